@@ -1,0 +1,8 @@
+#!/usr/bin/python3
+"""The cc_log demo (see README): collect, learn, then the smart logger live on a simulated BWIBot."""
+import sys
+
+from cc_log.demo import main
+
+if __name__ == '__main__':
+    sys.exit(main())

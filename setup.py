@@ -1,0 +1,6 @@
+"""Python package setup for catkin: installs the cc_log library from src/."""
+from setuptools import setup
+
+from catkin_pkg.python_setup import generate_distutils_setup
+
+setup(**generate_distutils_setup(packages=['cc_log'], package_dir={'': 'src'}))

@@ -1,0 +1,55 @@
+"""Window sizes given as a message count (``500``) or a duration (``5s``, ``250ms``)."""
+import collections
+import math
+
+
+class Span(collections.namedtuple('Span', 'count seconds')):
+    """A window size: exactly one of ``count`` (messages) and ``seconds`` is set."""
+
+    __slots__ = ()
+
+    @classmethod
+    def messages(cls, count):
+        """A span of ``count`` messages."""
+        return cls(int(count), None)
+
+    @classmethod
+    def duration(cls, seconds):
+        """A span of ``seconds`` seconds."""
+        return cls(None, float(seconds))
+
+    @classmethod
+    def parse(cls, value, name='size'):
+        """Parse ``500``, ``'500'``, ``'5s'``, ``'2.5s'`` or ``'250ms'``; a Span is returned as is.
+
+        Raises ValueError naming ``name`` when the value is not a non-negative count or duration.
+        """
+        if isinstance(value, cls):
+            return value
+        text = str(value).strip().lower()
+        try:
+            if text.endswith('ms'):
+                span = cls.duration(float(text[:-2]) / 1000.0)
+            elif text.endswith('s'):
+                span = cls.duration(float(text[:-1]))
+            else:
+                number = float(text)
+                if number != int(number):
+                    raise ValueError(text)
+                span = cls.messages(int(number))
+        except (ValueError, OverflowError):
+            raise ValueError('%s: %r is not a message count (500) or a duration (5s)' % (name, value))
+        amount = span.count if span.count is not None else span.seconds
+        if amount < 0 or not math.isfinite(amount):
+            raise ValueError('%s: %r must be zero or positive' % (name, value))
+        return span
+
+    @property
+    def is_duration(self):
+        """True for a duration, False for a message count."""
+        return self.seconds is not None
+
+    def __str__(self):
+        if self.is_duration:
+            return '%gs' % self.seconds
+        return str(self.count)

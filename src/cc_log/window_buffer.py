@@ -1,0 +1,286 @@
+"""The window buffer shared by collect, learn and smart mode.
+
+It holds two things for the driving topic (the topic the classifier watches):
+
+- the *feature window*: the feature rows of the last ``window`` messages, which the classifier turns into
+  one vector;
+- the *logging windows*: on an anomaly at message i, messages i-pre ... i+post are kept. An anomaly inside
+  an open window extends it, and two windows that touch or overlap become one, so no message is written
+  twice and none inside a window is skipped. Messages of other topics are buffered by time and saved in
+  the windows whose time span holds them.
+
+Everything is pure Python: records carry any message object, stamps are float seconds.
+"""
+import collections
+
+from .spans import Span
+
+Record = collections.namedtuple('Record', 'stamp topic msg')
+Record.__doc__ = 'One message: its stamp (float seconds), topic and message object.'
+
+Trigger = collections.namedtuple('Trigger', 'stamp reason score')
+Trigger.__doc__ = 'Why a window was opened or extended: stamp of the message, reason, classifier score.'
+
+DEFAULT_WINDOW = Span.messages(500)
+DEFAULT_PRE = Span.messages(100)
+DEFAULT_POST = Span.messages(100)
+DEFAULT_MAX_WINDOW = Span.messages(100000)
+DEFAULT_JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the buffer resets
+
+
+class LogWindow(object):
+    """A logging window: records in stamp order and the triggers that opened and extended it."""
+
+    def __init__(self, records, triggers, part=0):
+        self.records = records
+        self.triggers = triggers
+        self.part = part  # 0 for a whole window; 1, 2, ... when a long window was split at max_window
+
+    @property
+    def start(self):
+        """Stamp of the first record."""
+        return self.records[0].stamp
+
+    @property
+    def end(self):
+        """Stamp of the last record."""
+        return self.records[-1].stamp
+
+    @property
+    def topics(self):
+        """Topics in the window, in order of first appearance."""
+        return list(collections.OrderedDict.fromkeys(record.topic for record in self.records))
+
+    def __len__(self):
+        return len(self.records)
+
+    def __repr__(self):
+        return 'LogWindow(%d records, %.3f..%.3f, %d triggers)' % (
+            len(self.records), self.start, self.end, len(self.triggers))
+
+
+class _OpenWindow(object):
+    """A window still collecting driving records (open) or waiting to learn whether the next one touches
+    it (pending)."""
+
+    def __init__(self, records, trigger, post):
+        self.records = list(records)
+        self.triggers = []
+        self.part = 0
+        self.remaining = None  # messages still to take after the last trigger (count post)
+        self.until = None      # last stamp to take (duration post)
+        self.extend(trigger, post)
+
+    def extend(self, trigger, post):
+        self.triggers.append(trigger)
+        if post.is_duration:
+            self.until = trigger.stamp + post.seconds
+        else:
+            self.remaining = post.count
+
+    def takes(self, stamp):
+        """Whether a driving record at ``stamp`` still belongs to this window."""
+        if self.until is not None:
+            return stamp <= self.until
+        return self.remaining > 0
+
+    def take(self, record):
+        self.records.append(record)
+        if self.remaining is not None:
+            self.remaining -= 1
+
+
+class WindowBuffer(object):
+    """Sliding feature window plus logging windows around anomalies.
+
+    Call ``add`` for every driving message (with its feature row, if any), ``add_side`` for messages of
+    other topics, ``trigger`` when the last driving message is anomalous, and ``flush`` at the end of the
+    stream. ``add``, ``trigger`` and ``flush`` return the windows completed by that call (a list of
+    LogWindow); a window is complete once ``pre`` further messages have shown that the next window does
+    not touch it.
+    """
+
+    def __init__(self, window=DEFAULT_WINDOW, pre=DEFAULT_PRE, post=DEFAULT_POST,
+                 max_window=DEFAULT_MAX_WINDOW, jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE):
+        self.window = Span.parse(window, 'window')
+        self.pre = Span.parse(pre, 'pre')
+        self.post = Span.parse(post, 'post')
+        self.max_window = Span.parse(max_window, 'max_window')
+        if self.window.count == 0 or self.window.seconds == 0:
+            raise ValueError('window: must hold at least one message')
+        if self.max_window.count == 0 or self.max_window.seconds == 0:
+            raise ValueError('max_window: must hold at least one message')
+        if (self.pre.is_duration == self.max_window.is_duration) and \
+                (self.pre.count or self.pre.seconds or 0) >= (self.max_window.count or self.max_window.seconds):
+            raise ValueError('pre: %s is larger than the buffer can hold (max_window %s)' % (self.pre, self.max_window))
+        self.jump_back_tolerance = jump_back_tolerance
+        self._rows = collections.deque()   # (stamp, feature row) of the feature window
+        self._rows_since = None            # stamp of the first row since the last reset
+        self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
+        self._side = collections.deque()   # records of other topics, by time
+        self._open = None                  # window taking driving records
+        self._pending = None               # closed window that the next one may still touch
+        self._clock = None                 # newest stamp seen (stamps may jitter backwards a little)
+        self.resets = 0                    # times time jumped backwards and the buffer started over
+
+    # -- feature window -------------------------------------------------------------------------------
+
+    def feature_rows(self):
+        """Feature rows of the feature window, oldest first (a list; empty until rows are added)."""
+        return [row for _, row in self._rows]
+
+    @property
+    def feature_window_full(self):
+        """True once the feature window spans ``window`` messages or seconds."""
+        if not self._rows:
+            return False
+        if self.window.is_duration:
+            return self._rows[-1][0] - self._rows_since >= self.window.seconds
+        return len(self._rows) >= self.window.count
+
+    def _add_row(self, stamp, row):
+        self._rows.append((stamp, row))
+        if self._rows_since is None:
+            self._rows_since = stamp
+        if self.window.is_duration:
+            while self._rows[0][0] < stamp - self.window.seconds:
+                self._rows.popleft()
+        elif len(self._rows) > self.window.count:
+            self._rows.popleft()
+
+    # -- logging windows ------------------------------------------------------------------------------
+
+    @property
+    def window_open(self):
+        """True while a logging window is taking messages."""
+        return self._open is not None
+
+    @property
+    def buffered_messages(self):
+        """Messages held in memory: pre buffer, windows not yet written, other topics."""
+        held = len(self._ring) + len(self._side)
+        for window in (self._open, self._pending):
+            if window is not None:
+                held += len(window.records)
+        return held
+
+    def add(self, record, row=None):
+        """Add a driving record (and its feature row); return the windows this completes."""
+        done = []
+        if self._clock is not None and record.stamp < self._clock - self.jump_back_tolerance:
+            done.extend(self.flush())
+            self._reset()
+        self._clock = record.stamp if self._clock is None else max(self._clock, record.stamp)
+        if row is not None:
+            self._add_row(self._clock, row)
+        if self._open is not None:
+            if self._open.takes(self._clock):
+                self._open.take(record)
+                if self._full(self._open):
+                    done.append(self._split(self._open))
+                return done
+            if self._open.records:
+                self._pending = self._open
+            self._open = None
+        self._ring.append(record)
+        if self._prune_ring() and self._pending is not None:
+            done.append(self._emit(self._pending))
+            self._pending = None
+        self._prune_side()
+        return done
+
+    def add_side(self, record):
+        """Add a record of another topic; it is saved in the window whose time span holds it."""
+        self._side.append(record)
+
+    def trigger(self, reason, score=None):
+        """Mark the last driving record as anomalous: open a window around it or extend the open one.
+
+        Returns the windows this completes (always empty: a new window only ever merges with a pending
+        one, since a pending window is written as soon as a message after it leaves the pre buffer).
+        """
+        if self._clock is None:
+            raise ValueError('trigger: no message has been added yet')
+        trigger = Trigger(self._clock, reason, score)
+        if self._open is not None:
+            self._open.extend(trigger, self.post)
+            return []
+        if self._pending is not None:
+            # Every record after the pending window is still in the ring: the new window touches it.
+            self._open, self._pending = self._pending, None
+            self._open.records.extend(self._ring)
+            self._open.extend(trigger, self.post)
+        else:
+            self._open = _OpenWindow(self._ring, trigger, self.post)
+        self._ring.clear()
+        if self._full(self._open):
+            return [self._split(self._open)]
+        return []
+
+    def flush(self):
+        """Complete every window now (end of stream): the open one is written with what it has."""
+        done = []
+        for window in (self._pending, self._open):
+            if window is not None and window.records:
+                done.append(self._emit(window))
+        self._pending = self._open = None
+        return done
+
+    def _reset(self):
+        """Start over after time jumped backwards (bag loop, simulator reset)."""
+        self.resets += 1
+        self._rows.clear()
+        self._rows_since = None
+        self._ring.clear()
+        self._side.clear()
+        self._clock = None
+
+    def _full(self, window):
+        if self.max_window.is_duration:
+            return window.records[-1].stamp - window.records[0].stamp >= self.max_window.seconds
+        return len(window.records) >= self.max_window.count
+
+    def _split(self, window):
+        """Emit a window that reached max_window as one part; the rest goes on as the next part."""
+        window.part += 1
+        done = self._emit(window)
+        window.records = []
+        return done
+
+    def _prune_ring(self):
+        """Keep the newest driving record plus ``pre`` before it; return whether any was dropped."""
+        dropped = False
+        if self.pre.is_duration:
+            while self._ring[0].stamp < self._clock - self.pre.seconds:
+                self._ring.popleft()
+                dropped = True
+        else:
+            while len(self._ring) > self.pre.count + 1:
+                self._ring.popleft()
+                dropped = True
+        return dropped
+
+    def _prune_side(self):
+        """Drop records of other topics older than every driving record still held."""
+        oldest = None
+        for window in (self._pending, self._open):
+            if window is not None and window.records:
+                oldest = window.records[0].stamp
+                break
+        if oldest is None and self._ring:
+            oldest = self._ring[0].stamp
+        while self._side and oldest is not None and self._side[0].stamp < oldest:
+            self._side.popleft()
+
+    def _emit(self, window):
+        """Turn a window into a LogWindow with the side records of its time span, in stamp order."""
+        records = window.records
+        start, end = records[0].stamp, records[-1].stamp
+        side = []
+        while self._side and self._side[0].stamp <= end:
+            record = self._side.popleft()
+            if record.stamp >= start:
+                side.append(record)
+        if side:
+            records = sorted(records + side, key=lambda record: record.stamp)
+        return LogWindow(list(records), list(window.triggers), window.part)
