@@ -7,8 +7,10 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REAL_DATA = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real'))
 
-# Without a sourced workspace, import the library straight from the source tree.
-sys.path.insert(0, os.path.join(ROOT, 'src'))
+try:
+    import cc_log  # noqa: F401  (a sourced workspace also provides the generated cc_log.msg)
+except ImportError:
+    sys.path.insert(0, os.path.join(ROOT, 'src'))
 
 
 @pytest.fixture
