@@ -176,15 +176,14 @@ class WindowBuffer(object):
         if self._open is not None:
             if self._open.takes(self._clock):
                 self._open.take(record)
-                if self._full(self._open):
-                    done.append(self._split(self._open))
+                done.extend(self._split(self._open))
                 return done
-            if self._open.records:
-                self._pending = self._open
-            self._open = None
+            # Pending even when a split left it empty: a touching window continues its parts.
+            self._pending, self._open = self._open, None
         self._ring.append(record)
         if self._prune_ring() and self._pending is not None:
-            done.append(self._emit(self._pending))
+            if self._pending.records:
+                done.append(self._emit(self._pending))
             self._pending = None
         self._prune_side()
         return done
@@ -196,8 +195,9 @@ class WindowBuffer(object):
     def trigger(self, reason, score=None):
         """Mark the last driving record as anomalous: open a window around it or extend the open one.
 
-        Returns the windows this completes (always empty: a new window only ever merges with a pending
-        one, since a pending window is written as soon as a message after it leaves the pre buffer).
+        Returns the windows this completes: only parts of a window that reached max_window, since a new
+        window either extends the open one or merges with the pending one (a pending window is completed
+        as soon as a message after it leaves the pre buffer).
         """
         if self._clock is None:
             raise ValueError('trigger: no message has been added yet')
@@ -213,9 +213,7 @@ class WindowBuffer(object):
         else:
             self._open = _OpenWindow(self._ring, trigger, self.post)
         self._ring.clear()
-        if self._full(self._open):
-            return [self._split(self._open)]
-        return []
+        return self._split(self._open)
 
     def flush(self):
         """Complete every window now (end of stream): the open one is written with what it has."""
@@ -241,10 +239,14 @@ class WindowBuffer(object):
         return len(window.records) >= self.max_window.count
 
     def _split(self, window):
-        """Emit a window that reached max_window as one part; the rest goes on as the next part."""
-        window.part += 1
-        done = self._emit(window)
-        window.records = []
+        """Emit the parts of a window that reached max_window; the rest goes on as the next part."""
+        done = []
+        while window.records and self._full(window):
+            size = self.max_window.count or len(window.records)
+            window.part = max(window.part, 1)
+            done.append(self._emit(window, window.records[:size]))
+            window.part += 1
+            window.records = window.records[size:]
         return done
 
     def _prune_ring(self):
@@ -272,9 +274,10 @@ class WindowBuffer(object):
         while self._side and oldest is not None and self._side[0].stamp < oldest:
             self._side.popleft()
 
-    def _emit(self, window):
-        """Turn a window into a LogWindow with the side records of its time span, in stamp order."""
-        records = window.records
+    def _emit(self, window, records=None):
+        """Turn a window (or the given first records of it) into a LogWindow with the side records of its
+        time span, in stamp order."""
+        records = window.records if records is None else records
         start, end = records[0].stamp, records[-1].stamp
         side = []
         while self._side and self._side[0].stamp <= end:

@@ -1,0 +1,229 @@
+"""WindowBuffer and Span: logging windows around anomalies, the feature window, sizes (no roscore)."""
+import sys
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cc_log.spans import Span
+from cc_log.window_buffer import LogWindow, Record, WindowBuffer
+
+
+def run(buffer, stamps, anomalies, side=()):
+    """Feed driving messages 0..n-1 (msg = index) with the given stamps; trigger at the anomaly indices.
+
+    side: (stamp, name) records of another topic, added in stamp order among the driving messages.
+    Returns the completed windows, in order, after the end-of-stream flush.
+    """
+    side = sorted(side)
+    windows = []
+    for index, stamp in enumerate(stamps):
+        while side and side[0][0] <= stamp:
+            side_stamp, name = side.pop(0)
+            buffer.add_side(Record(side_stamp, '/side', name))
+        windows += buffer.add(Record(stamp, '/odom', index))
+        if index in anomalies:
+            windows += buffer.trigger('test', -1.0)
+    return windows + buffer.flush()
+
+
+def indices(window):
+    return [record.msg for record in window.records if record.topic == '/odom']
+
+
+def expected_by_count(n, anomalies, pre, post):
+    """Reference: the union of [i-pre, i+post] over the anomalies, split into maximal runs."""
+    kept = sorted({j for i in anomalies for j in range(max(0, i - pre), min(n - 1, i + post) + 1)})
+    runs = []
+    for j in kept:
+        if runs and runs[-1][-1] == j - 1:
+            runs[-1].append(j)
+        else:
+            runs.append([j])
+    return runs
+
+
+def test_single_anomaly_keeps_pre_and_post():
+    windows = run(WindowBuffer(window=5, pre=3, post=2), [float(i) for i in range(20)], {10})
+    assert [indices(w) for w in windows] == [[7, 8, 9, 10, 11, 12]]
+    assert windows[0].triggers[0].stamp == 10.0 and windows[0].triggers[0].reason == 'test'
+
+
+def test_anomaly_inside_open_window_extends_it():
+    windows = run(WindowBuffer(pre=2, post=3), [float(i) for i in range(30)], {10, 12})
+    assert [indices(w) for w in windows] == [list(range(8, 16))]
+    assert len(windows[0].triggers) == 2
+
+
+def test_touching_windows_become_one():
+    # first window 8..12, second starts at 13 = 12 + 1: they touch
+    windows = run(WindowBuffer(pre=2, post=2), [float(i) for i in range(30)], {10, 15})
+    assert [indices(w) for w in windows] == [list(range(8, 18))]
+
+
+def test_windows_with_a_gap_stay_apart():
+    windows = run(WindowBuffer(pre=2, post=2), [float(i) for i in range(30)], {10, 16})
+    assert [indices(w) for w in windows] == [list(range(8, 13)), list(range(14, 19))]
+
+
+def test_anomaly_in_first_and_last_message():
+    windows = run(WindowBuffer(pre=3, post=3), [float(i) for i in range(10)], {0, 9})
+    assert [indices(w) for w in windows] == [[0, 1, 2, 3], [6, 7, 8, 9]]
+
+
+def test_back_to_back_anomalies():
+    windows = run(WindowBuffer(pre=1, post=1), [float(i) for i in range(10)], {3, 4, 5, 6})
+    assert [indices(w) for w in windows] == [list(range(2, 8))]
+
+
+def test_zero_pre_and_post_keep_the_anomalous_message_only():
+    windows = run(WindowBuffer(pre=0, post=0), [float(i) for i in range(10)], {2, 3, 7})
+    assert [indices(w) for w in windows] == [[2, 3], [7]]
+
+
+def test_end_of_stream_flushes_open_window():
+    buffer = WindowBuffer(pre=2, post=100)
+    windows = run(buffer, [float(i) for i in range(10)], {5})
+    assert [indices(w) for w in windows] == [list(range(3, 10))]
+    assert not buffer.window_open
+
+
+def test_window_is_completed_once_pre_more_messages_show_no_touch():
+    buffer = WindowBuffer(pre=2, post=1)
+    completed = []
+    for i in range(8):
+        completed.append(buffer.add(Record(float(i), '/odom', i)))
+        if i == 1:
+            buffer.trigger('test')
+    # window 0..2; an anomaly at 3, 4 or 5 would still touch it (5 - pre = 3); 6 pushes 3 out of the pre
+    # buffer, so the window is complete
+    assert [len(c) for c in completed] == [0, 0, 0, 0, 0, 0, 1, 0]
+
+
+def test_durations_with_irregular_stamps():
+    stamps = [0.0, 0.1, 0.15, 0.5, 1.0, 1.05, 1.4, 2.2, 2.3, 3.9, 4.0, 6.0]
+    windows = run(WindowBuffer(window='1s', pre='0.5s', post='1s'), stamps, {6})  # anomaly at 1.4 s
+    assert [indices(w) for w in windows] == [[4, 5, 6, 7, 8]]  # 0.9 <= t <= 2.4
+
+
+def test_side_topics_are_saved_in_the_window_time_span():
+    side = [(0.5, 'a'), (8.5, 'b'), (9.9, 'c'), (12.5, 'd'), (18.0, 'e')]
+    windows = run(WindowBuffer(pre=2, post=2), [float(i) for i in range(20)], {10}, side)
+    assert len(windows) == 1
+    records = windows[0].records
+    assert [r.msg for r in records if r.topic == '/side'] == ['b', 'c']
+    assert [r.stamp for r in records] == sorted(r.stamp for r in records)
+    assert windows[0].topics == ['/odom', '/side']
+
+
+def test_long_anomaly_is_split_at_max_window_without_loss():
+    windows = run(WindowBuffer(pre=2, post=2, max_window=5), [float(i) for i in range(30)], set(range(5, 20)))
+    assert [w.part for w in windows] == [1, 2, 3, 4]
+    assert sum((indices(w) for w in windows), []) == list(range(3, 22))
+
+
+def test_time_jumping_backwards_flushes_and_starts_over():
+    buffer = WindowBuffer(pre=2, post=5)
+    stamps = [100.0 + i for i in range(10)] + [float(i) for i in range(10)]
+    windows = run(buffer, stamps, {8, 15})
+    assert [indices(w) for w in windows] == [[6, 7, 8, 9], [13, 14, 15, 16, 17, 18, 19]]
+    assert buffer.resets == 1
+
+
+def test_feature_window_by_count_and_duration():
+    buffer = WindowBuffer(window=3)
+    for i in range(5):
+        buffer.add(Record(float(i), '/odom', i), row=[i])
+        assert buffer.feature_window_full == (i >= 2)
+    assert buffer.feature_rows() == [[2], [3], [4]]
+    buffer = WindowBuffer(window='1s')
+    for i in range(5):
+        buffer.add(Record(i * 0.4, '/odom', i), row=[i])
+    assert buffer.feature_rows() == [[2], [3], [4]]  # 0.8 .. 1.6 s
+    assert buffer.feature_window_full
+
+
+def test_trigger_before_any_message_is_an_error():
+    with pytest.raises(ValueError, match='trigger'):
+        WindowBuffer().trigger('test')
+
+
+@pytest.mark.parametrize('kwargs, message', [
+    ({'pre': -1}, 'pre'),
+    ({'post': '-2s'}, 'post'),
+    ({'window': 0}, 'window'),
+    ({'window': 'ten'}, 'window'),
+    ({'pre': 200, 'max_window': 100}, 'pre'),
+])
+def test_bad_configuration_names_the_parameter(kwargs, message):
+    with pytest.raises(ValueError) as error:
+        WindowBuffer(**kwargs)
+    assert str(error.value).startswith(message + ':')
+    assert '\n' not in str(error.value)
+
+
+@pytest.mark.parametrize('text, span', [
+    ('500', Span(500, None)), (500, Span(500, None)), ('5s', Span(None, 5.0)),
+    ('2.5s', Span(None, 2.5)), ('250ms', Span(None, 0.25)), (' 7 ', Span(7, None)),
+])
+def test_span_parse(text, span):
+    assert Span.parse(text) == span
+    assert Span.parse(str(span)) == span
+
+
+@pytest.mark.parametrize('text', ['', 's', '1.5', '-1', '-1s', 'nan', 'infs', 'five'])
+def test_span_parse_rejects(text):
+    with pytest.raises(ValueError, match='^pre: '):
+        Span.parse(text, 'pre')
+
+
+def test_window_buffer_does_not_import_rospy():
+    import subprocess
+    code = 'import sys, cc_log.window_buffer, cc_log.spans; sys.exit("rospy" in sys.modules)'
+    assert subprocess.call([sys.executable, '-c', code], env=None) == 0
+
+
+def test_log_window_properties():
+    window = LogWindow([Record(1.0, '/a', 1), Record(2.0, '/b', 2)], [])
+    assert (window.start, window.end, len(window), window.topics) == (1.0, 2.0, 2, ['/a', '/b'])
+
+
+# -- properties over random streams ----------------------------------------------------------------------
+
+@settings(max_examples=300, deadline=None)
+@given(n=st.integers(1, 120), pre=st.integers(0, 12), post=st.integers(0, 12),
+       max_window=st.integers(30, 60), data=st.data())
+def test_windows_by_count_are_the_union_of_anomaly_neighbourhoods(n, pre, post, max_window, data):
+    anomalies = set(data.draw(st.lists(st.integers(0, n - 1), max_size=10)))
+    windows = run(WindowBuffer(pre=pre, post=post, max_window=max_window), [float(i) for i in range(n)],
+                  anomalies)
+    # Split parts of one window are consecutive; joined, they must be exactly the reference runs.
+    joined = []
+    for window in windows:
+        if window.part > 1:
+            joined[-1] += indices(window)
+        else:
+            joined.append(indices(window))
+    assert joined == expected_by_count(n, anomalies, pre, post)
+    assert all(len(window) <= max_window for window in windows)
+
+
+@settings(max_examples=300, deadline=None)
+@given(gaps=st.lists(st.floats(0.0, 0.5), min_size=1, max_size=100), pre=st.floats(0.0, 1.0),
+       post=st.floats(0.0, 1.0), data=st.data())
+def test_windows_by_duration_never_duplicate_or_skip(gaps, pre, post, data):
+    stamps = []
+    for gap in gaps:
+        stamps.append((stamps[-1] if stamps else 0.0) + gap)
+    anomalies = set(data.draw(st.lists(st.integers(0, len(stamps) - 1), max_size=8)))
+    windows = run(WindowBuffer(pre='%rs' % pre, post='%rs' % post), stamps, anomalies)
+    kept = sum((indices(w) for w in windows), [])
+    assert kept == sorted(set(kept)), 'a message was written twice or out of order'
+    for window in windows:
+        assert indices(window) == list(range(indices(window)[0], indices(window)[-1] + 1)), 'gap in window'
+    for a, b in zip(windows, windows[1:]):
+        assert indices(b)[0] > indices(a)[-1] + 1, 'touching windows were not merged'
+    for i in anomalies:
+        # every message within pre before / post after an anomaly is kept
+        near = {j for j, t in enumerate(stamps) if stamps[i] - pre <= t <= stamps[i] + post}
+        assert near <= set(kept)
