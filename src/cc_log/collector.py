@@ -1,0 +1,331 @@
+"""Collect mode: log everything, rotated into complete window files, plus feature vectors for learning.
+
+``Collector`` keeps every message it is fed. The stream is cut into files by ``rotate`` (a message count
+``'6000'``, a duration ``'60s'`` or a size ``'20MB'`` of raw row-JSON bytes); every file is a complete
+window file of the chosen format, readable on its own. From the driving topic it computes a feature vector
+every ``stride`` messages (or seconds) once a whole feature window of continuous data is in, and writes
+each vector as its own file under ``<directory>/features/<label>/`` with ``learning.write_vector`` — the
+training data of learn mode. File writes run on a background writer thread.
+
+``collect_bag`` computes the same vectors from a bag (``cclog collect``).
+
+Pure: no rospy (``collect_bag`` imports ``bagio``, and so rosbag, only when called).
+"""
+import collections
+import os
+import queue
+import re
+import threading
+import time
+
+from . import features as features_mod
+from . import learning
+from . import log_format
+from . import msg_codec
+from .spans import Span
+from .window_buffer import LogWindow, Record, Trigger
+
+__all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
+           'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']
+
+DEFAULT_ROTATE = '60s'
+DEFAULT_STRIDE = '100'
+DEFAULT_LABEL = 'nominal'
+DEFAULT_WINDOW = '500'
+DEFAULT_FEATURE_SET = 'motion'
+FEATURES_SUBDIRECTORY = 'features'
+JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream counts as restarted
+
+_SIZE = re.compile(r'^\s*([0-9]*\.?[0-9]+)\s*(b|kb|mb|gb)\s*$', re.IGNORECASE)
+_SIZE_FACTORS = {'b': 1, 'kb': 1000, 'mb': 1000 ** 2, 'gb': 1000 ** 3}
+_LABEL = re.compile(r'^[A-Za-z0-9_.-]+$')
+
+
+class Rotation(collections.namedtuple('Rotation', 'span bytes')):
+    """When to start a new file: after ``span`` (messages or seconds) or ``bytes`` raw row-JSON bytes."""
+
+    __slots__ = ()
+
+    @classmethod
+    def parse(cls, value, name='rotate'):
+        """``'6000'`` (messages), ``'60s'`` (duration) or ``'20MB'`` (raw JSON size: B, kB, MB, GB)."""
+        if isinstance(value, cls):
+            return value
+        match = _SIZE.match(str(value))
+        if match:
+            size = int(float(match.group(1)) * _SIZE_FACTORS[match.group(2).lower()])
+            if size <= 0:
+                raise ValueError('%s: %r must be positive' % (name, value))
+            return cls(None, size)
+        try:
+            span = Span.parse(value, name)
+        except ValueError:
+            raise ValueError('%s: %r is not a message count (6000), a duration (60s) or a size (20MB)'
+                             % (name, value))
+        if span.count == 0 or span.seconds == 0:
+            raise ValueError('%s: %r must be positive' % (name, value))
+        return cls(span, None)
+
+    def __str__(self):
+        return str(self.span) if self.span is not None else '%dB' % self.bytes
+
+
+def check_label(label):
+    """Return ``label`` when it can name a directory, else raise ValueError('label: ...')."""
+    if not isinstance(label, str) or not _LABEL.match(label) or label in ('.', '..'):
+        raise ValueError('label: %r must be letters, digits, ".", "_" or "-"' % (label,))
+    return label
+
+
+class VectorStream(object):
+    """Feature vectors of one driving topic: a row per message, a vector every ``stride`` once a whole
+    feature window of continuous data (no gap, no backwards time) is in.
+
+    ``add(msg, stamp)`` returns the vector (numpy array) due at this message, or None.
+    """
+
+    def __init__(self, config, stride=DEFAULT_STRIDE):
+        self.config = config
+        self.window = config.span
+        self.stride = Span.parse(stride, 'stride')
+        if self.stride.count == 0 or self.stride.seconds == 0:
+            raise ValueError('stride: must be positive')
+        self.features = features_mod.OdometryFeatures(config)
+        self._rows = collections.deque()
+        self._since = None  # messages (count stride) or stamp (duration stride) of the last vector
+        self._clock = None
+
+    def reset(self):
+        """Start over (time went backwards)."""
+        self.features.reset()
+        self._rows.clear()
+        self._since = None
+        self._clock = None
+
+    def add(self, msg, stamp):
+        if self._clock is not None and stamp < self._clock - JUMP_BACK_TOLERANCE:
+            self.reset()
+        self._clock = stamp if self._clock is None else max(self._clock, stamp)
+        row = self.features.row(msg, stamp)
+        rows = self._rows
+        rows.append((stamp, row))
+        if self.window.is_duration:
+            while rows[0][0] < stamp - self.window.seconds:
+                rows.popleft()
+        elif len(rows) > self.window.count:
+            rows.popleft()
+        if not self.features.covers(self.window, stamp):
+            return None
+        if self.stride.is_duration:
+            if self._since is not None and stamp - self._since < self.stride.seconds:
+                return None
+            self._since = stamp
+        else:
+            if self._since is not None and self._since + 1 < self.stride.count:
+                self._since += 1
+                return None
+            self._since = 0
+        return features_mod.window_vector([r for _, r in rows], self.config)
+
+
+class Collector(object):
+    """Log every message into rotated window files and write feature vectors of the driving topic.
+
+    directory: the logging directory (window files there, vectors under ``features/<label>/``); fmt:
+    ``'json-xz'`` or ``'bag-lz4'``; rotate: see ``Rotation.parse``; driving_topic: the topic name the
+    odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
+    the feature window and set of the vectors; stride: a vector every ``stride`` driving messages (or
+    seconds); label: the vectors' label; background: write on a writer thread.
+
+    Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
+    """
+
+    def __init__(self, directory, fmt='json-xz', rotate=DEFAULT_ROTATE, driving_topic='odom', side_topics=None,
+                 window=DEFAULT_WINDOW, feature_set=DEFAULT_FEATURE_SET, stride=DEFAULT_STRIDE,
+                 label=DEFAULT_LABEL, background=True):
+        self.directory = str(directory)
+        self.format = log_format.Format.check(fmt)
+        self.rotate = Rotation.parse(rotate)
+        if not driving_topic:
+            raise ValueError('driving_topic: must not be empty')
+        self.driving_topic = driving_topic
+        self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
+        self.config = features_mod.FeatureConfig(feature_set, window)
+        self.stride = Span.parse(stride, 'stride')
+        self.label = check_label(label)
+        self.features_directory = os.path.join(self.directory, FEATURES_SUBDIRECTORY)
+        self._vectors = VectorStream(self.config, self.stride)
+        self._lock = threading.Lock()
+        self._stats_lock = threading.Lock()
+        self._chunk = []
+        self._chunk_bytes = 0
+        self._chunk_start = None
+        self._clock = None
+        self._part = 0
+        self._closed = False
+        self._callbacks = []
+        self.counters = collections.OrderedDict([
+            ('messages_seen', 0), ('messages_kept', 0), ('messages_lost', 0), ('raw_json_bytes', 0),
+            ('stored_bytes', 0), ('files_written', 0), ('vectors_written', 0), ('write_errors', 0),
+            ('time_resets', 0)])
+        self.last_error = ''
+        self._queue = queue.Queue()
+        self._writer = None
+        if background:
+            self._writer = threading.Thread(target=self._write_loop, name='cc_log collect writer')
+            self._writer.daemon = True
+            self._writer.start()
+
+    def on_event(self, callback):
+        """Call ``callback(kind, detail)`` after each write: kind 'file', 'vector' or 'failed'; detail is
+        a dict (path, bytes, messages, start, end for files; path, stamp for vectors; error)."""
+        self._callbacks.append(callback)
+
+    def on_message(self, topic, msg, stamp=None):
+        """Keep one message (``stamp``: receipt/bag time, used when the message has no header stamp)."""
+        if topic != self.driving_topic and self.side_topics is not None and topic not in self.side_topics:
+            return
+        raw = msg_codec.row_json_bytes(msg)
+        stamp = features_mod.stamp_of(msg, time.time() if stamp is None else stamp)
+        with self._lock:
+            if self._closed:
+                raise ValueError('on_message: the collector is closed')
+            self._count('messages_seen', 1)
+            self._count('raw_json_bytes', raw)
+            if self._clock is not None and stamp < self._clock - JUMP_BACK_TOLERANCE:
+                self._count('time_resets', 1)
+                self._rotate()
+                self._clock = None
+            if self._chunk and self._due(stamp, raw):
+                self._rotate()
+            self._clock = stamp if self._clock is None else max(self._clock, stamp)
+            if self._chunk_start is None:
+                self._chunk_start = stamp
+            self._chunk.append(Record(stamp, topic, msg))
+            self._chunk_bytes += raw
+            if topic == self.driving_topic:
+                vector = self._vectors.add(msg, stamp)
+                if vector is not None:
+                    self._submit(('vector', stamp, vector))
+
+    def flush(self):
+        """Write the current file now (even when it is not due for rotation)."""
+        with self._lock:
+            self._rotate()
+
+    def close(self, timeout=None):
+        """Write the current file and wait for the writer; idempotent. True when all was written."""
+        with self._lock:
+            if not self._closed:
+                self._rotate()
+                self._closed = True
+                if self._writer is not None:
+                    self._queue.put(None)
+        if self._writer is not None:
+            self._writer.join(timeout)
+            return not self._writer.is_alive()
+        return True
+
+    def stats(self):
+        """A snapshot of the counters (dict), with messages_buffered and queue_depth."""
+        with self._lock:
+            buffered = len(self._chunk)
+        with self._stats_lock:
+            result = dict(self.counters)
+            result['last_error'] = self.last_error
+        result['messages_buffered'] = buffered
+        result['queue_depth'] = self._queue.qsize() if self._writer is not None else 0
+        return result
+
+    # -- internals ------------------------------------------------------------------------------------
+
+    def _count(self, key, amount):
+        with self._stats_lock:
+            self.counters[key] += amount
+
+    def _due(self, stamp, raw):
+        """Whether the message at ``stamp`` of ``raw`` bytes belongs in a new file."""
+        rotate = self.rotate
+        if rotate.bytes is not None:
+            return self._chunk_bytes + raw > rotate.bytes
+        if rotate.span.is_duration:
+            return stamp - self._chunk_start >= rotate.span.seconds
+        return len(self._chunk) >= rotate.span.count
+
+    def _rotate(self):
+        if not self._chunk:
+            return
+        records = sorted(self._chunk, key=lambda record: record.stamp)  # stable: arrival order on ties
+        self._part += 1
+        window = LogWindow(records, [Trigger(records[0].stamp, 'collect', None)], self._part)
+        self._chunk = []
+        self._chunk_bytes = 0
+        self._chunk_start = None
+        self._submit(('file', window))
+
+    def _submit(self, item):
+        if self._writer is not None:
+            self._queue.put(item)
+        else:
+            self._write(item)
+
+    def _write_loop(self):
+        while True:
+            item = self._queue.get()
+            try:
+                if item is None:
+                    return
+                self._write(item)
+            finally:
+                self._queue.task_done()
+
+    def _write(self, item):
+        try:
+            if item[0] == 'file':
+                window = item[1]
+                metadata = {'reason': 'collect', 'part': window.part, 'driving_topic': self.driving_topic,
+                            'rotate': str(self.rotate)}
+                path, nbytes = log_format.write_window(window, self.directory, self.format, metadata)
+                with self._stats_lock:
+                    self.counters['files_written'] += 1
+                    self.counters['messages_kept'] += len(window)
+                    self.counters['stored_bytes'] += nbytes
+                detail = {'path': path, 'bytes': nbytes, 'messages': len(window), 'start': window.start,
+                          'end': window.end}
+            else:
+                _, stamp, vector = item
+                path = learning.write_vector(self.features_directory, self.label, stamp, vector, self.config)
+                self._count('vectors_written', 1)
+                detail = {'path': path, 'stamp': stamp}
+        except (OSError, ValueError) as error:
+            with self._stats_lock:
+                self.counters['write_errors'] += 1
+                if item[0] == 'file':
+                    self.counters['messages_lost'] += len(item[1])
+                self.last_error = str(error)
+            for callback in self._callbacks:
+                callback('failed', {'error': str(error)})
+            return
+        for callback in self._callbacks:
+            callback(item[0], detail)
+
+
+def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=DEFAULT_STRIDE,
+                feature_set=DEFAULT_FEATURE_SET):
+    """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each).
+
+    Returns ``{'vectors': n, 'directory': out_dir/<label>, 'messages': driving messages read}``. Raises
+    ValueError for bad arguments, OSError when the bag cannot be read or a vector cannot be written.
+    """
+    from . import bagio  # rosbag: imported here so the module stays pure
+    check_label(label)
+    config = features_mod.FeatureConfig(feature_set, window)
+    stream = VectorStream(config, stride)
+    count = messages = 0
+    for record in bagio.read_messages(bag_path, [topic]):
+        messages += 1
+        vector = stream.add(record.msg, record.stamp)
+        if vector is not None:
+            learning.write_vector(out_dir, label, record.stamp, vector, config)
+            count += 1
+    return {'vectors': count, 'directory': os.path.join(out_dir, label), 'messages': messages}

@@ -1,0 +1,407 @@
+"""Smart mode: keep only the messages around anomalous behaviour.
+
+``SmartLogger`` is the one implementation behind the live node (``smart_node``) and offline replay
+(``replay``, used by ``cclog replay``). Feed it every message with ``on_message``:
+
+- the driving topic (nav_msgs/Odometry) becomes a feature row; once the feature window is full, the window
+  is turned into a vector and scored by the model, and an anomalous score opens (or extends) a logging
+  window of ``pre`` messages before and ``post`` after;
+- other topics are buffered by time and saved in the windows whose time span holds them.
+
+Completed windows go through a queue to a background writer thread that calls
+``log_format.write_window``, so compression and disk writes never run on the message path and no message
+is lost while a window is written. ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear
+when a window opens, is written or fails to be written.
+
+Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
+"""
+import collections
+import math
+import queue
+import threading
+import time
+
+from . import features as features_mod
+from . import log_format
+from . import msg_codec
+from .spans import Span
+from .window_buffer import DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, Record, WindowBuffer
+
+__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'replay',
+           'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC']
+
+DEFAULT_FORMAT = 'json-xz'
+DEFAULT_DRIVING_TOPIC = 'odom'
+
+OPENED = 'opened'
+WRITTEN = 'written'
+FAILED = 'failed'
+
+Event = collections.namedtuple('Event', 'kind reason score threshold start end messages path bytes error')
+Event.__doc__ = """What happened to a logging window.
+
+kind: OPENED (the classifier or a manual trigger opened a window), WRITTEN (the window file is on disk) or
+FAILED (writing it failed; ``error`` says why). reason: the first trigger's reason ('classifier',
+'manual'); score: the lowest classifier score of the window's triggers (NaN for manual triggers);
+threshold: the model's. start, end: header stamps (float s) of the first and last message (end is None for
+OPENED). messages, path, bytes: the window's message count (all topics), file and size on disk (0, '' and 0
+until WRITTEN).
+"""
+
+
+class _Stats(object):
+    """Counters shared by the message path and the writer thread (guarded by one lock)."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.messages_seen = 0
+        self.messages_kept = 0       # in window files on disk
+        self.messages_queued = 0     # in windows waiting for the writer
+        self.messages_lost = 0       # in windows whose file could not be written
+        self.raw_json_bytes = 0      # row-JSON bytes of every message seen
+        self.stored_bytes = 0        # bytes of the window files written
+        self.windows_opened = 0
+        self.windows_saved = 0
+        self.windows_queued = 0
+        self.write_errors = 0
+        self.last_error = ''
+        self.classifier_calls = 0
+        self.classifier_seconds = 0.0
+        self.classifier_max = 0.0
+        self.anomalous = 0           # driving messages the classifier called anomalous
+
+
+class SmartLogger(object):
+    """Anomaly-triggered logging of one driving topic plus side topics.
+
+    model: an ``AnomalyModel`` (its ``config`` says the feature set, feature window and topic type);
+    directory: where window files go; fmt: ``'json-xz'`` or ``'bag-lz4'``; pre, post, max_window: counts
+    (``'100'``) or durations (``'2s'``); driving_topic: the topic name ``on_message`` will be called with
+    for the odometry; side_topics: other topic names to keep (messages of any topic not listed are ignored
+    unless ``side_topics`` is None, which keeps every other topic); enabled: start enabled or paused;
+    background: write windows on a writer thread (True) or inline in the calling thread (False).
+
+    Thread-safe: ``on_message``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be called
+    from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
+    """
+
+    def __init__(self, model, directory, fmt=DEFAULT_FORMAT, pre=DEFAULT_PRE, post=DEFAULT_POST,
+                 driving_topic=DEFAULT_DRIVING_TOPIC, side_topics=(), max_window=DEFAULT_MAX_WINDOW,
+                 enabled=True, background=True):
+        self.model = model
+        self.config = model.config
+        self.threshold = float(model.threshold)
+        self.directory = str(directory)
+        self.format = log_format.Format.check(fmt)
+        self.pre = Span.parse(pre, 'pre')
+        self.post = Span.parse(post, 'post')
+        self.max_window = Span.parse(max_window, 'max_window')
+        self.window = self.config.span
+        if not driving_topic:
+            raise ValueError('driving_topic: must not be empty')
+        self.driving_topic = driving_topic
+        self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
+        self.background = bool(background)
+        self._lock = threading.RLock()
+        self._stats = _Stats()
+        self._callbacks = []
+        self._enabled = bool(enabled)
+        self._closed = False
+        self._new_buffer()  # raises ValueError for a bad pre/post/max_window combination
+        self._queue = queue.Queue()
+        self._writer = None
+        if self.background:
+            self._writer = threading.Thread(target=self._write_loop, name='cc_log window writer')
+            self._writer.daemon = True
+            self._writer.start()
+
+    # -- public API -----------------------------------------------------------------------------------
+
+    def on_event(self, callback):
+        """Call ``callback(Event)`` when a window opens, is written or fails to be written.
+
+        OPENED is called from the thread that fed the triggering message, WRITTEN and FAILED from the
+        writer thread; callbacks should be quick and must not raise.
+        """
+        self._callbacks.append(callback)
+
+    @property
+    def enabled(self):
+        """True while messages are buffered and classified."""
+        return self._enabled
+
+    def on_message(self, topic, msg, stamp=None):
+        """Feed one message of ``topic``; ``stamp`` (float s or a rospy/genpy Time) is its receipt or bag
+        time, used when the message has no non-zero header stamp (the current time when None too)."""
+        if topic != self.driving_topic and self.side_topics is not None and topic not in self.side_topics:
+            return
+        raw = msg_codec.row_json_bytes(msg)
+        with self._lock:
+            if self._closed:
+                raise ValueError('on_message: the logger is closed')
+            with self._stats.lock:
+                self._stats.messages_seen += 1
+                self._stats.raw_json_bytes += raw
+            if not self._enabled:
+                return
+            stamp = features_mod.stamp_of(msg, time.time() if stamp is None else stamp)
+            record = Record(stamp, topic, msg)
+            if topic != self.driving_topic:
+                self._buffer.add_side(record)
+                return
+            self._add_driving(record)
+
+    def trigger_now(self, reason='manual'):
+        """Save a window around the newest driving message now (``post`` messages after it still follow).
+
+        Returns ``(True, message)`` or ``(False, why not)``: disabled, closed or no driving message yet.
+        """
+        with self._lock:
+            if self._closed:
+                return False, 'the logger is closed'
+            if not self._enabled:
+                return False, 'the logger is disabled'
+            if self._last_stamp is None:
+                return False, 'no %s message received yet' % self.driving_topic
+            self._trigger(reason, float('nan'))
+            return True, 'window triggered at %.3f (%s)' % (self._last_stamp, reason)
+
+    def set_enabled(self, flag):
+        """Enable or pause the logger. Pausing completes any open window with what it holds; messages seen
+        while paused are counted but neither buffered nor classified; enabling starts a fresh buffer."""
+        with self._lock:
+            flag = bool(flag)
+            if flag == self._enabled:
+                return
+            if not flag:
+                self._complete(self._buffer.flush())
+            self._new_buffer()
+            self._enabled = flag
+
+    def flush(self):
+        """Complete every window now (the open one with what it holds), as at the end of a stream."""
+        with self._lock:
+            self._complete(self._buffer.flush())
+
+    def close(self, timeout=None):
+        """Flush, then wait for the writer to write every queued window. Idempotent.
+
+        Returns True when every queued window was handled within ``timeout`` seconds (None: wait).
+        """
+        with self._lock:
+            if not self._closed:
+                self._complete(self._buffer.flush())
+                self._closed = True
+                if self._writer is not None:
+                    self._queue.put(None)
+        if self._writer is not None:
+            self._writer.join(timeout)
+            return not self._writer.is_alive()
+        return True
+
+    def stats(self):
+        """A snapshot of the counters (a dict; see the node's diagnostics for their meaning)."""
+        with self._lock:
+            buffered = self._buffer.buffered_messages
+            resets = self._resets + self._buffer.resets
+        s = self._stats
+        with s.lock:
+            calls = s.classifier_calls
+            result = {
+                'enabled': self._enabled,
+                'messages_seen': s.messages_seen,
+                'messages_kept': s.messages_kept,
+                'messages_queued': s.messages_queued,
+                'messages_buffered': buffered,
+                'messages_lost': s.messages_lost,
+                'raw_json_bytes': s.raw_json_bytes,
+                'stored_bytes': s.stored_bytes,
+                'windows_opened': s.windows_opened,
+                'windows_saved': s.windows_saved,
+                'windows_queued': s.windows_queued,
+                'write_errors': s.write_errors,
+                'last_error': s.last_error,
+                'classifier_calls': calls,
+                'classifier_mean_us': (s.classifier_seconds / calls * 1e6) if calls else 0.0,
+                'classifier_max_us': s.classifier_max * 1e6,
+                'anomalous_messages': s.anomalous,
+                'time_resets': resets,
+            }
+        # Not in any window (outside every anomaly, or seen while paused).
+        result['messages_dropped'] = (result['messages_seen'] - result['messages_kept'] - result['messages_queued']
+                                      - result['messages_buffered'] - result['messages_lost'])
+        result['queue_depth'] = self._queue.qsize() if self._writer is not None else 0
+        return result
+
+    # -- message path ---------------------------------------------------------------------------------
+
+    def _new_buffer(self):
+        buffer = WindowBuffer(window=self.window, pre=self.pre, post=self.post, max_window=self.max_window)
+        if getattr(self, '_buffer', None) is not None:
+            self._resets += self._buffer.resets
+        else:
+            self._resets = 0
+        self._buffer = buffer
+        self._features = features_mod.OdometryFeatures(self.config)
+        self._recent = collections.deque()  # stamps of the newest driving message and the pre before it
+        self._last_stamp = None
+
+    def _add_driving(self, record):
+        buffer = self._buffer
+        resets = buffer.resets
+        row = self._features.row(record.msg, record.stamp)
+        done = buffer.add(record, row)
+        if buffer.resets != resets:  # time jumped backwards: the buffer started over
+            self._recent.clear()
+        self._last_stamp = record.stamp
+        self._note_recent(record.stamp)
+        self._complete(done)
+        if buffer.feature_window_full and self._features.covers(self.window, record.stamp):
+            started = time.perf_counter()
+            vector = features_mod.window_vector(buffer.feature_rows(), self.config)
+            anomalous, score = self.model.is_anomalous(vector)
+            elapsed = time.perf_counter() - started
+            with self._stats.lock:
+                self._stats.classifier_calls += 1
+                self._stats.classifier_seconds += elapsed
+                self._stats.classifier_max = max(self._stats.classifier_max, elapsed)
+                if anomalous:
+                    self._stats.anomalous += 1
+            if anomalous:
+                self._trigger('classifier', float(score))
+
+    def _note_recent(self, stamp):
+        recent = self._recent
+        recent.append(stamp)
+        if self.pre.is_duration:
+            newest = max(recent[-1], stamp)
+            while recent and recent[0] < newest - self.pre.seconds:
+                recent.popleft()
+        else:
+            while len(recent) > self.pre.count + 1:
+                recent.popleft()
+
+    def _window_active(self):
+        """Whether a window is open or complete but not yet written (a new trigger then joins it)."""
+        buffer = self._buffer
+        # WindowBuffer has no public view of its pending window yet; read it without changing it.
+        pending = getattr(buffer, '_pending', None)
+        return buffer.window_open or (pending is not None and bool(pending.records))
+
+    def _trigger(self, reason, score):
+        announce = not self._window_active()
+        done = self._buffer.trigger(reason, score)
+        if announce:
+            with self._stats.lock:
+                self._stats.windows_opened += 1
+            start = self._recent[0] if self._recent else self._last_stamp
+            self._emit(Event(OPENED, reason, score, self.threshold, start, None, 0, '', 0, ''))
+        self._complete(done)
+
+    def _complete(self, windows):
+        """Hand completed windows to the writer."""
+        for window in windows:
+            metadata = self._metadata(window)
+            with self._stats.lock:
+                self._stats.windows_queued += 1
+                self._stats.messages_queued += len(window)
+            if self._writer is not None:
+                self._queue.put((window, metadata))
+            else:
+                self._write(window, metadata)
+
+    def _metadata(self, window):
+        triggers = [{'stamp': t.stamp, 'reason': t.reason,
+                     'score': None if t.score is None or math.isnan(t.score) else t.score}
+                    for t in window.triggers]
+        return {
+            'reason': window.triggers[0].reason if window.triggers else '',
+            'triggers': triggers,
+            'threshold': self.threshold,
+            'driving_topic': self.driving_topic,
+            'part': window.part,
+            'pre': str(self.pre),
+            'post': str(self.post),
+            'model': self.config.to_dict(),
+        }
+
+    # -- writer ---------------------------------------------------------------------------------------
+
+    def _write_loop(self):
+        while True:
+            item = self._queue.get()
+            try:
+                if item is None:
+                    return
+                self._write(*item)
+            finally:
+                self._queue.task_done()
+
+    def _write(self, window, metadata):
+        scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
+        score = min(scores) if scores else float('nan')
+        reason = metadata['reason']
+        try:
+            path, nbytes = log_format.write_window(window, self.directory, self.format, metadata)
+        except (OSError, ValueError) as error:
+            with self._stats.lock:
+                self._stats.windows_queued -= 1
+                self._stats.messages_queued -= len(window)
+                self._stats.messages_lost += len(window)
+                self._stats.write_errors += 1
+                self._stats.last_error = str(error)
+            self._emit(Event(FAILED, reason, score, self.threshold, window.start, window.end, len(window),
+                             '', 0, str(error)))
+            return
+        with self._stats.lock:
+            self._stats.windows_queued -= 1
+            self._stats.messages_queued -= len(window)
+            self._stats.windows_saved += 1
+            self._stats.messages_kept += len(window)
+            self._stats.stored_bytes += nbytes
+        self._emit(Event(WRITTEN, reason, score, self.threshold, window.start, window.end, len(window),
+                         path, nbytes, ''))
+
+    def _emit(self, event):
+        for callback in self._callbacks:
+            callback(event)
+
+
+def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
+           side_topics=(), max_window=DEFAULT_MAX_WINDOW):
+    """Run the smart logger over a bag as fast as it can be read; return a summary dict:
+
+    ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
+    'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
+    message saved). Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag
+    cannot be read or a window cannot be written.
+    """
+    from . import bagio  # rosbag: imported here so the module stays pure
+    from .model import AnomalyModel
+    model = AnomalyModel.load(model_path)
+    logger = SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
+                         max_window=max_window)
+    windows = []
+    failures = []
+
+    def collect(event):
+        if event.kind == WRITTEN:
+            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
+                            'path': event.path})
+        elif event.kind == FAILED:
+            failures.append(event.error)
+    logger.on_event(collect)
+    try:
+        for record in bagio.read_messages(bag_path, [topic] + [t for t in side_topics if t != topic]):
+            logger.on_message(record.topic, record.msg, record.stamp)
+    finally:
+        logger.close()
+    if failures:
+        raise OSError('%s: %d window(s) could not be written: %s' % (out_dir, len(failures), failures[0]))
+    stats = logger.stats()
+    return {
+        'input_messages': stats['messages_seen'],
+        'raw_json_bytes': stats['raw_json_bytes'],
+        'stored_bytes': stats['stored_bytes'],
+        'windows': sorted(windows, key=lambda window: window['start']),
+    }
