@@ -3,7 +3,7 @@
 ``Collector`` keeps every message it is fed. The stream is cut into files by ``rotate`` (a message count
 ``'6000'``, a duration ``'60s'`` or a size ``'20MB'`` of raw row-JSON bytes); every file is a complete
 window file of the chosen format, readable on its own. From the driving topic it computes a feature vector
-every ``stride`` messages (or seconds) once a whole feature window of continuous data is in, and writes
+every ``stride`` messages once a whole feature window of continuous data is in, and writes
 each vector as its own file under ``<directory>/features/<label>/`` with ``learning.write_vector`` — the
 training data of learn mode. File writes run on a background writer thread.
 
@@ -23,13 +23,13 @@ from . import learning
 from . import log_format
 from . import msg_codec
 from .spans import Span
-from .window_buffer import LogWindow, Record, Trigger
+from .window_buffer import LogWindow, Record, Trigger, WindowBuffer
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']
 
 DEFAULT_ROTATE = '60s'
-DEFAULT_STRIDE = '100'
+DEFAULT_STRIDE = 25  # driving messages between feature vectors (4 per second at 100 Hz)
 DEFAULT_LABEL = 'nominal'
 DEFAULT_WINDOW = '500'
 DEFAULT_FEATURE_SET = 'motion'
@@ -78,54 +78,40 @@ def check_label(label):
 
 
 class VectorStream(object):
-    """Feature vectors of one driving topic: a row per message, a vector every ``stride`` once a whole
-    feature window of continuous data (no gap, no backwards time) is in.
-
-    ``add(msg, stamp)`` returns the vector (numpy array) due at this message, or None.
+    """Feature vectors of one driving topic, computed exactly as ``bagio.feature_vectors`` does offline:
+    rows go through OdometryFeatures into WindowBuffer's feature window, and once the window is full of
+    continuous data (no gap, no backwards time since the rows began) every ``stride``-th message yields a
+    vector. ``add(msg, stamp)`` returns that vector (numpy array) or None.
     """
 
     def __init__(self, config, stride=DEFAULT_STRIDE):
         self.config = config
         self.window = config.span
-        self.stride = Span.parse(stride, 'stride')
-        if self.stride.count == 0 or self.stride.seconds == 0:
-            raise ValueError('stride: must be positive')
+        self.stride = parse_stride(stride)
         self.features = features_mod.OdometryFeatures(config)
-        self._rows = collections.deque()
-        self._since = None  # messages (count stride) or stamp (duration stride) of the last vector
-        self._clock = None
-
-    def reset(self):
-        """Start over (time went backwards)."""
-        self.features.reset()
-        self._rows.clear()
-        self._since = None
-        self._clock = None
+        self.buffer = WindowBuffer(window=self.window, pre=0, post=0)
+        self._index = 0
 
     def add(self, msg, stamp):
-        if self._clock is not None and stamp < self._clock - JUMP_BACK_TOLERANCE:
-            self.reset()
-        self._clock = stamp if self._clock is None else max(self._clock, stamp)
         row = self.features.row(msg, stamp)
-        rows = self._rows
-        rows.append((stamp, row))
-        if self.window.is_duration:
-            while rows[0][0] < stamp - self.window.seconds:
-                rows.popleft()
-        elif len(rows) > self.window.count:
-            rows.popleft()
-        if not self.features.covers(self.window, stamp):
+        self.buffer.add(Record(stamp, None, None), row)
+        if not self.buffer.feature_window_full or not self.features.covers(self.window, stamp):
             return None
-        if self.stride.is_duration:
-            if self._since is not None and stamp - self._since < self.stride.seconds:
-                return None
-            self._since = stamp
-        else:
-            if self._since is not None and self._since + 1 < self.stride.count:
-                self._since += 1
-                return None
-            self._since = 0
-        return features_mod.window_vector([r for _, r in rows], self.config)
+        self._index += 1
+        if (self._index - 1) % self.stride:
+            return None
+        rows = self.buffer.feature_rows()
+        if not self.window.is_duration and len(rows) < self.window.count:
+            return None
+        return features_mod.window_vector(rows, self.config)
+
+
+def parse_stride(value):
+    """A positive whole number of messages; ValueError('stride: ...') otherwise."""
+    span = Span.parse(value, 'stride')
+    if span.is_duration or span.count < 1:
+        raise ValueError('stride: %r must be a whole number of messages, at least 1' % (value,))
+    return span.count
 
 
 class Collector(object):
@@ -134,8 +120,7 @@ class Collector(object):
     directory: the logging directory (window files there, vectors under ``features/<label>/``); fmt:
     ``'json-xz'`` or ``'bag-lz4'``; rotate: see ``Rotation.parse``; driving_topic: the topic name the
     odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
-    the feature window and set of the vectors; stride: a vector every ``stride`` driving messages (or
-    seconds); label: the vectors' label; background: write on a writer thread.
+    the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label: the vectors' label; background: write on a writer thread.
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
@@ -151,7 +136,7 @@ class Collector(object):
         self.driving_topic = driving_topic
         self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
         self.config = features_mod.FeatureConfig(feature_set, window)
-        self.stride = Span.parse(stride, 'stride')
+        self.stride = parse_stride(stride)
         self.label = check_label(label)
         self.features_directory = os.path.join(self.directory, FEATURES_SUBDIRECTORY)
         self._vectors = VectorStream(self.config, self.stride)
@@ -312,20 +297,14 @@ class Collector(object):
 
 def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=DEFAULT_STRIDE,
                 feature_set=DEFAULT_FEATURE_SET):
-    """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each).
-
-    Returns ``{'vectors': n, 'directory': out_dir/<label>, 'messages': driving messages read}``. Raises
-    ValueError for bad arguments, OSError when the bag cannot be read or a vector cannot be written.
+    """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each), as collect
+    mode does live. Returns ``{'vectors': n, 'directory': out_dir/<label>}``. Raises ValueError for bad
+    arguments or an unreadable bag, OSError when a vector cannot be written.
     """
     from . import bagio  # rosbag: imported here so the module stays pure
     check_label(label)
     config = features_mod.FeatureConfig(feature_set, window)
-    stream = VectorStream(config, stride)
-    count = messages = 0
-    for record in bagio.read_messages(bag_path, [topic]):
-        messages += 1
-        vector = stream.add(record.msg, record.stamp)
-        if vector is not None:
-            learning.write_vector(out_dir, label, record.stamp, vector, config)
-            count += 1
-    return {'vectors': count, 'directory': os.path.join(out_dir, label), 'messages': messages}
+    stamps, vectors = bagio.feature_vectors(bag_path, topic, config, parse_stride(stride))
+    for stamp, vector in zip(stamps, vectors):
+        learning.write_vector(out_dir, label, stamp, vector, config)
+    return {'vectors': len(stamps), 'directory': os.path.join(out_dir, label)}

@@ -37,11 +37,12 @@ OPENED = 'opened'
 WRITTEN = 'written'
 FAILED = 'failed'
 
-Event = collections.namedtuple('Event', 'kind reason score threshold start end messages path bytes error')
+Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error')
 Event.__doc__ = """What happened to a logging window.
 
 kind: OPENED (the classifier or a manual trigger opened a window), WRITTEN (the window file is on disk) or
-FAILED (writing it failed; ``error`` says why). reason: the first trigger's reason ('classifier',
+FAILED (writing it failed; ``error`` says why). stamp: of the message that triggered (the first trigger of
+the window for WRITTEN and FAILED). reason: the first trigger's reason ('classifier',
 'manual'); score: the lowest classifier score of the window's triggers (NaN for manual triggers);
 threshold: the model's. start, end: header stamps (float s) of the first and last message (end is None for
 OPENED). messages, path, bytes: the window's message count (all topics), file and size on disk (0, '' and 0
@@ -295,7 +296,7 @@ class SmartLogger(object):
             with self._stats.lock:
                 self._stats.windows_opened += 1
             start = self._recent[0] if self._recent else self._last_stamp
-            self._emit(Event(OPENED, reason, score, self.threshold, start, None, 0, '', 0, ''))
+            self._emit(Event(OPENED, self._last_stamp, reason, score, self.threshold, start, None, 0, '', 0, ''))
         self._complete(done)
 
     def _complete(self, windows):
@@ -341,6 +342,7 @@ class SmartLogger(object):
         scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
         score = min(scores) if scores else float('nan')
         reason = metadata['reason']
+        first = window.triggers[0].stamp if window.triggers else window.start
         try:
             path, nbytes = log_format.write_window(window, self.directory, self.format, metadata)
         except (OSError, ValueError) as error:
@@ -350,7 +352,7 @@ class SmartLogger(object):
                 self._stats.messages_lost += len(window)
                 self._stats.write_errors += 1
                 self._stats.last_error = str(error)
-            self._emit(Event(FAILED, reason, score, self.threshold, window.start, window.end, len(window),
+            self._emit(Event(FAILED, first, reason, score, self.threshold, window.start, window.end, len(window),
                              '', 0, str(error)))
             return
         with self._stats.lock:
@@ -359,7 +361,7 @@ class SmartLogger(object):
             self._stats.windows_saved += 1
             self._stats.messages_kept += len(window)
             self._stats.stored_bytes += nbytes
-        self._emit(Event(WRITTEN, reason, score, self.threshold, window.start, window.end, len(window),
+        self._emit(Event(WRITTEN, first, reason, score, self.threshold, window.start, window.end, len(window),
                          path, nbytes, ''))
 
     def _emit(self, event):

@@ -1,0 +1,400 @@
+"""The smart logger node (``rosrun cc_log smart_logger.py``): keep only the data around anomalies.
+
+Node name: ``smart_logger``.
+
+Subscribed topics
+  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it).
+  every topic in ``~topics`` (any type): saved in the windows whose time span holds them.
+
+Published topics
+  ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/dropped, raw vs stored
+  bytes, classifier latency, queues, free disk, every ``~diagnostic_period`` seconds (wall time).
+
+Services
+  ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
+  ``~enable`` (std_srvs/SetBool): resume (true) or pause (false) logging.
+
+Parameters (defaults below as module constants; each resolved value is logged once)
+  ``~model`` (string, required): model file from learn mode (its feature window is used).
+  ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): where window files go.
+  ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
+  ``~window`` (string, default: the model's): only checked against the model; a mismatch is an error.
+  ``~pre``, ``~post`` (string, default: 100): messages (``100``) or seconds (``2s``) before / after.
+  ``~max_window`` (string, default: 100000): longer windows are written in parts.
+  ``~topics`` (list or space-separated string, default: none): other topics to keep.
+  ``~enabled`` (bool, default: true): start logging, or start paused.
+  ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
+
+Subscriber callbacks only put the message on an intake queue; one feeder thread runs the classifier and
+the window buffer (``SmartLogger``), whose writer thread compresses and writes. Stamps are header stamps
+(receipt time for messages without one), so ``use_sim_time`` and ``rosbag play --clock`` work, and time
+jumping backwards (a bag played again) restarts the buffer instead of failing.
+"""
+import math
+import os
+import queue
+import sys
+import threading
+
+import genpy
+import roslib.message
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
+
+from . import msg_codec
+from . import smart_logger
+from .directory import LoggingDirectory
+from .model import AnomalyModel, ModelError
+from .spans import Span
+
+NODE_NAME = 'smart_logger'
+DRIVING_TOPIC = 'odom'
+DEFAULT_FORMAT = smart_logger.DEFAULT_FORMAT
+DEFAULT_PRE = str(smart_logger.DEFAULT_PRE)
+DEFAULT_POST = str(smart_logger.DEFAULT_POST)
+DEFAULT_MAX_WINDOW = str(smart_logger.DEFAULT_MAX_WINDOW)
+DEFAULT_TOPICS = ()
+DEFAULT_ENABLED = True
+DEFAULT_DIAGNOSTIC_PERIOD = 1.0
+DISK_WARN_BYTES = 200 * 1000 ** 2   # diagnostics warn below this much free disk
+CLOSE_TIMEOUT = 60.0                 # seconds to wait at shutdown for the last windows to be written
+
+
+class ConfigError(ValueError):
+    """Bad configuration: the message is one line naming the parameter."""
+
+
+# -- parameters (shared with collect_node) --------------------------------------------------------------
+
+def param(name, default, log=True):
+    """``~name`` or ``default``; the resolved value is logged once."""
+    value = rospy.get_param('~' + name, default)
+    if log:
+        rospy.loginfo('~%s: %s', name, value if value not in (None, '') else '(default)')
+    return value
+
+
+def param_bool(name, default):
+    value = param(name, default)
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ('true', '1', 'yes', 'on'):
+        return True
+    if text in ('false', '0', 'no', 'off'):
+        return False
+    raise ConfigError('~%s: %r is not true or false' % (name, value))
+
+
+def param_float(name, default, minimum=0.0):
+    value = param(name, default)
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError('~%s: %r is not a number' % (name, value))
+    if not math.isfinite(number) or number < minimum:
+        raise ConfigError('~%s: %r must be a number >= %g' % (name, value, minimum))
+    return number
+
+
+def param_topics(name='topics', default=DEFAULT_TOPICS):
+    """A list of topic names from a YAML list or a space/comma-separated string."""
+    value = param(name, default)
+    if isinstance(value, str):
+        items = value.replace(',', ' ').split()
+    elif isinstance(value, (list, tuple)):
+        items = value
+    else:
+        raise ConfigError('~%s: %r is not a list of topic names' % (name, value))
+    topics = []
+    for item in items:
+        if not isinstance(item, str) or not item.strip():
+            raise ConfigError('~%s: %r is not a topic name' % (name, item))
+        if item.strip() not in topics:
+            topics.append(item.strip())
+    return topics
+
+
+def resolve_directory(value):
+    """The logging directory: ``value``, else ~/.ros/cc_log, else /tmp/cc_log (created)."""
+    try:
+        path = LoggingDirectory(value or None).path
+    except OSError as error:
+        raise ConfigError('~directory: %s' % error)
+    rospy.loginfo('logging to %s', path)
+    return path
+
+
+def fail(node_name, error):
+    """Print the one-line configuration error and return the exit status."""
+    sys.stderr.write('%s: %s\n' % (node_name, error))
+    return 2
+
+
+# -- message intake (shared with collect_node) ----------------------------------------------------------
+
+class Intake(object):
+    """Subscribers that only enqueue; one feeder thread hands messages to ``sink.on_message`` in arrival
+    order. The driving topic is typed; other topics arrive as rospy.AnyMsg and are deserialized on the
+    feeder thread (their class from the publisher's type, or built from its message definition)."""
+
+    def __init__(self, sink, driving_topic, driving_class, side_topics):
+        self.sink = sink
+        self.queue = queue.Queue()   # unbounded: a slow classifier delays messages, never drops them
+        self.dropped = 0             # side messages that could not be deserialized
+        self._classes = {}
+        self.driving_topic = rospy.resolve_name(driving_topic)
+        self.subscribers = [rospy.Subscriber(self.driving_topic, driving_class, self._enqueue, self.driving_topic,
+                                             queue_size=None)]
+        self.side_topics = []
+        for topic in side_topics:
+            resolved = rospy.resolve_name(topic)
+            if resolved == self.driving_topic:
+                rospy.logwarn('~topics: %s is the driving topic; it is logged anyway', topic)
+                continue
+            if resolved in self.side_topics:
+                continue
+            self.subscribers.append(rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
+                                                     queue_size=None))
+            self.side_topics.append(resolved)
+        self._thread = threading.Thread(target=self._feed, name='cc_log feeder')
+        self._thread.daemon = True
+        self._thread.start()
+
+    def _enqueue(self, msg, topic):
+        # Cheap: note the receipt time and queue the message; decoding happens on the feeder thread.
+        self.queue.put((topic, msg, rospy.get_rostime()))
+
+    def _decode(self, msg):
+        if not isinstance(msg, rospy.AnyMsg):
+            return msg
+        header = msg._connection_header
+        msg_type = header.get('type', '')
+        cls = self._classes.get(msg_type)
+        if cls is None:
+            cls = roslib.message.get_message_class(msg_type)
+            if cls is None:
+                cls = msg_codec.message_class(msg_type, header.get('message_definition', ''))
+            self._classes[msg_type] = cls
+        decoded = cls()
+        decoded.deserialize(msg._buff)
+        return decoded
+
+    def _feed(self):
+        while True:
+            item = self.queue.get()
+            try:
+                if item is None:
+                    return
+                topic, msg, receipt = item
+                try:
+                    decoded = self._decode(msg)
+                except (genpy.DeserializationError, ValueError) as error:
+                    self.dropped += 1
+                    rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
+                    continue
+                self.sink.on_message(topic, decoded, receipt.to_sec())
+            finally:
+                self.queue.task_done()
+
+    def stop(self):
+        """Stop listening, feed what is queued, and wait for the feeder."""
+        for subscriber in self.subscribers:
+            subscriber.unregister()
+        self.queue.put(None)
+        self._thread.join()
+
+
+# -- diagnostics (shared with collect_node) -------------------------------------------------------------
+
+def free_disk(path):
+    """Bytes free for an unprivileged user on the file system of ``path`` (None if unknown)."""
+    try:
+        status = os.statvfs(path)
+    except OSError:
+        return None
+    return status.f_bavail * status.f_frsize
+
+
+class Diagnostics(object):
+    """Publish one DiagnosticStatus on /diagnostics every ``period`` seconds of wall time (so a paused or
+    jumping simulated clock never stops it)."""
+
+    def __init__(self, name, period, status_fn):
+        self.name = name
+        self.period = period
+        self.status_fn = status_fn
+        self.publisher = rospy.Publisher('/diagnostics', DiagnosticArray, queue_size=10)
+        self._stop = threading.Event()
+        self._thread = None
+        if period > 0:
+            self._thread = threading.Thread(target=self._loop, name='cc_log diagnostics')
+            self._thread.daemon = True
+            self._thread.start()
+
+    def _loop(self):
+        while not self._stop.wait(self.period) and not rospy.is_shutdown():
+            self.publish()
+
+    def publish(self):
+        level, message, values = self.status_fn()
+        status = DiagnosticStatus(level=level, name=self.name, message=message, hardware_id=rospy.get_name())
+        status.values = [KeyValue(key=key, value=str(value)) for key, value in values]
+        array = DiagnosticArray(status=[status])
+        try:
+            array.header.stamp = rospy.get_rostime()
+            self.publisher.publish(array)
+        except rospy.ROSException:  # shutting down (rospy.ROSTimeMovedBackwardsException is one too)
+            pass
+
+    def stop(self):
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+
+
+def time_of(stamp):
+    """rospy.Time of float seconds (zero for None or NaN)."""
+    if stamp is None or not math.isfinite(stamp) or stamp < 0:
+        return rospy.Time()
+    return rospy.Time.from_sec(stamp)
+
+
+# -- the node ------------------------------------------------------------------------------------------
+
+class SmartNode(object):
+    """Parameters, subscribers, publishers, services and diagnostics around a SmartLogger."""
+
+    def __init__(self):
+        from cc_log.msg import AnomalyEvent  # generated message: only in a built workspace
+        self._event_class = AnomalyEvent
+        model_path = param('model', '')
+        if not model_path:
+            raise ConfigError('~model: required (the model file written by learn mode)')
+        try:
+            self.model = AnomalyModel.load(os.path.expanduser(model_path))
+        except ModelError as error:
+            raise ConfigError('~model: %s' % error)
+        window = param('window', '')
+        if window not in ('', None):
+            try:
+                span = Span.parse(window, 'window')
+            except ValueError as error:
+                raise ConfigError('~%s' % error)
+            if span != self.model.config.span:
+                raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
+                                  'the model; leave ~window unset)' % (span, self.model.config.window))
+        rospy.loginfo('model: %s features, window %s, threshold %g', self.model.config.feature_set,
+                      self.model.config.window, self.model.threshold)
+        self.directory = resolve_directory(param('directory', ''))
+        fmt = param('format', DEFAULT_FORMAT)
+        pre = param('pre', DEFAULT_PRE)
+        post = param('post', DEFAULT_POST)
+        max_window = param('max_window', DEFAULT_MAX_WINDOW)
+        topics = param_topics()
+        enabled = param_bool('enabled', DEFAULT_ENABLED)
+        period = param_float('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        driving_class = roslib.message.get_message_class(self.model.config.topic_type)
+        if driving_class is None:
+            raise ConfigError('~model: message type %s is not installed' % self.model.config.topic_type)
+        driving_topic = rospy.resolve_name(DRIVING_TOPIC)
+        side_topics = [rospy.resolve_name(topic) for topic in topics]
+        try:
+            self.logger = smart_logger.SmartLogger(
+                self.model, self.directory, fmt, pre, post, driving_topic=driving_topic,
+                side_topics=side_topics, max_window=max_window, enabled=enabled)
+        except ValueError as error:
+            raise ConfigError('~%s' % error)
+        self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
+        self.logger.on_event(self._publish_event)
+        self.intake = Intake(self.logger, DRIVING_TOPIC, driving_class, topics)
+        self.services = [rospy.Service('~trigger', Trigger, self._trigger),
+                         rospy.Service('~enable', SetBool, self._enable)]
+        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
+        rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
+                      ', '.join(self.intake.side_topics) or 'no other topics',
+                      'enabled' if enabled else 'disabled until ~enable')
+
+    def _publish_event(self, event):
+        kind = {smart_logger.OPENED: self._event_class.OPENED, smart_logger.WRITTEN: self._event_class.WRITTEN,
+                smart_logger.FAILED: self._event_class.FAILED}[event.kind]
+        msg = self._event_class(event=kind, reason=event.reason, score=event.score, threshold=event.threshold,
+                                start=time_of(event.start), end=time_of(event.end), messages=event.messages,
+                                path=event.path, bytes=event.bytes)
+        msg.header.stamp = time_of(event.stamp)
+        if event.kind == smart_logger.WRITTEN:
+            rospy.loginfo('window written: %s (%d messages, %d bytes)', event.path, event.messages, event.bytes)
+        elif event.kind == smart_logger.FAILED:
+            rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
+        else:
+            rospy.loginfo('window opened (%s, score %.4g)', event.reason, event.score)
+        try:
+            self.events.publish(msg)
+        except rospy.ROSException:  # shutting down
+            pass
+
+    def _trigger(self, request):
+        ok, message = self.logger.trigger_now('manual')
+        # Messages still in the intake queue came before the call: the trigger applies to the newest fed.
+        return TriggerResponse(success=ok, message=message)
+
+    def _enable(self, request):
+        self.logger.set_enabled(request.data)
+        state = 'enabled' if request.data else 'disabled'
+        rospy.loginfo('smart logger %s', state)
+        return SetBoolResponse(success=True, message=state)
+
+    def _status(self):
+        stats = self.logger.stats()
+        free = free_disk(self.directory)
+        level, message = DiagnosticStatus.OK, 'logging' if stats['enabled'] else 'disabled'
+        if free is not None and free < DISK_WARN_BYTES:
+            level, message = DiagnosticStatus.WARN, 'low disk space: %d MB free' % (free // 1000 ** 2)
+        if stats['write_errors']:
+            level, message = DiagnosticStatus.ERROR, 'write errors: %s' % stats['last_error']
+        raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
+        values = [
+            ('enabled', stats['enabled']),
+            ('windows opened', stats['windows_opened']),
+            ('windows saved', stats['windows_saved']),
+            ('messages seen', stats['messages_seen']),
+            ('messages kept', stats['messages_kept']),
+            ('messages dropped', stats['messages_dropped']),
+            ('messages buffered', stats['messages_buffered']),
+            ('messages lost', stats['messages_lost'] + self.intake.dropped),
+            ('raw JSON bytes', raw),
+            ('stored bytes', stored),
+            ('stored / raw', '%.4f' % (float(stored) / raw) if raw else 'n/a'),
+            ('classifier mean us', '%.1f' % stats['classifier_mean_us']),
+            ('classifier max us', '%.1f' % stats['classifier_max_us']),
+            ('anomalous messages', stats['anomalous_messages']),
+            ('writer queue', stats['queue_depth']),
+            ('intake queue', self.intake.queue.qsize()),
+            ('write errors', stats['write_errors']),
+            ('time resets', stats['time_resets']),
+            ('directory', self.directory),
+            ('free disk bytes', free if free is not None else 'unknown'),
+        ]
+        return level, message, values
+
+    def shutdown(self):
+        """Feed what is queued, write the last windows, stop diagnostics."""
+        self.intake.stop()
+        if not self.logger.close(CLOSE_TIMEOUT):
+            rospy.logerr('windows still unwritten after %g s', CLOSE_TIMEOUT)
+        self.diagnostics.stop()
+
+
+def main(argv=None):
+    """Run the node; return the exit status (2 with one line on stderr for bad configuration)."""
+    argv = sys.argv if argv is None else argv
+    rospy.init_node(NODE_NAME, argv=argv)
+    try:
+        node = SmartNode()
+    except ConfigError as error:
+        return fail(rospy.get_name(), error)
+    rospy.spin()
+    node.shutdown()
+    return 0
