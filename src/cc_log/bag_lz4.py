@@ -1,0 +1,125 @@
+"""The ``bag-lz4`` window file: one LZ4-compressed rosbag (format 2.0) per window.
+
+``rosbag info``, ``rosbag play`` and rqt_bag open it. Records are written on their own topics with their
+stamp as the bag time. The window metadata is a JSON object in one ``std_msgs/String`` message on
+``/cc_log/metadata``, written first at the time of the first record (``rostopic echo -b FILE
+/cc_log/metadata`` shows it; ``rosbag play FILE --topics ...`` can leave it out). The JSON also holds a
+``"bag"`` object that ``read`` uses and removes:
+
+- ``topics``: the record topics in order of first appearance (ties in bag time are read in this order);
+- ``order``: only when the records were not in (bag time, topic) order: the index in bag read order of
+  each record, in window order;
+- ``stamps``: only when some record stamp (float seconds) does not survive the trip through bag time
+  (secs, nsecs): every record's stamp, in window order.
+
+Edge module: rosbag is imported inside the functions only, so importing cc_log.bag_lz4 costs nothing.
+"""
+import json
+import math
+
+from . import msg_codec
+from .window_buffer import Record
+
+CODEC = 'bag-lz4'
+EXTENSION = '.bag'
+LAYOUT_VERSION = 1
+MAGIC = b'#ROSBAG V2.0\n'
+METADATA_TOPIC = '/cc_log/metadata'
+_STRING_DEFINITION = 'string data\n'
+
+
+def bag_time(stamp):
+    """Float seconds -> genpy.Time, nanoseconds rounded to nearest; ValueError for negative or not finite."""
+    import genpy
+    stamp = float(stamp)
+    if not math.isfinite(stamp) or stamp < 0:
+        raise ValueError('stamp %r cannot be a bag time (must be finite and >= 0)' % stamp)
+    secs = int(math.floor(stamp))
+    nsecs = int(round((stamp - secs) * 1e9))
+    if nsecs >= 1000000000:
+        secs, nsecs = secs + 1, nsecs - 1000000000
+    return genpy.Time(secs, nsecs)
+
+
+def write(path, records, metadata):
+    """Write ``records`` (window order) and ``metadata`` (a JSON-able dict) as an LZ4 bag at ``path``."""
+    import rosbag
+    if not records:
+        raise ValueError('window: has no records')
+    topics = list(dict.fromkeys(record.topic for record in records))
+    if METADATA_TOPIC in topics:
+        raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
+    times = [bag_time(record.stamp) for record in records]
+    rank = {topic: number for number, topic in enumerate(topics)}
+    read_order = sorted(range(len(records)), key=lambda i: (times[i], rank[records[i].topic]))
+    layout = {'topics': topics}
+    if read_order != list(range(len(records))):
+        position = {index: place for place, index in enumerate(read_order)}
+        layout['order'] = [position[i] for i in range(len(records))]
+    if any(time.to_sec() != record.stamp for time, record in zip(times, records)):
+        layout['stamps'] = [msg_codec.encode_float(float(record.stamp)) for record in records]
+    meta = dict(metadata or {})
+    meta.setdefault('codec', CODEC)
+    meta['layout'] = LAYOUT_VERSION
+    meta['bag'] = layout
+    string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
+    text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
+    bag = rosbag.Bag(path, 'w', compression=rosbag.Compression.LZ4)
+    try:
+        bag.write(METADATA_TOPIC, string_class(data=text), min(times))
+        for record, time in zip(records, times):
+            bag.write(record.topic, record.msg, time)
+    finally:
+        bag.close()
+
+
+def read(path):
+    """``(metadata, records)`` of a bag-lz4 window file; ValueError('<path>: <what is wrong>') otherwise."""
+    import rosbag
+    try:
+        with open(path, 'rb') as stream:
+            magic = stream.read(len(MAGIC))
+    except OSError as error:
+        raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
+    if magic != MAGIC:
+        raise ValueError('%s: not a rosbag 2.0 file' % path)
+    metadata = None
+    read_records = []
+    try:
+        with rosbag.Bag(path) as bag:
+            for topic, msg, time in bag.read_messages():
+                if topic == METADATA_TOPIC:
+                    if metadata is None:
+                        metadata = json.loads(msg.data)
+                    continue
+                read_records.append((time, Record(time.to_sec(), topic, msg)))
+    except ValueError as error:
+        raise ValueError('%s: bad metadata JSON on %s (%s)' % (path, METADATA_TOPIC, error))
+    except Exception as error:  # rosbag raises ROSBag*Exception, struct.error, lz4 errors, ...
+        raise ValueError('%s: corrupt or truncated bag (%s: %s)' % (path, type(error).__name__, error))
+    if not isinstance(metadata, dict) or not isinstance(metadata.get('bag'), dict):
+        raise ValueError('%s: not a cc_log window (no metadata on %s)' % (path, METADATA_TOPIC))
+    layout = metadata.pop('bag')
+    try:
+        records = _restore(read_records, layout)
+    except (ValueError, TypeError, KeyError, IndexError) as error:
+        raise ValueError('%s: metadata does not fit the records (%s)' % (path, error))
+    return metadata, records
+
+
+def _restore(read_records, layout):
+    rank = {topic: number for number, topic in enumerate(layout['topics'])}
+    timed = sorted(read_records, key=lambda item: (item[0], rank.get(item[1].topic, len(rank))))
+    records = [record for _, record in timed]
+    order = layout.get('order')
+    if order is not None:
+        if sorted(order) != list(range(len(records))):
+            raise ValueError('order is not a permutation of the records')
+        records = [records[place] for place in order]
+    stamps = layout.get('stamps')
+    if stamps is not None:
+        if len(stamps) != len(records):
+            raise ValueError('%d stamps for %d records' % (len(stamps), len(records)))
+        records = [Record(msg_codec.decode_float(stamp), record.topic, record.msg)
+                   for stamp, record in zip(stamps, records)]
+    return records

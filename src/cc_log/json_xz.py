@@ -1,0 +1,249 @@
+"""The ``json-xz`` window file: one self-contained, xz-compressed JSON document per window.
+
+``xz -dc FILE | jq .`` shows it; docs/FORMAT.md describes the layout and the measurements behind it.
+The document (layout 1)::
+
+    {"metadata": {... window metadata, "layout": 1 ...},
+     "topics": [
+       {"topic": "/odom", "type": "nav_msgs/Odometry", "md5sum": "...", "count": 300,
+        "stamps": "header.stamp",             # or a list of float seconds, one per message
+        "constant": {"header.frame_id": "odom", "pose.covariance": [...], ...},
+        "columns": {"header.seq": [...], "header.stamp.secs": [...], "pose.pose.position.x": [...], ...},
+        "definition": "<full message definition>"}, ...],
+     "order": [0, 1, 0, ...]}                  # only when records are not in (stamp, section) order
+
+Each topic is one section in order of first appearance. A field (the message's own dotted names, times
+split into ``.secs``/``.nsecs``) is either in ``constant`` (the same JSON value in every message of the
+window, stated once) or in ``columns`` (one value per message, in message order). Arrays (covariance,
+ranges) are one value: a column of lists. Values follow ``msg_codec`` (base64 bytes, non-finite floats as
+strings). ``stamps`` is ``"header.stamp"`` when every record's stamp equals ``header.stamp.to_sec()``.
+
+Pure: no rospy, no rosbag.
+"""
+import json
+import lzma
+
+from . import msg_codec
+from .window_buffer import Record
+
+CODEC = 'json-xz'
+EXTENSION = '.json.xz'
+LAYOUT_VERSION = 1
+MAGIC = b'\xfd7zXZ\x00'
+
+#: LZMA2 preset used when writing. 6 is xz's default; on windows of a few hundred messages presets 6..9
+#: and "extreme" give the same size within 1% (see docs/FORMAT.md), so the cheap one is used.
+DEFAULT_PRESET = 6
+
+HEADER_STAMP = 'header.stamp'
+
+
+# -- columns --------------------------------------------------------------------------------------------
+
+def _flatten(row, prefix, out):
+    for name, value in row.items():
+        if isinstance(value, dict) and value:
+            _flatten(value, prefix + name + '.', out)
+        else:
+            out[prefix + name] = value
+    return out
+
+
+def _unflatten(flat):
+    row = {}
+    for key, value in flat.items():
+        node = row
+        parts = key.split('.')
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+    return row
+
+
+def _key(value):
+    """A comparison key that tells 0 from 0.0, False and -0.0 (``==`` does not)."""
+    if isinstance(value, float):
+        return ('f', repr(value))
+    if isinstance(value, (list, dict)):
+        return ('j', json.dumps(value, sort_keys=True))
+    return (type(value).__name__, value)
+
+
+def _columns(rows):
+    """Split flat rows into (constant, columns), keys in the order of the first row."""
+    constant, columns = {}, {}
+    for key in rows[0]:
+        values = [row[key] for row in rows]
+        first = values[0]
+        if len(values) > 1 and all(_key(value) == _key(first) for value in values[1:]):
+            constant[key] = first
+        else:
+            columns[key] = values
+    return constant, columns
+
+
+def _header_stamp(msg):
+    header = getattr(msg, 'header', None)
+    stamp = getattr(header, 'stamp', None)
+    return stamp.to_sec() if stamp is not None and hasattr(stamp, 'to_sec') else None
+
+
+def document(records, metadata):
+    """The JSON document (a dict) of a window's records and its metadata."""
+    if not records:
+        raise ValueError('window: has no records')
+    sections = []
+    index = {}
+    order = []
+    for record in records:
+        msg = record.msg
+        if record.topic not in index:
+            index[record.topic] = len(sections)
+            sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
+                             'definition': msg._full_text, 'records': []})
+        section = sections[index[record.topic]]
+        if msg._type != section['type']:
+            raise ValueError('topic %s: holds both %s and %s' % (record.topic, section['type'], msg._type))
+        section['records'].append(record)
+        order.append(index[record.topic])
+    topics = []
+    for section in sections:
+        recs = section.pop('records')
+        rows = [_flatten(msg_codec.to_dict(record.msg), '', {}) for record in recs]
+        constant, columns = _columns(rows)
+        stamps = [record.stamp for record in recs]
+        if all(_header_stamp(record.msg) == record.stamp for record in recs):
+            stamps = HEADER_STAMP
+        else:
+            stamps = [msg_codec.encode_float(float(stamp)) for stamp in stamps]
+        topics.append({'topic': section['topic'], 'type': section['type'], 'md5sum': section['md5sum'],
+                       'count': len(recs), 'stamps': stamps, 'constant': constant, 'columns': columns,
+                       'definition': section['definition']})
+    meta = dict(metadata or {})
+    meta.setdefault('codec', CODEC)
+    meta['layout'] = LAYOUT_VERSION
+    doc = {'metadata': meta, 'topics': topics}
+    if order != _merged_order(records, index):
+        doc['order'] = order
+    return doc
+
+
+def _merged_order(records, index):
+    """Section indexes in the order a reader merges sections: by stamp, then by section."""
+    keyed = sorted(range(len(records)), key=lambda i: (records[i].stamp, index[records[i].topic]))
+    return [index[records[i].topic] for i in keyed]
+
+
+def encode(records, metadata, preset=DEFAULT_PRESET):
+    """The ``.json.xz`` bytes of a window: compact JSON, one xz stream (CRC64)."""
+    text = json.dumps(document(records, metadata), separators=(',', ':'), allow_nan=False)
+    data = text.encode('utf-8')
+    return compress(data, preset)
+
+
+def compress(data, preset=DEFAULT_PRESET):
+    """xz-compress with LZMA2 at ``preset`` and a dictionary no larger than the data needs (the output is
+    the same as with the preset's own dictionary; memory stays small on the robot)."""
+    dict_size = 1 << 16
+    while dict_size < len(data) and dict_size < (1 << 26):
+        dict_size <<= 1
+    filters = [{'id': lzma.FILTER_LZMA2, 'preset': preset, 'dict_size': dict_size}]
+    return lzma.compress(data, format=lzma.FORMAT_XZ, check=lzma.CHECK_CRC64, filters=filters)
+
+
+# -- reading --------------------------------------------------------------------------------------------
+
+def decode(data, name='<bytes>'):
+    """``(metadata, records)`` from ``.json.xz`` bytes; ValueError('<name>: <what is wrong>') otherwise."""
+    if not data.startswith(MAGIC):
+        raise ValueError('%s: not an xz file' % name)
+    try:
+        text = lzma.decompress(data, format=lzma.FORMAT_XZ)
+    except (lzma.LZMAError, EOFError) as error:
+        raise ValueError('%s: corrupt or truncated xz data (%s)' % (name, error))
+    try:
+        doc = json.loads(text.decode('utf-8'))
+    except (UnicodeDecodeError, ValueError) as error:
+        raise ValueError('%s: not a JSON document (%s)' % (name, error))
+    try:
+        return from_document(doc)
+    except ValueError as error:
+        raise ValueError('%s: %s' % (name, error))
+
+
+def read(path):
+    """``(metadata, records)`` of a ``.json.xz`` window file."""
+    with open(path, 'rb') as stream:
+        return decode(stream.read(), path)
+
+
+def from_document(doc):
+    """``(metadata, records)`` of a decoded JSON document; ValueError saying what does not fit."""
+    if not isinstance(doc, dict) or not isinstance(doc.get('metadata'), dict) \
+            or not isinstance(doc.get('topics'), list):
+        raise ValueError('not a cc_log json-xz window (needs "metadata" and "topics")')
+    metadata = doc['metadata']
+    layout = metadata.get('layout')
+    if layout != LAYOUT_VERSION:
+        raise ValueError('json-xz layout %r is not supported (this cc_log reads layout %d)'
+                         % (layout, LAYOUT_VERSION))
+    per_topic = []
+    for number, section in enumerate(doc['topics']):
+        try:
+            per_topic.append(_section_records(section))
+        except (KeyError, TypeError, AttributeError, IndexError) as error:
+            raise ValueError('topic section %d: %s: %s' % (number, type(error).__name__, error))
+        except ValueError as error:
+            raise ValueError('topic %s: %s' % (section.get('topic', number), error))
+    order = doc.get('order')
+    if order is None:
+        merged = []
+        for number, recs in enumerate(per_topic):
+            merged.extend((record.stamp, number, i) for i, record in enumerate(recs))
+        merged.sort()
+        return metadata, [per_topic[number][i] for _, number, i in merged]
+    records = []
+    positions = [0] * len(per_topic)
+    try:
+        for number in order:
+            records.append(per_topic[number][positions[number]])
+            positions[number] += 1
+    except (IndexError, TypeError):
+        raise ValueError('"order" does not fit the topic sections')
+    if positions != [len(recs) for recs in per_topic]:
+        raise ValueError('"order" does not fit the topic sections')
+    return metadata, records
+
+
+def _section_records(section):
+    topic, msg_type, definition = section['topic'], section['type'], section['definition']
+    count = section['count']
+    constant, columns = section['constant'], section['columns']
+    if not isinstance(count, int) or count < 1:
+        raise ValueError('count %r is not a positive integer' % (count,))
+    for key, values in columns.items():
+        if not isinstance(values, list) or len(values) != count:
+            raise ValueError('column %s does not hold %d values' % (key, count))
+    cls = msg_codec.message_class(msg_type, definition)
+    if section.get('md5sum') not in (None, cls._md5sum):
+        raise ValueError('md5sum %s does not match the definition (%s)' % (section['md5sum'], cls._md5sum))
+    stamps = section['stamps']
+    if stamps != HEADER_STAMP:
+        if not isinstance(stamps, list) or len(stamps) != count:
+            raise ValueError('stamps do not hold %d values' % count)
+        stamps = [msg_codec.decode_float(stamp) for stamp in stamps]
+    records = []
+    for i in range(count):
+        flat = dict(constant)
+        for key, values in columns.items():
+            flat[key] = values[i]
+        try:
+            msg = msg_codec.from_dict(_unflatten(flat), msg_type, definition)
+        except ValueError as error:
+            raise ValueError('message %d: %s' % (i, error))
+        if stamps == HEADER_STAMP:
+            stamp = msg.header.stamp.to_sec()
+        else:
+            stamp = stamps[i]
+        records.append(Record(stamp, topic, msg))
+    return records

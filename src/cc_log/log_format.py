@@ -1,0 +1,245 @@
+"""Window files: the formats, their names, atomic writing and reading.
+
+``write_window(window, directory, fmt, metadata)`` writes one LogWindow as ``json-xz`` (pure, see
+``json_xz``) or ``bag-lz4`` (a rosbag, see ``bag_lz4``; rosbag is imported only when that format is
+written or read). Files are named by the UTC time of their first stamp and the first trigger reason, so
+names sort by time::
+
+    cc_log_20150521T191138.027Z_classifier.json.xz
+    cc_log_20150521T191138.027Z_classifier_part2.json.xz   (second part of a split window)
+    cc_log_20150521T191138.027Z_classifier_1.json.xz       (a file of that name existed already)
+
+A file is written as ``<final name>.tmp-<pid>``, flushed and fsynced, moved to a final name that does not
+exist yet (hard link then unlink, so a file is never overwritten even by another process; rename on file
+systems without hard links), and the directory is fsynced. Readers ignore ``*.tmp-*``; they are leftovers
+of a crash (``temporary_files``).
+"""
+import datetime
+import errno
+import os
+import re
+
+from . import __version__
+from . import json_xz
+from . import msg_codec
+
+PREFIX = 'cc_log_'
+TMP_MARK = '.tmp-'
+FILE_MODE = 0o664  # group-writable, never world-writable (the umask may take more away)
+DIR_MODE = 0o2775
+
+
+class Format(object):
+    """The window file formats."""
+
+    JSON_XZ = 'json-xz'
+    BAG_LZ4 = 'bag-lz4'
+    ALL = (JSON_XZ, BAG_LZ4)
+    EXTENSIONS = {JSON_XZ: json_xz.EXTENSION, BAG_LZ4: '.bag'}
+
+    @classmethod
+    def check(cls, name, param='format'):
+        """Return ``name`` when it is a format; else ValueError("format: 'xyz' is not one of: ...")."""
+        if name not in cls.ALL:
+            raise ValueError('%s: %r is not one of: %s' % (param, name, ', '.join(cls.ALL)))
+        return name
+
+
+# -- metadata -------------------------------------------------------------------------------------------
+
+def utc_text(stamp):
+    """``1432236698.0275`` -> ``'2015-05-21T19:31:38.027500Z'`` (ISO 8601, UTC)."""
+    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(stamp))
+    return moment.strftime('%Y-%m-%dT%H:%M:%S.%fZ')
+
+
+def _score(value):
+    if value is None:
+        return None
+    return msg_codec.encode_float(float(value))
+
+
+def window_metadata(window, codec, extra=None):
+    """The metadata every window file carries; keys of ``extra`` (JSON-able) are added, overriding.
+
+    topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the
+    first/last record), start_utc/end_utc, triggers ([{stamp, reason, score}]), reasons (distinct, in
+    order), part (0, or 1, 2, ... for a split window), codec, cc_log_version.
+    """
+    types, counts = {}, {}
+    for record in window.records:
+        types.setdefault(record.topic, record.msg._type)
+        counts[record.topic] = counts.get(record.topic, 0) + 1
+    triggers = [{'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
+                for trigger in window.triggers]
+    meta = {
+        'topics': list(types),
+        'types': types,
+        'counts': counts,
+        'count': len(window.records),
+        'start': float(window.start),
+        'end': float(window.end),
+        'start_utc': utc_text(window.start),
+        'end_utc': utc_text(window.end),
+        'triggers': triggers,
+        'reasons': list(dict.fromkeys(trigger['reason'] for trigger in triggers)),
+        'part': int(getattr(window, 'part', 0)),
+        'codec': codec,
+        'cc_log_version': __version__,
+    }
+    meta.update(extra or {})
+    return meta
+
+
+# -- names ----------------------------------------------------------------------------------------------
+
+def _reason_text(window):
+    reason = window.triggers[0].reason if window.triggers else 'window'
+    text = re.sub(r'[^A-Za-z0-9-]+', '-', str(reason)).strip('-')
+    return text or 'window'
+
+
+def base_name(window):
+    """``cc_log_<UTC of the first stamp>_<first reason>[_part<N>]`` (no extension)."""
+    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
+    stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
+    name = PREFIX + stamp + '_' + _reason_text(window)
+    if getattr(window, 'part', 0):
+        name += '_part%d' % window.part
+    return name
+
+
+def _extension(path):
+    for fmt, extension in Format.EXTENSIONS.items():
+        if path.endswith(extension):
+            return fmt
+    return None
+
+
+def window_files(directory):
+    """Final window files in ``directory`` (paths, sorted by name, hence by time); ``*.tmp-*`` ignored."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    return [os.path.join(directory, name) for name in sorted(names)
+            if name.startswith(PREFIX) and TMP_MARK not in name and _extension(name)]
+
+
+def temporary_files(directory):
+    """Leftovers of an interrupted write (``cc_log_*.tmp-<pid>``), sorted."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    return [os.path.join(directory, name) for name in sorted(names)
+            if name.startswith(PREFIX) and TMP_MARK in name]
+
+
+# -- writing --------------------------------------------------------------------------------------------
+
+def _fsync_path(path, directory=False):
+    flags = os.O_RDONLY | (getattr(os, 'O_DIRECTORY', 0) if directory else 0)
+    fd = os.open(path, flags)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _no_world_write(path):
+    mode = os.stat(path).st_mode
+    if mode & 0o002:
+        os.chmod(path, mode & 0o7775)
+
+
+def ensure_directory(directory):
+    """Create ``directory`` (and parents) group-writable, not world-writable, if it does not exist."""
+    if not os.path.isdir(directory):
+        os.makedirs(directory, DIR_MODE, exist_ok=True)
+        _no_world_write(directory)
+
+
+def _publish(tmp, directory, base, extension):
+    """Give ``tmp`` the first free name ``base[_N]extension``; never overwrite; return the final path."""
+    counter = 0
+    while True:
+        final = os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
+        counter += 1
+        if os.path.lexists(final):
+            continue
+        try:
+            os.link(tmp, final)
+        except OSError as error:
+            if error.errno == errno.EEXIST:
+                continue
+            if error.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
+                raise
+            os.rename(tmp, final)  # no hard links here: checked free just above
+            return final
+        os.unlink(tmp)
+        return final
+
+
+def write_window(window, directory, fmt, metadata=None):
+    """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
+
+    ``metadata`` (JSON-able dict) is added to ``window_metadata``. Raises ValueError for a bad format or
+    an empty window, OSError when the file cannot be written (the temporary file is removed).
+    """
+    Format.check(fmt)
+    if not window.records:
+        raise ValueError('window: has no records')
+    ensure_directory(directory)
+    meta = window_metadata(window, fmt, metadata)
+    base = base_name(window)
+    extension = Format.EXTENSIONS[fmt]
+    tmp = os.path.join(directory, '%s%s%s%d' % (base, extension, TMP_MARK, os.getpid()))
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, FILE_MODE)
+    try:
+        try:
+            if fmt == Format.JSON_XZ:
+                data = json_xz.encode(window.records, meta)
+                view = memoryview(data)
+                while view:
+                    view = view[os.write(fd, view):]
+        finally:
+            os.close(fd)
+        if fmt == Format.BAG_LZ4:
+            from . import bag_lz4
+            bag_lz4.write(tmp, window.records, meta)
+        _no_world_write(tmp)
+        _fsync_path(tmp)
+        nbytes = os.path.getsize(tmp)
+        final = _publish(tmp, directory, base, extension)
+    except BaseException:
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+        raise
+    _fsync_path(directory, directory=True)
+    return final, nbytes
+
+
+# -- reading --------------------------------------------------------------------------------------------
+
+def read_window(path):
+    """``(metadata, records)`` of a window file, by its magic bytes (then extension).
+
+    Raises ValueError('<path>: <what is wrong>') for a missing, truncated, corrupt or foreign file.
+    """
+    try:
+        with open(path, 'rb') as stream:
+            head = stream.read(16)
+    except OSError as error:
+        raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
+    if head.startswith(json_xz.MAGIC):
+        return json_xz.read(path)
+    from . import bag_lz4
+    if head.startswith(bag_lz4.MAGIC):
+        return bag_lz4.read(path)
+    fmt = _extension(path)
+    if not head:
+        raise ValueError('%s: empty file' % path)
+    if fmt is not None:
+        raise ValueError('%s: not a %s file (wrong magic bytes; truncated or corrupt?)' % (path, fmt))
+    raise ValueError('%s: not a cc_log window file (neither xz nor rosbag)' % path)

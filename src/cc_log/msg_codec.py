@@ -1,0 +1,232 @@
+"""ROS messages as plain data: nested dicts (rows), flat columns, and back.
+
+Pure: only genpy (the message runtime) is used, never rospy or rosbag, so the core and offline tools can
+read window files on any machine. A message is decoded from its type name and its full message
+definition (``msg._full_text``), which every window file carries; no installed message package is needed.
+
+Encoding rules (the same in every cc_log file):
+
+- field names are the message's own (``pose.pose.position.x``), in definition order;
+- ``time`` and ``duration`` are ``{"secs": int, "nsecs": int}`` (lossless);
+- ``uint8[]``, ``uint8[N]``, ``char[]`` and ``char[N]`` (bytes in Python 3) are base64 strings
+  (standard alphabet, with padding): 4 characters per 3 bytes instead of up to 4 per byte as a list;
+- float fields that are not finite become the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"``
+  (JSON has no such numbers); they are turned back into floats by the field's type when decoding;
+- finite floats are written by ``json`` with Python's ``repr``, which round-trips exactly;
+- other numeric arrays are lists, message arrays are lists of dicts.
+"""
+import base64
+import json
+import math
+
+import genpy
+import genpy.dynamic
+
+__all__ = ['to_dict', 'from_dict', 'message_class', 'message_classes', 'row_json', 'row_json_bytes',
+           'field_types', 'encode_float', 'decode_float', 'NON_FINITE']
+
+FLOAT_TYPES = frozenset(['float32', 'float64'])
+INT_TYPES = frozenset(['int8', 'uint8', 'int16', 'uint16', 'int32', 'uint32', 'int64', 'uint64',
+                       'byte', 'char'])
+BYTES_TYPES = frozenset(['uint8', 'char'])  # arrays of these are bytes in Python 3
+TIME_TYPES = frozenset(['time', 'duration'])
+PRIMITIVE_TYPES = FLOAT_TYPES | INT_TYPES | TIME_TYPES | frozenset(['bool', 'string'])
+
+NON_FINITE = {'NaN': float('nan'), 'Infinity': float('inf'), '-Infinity': float('-inf')}
+
+
+def encode_float(value):
+    """A float as JSON data: itself when finite, else ``'NaN'``, ``'Infinity'`` or ``'-Infinity'``."""
+    if math.isfinite(value):
+        return value
+    if math.isnan(value):
+        return 'NaN'
+    return 'Infinity' if value > 0 else '-Infinity'
+
+
+def decode_float(value):
+    """The inverse of ``encode_float``; ints are turned into floats."""
+    if isinstance(value, str):
+        try:
+            return NON_FINITE[value]
+        except KeyError:
+            raise ValueError('%r is not a number' % (value,))
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError('%r is not a number' % (value,))
+    return float(value)
+
+
+def split_type(slot_type):
+    """``'float64[36]'`` -> ``('float64', True, 36)``; ``'string'`` -> ``('string', False, None)``."""
+    if slot_type.endswith(']'):
+        base, _, size = slot_type[:-1].partition('[')
+        return base, True, (int(size) if size else None)
+    return slot_type, False, None
+
+
+def _resolve(base, parent_type):
+    """Full name of a message type as written in a field of ``parent_type``."""
+    if base in PRIMITIVE_TYPES or '/' in base:
+        return base
+    if base == 'Header':
+        return 'std_msgs/Header'
+    return parent_type.split('/')[0] + '/' + base
+
+
+# -- message -> data ------------------------------------------------------------------------------------
+
+def _encode_value(value, slot_type):
+    base, is_array, _ = split_type(slot_type)
+    if is_array:
+        if base in BYTES_TYPES:
+            if not isinstance(value, (bytes, bytearray)):
+                value = bytes(bytearray(value))
+            return base64.b64encode(bytes(value)).decode('ascii')
+        if base in FLOAT_TYPES:
+            return [encode_float(item) for item in value]
+        if base in TIME_TYPES:
+            return [{'secs': int(item.secs), 'nsecs': int(item.nsecs)} for item in value]
+        if base in PRIMITIVE_TYPES:
+            return list(value)
+        return [to_dict(item) for item in value]
+    if base in FLOAT_TYPES:
+        return encode_float(float(value))
+    if base in TIME_TYPES:
+        return {'secs': int(value.secs), 'nsecs': int(value.nsecs)}
+    if base in PRIMITIVE_TYPES:
+        return value
+    return to_dict(value)
+
+
+def to_dict(msg):
+    """A ROS message as a nested dict (the row form), fields in definition order."""
+    return {name: _encode_value(getattr(msg, name), slot_type)
+            for name, slot_type in zip(msg.__slots__, msg._slot_types)}
+
+
+def row_json(msg):
+    """The message as one line of the plain row-per-message JSON log (no newline)."""
+    return json.dumps(to_dict(msg))
+
+
+def row_json_bytes(msg):
+    """Bytes the message takes in the plain row-per-message JSON log: ``json.dumps`` of the row plus the
+    newline. This is the "raw" size every compression figure of cc_log is relative to."""
+    return len(row_json(msg).encode('utf-8')) + 1
+
+
+# -- message classes from definitions --------------------------------------------------------------------
+
+_CLASSES = {}
+
+
+def message_classes(msg_type, definition):
+    """All classes (by full type name) generated from ``definition`` of ``msg_type``; cached."""
+    key = (msg_type, definition)
+    classes = _CLASSES.get(key)
+    if classes is None:
+        try:
+            classes = genpy.dynamic.generate_dynamic(msg_type, definition)
+        except Exception as error:  # genpy raises several kinds for a bad definition
+            raise ValueError('%s: cannot build the message class from its definition: %s' % (msg_type, error))
+        if msg_type not in classes:
+            raise ValueError('%s: the definition does not define this type' % msg_type)
+        _CLASSES[key] = classes
+    return classes
+
+
+def message_class(msg_type, definition):
+    """The message class of ``msg_type`` generated from its full definition text (cached)."""
+    return message_classes(msg_type, definition)[msg_type]
+
+
+# -- data -> message ------------------------------------------------------------------------------------
+
+def _decode_value(data, slot_type, parent_type, classes, path):
+    base, is_array, size = split_type(slot_type)
+    base = _resolve(base, parent_type)
+    try:
+        if is_array:
+            if base in BYTES_TYPES:
+                if isinstance(data, str):
+                    value = base64.b64decode(data.encode('ascii'), validate=True)
+                else:
+                    value = bytes(bytearray(data))
+                items = value
+            elif base in FLOAT_TYPES:
+                items = value = tuple(decode_float(item) for item in data)
+            elif base in TIME_TYPES:
+                cls = genpy.Time if base == 'time' else genpy.Duration
+                items = value = [cls(item['secs'], item['nsecs']) for item in data]
+            elif base == 'string' or base not in PRIMITIVE_TYPES:
+                if base == 'string':
+                    items = value = [str(item) for item in data]
+                else:
+                    items = value = [_from_dict(item, classes[base], classes, '%s[%d]' % (path, i))
+                                     for i, item in enumerate(data)]
+            else:
+                items = value = tuple(data)
+            if size is not None and len(items) != size:
+                raise ValueError('has %d items, the type says %d' % (len(items), size))
+            return value
+        if base in FLOAT_TYPES:
+            return decode_float(data)
+        if base in TIME_TYPES:
+            cls = genpy.Time if base == 'time' else genpy.Duration
+            return cls(int(data['secs']), int(data['nsecs']))
+        if base == 'string':
+            if not isinstance(data, str):
+                raise ValueError('%r is not a string' % (data,))
+            return data
+        if base == 'bool':
+            return data
+        if base in INT_TYPES:
+            if isinstance(data, bool) or not isinstance(data, int):
+                raise ValueError('%r is not an integer' % (data,))
+            return data
+        return _from_dict(data, classes[base], classes, path)
+    except ValueError as error:
+        if str(error).startswith('field '):
+            raise
+        raise ValueError('field %s (%s): %s' % (path, slot_type, error))
+    except (TypeError, KeyError, AttributeError, base64.binascii.Error) as error:
+        raise ValueError('field %s (%s): %s: %s' % (path, slot_type, type(error).__name__, error))
+
+
+def _from_dict(data, cls, classes, path=''):
+    if not isinstance(data, dict):
+        raise ValueError('field %s: expected an object, got %r' % (path or '(message)', type(data).__name__))
+    values = {}
+    for name, slot_type in zip(cls.__slots__, cls._slot_types):
+        field_path = path + '.' + name if path else name
+        if name not in data:
+            raise ValueError('field %s: missing' % field_path)
+        values[name] = _decode_value(data[name], slot_type, cls._type, classes, field_path)
+    return cls(**values)
+
+
+def from_dict(data, msg_type, definition):
+    """Build a message of ``msg_type`` from its row dict and full message definition text.
+
+    Raises ValueError naming the field when the data does not fit the definition.
+    """
+    classes = message_classes(msg_type, definition)
+    return _from_dict(data, classes[msg_type], classes)
+
+
+def field_types(msg_type, definition):
+    """``{'header.seq': 'uint32', 'pose.covariance': 'float64[36]', ...}``: the leaves of the row form
+    (primitives, primitive arrays, time/duration and message arrays), in definition order."""
+    classes = message_classes(msg_type, definition)
+    leaves = {}
+
+    def walk(cls, prefix):
+        for name, slot_type in zip(cls.__slots__, cls._slot_types):
+            base, is_array, _ = split_type(slot_type)
+            base = _resolve(base, cls._type)
+            if is_array or base in PRIMITIVE_TYPES:
+                leaves[prefix + name] = slot_type
+            else:
+                walk(classes[base], prefix + name + '.')
+    walk(classes[msg_type], '')
+    return leaves
