@@ -1,0 +1,132 @@
+"""Reading bags for replay, collect and learning (edge module: imports rosbag).
+
+Every failure to read a bag is a ValueError with one clear line naming the file: missing, not a bag,
+truncated or unindexed, topic not in the bag (the topics are listed), topic of another type.
+"""
+import os
+import struct
+
+import numpy as np
+import rosbag
+
+from .features import OdometryFeatures, stamp_of, window_vector
+from .window_buffer import Record, WindowBuffer
+
+
+def open_bag(path):
+    """Open a bag for reading; raise ValueError('<path>: <what is wrong>') when it cannot be read."""
+    if not os.path.exists(path):
+        raise ValueError('%s: no such bag file' % path)
+    if os.path.isdir(path):
+        raise ValueError('%s: is a directory, not a bag file' % path)
+    try:
+        with open(path, 'rb') as stream:
+            magic = stream.read(13)
+    except (IOError, OSError) as error:
+        raise ValueError('%s: cannot read: %s' % (path, error.strerror or error))
+    if not magic.startswith(b'#ROSBAG V'):
+        raise ValueError('%s: not a ROS bag (no #ROSBAG header)' % path)
+    if not magic.startswith(b'#ROSBAG V2.0'):
+        raise ValueError('%s: unsupported bag version %s (cc_log reads 2.0)'
+                         % (path, magic[9:12].decode('ascii', 'replace')))
+    try:
+        bag = rosbag.Bag(path, 'r', allow_unindexed=False)
+    except rosbag.ROSBagUnindexedException:
+        raise ValueError('%s: bag is unindexed or truncated (try `rosbag reindex` on a copy)' % path)
+    except (rosbag.ROSBagException, rosbag.ROSBagFormatException, struct.error, EOFError, ValueError,
+            KeyError, IndexError, OSError) as error:
+        raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
+    try:
+        _check_index(bag, path)
+    except Exception:
+        bag.close()
+        raise
+    return bag
+
+
+def _one_line(error):
+    text = str(error).strip().splitlines()
+    return (text[0] if text else type(error).__name__)[:200]
+
+
+def _check_index(bag, path):
+    """An indexed bag whose chunks lie beyond the end of the file was cut after it was indexed."""
+    size = os.path.getsize(path)
+    for chunk in getattr(bag, '_chunks', []):
+        if chunk.pos >= size:
+            raise ValueError('%s: bag is truncated (chunk at byte %d, file has %d bytes)' % (path, chunk.pos, size))
+
+
+def topics_of(bag):
+    """dict topic -> message type of an open bag."""
+    return {topic: info.msg_type for topic, info in bag.get_type_and_topic_info().topics.items()}
+
+
+def check_topic(bag, topic, expected_type=None):
+    """Return the type of ``topic`` in the open bag; ValueError when absent or not ``expected_type``."""
+    topics = topics_of(bag)
+    if topic not in topics:
+        listing = ', '.join('%s (%s)' % (name, topics[name]) for name in sorted(topics)) or 'none'
+        raise ValueError('%s: topic %s is not in the bag; its topics: %s' % (bag.filename, topic, listing))
+    if expected_type is not None and topics[topic] != expected_type:
+        raise ValueError('%s: topic %s is %s, expected %s' % (bag.filename, topic, topics[topic], expected_type))
+    return topics[topic]
+
+
+def read_messages(path, topics, expected_types=None):
+    """Yield Record(stamp, topic, msg) of ``topics`` in bag order; stamp is the header stamp, else bag time.
+
+    ``expected_types``: optional dict topic -> type to check. Raises ValueError (before yielding anything)
+    for an unreadable bag or a missing topic.
+    """
+    if isinstance(topics, str):
+        topics = [topics]
+    bag = open_bag(path)
+    try:
+        for topic in topics:
+            check_topic(bag, topic, (expected_types or {}).get(topic))
+        try:
+            for topic, msg, t in bag.read_messages(topics=list(topics)):
+                yield Record(stamp_of(msg, t.to_sec()), topic, msg)
+        except (rosbag.ROSBagException, struct.error, EOFError) as error:
+            raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
+    finally:
+        bag.close()
+
+
+def feature_vectors(path, topic, config, stride=1, max_dt=None, whole_windows=True):
+    """Run the features over ``topic`` of a bag: return ``(stamps, X)`` (1-D array, 2-D array).
+
+    Rows go through OdometryFeatures into WindowBuffer's feature window (as in collect and smart mode);
+    a vector is computed at every ``stride``-th message once the feature window is full. With
+    ``whole_windows`` (default), a vector also needs the rows since the last gap or backwards jump to fill
+    the window, so no vector mixes data from both sides of a gap or is computed from a few rows after one.
+    """
+    if stride < 1:
+        raise ValueError('stride: must be at least 1, got %r' % stride)
+    kwargs = {} if max_dt is None else {'max_dt': max_dt}
+    features = OdometryFeatures(config, **kwargs)
+    span = config.span
+    buffer = WindowBuffer(window=span)
+    stamps, vectors = [], []
+    index = 0
+    for record in read_messages(path, [topic], {topic: config.topic_type}):
+        row = features.row(record.msg, record.stamp)
+        buffer.add(record, row)
+        if not buffer.feature_window_full:
+            continue
+        if whole_windows and not features.covers(span, record.stamp):
+            continue
+        index += 1
+        if (index - 1) % stride:
+            continue
+        rows = buffer.feature_rows()
+        if whole_windows and not span.is_duration and len(rows) < span.count:
+            continue
+        stamps.append(record.stamp)
+        vectors.append(window_vector(rows, config))
+    width = len(vectors[0]) if vectors else 0
+    return np.array(stamps, dtype=float), np.array(vectors, dtype=float).reshape(len(vectors), width)
+
+
+__all__ = ['open_bag', 'check_topic', 'topics_of', 'read_messages', 'feature_vectors']
