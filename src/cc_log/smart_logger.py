@@ -192,6 +192,7 @@ class SmartLogger(object):
         with self._lock:
             if not self._closed:
                 self._complete(self._buffer.flush())
+                self._new_buffer()  # what the buffer still held was outside every window: dropped
                 self._closed = True
                 if self._writer is not None:
                     self._queue.put(None)
@@ -312,15 +313,11 @@ class SmartLogger(object):
                 self._write(window, metadata)
 
     def _metadata(self, window):
-        triggers = [{'stamp': t.stamp, 'reason': t.reason,
-                     'score': None if t.score is None or math.isnan(t.score) else t.score}
-                    for t in window.triggers]
+        """Smart-mode metadata added to log_format's (which already holds triggers, part, counts)."""
         return {
             'reason': window.triggers[0].reason if window.triggers else '',
-            'triggers': triggers,
             'threshold': self.threshold,
             'driving_topic': self.driving_topic,
-            'part': window.part,
             'pre': str(self.pre),
             'post': str(self.post),
             'model': self.config.to_dict(),

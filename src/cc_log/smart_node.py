@@ -120,11 +120,13 @@ def param_topics(name='topics', default=DEFAULT_TOPICS):
 def resolve_directory(value):
     """The logging directory: ``value``, else ~/.ros/cc_log, else /tmp/cc_log (created)."""
     try:
-        path = LoggingDirectory(value or None).path
+        directory = LoggingDirectory(value or None)
     except OSError as error:
         raise ConfigError('~directory: %s' % error)
-    rospy.loginfo('logging to %s', path)
-    return path
+    for path, reason in directory.tried:
+        rospy.logwarn('~directory: cannot use %s (%s)', path, reason)
+    rospy.loginfo('logging to %s', directory.path)
+    return directory.path
 
 
 def fail(node_name, error):

@@ -1,0 +1,346 @@
+"""SmartLogger and replay on real Husky records (no roscore): windows, events, stats, the writer thread."""
+import copy
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from cc_log import learning, log_format, msg_codec, smart_logger
+from cc_log.collector import VectorStream
+from cc_log.features import FeatureConfig, vector_length
+from cc_log.smart_logger import FAILED, OPENED, WRITTEN, SmartLogger, replay
+from cc_log.window_buffer import Record, WindowBuffer
+
+bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+
+HUSKY = 'husky_outdoor_2015.bag'
+ODOM = '/husky_velocity_controller/odom'
+IMU = '/imu/data'
+CONFIG = FeatureConfig('motion', '20')
+PRE, POST = 10, 10
+
+
+class ScriptedModel(object):
+    """A stand-in model that calls exactly the driving messages whose index is in ``flags`` anomalous
+    (the test sets ``index`` before feeding each message); it records every call."""
+
+    def __init__(self, flags=(), config=CONFIG):
+        self.config = config
+        self.threshold = 0.0
+        self.flags = set(flags)
+        self.index = None
+        self.calls = []
+
+    def is_anomalous(self, vector):
+        assert len(vector) == vector_length(self.config)
+        self.calls.append(self.index)
+        anomalous = self.index in self.flags
+        return anomalous, (-1.0 if anomalous else 1.0)
+
+
+@pytest.fixture(scope='module')
+def husky(request):
+    """The first 60 s of the Husky bag: odometry (600) and IMU records in bag order."""
+    from conftest import REAL_DATA
+    path = os.path.join(REAL_DATA, HUSKY)
+    if not os.path.exists(path):
+        pytest.fail('real data missing: %s' % path)
+    records = list(bagio.read_messages(path, [ODOM, IMU]))
+    start = records[0].stamp
+    return [record for record in records if record.stamp < start + 60.0]
+
+
+def feed(logger, records, model=None):
+    """Feed records; set the scripted model's index to the driving message number."""
+    index = -1
+    for record in records:
+        if record.topic == ODOM:
+            index += 1
+            if model is not None:
+                model.index = index
+        logger.on_message(record.topic, record.msg, record.stamp)
+
+
+def reference_windows(records, flags, pre=PRE, post=POST):
+    """What WindowBuffer itself makes of the same stream with the same anomalies."""
+    buffer = WindowBuffer(window=CONFIG.window, pre=pre, post=post)
+    done, index = [], -1
+    for record in records:
+        if record.topic != ODOM:
+            buffer.add_side(record)
+            continue
+        index += 1
+        done += buffer.add(record)
+        if index in flags:
+            done += buffer.trigger('classifier', -1.0)
+    return done + buffer.flush()
+
+
+def read_all(directory):
+    files = sorted(os.path.join(directory, name) for name in os.listdir(directory) if '.tmp-' not in name)
+    return [(path,) + tuple(log_format.read_window(path)) for path in files]
+
+
+def same(a, b):
+    return a.topic == b.topic and a.stamp == b.stamp and msg_codec.to_dict(a.msg) == msg_codec.to_dict(b.msg)
+
+
+def test_windows_follow_window_buffer_and_hold_pre_and_post(husky, tmp_path):
+    odom = [r for r in husky if r.topic == ODOM]
+    flags = {100, 300, 305}  # 300 and 305 merge into one window
+    model = ScriptedModel(flags)
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', PRE, POST, driving_topic=ODOM, side_topics=[IMU])
+    events = []
+    logger.on_event(events.append)
+    feed(logger, husky, model)
+    assert logger.close(30)
+    # the classifier runs on every driving message once 20 rows are in
+    assert model.calls == list(range(19, len(odom)))
+    files = sorted(read_all(str(tmp_path)), key=lambda f: f[2][0].stamp)
+    expected = reference_windows(husky, flags)
+    assert len(files) == len(expected) == 2
+    written = sorted((e for e in events if e.kind == WRITTEN), key=lambda e: e.start)
+    for (path, metadata, records), window, event in zip(files, expected, written):
+        assert len(records) == len(window.records)
+        assert all(same(a, b) for a, b in zip(records, window.records))
+        assert event.path == path and event.messages == len(records) and event.bytes == os.path.getsize(path)
+        assert (event.start, event.end) == (records[0].stamp, records[-1].stamp)
+        assert metadata['reason'] == 'classifier' and metadata['driving_topic'] == ODOM
+    # first window: odometry 90..110, plus exactly the IMU messages between its first and last stamp
+    first = files[0][2]
+    first_odom = [r for r in first if r.topic == ODOM]
+    assert [r.stamp for r in first_odom] == [r.stamp for r in odom[100 - PRE:100 + POST + 1]]
+    imu_inside = [r for r in husky if r.topic == IMU and first_odom[0].stamp <= r.stamp <= first_odom[-1].stamp]
+    assert imu_inside and [r.stamp for r in first if r.topic == IMU] == [r.stamp for r in imu_inside]
+    second_odom = [r for r in files[1][2] if r.topic == ODOM]
+    assert [r.stamp for r in second_odom] == [r.stamp for r in odom[300 - PRE:305 + POST + 1]]
+    # one OPENED per window (the anomaly at 305 extends the open window), opened at the pre start
+    opened = [e for e in events if e.kind == OPENED]
+    assert [(e.stamp, e.start) for e in opened] == [(odom[100].stamp, odom[100 - PRE].stamp),
+                                                    (odom[300].stamp, odom[300 - PRE].stamp)]
+    assert all(e.reason == 'classifier' and e.score == -1.0 for e in opened)
+
+
+def test_touching_windows_make_one_file_and_one_opened_event(husky, tmp_path):
+    """The window of 318 (308..328) overlaps the closed but unwritten window of 300 (290..310)."""
+    odom = [r for r in husky if r.topic == ODOM]
+    model = ScriptedModel({300, 318})
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', PRE, POST, driving_topic=ODOM)
+    events = []
+    logger.on_event(events.append)
+    feed(logger, odom, model)
+    logger.close()
+    assert [e.kind for e in events] == [OPENED, WRITTEN]
+    files = read_all(str(tmp_path))
+    assert [[r.stamp for r in f[2]] for f in files] == [[r.stamp for r in odom[290:329]]]
+    assert [t['stamp'] for t in files[0][1]['triggers']] == [odom[300].stamp, odom[318].stamp]
+
+
+def test_stats_count_every_message_and_byte(husky, tmp_path):
+    model = ScriptedModel({200})
+    logger = SmartLogger(model, str(tmp_path), 'bag-lz4', PRE, POST, driving_topic=ODOM, side_topics=[IMU])
+    feed(logger, husky, model)
+    logger.close()
+    stats = logger.stats()
+    files = read_all(str(tmp_path))
+    assert stats['messages_seen'] == len(husky)
+    assert stats['raw_json_bytes'] == sum(msg_codec.row_json_bytes(r.msg) for r in husky)
+    assert stats['windows_saved'] == stats['windows_opened'] == len(files) == 1
+    assert stats['messages_kept'] == len(files[0][2])
+    assert stats['stored_bytes'] == os.path.getsize(files[0][0])
+    assert stats['messages_dropped'] == len(husky) - len(files[0][2])
+    assert stats['messages_queued'] == stats['messages_lost'] == stats['write_errors'] == 0
+    assert stats['classifier_calls'] == len(model.calls)
+    assert 0 < stats['classifier_mean_us'] <= stats['classifier_max_us']
+    assert stats['queue_depth'] == 0
+
+
+def test_writer_thread_never_blocks_the_message_path(husky, tmp_path, monkeypatch):
+    release = threading.Event()
+    real_write = log_format.write_window
+    calls = []
+
+    def slow_write(window, directory, fmt, metadata=None):
+        calls.append(len(window))
+        release.wait(30)
+        return real_write(window, directory, fmt, metadata)
+
+    monkeypatch.setattr(log_format, 'write_window', slow_write)
+    model = ScriptedModel({50, 150, 250, 350})
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', PRE, POST, driving_topic=ODOM, side_topics=[IMU])
+    started = time.time()
+    feed(logger, husky, model)
+    elapsed = time.time() - started
+    assert not release.is_set() and calls  # the first write is still blocked ...
+    assert elapsed < 25                      # ... and feeding went on regardless
+    stats = logger.stats()
+    assert stats['windows_saved'] == 0 and stats['queue_depth'] >= 2
+    assert stats['messages_queued'] > 0
+    release.set()
+    assert logger.close(30)
+    stats = logger.stats()
+    assert stats['windows_saved'] == 4 and stats['messages_queued'] == 0 and stats['queue_depth'] == 0
+    kept = [r for _, _, records in read_all(str(tmp_path)) for r in records]
+    assert len(kept) == stats['messages_kept']
+    expected = [r for w in reference_windows(husky, {50, 150, 250, 350}) for r in w.records]
+    assert sorted((r.stamp, r.topic) for r in kept) == sorted((r.stamp, r.topic) for r in expected)
+
+
+def test_disabled_logger_counts_but_keeps_nothing(husky, tmp_path):
+    model = ScriptedModel({100, 400})
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', PRE, POST, driving_topic=ODOM, side_topics=[IMU],
+                         enabled=False)
+    assert logger.trigger_now() == (False, 'the logger is disabled')
+    odom_seen = 0
+    for record in husky:
+        if record.topic == ODOM:
+            model.index = odom_seen
+            odom_seen += 1
+            if odom_seen == 300:
+                logger.set_enabled(True)
+        logger.on_message(record.topic, record.msg, record.stamp)
+    logger.close()
+    stats = logger.stats()
+    assert stats['messages_seen'] == len(husky)
+    files = read_all(str(tmp_path))
+    assert len(files) == 1  # 100 came while disabled
+    odom_kept = [r for r in files[0][2] if r.topic == ODOM]
+    odom = [r for r in husky if r.topic == ODOM]
+    assert [r.stamp for r in odom_kept] == [r.stamp for r in odom[400 - PRE:400 + POST + 1]]
+    # the feature window restarts when enabled: the first call is 20 messages after enabling
+    assert model.calls[0] == 299 + 19
+
+
+def test_disable_completes_the_open_window(husky, tmp_path):
+    model = ScriptedModel({100})
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', PRE, POST, driving_topic=ODOM)
+    odom = [r for r in husky if r.topic == ODOM]
+    for index, record in enumerate(odom[:105]):
+        model.index = index
+        logger.on_message(ODOM, record.msg, record.stamp)
+    logger.set_enabled(False)
+    for record in odom[105:200]:
+        logger.on_message(ODOM, record.msg, record.stamp)
+    logger.close()
+    files = read_all(str(tmp_path))
+    assert [[r.stamp for r in f[2]] for f in files] == [[r.stamp for r in odom[90:105]]]
+
+
+def test_manual_trigger_saves_pre_and_post(husky, tmp_path):
+    model = ScriptedModel()
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', PRE, POST, driving_topic=ODOM)
+    assert logger.trigger_now()[0] is False  # nothing received yet
+    events = []
+    logger.on_event(events.append)
+    odom = [r for r in husky if r.topic == ODOM]
+    for index, record in enumerate(odom[:200]):
+        logger.on_message(ODOM, record.msg, record.stamp)
+        if index == 50:
+            ok, message = logger.trigger_now()
+            assert ok, message
+    logger.close()
+    files = read_all(str(tmp_path))
+    assert [[r.stamp for r in f[2]] for f in files] == [[r.stamp for r in odom[40:61]]]
+    assert files[0][1]['reason'] == 'manual'
+    assert [e.kind for e in events] == [OPENED, WRITTEN]
+    assert events[0].reason == 'manual' and np.isnan(events[0].score)
+
+
+def test_time_jumping_back_restarts_the_buffer(husky, tmp_path):
+    """A bag played twice (rosbag play -l): the second pass starts over instead of failing."""
+    model = ScriptedModel()
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', PRE, POST, driving_topic=ODOM)
+    odom = [r for r in husky if r.topic == ODOM][:150]
+    stream = odom + odom
+    model.flags = {100, 250}  # the same message (100) in both passes
+    for index, record in enumerate(stream):
+        model.index = index
+        logger.on_message(ODOM, record.msg, record.stamp)
+    logger.close()
+    stats = logger.stats()
+    assert stats['time_resets'] == 1
+    files = read_all(str(tmp_path))
+    assert len(files) == 2
+    for _, _, records in files:
+        assert [r.stamp for r in records] == [r.stamp for r in odom[90:111]]
+    # after the jump the feature window refilled: 19 messages without a classifier call
+    assert 150 + 19 in model.calls and 150 + 18 not in model.calls
+
+
+def test_failed_writes_are_reported_not_raised(husky, tmp_path):
+    blocker = tmp_path / 'not_a_directory'
+    blocker.write_text('x')
+    model = ScriptedModel({100})
+    logger = SmartLogger(model, str(blocker), 'json-xz', PRE, POST, driving_topic=ODOM)
+    events = []
+    logger.on_event(events.append)
+    feed(logger, [r for r in husky if r.topic == ODOM][:200], model)
+    assert logger.close(30)
+    stats = logger.stats()
+    assert stats['write_errors'] == 1 and stats['messages_lost'] == 21 and stats['windows_saved'] == 0
+    assert [e.kind for e in events] == [OPENED, FAILED] and events[1].error
+
+
+def test_bad_configuration_names_the_parameter(tmp_path):
+    model = ScriptedModel()
+    for kwargs, name in (({'fmt': 'zip'}, 'format'), ({'pre': '-1'}, 'pre'), ({'post': 'soon'}, 'post'),
+                         ({'max_window': '0'}, 'max_window'), ({'driving_topic': ''}, 'driving_topic')):
+        with pytest.raises(ValueError) as error:
+            SmartLogger(model, str(tmp_path), **kwargs)
+        assert str(error.value).startswith(name), str(error.value)
+
+
+# -- replay with a trained model ---------------------------------------------------------------------------
+
+def inject(records, at, count=6, amplitude=3.0):
+    """Copies of odometry records with a jerky burst: twist flips by +-amplitude for ``count`` messages."""
+    out = [Record(r.stamp, r.topic, copy.deepcopy(r.msg)) for r in records]
+    for k in range(at, at + count):
+        out[k].msg.twist.twist.linear.x += amplitude * (-1) ** k
+        out[k].msg.twist.twist.angular.z += amplitude * (-1) ** k
+    return out
+
+
+def vectors(records):
+    stream = VectorStream(CONFIG, 1)
+    return [(i, v) for i, v in ((i, stream.add(r.msg, r.stamp)) for i, r in enumerate(records)) if v is not None]
+
+
+@pytest.fixture(scope='module')
+def trained(husky, tmp_path_factory):
+    """A model trained on the first 40 s of odometry, with injected bursts as anomalous examples."""
+    odom = [r for r in husky if r.topic == ODOM][:400]
+    nominal = np.array([v for _, v in vectors(odom)])
+    anomalous = np.array([v for at in (60, 160, 260) for i, v in vectors(inject(odom[at - 40:at + 40], 40))
+                          if 40 <= i < 40 + 6 + 20])
+    model, _ = learning.train(nominal, anomalous, CONFIG)
+    path = str(tmp_path_factory.mktemp('model') / 'model.json')
+    model.save(path)
+    return path, model
+
+
+def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
+    import rosbag
+    path, model = trained
+    odom = [r for r in husky if r.topic == ODOM][400:600]
+    run = inject(odom, 100)
+    flagged = [i for i, v in vectors(run) if model.is_anomalous(v)[0]]
+    # only the burst: rows 100..107 (accelerations and jerk see it two messages longer), in 20-row windows
+    assert flagged and 100 <= min(flagged) and max(flagged) <= 107 + 19
+    bag = str(tmp_path / 'run.bag')
+    with rosbag.Bag(bag, 'w') as out:
+        for record in run:
+            out.write(ODOM, record.msg, t=record.msg.header.stamp)
+    summary = replay(bag, ODOM, path, str(tmp_path / 'out'), PRE, POST, 'json-xz')
+    assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows'}
+    assert summary['input_messages'] == len(run)
+    assert summary['raw_json_bytes'] == sum(msg_codec.row_json_bytes(r.msg) for r in run)
+    window, = summary['windows']
+    lo, hi = min(flagged) - PRE, max(flagged) + POST
+    assert (window['start'], window['end'], window['messages']) == (run[lo].stamp, run[hi].stamp, hi - lo + 1)
+    assert summary['stored_bytes'] == os.path.getsize(window['path'])
+    _, records = log_format.read_window(window['path'])
+    assert all(same(a, b) for a, b in zip(records, run[lo:hi + 1]))
+    assert smart_logger.DEFAULT_FORMAT == 'json-xz'
