@@ -1,0 +1,1176 @@
+"""``cclog``: the offline cc_log tool. No roscore is needed for any command.
+
+    rosrun cc_log cclog <command> [options]      (see ``cclog <command> --help`` and docs/CLI.md)
+
+Commands: ``collect`` (feature vectors from a bag), ``learn`` (train / evaluate a model), ``replay`` (the
+smart logger over a bag), ``info``, ``cat``, ``export`` (window files), ``codecs`` (the paper's Table 2 on
+some data), ``plot`` (a timeline of a run), ``simulate`` (a simulated BWIBot bag with labelled anomalies).
+
+Conventions shared by every command:
+
+- results go to stdout: readable text, or with ``--json`` one JSON object (``cat`` writes JSON lines);
+- progress bars go to stderr, only when stderr is a terminal or with ``--progress``; never to stdout;
+- bad input (missing file, truncated or unindexed bag, topic not in the bag, wrong message type, a model
+  of another feature configuration, bad option values) prints one line
+  ``cclog <command>: error: <what is wrong>`` on stderr and exits with status 1 (2 for bad command-line
+  syntax, 130 when interrupted).
+
+Library modules are imported inside the commands, so ``cclog --help`` is quick and a command only needs
+what it uses (rosbag for bags, matplotlib for ``plot``).
+"""
+import argparse
+import collections
+import inspect
+import json
+import math
+import os
+import sys
+import tempfile
+import textwrap
+import threading
+import time
+
+PROG = 'cclog'
+EXIT_OK = 0
+EXIT_BAD_INPUT = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+EXPORT_TARGETS = ('bag', 'csv', 'jsonl')
+
+
+class CommandError(ValueError):
+    """Bad input found by a command itself (the message is the one line printed)."""
+
+
+# -- progress ---------------------------------------------------------------------------------------------
+
+class Progress(object):
+    """A tiny dependency-free progress bar on stderr: ``label [#####.....]  50%  1976/3952  1.2s``.
+
+    Without a total it shows a count (or, with ``busy()``, a spinner) and the elapsed time. Disabled bars
+    cost nothing. Redraws at most every ``interval`` seconds; ``close()`` ends the line.
+    """
+
+    WIDTH = 28
+    SPINNER = '|/-\\'
+
+    def __init__(self, label, total=None, enabled=False, stream=None, interval=0.1):
+        self.label = label
+        self.total = total
+        self.enabled = bool(enabled)
+        self.stream = stream if stream is not None else sys.stderr
+        self.interval = interval
+        self.done = 0
+        self.started = time.time()
+        self._drawn = 0.0
+        self._ticks = 0
+        self._width = 0
+        self._lock = threading.Lock()
+        self._stop = None
+        self._thread = None
+        self._closed = False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def update(self, amount=1):
+        """Count ``amount`` more items done."""
+        self.done += amount
+        if self.enabled:
+            self._draw()
+
+    def set(self, done, total=None):
+        """Set the count (and the total) directly; usable as a ``progress(done, total)`` callback."""
+        self.done = done
+        if total is not None:
+            self.total = total
+        if self.enabled:
+            self._draw()
+
+    def busy(self):
+        """Animate a spinner from a background thread until ``close()`` (work without a progress hook)."""
+        if self.enabled and self._thread is None:
+            self._stop = threading.Event()
+            self._thread = threading.Thread(target=self._spin, name='cclog progress')
+            self._thread.daemon = True
+            self._thread.start()
+        return self
+
+    def _spin(self):
+        while not self._stop.wait(self.interval):
+            self._draw(force=True)
+
+    def text(self):
+        """The bar as text (no carriage return)."""
+        elapsed = time.time() - self.started
+        if self.total:
+            fraction = min(1.0, max(0.0, float(self.done) / self.total))
+            filled = int(round(fraction * self.WIDTH))
+            return '%s [%s%s] %3d%%  %d/%d  %.1fs' % (self.label, '#' * filled, '.' * (self.WIDTH - filled),
+                                                   int(fraction * 100), self.done, self.total, elapsed)
+        if self._thread is not None:
+            return '%s %s  %.1fs' % (self.label, self.SPINNER[self._ticks % len(self.SPINNER)], elapsed)
+        return '%s  %d  %.1fs' % (self.label, self.done, elapsed)
+
+    def _draw(self, force=False, final=False):
+        now = time.time()
+        with self._lock:
+            if self._closed or not (force or final or now - self._drawn >= self.interval):
+                return
+            self._drawn = now
+            self._ticks += 1
+            text = self.text()
+            pad = max(0, self._width - len(text))
+            self._width = len(text)
+            try:
+                self.stream.write('\r' + text + ' ' * pad + ('\n' if final else ''))
+                self.stream.flush()
+            except (OSError, ValueError):
+                self.enabled = False
+
+    def close(self):
+        """Stop the spinner, draw the final state and end the line (once)."""
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+        if self.enabled and not self._closed:
+            self._draw(final=True)
+        self._closed = True
+
+
+def _progress_wanted(args):
+    """``--progress`` / ``--no-progress``, else only when stderr is a terminal."""
+    if getattr(args, 'progress', None) is not None:
+        return args.progress
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def _bar(args, label, total=None):
+    return Progress(label, total, enabled=_progress_wanted(args))
+
+
+def _call(function, progress, *positional, **keywords):
+    """Call a library function, passing ``progress=<callback(done, total)>`` when it takes one; else spin."""
+    try:
+        takes = 'progress' in inspect.signature(function).parameters
+    except (TypeError, ValueError):
+        takes = False
+    if takes:
+        keywords['progress'] = progress.set
+    else:
+        progress.busy()
+    return function(*positional, **keywords)
+
+
+# -- output helpers ---------------------------------------------------------------------------------------
+
+def _plain(value):
+    """JSON-safe copy: numpy numbers to Python, NaN/inf to None, tuples to lists."""
+    if isinstance(value, dict):
+        return {str(key): _plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(item) for item in value]
+    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
+        return _plain(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _print_json(document):
+    sys.stdout.write(json.dumps(_plain(document), allow_nan=False, sort_keys=False) + '\n')
+
+
+def human_bytes(count):
+    """``1536`` -> ``'1.5 kB'`` (powers of 1000, as in the paper's tables)."""
+    count = float(count)
+    for unit in ('B', 'kB', 'MB', 'GB'):
+        if abs(count) < 1000 or unit == 'GB':
+            return ('%d %s' % (count, unit)) if unit == 'B' else ('%.1f %s' % (count, unit))
+        count /= 1000.0
+
+
+def _ratio(raw, stored):
+    return float(raw) / stored if stored else None
+
+
+def _stamp_text(stamp):
+    return '%.3f' % stamp if stamp is not None else '-'
+
+
+def _existing_file(path, what='file'):
+    if not os.path.exists(path):
+        raise CommandError('%s: no such %s' % (path, what))
+    if os.path.isdir(path):
+        raise CommandError('%s: is a directory, not a %s' % (path, what))
+    return path
+
+
+def _writable_dir(path, name):
+    """Create directory ``path`` if needed; CommandError('<name>: ...') when that is impossible."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise CommandError('%s: %s exists and is not a directory' % (name, path))
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as error:
+        raise CommandError('%s: cannot create %s (%s)' % (name, path, error.strerror or error))
+    return path
+
+
+def _parent_exists(path, name):
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise CommandError('%s: directory %s does not exist' % (name, folder))
+    return path
+
+
+def _span(name):
+    """argparse type for a count (``500``) or a duration (``5s``) checked by Span.parse."""
+    def parse(value):
+        from .spans import Span
+        try:
+            Span.parse(value, name)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error))
+        return value
+    parse.__name__ = name
+    return parse
+
+
+def _positive_float(name):
+    def parse(value):
+        try:
+            number = float(value)
+        except ValueError:
+            number = float('nan')
+        if not (math.isfinite(number) and number > 0):
+            raise argparse.ArgumentTypeError('%s: %r must be a positive number' % (name, value))
+        return number
+    parse.__name__ = name
+    return parse
+
+
+def _non_negative_int(name, minimum=0):
+    def parse(value):
+        try:
+            number = int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError('%s: %r is not a whole number' % (name, value))
+        if number < minimum:
+            raise argparse.ArgumentTypeError('%s: %r must be at least %d' % (name, value, minimum))
+        return number
+    parse.__name__ = name
+    return parse
+
+
+# -- reading window files ---------------------------------------------------------------------------------
+
+def window_paths(paths):
+    """Window files named by ``paths`` (files as given; directories: their window files, by time).
+
+    CommandError for a path that does not exist or a directory without window files.
+    """
+    from . import log_format
+    found = []
+    for path in paths:
+        if not os.path.exists(path):
+            raise CommandError('%s: no such file or directory' % path)
+        if os.path.isdir(path):
+            files = log_format.window_files(path)
+            if not files:
+                raise CommandError('%s: no cc_log window files (cc_log_*.json.xz / cc_log_*.bag) in this directory'
+                                   % path)
+            found.extend(files)
+        else:
+            found.append(path)
+    return found
+
+
+def _read_windows(args, paths, label):
+    """Yield ``(path, metadata, records)`` of every window file named by ``paths``, with a progress bar."""
+    from . import log_format
+    files = window_paths(paths)
+    with _bar(args, label, len(files)) as bar:
+        for path in files:
+            metadata, records = log_format.read_window(path)
+            yield path, metadata, records
+            bar.update()
+
+
+def _window_summary(path, metadata, records):
+    """What ``info`` reports about one window file."""
+    from . import msg_codec
+    counts = collections.OrderedDict()
+    types = collections.OrderedDict()
+    raw = 0
+    for record in records:
+        counts[record.topic] = counts.get(record.topic, 0) + 1
+        types.setdefault(record.topic, record.msg._type)
+        raw += msg_codec.row_json_bytes(record.msg)
+    stamps = [record.stamp for record in records]
+    start = min(stamps) if stamps else None
+    end = max(stamps) if stamps else None
+    size = os.path.getsize(path)
+    triggers = []
+    for trigger in metadata.get('triggers') or []:
+        score = trigger.get('score')
+        if isinstance(score, str):  # non-finite scores are stored as 'NaN' / 'Infinity' strings
+            score = None
+        triggers.append({'stamp': trigger.get('stamp'), 'reason': trigger.get('reason'), 'score': score})
+    scores = [trigger['score'] for trigger in triggers if isinstance(trigger['score'], (int, float))]
+    return collections.OrderedDict([
+        ('path', path),
+        ('codec', metadata.get('codec')),
+        ('start', start),
+        ('end', end),
+        ('duration', (end - start) if stamps else None),
+        ('start_utc', metadata.get('start_utc')),
+        ('messages', len(records)),
+        ('topics', counts),
+        ('types', types),
+        ('bytes', size),
+        ('raw_json_bytes', raw),
+        ('ratio', _ratio(raw, size)),
+        ('reason', metadata.get('reason') or (triggers[0]['reason'] if triggers else None)),
+        ('triggers', triggers),
+        ('min_score', min(scores) if scores else None),
+        ('threshold', metadata.get('threshold')),
+        ('driving_topic', metadata.get('driving_topic')),
+        ('part', metadata.get('part', 0)),
+        ('pre', metadata.get('pre')),
+        ('post', metadata.get('post')),
+        ('model', metadata.get('model')),
+    ])
+
+
+# -- commands ---------------------------------------------------------------------------------------------
+
+def cmd_collect(args):
+    """Feature vectors of a bag's driving topic into ``OUT/<label>/``, as collect mode writes them."""
+    from . import collector
+    _existing_file(args.bag, 'bag file')
+    with _bar(args, 'collect') as bar:
+        result = _call(collector.collect_bag, bar, args.bag, args.topic, args.out, label=args.label,
+                       window=args.window, stride=args.stride, feature_set=args.features)
+    summary = collections.OrderedDict([
+        ('bag', args.bag), ('topic', args.topic), ('label', args.label), ('window', args.window),
+        ('stride', args.stride), ('features', args.features), ('vectors', result['vectors']),
+        ('directory', result['directory'])])
+    if args.json:
+        _print_json(summary)
+    else:
+        print('%d feature vectors (%s features, window %s, every %s messages) from %s %s -> %s'
+              % (summary['vectors'], args.features, args.window, args.stride, args.bag, args.topic,
+                 summary['directory']))
+    if not result['vectors']:
+        sys.stderr.write('%s collect: warning: no vector: the topic never filled a whole feature window of '
+                         '%s messages\n' % (PROG, args.window))
+    return EXIT_OK
+
+
+def _report_dict(report):
+    return collections.OrderedDict((field, getattr(report, field)) for field in report._fields)
+
+
+def _training_text(info):
+    """What training alone (no --test) can tell: the model, its threshold, the held-out nominal check."""
+    lines = ['%-16s %s, nu=%g, gamma=%.4g, %s nominal vectors (%s held out), %s anomalous' % (
+        'Model', info['method'], info['nu'], info['gamma'], info['vectors_nominal'], info['vectors_held_out'],
+        info['vectors_anomalous']),
+        '%-16s %.4g (%s)' % ('Threshold', info['threshold'], info['threshold_rule']),
+        '%-16s %d of %d held-out nominal vectors flagged (no --test directory)' % (
+            'Held out', info['held_out_flagged'], info['vectors_held_out']),
+        '%-16s %.2f s' % ('Training time', info['train_seconds']),
+        '%-16s %.0f MB (process peak RSS)' % ('Peak memory', info['peak_rss_mb'])]
+    return '\n'.join(lines)
+
+
+def cmd_learn(args):
+    """Train a model (``--train``), validate it (``--test``); or evaluate an existing one (``--test`` only)."""
+    from . import learn_main, learning
+    from .model import AnomalyModel
+    if args.train is None and args.test is None:
+        raise CommandError('train: give --train DIR (train a model), --test DIR (evaluate --model), or both')
+    for name, folder in (('train', args.train), ('test', args.test)):
+        if folder is not None and not os.path.isdir(folder):
+            raise CommandError('%s: %s: no such directory of feature vectors' % (name, folder))
+    summary = collections.OrderedDict([('model', args.model), ('train', args.train), ('test', args.test)])
+    with _bar(args, 'learn').busy():
+        if args.train is None:
+            model = AnomalyModel.load(args.model)
+            vectors, config = learning.load_vectors(args.test)
+            model.check_config(config)
+            nominal, anomalous = learn_main.split_labels(vectors)
+            report = learning.evaluate(model, nominal, anomalous)
+            info = {}
+        elif args.test is not None:
+            model, report, info = learn_main.learn(args.train, args.test, args.model, args.nu, args.gamma,
+                                                   args.method)
+        else:
+            _parent_exists(args.model, 'model')
+            vectors, config = learning.load_vectors(args.train)
+            nominal, anomalous = learn_main.split_labels(vectors)
+            if nominal is None:
+                raise CommandError('train: %s has no %s/ vectors' % (args.train, learn_main.NOMINAL))
+            model, info = learning.train(nominal, anomalous, config, nu=args.nu, gamma=args.gamma,
+                                         method=args.method)
+            try:
+                model.save(args.model)
+            except OSError as error:
+                raise CommandError('model: cannot write %s: %s' % (args.model, error.strerror or error))
+            report = None
+    summary['trained'] = args.train is not None
+    summary['config'] = model.config.to_dict()
+    summary['threshold'] = model.threshold
+    summary['info'] = {key: value for key, value in info.items() if key != 'grid'}
+    summary['report'] = _report_dict(report) if report is not None else None
+    if args.json:
+        _print_json(summary)
+        return EXIT_OK
+    if report is not None:
+        print(learning.format_report(report, info))
+    else:
+        print(_training_text(info))
+    if args.train is not None:
+        print('%-16s %s (%s features, window %s)' % ('Saved', args.model, model.config.feature_set,
+                                                     model.config.window))
+    return EXIT_OK
+
+
+def _check_driving_topic(bag_path, topic, topic_type, side_topics=()):
+    """One clear line before any work: readable bag, topic present and of the type the model reads."""
+    from . import bagio
+    bag = bagio.open_bag(bag_path)
+    try:
+        bagio.check_topic(bag, topic, topic_type)
+        for side in side_topics:
+            bagio.check_topic(bag, side)
+        return bag.get_message_count([topic] + list(side_topics))
+    finally:
+        bag.close()
+
+
+def cmd_replay(args):
+    """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read."""
+    from . import smart_logger
+    from .model import AnomalyModel
+    from .spans import Span
+    _existing_file(args.bag, 'bag file')
+    model = AnomalyModel.load(args.model)
+    pre, post = Span.parse(args.pre, 'pre'), Span.parse(args.post, 'post')
+    side = [topic for topic in args.side_topic if topic != args.topic]
+    total = _check_driving_topic(args.bag, args.topic, model.config.topic_type, side)
+    _writable_dir(args.out, 'out')
+    with _bar(args, 'replay', total) as bar:
+        summary = _call(smart_logger.replay, bar, args.bag, args.topic, args.model, args.out, pre=str(pre),
+                        post=str(post), fmt=args.format, side_topics=tuple(side))
+    result = collections.OrderedDict([
+        ('input_messages', summary['input_messages']),
+        ('raw_json_bytes', summary['raw_json_bytes']),
+        ('stored_bytes', summary['stored_bytes']),
+        ('windows', [collections.OrderedDict([('start', w['start']), ('end', w['end']),
+                                              ('messages', w['messages']), ('path', w['path'])])
+                     for w in summary['windows']]),
+    ])
+    if args.json:
+        _print_json(result)
+        return EXIT_OK
+    windows = result['windows']
+    saved = sum(window['messages'] for window in windows)
+    print('%s %s: %d messages in, %d saved in %d window(s) (%s files in %s)'
+          % (args.bag, args.topic, result['input_messages'], saved, len(windows), args.format, args.out))
+    ratio = _ratio(result['raw_json_bytes'], result['stored_bytes'])
+    print('  raw row-per-message JSON %s, stored %s%s' % (
+        human_bytes(result['raw_json_bytes']), human_bytes(result['stored_bytes']),
+        ' (%.1fx smaller)' % ratio if ratio else ''))
+    for number, window in enumerate(windows, 1):
+        print('  %3d  %s .. %s  %7.2f s  %6d msgs  %s' % (
+            number, _stamp_text(window['start']), _stamp_text(window['end']), window['end'] - window['start'],
+            window['messages'], window['path']))
+    return EXIT_OK
+
+
+def cmd_info(args):
+    """Windows, time spans, message counts, sizes, codec, trigger and scores of window files."""
+    windows = [_window_summary(path, metadata, records)
+               for path, metadata, records in _read_windows(args, args.paths, 'info')]
+    total = collections.OrderedDict([
+        ('windows', len(windows)),
+        ('messages', sum(w['messages'] for w in windows)),
+        ('bytes', sum(w['bytes'] for w in windows)),
+        ('raw_json_bytes', sum(w['raw_json_bytes'] for w in windows)),
+        ('start', min(w['start'] for w in windows) if windows else None),
+        ('end', max(w['end'] for w in windows) if windows else None),
+    ])
+    total['ratio'] = _ratio(total['raw_json_bytes'], total['bytes'])
+    if args.json:
+        _print_json(collections.OrderedDict([('windows', windows), ('total', total)]))
+        return EXIT_OK
+    for w in windows:
+        print(w['path'])
+        print('  codec      %s' % w['codec'])
+        print('  span       %s .. %s  (%.2f s%s)' % (_stamp_text(w['start']), _stamp_text(w['end']),
+                                                   w['duration'] or 0.0,
+                                                   ', from %s' % w['start_utc'] if w['start_utc'] else ''))
+        print('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
+        print('  size       %s (row JSON %s, %s)' % (
+            human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
+            '%.1fx' % w['ratio'] if w['ratio'] else '-'))
+        if w['triggers']:
+            scores = [t['score'] for t in w['triggers'] if t['score'] is not None]
+            print('  trigger    %s, %d trigger(s)%s%s' % (
+                w['reason'], len(w['triggers']),
+                ', scores %.4g .. %.4g' % (min(scores), max(scores)) if scores else '',
+                ', threshold %.4g' % w['threshold'] if isinstance(w['threshold'], (int, float)) else ''))
+        if w['part']:
+            print('  part       %s of a window split at max_window' % w['part'])
+    print('%d window(s), %d messages, %s on disk, %s as row JSON%s' % (
+        total['windows'], total['messages'], human_bytes(total['bytes']), human_bytes(total['raw_json_bytes']),
+        ' (%.1fx)' % total['ratio'] if total['ratio'] else ''))
+    return EXIT_OK
+
+
+def _record_row(record, path=None):
+    from . import msg_codec
+    row = collections.OrderedDict([('stamp', record.stamp), ('topic', record.topic),
+                                   ('type', record.msg._type), ('msg', msg_codec.to_dict(record.msg))])
+    if path is not None:
+        row['file'] = path
+    return row
+
+
+def _read_json_file(path):
+    """A cc_log JSON file (model, feature vector, truth list); CommandError when it is none of them."""
+    try:
+        with open(path) as stream:
+            return json.load(stream)
+    except UnicodeDecodeError:
+        raise CommandError('%s: not a cc_log file (not a window file and not JSON text)' % path)
+    except ValueError as error:
+        raise CommandError('%s: not a cc_log file (not a window file; invalid JSON: %s)' % (path, error))
+
+
+def _is_window_file(path):
+    from . import bag_lz4, json_xz
+    with open(path, 'rb') as stream:
+        head = stream.read(16)
+    return head.startswith(json_xz.MAGIC) or head.startswith(bag_lz4.MAGIC)
+
+
+def cmd_cat(args):
+    """Decode cc_log files to JSON lines on stdout (window records; models, vectors, truth as one line)."""
+    from . import log_format
+    topics = set(args.topic) if args.topic else None
+    out = sys.stdout
+    jsonl = []  # single-document JSON files
+    window_inputs = []
+    for path in args.paths:
+        if os.path.isdir(path) or not os.path.exists(path):
+            window_inputs.append(path)
+        elif _is_window_file(path):
+            window_inputs.append(path)
+        elif path.endswith('.json') or not log_format._extension(path):
+            jsonl.append(path)
+        else:
+            window_inputs.append(path)  # read_window says what is wrong with it
+    for path in jsonl:
+        document = _read_json_file(path)
+        out.write(json.dumps(_plain(document), allow_nan=False) + '\n')
+    if window_inputs:
+        for path, metadata, records in _read_windows(args, window_inputs, 'cat'):
+            if args.metadata:
+                out.write(json.dumps(_plain({'file': path, 'metadata': metadata}), allow_nan=False) + '\n')
+            for record in records:
+                if topics is None or record.topic in topics:
+                    out.write(json.dumps(_plain(_record_row(record, path if args.with_file else None)),
+                                         allow_nan=False) + '\n')
+    return EXIT_OK
+
+
+def _selected_records(args):
+    """All records of the window files named by ``args.paths`` (``--topic`` filter), in stamp order."""
+    topics = set(args.topic) if args.topic else None
+    records = []
+    for _, _, window in _read_windows(args, args.paths, 'read'):
+        records.extend(record for record in window if topics is None or record.topic in topics)
+    records.sort(key=lambda record: record.stamp)
+    if not records:
+        raise CommandError('topic: no messages of %s in %s' % (', '.join(sorted(topics)), ', '.join(args.paths))
+                           if topics else '%s: no messages' % ', '.join(args.paths))
+    return records
+
+
+def _csv_cell(value):
+    if isinstance(value, (list, dict)):
+        return json.dumps(value, allow_nan=False)
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, float):
+        return repr(value)
+    return value
+
+
+def _flatten(row, prefix, out):
+    for name, value in row.items():
+        if isinstance(value, dict) and value and not set(value) == {'secs', 'nsecs'}:
+            _flatten(value, prefix + name + '.', out)
+        elif isinstance(value, dict):
+            out[prefix + name] = value['secs'] + value['nsecs'] * 1e-9 if value else value
+            out[prefix + name + '.secs'] = value['secs']
+            out[prefix + name + '.nsecs'] = value['nsecs']
+        else:
+            out[prefix + name] = value
+    return out
+
+
+def _topic_file_name(topic):
+    name = ''.join(c if c.isalnum() or c in '-_.' else '_' for c in topic.strip('/')) or 'root'
+    return name + '.csv'
+
+
+def cmd_export(args):
+    """Window files to one bag, one CSV per topic, or one JSON-lines file."""
+    import csv
+    from . import msg_codec
+    records = _selected_records(args)
+    files = []
+    if args.to == 'jsonl':
+        _parent_exists(args.out, 'out')
+        with open(args.out, 'w') as stream:
+            for record in records:
+                stream.write(json.dumps(_plain(_record_row(record)), allow_nan=False) + '\n')
+        files.append(args.out)
+    elif args.to == 'bag':
+        import rosbag
+        from .bag_lz4 import bag_time
+        _parent_exists(args.out, 'out')
+        if os.path.exists(args.out) and not args.force:
+            raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
+        compression = rosbag.Compression.LZ4 if args.compression == 'lz4' else (
+            rosbag.Compression.BZ2 if args.compression == 'bz2' else rosbag.Compression.NONE)
+        with _bar(args, 'export', len(records)) as bar, rosbag.Bag(args.out, 'w', compression=compression) as bag:
+            for record in records:
+                bag.write(record.topic, record.msg, bag_time(record.stamp))
+                bar.update()
+        files.append(args.out)
+    else:
+        _writable_dir(args.out, 'out')
+        by_topic = collections.OrderedDict()
+        for record in records:
+            by_topic.setdefault(record.topic, []).append(record)
+        for topic, topic_records in by_topic.items():
+            rows = [_flatten(msg_codec.to_dict(record.msg), '', collections.OrderedDict())
+                    for record in topic_records]
+            fields = list(collections.OrderedDict.fromkeys(key for row in rows for key in row))
+            path = os.path.join(args.out, _topic_file_name(topic))
+            with open(path, 'w', newline='') as stream:
+                writer = csv.writer(stream)
+                writer.writerow(['stamp'] + fields)
+                for record, row in zip(topic_records, rows):
+                    writer.writerow([repr(float(record.stamp))] + [_csv_cell(row.get(field, '')) for field in fields])
+            files.append(path)
+    summary = collections.OrderedDict([('to', args.to), ('messages', len(records)),
+                                       ('topics', sorted(set(record.topic for record in records))),
+                                       ('files', files)])
+    if args.json:
+        _print_json(summary)
+    else:
+        print('%d messages of %d topic(s) -> %s' % (len(records), len(summary['topics']), ', '.join(files)))
+    return EXIT_OK
+
+
+def _rows_of(rows):
+    """codec_table rows as dicts (name, bytes, ratio, mb_per_s, ...)."""
+    return [dict(row._asdict()) if hasattr(row, '_asdict') else dict(row) for row in rows]
+
+
+def _own_format_rows(records, raw_bytes):
+    """cc_log's own window formats on the same records: size, ratio, MB/s (of raw row JSON, write time)."""
+    from . import log_format
+    from .window_buffer import LogWindow, Trigger
+    rows = []
+    window = LogWindow(records, [Trigger(records[0].stamp, 'codecs', None)])
+    folder = tempfile.mkdtemp(prefix='cclog-codecs-')
+    try:
+        for fmt in log_format.Format.ALL:
+            started = time.perf_counter()
+            path, size = log_format.write_window(window, folder, fmt, {})
+            seconds = time.perf_counter() - started
+            os.unlink(path)
+            rows.append({'codec': 'cc_log %s' % fmt, 'bytes': size, 'ratio': _ratio(raw_bytes, size),
+                         'mb_per_s': raw_bytes / 1e6 / seconds if seconds > 0 else None})
+    finally:
+        for name in os.listdir(folder):
+            os.unlink(os.path.join(folder, name))
+        os.rmdir(folder)
+    return rows
+
+
+def cmd_codecs(args):
+    """The paper's Table 2 on the row-per-message JSON of a bag topic or of window files."""
+    from . import codecs, msg_codec
+    path = args.path
+    if not os.path.exists(path):
+        raise CommandError('%s: no such file or directory' % path)
+    if os.path.isfile(path) and _is_plain_bag(path):
+        from . import bagio
+        bag = bagio.open_bag(path)
+        try:
+            if not args.topic:
+                topics = bagio.topics_of(bag)
+                raise CommandError('topic: a bag needs --topic; its topics: %s' % ', '.join(
+                    '%s (%s)' % (name, topics[name]) for name in sorted(topics)))
+            for topic in args.topic:
+                bagio.check_topic(bag, topic)
+            total = bag.get_message_count(args.topic)
+        finally:
+            bag.close()
+        records = []
+        with _bar(args, 'read', total) as bar:
+            for record in bagio.read_messages(path, args.topic):
+                records.append(record)
+                bar.update()
+        source = collections.OrderedDict([('bag', path), ('topics', args.topic)])
+    else:
+        records = _selected_records(args)
+        source = collections.OrderedDict([('log', path), ('topics', sorted(set(r.topic for r in records)))])
+    if not records:
+        raise CommandError('%s: no messages on %s' % (path, ', '.join(args.topic or [])))
+    data = b''.join(msg_codec.row_json(record.msg).encode('utf-8') + b'\n' for record in records)
+    with _bar(args, 'codecs').busy():
+        rows = _rows_of(codecs.codec_table(data))
+        rows.extend(_own_format_rows(records, len(data)))
+    result = collections.OrderedDict([('source', source), ('messages', len(records)), ('raw_json_bytes', len(data)),
+                                      ('rows', rows)])
+    if args.json:
+        _print_json(result)
+        return EXIT_OK
+    print('%d messages, %s of row-per-message JSON (%s)' % (len(records), human_bytes(len(data)),
+                                                             ', '.join(source['topics'])))
+    print(codecs.format_table(rows))
+    return EXIT_OK
+
+
+def _is_plain_bag(path):
+    """True for a rosbag that is not a cc_log bag-lz4 window file (which ``codecs`` reads as a LOG)."""
+    from . import bag_lz4
+    with open(path, 'rb') as stream:
+        if not stream.read(16).startswith(bag_lz4.MAGIC):
+            return False
+    return not os.path.basename(path).startswith('cc_log_')
+
+
+def _speed(msg):
+    twist = msg.twist.twist.linear
+    return math.sqrt(twist.x ** 2 + twist.y ** 2 + twist.z ** 2)
+
+
+def cmd_plot(args):
+    """A timeline: speed of the driving topic with the saved windows shaded, and the triggers' scores."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    windows = []
+    driving = args.topic
+    for path, metadata, records in _read_windows(args, args.paths, 'plot'):
+        driving = driving or metadata.get('driving_topic')
+        windows.append((path, metadata, records))
+    if not driving:
+        raise CommandError('topic: the windows do not name their driving topic; give --topic')
+    speed = []  # (stamp, speed) of the whole run (--bag) or of the saved windows
+    if args.bag:
+        from . import bagio
+        bag = bagio.open_bag(args.bag)
+        try:
+            bagio.check_topic(bag, driving, 'nav_msgs/Odometry')
+            total = bag.get_message_count([driving])
+        finally:
+            bag.close()
+        with _bar(args, 'read', total) as bar:
+            for record in bagio.read_messages(args.bag, [driving]):
+                speed.append((record.stamp, _speed(record.msg)))
+                bar.update()
+    else:
+        for _, _, records in windows:
+            speed.extend((r.stamp, _speed(r.msg)) for r in records
+                         if r.topic == driving and r.msg._type == 'nav_msgs/Odometry')
+        if not speed:
+            raise CommandError('topic: no nav_msgs/Odometry messages on %s in the windows' % driving)
+    speed.sort()
+    origin = min([speed[0][0]] + [min(r.stamp for r in records) for _, _, records in windows])
+    triggers, threshold = [], None
+    for _, metadata, _ in windows:
+        for trigger in metadata.get('triggers') or []:
+            if isinstance(trigger.get('score'), (int, float)):
+                triggers.append((trigger['stamp'] - origin, trigger['score']))
+        if isinstance(metadata.get('threshold'), (int, float)):
+            threshold = metadata['threshold']
+    figure, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(args.width, 6),
+                                         gridspec_kw={'height_ratios': [3, 1]})
+    if args.bag:
+        top.plot([s - origin for s, _ in speed], [v for _, v in speed], lw=0.8, color='tab:blue',
+                 label='speed (%s)' % driving)
+    else:
+        for _, _, records in windows:
+            part = [(r.stamp - origin, _speed(r.msg)) for r in records
+                    if r.topic == driving and r.msg._type == 'nav_msgs/Odometry']
+            top.plot([s for s, _ in part], [v for _, v in part], lw=0.8, color='tab:blue')
+    for number, (_, _, records) in enumerate(windows):
+        start = min(r.stamp for r in records) - origin
+        end = max(r.stamp for r in records) - origin
+        for axis in (top, bottom):
+            axis.axvspan(start, end, color='tab:orange', alpha=0.25, lw=0,
+                         label='saved window' if number == 0 and axis is top else None)
+    if triggers:
+        bottom.plot([t for t, _ in triggers], [s for _, s in triggers], 'v', color='tab:red', ms=4,
+                    label='trigger score')
+    if threshold is not None:
+        bottom.axhline(threshold, color='k', ls='--', lw=0.8, label='threshold %.3g' % threshold)
+    top.set_ylabel('speed (m/s)')
+    top.set_title(args.title or '%s: %d saved window(s)%s' % (
+        args.bag or ', '.join(args.paths), len(windows), '' if args.bag else ' (speed inside the windows only)'),
+        fontsize=9)
+    top.legend(loc='upper right', fontsize=8)
+    bottom.set_ylabel('score')
+    bottom.set_xlabel('time since %.3f (s)' % origin)
+    if triggers or threshold is not None:
+        bottom.legend(loc='upper right', fontsize=8)
+    figure.tight_layout()
+    _parent_exists(args.out, 'out')
+    figure.savefig(args.out, dpi=args.dpi)
+    plt.close(figure)
+    summary = collections.OrderedDict([('out', args.out), ('windows', len(windows)), ('triggers', len(triggers)),
+                                       ('speed_samples', len(speed)), ('start', origin),
+                                       ('end', max(speed[-1][0], max(max(r.stamp for r in rs)
+                                                                     for _, _, rs in windows)))])
+    if args.json:
+        _print_json(summary)
+    else:
+        print('%s: %d window(s), %d trigger score(s), %d speed samples' % (
+            args.out, len(windows), len(triggers), len(speed)))
+    return EXIT_OK
+
+
+def cmd_simulate(args):
+    """A simulated BWIBot bag with labelled anomalies, and ``<bag>.truth.json``."""
+    from . import sim
+    _parent_exists(args.out, 'out')
+    if os.path.exists(args.out) and not args.force:
+        raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
+    keywords = {'rate': args.rate, 'seed': args.seed, 'minutes': args.minutes, 'anomalies': args.anomalies,
+                'imu': args.imu}
+    if args.types:
+        keywords['anomaly_types'] = tuple(name.strip() for name in args.types.split(',') if name.strip())
+    config = sim.SimConfig(**keywords)
+    with _bar(args, 'simulate') as bar:
+        truth = _call(sim.simulate_to_bag, bar, args.out, config)
+    truth_path = args.out + '.truth.json'
+    if not os.path.exists(truth_path):
+        with open(truth_path, 'w') as stream:
+            json.dump(_plain(truth), stream, indent=1, allow_nan=False)
+    summary = collections.OrderedDict([('bag', args.out), ('truth', truth_path), ('minutes', args.minutes),
+                                       ('rate', args.rate), ('seed', args.seed), ('anomalies', len(truth)),
+                                       ('bytes', os.path.getsize(args.out)), ('truth_list', _plain(truth))])
+    if args.json:
+        _print_json(summary)
+    else:
+        print('%s: %.1f min at %g Hz, %d anomalies (%s), %s' % (
+            args.out, args.minutes, args.rate, len(truth), truth_path, human_bytes(summary['bytes'])))
+    return EXIT_OK
+
+
+# -- parser -----------------------------------------------------------------------------------------------
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``cclog replay: error: ... (see cclog replay --help)``, status 2."""
+
+    def error(self, message):
+        self.exit(EXIT_USAGE, '%s: error: %s (see %s --help)\n' % (self.prog, message, self.prog))
+
+
+def _help(description, examples):
+    return dict(description=textwrap.dedent(description).strip(),
+                epilog='examples:\n' + textwrap.indent(textwrap.dedent(examples).strip('\n'), '  '),
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def _common(parser, json_help=True):
+    if json_help:
+        parser.add_argument('--json', action='store_true', help='print one JSON object on stdout')
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument('--progress', dest='progress', action='store_true', default=None,
+                       help='progress bar on stderr even when it is not a terminal')
+    group.add_argument('--no-progress', dest='progress', action='store_false',
+                       help='no progress bar, even on a terminal')
+
+
+def build_parser():
+    """The ``cclog`` argument parser (one sub-parser per command)."""
+    from .spans import Span  # noqa: F401  (cheap, pure; checks the defaults below parse)
+    parser = _Parser(prog=PROG, **_help(
+        """
+        cc_log offline tool: tune the anomaly logger on bags you already have. No roscore needed.
+
+        Results go to stdout (--json: one JSON object); progress bars to stderr (on a terminal or with
+        --progress). Bad input prints one line "cclog <command>: error: ..." and exits 1 (2 for bad
+        command-line syntax).
+        """,
+        """
+          cclog simulate --minutes 10 --anomalies 6 --seed 1 sim.bag
+          cclog collect husky.bag --topic /husky_velocity_controller/odom --out vectors
+          cclog learn --train vectors --model model.json
+          cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs --json
+          cclog info logs
+          cclog plot logs --bag husky.bag --out run.png
+        """))
+    parser.add_argument('--version', action='version', version='%(prog)s ' + _version())
+    commands = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
+    commands.required = True
+
+    p = commands.add_parser('collect', help='feature vectors of a bag into DIR/<label>/ (collect mode)', **_help(
+        """
+        Collect mode from a bag: run the features over the driving topic (nav_msgs/Odometry) and write one
+        feature vector file per --stride messages into OUT/<label>/, as the collect node does live. Those
+        directories are what `cclog learn --train` reads; label a run "nominal" or after its anomaly.
+        """,
+        """
+          cclog collect husky.bag --topic /husky_velocity_controller/odom --out train
+          cclog collect crash.bag --topic /odom --out test --label crash --window 5s --stride 5
+          cclog collect run.bag --topic /odom --out train --window 200 --json
+        """))
+    p.add_argument('bag', metavar='BAG', help='input bag (indexed, rosbag 2.0)')
+    p.add_argument('--topic', required=True, metavar='T', help='driving topic (nav_msgs/Odometry)')
+    p.add_argument('--out', required=True, metavar='DIR', help='vectors go to DIR/<label>/')
+    p.add_argument('--label', default='nominal', help='label directory (default: %(default)s; anything but '
+                   '"nominal" counts as anomalous)')
+    p.add_argument('--window', default='500', type=_span('window'), metavar='N|Ns',
+                   help='feature window: messages (500) or seconds (5s) (default: %(default)s)')
+    p.add_argument('--stride', default=_collect_stride(), type=_non_negative_int('stride', 1), metavar='N',
+                   help='a vector every N driving messages (default: %(default)s)')
+    p.add_argument('--features', default='motion', choices=('motion', 'raw'),
+                   help='feature set (default: %(default)s)')
+    _common(p)
+    p.set_defaults(run=cmd_collect)
+
+    p = commands.add_parser('learn', help='train the model (learn mode), validate or evaluate it', **_help(
+        """
+        Learn mode. --train DIR holds <label>/<stamp>.json vector files (from `cclog collect` or the
+        collect node); DIR/nominal/ alone is enough (the threshold is then set on held-out nominal
+        blocks); other labels count as anomalous and tune nu, gamma and the threshold. --test DIR (disjoint
+        from --train) is scored with the new model: the paper's table (TP, FP, FN, TN, precision, recall).
+        Without --train, --test evaluates the existing --model (the vectors must have its feature
+        configuration).
+        """,
+        """
+          cclog learn --train vectors --model model.json
+          cclog learn --train train --test test --model model.json --json
+          cclog learn --test test --model model.json          # evaluate an existing model
+        """))
+    p.add_argument('--train', metavar='DIR', help='training vectors (DIR/nominal/ at least)')
+    p.add_argument('--test', metavar='DIR', help='test vectors, disjoint from --train')
+    p.add_argument('--model', required=True, metavar='PATH', help='model file to write (or to evaluate)')
+    p.add_argument('--nu', type=_positive_float('nu'), help='one-class SVM nu (default: learning default or grid)')
+    p.add_argument('--gamma', type=_positive_float('gamma'), help='RBF gamma (default: learning default or grid)')
+    p.add_argument('--method', default='auto', choices=('auto', 'exact', 'nystroem'),
+                   help='exact OneClassSVM, Nystroem + SGD, or auto (default: %(default)s)')
+    _common(p)
+    p.set_defaults(run=cmd_learn)
+
+    p = commands.add_parser('replay', help='the smart logger over a bag (windows around anomalies)', **_help(
+        """
+        Smart mode offline: feed the bag, as fast as it can be read, to the same SmartLogger the live node
+        runs. The driving topic is scored by the model; every anomaly saves --pre messages before and --post
+        after (counts or durations), with the --side-topic messages of that time span, as window files in
+        OUT. --json prints {input_messages, raw_json_bytes, stored_bytes, windows: [{start, end, messages,
+        path}]}; start/end are the header stamps (float seconds) of the first and last message saved.
+        """,
+        """
+          cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
+          cclog replay crash.bag --topic /odom --model model.json --out logs --pre 2s --post 2s --json
+          cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
+        """))
+    p.add_argument('bag', metavar='BAG', help='input bag')
+    p.add_argument('--topic', required=True, metavar='T', help='driving topic (the model\'s message type)')
+    p.add_argument('--model', required=True, metavar='PATH', help='model file (cclog learn)')
+    p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
+    p.add_argument('--pre', default='100', type=_span('pre'), metavar='N|Ns',
+                   help='messages (100) or seconds (2s) kept before an anomaly (default: %(default)s)')
+    p.add_argument('--post', default='100', type=_span('post'), metavar='N|Ns',
+                   help='messages or seconds kept after the last anomaly (default: %(default)s)')
+    p.add_argument('--format', default='json-xz', choices=('json-xz', 'bag-lz4'),
+                   help='window file format (default: %(default)s)')
+    p.add_argument('--side-topic', action='append', default=[], metavar='T',
+                   help='another topic to save inside the windows (repeatable)')
+    _common(p)
+    p.set_defaults(run=cmd_replay)
+
+    p = commands.add_parser('info', help='windows, spans, counts, sizes, codec, triggers, scores', **_help(
+        """
+        Describe window files: time span, messages per topic, size on disk and as row-per-message JSON,
+        codec, the trigger(s) that opened the window with their scores, and the model threshold. PATH is a
+        window file or a directory of them (read in time order).
+        """,
+        """
+          cclog info logs
+          cclog info logs/cc_log_20150521T191138.027Z_classifier.json.xz --json
+        """))
+    p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
+    _common(p)
+    p.set_defaults(run=cmd_info)
+
+    p = commands.add_parser('cat', help='decode cc_log files to JSON lines', **_help(
+        """
+        Decode cc_log files to JSON lines on stdout. A window file (json-xz or bag-lz4) or a directory of
+        them gives one line per message: {"stamp", "topic", "type", "msg"} (msg_codec rows: times as
+        {secs, nsecs}, byte arrays as base64, non-finite floats as strings). A model, feature-vector or
+        truth file (JSON) is printed as one line.
+        """,
+        """
+          cclog cat logs/cc_log_20150521T191138.027Z_classifier.json.xz | jq .msg.twist.twist.linear.x
+          cclog cat logs --topic /odom --metadata
+          cclog cat model.json | jq .threshold
+        """))
+    p.add_argument('paths', nargs='+', metavar='PATH', help='cc_log file or directory of window files')
+    p.add_argument('--topic', action='append', metavar='T', help='only this topic (repeatable)')
+    p.add_argument('--metadata', action='store_true', help='a {"file", "metadata"} line before each window')
+    p.add_argument('--with-file', action='store_true', help='add "file" (the window file) to every line')
+    _common(p, json_help=False)
+    p.set_defaults(run=cmd_cat)
+
+    p = commands.add_parser('export', help='window files to a bag, CSV or JSON lines', **_help(
+        """
+        Export the messages of window files (merged, in stamp order) to one rosbag (messages on their own
+        topics, stamp as bag time), to CSV (--out is a directory: one <topic>.csv per topic, a "stamp"
+        column then one column per field; arrays as JSON), or to one JSON-lines file.
+        """,
+        """
+          cclog export logs --to bag --out anomalies.bag
+          cclog export logs/cc_log_20150521T191138.027Z_classifier.json.xz --to csv --out csv/
+          cclog export logs --to jsonl --out all.jsonl --topic /odom
+        """))
+    p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
+    p.add_argument('--to', required=True, choices=EXPORT_TARGETS, help='output kind')
+    p.add_argument('--out', required=True, metavar='PATH', help='output file (bag, jsonl) or directory (csv)')
+    p.add_argument('--topic', action='append', metavar='T', help='only this topic (repeatable)')
+    p.add_argument('--compression', default='none', choices=('none', 'lz4', 'bz2'),
+                   help='bag compression (default: %(default)s)')
+    p.add_argument('--force', action='store_true', help='overwrite an existing bag')
+    _common(p)
+    p.set_defaults(run=cmd_export)
+
+    p = commands.add_parser('codecs', help="the paper's Table 2 on some data", **_help(
+        """
+        The paper's Table 2 on the row-per-message JSON of the data: every codec cc_log knows (none, LZ4,
+        LZFSE when its Python binding is installed, ZIP, gzip, bzip2, LZMA-6, zstd) and cc_log's own
+        window formats (json-xz, bag-lz4), with size, ratio and MB/s (of the raw JSON). For a BAG the data
+        is the messages of --topic; for a LOG (window file or directory) all its messages (or --topic).
+        """,
+        """
+          cclog codecs husky.bag --topic /husky_velocity_controller/odom
+          cclog codecs husky.bag --topic /imu/data --json
+          cclog codecs logs
+        """))
+    p.add_argument('path', metavar='BAG|LOG', help='a bag, a window file or a directory of window files')
+    p.add_argument('--topic', action='append', metavar='T', help='topic to measure (repeatable; required for a bag)')
+    _common(p)
+    p.set_defaults(run=cmd_codecs, paths=None)
+
+    p = commands.add_parser('plot', help='timeline of a run with windows and scores (PNG)', **_help(
+        """
+        Draw a timeline: speed of the driving topic (nav_msgs/Odometry) over time with the saved windows
+        shaded, and below it the classifier scores of the triggers and the model threshold. With --bag the
+        speed curve covers the whole run, else only the messages inside the windows. Uses matplotlib's Agg
+        backend (no display needed).
+        """,
+        """
+          cclog plot logs --bag husky.bag --out run.png
+          cclog plot logs/cc_log_20150521T191138.027Z_classifier.json.xz --out window.png
+        """))
+    p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
+    p.add_argument('--out', required=True, metavar='PNG', help='image to write')
+    p.add_argument('--bag', metavar='BAG', help='the full run, for the speed curve')
+    p.add_argument('--topic', metavar='T', help='driving topic (default: the windows\' driving_topic)')
+    p.add_argument('--title', help='figure title')
+    p.add_argument('--width', type=_positive_float('width'), default=11.0, help='inches (default: %(default)s)')
+    p.add_argument('--dpi', type=_non_negative_int('dpi', 10), default=100, help='(default: %(default)s)')
+    _common(p)
+    p.set_defaults(run=cmd_plot)
+
+    p = commands.add_parser('simulate', help='a simulated BWIBot bag with labelled anomalies', **_help(
+        """
+        Simulate the BWIBot driving (nav_msgs/Odometry, optionally IMU) with labelled anomalies and write a
+        bag plus OUT.truth.json (the anomalies: time spans and types).
+        """,
+        """
+          cclog simulate --minutes 10 --anomalies 6 --seed 1 out.bag
+          cclog simulate --minutes 2 --anomalies 0 --seed 7 nominal.bag --json
+        """))
+    p.add_argument('out', metavar='OUT.bag', help='bag to write (OUT.bag.truth.json next to it)')
+    p.add_argument('--minutes', type=_positive_float('minutes'), default=10.0, help='(default: %(default)s)')
+    p.add_argument('--anomalies', type=_non_negative_int('anomalies'), default=6, help='(default: %(default)s)')
+    p.add_argument('--seed', type=_non_negative_int('seed'), default=1, help='(default: %(default)s)')
+    p.add_argument('--rate', type=_positive_float('rate'), default=_sim_rate(), help='odometry Hz (default: %(default)s)')
+    p.add_argument('--types', metavar='A,B', help='anomaly types to draw from (default: all)')
+    p.add_argument('--imu', action='store_true', help='also write sensor_msgs/Imu')
+    p.add_argument('--force', action='store_true', help='overwrite an existing bag')
+    _common(p)
+    p.set_defaults(run=cmd_simulate)
+    return parser
+
+
+def _version():
+    from . import __version__
+    return __version__
+
+
+def _collect_stride():
+    try:
+        from .collector import DEFAULT_STRIDE
+    except ImportError:
+        return 25
+    return DEFAULT_STRIDE
+
+
+def _sim_rate():
+    try:
+        from .sim import SimConfig
+        return SimConfig().rate
+    except (ImportError, TypeError):
+        return 50.0
+
+
+# -- main -------------------------------------------------------------------------------------------------
+
+def _one_line(error):
+    text = ' '.join(part.strip() for part in str(error).strip().splitlines() if part.strip())
+    return text or type(error).__name__
+
+
+def main(argv=None):
+    """Run ``cclog``; return the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    prog = '%s %s' % (PROG, args.command)
+    try:
+        return args.run(args)
+    except ValueError as error:  # CommandError, ModelError and every '<what>: <problem>' of the library
+        sys.stderr.write('%s: error: %s\n' % (prog, _one_line(error)))
+        return EXIT_BAD_INPUT
+    except BrokenPipeError:  # `cclog cat ... | head`: the reader is gone, nothing left to say
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
+    except OSError as error:
+        where = ' %s:' % error.filename if getattr(error, 'filename', None) else ''
+        sys.stderr.write('%s: error:%s %s\n' % (prog, where, _one_line(error.strerror or error)))
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        sys.stderr.write('%s: interrupted\n' % prog)
+        return EXIT_INTERRUPTED
