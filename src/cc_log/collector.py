@@ -144,7 +144,7 @@ class Collector(object):
         self._stats_lock = threading.Lock()
         self._chunk = []
         self._chunk_bytes = 0
-        self._chunk_start = None
+        self._chunk_span = None
         self._clock = None
         self._part = 0
         self._closed = False
@@ -184,8 +184,10 @@ class Collector(object):
             if self._chunk and self._due(stamp, raw):
                 self._rotate()
             self._clock = stamp if self._clock is None else max(self._clock, stamp)
-            if self._chunk_start is None:
-                self._chunk_start = stamp
+            if self._chunk_span is None:
+                self._chunk_span = (stamp, stamp)
+            else:
+                self._chunk_span = (min(self._chunk_span[0], stamp), max(self._chunk_span[1], stamp))
             self._chunk.append(Record(stamp, topic, msg))
             self._chunk_bytes += raw
             if topic == self.driving_topic:
@@ -233,8 +235,9 @@ class Collector(object):
         rotate = self.rotate
         if rotate.bytes is not None:
             return self._chunk_bytes + raw > rotate.bytes
-        if rotate.span.is_duration:
-            return stamp - self._chunk_start >= rotate.span.seconds
+        if rotate.span.is_duration:  # the file spans less than the duration, whatever the arrival order
+            first, last = self._chunk_span
+            return max(last, stamp) - min(first, stamp) >= rotate.span.seconds
         return len(self._chunk) >= rotate.span.count
 
     def _rotate(self):
@@ -245,7 +248,7 @@ class Collector(object):
         window = LogWindow(records, [Trigger(records[0].stamp, 'collect', None)], self._part)
         self._chunk = []
         self._chunk_bytes = 0
-        self._chunk_start = None
+        self._chunk_span = None
         self._submit(('file', window))
 
     def _submit(self, item):
