@@ -5,8 +5,9 @@ Two feature sets:
 - ``motion`` (default): per message, quantities that do not depend on where the robot is or which way it
   faces: body-frame twist, speed, accelerations, angular accelerations and jerk from twist differences over
   the real time step, the pose-derived body velocity and attitude rate minus the reported twist
-  (consistency: localization jumps, wheels spinning while the pose stands still), and the direction of
-  "up" in the body frame (roll/pitch, never heading). A window of rows becomes a fixed-length vector of
+  (consistency: localization jumps, wheels spinning while the pose stands still), the direction of
+  "up" in the body frame (roll/pitch, never heading), the climb rate and the specific mechanical power
+  d(speed^2/2 + g z)/dt (a UAV losing an engine, a robot hitting a wall). A window of rows becomes a fixed-length vector of
   per-channel summary statistics (mean, std, min, max), whatever the number of rows.
 - ``raw``: the CC-Log paper's features, the concatenation of position, orientation, linear and angular
   twist of the W messages of a count window (kept for comparison; it depends on where the robot is).
@@ -39,7 +40,10 @@ MOTION_COLUMNS = (
     'pose_vx_err', 'pose_vy_err', 'pose_vz_err',  # body velocity from pose differences minus twist
     'att_rate_x_err', 'att_rate_y_err', 'att_rate_z_err',  # body rate from orientation minus twist
     'up_x', 'up_y',                        # world "up" in the body frame (roll / pitch, not heading)
+    'climb_rate',                          # world dz/dt from pose differences
+    'energy_rate',                         # d(speed^2 / 2 + g z)/dt: specific mechanical power
 )
+GRAVITY = 9.81
 RAW_COLUMNS = ('px', 'py', 'pz', 'qx', 'qy', 'qz', 'qw', 'vx', 'vy', 'vz', 'wx', 'wy', 'wz')
 STATISTICS = ('mean', 'std', 'min', 'max')
 
@@ -224,7 +228,7 @@ class OdometryFeatures(object):
                 self.segment_start = None
                 self.segment_rows = 0
             self.restarts += 1
-            deriv = (0.0,) * 13
+            deriv = (0.0,) * 15
             a = None
             self._prev = (stamp, p, q, v, w, a)
         elif dt < self.min_dt:
@@ -250,7 +254,11 @@ class OdometryFeatures(object):
             # Body rate from the orientation change q0^-1 * q, compared with the mean reported rate.
             r = _body_rate(q0, q, inv)
             rate_err = (r[0] - 0.5 * (w0[0] + w[0]), r[1] - 0.5 * (w0[1] + w[1]), r[2] - 0.5 * (w0[2] + w[2]))
-            deriv = a + alpha + (jerk,) + pose_err + rate_err
+            climb = d[2]
+            speed0 = math.sqrt(v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2])
+            speed1 = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+            energy = 0.5 * (speed1 * speed1 - speed0 * speed0) * inv + GRAVITY * climb
+            deriv = a + alpha + (jerk,) + pose_err + rate_err + (climb, energy)
             self._prev = (stamp, p, q, v, w, a)
         self._deriv = deriv
         self._count(stamp)
@@ -258,7 +266,7 @@ class OdometryFeatures(object):
         up_x = 2.0 * (x * z - y * qw)
         up_y = 2.0 * (y * z + x * qw)
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        values = v + w + (speed,) + deriv + (up_x, up_y)
+        values = v + w + (speed,) + deriv[:13] + (up_x, up_y) + deriv[13:]
         row = np.array([_clip(value) for value in values], dtype=float)
         self._last_row = row
         return row.copy()
