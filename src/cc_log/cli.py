@@ -108,13 +108,14 @@ class Progress(object):
     def text(self):
         """The bar as text (no carriage return)."""
         elapsed = time.time() - self.started
+        if self._thread is not None:
+            return '%s %s%s  %.1fs' % (self.label, self.SPINNER[self._ticks % len(self.SPINNER)],
+                                       '  (%d items)' % self.total if self.total else '', elapsed)
         if self.total:
             fraction = min(1.0, max(0.0, float(self.done) / self.total))
             filled = int(round(fraction * self.WIDTH))
             return '%s [%s%s] %3d%%  %d/%d  %.1fs' % (self.label, '#' * filled, '.' * (self.WIDTH - filled),
                                                    int(fraction * 100), self.done, self.total, elapsed)
-        if self._thread is not None:
-            return '%s %s  %.1fs' % (self.label, self.SPINNER[self._ticks % len(self.SPINNER)], elapsed)
         return '%s  %d  %.1fs' % (self.label, self.done, elapsed)
 
     def _draw(self, force=False, final=False):
@@ -687,13 +688,9 @@ def cmd_export(args):
     return EXIT_OK
 
 
-def _rows_of(rows):
-    """codec_table rows as dicts (name, bytes, ratio, mb_per_s, ...)."""
-    return [dict(row._asdict()) if hasattr(row, '_asdict') else dict(row) for row in rows]
-
-
 def _own_format_rows(records, raw_bytes):
-    """cc_log's own window formats on the same records: size, ratio, MB/s (of raw row JSON, write time)."""
+    """cc_log's own window formats on the same records, as ``codecs.codec_table`` rows (size, ratio in %
+    of the raw JSON, MB/s of raw JSON through ``log_format.write_window``, file write and fsync included)."""
     from . import log_format
     from .window_buffer import LogWindow, Trigger
     rows = []
@@ -705,13 +702,30 @@ def _own_format_rows(records, raw_bytes):
             path, size = log_format.write_window(window, folder, fmt, {})
             seconds = time.perf_counter() - started
             os.unlink(path)
-            rows.append({'codec': 'cc_log %s' % fmt, 'bytes': size, 'ratio': _ratio(raw_bytes, size),
-                         'mb_per_s': raw_bytes / 1e6 / seconds if seconds > 0 else None})
+            rows.append({'codec': 'cc_log %s' % fmt, 'available': True, 'size': size,
+                         'ratio': 100.0 * size / raw_bytes if raw_bytes else 0.0,
+                         'mb_s': raw_bytes / 1e6 / seconds if seconds > 0 else None,
+                         'note': 'window file, one write'})
     finally:
         for name in os.listdir(folder):
             os.unlink(os.path.join(folder, name))
         os.rmdir(folder)
     return rows
+
+
+def format_codec_table(rows):
+    """``codec_table`` rows (plus cc_log's own) as a text table, the codec column as wide as its names."""
+    width = max([len('codec')] + [len(row['codec']) for row in rows])
+    lines = ['%-*s %12s %8s %10s' % (width, 'codec', 'bytes', 'ratio', 'MB/s')]
+    for row in rows:
+        if row['available']:
+            speed = row['mb_s']
+            lines.append('%-*s %12d %7.2f%% %10s  %s' % (
+                width, row['codec'], row['size'], row['ratio'],
+                '%.1f' % speed if speed is not None and math.isfinite(speed) else '-', row.get('note') or ''))
+        else:
+            lines.append('%-*s %12s %8s %10s  %s' % (width, row['codec'], '-', '-', '-', row.get('note') or ''))
+    return '\n'.join(line.rstrip() for line in lines)
 
 
 def cmd_codecs(args):
@@ -740,13 +754,14 @@ def cmd_codecs(args):
                 bar.update()
         source = collections.OrderedDict([('bag', path), ('topics', args.topic)])
     else:
+        args.paths = [path]
         records = _selected_records(args)
         source = collections.OrderedDict([('log', path), ('topics', sorted(set(r.topic for r in records)))])
     if not records:
         raise CommandError('%s: no messages on %s' % (path, ', '.join(args.topic or [])))
     data = b''.join(msg_codec.row_json(record.msg).encode('utf-8') + b'\n' for record in records)
     with _bar(args, 'codecs').busy():
-        rows = _rows_of(codecs.codec_table(data))
+        rows = list(codecs.codec_table(data))
         rows.extend(_own_format_rows(records, len(data)))
     result = collections.OrderedDict([('source', source), ('messages', len(records)), ('raw_json_bytes', len(data)),
                                       ('rows', rows)])
@@ -755,7 +770,8 @@ def cmd_codecs(args):
         return EXIT_OK
     print('%d messages, %s of row-per-message JSON (%s)' % (len(records), human_bytes(len(data)),
                                                              ', '.join(source['topics'])))
-    print(codecs.format_table(rows))
+    print(format_codec_table(rows))
+    print('ratio: compressed size in % of the raw JSON; MB/s: raw JSON compressed per second')
     return EXIT_OK
 
 
@@ -805,6 +821,17 @@ def cmd_plot(args):
         if not speed:
             raise CommandError('topic: no nav_msgs/Odometry messages on %s in the windows' % driving)
     speed.sort()
+    curve = []  # (stamp, score) of every feature window of the run (--model with --bag)
+    if args.model:
+        from . import bagio
+        from .model import AnomalyModel
+        if not args.bag:
+            raise CommandError('model: --model scores the whole run and needs --bag')
+        model = AnomalyModel.load(args.model)
+        with _bar(args, 'score').busy():
+            stamps, vectors = bagio.feature_vectors(args.bag, driving, model.config, args.stride)
+            if len(stamps):
+                curve = list(zip(stamps.tolist(), model.scores(vectors).tolist()))
     origin = min([speed[0][0]] + [min(r.stamp for r in records) for _, _, records in windows])
     triggers, threshold = [], None
     for _, metadata, _ in windows:
@@ -813,6 +840,8 @@ def cmd_plot(args):
                 triggers.append((trigger['stamp'] - origin, trigger['score']))
         if isinstance(metadata.get('threshold'), (int, float)):
             threshold = metadata['threshold']
+    if args.model and threshold is None:
+        threshold = model.threshold
     figure, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(args.width, 6),
                                          gridspec_kw={'height_ratios': [3, 1]})
     if args.bag:
@@ -829,6 +858,9 @@ def cmd_plot(args):
         for axis in (top, bottom):
             axis.axvspan(start, end, color='tab:orange', alpha=0.25, lw=0,
                          label='saved window' if number == 0 and axis is top else None)
+    if curve:
+        bottom.plot([t - origin for t, _ in curve], [v for _, v in curve], lw=0.7, color='tab:gray',
+                    label='score (%s)' % os.path.basename(args.model))
     if triggers:
         bottom.plot([t for t, _ in triggers], [s for _, s in triggers], 'v', color='tab:red', ms=4,
                     label='trigger score')
@@ -841,14 +873,14 @@ def cmd_plot(args):
     top.legend(loc='upper right', fontsize=8)
     bottom.set_ylabel('score')
     bottom.set_xlabel('time since %.3f (s)' % origin)
-    if triggers or threshold is not None:
-        bottom.legend(loc='upper right', fontsize=8)
+    if curve or triggers or threshold is not None:
+        bottom.legend(loc='lower right', fontsize=8)
     figure.tight_layout()
     _parent_exists(args.out, 'out')
     figure.savefig(args.out, dpi=args.dpi)
     plt.close(figure)
     summary = collections.OrderedDict([('out', args.out), ('windows', len(windows)), ('triggers', len(triggers)),
-                                       ('speed_samples', len(speed)), ('start', origin),
+                                       ('speed_samples', len(speed)), ('scores', len(curve)), ('start', origin),
                                        ('end', max(speed[-1][0], max(max(r.stamp for r in rs)
                                                                      for _, _, rs in windows)))])
     if args.json:
@@ -865,20 +897,14 @@ def cmd_simulate(args):
     _parent_exists(args.out, 'out')
     if os.path.exists(args.out) and not args.force:
         raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
-    keywords = {'rate': args.rate, 'seed': args.seed, 'minutes': args.minutes, 'anomalies': args.anomalies,
-                'imu': args.imu}
-    if args.types:
-        keywords['anomaly_types'] = tuple(name.strip() for name in args.types.split(',') if name.strip())
-    config = sim.SimConfig(**keywords)
+    config = sim.SimConfig(rate=args.rate, seed=args.seed, minutes=args.minutes, anomalies=args.anomalies,
+                           imu=args.imu, **({'anomaly_types': args.types} if args.types else {}))
     with _bar(args, 'simulate') as bar:
         truth = _call(sim.simulate_to_bag, bar, args.out, config)
-    truth_path = args.out + '.truth.json'
-    if not os.path.exists(truth_path):
-        with open(truth_path, 'w') as stream:
-            json.dump(_plain(truth), stream, indent=1, allow_nan=False)
+    truth_path = sim.truth_path(args.out)
     summary = collections.OrderedDict([('bag', args.out), ('truth', truth_path), ('minutes', args.minutes),
                                        ('rate', args.rate), ('seed', args.seed), ('anomalies', len(truth)),
-                                       ('bytes', os.path.getsize(args.out)), ('truth_list', _plain(truth))])
+                                       ('bytes', os.path.getsize(args.out)), ('truth_anomalies', truth)])
     if args.json:
         _print_json(summary)
     else:
@@ -1087,17 +1113,22 @@ def build_parser():
         """
         Draw a timeline: speed of the driving topic (nav_msgs/Odometry) over time with the saved windows
         shaded, and below it the classifier scores of the triggers and the model threshold. With --bag the
-        speed curve covers the whole run, else only the messages inside the windows. Uses matplotlib's Agg
+        speed curve covers the whole run, else only the messages inside the windows; with --bag and
+        --model the model's score of every feature window of the run is drawn too. Uses matplotlib's Agg
         backend (no display needed).
         """,
         """
           cclog plot logs --bag husky.bag --out run.png
+          cclog plot logs --bag husky.bag --model model.json --out run-scores.png
           cclog plot logs/cc_log_20150521T191138.027Z_classifier.json.xz --out window.png
         """))
     p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
     p.add_argument('--out', required=True, metavar='PNG', help='image to write')
     p.add_argument('--bag', metavar='BAG', help='the full run, for the speed curve')
     p.add_argument('--topic', metavar='T', help='driving topic (default: the windows\' driving_topic)')
+    p.add_argument('--model', metavar='PATH', help='with --bag: draw this model\'s score over the whole run')
+    p.add_argument('--stride', type=_non_negative_int('stride', 1), default=1, metavar='N',
+                   help='with --model: score every N-th message (default: %(default)s)')
     p.add_argument('--title', help='figure title')
     p.add_argument('--width', type=_positive_float('width'), default=11.0, help='inches (default: %(default)s)')
     p.add_argument('--dpi', type=_non_negative_int('dpi', 10), default=100, help='(default: %(default)s)')
@@ -1143,8 +1174,8 @@ def _sim_rate():
     try:
         from .sim import SimConfig
         return SimConfig().rate
-    except (ImportError, TypeError):
-        return 50.0
+    except ImportError:
+        return 100.0
 
 
 # -- main -------------------------------------------------------------------------------------------------
