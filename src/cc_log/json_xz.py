@@ -9,7 +9,7 @@ The document (layout 1)::
         "stamps": "header.stamp",             # or a list of float seconds, one per message
         "constant": {"header.frame_id": "odom", "pose.covariance": [...], ...},
         "columns": {"header.seq": [...], "header.stamp.secs": [...], "pose.pose.position.x": [...], ...},
-        "definition": "<full message definition>"}, ...],
+        "definition": "<full message definition, comments left out>"}, ...],
      "order": [0, 1, 0, ...]}                  # only when records are not in (stamp, section) order
 
 Each topic is one section in order of first appearance. A field (the message's own dotted names, times
@@ -100,7 +100,8 @@ def document(records, metadata):
         if record.topic not in index:
             index[record.topic] = len(sections)
             sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
-                             'definition': msg._full_text, 'records': []})
+                             'definition': msg_codec.compact_definition(msg._full_text),
+                             'records': []})
         section = sections[index[record.topic]]
         if msg._type != section['type']:
             raise ValueError('topic %s: holds both %s and %s' % (record.topic, section['type'], msg._type))

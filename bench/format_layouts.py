@@ -1,0 +1,203 @@
+#!/usr/bin/env python3
+"""Window file layouts on real odometry: size against row-per-message JSON, and the cost of writing.
+
+    source .catkin_ws/devel/setup.bash && /usr/bin/python3 bench/format_layouts.py [--window 300] [--quick]
+
+For each bag's odometry topic (../shared/data/real/), the messages are cut into windows of ``--window``
+messages (the unit cc_log writes) and, separately, taken as one window of the whole topic. Every layout is
+LZMA-compressed (xz container) with each preset; the table gives the summed file bytes and their share of
+the uncompressed row-per-message JSON of the same messages (``msg_codec.row_json_bytes``), and the mean
+milliseconds per window (building the document + compressing) on this machine.
+
+Layouts:
+  rows            row-per-message JSON lines (the paper's plain log), LZMA
+  columns         the json-xz file as written (json_xz.encode): column per field, constants once,
+                  arrays as a column of lists, metadata + message definition included
+  columns-elem    as columns, but fixed-size arrays split into one column per element
+  columns-noconst as columns, without stating constant columns once
+  bag-lz4         the bag-lz4 file (rosbag, LZ4 chunks), for reference (no preset)
+  binary-floor    reference only, not a format: numeric fields as little-endian 64-bit arrays
+                  (integers delta-coded), LZMA preset 9: roughly what any lossless coding can reach
+"""
+import argparse
+import json
+import lzma
+import os
+import platform
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REAL = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real'))
+try:
+    import cc_log  # noqa: F401
+except ImportError:
+    sys.path.insert(0, os.path.join(ROOT, 'src'))
+
+import cc_log  # noqa: E402
+from cc_log import json_xz, msg_codec  # noqa: E402
+from cc_log.window_buffer import Record  # noqa: E402
+
+BAGS = [
+    ('husky_outdoor_2015.bag', '/husky_velocity_controller/odom'),
+    ('alfa_carbonZ_engine_failure.bag', '/mavros/local_position/odom'),
+    ('sequor_E2_normal_safe_escape_straight.bag', '/odom'),
+    ('sequor_N2_anomalous_jerky_driving.bag', '/odom'),
+    ('sequor_N3_anomalous_crash_wall.bag', '/odom'),
+]
+PRESETS = [('0', 0), ('1', 1), ('3', 3), ('6', 6), ('9', 9), ('9e', 9 | lzma.PRESET_EXTREME)]
+QUICK_PRESETS = [('1', 1), ('6', 6), ('9e', 9 | lzma.PRESET_EXTREME)]
+METADATA = {'codec': 'json-xz', 'reasons': ['classifier'], 'cc_log_version': cc_log.__version__}
+
+
+def machine():
+    model = platform.processor() or '?'
+    try:
+        with open('/proc/cpuinfo') as stream:
+            for line in stream:
+                if line.startswith('model name'):
+                    model = line.split(':', 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return '%s, %d cores (os.cpu_count), Python %s, liblzma via lzma module' % (
+        model, os.cpu_count() or 0, platform.python_version())
+
+
+def load(bag_name, topic):
+    import rosbag
+    records = []
+    with rosbag.Bag(os.path.join(REAL, bag_name)) as bag:
+        for _, msg, time_ in bag.read_messages(topics=[topic]):
+            stamp = msg.header.stamp.to_sec() if msg.header.stamp.to_sec() > 0 else time_.to_sec()
+            records.append(Record(stamp, topic, msg))
+    return records
+
+
+def xz(data, preset):
+    return json_xz.compress(data, preset)
+
+
+# -- layouts: each returns the uncompressed bytes of one window ---------------------------------------
+
+def rows_layout(records):
+    return ''.join(msg_codec.row_json(record.msg) + '\n' for record in records).encode()
+
+
+def columns_layout(records):
+    return json.dumps(json_xz.document(records, METADATA), separators=(',', ':')).encode()
+
+
+def _variant(records, split_arrays, constants):
+    doc = json_xz.document(records, METADATA)
+    for section in doc['topics']:
+        columns = dict(section['columns'])
+        for key, value in section['constant'].items():
+            columns[key] = [value] * section['count']
+        if split_arrays:
+            for key in list(columns):
+                values = columns[key]
+                if isinstance(values[0], list) and len(set(len(value) for value in values)) == 1:
+                    del columns[key]
+                    for index in range(len(values[0])):
+                        columns['%s[%d]' % (key, index)] = [value[index] for value in values]
+        rows = [dict((key, values[i]) for key, values in columns.items()) for i in range(section['count'])]
+        if constants:
+            section['constant'], section['columns'] = json_xz._columns(rows)
+        else:
+            section['constant'], section['columns'] = {}, columns
+    return json.dumps(doc, separators=(',', ':')).encode()
+
+
+def elem_layout(records):
+    return _variant(records, True, True)
+
+
+def noconst_layout(records):
+    return _variant(records, False, False)
+
+
+LAYOUTS = [('rows', rows_layout), ('columns', columns_layout), ('columns-elem', elem_layout),
+           ('columns-noconst', noconst_layout)]
+
+
+def bag_bytes(records):
+    from cc_log import bag_lz4
+    with tempfile.TemporaryDirectory() as directory:
+        path = os.path.join(directory, 'w.bag')
+        bag_lz4.write(path, records, dict(METADATA, codec='bag-lz4'))
+        return os.path.getsize(path)
+
+
+def binary_floor(records):
+    import struct
+    columns = {}
+    for record in records:
+        for key, value in json_xz._flatten(msg_codec.to_dict(record.msg), '', {}).items():
+            columns.setdefault(key, []).append(value)
+    blob = bytearray()
+    for key, values in columns.items():
+        if all(isinstance(value, float) for value in values):
+            blob += struct.pack('<%dd' % len(values), *values)
+        elif all(isinstance(value, int) and not isinstance(value, bool) for value in values):
+            deltas = [values[0]] + [b - a for a, b in zip(values, values[1:])]
+            blob += struct.pack('<%dq' % len(values), *deltas)
+        else:
+            blob += json.dumps(values).encode()
+    return len(lzma.compress(bytes(blob), preset=9))
+
+
+def windows(records, size):
+    if size <= 0 or size >= len(records):
+        return [records]
+    return [records[i:i + size] for i in range(0, len(records), size) if len(records[i:i + size]) == size]
+
+
+def measure(records, size, presets):
+    """Rows of (layout, preset, bytes, percent, ms per window) for the windows of ``size`` records."""
+    chunks = windows(records, size)
+    raw = sum(msg_codec.row_json_bytes(record.msg) for chunk in chunks for record in chunk)
+    results = []
+    for name, layout in LAYOUTS:
+        for label, preset in presets:
+            total, seconds = 0, 0.0
+            for chunk in chunks:
+                start = time.perf_counter()
+                total += len(xz(layout(chunk), preset))
+                seconds += time.perf_counter() - start
+            results.append((name, label, total, 100.0 * total / raw, 1000.0 * seconds / len(chunks)))
+    start = time.perf_counter()
+    total = sum(bag_bytes(chunk) for chunk in chunks)
+    results.append(('bag-lz4', '-', total, 100.0 * total / raw, 1000.0 * (time.perf_counter() - start) / len(chunks)))
+    total = sum(binary_floor(chunk) for chunk in chunks)
+    results.append(('binary-floor', '9', total, 100.0 * total / raw, float('nan')))
+    return raw, len(chunks), results
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--window', type=int, default=300, help='messages per window (default 300)')
+    parser.add_argument('--quick', action='store_true', help='presets 1, 6, 9e only; first two bags')
+    parser.add_argument('--no-whole', action='store_true', help='skip the whole-topic-as-one-window rows')
+    args = parser.parse_args(argv)
+    presets = QUICK_PRESETS if args.quick else PRESETS
+    print('machine: %s' % machine())
+    print('row JSON = msg_codec.row_json_bytes (json.dumps of the nested message dict + newline)')
+    for bag_name, topic in (BAGS[:2] if args.quick else BAGS):
+        records = load(bag_name, topic)
+        sizes = [args.window] + ([] if args.no_whole or len(records) <= args.window else [len(records)])
+        for size in sizes:
+            raw, count, results = measure(records, size, presets)
+            print()
+            print('%s %s: %d msgs, windows of %d msgs: %d window(s), row JSON %d bytes'
+                  % (bag_name, topic, len(records), min(size, len(records)), count, raw))
+            print('  %-16s %-6s %10s %9s %12s' % ('layout', 'preset', 'bytes', '% row', 'ms/window'))
+            for name, label, total, percent, ms in results:
+                print('  %-16s %-6s %10d %8.2f%% %12s' % (name, label, total, percent,
+                                                          '-' if ms != ms else '%.1f' % ms))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
