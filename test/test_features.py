@@ -82,7 +82,7 @@ def test_motion_features_ignore_position_and_heading(real_bag, name, topic):
     assert not np.allclose(np.array(rows_of(traj, raw)), np.array(rows_of(moved(traj, 2.1, (1000.0, 0, 0)), raw)))
 
 
-def test_motion_rows_see_a_localization_jump_and_spinning_wheels():
+def test_motion_rows_see_jumps_spinning_wheels_climbing_and_braking():
     config = FeatureConfig()
     features = OdometryFeatures(config)
     q = (0.0, 0.0, math.sin(0.3), math.cos(0.3))
@@ -99,10 +99,14 @@ def test_motion_rows_see_a_localization_jump_and_spinning_wheels():
     # localization jump of 5 m sideways in 0.1 s
     jump = features.row(odom((p[0] - 5 * heading[1], p[1] + 5 * heading[0], 0.0), q, (1.0, 0, 0), (0, 0, 0)), 12.1)
     assert jump[err[1]] == pytest.approx(50.0, rel=1e-6)
-    # the heading rate from orientation vs angular.z
-    turn = (0.0, 0.0, math.sin(0.35), math.cos(0.35))  # +0.1 rad of yaw in 0.1 s, twist says 0
-    row = features.row(odom((p[0] - 5 * heading[1], p[1] + 5 * heading[0], 0.0), turn, (0, 0, 0), (0, 0, 0)), 12.2)
-    assert row[MOTION_COLUMNS.index('att_rate_z_err')] == pytest.approx(1.0, rel=1e-6)
+    # climbing 0.2 m in 0.1 s at 1 m/s: climb rate 2 m/s, specific power g * 2 (speed unchanged)
+    row = features.row(odom((p[0] - 5 * heading[1], p[1] + 5 * heading[0], 0.2), q, (1.0, 0, 0), (0, 0, 0)), 12.2)
+    assert row[MOTION_COLUMNS.index('climb_rate')] == pytest.approx(2.0, rel=1e-6)
+    assert row[MOTION_COLUMNS.index('energy_rate')] == pytest.approx(9.81 * 2.0, rel=1e-6)
+    # braking from 1 m/s to 0 in 0.1 s: -10 m/s^2, specific power -(1/2) / 0.1 = -5 W/kg
+    row = features.row(odom((p[0] - 5 * heading[1], p[1] + 5 * heading[0], 0.2), q, (0.0, 0, 0), (0, 0, 0)), 12.3)
+    assert row[MOTION_COLUMNS.index('ax')] == pytest.approx(-10.0, rel=1e-6)
+    assert row[MOTION_COLUMNS.index('energy_rate')] == pytest.approx(-5.0, rel=1e-6)
 
 
 def test_irregular_time_gives_finite_rows_without_spikes():

@@ -18,9 +18,11 @@ D = vector_length(CONFIG)
 
 
 def data(n=400, seed=0):
+    fixed = np.random.default_rng(100)                 # the same process for every seed
+    mix, scale = fixed.normal(size=(4, D)), fixed.uniform(0.1, 20, D)
     rng = np.random.default_rng(seed)
     latent = rng.normal(size=(n, 4))
-    X = np.tanh(latent.dot(rng.normal(size=(4, D)))) * rng.uniform(0.1, 20, D) + rng.normal(scale=0.05, size=(n, D))
+    X = np.tanh(latent.dot(mix)) * scale + rng.normal(scale=0.05, size=(n, D))
     X[:, 5] = 3.0   # a constant column: scale 1 in sklearn
     return X
 

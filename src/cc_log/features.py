@@ -3,12 +3,12 @@
 Two feature sets:
 
 - ``motion`` (default): per message, quantities that do not depend on where the robot is or which way it
-  faces: body-frame twist, speed, accelerations, angular accelerations and jerk from twist differences over
-  the real time step, the pose-derived body velocity and attitude rate minus the reported twist
-  (consistency: localization jumps, wheels spinning while the pose stands still), the direction of
-  "up" in the body frame (roll/pitch, never heading), the climb rate and the specific mechanical power
-  d(speed^2/2 + g z)/dt (a UAV losing an engine, a robot hitting a wall). A window of rows becomes a fixed-length vector of
-  per-channel summary statistics (mean, std, min, max), whatever the number of rows.
+  faces: body-frame twist (speeds, roll/pitch/yaw rates), speed, accelerations and jerk from twist
+  differences over the real time step, the pose-derived body velocity minus the reported twist
+  (consistency: localization jumps, wheels spinning while the pose stands still), the direction of "up" in
+  the body frame (roll/pitch, never heading), the climb rate and the specific mechanical power
+  d(speed^2/2 + g z)/dt (a UAV losing an engine, a robot hitting a wall). A window of rows becomes a
+  fixed-length vector of per-channel summary statistics (mean, std, min, max), whatever the number of rows.
 - ``raw``: the CC-Log paper's features, the concatenation of position, orientation, linear and angular
   twist of the W messages of a count window (kept for comparison; it depends on where the robot is).
 
@@ -35,14 +35,15 @@ MOTION_COLUMNS = (
     'wx', 'wy', 'wz',                      # reported angular twist: roll, pitch, yaw rate
     'speed',                               # |v|
     'ax', 'ay', 'az',                      # d(linear twist)/dt over the real dt
-    'alpha_x', 'alpha_y', 'alpha_z',       # d(angular twist)/dt
     'jerk',                                # |d(a)/dt|
     'pose_vx_err', 'pose_vy_err', 'pose_vz_err',  # body velocity from pose differences minus twist
-    'att_rate_x_err', 'att_rate_y_err', 'att_rate_z_err',  # body rate from orientation minus twist
     'up_x', 'up_y',                        # world "up" in the body frame (roll / pitch, not heading)
     'climb_rate',                          # world dz/dt from pose differences
     'energy_rate',                         # d(speed^2 / 2 + g z)/dt: specific mechanical power
 )
+# Tried and left out: angular acceleration and the body rate from orientation differences minus the reported
+# rate (heading-rate consistency). On the real data they were noise that hid the anomalies (ALFA publishes
+# the angular twist at half the odometry rate): docs/DETECTION.md has the figures.
 GRAVITY = 9.81
 RAW_COLUMNS = ('px', 'py', 'pz', 'qx', 'qy', 'qz', 'qw', 'vx', 'vy', 'vz', 'wx', 'wy', 'wz')
 STATISTICS = ('mean', 'std', 'min', 'max')
@@ -228,7 +229,7 @@ class OdometryFeatures(object):
                 self.segment_start = None
                 self.segment_rows = 0
             self.restarts += 1
-            deriv = (0.0,) * 15
+            deriv = (0.0,) * 9
             a = None
             self._prev = (stamp, p, q, v, w, a)
         elif dt < self.min_dt:
@@ -238,7 +239,6 @@ class OdometryFeatures(object):
             _, p0, q0, v0, w0, a0 = prev
             inv = 1.0 / dt
             a = ((v[0] - v0[0]) * inv, (v[1] - v0[1]) * inv, (v[2] - v0[2]) * inv)
-            alpha = ((w[0] - w0[0]) * inv, (w[1] - w0[1]) * inv, (w[2] - w0[2]) * inv)
             if a0 is None:
                 jerk = 0.0
             else:
@@ -251,14 +251,11 @@ class OdometryFeatures(object):
             pose_err = (0.5 * (b1[0] + b2[0] - v0[0] - v[0]),
                         0.5 * (b1[1] + b2[1] - v0[1] - v[1]),
                         0.5 * (b1[2] + b2[2] - v0[2] - v[2]))
-            # Body rate from the orientation change q0^-1 * q, compared with the mean reported rate.
-            r = _body_rate(q0, q, inv)
-            rate_err = (r[0] - 0.5 * (w0[0] + w[0]), r[1] - 0.5 * (w0[1] + w[1]), r[2] - 0.5 * (w0[2] + w[2]))
             climb = d[2]
             speed0 = math.sqrt(v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2])
             speed1 = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
             energy = 0.5 * (speed1 * speed1 - speed0 * speed0) * inv + GRAVITY * climb
-            deriv = a + alpha + (jerk,) + pose_err + rate_err + (climb, energy)
+            deriv = a + (jerk,) + pose_err + (climb, energy)
             self._prev = (stamp, p, q, v, w, a)
         self._deriv = deriv
         self._count(stamp)
@@ -266,7 +263,7 @@ class OdometryFeatures(object):
         up_x = 2.0 * (x * z - y * qw)
         up_y = 2.0 * (y * z + x * qw)
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        values = v + w + (speed,) + deriv[:13] + (up_x, up_y) + deriv[13:]
+        values = v + w + (speed,) + deriv[:7] + (up_x, up_y) + deriv[7:]
         row = np.array([_clip(value) for value in values], dtype=float)
         self._last_row = row
         return row.copy()
@@ -287,23 +284,6 @@ def _to_body(q, d):
     return (r00 * d[0] + r10 * d[1] + r20 * d[2],
             r01 * d[0] + r11 * d[1] + r21 * d[2],
             r02 * d[0] + r12 * d[1] + r22 * d[2])
-
-
-def _body_rate(q0, q1, inv_dt):
-    """Body angular velocity taking unit quaternion q0 to q1 in 1/inv_dt seconds (rotation vector / dt)."""
-    ax, ay, az, aw = -q0[0], -q0[1], -q0[2], q0[3]   # conjugate of q0
-    bx, by, bz, bw = q1
-    rw = aw * bw - ax * bx - ay * by - az * bz
-    rx = aw * bx + ax * bw + ay * bz - az * by
-    ry = aw * by - ax * bz + ay * bw + az * bx
-    rz = aw * bz + ax * by - ay * bx + az * bw
-    if rw < 0:
-        rw, rx, ry, rz = -rw, -rx, -ry, -rz
-    s = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if s < 1e-12:
-        return (2.0 * rx * inv_dt, 2.0 * ry * inv_dt, 2.0 * rz * inv_dt)
-    k = 2.0 * math.atan2(s, rw) / s * inv_dt
-    return (rx * k, ry * k, rz * k)
 
 
 def vector_names(config):

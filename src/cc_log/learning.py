@@ -280,10 +280,25 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     else:
         nu = DEFAULT_NU if nu is None else float(nu)
         gamma = DEFAULT_GAMMA_FACTOR / dimension if gamma is None else float(gamma)
-        fitted, _ = _fit(X_train, config, nu, gamma, fit_method, names, seed)
-        held_scores = fitted.scores(X_held)
+        reductions = 0
+        while True:
+            fitted, _ = _fit(X_train, config, nu, gamma, fit_method, names, seed)
+            held_scores = fitted.scores(X_held)
+            floor = _score_floor(fitted.model)
+            low = float(np.quantile(held_scores, quantile))
+            # Held-out nominal vectors beyond the reach of every support vector (their score is the floor):
+            # the kernel is too narrow for this data; widen it (smaller gamma) and refit.
+            if floor is None or low - floor > 0.01 * (float(np.median(held_scores)) - floor) or reductions >= 4:
+                break
+            gamma *= 0.5
+            reductions += 1
         threshold = nominal_threshold(held_scores, quantile, margin)
         info['threshold_rule'] = ('held-out nominal: q%g - %g * (median - q%g)' % (quantile, margin, quantile))
+        info['gamma_reductions'] = reductions
+        if floor is not None and threshold <= floor + 0.1 * (low - floor):
+            # a threshold at or below the lowest possible score would never flag anything
+            threshold = floor + 0.1 * (low - floor)
+            info['threshold_rule'] += ', raised above the lowest possible score'
         if A is not None:
             threshold = max(threshold, _recall_threshold(held_scores, fitted.scores(A)))
     model = fitted.model
@@ -298,6 +313,13 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     })
     model.info = {key: value for key, value in info.items() if key != 'grid'}
     return model, info
+
+
+def _score_floor(model):
+    """The lowest score the model can give (far from every support vector), or None when unbounded."""
+    if model.kind == 'ocsvm':
+        return model.kernel['intercept'] + float(np.sum(np.minimum(model.kernel['dual_coef'], 0.0)))
+    return None
 
 
 def _recall_threshold(nominal_scores, anomalous_scores):
