@@ -78,6 +78,7 @@ BWIBOT_LIMITS = Limits(max_speed=1.0, max_accel=0.8, max_decel=1.0, max_yaw_rate
 MAX_ANOMALY_SECONDS = 10.0   # no anomaly's active phase lasts longer (simulator)
 _SOFT_DECEL = 0.5            # braking the planner plans with (m/s^2), below the limit
 _MOVING = 0.3                # m/s: the base counts as driving
+_CATCH_UP = 0.8              # m/s: peak extra speed with which injected odometry gets back onto the recording
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -862,9 +863,9 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
     seconds apart; types that need a moving robot start where it drives (>= 0.3 m/s when it can).
 
     Inside an anomaly the twist follows the model plus the recording's own noise (the residual of the
-    recorded twist around its 0.5 s moving average), the pose is integrated from that twist; then the
+    recorded twist around its 0.5 s moving average, scaled down when the model is slower), the pose is integrated from that twist; then the
     base gets back to the recorded speed within its limits and the pose blends smoothly back onto the
-    recorded track (speed changes of at most ~0.5 m/s), so every message from ``end`` on is the recorded
+    recorded track (at most ~0.8 m/s faster or slower than recorded), so every message from ``end`` on is the recorded
     one. Modified messages are copies; the input is not changed.
 
     Returns ``(records, truth)``: a new list of records and [{'type', 'start', 'end'}]. Raises ValueError
@@ -940,6 +941,13 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
     return out, truth
 
 
+def _with_noise(cv, cw, v, w, v_s, w_s):
+    """The model's twist plus the recording's own noise (its residual around the moving average), scaled
+    down when the model moves slower than the recording (a base at rest reads no wheel noise)."""
+    scale = min(1.0, (abs(cv) + 0.3 * abs(cw)) / max(abs(v_s) + 0.3 * abs(w_s), 0.05))
+    return cv + scale * (v - v_s), cw + scale * (w - w_s)
+
+
 def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
     """One anomaly from index i0: {index: (x, y, yaw, v, w)} and the index of the first unchanged message."""
     kind = plan['type']
@@ -964,7 +972,7 @@ def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
                 cv = _limit_speed(cv, sv, limits, dt)
                 cw = _limit_yaw(cw, sw, limits, dt)
             sv, sw = cv, cw
-            ov, ow = cv + (v[i] - v_s[i]), cw + (w[i] - w_s[i])   # the recording's own noise on top
+            ov, ow = _with_noise(cv, cw, v[i], w[i], v_s[i], w_s[i])
             heading = ayaw + 0.5 * ow * dt
             ax += ov * dt * math.cos(heading)
             ay += ov * dt * math.sin(heading)
@@ -979,7 +987,7 @@ def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
             dt = max(t[i] - t[i - 1], 0.0)
             sv = _limit_speed(v_s[i], sv, limits, dt)
             sw = _limit(w_s[i], sw, limits.max_yaw_accel, limits.max_yaw_accel, dt)
-            ov, ow = sv + (v[i] - v_s[i]), sw + (w[i] - w_s[i])
+            ov, ow = _with_noise(sv, sw, v[i], w[i], v_s[i], w_s[i])
             heading = ayaw + 0.5 * ow * dt
             ax += ov * dt * math.cos(heading)
             ay += ov * dt * math.sin(heading)
@@ -994,7 +1002,8 @@ def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
         return out, i
     dx, dy = out[last][0] - x[last], out[last][1] - y[last]
     dyaw = _wrap(out[last][2] - yaw[last])
-    span = max(2.0, 3.0 * math.hypot(dx, dy), 2.5 * abs(dyaw))
+    # smoothstep blend: peak extra speed 1.5 * distance / span <= _CATCH_UP, peak extra yaw rate <= 0.6 rad/s
+    span = max(2.0, 1.5 * math.hypot(dx, dy) / _CATCH_UP, 2.5 * abs(dyaw))
     t_b = t[last]
     while i < n and t[i] - t_b < span:
         u = (t[i] - t_b) / span
