@@ -44,7 +44,7 @@ PRE_POST = 100               # messages before and after a flag kept by the smar
 # Default windows per robot (docs/DETECTION.md): duration windows for 'motion', the count windows of about
 # the same length for 'raw'.
 WINDOWS = {
-    'husky': {'motion': '5s', 'raw': '50'},
+    'husky': {'motion': '2s', 'raw': '20'},
     'alfa': {'motion': '2s', 'raw': '8'},
     'sequor': {'motion': '1s', 'raw': '10'},
 }
@@ -161,6 +161,44 @@ def sequor(feature_set, setting, window=None):
     return out
 
 
+def paper_tables():
+    """The paper's table (Total, TP, FP, FN, TN, Precision, Recall) for ALFA and Sequor, default features.
+
+    ALFA: positives are the vectors whose window ends after the onset, negatives the pre-onset training
+    vectors themselves (so FP counts flags on data the model saw). Sequor: positives are every N2 and N3
+    vector, negatives the vectors of the 5 held-back E2 trials.
+    """
+    out = []
+    config = FeatureConfig('motion', WINDOWS['alfa']['motion'])
+    stamps, X = vectors(*ALFA, config=config)
+    before = stamps < bag_start(ALFA[0]) + ALFA_ONSET
+    model, info = learning.train(X[before], config=config)
+    out.append(('ALFA, motion %s' % config.window, learning.evaluate(model, X[before], X[~before]), info))
+    config = FeatureConfig('motion', WINDOWS['sequor']['motion'])
+    stamps, X = vectors(*SEQUOR_E2, config=config)
+    trials = trial_of(SEQUOR_E2[0], stamps)
+    held_back = set(sorted(set(trials))[3::4])
+    train_mask = np.array([trial not in held_back for trial in trials])
+    model, info = learning.train(X[train_mask], config=config)
+    anomalous = np.vstack([vectors(*SEQUOR_N2, config=config)[1], vectors(*SEQUOR_N3, config=config)[1]])
+    out.append(('Sequor, motion %s' % config.window, learning.evaluate(model, X[~train_mask], anomalous), info))
+    return out
+
+
+def training_cost(n=17512, seed=0):
+    """Training time and peak memory on n vectors: the Husky 2 s vectors tiled with 1% noise."""
+    config = FeatureConfig('motion', '2s')
+    _, X = vectors(*HUSKY, config=config)
+    rng = np.random.default_rng(seed)
+    big = np.tile(X, (n // len(X) + 1, 1))[:n]
+    big = big + rng.normal(size=big.shape) * 0.01 * (X.std(axis=0) + 1e-9)
+    rows = []
+    for method in ('exact', 'nystroem'):
+        model, info = learning.train(big, config=config, method=method)
+        rows.append((method, info))
+    return rows
+
+
 def machine():
     cpu = platform.processor() or ''
     try:
@@ -206,6 +244,17 @@ def main(argv=None):
         print('%-36s' % experiment.__name__ + ''.join('%16s' % column for column in results))
         for key in results['motion']:
             print('  %-34s' % key + ''.join('%16s' % results[column].get(key, '') for column in results))
+        print()
+    if not args.only:
+        for title, report, info in paper_tables():
+            print(title)
+            print('  ' + learning.format_report(report, info).replace('\n', '\n  '))
+            print()
+        print('training on 17512 vectors (Husky 2 s vectors tiled, 1% noise), peak RSS of this process so far:')
+        for method, info in training_cost():
+            print('  %-9s %5.2f s  %4d support vectors/components  peak RSS %.0f MB  held-out flagged %d/%d' % (
+                method, info['train_seconds'], info['support_vectors'], info['peak_rss_mb'],
+                info['held_out_flagged'], info['vectors_held_out']))
         print()
     print('total %.1f s' % (time.time() - started))
     return 0
