@@ -465,7 +465,7 @@ def cmd_replay(args):
     from .model import AnomalyModel
     from .spans import Span
     _existing_file(args.bag, 'bag file')
-    model = AnomalyModel.load(args.model)
+    model = AnomalyModel.load(_existing_file(args.model, 'model file'))
     pre, post = Span.parse(args.pre, 'pre'), Span.parse(args.post, 'post')
     side = [topic for topic in args.side_topic if topic != args.topic]
     total = _check_driving_topic(args.bag, args.topic, model.config.topic_type, side)

@@ -1,0 +1,474 @@
+"""``cclog``, the offline tool, run as users and evaluation scripts run it: the real ``scripts/cclog`` in a
+subprocess (``/usr/bin/python3``, list arguments, no shell) on the real bags of ../shared/data/real/.
+
+No roscore: every run gets ROS_MASTER_URI pointing at a closed port, so a command that needed a master
+would hang or fail. Checked: exit codes, the one-line error for every kind of bad input, the ``--json``
+fields (against what the bags and the written files really hold), and that progress bars stay on stderr.
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CCLOG = os.path.join(ROOT, 'scripts', 'cclog')
+COMMANDS = ('collect', 'learn', 'replay', 'info', 'cat', 'export', 'codecs', 'plot', 'simulate')
+
+HUSKY = 'husky_outdoor_2015.bag'
+HUSKY_ODOM = '/husky_velocity_controller/odom'
+NORMAL = 'sequor_E2_normal_safe_escape_straight.bag'
+JERKY = 'sequor_N2_anomalous_jerky_driving.bag'
+ALFA = 'alfa_carbonZ_engine_failure.bag'
+WINDOW = '20'  # feature window of the Sequor model: the normal runs are 20 trials of ~23 messages
+
+
+def run(*args, **kwargs):
+    """Run ``cclog ARGS``; return the CompletedProcess (text stdout/stderr)."""
+    env = dict(os.environ)
+    env['ROS_MASTER_URI'] = 'http://127.0.0.1:1'  # nothing listens: offline commands must not need it
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [env.get('PYTHONPATH'), os.path.join(ROOT, 'src')]))
+    env.pop('COLUMNS', None)
+    result = subprocess.run([sys.executable, CCLOG] + [str(arg) for arg in args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env, timeout=300, **kwargs)
+    # decoded by hand: text mode would turn the progress bar's carriage returns into newlines
+    result.stdout, result.stderr = result.stdout.decode('utf-8'), result.stderr.decode('utf-8')
+    return result
+
+
+def ok(*args):
+    """Run ``cclog ARGS``, assert success and return stdout."""
+    result = run(*args)
+    assert result.returncode == 0, 'cclog %s failed (%d): %s' % (' '.join(map(str, args)), result.returncode,
+                                                                 result.stderr)
+    return result.stdout
+
+
+def ok_json(*args):
+    """Run ``cclog ARGS --json``; stdout must be exactly one JSON object."""
+    out = ok(*(args + ('--json',)))
+    assert out.count('\n') == 1 and out.endswith('\n'), out
+    document = json.loads(out)
+    assert isinstance(document, dict)
+    return document
+
+
+def fails(*args, **kwargs):
+    """Run ``cclog ARGS``; assert it fails with one line ``cclog <command>: error: ...``; return that line."""
+    status = kwargs.pop('status', 1)
+    result = run(*args)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == status, (result.returncode, result.stderr)
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith('cclog %s: error: ' % args[0]), lines[0]
+    assert result.stdout == ''
+    return lines[0]
+
+
+def bag_messages(path, topics):
+    """Records of ``topics`` read straight with rosbag: (stamp, topic, msg), stamp as cc_log defines it."""
+    import rosbag
+    from cc_log.features import stamp_of
+    with rosbag.Bag(path) as bag:
+        return [(stamp_of(msg, t.to_sec()), topic, msg) for topic, msg, t in bag.read_messages(topics=topics)]
+
+
+# -- a trained model and a replay, shared by the tests of one session -----------------------------------------
+
+_CACHE = {}
+
+
+@pytest.fixture
+def trained(real_bag, tmp_path_factory):
+    """Vectors of the normal Sequor runs (collect), a model trained on them alone (learn)."""
+    if 'trained' not in _CACHE:
+        base = tmp_path_factory.mktemp('trained')
+        normal = real_bag(NORMAL)
+        collect = ok_json('collect', normal, '--topic', '/odom', '--out', base / 'train', '--window', WINDOW,
+                          '--stride', '1')
+        model = base / 'model.json'
+        learn = ok_json('learn', '--train', base / 'train', '--model', model)
+        _CACHE['trained'] = {'dir': base, 'train': base / 'train', 'model': model, 'collect': collect,
+                             'learn': learn}
+    return _CACHE['trained']
+
+
+@pytest.fixture
+def replayed(trained, real_bag, tmp_path_factory):
+    """``cclog replay --json`` of the jerky-driving bag with the normal-driving model, /scan kept too."""
+    if 'replayed' not in _CACHE:
+        out = tmp_path_factory.mktemp('replay') / 'logs'
+        bag = real_bag(JERKY)
+        summary = ok_json('replay', bag, '--topic', '/odom', '--side-topic', '/scan', '--model', trained['model'],
+                          '--out', out, '--pre', '10', '--post', '10')
+        _CACHE['replayed'] = {'bag': bag, 'out': out, 'summary': summary}
+    return _CACHE['replayed']
+
+
+# -- help -----------------------------------------------------------------------------------------------------
+
+def test_help_lists_every_command_with_examples():
+    out = ok('--help')
+    for command in COMMANDS:
+        assert '\n    %s ' % command in out, command
+    assert 'examples:' in out
+
+
+@pytest.mark.parametrize('command', COMMANDS)
+def test_every_command_has_help_with_examples(command):
+    out = ok(command, '--help')
+    assert out.startswith('usage: cclog %s' % command)
+    examples = out.split('examples:\n', 1)[1]
+    assert '  cclog %s ' % command in examples
+    assert '--progress' in out
+
+
+def test_no_command_and_unknown_command_are_usage_errors():
+    result = run()
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    result = run('bogus')
+    assert result.returncode == 2
+    assert "invalid choice: 'bogus'" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+# -- collect and learn ----------------------------------------------------------------------------------------
+
+def test_collect_writes_one_vector_file_per_vector_under_the_label(trained):
+    collect = trained['collect']
+    folder = trained['train'] / 'nominal'
+    assert collect['directory'] == str(folder)
+    assert collect['label'] == 'nominal' and collect['window'] == WINDOW and collect['stride'] == 1
+    files = sorted(os.listdir(folder))
+    assert collect['vectors'] == len(files) > 20
+    document = json.loads((folder / files[0]).read_text())
+    assert document['config'] == {'feature_set': 'motion', 'window': WINDOW, 'topic_type': 'nav_msgs/Odometry'}
+
+
+def test_collect_label_and_duration_window(real_bag, tmp_path):
+    out = ok('collect', real_bag(HUSKY), '--topic', HUSKY_ODOM, '--out', tmp_path, '--label', 'bumpy',
+             '--window', '10s', '--stride', '50')
+    files = os.listdir(tmp_path / 'bumpy')
+    assert '%d feature vectors' % len(files) in out
+    # 3952 messages at 10 Hz: the first vector needs 10 s of rows, then one every 50 messages
+    assert 70 <= len(files) <= 80
+    assert json.loads((tmp_path / 'bumpy' / files[0]).read_text())['config']['window'] == '10s'
+
+
+def test_learn_with_only_nominal_vectors(trained):
+    learn = trained['learn']
+    assert os.path.isfile(trained['model'])
+    assert learn['trained'] is True and learn['report'] is None
+    assert learn['config'] == {'feature_set': 'motion', 'window': WINDOW, 'topic_type': 'nav_msgs/Odometry'}
+    model = json.loads(trained['model'].read_text())
+    assert model['format'] == 'cc_log-model' and model['threshold'] == learn['threshold']
+    assert learn['info']['vectors_nominal'] == trained['collect']['vectors']
+    assert learn['info']['vectors_anomalous'] == 0
+
+
+def test_learn_with_a_test_directory_reports_the_table(trained, real_bag, tmp_path):
+    ok('collect', real_bag(JERKY), '--topic', '/odom', '--out', tmp_path / 'test', '--label', 'jerky',
+       '--window', WINDOW, '--stride', '1')
+    jerky = len(os.listdir(tmp_path / 'test' / 'jerky'))
+    result = ok_json('learn', '--train', trained['train'], '--test', tmp_path / 'test', '--model',
+                     tmp_path / 'model.json')
+    report = result['report']
+    assert report['total'] == jerky == report['tp'] + report['fn']
+    assert report['tp'] > jerky // 2  # jerky driving looks anomalous to a model of normal driving
+    text = ok('learn', '--test', tmp_path / 'test', '--model', trained['model'])  # evaluate only
+    assert 'Total            %d' % jerky in text and 'Recall' in text and 'Saved' not in text
+
+
+# -- replay ---------------------------------------------------------------------------------------------------
+
+def test_replay_json_fields_match_the_bag_and_the_files(replayed):
+    from cc_log import log_format, msg_codec
+    summary, bag = replayed['summary'], replayed['bag']
+    assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows']
+    records = bag_messages(bag, ['/odom', '/scan'])
+    assert summary['input_messages'] == len(records) == 542
+    assert summary['raw_json_bytes'] == sum(msg_codec.row_json_bytes(msg) for _, _, msg in records)
+    windows = summary['windows']
+    assert windows, 'jerky driving should open at least one window'
+    files = log_format.window_files(str(replayed['out']))
+    assert sorted(window['path'] for window in windows) == files
+    assert summary['stored_bytes'] == sum(os.path.getsize(path) for path in files)
+    for window in windows:
+        assert list(window) == ['start', 'end', 'messages', 'path']
+        metadata, saved = log_format.read_window(window['path'])
+        assert window['messages'] == len(saved)
+        assert window['start'] == saved[0].stamp == min(record.stamp for record in saved)
+        assert window['end'] == saved[-1].stamp == max(record.stamp for record in saved)
+        assert {record.topic for record in saved} == {'/odom', '/scan'}
+        header = [r.msg.header.stamp.to_sec() for r in saved if r.topic == '/odom']
+        assert window['start'] <= min(header) and max(header) <= window['end']
+    assert [w['start'] for w in windows] == sorted(w['start'] for w in windows)
+
+
+def test_replay_nominal_run_and_bag_lz4_format(trained, real_bag, tmp_path):
+    bag = real_bag(JERKY)
+    summary = ok_json('replay', bag, '--topic', '/odom', '--model', trained['model'], '--out', tmp_path,
+                      '--format', 'bag-lz4', '--pre', '1s', '--post', '1s')
+    assert summary['input_messages'] == 271  # only the driving topic without --side-topic
+    assert summary['windows']
+    for window in summary['windows']:
+        assert window['path'].endswith('.bag')
+        with open(window['path'], 'rb') as stream:
+            assert stream.read(13) == b'#ROSBAG V2.0\n'
+    text = ok('replay', bag, '--topic', '/odom', '--model', trained['model'], '--out', tmp_path / 'text')
+    assert '271 messages in' in text and 'window(s)' in text
+
+
+# -- info, cat, export ----------------------------------------------------------------------------------------
+
+def test_info_of_a_directory_and_of_a_file(replayed):
+    summary = replayed['summary']
+    info = ok_json('info', replayed['out'])
+    assert len(info['windows']) == len(summary['windows'])
+    assert info['total']['messages'] == sum(w['messages'] for w in summary['windows'])
+    assert info['total']['bytes'] == summary['stored_bytes']
+    first = info['windows'][0]
+    assert first['codec'] == 'json-xz'
+    assert first['start'] == summary['windows'][0]['start'] and first['end'] == summary['windows'][0]['end']
+    assert set(first['topics']) == {'/odom', '/scan'} and sum(first['topics'].values()) == first['messages']
+    assert first['reason'] == 'classifier' and first['triggers']
+    assert first['min_score'] < first['threshold']  # a classifier trigger means score below the threshold
+    text = ok('info', summary['windows'][0]['path'])
+    assert 'codec      json-xz' in text and 'trigger    classifier' in text
+
+
+def test_cat_decodes_every_message_and_other_cc_log_files(replayed, trained):
+    window = replayed['summary']['windows'][0]
+    lines = ok('cat', window['path']).splitlines()
+    assert len(lines) == window['messages']
+    rows = [json.loads(line) for line in lines]
+    assert rows[0]['stamp'] == window['start'] and rows[-1]['stamp'] == window['end']
+    odom = [row for row in rows if row['topic'] == '/odom']
+    assert odom[0]['type'] == 'nav_msgs/Odometry' and 'twist' in odom[0]['msg']
+    only = ok('cat', window['path'], '--topic', '/scan', '--metadata').splitlines()
+    assert json.loads(only[0])['metadata']['codec'] == 'json-xz'
+    assert len(only) - 1 == sum(1 for row in rows if row['topic'] == '/scan')
+    model = ok('cat', trained['model']).splitlines()
+    assert len(model) == 1 and json.loads(model[0])['format'] == 'cc_log-model'
+
+
+def test_export_to_bag_csv_and_jsonl(replayed, tmp_path):
+    import rosbag
+    out, summary = replayed['out'], replayed['summary']
+    total = sum(w['messages'] for w in summary['windows'])
+    result = ok_json('export', out, '--to', 'bag', '--out', tmp_path / 'all.bag')
+    assert result['messages'] == total
+    with rosbag.Bag(str(tmp_path / 'all.bag')) as bag:
+        assert bag.get_message_count() == total
+        assert set(bag.get_type_and_topic_info().topics) == {'/odom', '/scan'}
+        first = next(bag.read_messages(topics=['/odom']))
+        assert first.message._type == 'nav_msgs/Odometry'
+    result = ok_json('export', out, '--to', 'csv', '--out', tmp_path / 'csv')
+    odom_csv = tmp_path / 'csv' / 'odom.csv'
+    assert str(odom_csv) in result['files']
+    odom_lines = odom_csv.read_text().splitlines()
+    assert odom_lines[0].startswith('stamp,header.seq,header.stamp,')
+    assert len(odom_lines) - 1 == sum(1 for line in ok('cat', out, '--topic', '/odom').splitlines())
+    ok('export', out, '--to', 'jsonl', '--out', tmp_path / 'odom.jsonl', '--topic', '/odom')
+    assert (tmp_path / 'odom.jsonl').read_text().splitlines() == ok('cat', out, '--topic', '/odom').splitlines()
+
+
+# -- codecs, plot, simulate -----------------------------------------------------------------------------------
+
+TABLE_2 = ['none', 'LZ4', 'LZFSE', 'ZIP', 'gzip', 'bzip2', 'LZMA-6', 'zstd', 'cc_log json-xz', 'cc_log bag-lz4']
+
+
+def test_codecs_on_a_bag_topic(real_bag):
+    from cc_log import msg_codec
+    bag = real_bag(HUSKY)
+    table = ok_json('codecs', bag, '--topic', HUSKY_ODOM)
+    raw = sum(msg_codec.row_json_bytes(msg) for _, _, msg in bag_messages(bag, [HUSKY_ODOM]))
+    assert table['messages'] == 3952 and table['raw_json_bytes'] == raw
+    rows = {row['codec']: row for row in table['rows']}
+    assert [row['codec'] for row in table['rows']] == TABLE_2
+    assert rows['none']['size'] == raw and rows['none']['ratio'] == 100.0
+    for name in TABLE_2[1:]:
+        if name == 'LZFSE' and not rows[name]['available']:
+            continue
+        row = rows[name]
+        assert 0 < row['size'] < raw and row['mb_s'] > 0
+        assert abs(row['ratio'] - 100.0 * row['size'] / raw) < 1e-9
+    assert rows['LZMA-6']['size'] < rows['LZ4']['size']
+
+
+def test_codecs_on_window_files(replayed):
+    table = ok_json('codecs', replayed['out'])
+    assert table['source']['topics'] == ['/odom', '/scan']
+    assert table['messages'] == sum(w['messages'] for w in replayed['summary']['windows'])
+    text = ok('codecs', replayed['summary']['windows'][0]['path'], '--topic', '/odom')
+    for name in TABLE_2:
+        assert '\n%s ' % name in text
+
+
+def test_plot_writes_a_png(replayed, trained, tmp_path):
+    png = tmp_path / 'run.png'
+    result = ok_json('plot', replayed['out'], '--bag', replayed['bag'], '--model', trained['model'],
+                     '--out', png)
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 10000
+    assert result['windows'] == len(replayed['summary']['windows'])
+    assert result['speed_samples'] == 271 and result['scores'] > 0 and result['triggers'] > 0
+    only = ok_json('plot', replayed['summary']['windows'][0]['path'], '--out', tmp_path / 'w.png')
+    assert only['speed_samples'] == sum(1 for line in ok('cat', replayed['summary']['windows'][0]['path'],
+                                                          '--topic', '/odom').splitlines())
+
+
+def test_simulate_writes_bag_and_truth(tmp_path):
+    import rosbag
+    bag = tmp_path / 'out.bag'
+    result = ok_json('simulate', '--minutes', '1', '--anomalies', '1', '--seed', '1', '--rate', '20', bag)
+    truth = json.loads((tmp_path / 'out.bag.truth.json').read_text())
+    assert result['truth'] == str(bag) + '.truth.json'
+    assert len(truth['anomalies']) == result['anomalies'] == 1
+    with rosbag.Bag(str(bag)) as reader:
+        assert reader.get_type_and_topic_info().topics['/odom'].msg_type == 'nav_msgs/Odometry'
+        assert 1150 <= reader.get_message_count(['/odom']) <= 1250  # 60 s at 20 Hz
+    again = ok_json('simulate', '--minutes', '1', '--anomalies', '1', '--seed', '1', '--rate', '20',
+                    tmp_path / 'again.bag')
+    assert again['truth_anomalies'] == result['truth_anomalies']  # same seed, same run
+    assert 'exists' in fails('simulate', '--minutes', '1', '--anomalies', '0', bag)
+
+
+# -- progress -------------------------------------------------------------------------------------------------
+
+def test_progress_only_on_stderr_and_only_when_asked(replayed, trained):
+    args = ('replay', replayed['bag'], '--topic', '/odom', '--model', trained['model'], '--json')
+    quiet = run(*(args + ('--out', replayed['out'].parent / 'quiet')))
+    assert quiet.returncode == 0 and quiet.stderr == ''  # stderr is not a terminal here
+    loud = run(*(args + ('--out', replayed['out'].parent / 'loud', '--progress')))
+    assert loud.returncode == 0
+    assert loud.stderr.startswith('\rreplay ') and loud.stderr.endswith('\n')
+    assert json.loads(loud.stdout)['input_messages'] == 271 and '\r' not in loud.stdout
+    info = run('info', replayed['out'], '--progress', '--json')
+    assert '\rinfo [' in info.stderr and '100%' in info.stderr and json.loads(info.stdout)['windows']
+
+
+# -- bad input: one line, non-zero exit -------------------------------------------------------------------------
+
+@pytest.fixture
+def truncated_bag(real_bag, tmp_path):
+    """The first 4 kB of a real bag."""
+    path = tmp_path / 'truncated.bag'
+    with open(real_bag(HUSKY), 'rb') as stream:
+        path.write_bytes(stream.read(4096))
+    return path
+
+
+@pytest.fixture
+def unindexed_bag(real_bag, tmp_path):
+    """A bag as a recorder killed mid-run leaves it: chunks on disk, no index (copied before close)."""
+    import rosbag
+    path = tmp_path / 'recording.bag'
+    copy = tmp_path / 'unindexed.bag'
+    with rosbag.Bag(real_bag(JERKY)) as source:
+        writer = rosbag.Bag(str(path), 'w', chunk_threshold=4096)
+        for number, (topic, msg, stamp) in enumerate(source.read_messages()):
+            writer.write(topic, msg, stamp)
+            if number > 300:
+                break
+        writer._file.flush()
+        shutil.copy(str(path), str(copy))
+        writer.close()
+    with pytest.raises(rosbag.ROSBagUnindexedException):
+        rosbag.Bag(str(copy))
+    return copy
+
+
+def _bag_commands(bag, model, tmp_path, topic='/odom'):
+    """Every command that reads a bag, on ``bag``."""
+    return [
+        ('replay', bag, '--topic', topic, '--model', model, '--out', tmp_path / 'logs'),
+        ('collect', bag, '--topic', topic, '--out', tmp_path / 'vectors'),
+        ('codecs', bag, '--topic', topic),
+    ]
+
+
+def test_missing_files(trained, replayed, tmp_path):
+    missing = tmp_path / 'nope.bag'
+    for args in _bag_commands(missing, trained['model'], tmp_path):
+        line = fails(*args)
+        assert str(missing) in line and 'no such' in line
+    assert 'no such' in fails('replay', replayed['bag'], '--topic', '/odom', '--model', tmp_path / 'm.json',
+                              '--out', tmp_path / 'x')
+    for command in ('info', 'cat'):
+        assert 'no such file or directory' in fails(command, missing)
+    assert 'no such' in fails('export', missing, '--to', 'jsonl', '--out', tmp_path / 'x.jsonl')
+    assert 'no such' in fails('plot', replayed['out'], '--bag', missing, '--out', tmp_path / 'x.png')
+    assert 'no such directory' in fails('learn', '--train', tmp_path / 'none', '--model', tmp_path / 'm.json')
+    assert 'no cc_log window files' in fails('info', tmp_path)
+    assert not os.path.exists(tmp_path / 'logs') and not os.path.exists(tmp_path / 'vectors')
+
+
+def test_truncated_bag(truncated_bag, trained, tmp_path):
+    for args in _bag_commands(truncated_bag, trained['model'], tmp_path):
+        line = fails(*args)
+        assert str(truncated_bag) in line and 'truncated' in line
+
+
+def test_unindexed_bag(unindexed_bag, trained, tmp_path):
+    for args in _bag_commands(unindexed_bag, trained['model'], tmp_path):
+        line = fails(*args)
+        assert str(unindexed_bag) in line and 'unindexed' in line
+
+
+def test_topic_not_in_bag(real_bag, trained, tmp_path):
+    bag = real_bag(HUSKY)
+    for args in _bag_commands(bag, trained['model'], tmp_path, topic='/odom'):
+        line = fails(*args)
+        assert 'topic /odom is not in the bag' in line and HUSKY_ODOM in line  # the real topics are listed
+    assert 'needs --topic' in fails('codecs', bag)
+
+
+def test_wrong_message_type(real_bag, trained, tmp_path):
+    bag = real_bag(ALFA)
+    topic = '/failure_status/engines'
+    for command in ('replay', 'collect'):
+        args = [args for args in _bag_commands(bag, trained['model'], tmp_path, topic) if args[0] == command][0]
+        line = fails(*args)
+        assert 'std_msgs/Bool' in line and 'expected nav_msgs/Odometry' in line
+
+def test_wrong_message_type_for_plot(replayed, real_bag, tmp_path):
+    line = fails('plot', replayed['out'], '--bag', real_bag(HUSKY), '--topic', '/imu/data', '--out',
+                 tmp_path / 'x.png')
+    assert 'topic /imu/data is sensor_msgs/Imu, expected nav_msgs/Odometry' in line
+    assert not os.path.exists(tmp_path / 'x.png')
+
+
+def test_model_from_another_feature_configuration(trained, replayed, real_bag, tmp_path):
+    # vectors of another feature window than the model's
+    ok('collect', real_bag(JERKY), '--topic', '/odom', '--out', tmp_path / 'other', '--label', 'jerky',
+       '--window', '10', '--stride', '1')
+    line = fails('learn', '--test', tmp_path / 'other', '--model', trained['model'])
+    assert 'other features' in line and "window '10'" in line
+    line = fails('learn', '--train', trained['train'], '--test', tmp_path / 'other', '--model', tmp_path / 'm.json')
+    assert 'window' in line and str(tmp_path / 'other') in line
+    # a model file claiming a feature configuration its arrays do not fit
+    document = json.loads(trained['model'].read_text())
+    document['config']['feature_set'] = 'raw'
+    other = tmp_path / 'raw-model.json'
+    other.write_text(json.dumps(document))
+    line = fails('replay', replayed['bag'], '--topic', '/odom', '--model', other, '--out', tmp_path / 'logs')
+    assert str(other) in line and 'need' in line
+    assert 'not a cc_log model' in fails('replay', replayed['bag'], '--topic', '/odom', '--model',
+                                         replayed['bag'], '--out', tmp_path / 'logs')
+
+
+def test_bad_window_files_and_option_values(replayed, trained, tmp_path):
+    window = replayed['summary']['windows'][0]['path']
+    cut = tmp_path / os.path.basename(window)
+    with open(window, 'rb') as stream:
+        cut.write_bytes(stream.read(200))
+    for command in ('info', 'cat'):
+        line = fails(command, cut)
+        assert str(cut) in line and 'truncated' in line
+    line = fails('replay', replayed['bag'], '--topic', '/odom', '--model', trained['model'], '--out', tmp_path,
+                 '--pre', 'lots', status=2)
+    assert "pre: 'lots' is not a message count" in line
+    assert 'window' in fails('collect', replayed['bag'], '--topic', '/odom', '--out', tmp_path, '--window',
+                             '-5', status=2)
+    assert 'invalid choice' in fails('export', replayed['out'], '--to', 'xml', '--out', tmp_path, status=2)
