@@ -964,7 +964,7 @@ def build_parser():
     p = commands.add_parser('collect', help='feature vectors of a bag into DIR/<label>/ (collect mode)', **_help(
         """
         Collect mode from a bag: run the features over the driving topic (nav_msgs/Odometry) and write one
-        feature vector file per --stride messages into OUT/<label>/, as the collect node does live. Those
+        feature vector file per --stride messages into DIR/<label>/, as the collect node does live. Those
         directories are what `cclog learn --train` reads; label a run "nominal" or after its anomaly.
         """,
         """
