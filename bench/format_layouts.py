@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Window file layouts on real odometry: size against row-per-message JSON, and the cost of writing.
+"""Window file layouts on real odometry (and one LaserScan topic): size against row-per-message JSON, and the cost of writing.
 
     source .catkin_ws/devel/setup.bash && /usr/bin/python3 bench/format_layouts.py [--window 300] [--quick]
 
@@ -45,6 +45,7 @@ BAGS = [
     ('sequor_E2_normal_safe_escape_straight.bag', '/odom'),
     ('sequor_N2_anomalous_jerky_driving.bag', '/odom'),
     ('sequor_N3_anomalous_crash_wall.bag', '/odom'),
+    ('sequor_N2_anomalous_jerky_driving.bag', '/scan'),  # a side topic: float32 LaserScan, 128 beams
 ]
 PRESETS = [('0', 0), ('1', 1), ('3', 3), ('6', 6), ('9', 9), ('9e', 9 | lzma.PRESET_EXTREME)]
 QUICK_PRESETS = [('1', 1), ('6', 6), ('9e', 9 | lzma.PRESET_EXTREME)]

@@ -471,3 +471,22 @@ def test_pure_modules_do_not_import_rospy(module):
     result = subprocess.run([sys.executable, '-c', code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             env=env, timeout=60)
     assert result.returncode == 0, (result.stdout, result.stderr)
+
+
+def test_float32_fields_written_short_and_read_back_exact(real_bag):
+    with rosbag.Bag(real_bag(SEQUOR)) as bag:
+        for _, scan, _ in bag.read_messages(topics=['/scan']):
+            break
+    row = msg_codec.to_dict(scan, short_float32=True)
+    full = msg_codec.to_dict(scan)
+    assert full['scan_time'] == 0.10000000149011612 and row['scan_time'] == 0.1
+    assert len(json.dumps(row['ranges'])) < 0.7 * len(json.dumps(full['ranges']))
+    back = msg_codec.from_dict(json.loads(json.dumps(row)), scan._type, scan._full_text)
+    assert back.scan_time == scan.scan_time and back.ranges == scan.ranges
+    assert serialized(back) == serialized(scan)
+    # A float32 field set in Python to a value float32 cannot hold reads back as its float32 (wire) value.
+    scan.scan_time = 0.1
+    back = msg_codec.from_dict(msg_codec.to_dict(scan, short_float32=True), scan._type, scan._full_text)
+    assert back.scan_time == 0.10000000149011612 and serialized(back) == serialized(scan)
+    assert msg_codec.short_float32(float('nan')) != msg_codec.short_float32(float('nan'))
+    assert msg_codec.short_float32(3.4028234663852886e+38) == 3.4028235e+38

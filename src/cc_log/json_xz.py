@@ -16,7 +16,8 @@ Each topic is one section in order of first appearance. A field (the message's o
 split into ``.secs``/``.nsecs``) is either in ``constant`` (the same JSON value in every message of the
 window, stated once) or in ``columns`` (one value per message, in message order). Arrays (covariance,
 ranges) are one value: a column of lists. Values follow ``msg_codec`` (base64 bytes, non-finite floats as
-strings). ``stamps`` is ``"header.stamp"`` when every record's stamp equals ``header.stamp.to_sec()``.
+strings; float32 fields as the shortest decimal of their float32 value). ``stamps`` is
+``"header.stamp"`` when every record's stamp equals ``header.stamp.to_sec()``.
 
 Pure: no rospy, no rosbag.
 """
@@ -110,7 +111,7 @@ def document(records, metadata):
     topics = []
     for section in sections:
         recs = section.pop('records')
-        rows = [_flatten(msg_codec.to_dict(record.msg), '', {}) for record in recs]
+        rows = [_flatten(msg_codec.to_dict(record.msg, short_float32=True), '', {}) for record in recs]
         constant, columns = _columns(rows)
         stamps = [record.stamp for record in recs]
         if all(_header_stamp(record.msg) == record.stamp for record in recs):

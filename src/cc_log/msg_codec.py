@@ -12,19 +12,25 @@ Encoding rules (the same in every cc_log file):
   (standard alphabet, with padding): 4 characters per 3 bytes instead of up to 4 per byte as a list;
 - float fields that are not finite become the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"``
   (JSON has no such numbers); they are turned back into floats by the field's type when decoding;
-- finite floats are written by ``json`` with Python's ``repr``, which round-trips exactly;
+- finite floats are written by ``json`` with Python's ``repr``, which round-trips exactly; with
+  ``short_float32=True`` (the json-xz columns) a ``float32`` field holding a float32 value is written as
+  the shortest decimal that gives the same float32 (``0.19016418`` instead of ``0.19016417860984802``);
+- decoding rounds ``float32`` fields to float32, the value they have on the wire (so a float32 field
+  reads back exactly as it was received, and serializes to the same bytes in every case);
 - other numeric arrays are lists, message arrays are lists of dicts.
 """
 import base64
 import json
 import math
 import re
+import struct
 
 import genpy
 import genpy.dynamic
 
 __all__ = ['to_dict', 'from_dict', 'message_class', 'message_classes', 'row_json', 'row_json_bytes',
-           'field_types', 'encode_float', 'decode_float', 'compact_definition', 'NON_FINITE']
+           'field_types', 'encode_float', 'decode_float', 'compact_definition', 'to_float32', 'short_float32',
+           'NON_FINITE']
 
 FLOAT_TYPES = frozenset(['float32', 'float64'])
 INT_TYPES = frozenset(['int8', 'uint8', 'int16', 'uint16', 'int32', 'uint32', 'int64', 'uint64',
@@ -34,6 +40,7 @@ TIME_TYPES = frozenset(['time', 'duration'])
 PRIMITIVE_TYPES = FLOAT_TYPES | INT_TYPES | TIME_TYPES | frozenset(['bool', 'string'])
 
 NON_FINITE = {'NaN': float('nan'), 'Infinity': float('inf'), '-Infinity': float('-inf')}
+_INF = float('inf')
 
 
 def encode_float(value):
@@ -43,6 +50,29 @@ def encode_float(value):
     if math.isnan(value):
         return 'NaN'
     return 'Infinity' if value > 0 else '-Infinity'
+
+
+_FLOAT32 = struct.Struct('<f')
+
+
+def to_float32(value):
+    """``value`` rounded to the nearest float32 (as a Python float); values beyond float32 unchanged."""
+    try:
+        return _FLOAT32.unpack(_FLOAT32.pack(value))[0]
+    except (OverflowError, struct.error):
+        return value
+
+
+def short_float32(value):
+    """The shortest float that is the same float32 as ``value`` when ``value`` is a finite float32;
+    else ``value`` itself (then it is written in full)."""
+    if value != value or value in (_INF, -_INF) or to_float32(value) != value:
+        return value
+    for digits in (6, 7, 8):
+        short = float('%.*g' % (digits, value))
+        if to_float32(short) == value:
+            return short
+    return value  # 9 digits: repr of the double is as short as it gets
 
 
 def decode_float(value):
@@ -76,7 +106,7 @@ def _resolve(base, parent_type):
 
 # -- message -> data ------------------------------------------------------------------------------------
 
-def _encode_value(value, slot_type):
+def _encode_value(value, slot_type, short):
     base, is_array, _ = split_type(slot_type)
     if is_array:
         if base in BYTES_TYPES:
@@ -84,24 +114,31 @@ def _encode_value(value, slot_type):
                 value = bytes(bytearray(value))
             return base64.b64encode(bytes(value)).decode('ascii')
         if base in FLOAT_TYPES:
-            return [encode_float(item) for item in value]
+            if short and base == 'float32':
+                return [encode_float(short_float32(float(item))) for item in value]
+            return [encode_float(float(item)) for item in value]
         if base in TIME_TYPES:
             return [{'secs': int(item.secs), 'nsecs': int(item.nsecs)} for item in value]
         if base in PRIMITIVE_TYPES:
             return list(value)
-        return [to_dict(item) for item in value]
+        return [to_dict(item, short) for item in value]
     if base in FLOAT_TYPES:
+        if short and base == 'float32':
+            return encode_float(short_float32(float(value)))
         return encode_float(float(value))
     if base in TIME_TYPES:
         return {'secs': int(value.secs), 'nsecs': int(value.nsecs)}
     if base in PRIMITIVE_TYPES:
         return value
-    return to_dict(value)
+    return to_dict(value, short)
 
 
-def to_dict(msg):
-    """A ROS message as a nested dict (the row form), fields in definition order."""
-    return {name: _encode_value(getattr(msg, name), slot_type)
+def to_dict(msg, short_float32=False):
+    """A ROS message as a nested dict (the row form), fields in definition order.
+
+    ``short_float32``: write float32 fields as the shortest decimal of their float32 value (json-xz).
+    """
+    return {name: _encode_value(getattr(msg, name), slot_type, short_float32)
             for name, slot_type in zip(msg.__slots__, msg._slot_types)}
 
 
@@ -173,6 +210,8 @@ def _decode_value(data, slot_type, parent_type, classes, path):
                 else:
                     value = bytes(bytearray(data))
                 items = value
+            elif base == 'float32':
+                items = value = tuple(to_float32(decode_float(item)) for item in data)
             elif base in FLOAT_TYPES:
                 items = value = tuple(decode_float(item) for item in data)
             elif base in TIME_TYPES:
@@ -189,6 +228,8 @@ def _decode_value(data, slot_type, parent_type, classes, path):
             if size is not None and len(items) != size:
                 raise ValueError('has %d items, the type says %d' % (len(items), size))
             return value
+        if base == 'float32':
+            return to_float32(decode_float(data))
         if base in FLOAT_TYPES:
             return decode_float(data)
         if base in TIME_TYPES:
