@@ -216,6 +216,11 @@ def test_replay_nominal_run_and_bag_lz4_format(trained, real_bag, tmp_path):
         assert window['path'].endswith('.bag')
         with open(window['path'], 'rb') as stream:
             assert stream.read(13) == b'#ROSBAG V2.0\n'
+    info = ok_json('info', tmp_path)
+    assert [w['codec'] for w in info['windows']] == ['bag-lz4'] * len(summary['windows'])
+    assert [w['messages'] for w in info['windows']] == [w['messages'] for w in summary['windows']]
+    lines = ok('cat', summary['windows'][0]['path']).splitlines()
+    assert len(lines) == summary['windows'][0]['messages'] and json.loads(lines[0])['topic'] == '/odom'
     text = ok('replay', bag, '--topic', '/odom', '--model', trained['model'], '--out', tmp_path / 'text')
     assert '271 messages in' in text and 'window(s)' in text
 
@@ -251,6 +256,16 @@ def test_cat_decodes_every_message_and_other_cc_log_files(replayed, trained):
     assert len(only) - 1 == sum(1 for row in rows if row['topic'] == '/scan')
     model = ok('cat', trained['model']).splitlines()
     assert len(model) == 1 and json.loads(model[0])['format'] == 'cc_log-model'
+    folder = trained['train'] / 'nominal'
+    vector = json.loads(ok('cat', folder / sorted(os.listdir(folder))[0]))
+    assert len(vector['features']) == len(json.loads(model[0])['scaler']['mean'])
+
+
+def test_cat_refuses_files_that_are_not_cc_log(real_bag, tmp_path):
+    assert 'not a cc_log window' in fails('cat', real_bag(HUSKY))  # a plain rosbag is no window file
+    other = tmp_path / 'other.json'
+    other.write_text('{"a": 1}')
+    assert 'not a cc_log file' in fails('cat', other)
 
 
 def test_export_to_bag_csv_and_jsonl(replayed, tmp_path):

@@ -548,15 +548,20 @@ def _record_row(record, path=None):
     return row
 
 
-def _read_json_file(path):
-    """A cc_log JSON file (model, feature vector, truth list); CommandError when it is none of them."""
+def _cc_log_json(path):
+    """A cc_log JSON file (model, feature vector, simulator truth); CommandError when it is none of them."""
     try:
         with open(path) as stream:
-            return json.load(stream)
+            document = json.load(stream)
     except UnicodeDecodeError:
         raise CommandError('%s: not a cc_log file (not a window file and not JSON text)' % path)
     except ValueError as error:
         raise CommandError('%s: not a cc_log file (not a window file; invalid JSON: %s)' % (path, error))
+    kind = document.get('format', '') if isinstance(document, dict) else ''
+    if kind == 'cc_log-model' or str(kind).startswith('cc_log.') or (
+            isinstance(document, dict) and 'features' in document and 'config' in document):
+        return document
+    raise CommandError('%s: not a cc_log file (JSON, but not a model, feature-vector or truth file)' % path)
 
 
 def _is_window_file(path):
@@ -568,25 +573,14 @@ def _is_window_file(path):
 
 def cmd_cat(args):
     """Decode cc_log files to JSON lines on stdout (window records; models, vectors, truth as one line)."""
-    from . import log_format
     topics = set(args.topic) if args.topic else None
     out = sys.stdout
-    jsonl = []  # single-document JSON files
-    window_inputs = []
-    for path in args.paths:
-        if os.path.isdir(path) or not os.path.exists(path):
-            window_inputs.append(path)
-        elif _is_window_file(path):
-            window_inputs.append(path)
-        elif path.endswith('.json') or not log_format._extension(path):
-            jsonl.append(path)
-        else:
-            window_inputs.append(path)  # read_window says what is wrong with it
-    for path in jsonl:
-        document = _read_json_file(path)
-        out.write(json.dumps(_plain(document), allow_nan=False) + '\n')
-    if window_inputs:
-        for path, metadata, records in _read_windows(args, window_inputs, 'cat'):
+    for argument in args.paths:
+        if os.path.isfile(argument) and not _is_window_file(argument) and not argument.endswith(
+                ('.json.xz', '.bag')):
+            out.write(json.dumps(_plain(_cc_log_json(argument)), allow_nan=False) + '\n')
+            continue
+        for path, metadata, records in _read_windows(args, [argument], 'cat'):
             if args.metadata:
                 out.write(json.dumps(_plain({'file': path, 'metadata': metadata}), allow_nan=False) + '\n')
             for record in records:
