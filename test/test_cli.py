@@ -343,9 +343,10 @@ def test_simulate_writes_bag_and_truth(tmp_path):
     with rosbag.Bag(str(bag)) as reader:
         assert reader.get_type_and_topic_info().topics['/odom'].msg_type == 'nav_msgs/Odometry'
         assert 1150 <= reader.get_message_count(['/odom']) <= 1250  # 60 s at 20 Hz
-    again = ok_json('simulate', '--minutes', '1', '--anomalies', '1', '--seed', '1', '--rate', '20',
-                    tmp_path / 'again.bag')
-    assert again['truth_anomalies'] == result['truth_anomalies']  # same seed, same run
+    again = run('simulate', '--minutes', '1', '--anomalies', '1', '--seed', '1', '--rate', '20',
+                tmp_path / 'again.bag', '--json', '--progress')
+    assert again.returncode == 0 and '\rsimulate [' in again.stderr and '100%' in again.stderr
+    assert json.loads(again.stdout)['truth_anomalies'] == result['truth_anomalies']  # same seed, same run
     assert 'exists' in fails('simulate', '--minutes', '1', '--anomalies', '0', bag)
 
 

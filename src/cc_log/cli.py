@@ -934,7 +934,6 @@ def _common(parser, json_help=True):
 
 def build_parser():
     """The ``cclog`` argument parser (one sub-parser per command)."""
-    from .spans import Span  # noqa: F401  (cheap, pure; checks the defaults below parse)
     parser = _Parser(prog=PROG, **_help(
         """
         cc_log offline tool: tune the anomaly logger on bags you already have. No roscore needed.
@@ -1142,7 +1141,8 @@ def build_parser():
     p.add_argument('--minutes', type=_positive_float('minutes'), default=10.0, help='(default: %(default)s)')
     p.add_argument('--anomalies', type=_non_negative_int('anomalies'), default=6, help='(default: %(default)s)')
     p.add_argument('--seed', type=_non_negative_int('seed'), default=1, help='(default: %(default)s)')
-    p.add_argument('--rate', type=_positive_float('rate'), default=_sim_rate(), help='odometry Hz (default: %(default)s)')
+    p.add_argument('--rate', type=_positive_float('rate'), default=_sim_rate(),
+                   help='odometry Hz (default: %(default)s)')
     p.add_argument('--types', metavar='A,B', help='anomaly types to draw from (default: all)')
     p.add_argument('--imu', action='store_true', help='also write sensor_msgs/Imu')
     p.add_argument('--force', action='store_true', help='overwrite an existing bag')
