@@ -61,13 +61,9 @@ def _unflatten(flat):
     return row
 
 
-def _key(value):
-    """A comparison key that tells 0 from 0.0, False and -0.0 (``==`` does not)."""
-    if isinstance(value, float):
-        return ('f', repr(value))
-    if isinstance(value, (list, dict)):
-        return ('j', json.dumps(value, sort_keys=True))
-    return (type(value).__name__, value)
+def _same(value, first, first_repr):
+    """Whether two JSON values are the same text: ``==`` alone takes 0 for 0.0, False or -0.0."""
+    return value == first and repr(value) == first_repr
 
 
 def _columns(rows):
@@ -76,7 +72,8 @@ def _columns(rows):
     for key in rows[0]:
         values = [row[key] for row in rows]
         first = values[0]
-        if len(values) > 1 and all(_key(value) == _key(first) for value in values[1:]):
+        first_repr = repr(first)
+        if len(values) > 1 and all(_same(value, first, first_repr) for value in values[1:]):
             constant[key] = first
         else:
             columns[key] = values

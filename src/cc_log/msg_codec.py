@@ -20,6 +20,7 @@ Encoding rules (the same in every cc_log file):
 - other numeric arrays are lists, message arrays are lists of dicts.
 """
 import base64
+import functools
 import json
 import math
 import re
@@ -87,6 +88,7 @@ def decode_float(value):
     return float(value)
 
 
+@functools.lru_cache(maxsize=None)
 def split_type(slot_type):
     """``'float64[36]'`` -> ``('float64', True, 36)``; ``'string'`` -> ``('string', False, None)``."""
     if slot_type.endswith(']'):
