@@ -6,11 +6,11 @@
 #   ./dev.sh setup    install what is missing and build only
 #
 # Setup installs the Debian packages cc_log needs when they are missing (quick when they are present) and
-# builds a catkin workspace in .catkin_ws/ whose src/cc_log points at this repository. Afterwards
+# builds a catkin workspace in .catkin_ws/ whose src/cc_log points at this repository (entry by entry). Afterwards
 # `source .catkin_ws/devel/setup.bash` makes rosrun, roslaunch and rostest find cc_log.
 set -euo pipefail
 
-ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+ROOT=$(cd "$(dirname "$(readlink -f "${BASH_SOURCE[0]}")")" && pwd)
 WS="$ROOT/.catkin_ws"
 # Debian's ROS lives in the system interpreter; another python3 first on PATH cannot see it.
 export PATH="/usr/bin:/bin:$PATH"
@@ -40,9 +40,22 @@ install_missing() {
     "${missing[@]}" >/dev/null
 }
 
+link_package() {
+  # src/cc_log mirrors the repository root entry by entry (symlinks), leaving out .catkin_ws itself, so
+  # that tools which search the package directory (rosrun's find -L) never walk into the workspace.
+  local pkg="$WS/src/cc_log" entry
+  [ -L "$pkg" ] && rm -f "$pkg"
+  mkdir -p "$pkg"
+  find "$pkg" -mindepth 1 -maxdepth 1 -type l -delete
+  for entry in "$ROOT"/* "$ROOT"/.[!.]*; do
+    case "$(basename "$entry")" in .catkin_ws|.git|'.[!.]*') continue ;; esac
+    [ -e "$entry" ] && ln -sfn "$entry" "$pkg/$(basename "$entry")"
+  done
+}
+
 build() {
   mkdir -p "$WS/src"
-  ln -sfn "$ROOT" "$WS/src/cc_log"
+  link_package
   log "building $WS"
   (cd "$WS" && catkin_make -DPYTHON_EXECUTABLE=/usr/bin/python3 -DCATKIN_ENABLE_TESTING=ON >"$WS/build.log" 2>&1) \
     || { tail -n 40 "$WS/build.log" >&2; log "catkin_make failed (full log: $WS/build.log)"; exit 1; }

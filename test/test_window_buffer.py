@@ -143,6 +143,16 @@ def test_feature_window_by_count_and_duration():
     assert buffer.feature_window_full
 
 
+def test_duration_feature_window_refills_after_a_gap():
+    buffer = WindowBuffer(window='1s')
+    for stamp in (0.0, 0.5, 1.0, 3600.0, 3600.5):
+        buffer.add(Record(stamp, '/odom', None), row=[stamp])
+    assert buffer.feature_rows() == [[3600.0], [3600.5]]
+    assert not buffer.feature_window_full
+    buffer.add(Record(3601.0, '/odom', None), row=[3601.0])
+    assert buffer.feature_window_full
+
+
 def test_trigger_before_any_message_is_an_error():
     with pytest.raises(ValueError, match='trigger'):
         WindowBuffer().trigger('test')

@@ -139,9 +139,9 @@ class WindowBuffer(object):
         return len(self._rows) >= self.window.count
 
     def _add_row(self, stamp, row):
+        if self._rows_since is None or (self.window.is_duration and stamp - self._rows[-1][0] > self.window.seconds):
+            self._rows_since = stamp  # after a gap longer than the window, it fills again from here
         self._rows.append((stamp, row))
-        if self._rows_since is None:
-            self._rows_since = stamp
         if self.window.is_duration:
             while self._rows[0][0] < stamp - self.window.seconds:
                 self._rows.popleft()

@@ -1,0 +1,288 @@
+"""The one-command demo: collect, learn, then the smart logger live on a simulated BWIBot.
+
+``rosrun cc_log demo.py`` (or ``./dev.sh demo`` on a fresh machine):
+
+1. simulates a nominal run of the BWIBot (no roscore) and collects its feature vectors, as collect mode;
+2. learns a model from them, as learn mode;
+3. starts a roscore and ``demo.launch`` (simulator with injected anomalies + smart logger), live;
+4. prints what was injected and caught, false windows, messages seen vs kept, raw vs stored bytes, and
+   writes a PNG timeline.
+
+Everything it starts is stopped when it ends, whatever way it ends.
+"""
+import argparse
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+
+from . import collector
+from . import learning
+from . import log_format
+from . import msg_codec
+from . import sim
+
+DEFAULT_OUT = os.path.join(os.path.expanduser('~'), '.ros', 'cc_log', 'demo')
+DEFAULT_TRAIN_MINUTES = 8.0
+DEFAULT_LIVE_MINUTES = 2.5
+DEFAULT_ANOMALIES = 6
+DEFAULT_SEED = 7
+DEFAULT_WINDOW = '500'
+DEFAULT_STRIDE = '10'
+MASTER_TIMEOUT = 30.0
+
+
+def log(text):
+    """A progress line on stderr."""
+    sys.stderr.write('[demo] %s\n' % text)
+    sys.stderr.flush()
+
+
+def free_port():
+    """A TCP port nobody listens on (for the demo's own roscore)."""
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+class Processes(object):
+    """Child processes in their own process groups, all stopped on exit."""
+
+    def __init__(self):
+        self.children = []
+
+    def start(self, args, env, log_path):
+        stream = open(log_path, 'wb')
+        child = subprocess.Popen(args, env=env, stdout=stream, stderr=subprocess.STDOUT,
+                                 stdin=subprocess.DEVNULL, start_new_session=True)
+        self.children.append((child, stream))
+        return child
+
+    def stop(self):
+        for child, _ in reversed(self.children):
+            if child.poll() is None:
+                os.killpg(child.pid, signal.SIGINT)
+        deadline = time.time() + 20.0
+        for child, stream in reversed(self.children):
+            try:
+                child.wait(max(0.1, deadline - time.time()))
+            except subprocess.TimeoutExpired:
+                os.killpg(child.pid, signal.SIGKILL)
+                child.wait()
+            stream.close()
+        self.children = []
+
+
+def train(out, minutes, seed, window, stride):
+    """Steps 1 and 2: a nominal simulated run, its feature vectors, a model. Returns the model path."""
+    bag = os.path.join(out, 'nominal.bag')
+    log('1/4 simulating %.0f minutes of nominal driving (no roscore) -> %s' % (minutes, bag))
+    sim.simulate_to_bag(bag, sim.SimConfig(minutes=minutes, anomalies=0, seed=seed))
+    features = os.path.join(out, 'features')
+    log('2/4 collect: feature vectors (window %s, one every %s messages) -> %s/nominal/' % (window, stride, features))
+    collected = collector.collect_bag(bag, sim.ODOM_TOPIC, features, window=window, stride=stride)
+    log('    %d vectors' % collected['vectors'])
+    vectors, config = learning.load_vectors(features)
+    log('3/4 learn: one-class SVM on %d nominal vectors' % len(vectors['nominal']))
+    model, info = learning.train(vectors['nominal'], None, config)
+    path = os.path.join(out, 'model.json')
+    model.save(path)
+    log('    model -> %s (%s)' % (path, ', '.join('%s %s' % item for item in sorted(info.items())
+                                                 if isinstance(item[1], (int, float, str)))[:200]))
+    os.remove(bag)
+    os.remove(sim.truth_path(bag))
+    return path
+
+
+class LiveRecorder(object):
+    """The demo's own ROS node: what the robot published (for the byte count and the plot)."""
+
+    def __init__(self):
+        import rospy
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import Imu
+        self.lock = threading.Lock()
+        self.messages = 0
+        self.raw_bytes = 0
+        self.track = []  # (stamp, speed, yaw rate)
+        rospy.init_node('cc_log_demo', anonymous=True, disable_signals=True)
+        self.subscribers = [rospy.Subscriber('odom', Odometry, self._odom, queue_size=1000),
+                            rospy.Subscriber('imu/data', Imu, self._count, queue_size=1000)]
+
+    def _count(self, msg):
+        with self.lock:
+            self.messages += 1
+            self.raw_bytes += msg_codec.row_json_bytes(msg)
+
+    def _odom(self, msg):
+        self._count(msg)
+        with self.lock:
+            self.track.append((msg.header.stamp.to_sec(), msg.twist.twist.linear.x, msg.twist.twist.angular.z))
+
+
+def run_live(out, model, minutes, anomalies, seed, processes):
+    """Step 3: roscore + demo.launch until the simulator finishes. Returns (windows dir, truth, recorder)."""
+    port = free_port()
+    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:%d' % port, ROS_HOSTNAME='127.0.0.1',
+               ROS_LOG_DIR=os.path.join(out, 'ros_log'))
+    os.environ.update(ROS_MASTER_URI=env['ROS_MASTER_URI'], ROS_HOSTNAME='127.0.0.1')
+    log('4/4 live: roscore on port %d, simulator (%.1f min, %d anomalies) + smart logger' % (port, minutes, anomalies))
+    processes.start(['roscore', '-p', str(port)], env, os.path.join(out, 'roscore.log'))
+    wait_for_master(env['ROS_MASTER_URI'])
+    recorder = LiveRecorder()
+    windows = os.path.join(out, 'windows')
+    truth_file = os.path.join(out, 'truth.json')
+    launch = processes.start(
+        ['roslaunch', 'cc_log', 'demo.launch', 'model:=%s' % model, 'directory:=%s' % windows,
+         'minutes:=%g' % minutes, 'anomalies:=%d' % anomalies, 'seed:=%d' % seed, 'truth_file:=%s' % truth_file],
+        env, os.path.join(out, 'roslaunch.log'))
+    started = time.time()
+    total = minutes * 60.0
+    while launch.poll() is None:
+        time.sleep(1.0)
+        elapsed = time.time() - started
+        if int(elapsed) % 15 == 0:
+            saved = len(log_format.window_files(windows)) if os.path.isdir(windows) else 0
+            log('    %3.0f / %.0f s simulated, %d messages seen, %d windows saved'
+                % (min(elapsed, total), total, recorder.messages, saved))
+        if elapsed > total + 90.0:
+            raise RuntimeError('demo.launch did not finish %.0f s after the simulated run' % (elapsed - total))
+    if launch.returncode != 0 or not os.path.exists(truth_file):
+        raise RuntimeError('demo.launch failed (exit %d, no ground truth written): see %s'
+                           % (launch.returncode, os.path.join(out, 'roslaunch.log')))
+    return windows, sim.load_truth(truth_file), recorder
+
+
+def wait_for_master(uri):
+    import rosgraph
+    master = rosgraph.Master('/cc_log_demo', master_uri=uri)
+    deadline = time.time() + MASTER_TIMEOUT
+    while time.time() < deadline:
+        try:
+            master.getPid()
+            return
+        except Exception:  # noqa: BLE001 (any connection error means: not up yet)
+            time.sleep(0.3)
+    raise RuntimeError('roscore did not come up within %.0f s' % MASTER_TIMEOUT)
+
+
+def match(windows, truth, slack):
+    """Which true anomalies a window overlaps (with ``slack`` seconds after each, for the feature
+    window to see it); windows overlapping none are false windows."""
+    caught = {}
+    false_windows = []
+    for window in windows:
+        hits = [event for event in truth if window['start'] <= event['end'] + slack and window['end'] >= event['start']]
+        for event in hits:
+            caught[id(event)] = True
+        if not hits:
+            false_windows.append(window)
+    return caught, false_windows
+
+
+def summarize(out, windows_dir, truth, recorder, window_seconds):
+    """Print the summary and write the PNG; return 0 when every anomaly was caught."""
+    windows = []
+    for path in log_format.window_files(windows_dir):
+        meta, _ = log_format.read_window(path)
+        windows.append({'path': path, 'start': meta['start'], 'end': meta['end'], 'count': meta['count'],
+                        'bytes': os.path.getsize(path)})
+    caught, false_windows = match(windows, truth, window_seconds)
+    stored = sum(window['bytes'] for window in windows)
+    kept = sum(window['count'] for window in windows)
+    by_type = {}
+    for event in truth:
+        injected, hit = by_type.get(event['type'], (0, 0))
+        by_type[event['type']] = (injected + 1, hit + (1 if id(event) in caught else 0))
+    lines = ['', 'cc_log demo: smart logger on a simulated BWIBot (100 Hz odometry + IMU)',
+             '  anomalies injected vs caught:']
+    for kind, (injected, hit) in sorted(by_type.items()):
+        lines.append('    %-22s %d / %d' % (kind, hit, injected))
+    lines.append('    %-22s %d / %d' % ('all', len(caught), len(truth)))
+    lines.append('  false windows:          %d' % len(false_windows))
+    lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept,
+                                                              100.0 * kept / max(recorder.messages, 1)))
+    lines.append('  raw row JSON / stored:  %s / %s  (%.0fx less)' % (
+        human(recorder.raw_bytes), human(stored), recorder.raw_bytes / max(stored, 1)))
+    lines.append('  windows (%d) in:         %s' % (len(windows), windows_dir))
+    if windows:
+        lines.append('  look at one:            rosrun cc_log cclog info %s' % windows[0]['path'])
+        lines.append('                          xz -dc %s | jq .cc_log' % windows[0]['path'])
+    png = os.path.join(out, 'timeline.png')
+    plot(png, recorder.track, truth, windows)
+    lines.append('  timeline:               %s' % png)
+    print('\n'.join(lines))
+    return 0 if len(caught) == len(truth) else 1
+
+
+def human(size):
+    for unit in ('B', 'KB', 'MB', 'GB'):
+        if size < 1000 or unit == 'GB':
+            return '%.1f %s' % (size, unit) if unit != 'B' else '%d B' % size
+        size /= 1000.0
+
+
+def plot(png, track, truth, windows):
+    """Speed and yaw rate over time, true anomalies shaded red, saved windows marked green."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    if not track:
+        return
+    t0 = track[0][0]
+    figure, axes = plt.subplots(2, 1, sharex=True, figsize=(12, 5))
+    for axis, column, label in ((axes[0], 1, 'speed (m/s)'), (axes[1], 2, 'yaw rate (rad/s)')):
+        axis.plot([row[0] - t0 for row in track], [row[column] for row in track], lw=0.6, color='k')
+        axis.set_ylabel(label)
+        for event in truth:
+            axis.axvspan(event['start'] - t0, event['end'] - t0, color='red', alpha=0.25)
+        for window in windows:
+            axis.axvspan(window['start'] - t0, window['end'] - t0, ymin=0.0, ymax=0.08, color='green', alpha=0.8)
+    for event in truth:
+        axes[0].annotate(event['type'], (event['start'] - t0, axes[0].get_ylim()[1]), fontsize=7, rotation=20,
+                         va='top')
+    axes[1].set_xlabel('time (s); red: injected anomalies, green bars: windows cc_log saved')
+    figure.tight_layout()
+    figure.savefig(png, dpi=100)
+    plt.close(figure)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog='demo.py', description=__doc__.split('\n\n')[0],
+        epilog='example: rosrun cc_log demo.py --out /tmp/cc_log_demo --live-minutes 2')
+    parser.add_argument('--out', default=DEFAULT_OUT, help='working directory, emptied first (default: %(default)s)')
+    parser.add_argument('--train-minutes', type=float, default=DEFAULT_TRAIN_MINUTES)
+    parser.add_argument('--live-minutes', type=float, default=DEFAULT_LIVE_MINUTES)
+    parser.add_argument('--anomalies', type=int, default=DEFAULT_ANOMALIES)
+    parser.add_argument('--seed', type=int, default=DEFAULT_SEED)
+    args = parser.parse_args(argv)
+    out = os.path.abspath(args.out)
+    if os.path.isdir(out):
+        shutil.rmtree(out)
+    os.makedirs(out)
+    processes = Processes()
+    started = time.time()
+    try:
+        model = train(out, args.train_minutes, args.seed, DEFAULT_WINDOW, DEFAULT_STRIDE)
+        windows, truth, recorder = run_live(out, model, args.live_minutes, args.anomalies, args.seed + 1, processes)
+        status = summarize(out, windows, truth, recorder, window_seconds=5.0)
+    except (RuntimeError, ValueError, OSError) as error:
+        sys.stderr.write('demo: %s\n' % error)
+        return 1
+    except KeyboardInterrupt:
+        sys.stderr.write('demo: interrupted\n')
+        return 130
+    finally:
+        try:
+            import rospy
+            rospy.signal_shutdown('demo finished')
+        except ImportError:
+            pass
+        processes.stop()
+    log('done in %.0f s' % (time.time() - started))
+    return status
