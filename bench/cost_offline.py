@@ -1,0 +1,138 @@
+#!/usr/bin/env python3
+"""Offline cost: smart-logger replay throughput vs a plain rosbag Python read of the same messages.
+
+    cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
+    python3 bench/cost_offline.py            # 3 alternating rounds per bag
+    python3 bench/cost_offline.py --quick    # 1 round on the Husky bag (tests)
+
+For each bag, in the same process and alternating (read, replay, read, replay, ...), so both see the same
+machine load:
+- read: ``rosbag.Bag.read_messages`` of the topics, touching each message (the baseline: what any Python
+  tool pays to get the messages);
+- replay: ``smart_logger.replay`` (what ``cclog replay`` runs: bag read + features + classifier + windows
+  written as json-xz by the background writer, waiting for every window to be written).
+Throughput is messages / process CPU seconds (user + system, all threads) and messages / wall seconds;
+the best round of each is kept. The ratio read-time / replay-time is "smart logger speed as % of read
+speed" (target >= 50%).
+
+Bags: ../shared/data/real/husky_outdoor_2015.bag (odometry driving + IMU side topic; model trained on the
+first half, motion 2 s window) and a 10-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz odometry +
+IMU, 6 anomalies; model trained on a nominal run, seed 2, motion 500-message window).
+"""
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+
+import rosbag  # noqa: E402
+
+from cc_log import learning, sim  # noqa: E402
+from cc_log.features import FeatureConfig  # noqa: E402
+from cc_log.smart_logger import replay  # noqa: E402
+
+
+def plain_read(path, topics):
+    n = 0
+    with rosbag.Bag(path) as bag:
+        for _, msg, _ in bag.read_messages(topics=topics):
+            n += 1
+    return n
+
+
+class _NoRawBytes(object):
+    """What-if: SmartLogger's per-message raw row-JSON byte count (msg_codec.row_json_bytes, a json.dumps of
+    every message for the statistics) replaced by 0, to show what that accounting costs."""
+
+    def __enter__(self):
+        from cc_log import smart_logger
+        self.module = smart_logger.msg_codec
+        self.saved = self.module.row_json_bytes
+        self.module.row_json_bytes = lambda msg: 0
+        return self
+
+    def __exit__(self, *exc):
+        self.module.row_json_bytes = self.saved
+        return False
+
+
+def measure(path, topics, model_path, rounds, tmp, what_if=False):
+    reads, replays = [], []
+    summary = None
+    for k in range(rounds):
+        with common.Timer() as timer:
+            n = plain_read(path, topics)
+        reads.append((timer.cpu, timer.wall, n))
+        out = os.path.join(tmp, 'replay_%d' % k)
+        with common.Timer() as timer:
+            if what_if:
+                with _NoRawBytes():
+                    summary = replay(path, topics[0], model_path, out, side_topics=topics[1:])
+            else:
+                summary = replay(path, topics[0], model_path, out, side_topics=topics[1:])
+        replays.append((timer.cpu, timer.wall, summary['input_messages']))
+        shutil.rmtree(out, ignore_errors=True)
+    read_cpu, read_wall = min(r[0] for r in reads), min(r[1] for r in reads)
+    rep_cpu, rep_wall = min(r[0] for r in replays), min(r[1] for r in replays)
+    return {'messages': reads[0][2], 'replayed': replays[0][2], 'read_cpu': read_cpu, 'read_wall': read_wall,
+            'replay_cpu': rep_cpu, 'replay_wall': rep_wall, 'windows': len(summary['windows'])}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--rounds', type=int, default=3)
+    parser.add_argument('--quick', action='store_true')
+    args = parser.parse_args(argv)
+    started = time.time()
+    with tempfile.TemporaryDirectory(prefix='cc_log_bench_') as tmp:
+        cases = []
+        # Husky: model on the first half of the odometry
+        records = common.husky_records((common.HUSKY_ODOM,))
+        first, _ = common.split_half(records, common.HUSKY_ODOM)
+        config = FeatureConfig('motion', '2s')
+        _, X = common.window_vectors(first, common.HUSKY_ODOM, config)
+        model, _ = learning.train(X, config=config)
+        husky_model = model.save(os.path.join(tmp, 'husky.model.json'))
+        cases.append(('husky_outdoor_2015', common.HUSKY_BAG, [common.HUSKY_ODOM, common.HUSKY_IMU], husky_model))
+        data = [common.describe_data(common.HUSKY_BAG)]
+        if not args.quick:
+            sim_bag = os.path.join(tmp, 'sim.bag')
+            sim.simulate_to_bag(sim_bag, sim.SimConfig(seed=1, minutes=10, anomalies=6, imu=True))
+            nominal, _ = common.sim_records(sim.SimConfig(seed=2, minutes=10, anomalies=0))
+            config = FeatureConfig('motion', '500')
+            _, X = common.window_vectors(nominal, sim.ODOM_TOPIC, config, stride=10)
+            model, _ = learning.train(X, config=config)
+            sim_model = model.save(os.path.join(tmp, 'sim.model.json'))
+            cases.append(('sim 10 min, 6 anomalies', sim_bag, [sim.ODOM_TOPIC, sim.IMU_TOPIC], sim_model))
+            data.append('data: cc_log.sim BWIBot 10 min, 100 Hz odometry + IMU, 6 anomalies, seed 1, '
+                        'lz4 bag (%d bytes)' % os.path.getsize(sim_bag))
+        rounds = 1 if args.quick else args.rounds
+        common.header('Offline replay cost', data + ['rounds: %d, alternating read / replay; best of each' % rounds])
+        rows = []
+        for (name, path, topics, model_path), what_if in [(case, w) for case in cases for w in (False, True)]:
+            r = measure(path, topics, model_path, rounds, tmp, what_if)
+            if what_if:
+                name += ' (what-if: no raw-byte count)'
+            ratio_cpu = r['read_cpu'] / r['replay_cpu']
+            ratio_wall = r['read_wall'] / r['replay_wall']
+            rows.append([name, r['messages'], '%.0f' % (r['messages'] / r['read_cpu']),
+                         '%.0f' % (r['replayed'] / r['replay_cpu']), '%.0f%%' % (100 * ratio_cpu),
+                         '%.0f' % (r['messages'] / r['read_wall']), '%.0f' % (r['replayed'] / r['replay_wall']),
+                         '%.0f%%' % (100 * ratio_wall), r['windows']])
+            if not what_if:
+                print('target smart logger >= 50%% of read speed, %s: %.0f%% (CPU time), %.0f%% (wall) -> %s' % (
+                    name, 100 * ratio_cpu, 100 * ratio_wall, 'met' if ratio_cpu >= 0.5 else 'NOT met'))
+        print()
+        common.table(['bag', 'messages', 'read msg/CPU s', 'replay msg/CPU s', 'replay/read (CPU)',
+                      'read msg/s wall', 'replay msg/s wall', 'replay/read (wall)', 'windows'], rows,
+                     'Offline throughput (replay = bag read + features + classifier + json-xz windows):')
+    print('total %.1f s' % (time.time() - started))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
