@@ -1,0 +1,297 @@
+#!/usr/bin/env python3
+"""Live cost of the smart node: CPU and peak RSS at 100 Hz next to `rosbag record`, and the highest rate it
+keeps up with.
+
+    cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
+    python3 bench/cost_live.py                      # 60 s at 100 Hz, then 60 s at each of 1000 and 2000 Hz
+    python3 bench/cost_live.py --seconds 10         # shorter runs
+    python3 bench/cost_live.py --quick              # 3 s runs at 100 and 1000 Hz (tests)
+
+What it starts (each in its own session, all stopped at the end by their process ids):
+- ``roscore -p <free port>`` with ROS_MASTER_URI, ROS_HOME and ROS_LOG_DIR pointing at it and a temporary
+  directory for every child;
+- the smart node: ``rosrun cc_log smart_logger.py _model:=<model> _directory:=<tmp> odom:=/odom``; the model
+  is trained here on a nominal simulated run (cc_log.sim seed 2, 100 Hz, motion 500-message window);
+- ``rosbag record -O <tmp>/record.bag /odom`` (no compression, its default) in the 100 Hz run;
+- a publisher (this script with --publisher): 20 s of simulated BWIBot odometry (cc_log.sim seed 3, nominal)
+  published in a loop on /odom at the given rate, with header stamps of the current time; it also listens to
+  /diagnostics and reports the node's last "messages seen" and the largest "intake queue" it saw.
+
+CPU % of one core = process CPU time (user + system, psutil, children included for rosbag record, which runs
+the C++ `record` under a Python wrapper) from just before the publisher starts to just after it ends (1 s
+of connection set-up and 2 s of draining included: a slight overestimate), divided by the publishing
+seconds. Peak RSS = VmHWM of /proc/<pid>/status (summed over the process tree for rosbag record).
+A rate is sustained when the node has seen every published message within 2 s after the publisher stops
+(its intake queue is unbounded: nothing is dropped at the socket, so falling behind shows as a growing
+intake queue and messages seen < published).
+"""
+import argparse
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+
+LOOP_SECONDS = 20.0
+
+
+# -- the publisher child -------------------------------------------------------------------------------
+
+def publisher(args):
+    import rospy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+    from cc_log import sim
+    simulator = sim.Simulator(sim.SimConfig(rate=100.0, seed=3, minutes=LOOP_SECONDS / 60.0, anomalies=0))
+    messages = [msg for topic, _, msg in simulator.messages() if topic == sim.ODOM_TOPIC]
+    rospy.init_node('cc_log_bench_publisher', disable_signals=True)
+    state = {'seen': None, 'intake_max': 0, 'windows': None}
+
+    def on_diagnostics(array):
+        for status in array.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if 'messages seen' in values:
+                state['seen'] = int(values['messages seen'])
+                state['intake_max'] = max(state['intake_max'], int(values.get('intake queue', 0)))
+                state['windows'] = int(values.get('windows saved', 0))
+    rospy.Subscriber('/diagnostics', DiagnosticArray, on_diagnostics)
+    pub = rospy.Publisher('/odom', Odometry, queue_size=10000)
+    deadline = time.time() + 10.0
+    while pub.get_num_connections() < args.subscribers and time.time() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)
+    sent, start = 0, time.time()
+    end = start + args.seconds
+    while True:
+        now = time.time()
+        if now >= end:
+            break
+        due = min(int((now - start) * args.rate) + 1, int(args.seconds * args.rate))
+        while sent < due:
+            msg = messages[sent % len(messages)]
+            msg.header.seq = sent
+            msg.header.stamp = rospy.Time.from_sec(start + sent / args.rate)
+            pub.publish(msg)
+            sent += 1
+        time.sleep(max(0.0, min(0.001, start + (sent / args.rate) - time.time())))
+    publish_seconds = time.time() - start
+    # wait (up to 2 s after the last diagnostics update) for the node to catch up
+    drain_end = time.time() + 2.5
+    while time.time() < drain_end and (state['seen'] is None or state['seen'] < sent):
+        time.sleep(0.1)
+    time.sleep(1.2)  # one more diagnostics period
+    print(json.dumps({'sent': sent, 'publish_seconds': publish_seconds, 'seen': state['seen'],
+                      'intake_max': state['intake_max'], 'windows': state['windows']}))
+    rospy.signal_shutdown('done')
+    return 0
+
+
+# -- processes -----------------------------------------------------------------------------------------
+
+def free_port():
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        return sock.getsockname()[1]
+
+
+class Processes(object):
+    """Children started in their own sessions; stop() ends each by its id (SIGINT, then SIGKILL)."""
+
+    def __init__(self, env, logdir):
+        self.env, self.logdir, self.children = env, logdir, []
+
+    def start(self, name, command):
+        log = open(os.path.join(self.logdir, name + '.log'), 'w')
+        process = subprocess.Popen(command, env=self.env, stdout=log, stderr=subprocess.STDOUT,
+                                   start_new_session=True)
+        self.children.append((name, process, log))
+        return process
+
+    def stop(self, process, timeout=15.0):
+        if process.poll() is None:
+            try:
+                os.killpg(process.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+            try:
+                process.wait(timeout)
+            except subprocess.TimeoutExpired:
+                try:
+                    os.killpg(process.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                process.wait(5)
+
+    def stop_all(self):
+        for name, process, log in reversed(self.children):
+            self.stop(process)
+            log.close()
+
+
+def tree(pid):
+    import psutil
+    try:
+        root = psutil.Process(pid)
+        return [root] + root.children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+def cpu_of(pid):
+    total = 0.0
+    for process in tree(pid):
+        try:
+            times = process.cpu_times()
+            total += times.user + times.system + times.children_user + times.children_system
+        except Exception:
+            pass
+    return total
+
+
+def hwm_mb(pid):
+    total = 0
+    for process in tree(pid):
+        try:
+            with open('/proc/%d/status' % process.pid) as stream:
+                for line in stream:
+                    if line.startswith('VmHWM:'):
+                        total += int(line.split()[1])
+        except IOError:
+            pass
+    return total / 1024.0
+
+
+def wait_master(env, seconds=30.0):
+    import rosgraph
+    os.environ['ROS_MASTER_URI'] = env['ROS_MASTER_URI']
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        try:
+            rosgraph.Master('/cc_log_bench').getPid()
+            return True
+        except Exception:
+            time.sleep(0.3)
+    raise RuntimeError('roscore did not come up within %g s' % seconds)
+
+
+def wait_subscribers(topic, count, seconds=30.0):
+    import rosgraph
+    master = rosgraph.Master('/cc_log_bench')
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        _, subscribers, _ = master.getSystemState()
+        for name, nodes in subscribers:
+            if name == topic and len(nodes) >= count:
+                return True
+        time.sleep(0.3)
+    raise RuntimeError('%s: fewer than %d subscribers after %g s' % (topic, count, seconds))
+
+
+def train_model(path):
+    from cc_log import learning, sim
+    from cc_log.features import FeatureConfig
+    records, _ = common.sim_records(sim.SimConfig(seed=2, minutes=5, anomalies=0))
+    config = FeatureConfig('motion', '500')
+    _, X = common.window_vectors(records, sim.ODOM_TOPIC, config, stride=10)
+    model, _ = learning.train(X, config=config)
+    return model.save(path)
+
+
+def run(procs, tmp, model, rate, seconds, with_record):
+    """One run: node (+ rosbag record) + publisher; returns the figures."""
+    out_dir = os.path.join(tmp, 'windows_%d' % rate)
+    node = procs.start('smart_node_%d' % rate, ['rosrun', 'cc_log', 'smart_logger.py', '_model:=' + model,
+                                                '_directory:=' + out_dir, 'odom:=/odom'])
+    record = None
+    if with_record:
+        record = procs.start('rosbag_record', ['rosbag', 'record', '-O', os.path.join(tmp, 'record.bag'), '/odom'])
+    wait_subscribers('/odom', 2 if with_record else 1)
+    time.sleep(1.0)
+    cpu0 = {'node': cpu_of(node.pid), 'record': cpu_of(record.pid) if record else 0.0}
+    output = subprocess.check_output([sys.executable, os.path.abspath(__file__), '--publisher', '--rate', str(rate),
+                                      '--seconds', str(seconds), '--subscribers', '2' if with_record else '1'],
+                                     env=procs.env, universal_newlines=True)
+    result = json.loads(output.strip().splitlines()[-1])
+    result['node_cpu'] = cpu_of(node.pid) - cpu0['node']
+    result['node_rss'] = hwm_mb(node.pid)
+    if record:
+        result['record_cpu'] = cpu_of(record.pid) - cpu0['record']
+        result['record_rss'] = hwm_mb(record.pid)
+        procs.stop(record)
+    procs.stop(node)
+    result['rate'] = rate
+    return result
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--seconds', type=float, default=60.0)
+    parser.add_argument('--rates', default='1000,2000', help='rates for the sustained-rate runs')
+    parser.add_argument('--quick', action='store_true')
+    parser.add_argument('--publisher', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument('--rate', type=float, default=100.0, help=argparse.SUPPRESS)
+    parser.add_argument('--subscribers', type=int, default=1, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.publisher:
+        return publisher(args)
+    if args.quick:
+        args.seconds, args.rates = 3.0, '1000'
+    rates = [int(r) for r in args.rates.split(',') if r]
+    started = time.time()
+    common.header('Live cost of the smart node', [
+        'data: cc_log.sim BWIBot odometry (seed 3, nominal, 20 s looped, restamped) published on /odom; model: '
+        'motion 500-message window trained on a nominal simulated run (seed 2, 5 min)',
+        'runs: 100 Hz for %g s with rosbag record beside the node; then %s Hz for %g s each, node alone'
+        % (args.seconds, ', '.join(map(str, rates)), args.seconds)])
+    tmp = tempfile.mkdtemp(prefix='cc_log_bench_live_')
+    port = free_port()
+    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:%d' % port, ROS_HOME=os.path.join(tmp, 'ros_home'),
+               ROS_LOG_DIR=os.path.join(tmp, 'ros_log'), ROS_IP='127.0.0.1')
+    env.pop('ROS_HOSTNAME', None)
+    procs = Processes(env, tmp)
+    results = []
+    try:
+        model = train_model(os.path.join(tmp, 'model.json'))
+        procs.start('roscore', ['roscore', '-p', str(port)])
+        wait_master(env)
+        results.append(run(procs, tmp, model, 100, args.seconds, True))
+        for rate in rates:
+            results.append(run(procs, tmp, model, rate, args.seconds, False))
+    finally:
+        procs.stop_all()
+        shutil.rmtree(tmp, ignore_errors=True)
+    first = results[0]
+    rows = [['cc_log smart node', 100, first['sent'], first['seen'], '%.2f%%' % (100 * first['node_cpu'] / first['publish_seconds']),
+             '%.0f' % first['node_rss'], first['windows']],
+            ['rosbag record (same topic, same run)', 100, first['sent'], '-',
+             '%.2f%%' % (100 * first['record_cpu'] / first['publish_seconds']), '%.0f' % first['record_rss'], '-']]
+    common.table(['process', 'Hz', 'published', 'seen by node', 'CPU % of one core', 'peak RSS MB', 'windows'], rows,
+                 'At 100 Hz for %.0f s (process CPU time / publishing seconds):' % first['publish_seconds'])
+    rows = []
+    best = 0
+    for r in results:
+        ok = r['seen'] is not None and r['seen'] >= r['sent']
+        if ok:
+            best = max(best, r['rate'])
+        rows.append([r['rate'], '%.0f' % r['publish_seconds'], r['sent'], r['seen'], r['intake_max'],
+                     '%.1f%%' % (100 * r['node_cpu'] / r['publish_seconds']), '%.0f' % r['node_rss'], r['windows'],
+                     'yes' if ok else 'NO'])
+    common.table(['Hz', 'seconds', 'published', 'seen by node', 'max intake queue', 'node CPU %', 'node peak RSS MB',
+                  'windows', 'kept up'], rows, 'Sustained rate (node alone; publisher on the same 2 cores):')
+    cpu = 100 * first['node_cpu'] / first['publish_seconds']
+    print('target <= 3%% CPU at 100 Hz: %.2f%% -> %s' % (cpu, 'met' if cpu <= 3 else 'NOT met'))
+    print('target sustains >= 1 kHz for %g s with zero dropped: highest rate kept up %d Hz -> %s' % (
+        args.seconds, best, 'met' if best >= 1000 else 'NOT met'))
+    print('total %.1f s' % (time.time() - started))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
