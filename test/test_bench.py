@@ -1,0 +1,71 @@
+"""The bench/ scripts still run: each on tiny inputs (--quick), checking the shape of what they print.
+
+Benchmarks are scripts, not timed tests: nothing here asserts on a time, a rate or a size.
+"""
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+BENCH = os.path.join(ROOT, 'bench')
+
+
+def run(script, *args, timeout=600):
+    completed = subprocess.run([sys.executable, os.path.join(BENCH, script)] + list(args), cwd=ROOT,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, universal_newlines=True,
+                               timeout=timeout)
+    assert completed.returncode == 0, completed.stdout[-3000:]
+    out = completed.stdout
+    assert out.startswith('# '), out[:500]
+    assert '\nmachine: ' in out and ' cores' in out
+    assert '\ndata: ' in out
+    assert 'total ' in out
+    return out
+
+
+def targets(out):
+    return [line for line in out.splitlines() if line.startswith('target ')]
+
+
+def test_detection_sim_quick():
+    out = run('detection_sim.py', '--quick')
+    assert 'Table 1' in out and '| TP ' in out and '| Precision ' in out
+    assert 'paper features' in out and 'paper settings' in out
+    assert len(targets(out)) == 1
+
+
+def test_storage_quick():
+    out = run('storage.py', '--quick')
+    assert out.count('Table 2, ') == 2
+    assert 'cc_log json-xz' in out and 'cc_log bag-lz4' in out and 'LZMA-6' in out
+    assert 'End to end' in out and 'rosbag --lz4 B' in out and 'BWI 1/100 bz2 B' in out
+    assert len(targets(out)) == 4
+
+
+def test_injected_husky_quick():
+    out = run('injected_husky.py', '--quick')
+    assert 'Caught by type' in out and 'false windows/h' in out
+    assert len(targets(out)) == 2
+
+
+def test_cost_offline_quick():
+    out = run('cost_offline.py', '--quick')
+    assert 'replay/read (CPU)' in out and 'husky_outdoor_2015' in out
+    assert len(targets(out)) == 1
+
+
+def test_training_quick():
+    out = run('training.py', '--quick')
+    assert 'exact OCSVM' in out and 'nystroem-sgd' in out and 'paper case' in out
+    assert len(targets(out)) == 2
+
+
+@pytest.mark.skipif(shutil.which('roscore') is None or shutil.which('rosrun') is None,
+                    reason='needs roscore and rosrun (a sourced ROS workspace)')
+def test_cost_live_quick():
+    out = run('cost_live.py', '--quick')
+    assert 'rosbag record' in out and 'Sustained rate' in out
+    assert len(targets(out)) == 2
