@@ -25,6 +25,7 @@ import json
 import math
 import re
 import struct
+import threading
 
 import genpy
 import genpy.dynamic
@@ -158,6 +159,7 @@ def row_json_bytes(msg):
 # -- message classes from definitions --------------------------------------------------------------------
 
 _CLASSES = {}
+_CLASSES_LOCK = threading.Lock()  # the background writer and the main thread may both build classes
 
 
 def message_classes(msg_type, definition):
@@ -165,13 +167,17 @@ def message_classes(msg_type, definition):
     key = (msg_type, definition)
     classes = _CLASSES.get(key)
     if classes is None:
-        try:
-            classes = genpy.dynamic.generate_dynamic(msg_type, definition)
-        except Exception as error:  # genpy raises several kinds for a bad definition
-            raise ValueError('%s: cannot build the message class from its definition: %s' % (msg_type, error))
-        if msg_type not in classes:
-            raise ValueError('%s: the definition does not define this type' % msg_type)
-        _CLASSES[key] = classes
+        with _CLASSES_LOCK:
+            classes = _CLASSES.get(key)
+            if classes is None:
+                try:
+                    classes = genpy.dynamic.generate_dynamic(msg_type, definition)
+                except Exception as error:  # genpy raises several kinds for a bad definition
+                    raise ValueError('%s: cannot build the message class from its definition: %s'
+                                     % (msg_type, error))
+                if msg_type not in classes:
+                    raise ValueError('%s: the definition does not define this type' % msg_type)
+                _CLASSES[key] = classes
     return classes
 
 
