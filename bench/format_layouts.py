@@ -179,15 +179,20 @@ def measure(records, size, presets):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--window', type=int, default=300, help='messages per window (default 300)')
-    parser.add_argument('--quick', action='store_true', help='presets 1, 6, 9e only; first two bags')
+    parser.add_argument('--quick', action='store_true',
+                        help='a smoke run: presets 1, 6, 9e; Husky and ALFA; windows only')
     parser.add_argument('--no-whole', action='store_true', help='skip the whole-topic-as-one-window rows')
     args = parser.parse_args(argv)
     presets = QUICK_PRESETS if args.quick else PRESETS
+    began = time.perf_counter()
+    print('# format_layouts: json-xz layouts and LZMA presets against row-per-message JSON')
     print('machine: %s' % machine())
+    print('data: %s (see SOURCES.md there)' % REAL)
     print('row JSON = msg_codec.row_json_bytes (json.dumps of the nested message dict + newline)')
     for bag_name, topic in (BAGS[:2] if args.quick else BAGS):
         records = load(bag_name, topic)
-        sizes = [args.window] + ([] if args.no_whole or len(records) <= args.window else [len(records)])
+        whole = not (args.no_whole or args.quick) and len(records) > args.window
+        sizes = [args.window] + ([len(records)] if whole else [])
         for size in sizes:
             raw, count, results = measure(records, size, presets)
             print()
@@ -197,6 +202,8 @@ def main(argv=None):
             for name, label, total, percent, ms in results:
                 print('  %-16s %-6s %10d %8.2f%% %12s' % (name, label, total, percent,
                                                           '-' if ms != ms else '%.1f' % ms))
+    print()
+    print('total %.1f s' % (time.perf_counter() - began))
     return 0
 
 
