@@ -110,13 +110,13 @@ def main(argv=None):
         args.motion_windows = [100, 50]
         args.train, args.test, args.anomalies, args.window = 60, 48, 2, 100
     started = time.time()
+    args.test_minutes = run_minutes(args.test + args.anomalies * 3, args.window, args.rate)
     common.header('Detection on the simulator: the paper\'s Table 1 protocol',
                   ['data: cc_log.sim BWIBot, %g Hz odometry; train run seed %d (nominal, %.1f min), test run '
                    'seed %d (%d anomalies of every type, %.1f min); windows of %d messages, no overlap'
                    % (args.rate, args.seed, run_minutes(args.train, args.window, args.rate), args.seed + 1,
-                      args.anomalies, run_minutes(args.test, args.window, args.rate), args.window)])
+                      args.anomalies, args.test_minutes, args.window)])
     configs = {'motion': FeatureConfig('motion', str(args.window)), 'raw': FeatureConfig('raw', str(args.window))}
-    args.test_minutes = run_minutes(args.test + args.anomalies * 3, args.window, args.rate)
     train_cfg = sim.SimConfig(rate=args.rate, seed=args.seed, minutes=run_minutes(args.train, args.window, args.rate),
                               anomalies=0)
     test_cfg = sim.SimConfig(rate=args.rate, seed=args.seed + 1,
