@@ -72,7 +72,10 @@ def param(name, default, log=True):
     """``~name`` or ``default``; the resolved value is logged once."""
     value = rospy.get_param('~' + name, default)
     if log:
-        rospy.loginfo('~%s: %s', name, value if value not in (None, '') else '(default)')
+        shown = value
+        if value in (None, '') or value == default:
+            shown = '%s (default)' % (value if value not in (None, '', ()) else 'none')
+        rospy.loginfo('~%s: %s', name, shown)
     return value
 
 
@@ -272,13 +275,14 @@ class SmartNode(object):
     def __init__(self):
         from cc_log.msg import AnomalyEvent  # generated message: only in a built workspace
         self._event_class = AnomalyEvent
-        model_path = param('model', '')
+        model_path = param('model', '', log=False)
         if not model_path:
             raise ConfigError('~model: required (the model file written by learn mode)')
         try:
             self.model = AnomalyModel.load(os.path.expanduser(model_path))
         except ModelError as error:
             raise ConfigError('~model: %s' % error)
+        rospy.loginfo('~model: %s', model_path)
         window = param('window', '')
         if window not in ('', None):
             try:
