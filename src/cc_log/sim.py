@@ -804,11 +804,12 @@ def load_truth(path):
     return [_truth_entry(e['type'], float(e['start']), float(e['end'])) for e in entries]
 
 
-def simulate_to_bag(path, config=None, truth_file=None, compression='lz4'):
+def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progress=None):
     """Simulate a whole run straight into a bag (no roscore) and its ground truth next to it.
 
-    Writes ``path`` (odometry, IMU when configured, /sim/anomaly events; ``compression`` 'lz4' or 'none')
-    and the sidecar ``truth_file`` (default ``<path>.truth.json``). Returns the truth list.
+    Writes ``path`` (odometry, IMU when configured, /sim/anomaly events; ``compression`` 'lz4', 'bz2' or
+    'none') and the sidecar ``truth_file`` (default ``<path>.truth.json``); ``progress(done, total)`` is
+    called now and then with simulated ticks. Returns the truth list.
     """
     import rosbag  # noqa: E402  (not at module level: the core stays free of rospy)
     config = (config or SimConfig()).validate()
@@ -821,8 +822,15 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4'):
     try:
         with rosbag.Bag(tmp, 'w', compression=compression, chunk_threshold=1024 * 1024) as bag:
             write = bag.write
-            for topic, stamp, msg in simulator.messages():
-                write(topic, msg, _time(stamp)[0])
+            total = simulator.total_ticks
+            every = max(1, int(config.rate * 10))
+            while not simulator.done:
+                for topic, stamp, msg in simulator.step():
+                    write(topic, msg, msg.header.stamp if topic != TRUTH_TOPIC else _time(stamp)[0])
+                if progress is not None and simulator.tick % every == 0:
+                    progress(simulator.tick, total)
+            if progress is not None:
+                progress(total, total)
         with open(tmp, 'rb+') as stream:
             os.fsync(stream.fileno())
         os.rename(tmp, path)

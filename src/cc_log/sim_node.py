@@ -1,0 +1,161 @@
+"""The simulated BWIBot node (``rosrun cc_log sim_bwibot.py``): odometry with labelled anomalies, live.
+
+Node name: ``sim_bwibot``. The robot, its floor and its anomalies are ``cc_log.sim``; this node publishes
+them in real time, stamped with the ROS clock (``rospy.Time.now()``: wall time when use_sim_time is off).
+
+Published topics (relative names: push the node into a namespace or remap them)
+  ``odom`` (nav_msgs/Odometry, frame ``odom`` -> ``base_link``): at ``~rate`` Hz, steady (rospy.Rate).
+  ``imu/data`` (sensor_msgs/Imu): at the same rate when ``~imu`` is true.
+  ``sim/anomaly`` (std_msgs/String, JSON): ground truth, one message when an anomaly starts
+  ``{"event": "start", "type", "start", "end": null}`` and one when it ends
+  ``{"event": "end", "type", "start", "end"}``; stamps are those of the odometry published at that moment.
+
+Parameters (each resolved value is logged once)
+  ``~rate`` (double, default 100.0): odometry messages per second.
+  ``~seed`` (int, default 0): same seed, same robot run and anomalies.
+  ``~anomalies`` (int, default 0): how many anomalies to inject.
+  ``~anomaly_types`` (list or comma-separated string, default: all): which types.
+  ``~imu`` (bool, default false): also publish ``imu/data``.
+  ``~minutes`` (double, default 0): how long to run; 0 = until shutdown. The node exits at the end.
+  ``~truth_file`` (string, default: none): ground-truth JSON (as ``cc_log.sim.write_truth``), rewritten
+  whenever an anomaly ends and at shutdown.
+  ``~gap`` (double, default 20.0), ``~warmup`` (double, default 20.0): seconds of nominal driving between
+  anomalies / before the first.
+
+Bad parameters print one line ``/sim_bwibot: ~<param>: <what is wrong>`` and exit with status 2.
+"""
+import json
+import sys
+
+import rospy
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import Imu
+from std_msgs.msg import String
+
+from . import sim
+
+NODE_NAME = 'sim_bwibot'
+ODOM_TOPIC = 'odom'
+IMU_TOPIC = 'imu/data'
+TRUTH_TOPIC = 'sim/anomaly'
+DEFAULTS = {'rate': 100.0, 'seed': 0, 'anomalies': 0, 'anomaly_types': 'all', 'imu': False, 'minutes': 0.0,
+            'truth_file': '', 'gap': 20.0, 'warmup': 20.0}
+
+
+class ConfigError(ValueError):
+    """Bad configuration: one line naming the parameter."""
+
+
+def _param(name):
+    default = DEFAULTS[name]
+    value = rospy.get_param('~' + name, default)
+    shown = value if not isinstance(value, (list, tuple)) else ','.join(str(v) for v in value)
+    rospy.loginfo('~%s: %s%s', name, shown if shown not in ('', None) else 'none',
+                  ' (default)' if value == default else '')
+    return value
+
+
+def _bool(name, value):
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ('true', '1', 'yes', 'on'):
+        return True
+    if text in ('false', '0', 'no', 'off'):
+        return False
+    raise ConfigError('~%s: %r is not true or false' % (name, value))
+
+
+def read_config(start_time):
+    """(SimConfig, truth file or None) from the private parameters; ConfigError names the parameter."""
+    values = dict((name, _param(name)) for name in sorted(DEFAULTS))
+    try:
+        config = sim.SimConfig(rate=values['rate'], seed=values['seed'], minutes=values['minutes'],
+                               anomalies=values['anomalies'], anomaly_types=values['anomaly_types'],
+                               imu=_bool('imu', values['imu']), start_time=start_time, gap=values['gap'],
+                               warmup=values['warmup'], jitter=0.0).validate()
+    except ConfigError:
+        raise
+    except ValueError as error:
+        raise ConfigError('~%s' % error)
+    truth_file = str(values['truth_file'] or '').strip() or None
+    return config, truth_file
+
+
+class SimNode(object):
+    """Publishes a ``cc_log.sim.Simulator`` run in real time."""
+
+    def __init__(self, config, truth_file=None):
+        self.config = config
+        self.truth_file = truth_file
+        self.simulator = sim.Simulator(config)
+        self.truth = []
+        self._open = {}     # simulated start stamp -> published start stamp
+        self.odom_pub = rospy.Publisher(ODOM_TOPIC, Odometry, queue_size=50)
+        self.imu_pub = rospy.Publisher(IMU_TOPIC, Imu, queue_size=50) if config.imu else None
+        self.truth_pub = rospy.Publisher(TRUTH_TOPIC, String, queue_size=20)
+        self.published = 0
+
+    def run(self):
+        """Publish until the run ends or ROS shuts down."""
+        rate = rospy.Rate(self.config.rate)
+        last = None
+        try:
+            while not rospy.is_shutdown() and not self.simulator.done:
+                now = rospy.Time.now()
+                for topic, _, msg in self.simulator.step():
+                    if topic == sim.ODOM_TOPIC:
+                        msg.header.stamp = now
+                        self.odom_pub.publish(msg)
+                        self.published += 1
+                    elif topic == sim.IMU_TOPIC:
+                        msg.header.stamp = now
+                        self.imu_pub.publish(msg)
+                    elif topic == sim.TRUTH_TOPIC:
+                        self._truth_event(json.loads(msg.data), now.to_sec())
+                last = now.to_sec()
+                rate.sleep()
+        except rospy.ROSInterruptException:
+            pass
+        finally:
+            for sim_start, (kind, start) in sorted(self._open.items()):   # cut short by shutdown
+                self.truth.append(sim._truth_entry(kind, start, last if last is not None else start))
+            self._open.clear()
+            self._write_truth()
+        rospy.loginfo('%s: published %d odometry messages, %d anomalies', NODE_NAME, self.published,
+                      len(self.truth))
+
+    def _truth_event(self, event, now):
+        if event['event'] == 'start':
+            self._open[event['start']] = (event['type'], now)
+            entry = sim._truth_entry(event['type'], now, None)
+            rospy.loginfo('anomaly %s starts at %.3f', event['type'], now)
+        else:
+            kind, start = self._open.pop(event['start'], (event['type'], now))
+            entry = sim._truth_entry(kind, start, now)
+            self.truth.append(entry)
+            rospy.loginfo('anomaly %s ends at %.3f (%.1f s)', kind, now, now - start)
+            self._write_truth()
+        self.truth_pub.publish(sim.truth_event(event['event'], entry))
+
+    def _write_truth(self):
+        if not self.truth_file:
+            return
+        try:
+            sim.write_truth(self.truth_file, self.truth, topic=rospy.resolve_name(ODOM_TOPIC),
+                            config=self.config, source='cc_log.sim_node')
+        except (IOError, OSError) as error:
+            rospy.logerr('~truth_file: cannot write %s: %s', self.truth_file, error)
+
+
+def main(argv=None):
+    """Run the node; return the exit status (2 with one line on stderr for bad configuration)."""
+    argv = sys.argv if argv is None else argv
+    rospy.init_node(NODE_NAME, argv=argv)
+    try:
+        config, truth_file = read_config(rospy.Time.now().to_sec())
+    except ConfigError as error:
+        sys.stderr.write('%s: %s\n' % (rospy.get_name(), error))
+        return 2
+    SimNode(config, truth_file).run()
+    return 0
