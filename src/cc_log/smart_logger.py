@@ -33,6 +33,8 @@ __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'replay',
 DEFAULT_FORMAT = 'json-xz'
 DEFAULT_DRIVING_TOPIC = 'odom'
 
+PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
+
 OPENED = 'opened'
 WRITTEN = 'written'
 FAILED = 'failed'
@@ -367,12 +369,13 @@ class SmartLogger(object):
 
 
 def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
-           side_topics=(), max_window=DEFAULT_MAX_WINDOW):
+           side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None):
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
     'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
-    message saved). Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag
+    message saved). ``progress``: optional ``callback(messages read)``, called every PROGRESS_EVERY messages and
+    at the end. Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag
     cannot be read or a window cannot be written.
     """
     from . import bagio  # rosbag: imported here so the module stays pure
@@ -391,8 +394,14 @@ def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_P
             failures.append(event.error)
     logger.on_event(collect)
     try:
+        count = 0
         for record in bagio.read_messages(bag_path, [topic] + [t for t in side_topics if t != topic]):
             logger.on_message(record.topic, record.msg, record.stamp)
+            count += 1
+            if progress is not None and count % PROGRESS_EVERY == 0:
+                progress(count)
+        if progress is not None:
+            progress(count)
     finally:
         logger.close()
     if failures:
