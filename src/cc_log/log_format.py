@@ -181,8 +181,10 @@ def _publish(tmp, directory, base, extension):
         return final
 
 
-def write_window(window, directory, fmt, metadata=None):
+def write_window(window, directory, fmt, metadata=None, base=None):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
+
+    ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
 
     ``metadata`` (JSON-able dict) is added to ``window_metadata``. Raises ValueError for a bad format or
     an empty window, OSError when the file cannot be written (the temporary file is removed).
@@ -192,14 +194,15 @@ def write_window(window, directory, fmt, metadata=None):
         raise ValueError('window: has no records')
     ensure_directory(directory)
     meta = window_metadata(window, fmt, metadata)
-    base = base_name(window)
+    base = base or base_name(window)
     extension = Format.EXTENSIONS[fmt]
     tmp = os.path.join(directory, '%s%s%s%d' % (base, extension, TMP_MARK, os.getpid()))
+    # Encode before the temporary file exists: a crash while encoding leaves no empty leftover.
+    data = json_xz.encode(window.records, meta) if fmt == Format.JSON_XZ else None
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, FILE_MODE)
     try:
         try:
             if fmt == Format.JSON_XZ:
-                data = json_xz.encode(window.records, meta)
                 view = memoryview(data)
                 while view:
                     view = view[os.write(fd, view):]
