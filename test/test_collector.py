@@ -155,12 +155,12 @@ def test_learn_refuses_overlapping_sets(husky_path, tmp_path, capsys):
         learning.write_vector(str(tmp_path / 'copy'), 'nominal', stamp, vector, config)
     model = str(tmp_path / 'model.json')
     assert learn_main.main(['--train', str(tmp_path / 'all'), '--validate', str(tmp_path / 'all'),
-                            '--model', model]) == 2
+                            '--model', model]) == 1
     assert 'validate:' in capsys.readouterr().err
     assert learn_main.main(['--train', str(tmp_path / 'all'), '--validate', str(tmp_path / 'copy'),
-                            '--model', model]) == 2
+                            '--model', model]) == 1
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and '5 vector(s)' in err
     assert learn_main.main(['--train', str(tmp_path / 'missing'), '--validate', str(tmp_path / 'copy'),
-                            '--model', model]) == 2
+                            '--model', model]) == 1
     assert not os.path.exists(model)

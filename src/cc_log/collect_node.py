@@ -115,7 +115,7 @@ class CollectNode(object):
 
 
 def main(argv=None):
-    """Run the node; return the exit status (2 with one line on stderr for bad configuration)."""
+    """Run the node; return the exit status (1 with one line on stderr for bad configuration)."""
     rospy.init_node(NODE_NAME, argv=sys.argv if argv is None else argv)
     try:
         node = CollectNode()

@@ -120,7 +120,8 @@ class Collector(object):
     directory: the logging directory (window files there, vectors under ``features/<label>/``); fmt:
     ``'json-xz'`` or ``'bag-lz4'``; rotate: see ``Rotation.parse``; driving_topic: the topic name the
     odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
-    the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label: the vectors' label; background: write on a writer thread.
+    the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label:
+    the vectors' label; background: write on a writer thread.
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """

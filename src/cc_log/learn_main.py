@@ -101,12 +101,13 @@ def parse_args(argv):
 
 
 def main(argv=None):
-    """Run learn mode; return the exit status (2 with one line on stderr for bad input)."""
+    """Run learn mode; return the exit status: 1 with one line on stderr for bad input (2 for a bad command
+    line, from argparse)."""
     args = parse_args(sys.argv[1:] if argv is None else argv)
     try:
         model, report, info = learn(args.train, args.validate, args.model, args.nu, args.gamma, args.method)
     except ValueError as error:
         sys.stderr.write('learn: %s\n' % error)
-        return 2
+        return 1
     print(format_result(model, report, info))
     return 0

@@ -59,6 +59,7 @@ DEFAULT_TOPICS = ()
 DEFAULT_ENABLED = True
 DEFAULT_DIAGNOSTIC_PERIOD = 1.0
 DISK_WARN_BYTES = 200 * 1000 ** 2   # diagnostics warn below this much free disk
+EXIT_BAD_CONFIG = 1                  # as cclog's bad input (2 is its command-line usage error)
 CLOSE_TIMEOUT = 60.0                 # seconds to wait at shutdown for the last windows to be written
 
 
@@ -135,7 +136,7 @@ def resolve_directory(value):
 def fail(node_name, error):
     """Print the one-line configuration error and return the exit status."""
     sys.stderr.write('%s: %s\n' % (node_name, error))
-    return 2
+    return EXIT_BAD_CONFIG
 
 
 # -- message intake (shared with collect_node) ----------------------------------------------------------
@@ -394,7 +395,7 @@ class SmartNode(object):
 
 
 def main(argv=None):
-    """Run the node; return the exit status (2 with one line on stderr for bad configuration)."""
+    """Run the node; return the exit status (1 with one line on stderr for bad configuration)."""
     argv = sys.argv if argv is None else argv
     rospy.init_node(NODE_NAME, argv=argv)
     try:
