@@ -46,10 +46,12 @@ Everything here is pure and deterministic: the same configuration and seed give 
 import collections
 import copy
 import heapq
+import io
 import json
 import math
 import os
 import random
+import struct
 
 import genpy
 from nav_msgs.msg import Odometry
@@ -486,6 +488,11 @@ _TWIST_COVARIANCE = (1e-3, 0.0, 0.0, 0.0, 0.0, 0.0,
 _IMU_ORIENTATION_COVARIANCE = (2.5e-3, 0.0, 0.0, 0.0, 2.5e-3, 0.0, 0.0, 0.0, 1e-2)
 _IMU_GYRO_COVARIANCE = (2.5e-5, 0.0, 0.0, 0.0, 2.5e-5, 0.0, 0.0, 0.0, 2.5e-5)
 _IMU_ACCEL_COVARIANCE = (2.5e-3, 0.0, 0.0, 0.0, 2.5e-3, 0.0, 0.0, 0.0, 2.5e-3)
+_POSE_COVARIANCE_BYTES = struct.pack('<36d', *_POSE_COVARIANCE)
+_TWIST_COVARIANCE_BYTES = struct.pack('<36d', *_TWIST_COVARIANCE)
+_IMU_ORIENTATION_COVARIANCE_BYTES = struct.pack('<9d', *_IMU_ORIENTATION_COVARIANCE)
+_IMU_GYRO_COVARIANCE_BYTES = struct.pack('<9d', *_IMU_GYRO_COVARIANCE)
+_IMU_ACCEL_COVARIANCE_BYTES = struct.pack('<9d', *_IMU_ACCEL_COVARIANCE)
 
 
 def _odometry(stamp, seq, x, y, yaw, v, w):
@@ -503,6 +510,96 @@ def _odometry(stamp, seq, x, y, yaw, v, w):
     msg.twist.twist.angular.z = w
     msg.twist.covariance = _TWIST_COVARIANCE
     return msg
+
+
+_ODOM, _IMU = 'odom', 'imu'
+_HEADER = struct.Struct('<3I')
+_ODOM_POSE = struct.Struct('<7d')
+_ODOM_TWIST = struct.Struct('<6d')
+_IMU_ORIENTATION = struct.Struct('<4d')
+_VECTOR = struct.Struct('<3d')
+
+
+def _string_bytes(text):
+    data = text.encode('utf-8')
+    return struct.pack('<I', len(data)) + data
+
+
+def _doubles(values):
+    return struct.pack('<%dd' % len(values), *values)
+
+
+_ODOM_FRAMES = _string_bytes(ODOM_FRAME) + _string_bytes(BASE_FRAME)
+_IMU_FRAME_BYTES = _string_bytes(IMU_FRAME)
+
+
+def _message(item):
+    """The ROS message of a simulator item."""
+    if not isinstance(item, tuple):
+        return item
+    kind, stamp, seq, values = item
+    if kind == _ODOM:
+        return _odometry(stamp, seq, *values)
+    qz, qw, gx, gy, gz, ax, ay, az = values
+    msg = Imu()
+    msg.header.seq = seq
+    msg.header.stamp = stamp
+    msg.header.frame_id = IMU_FRAME
+    msg.orientation.z, msg.orientation.w = qz, qw
+    msg.orientation_covariance = _IMU_ORIENTATION_COVARIANCE
+    msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = gx, gy, gz
+    msg.angular_velocity_covariance = _IMU_GYRO_COVARIANCE
+    msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = ax, ay, az
+    msg.linear_acceleration_covariance = _IMU_ACCEL_COVARIANCE
+    return msg
+
+
+def _serialized(item):
+    """The serialized bytes of a simulator item: the same bytes genpy writes for ``_message(item)``."""
+    if not isinstance(item, tuple):
+        buffer = io.BytesIO()
+        item.serialize(buffer)
+        return buffer.getvalue()
+    kind, stamp, seq, values = item
+    header = _HEADER.pack(seq & 0xffffffff, stamp.secs, stamp.nsecs)
+    if kind == _ODOM:
+        x, y, yaw, v, w = values
+        return b''.join((header, _ODOM_FRAMES,
+                         _ODOM_POSE.pack(x, y, 0.0, 0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0)),
+                         _POSE_COVARIANCE_BYTES, _ODOM_TWIST.pack(v, 0.0, 0.0, 0.0, 0.0, w),
+                         _TWIST_COVARIANCE_BYTES))
+    qz, qw, gx, gy, gz, ax, ay, az = values
+    return b''.join((header, _IMU_FRAME_BYTES, _IMU_ORIENTATION.pack(0.0, 0.0, qz, qw),
+                     _IMU_ORIENTATION_COVARIANCE_BYTES, _VECTOR.pack(gx, gy, gz), _IMU_GYRO_COVARIANCE_BYTES,
+                     _VECTOR.pack(ax, ay, az), _IMU_ACCEL_COVARIANCE_BYTES))
+
+
+class _BagTime(genpy.Time):
+    """genpy.Time with plain-integer comparisons: rosbag sorts its index with them on every write."""
+    __slots__ = ()
+
+    def _key(self):
+        return self.secs * 1000000000 + self.nsecs
+
+    def __lt__(self, other):
+        return self._key() < other.secs * 1000000000 + other.nsecs
+
+    def __le__(self, other):
+        return self._key() <= other.secs * 1000000000 + other.nsecs
+
+    def __gt__(self, other):
+        return self._key() > other.secs * 1000000000 + other.nsecs
+
+    def __ge__(self, other):
+        return self._key() >= other.secs * 1000000000 + other.nsecs
+
+    def __eq__(self, other):
+        return isinstance(other, genpy.Time) and self._key() == other.secs * 1000000000 + other.nsecs
+
+    def __ne__(self, other):
+        return not self.__eq__(other)
+
+    __hash__ = genpy.Time.__hash__
 
 
 def truth_event(event, entry):
@@ -596,6 +693,11 @@ class Simulator(object):
     # -- one tick ---------------------------------------------------------------------------------------
     def step(self):
         """Advance one tick; return [(topic, stamp, msg)] sorted by stamp."""
+        return [(topic, stamp, _message(item)) for topic, stamp, item in self._advance()]
+
+    def _advance(self):
+        """Advance one tick; return [(topic, stamp, item)] sorted by stamp, where item is a message
+        (std_msgs/String) or a tuple of values (_ODOM or _IMU, genpy.Time stamp, seq, values)."""
         if self.done:
             return []
         dt, limits, config = self.dt, self.limits, self.config
@@ -660,7 +762,7 @@ class Simulator(object):
         if plan is not None and plan['type'] == 'localization_jump':
             dx, dy, dyaw = _offset(plan, (k - active['start_tick']) * dt)
             px, py, pyaw = px + dx, py + dy, pyaw + dyaw
-        out.append((ODOM_TOPIC, stamp_s, _odometry(stamp, k, px, py, pyaw, meas_v, meas_w)))
+        out.append((ODOM_TOPIC, stamp_s, (_ODOM, stamp, k, (px, py, pyaw, meas_v, meas_w))))
 
         if config.imu:
             out.append(self._imu(k, t, accel))
@@ -676,22 +778,14 @@ class Simulator(object):
         stamp, stamp_s = _time(self.config.start_time + t + offset)
         self._imu_yaw_drift += rng.gauss(0.0, 2e-4 * noise * math.sqrt(self.dt))
         yaw = self.yaw + self._imu_yaw_drift
-        msg = Imu()
-        msg.header.seq = k
-        msg.header.stamp = stamp
-        msg.header.frame_id = IMU_FRAME
-        msg.orientation.z = math.sin(yaw / 2.0)
-        msg.orientation.w = math.cos(yaw / 2.0)
-        msg.orientation_covariance = _IMU_ORIENTATION_COVARIANCE
-        msg.angular_velocity.x = rng.gauss(0.0, 0.005 * noise)
-        msg.angular_velocity.y = rng.gauss(0.0, 0.005 * noise)
-        msg.angular_velocity.z = self.w + self._imu_gyro_bias + rng.gauss(0.0, 0.005 * noise)
-        msg.angular_velocity_covariance = _IMU_GYRO_COVARIANCE
-        msg.linear_acceleration.x = accel + rng.gauss(0.0, 0.05 * noise)
-        msg.linear_acceleration.y = self.v * self.w + rng.gauss(0.0, 0.05 * noise)
-        msg.linear_acceleration.z = GRAVITY + rng.gauss(0.0, 0.05 * noise)
-        msg.linear_acceleration_covariance = _IMU_ACCEL_COVARIANCE
-        return IMU_TOPIC, stamp_s, msg
+        gyro_x = rng.gauss(0.0, 0.005 * noise)
+        gyro_y = rng.gauss(0.0, 0.005 * noise)
+        gyro_z = self.w + self._imu_gyro_bias + rng.gauss(0.0, 0.005 * noise)
+        accel_x = accel + rng.gauss(0.0, 0.05 * noise)
+        accel_y = self.v * self.w + rng.gauss(0.0, 0.05 * noise)
+        accel_z = GRAVITY + rng.gauss(0.0, 0.05 * noise)
+        return IMU_TOPIC, stamp_s, (_IMU, stamp, k, (math.sin(yaw / 2.0), math.cos(yaw / 2.0), gyro_x, gyro_y,
+                                                     gyro_z, accel_x, accel_y, accel_z))
 
     def _maybe_start(self, k, t, stamp_s, out):
         """Start the next armed anomaly when its time has come and the base is in a state to show it."""
@@ -824,9 +918,13 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progr
             write = bag.write
             total = simulator.total_ticks
             every = max(1, int(config.rate * 10))
+            kinds = {ODOM_TOPIC: Odometry, IMU_TOPIC: Imu, TRUTH_TOPIC: String}
             while not simulator.done:
-                for topic, stamp, msg in simulator.step():
-                    write(topic, msg, msg.header.stamp if topic != TRUTH_TOPIC else _time(stamp)[0])
+                for topic, stamp, item in simulator._advance():
+                    cls = kinds[topic]
+                    when = _time(stamp)[0] if topic == TRUTH_TOPIC else item[1]
+                    write(topic, (cls._type, _serialized(item), cls._md5sum, cls), _BagTime(when.secs, when.nsecs),
+                          raw=True)
                 if progress is not None and simulator.tick % every == 0:
                     progress(simulator.tick, total)
             if progress is not None:
