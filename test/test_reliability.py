@@ -265,3 +265,246 @@ def test_no_shell_anywhere():
                     if pattern.search(line):
                         found.append('%s:%d: %s' % (path, number, line.strip()))
     assert not found, found
+
+
+# -- SmartLogger: write failures, disk limits, bad input -------------------------------------------------
+
+from cc_log import smart_logger  # noqa: E402
+from cc_log.features import FeatureConfig, vector_length  # noqa: E402
+from cc_log.smart_logger import DELETED, FAILED, OPENED, WRITTEN, SmartLogger  # noqa: E402
+
+CONFIG = FeatureConfig('motion', '20')
+
+
+class EveryNthModel(object):
+    """Calls every driving message whose number is in ``flags`` anomalous (counted by the model itself)."""
+
+    def __init__(self, flags=(), config=CONFIG):
+        self.config = config
+        self.threshold = 0.0
+        self.flags = set(flags)
+        self.count = 0
+
+    def is_anomalous(self, vector):
+        assert len(vector) == vector_length(self.config)
+        self.count += 1
+        return self.count in self.flags, (-1.0 if self.count in self.flags else 1.0)
+
+
+def feed(logger, n, start=0, mutate=None):
+    for i in range(start, start + n):
+        msg = odom(i)
+        if mutate is not None:
+            mutate(i, msg)
+        logger.on_message('/odom', msg, msg.header.stamp.to_sec())
+
+
+class FlakyDisk(object):
+    """log_format.write_window that fails with ``errno`` while ``failing`` is set."""
+
+    def __init__(self, monkeypatch, code=errno.ENOSPC):
+        self.failing = True
+        self.calls = 0
+        self.code = code
+        self.real = log_format.write_window
+        monkeypatch.setattr(log_format, 'write_window', self)
+
+    def __call__(self, *args, **kwargs):
+        self.calls += 1
+        if self.failing:
+            raise OSError(self.code, os.strerror(self.code))
+        return self.real(*args, **kwargs)
+
+
+@pytest.mark.parametrize('code', [errno.ENOSPC, errno.EACCES])
+def test_disk_full_keeps_the_window_in_memory_and_writes_it_when_space_returns(code, tmp_path, monkeypatch):
+    disk = FlakyDisk(monkeypatch, code)
+    model = EveryNthModel({10, 60})
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', retry_period=0.05)
+    events = []
+    logger.on_event(events.append)
+    feed(logger, 200)
+    deadline = time.time() + 10
+    while logger.stats()['windows_held'] < 2 and time.time() < deadline:
+        time.sleep(0.02)
+    stats = logger.stats()
+    assert stats['windows_held'] == 2 and stats['messages_held'] == 22 and stats['messages_lost'] == 0
+    assert stats['write_errors'] == 1 and os.strerror(code) in stats['last_error']
+    assert stats['messages_dropped'] + stats['messages_queued'] + stats['messages_buffered'] == 200
+    failed = [e for e in events if e.kind == FAILED]
+    assert len(failed) == 1 and 'retrying' in failed[0].error
+    time.sleep(0.3)
+    assert logger.stats()['write_retries'] >= 2  # it keeps trying, the writer thread is alive
+    disk.failing = False
+    assert logger.close(30)
+    stats = logger.stats()
+    assert stats['windows_saved'] == 2 and stats['messages_kept'] == 22 and stats['messages_lost'] == 0
+    assert stats['windows_held'] == 0 and stats['messages_queued'] == 0
+    files = log_format.window_files(str(tmp_path))
+    assert [len(read_window(f)[1]) for f in files] == [11, 11]  # order kept, nothing lost
+    assert [e.kind for e in events].count(WRITTEN) == 2
+
+
+def test_still_failing_at_close_counts_the_loss_once(tmp_path, monkeypatch):
+    FlakyDisk(monkeypatch)
+    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         background=False)
+    events = []
+    logger.on_event(events.append)
+    feed(logger, 100)
+    assert logger.stats()['windows_held'] == 1
+    logger.close()
+    stats = logger.stats()
+    assert stats['messages_lost'] == 11 and stats['windows_held'] == 0 and stats['write_errors'] == 1
+    assert [e.kind for e in events] == [OPENED, FAILED]
+
+
+def test_memory_held_is_bounded_oldest_dropped_and_counted(tmp_path, monkeypatch):
+    FlakyDisk(monkeypatch)
+    logger = SmartLogger(EveryNthModel({10, 40, 70, 100}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         background=False, max_held_messages=25)
+    feed(logger, 200)
+    stats = logger.stats()
+    assert stats['windows_held'] == 2 and stats['messages_held'] == 22 and stats['messages_lost'] == 22
+    assert 'dropped' in stats['last_error']
+
+
+def test_min_free_pauses_writing_with_windows_in_memory_and_resumes(tmp_path):
+    statvfs = FakeStatvfs(free=1)
+    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         background=False, min_free_mb=1)
+    logger.guard._statvfs = statvfs
+    events = []
+    logger.on_event(events.append)
+    feed(logger, 100)
+    stats = logger.stats()
+    assert stats['disk_paused'] and stats['windows_held'] == 1 and stats['write_errors'] == 0
+    assert log_format.window_files(str(tmp_path)) == [] and FAILED not in [e.kind for e in events]
+    statvfs.free = 1000000
+    feed(logger, 50, start=100)  # the next completed window (none here) or close retries
+    logger.close()
+    stats = logger.stats()
+    assert not stats['disk_paused'] and stats['windows_saved'] == 1 and stats['messages_lost'] == 0
+
+
+def test_quota_in_the_logger_deletes_oldest_and_says_so(tmp_path):
+    other = tmp_path / 'keep.me'
+    other.write_bytes(b'z' * 1000)
+    flags = {10 + 40 * k for k in range(6)}
+    logger = SmartLogger(EveryNthModel(flags), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         background=False, max_disk_mb=0.0035)
+    events = []
+    logger.on_event(events.append)
+    feed(logger, 300)
+    logger.close()
+    stats = logger.stats()
+    files = log_format.window_files(str(tmp_path))
+    assert stats['windows_saved'] == 6 and stats['windows_deleted'] == 6 - len(files) > 0
+    written = [e.path for e in events if e.kind == WRITTEN]
+    assert files == written[-len(files):]  # the newest are kept
+    assert [e.path for e in events if e.kind == DELETED] == written[:-len(files)]
+    assert sum(os.path.getsize(f) for f in files) <= 3500 and other.exists()
+
+
+def test_unwritable_directory_does_not_kill_the_writer(tmp_path):
+    if os.geteuid() == 0:
+        # root writes anywhere: make the path a file instead (ENOTDIR / EEXIST), then fix it
+        blocked = tmp_path / 'logs'
+        blocked.write_text('x')
+    else:
+        blocked = tmp_path / 'logs'
+        blocked.mkdir()
+        blocked.chmod(0o500)
+    logger = SmartLogger(EveryNthModel({10}), str(blocked), 'json-xz', 5, 5, driving_topic='/odom',
+                         retry_period=0.05)
+    feed(logger, 100)
+    deadline = time.time() + 10
+    while logger.stats()['windows_held'] < 1 and time.time() < deadline:
+        time.sleep(0.02)
+    assert logger.stats()['windows_held'] == 1
+    if blocked.is_file():
+        blocked.unlink()
+    else:
+        blocked.chmod(0o775)
+    assert logger.close(30)
+    assert logger.stats()['windows_saved'] == 1 and len(log_format.window_files(str(blocked))) == 1
+
+
+def _nan(i, msg):
+    if i % 7 == 0:
+        msg.twist.twist.linear.x = float('nan')
+    if i % 11 == 0:
+        msg.pose.pose.position.x = float('inf')
+    if i % 13 == 0:
+        msg.twist.twist.angular.z = float('-inf')
+
+
+def _zero_stamps(i, msg):
+    if i % 5 == 0:
+        msg.header.stamp.secs = msg.header.stamp.nsecs = 0
+
+
+def _repeated_stamps(i, msg):
+    t = odom(i - i % 3).header.stamp
+    msg.header.stamp.secs, msg.header.stamp.nsecs = t.secs, t.nsecs
+
+
+@pytest.mark.parametrize('mutate', [_nan, _zero_stamps, _repeated_stamps], ids=['nan-inf', 'zero', 'repeated'])
+def test_bad_values_and_stamps_are_logged_not_fatal(mutate, tmp_path):
+    logger = SmartLogger(EveryNthModel({30, 90}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         background=False)
+    feed(logger, 300, mutate=mutate)
+    logger.close()
+    stats = logger.stats()
+    assert stats['write_errors'] == 0 and stats['messages_lost'] == 0 and stats['messages_seen'] == 300
+    for path in log_format.window_files(str(tmp_path)):
+        _, records = read_window(path)  # NaN/inf read back as written
+        for record in records:
+            if record.msg.header.seq % 7 == 0 and mutate is _nan:
+                assert math.isnan(record.msg.twist.twist.linear.x)
+
+
+def test_time_jumping_back_and_a_10x_burst(tmp_path):
+    logger = SmartLogger(EveryNthModel({30, 150, 260}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         background=False)
+    feed(logger, 120)          # 100 Hz
+    feed(logger, 120)          # the same stamps again: a bag loop
+    for i in range(240, 400):  # a burst at 1 kHz
+        msg = odom(0, t0=1432235498.0 + 2.4 + (i - 240) * 0.001)
+        msg.header.seq = i
+        logger.on_message('/odom', msg, msg.header.stamp.to_sec())
+    logger.close()
+    stats = logger.stats()
+    assert stats['time_resets'] == 1 and stats['write_errors'] == stats['messages_lost'] == 0
+    assert stats['windows_saved'] == 3
+
+
+def test_a_side_topic_changing_type_does_not_lose_the_window(tmp_path):
+    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         side_topics=None, background=False)
+    for i in range(100):
+        msg = odom(i)
+        logger.on_message('/odom', msg, msg.header.stamp.to_sec())
+        side = Imu() if i % 2 else odom(i)
+        side.header.stamp = msg.header.stamp
+        logger.on_message('/side', side, msg.header.stamp.to_sec())
+    logger.close()
+    stats = logger.stats()
+    assert stats['windows_saved'] == 1 and stats['messages_lost'] == 0, stats['last_error']
+    assert stats['messages_refused'] == 50 and 'sensor_msgs/Imu message refused' in stats['last_refused']
+    _, records = read_window(log_format.window_files(str(tmp_path))[0])
+    assert {r.msg._type for r in records if r.topic == '/side'} == {'nav_msgs/Odometry'}
+
+
+def test_wrong_message_type_on_the_driving_topic_is_refused(tmp_path):
+    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+                         background=False)
+    feed(logger, 50)
+    imu = Imu()
+    imu.header.stamp = odom(50).header.stamp
+    logger.on_message('/odom', imu, 0.0)
+    feed(logger, 50, start=51)
+    logger.close()
+    stats = logger.stats()
+    assert stats['messages_refused'] == 1 and 'nav_msgs/Odometry' in stats['last_refused']
+    assert stats['windows_saved'] == 1 and stats['messages_lost'] == 0

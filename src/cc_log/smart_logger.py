@@ -21,13 +21,14 @@ import queue
 import threading
 import time
 
+from . import disk_guard
 from . import features as features_mod
 from . import log_format
 from . import msg_codec
 from .spans import Span
 from .window_buffer import DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, Record, WindowBuffer
 
-__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'replay',
+__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC']
 
 DEFAULT_FORMAT = 'json-xz'
@@ -38,12 +39,18 @@ PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
 OPENED = 'opened'
 WRITTEN = 'written'
 FAILED = 'failed'
+DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (path, bytes)
+
+DEFAULT_RETRY_PERIOD = 2.0         # seconds between attempts to write windows held after a failure
+DEFAULT_MAX_HELD_MESSAGES = 50000  # messages of unwritten windows kept in memory; beyond, the oldest go
 
 Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error')
 Event.__doc__ = """What happened to a logging window.
 
-kind: OPENED (the classifier or a manual trigger opened a window), WRITTEN (the window file is on disk) or
-FAILED (writing it failed; ``error`` says why). stamp: of the message that triggered (the first trigger of
+kind: OPENED (the classifier or a manual trigger opened a window), WRITTEN (the window file is on disk),
+FAILED (writing it failed; ``error`` says why: once when a disk problem first keeps the window in memory to
+be retried, or when it is lost for good) or DELETED (``path``, an old window file, was deleted to stay within
+max_disk_mb; stamp, start and end are None). stamp: of the message that triggered (the first trigger of
 the window for WRITTEN and FAILED). reason: the first trigger's reason ('classifier',
 'manual'); score: the lowest classifier score of the window's triggers (NaN for manual triggers);
 threshold: the model's. start, end: header stamps (float s) of the first and last message (end is None for
@@ -72,6 +79,14 @@ class _Stats(object):
         self.classifier_seconds = 0.0
         self.classifier_max = 0.0
         self.anomalous = 0           # driving messages the classifier called anomalous
+        self.windows_held = 0        # windows kept in memory after a failed (or paused) write
+        self.messages_held = 0
+        self.write_retries = 0
+        self.windows_deleted = 0     # oldest window files deleted by the max_disk_mb quota
+        self.bytes_deleted = 0
+        self.last_deleted = ''
+        self.messages_refused = 0    # a message type other than the topic's (first seen / the model's)
+        self.last_refused = ''
 
 
 class SmartLogger(object):
@@ -82,7 +97,11 @@ class SmartLogger(object):
     (``'100'``) or durations (``'2s'``); driving_topic: the topic name ``on_message`` will be called with
     for the odometry; side_topics: other topic names to keep (messages of any topic not listed are ignored
     unless ``side_topics`` is None, which keeps every other topic); enabled: start enabled or paused;
-    background: write windows on a writer thread (True) or inline in the calling thread (False).
+    background: write windows on a writer thread (True) or inline in the calling thread (False);
+    max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period: seconds between attempts
+    to write windows that could not be written (disk full, unwritable directory, min_free_mb reached: they are
+    kept in memory, in order, up to max_held_messages messages; beyond, the oldest are dropped and counted as
+    lost).
 
     Thread-safe: ``on_message``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be called
     from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -90,7 +109,8 @@ class SmartLogger(object):
 
     def __init__(self, model, directory, fmt=DEFAULT_FORMAT, pre=DEFAULT_PRE, post=DEFAULT_POST,
                  driving_topic=DEFAULT_DRIVING_TOPIC, side_topics=(), max_window=DEFAULT_MAX_WINDOW,
-                 enabled=True, background=True):
+                 enabled=True, background=True, max_disk_mb=0, min_free_mb=0,
+                 retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES):
         self.model = model
         self.config = model.config
         self.threshold = float(model.threshold)
@@ -105,6 +125,14 @@ class SmartLogger(object):
         self.driving_topic = driving_topic
         self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
         self.background = bool(background)
+        # Disk limits and write failures: see disk_guard; unwritten windows wait in _held (writer only).
+        self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb)
+        self.retry_period = float(retry_period)
+        if not self.retry_period > 0:
+            raise ValueError('retry_period: %r must be > 0 seconds' % (retry_period,))
+        self.max_held_messages = int(max_held_messages)
+        self._held = collections.deque()  # [window, metadata, reported] oldest first
+        self._types = {}  # side topic -> its message type (the first seen)
         self._lock = threading.RLock()
         self._stats = _Stats()
         self._callbacks = []
@@ -146,6 +174,8 @@ class SmartLogger(object):
                 self._stats.messages_seen += 1
                 self._stats.raw_json_bytes += raw
             if not self._enabled:
+                return
+            if not self._type_ok(topic, msg):
                 return
             stamp = features_mod.stamp_of(msg, time.time() if stamp is None else stamp)
             record = Record(stamp, topic, msg)
@@ -198,6 +228,8 @@ class SmartLogger(object):
                 self._closed = True
                 if self._writer is not None:
                     self._queue.put(None)
+                else:
+                    self._retry_held(final=True)
         if self._writer is not None:
             self._writer.join(timeout)
             return not self._writer.is_alive()
@@ -230,6 +262,15 @@ class SmartLogger(object):
                 'classifier_max_us': s.classifier_max * 1e6,
                 'anomalous_messages': s.anomalous,
                 'time_resets': resets,
+                'windows_held': s.windows_held,
+                'messages_held': s.messages_held,
+                'write_retries': s.write_retries,
+                'disk_paused': self.guard.paused,
+                'windows_deleted': s.windows_deleted,
+                'bytes_deleted': s.bytes_deleted,
+                'last_deleted': s.last_deleted,
+                'messages_refused': s.messages_refused,
+                'last_refused': s.last_refused,
             }
         # Not in any window (outside every anomaly, or seen while paused).
         result['messages_dropped'] = (result['messages_seen'] - result['messages_kept'] - result['messages_queued']
@@ -238,6 +279,21 @@ class SmartLogger(object):
         return result
 
     # -- message path ---------------------------------------------------------------------------------
+
+    def _type_ok(self, topic, msg):
+        """Whether ``msg`` has the type of its topic (the model's for the driving topic, else the first type
+        seen there); other messages are counted as refused (one window file holds one type per topic)."""
+        msg_type = getattr(msg, '_type', type(msg).__name__)
+        if topic == self.driving_topic:
+            expected = self.config.topic_type
+        else:
+            expected = self._types.setdefault(topic, msg_type)
+        if msg_type == expected:
+            return True
+        with self._stats.lock:
+            self._stats.messages_refused += 1
+            self._stats.last_refused = '%s: %s message refused (the topic carries %s)' % (topic, msg_type, expected)
+        return False
 
     def _new_buffer(self):
         buffer = WindowBuffer(window=self.window, pre=self.pre, post=self.post, max_window=self.max_window)
@@ -329,39 +385,123 @@ class SmartLogger(object):
 
     def _write_loop(self):
         while True:
-            item = self._queue.get()
+            try:
+                item = self._queue.get(timeout=self.retry_period if self._held else None)
+            except queue.Empty:
+                self._retry_held()
+                continue
             try:
                 if item is None:
+                    self._retry_held(final=True)
                     return
                 self._write(*item)
             finally:
                 self._queue.task_done()
 
     def _write(self, window, metadata):
+        """Write a completed window; on a disk problem keep it in memory (in order) to retry later."""
+        self._retry_held()
+        if self._held:  # older windows still wait: keep the order
+            self._hold([window, metadata, False])
+            return
+        item = [window, metadata, False]
+        if not self._attempt(item, final=False):
+            self._hold(item)
+
+    def _attempt(self, item, final):
+        """Try to write a window once; True when it is on disk (or lost for good: bad content / final)."""
+        window, metadata, reported = item
         scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
         score = min(scores) if scores else float('nan')
         reason = metadata['reason']
         first = window.triggers[0].stamp if window.triggers else window.start
-        try:
-            path, nbytes = log_format.write_window(window, self.directory, self.format, metadata)
-        except (OSError, ValueError) as error:
+        allowed, why = self.guard.check()
+        retryable = True
+        if not allowed:
+            error = why
+        else:
+            try:
+                path, nbytes = log_format.write_window(window, self.directory, self.format, metadata)
+            except Exception as failure:  # OSError, ValueError, rosbag's exceptions: the writer must go on
+                error = str(failure) or type(failure).__name__
+                retryable = disk_guard.is_retryable(failure)
+            else:
+                with self._stats.lock:
+                    self._stats.windows_queued -= 1
+                    self._stats.messages_queued -= len(window)
+                    self._stats.windows_saved += 1
+                    self._stats.messages_kept += len(window)
+                    self._stats.stored_bytes += nbytes
+                self._emit(Event(WRITTEN, first, reason, score, self.threshold, window.start, window.end,
+                                 len(window), path, nbytes, ''))
+                self._enforce_quota(path)
+                return True
+        if allowed:
             with self._stats.lock:
-                self._stats.windows_queued -= 1
-                self._stats.messages_queued -= len(window)
-                self._stats.messages_lost += len(window)
-                self._stats.write_errors += 1
-                self._stats.last_error = str(error)
-            self._emit(Event(FAILED, first, reason, score, self.threshold, window.start, window.end, len(window),
-                             '', 0, str(error)))
-            return
+                if reported:
+                    self._stats.write_retries += 1
+                else:
+                    self._stats.write_errors += 1
+                self._stats.last_error = error
+        if retryable and not final:
+            if allowed and not reported:
+                item[2] = True
+                self._emit(Event(FAILED, first, reason, score, self.threshold, window.start, window.end,
+                                 len(window), '', 0, '%s (kept in memory; retrying every %g s)'
+                                 % (error, self.retry_period)))
+            return False
+        self._lose(item, error)
+        return True
+
+    def _lose(self, item, error):
+        window, metadata, reported = item
         with self._stats.lock:
             self._stats.windows_queued -= 1
             self._stats.messages_queued -= len(window)
-            self._stats.windows_saved += 1
-            self._stats.messages_kept += len(window)
-            self._stats.stored_bytes += nbytes
-        self._emit(Event(WRITTEN, first, reason, score, self.threshold, window.start, window.end, len(window),
-                         path, nbytes, ''))
+            self._stats.messages_lost += len(window)
+            self._stats.last_error = error
+        if not reported:
+            scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
+            first = window.triggers[0].stamp if window.triggers else window.start
+            self._emit(Event(FAILED, first, metadata['reason'], min(scores) if scores else float('nan'),
+                             self.threshold, window.start, window.end, len(window), '', 0, error))
+
+    def _hold(self, item):
+        """Keep an unwritten window in memory; beyond max_held_messages the oldest held windows are lost."""
+        self._held.append(item)
+        with self._stats.lock:
+            self._stats.windows_held += 1
+            self._stats.messages_held += len(item[0])
+        while len(self._held) > 1 and self._stats.messages_held > self.max_held_messages:
+            old = self._held.popleft()
+            with self._stats.lock:
+                self._stats.windows_held -= 1
+                self._stats.messages_held -= len(old[0])
+            self._lose(old, 'more than %d messages held in memory: the oldest unwritten window (%d messages) '
+                       'was dropped' % (self.max_held_messages, len(old[0])))
+
+    def _retry_held(self, final=False):
+        """Write held windows, oldest first, until one fails again (then they wait for the next period)."""
+        while self._held:
+            item = self._held[0]
+            if not self._attempt(item, final):
+                return
+            self._held.popleft()
+            with self._stats.lock:
+                self._stats.windows_held -= 1
+                self._stats.messages_held -= len(item[0])
+
+    def _enforce_quota(self, path):
+        if not self.guard.max_bytes:
+            return
+        for deleted in self.guard.enforce_quota(keep=path):
+            with self._stats.lock:
+                self._stats.windows_deleted += 1
+                self._stats.last_deleted = deleted
+            self._emit(Event(DELETED, None, 'max_disk_mb', float('nan'), self.threshold, None, None, 0, deleted, 0,
+                             'deleted to stay within max_disk_mb %g' % (self.guard.max_bytes / float(disk_guard.MB))))
+        with self._stats.lock:
+            self._stats.bytes_deleted = self.guard.deleted_bytes
 
     def _emit(self, event):
         for callback in self._callbacks:

@@ -25,6 +25,16 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~topics`` (list or space-separated string, default: none): other topics to keep.
   ``~enabled`` (bool, default: true): start logging, or start paused.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
+  ``~max_disk_mb`` (double, default: 0 = no quota): cc_log window files in ``~directory`` are kept within this
+  many MB (10^6 bytes) by deleting the oldest ones (only cc_log window files); each deletion is logged and
+  counted on /diagnostics.
+  ``~min_free_mb`` (double, default: 0 = off): below this much free space writing stops (ERROR on
+  /diagnostics), windows wait in memory (bounded) and are written when space returns.
+
+On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``) are recovered into window files or,
+when they cannot be, reported (logwarn and /diagnostics) and left in place: never deleted silently. A write
+that fails (disk full, directory not writable) is reported (ERROR on /diagnostics, a FAILED event) and the
+window is kept in memory and retried every few seconds.
 
 Subscriber callbacks only put the message on an intake queue; one feeder thread runs the classifier and
 the window buffer (``SmartLogger``), whose writer thread compresses and writes. Stamps are header stamps
@@ -44,6 +54,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
 from . import msg_codec
+from . import recovery
 from . import smart_logger
 from .directory import LoggingDirectory
 from .model import AnomalyModel, ModelError
@@ -58,6 +69,8 @@ DEFAULT_MAX_WINDOW = str(smart_logger.DEFAULT_MAX_WINDOW)
 DEFAULT_TOPICS = ()
 DEFAULT_ENABLED = True
 DEFAULT_DIAGNOSTIC_PERIOD = 1.0
+DEFAULT_MAX_DISK_MB = 0.0
+DEFAULT_MIN_FREE_MB = 0.0
 DISK_WARN_BYTES = 200 * 1000 ** 2   # diagnostics warn below this much free disk
 EXIT_BAD_CONFIG = 1                  # as cclog's bad input (2 is its command-line usage error)
 CLOSE_TIMEOUT = 60.0                 # seconds to wait at shutdown for the last windows to be written
@@ -133,6 +146,19 @@ def resolve_directory(value):
     return directory.path
 
 
+def recover_leftovers(directory):
+    """Recover crash leftovers in ``directory`` (see ``recovery``); log each; return the outcomes."""
+    outcomes = recovery.recover_directory(directory)
+    for outcome in outcomes:
+        if outcome.status == recovery.BUSY:
+            rospy.loginfo('leftover %s: %s', outcome.leftover, outcome.detail)
+        elif outcome.status == recovery.UNRECOVERABLE:
+            rospy.logwarn('crash leftover NOT recovered, kept: %s: %s', outcome.leftover, outcome.detail)
+        else:
+            rospy.logwarn('crash leftover %s: %s', outcome.leftover, outcome.detail)
+    return outcomes
+
+
 def fail(node_name, error):
     """Print the one-line configuration error and return the exit status."""
     sys.stderr.write('%s: %s\n' % (node_name, error))
@@ -201,7 +227,12 @@ class Intake(object):
                     self.dropped += 1
                     rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
                     continue
-                self.sink.on_message(topic, decoded, receipt.to_sec())
+                try:
+                    self.sink.on_message(topic, decoded, receipt.to_sec())
+                except Exception as error:  # a bad message must not stop the feeder (and so all logging)
+                    self.dropped += 1
+                    rospy.logerr_throttle(10.0, 'message of %s not handled: %s: %s'
+                                          % (topic, type(error).__name__, error))
             finally:
                 self.queue.task_done()
 
@@ -296,6 +327,9 @@ class SmartNode(object):
         rospy.loginfo('model: %s features, window %s, threshold %g', self.model.config.feature_set,
                       self.model.config.window, self.model.threshold)
         self.directory = resolve_directory(param('directory', ''))
+        self.leftovers = recover_leftovers(self.directory)
+        max_disk_mb = param_float('max_disk_mb', DEFAULT_MAX_DISK_MB)
+        min_free_mb = param_float('min_free_mb', DEFAULT_MIN_FREE_MB)
         fmt = param('format', DEFAULT_FORMAT)
         pre = param('pre', DEFAULT_PRE)
         post = param('post', DEFAULT_POST)
@@ -311,9 +345,11 @@ class SmartNode(object):
         try:
             self.logger = smart_logger.SmartLogger(
                 self.model, self.directory, fmt, pre, post, driving_topic=driving_topic,
-                side_topics=side_topics, max_window=max_window, enabled=enabled)
+                side_topics=side_topics, max_window=max_window, enabled=enabled, max_disk_mb=max_disk_mb,
+                min_free_mb=min_free_mb)
         except ValueError as error:
             raise ConfigError('~%s' % error)
+        self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
         self.intake = Intake(self.logger, DRIVING_TOPIC, driving_class, topics)
@@ -325,6 +361,9 @@ class SmartNode(object):
                       'enabled' if enabled else 'disabled until ~enable')
 
     def _publish_event(self, event):
+        if event.kind == smart_logger.DELETED:
+            rospy.logwarn('window file deleted (~max_disk_mb): %s', event.path)
+            return
         kind = {smart_logger.OPENED: self._event_class.OPENED, smart_logger.WRITTEN: self._event_class.WRITTEN,
                 smart_logger.FAILED: self._event_class.FAILED}[event.kind]
         msg = self._event_class(event=kind, reason=event.reason, score=event.score, threshold=event.threshold,
@@ -356,11 +395,36 @@ class SmartNode(object):
     def _status(self):
         stats = self.logger.stats()
         free = free_disk(self.directory)
+        guard = self.logger.guard
         level, message = DiagnosticStatus.OK, 'logging' if stats['enabled'] else 'disabled'
+        if stats['windows_deleted']:
+            message += '; %d oldest window files deleted to stay within ~max_disk_mb' % stats['windows_deleted']
+        if stats['messages_refused'] > self._refused:
+            self._refused = stats['messages_refused']
+            rospy.logwarn_throttle(10.0, stats['last_refused'])
         if free is not None and free < DISK_WARN_BYTES:
             level, message = DiagnosticStatus.WARN, 'low disk space: %d MB free' % (free // 1000 ** 2)
-        if stats['write_errors']:
-            level, message = DiagnosticStatus.ERROR, 'write errors: %s' % stats['last_error']
+        if stats['messages_refused']:
+            level, message = DiagnosticStatus.WARN, '%d messages of the wrong type refused (last: %s)' % (
+                stats['messages_refused'], stats['last_refused'])
+        unrecovered = [o for o in self.leftovers if o.status == recovery.UNRECOVERABLE]
+        if unrecovered:
+            level, message = DiagnosticStatus.WARN, '%d crash leftovers could not be recovered (kept): %s' % (
+                len(unrecovered), unrecovered[0].leftover)
+        if stats['write_errors'] and not stats['windows_held']:
+            level = DiagnosticStatus.ERROR if stats['messages_lost'] else DiagnosticStatus.WARN
+            message = 'write errors (%d, all retried and written): %s' % (stats['write_errors'], stats['last_error']) \
+                if not stats['messages_lost'] else 'write errors, %d messages lost: %s' % (
+                    stats['messages_lost'], stats['last_error'])
+        low = guard.min_free_bytes and free is not None and free < guard.min_free_bytes
+        if stats['windows_held'] or low or stats['disk_paused']:
+            level = DiagnosticStatus.ERROR
+            if low or stats['disk_paused']:
+                message = 'disk nearly full: %.1f MB free < ~min_free_mb %g: writing paused' % (
+                    (free or 0) / 1e6, guard.min_free_bytes / 1e6)
+            else:
+                message = 'cannot write: %s' % stats['last_error']
+            message += '; %d windows (%d messages) held in memory' % (stats['windows_held'], stats['messages_held'])
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('enabled', stats['enabled']),
@@ -383,6 +447,20 @@ class SmartNode(object):
             ('time resets', stats['time_resets']),
             ('directory', self.directory),
             ('free disk bytes', free if free is not None else 'unknown'),
+            ('windows held', stats['windows_held']),
+            ('messages held', stats['messages_held']),
+            ('write retries', stats['write_retries']),
+            ('writing paused', bool(low or stats['disk_paused'])),
+            ('max disk bytes', guard.max_bytes or 'no quota'),
+            ('min free bytes', guard.min_free_bytes or 'off'),
+            ('disk usage bytes', guard.usage()),
+            ('windows deleted (quota)', stats['windows_deleted']),
+            ('bytes deleted (quota)', stats['bytes_deleted']),
+            ('last deleted', stats['last_deleted']),
+            ('messages refused', stats['messages_refused']),
+            ('leftovers recovered', sum(1 for o in self.leftovers if o.status in (
+                recovery.COMPLETE, recovery.PARTIAL, recovery.DUPLICATE, recovery.EMPTY))),
+            ('leftovers unrecoverable', len(unrecovered)),
         ]
         return level, message, values
 
