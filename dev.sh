@@ -70,14 +70,15 @@ activate() {
 }
 
 run_tests() {
-  local results="$WS/build/test_results/cc_log"
-  rm -rf "$results" && mkdir -p "$results"
+  # catkin's run_tests empties build/test_results first, so the unit test results live beside it.
+  local unit="$WS/build/unit_test_results" rostests="$WS/build/test_results/cc_log"
+  rm -rf "$unit" && mkdir -p "$unit"
   log "unit tests (pytest, no roscore)"
-  (cd "$ROOT" && python3 -m pytest -q -p no:cacheprovider --junitxml="$results/pytest-unit.xml" test) || true
-  log "rostests (catkin run_tests)"
+  (cd "$ROOT" && python3 -m pytest -q -p no:cacheprovider --junitxml="$unit/pytest-unit.xml" test) || true
+  log "rostests and launch file checks (catkin run_tests)"
   (cd "$WS" && catkin_make run_tests -DPYTHON_EXECUTABLE=/usr/bin/python3 >"$WS/run_tests.log" 2>&1) || true
   grep -E "^\[ROSTEST\]|^ SUMMARY|^ \* RESULT|^ \* TESTS|^ \* ERRORS|^ \* FAILURES" "$WS/run_tests.log" >&2 || true
-  python3 "$ROOT/tools/test_summary.py" "$results"
+  python3 "$ROOT/tools/test_summary.py" "$unit" "$rostests"
 }
 
 main() {

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Tally JUnit XML results of the unit tests and rostests; print 'N passed, N failed'.
+"""Tally JUnit XML results below the given directories; print 'N passed, N failed, N skipped'.
 
 Exit status is non-zero when any test failed or errored, or when no test ran at all.
 """
@@ -33,7 +33,12 @@ def tally(directory):
 
 
 def main(argv):
-    passed, failed, skipped, failures = tally(argv[1])
+    passed = failed = skipped = 0
+    failures = []
+    for directory in argv[1:]:
+        counts = tally(directory)
+        passed, failed, skipped = passed + counts[0], failed + counts[1], skipped + counts[2]
+        failures += counts[3]
     for name in failures:
         print('FAILED %s' % name)
     if passed + failed == 0:
