@@ -416,7 +416,7 @@ def _command(plan, tau, v0, w0, v_nom, w_nom):
             return 0.0, plan['direction'] * plan['yaw_rate'], True
         phase = 2.0 * math.pi * tau / plan['period']
         return (plan['speed'] * math.sin(phase),
-                plan['direction'] * plan['yaw_rate'] * (1.0 if math.sin(1.5 * phase) >= 0 else -1.0), True)
+                plan['direction'] * plan['yaw_rate'] * (1.0 if math.cos(phase) >= 0 else -1.0), True)
     if kind == 'collision':
         f = max(0.0, 1.0 - tau / plan['stop_time'])
         return v0 * f, w0 * f, False
@@ -635,8 +635,8 @@ class Simulator(object):
         self._rng_anomaly = random.Random('%d:anomaly' % seed)
         noise = config.noise
         # sensor errors: wheel-scale errors, white noise, a slowly wandering yaw-rate bias (drift)
-        self._scale_v = self._rng_noise.gauss(0.0, 0.01 * noise)
-        self._scale_w = self._rng_noise.gauss(0.0, 0.02 * noise)
+        self._scale_v = _clamp(self._rng_noise.gauss(0.0, 0.01 * noise), -0.02 * noise, 0.02 * noise)
+        self._scale_w = _clamp(self._rng_noise.gauss(0.0, 0.02 * noise), -0.03 * noise, 0.03 * noise)
         self._bias_w = self._rng_noise.gauss(0.0, 3e-4 * noise)
         self._sigma_v = 0.004 * noise
         self._sigma_w = 0.008 * noise

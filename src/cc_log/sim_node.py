@@ -18,7 +18,7 @@ Parameters (each resolved value is logged once)
   ``~imu`` (bool, default false): also publish ``imu/data``.
   ``~minutes`` (double, default 0): how long to run; 0 = until shutdown. The node exits at the end.
   ``~truth_file`` (string, default: none): ground-truth JSON (as ``cc_log.sim.write_truth``), rewritten
-  whenever an anomaly ends and at shutdown.
+  whenever an anomaly ends (and at shutdown when one was cut short; its end is then the last stamp).
   ``~gap`` (double, default 20.0), ``~warmup`` (double, default 20.0): seconds of nominal driving between
   anomalies / before the first.
 
@@ -118,10 +118,11 @@ class SimNode(object):
         except rospy.ROSInterruptException:
             pass
         finally:
-            for sim_start, (kind, start) in sorted(self._open.items()):   # cut short by shutdown
-                self.truth.append(sim._truth_entry(kind, start, last if last is not None else start))
-            self._open.clear()
-            self._write_truth()
+            if self._open:   # anomalies cut short by the end of the run or shutdown
+                for sim_start, (kind, start) in sorted(self._open.items()):
+                    self.truth.append(sim._truth_entry(kind, start, last if last is not None else start))
+                self._open.clear()
+                self._write_truth()
         rospy.loginfo('%s: published %d odometry messages, %d anomalies', NODE_NAME, self.published,
                       len(self.truth))
 
