@@ -490,3 +490,28 @@ def test_float32_fields_written_short_and_read_back_exact(real_bag):
     assert back.scan_time == 0.10000000149011612 and serialized(back) == serialized(scan)
     assert msg_codec.short_float32(float('nan')) != msg_codec.short_float32(float('nan'))
     assert msg_codec.short_float32(3.4028234663852886e+38) == 3.4028235e+38
+
+
+@pytest.mark.parametrize('name', ['husky_outdoor_2015.bag', 'sequor_N2_anomalous_jerky_driving.bag',
+                                  'alfa_carbonZ_engine_failure.bag'])
+def test_row_json_bytes_counts_exactly_the_row_json(name):
+    import rosbag
+    counted = 0
+    with rosbag.Bag(real(name)) as bag:
+        for _, msg, _ in bag.read_messages():
+            assert msg_codec.row_json_bytes(msg) == len(msg_codec.row_json(msg).encode('utf-8')) + 1
+            counted += 1
+    assert counted > 1000
+
+
+def test_row_json_bytes_with_non_finite_and_int_values():
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import LaserScan
+    odom = Odometry()
+    odom.header.frame_id = 'odom "quoted" \u00e9'
+    odom.pose.pose.position.x = float('nan')
+    odom.pose.pose.position.y = 3  # an int in a float64 field is written as 3.0
+    odom.twist.covariance = [float('-inf')] + [0] * 35
+    scan = LaserScan(ranges=[1.5, float('inf'), 2], intensities=[])
+    for msg in (odom, scan, Odometry()):
+        assert msg_codec.row_json_bytes(msg) == len(msg_codec.row_json(msg).encode('utf-8')) + 1

@@ -152,8 +152,77 @@ def row_json(msg):
 
 def row_json_bytes(msg):
     """Bytes the message takes in the plain row-per-message JSON log: ``json.dumps`` of the row plus the
-    newline. This is the "raw" size every compression figure of cc_log is relative to."""
-    return len(row_json(msg).encode('utf-8')) + 1
+    newline. This is the "raw" size every compression figure of cc_log is relative to.
+
+    Counted without building the text (``len(row_json(msg)) + 1`` exactly, several times faster): the
+    smart logger counts every message it sees.
+    """
+    return _message_size(msg) + 1
+
+
+# -- row JSON size without the text ----------------------------------------------------------------------
+# json.dumps writes ', ' and ': ' separators, ASCII only, finite floats as repr(); a list of finite floats
+# or of ints has the same length as its Python repr. Anything else falls back to json.dumps of the value.
+
+_SIZERS = {}
+
+
+def _message_size(msg):
+    sizer = _SIZERS.get(type(msg))
+    if sizer is None:
+        fields = [(name, len(name) + 4, _field_size(slot_type))
+                  for name, slot_type in zip(msg.__slots__, msg._slot_types)]
+        overhead = 2 * len(fields) if fields else 2  # braces plus ', ' between fields
+
+        def sizer(value, fields=fields, overhead=overhead):
+            return overhead + sum(key + size(getattr(value, name)) for name, key, size in fields)
+        _SIZERS[type(msg)] = sizer
+    return sizer(msg)
+
+
+def _list_size(sizes):
+    return 2 * len(sizes) + sum(sizes) if sizes else 2
+
+
+def _float_size(value):
+    text = repr(float(value))
+    return len(text) if 'n' not in text else len(json.dumps(encode_float(float(value))))
+
+
+def _floats_size(values):
+    text = repr(list(map(float, values)))
+    return len(text) if 'n' not in text else len(json.dumps([encode_float(float(item)) for item in values]))
+
+
+def _time_size(value):
+    return 21 + len(str(int(value.secs))) + len(str(int(value.nsecs)))
+
+
+def _json_size(value):
+    return len(str(value)) if type(value) is int else len(json.dumps(value))
+
+
+def _field_size(slot_type):
+    base, is_array, _ = split_type(slot_type)
+    if not is_array:
+        if base in FLOAT_TYPES:
+            return _float_size
+        if base in TIME_TYPES:
+            return _time_size
+        if base in PRIMITIVE_TYPES:
+            return _json_size
+        return _message_size
+    if base in BYTES_TYPES:
+        return lambda value: 2 + 4 * ((len(value) + 2) // 3)  # base64 in quotes
+    if base in FLOAT_TYPES:
+        return _floats_size
+    if base in TIME_TYPES:
+        return lambda values: _list_size([_time_size(item) for item in values])
+    if base in INT_TYPES or base == 'bool':
+        return lambda values: len(repr(list(values))) if values else 2
+    if base in PRIMITIVE_TYPES:
+        return lambda values: len(json.dumps(list(values)))
+    return lambda values: _list_size([_message_size(item) for item in values])
 
 
 # -- message classes from definitions --------------------------------------------------------------------
