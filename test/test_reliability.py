@@ -142,6 +142,17 @@ def test_bag_cut_off_by_sigkill_is_reindexed_with_what_it_held(tmp_path):
     assert same(records, full[:len(records)])  # exactly the first messages, nothing invented
 
 
+def test_bag_killed_before_its_first_chunk_held_nothing_and_is_removed_with_a_report(tmp_path):
+    directory = str(tmp_path)
+    script = CRASHING_WRITER.format(test=os.path.join(ROOT, 'test'), directory=directory).replace('window(6000)',
+                                                                                                 'window(10)')
+    assert subprocess.call([sys.executable, '-c', script]) == -signal.SIGKILL
+    leftover, = recovery.scan(directory)
+    outcome, = recovery.recover_directory(directory)
+    assert outcome.status == recovery.EMPTY and 'holds no message' in outcome.detail
+    assert os.listdir(directory) == []
+
+
 def test_no_empty_leftover_while_encoding(tmp_path, monkeypatch):
     """json-xz is encoded before the temporary file exists: dying while encoding leaves nothing."""
     from cc_log import json_xz

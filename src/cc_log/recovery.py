@@ -11,7 +11,8 @@ leftover into a final window file with what it held:
 - ``partial``: a bag-lz4 file cut off while rosbag was writing chunks (no index): a copy is reindexed
   (rosbag's own reindex) and every message it still holds is written as a new window file named
   ``..._recovered`` with the original metadata plus ``"recovered": true``; the leftover is then removed.
-- ``empty``: a zero-byte leftover (nothing was written into it): removed, and reported.
+- ``empty``: a zero-byte leftover, or a bag that holds no message once reindexed (the writer was killed
+  before rosbag wrote its first chunk: the messages were only in its memory): removed, and reported.
 - ``unrecoverable``: anything else (a json-xz file cut off mid-write, garbage): left where it is, under
   its ``.tmp-`` name, and reported every time; it is never deleted.
 
@@ -102,6 +103,10 @@ def _publish(tmp, directory, base, extension):
     return final
 
 
+class _NoMessage(ValueError):
+    pass
+
+
 def _reindexed_records(path):
     """(metadata, records) from a bag cut off while being written: a copy is reindexed, the leftover is not
     touched. Raises ValueError when nothing can be read."""
@@ -127,7 +132,7 @@ def _reindexed_records(path):
             if not records:
                 raise ValueError('%s: cannot be reindexed (%s: %s)' % (path, type(error).__name__, error))
         if not records:
-            raise ValueError('%s: no message could be read back' % path)
+            raise _NoMessage('%s: holds no message (killed before rosbag wrote its first chunk)' % path)
         return metadata if isinstance(metadata, dict) else {}, records
     finally:
         if os.path.lexists(copy):
@@ -160,6 +165,9 @@ def recover(path):
         return Outcome(path, UNRECOVERABLE, '', 0, '%s; kept as it is' % reason)
     try:
         metadata, records = _reindexed_records(path)
+    except _NoMessage as error:
+        os.unlink(path)
+        return Outcome(path, EMPTY, '', 0, '%s: removed' % error)
     except ValueError as error:
         return Outcome(path, UNRECOVERABLE, '', 0, '%s; kept as it is' % error)
     from .window_buffer import LogWindow, Trigger
