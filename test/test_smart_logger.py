@@ -248,6 +248,34 @@ def test_manual_trigger_saves_pre_and_post(husky, tmp_path):
     assert events[0].reason == 'manual' and np.isnan(events[0].score)
 
 
+def test_onset_retrigger_keeps_only_the_onsets(husky, tmp_path):
+    """retrigger='onset': a run of anomalous scores triggers once, at its first message; a new run after a
+    nominal score triggers again (hysteresis at the threshold). The default ('every') extends the window
+    with every anomalous score."""
+    odom = [r for r in husky if r.topic == ODOM]
+    flags = set(range(100, 140)) | {150} | set(range(300, 330))  # 150: a new onset after 140..149 nominal
+    windows = {}
+    for rule in ('every', 'onset'):
+        model = ScriptedModel(flags)
+        directory = tmp_path / rule
+        logger = SmartLogger(model, str(directory), 'json-xz', PRE, POST, driving_topic=ODOM, retrigger=rule)
+        assert logger.retrigger == rule
+        feed(logger, odom, model)
+        assert logger.close(30)
+        assert logger.stats()['anomalous_messages'] == len(flags)  # every anomalous score is still counted
+        windows[rule] = [([r.stamp for r in f[2]], [t['stamp'] for t in f[1]['triggers']])
+                         for f in sorted(read_all(str(directory)), key=lambda f: f[2][0].stamp)]
+    stamps = [r.stamp for r in odom]
+    assert windows['every'] == [(stamps[90:161], [stamps[i] for i in sorted(flags) if i < 200]),
+                                (stamps[290:340], stamps[300:330])]
+    # onset: 100 opens 90..110; 150 (after nominal 140..149) opens 140..160; they do not touch: two files
+    assert windows['onset'] == [(stamps[90:111], [stamps[100]]), (stamps[140:161], [stamps[150]]),
+                                (stamps[290:311], [stamps[300]])]
+    with pytest.raises(ValueError, match='retrigger'):
+        SmartLogger(ScriptedModel(), str(tmp_path / 'bad'), 'json-xz', PRE, POST, driving_topic=ODOM,
+                    retrigger='sometimes')
+
+
 def test_time_jumping_back_restarts_the_buffer(husky, tmp_path):
     """A bag played twice (rosbag play -l): the second pass starts over instead of failing."""
     model = ScriptedModel()

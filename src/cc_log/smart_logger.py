@@ -29,10 +29,21 @@ from .spans import Span
 from .window_buffer import DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, Record, WindowBuffer
 
 __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay',
-           'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC']
+           'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
+           'RETRIGGER_MODES', 'DEFAULT_RETRIGGER']
 
 DEFAULT_FORMAT = 'json-xz'
 DEFAULT_DRIVING_TOPIC = 'odom'
+
+# Which anomalous scores trigger (open or extend a logging window):
+# - 'every': every driving message scored anomalous (the paper's rule). A feature window of W messages keeps
+#   scoring anomalous for up to W messages after the anomaly itself ended, so windows grow by that tail.
+# - 'onset': only the onset, i.e. a message scored anomalous after a message scored nominal (or the first
+#   score since the start / a restart): hysteresis at the threshold. While the score stays below the
+#   threshold nothing extends the window; a new crossing (the score went back above, then below again)
+#   triggers again.
+RETRIGGER_MODES = ('every', 'onset')
+DEFAULT_RETRIGGER = 'every'
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
 
@@ -98,10 +109,11 @@ class SmartLogger(object):
     for the odometry; side_topics: other topic names to keep (messages of any topic not listed are ignored
     unless ``side_topics`` is None, which keeps every other topic); enabled: start enabled or paused;
     background: write windows on a writer thread (True) or inline in the calling thread (False);
-    max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period: seconds between attempts
-    to write windows that could not be written (disk full, unwritable directory, min_free_mb reached: they are
-    kept in memory, in order, up to max_held_messages messages; beyond, the oldest are dropped and counted as
-    lost).
+    retrigger: ``'every'`` (default: every anomalous score triggers) or ``'onset'`` (only a crossing of the
+    threshold from nominal to anomalous triggers; see RETRIGGER_MODES); max_disk_mb, min_free_mb: disk limits
+    (0: off; see ``disk_guard``); retry_period: seconds between attempts to write windows that could not be
+    written (disk full, unwritable directory, min_free_mb reached: they are kept in memory, in order, up to
+    max_held_messages messages; beyond, the oldest are dropped and counted as lost).
 
     Thread-safe: ``on_message``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be called
     from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -109,8 +121,11 @@ class SmartLogger(object):
 
     def __init__(self, model, directory, fmt=DEFAULT_FORMAT, pre=DEFAULT_PRE, post=DEFAULT_POST,
                  driving_topic=DEFAULT_DRIVING_TOPIC, side_topics=(), max_window=DEFAULT_MAX_WINDOW,
-                 enabled=True, background=True, max_disk_mb=0, min_free_mb=0,
+                 enabled=True, background=True, retrigger=DEFAULT_RETRIGGER, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES):
+        if retrigger not in RETRIGGER_MODES:
+            raise ValueError('retrigger: %r is not one of %s' % (retrigger, ', '.join(RETRIGGER_MODES)))
+        self.retrigger = retrigger
         self.model = model
         self.config = model.config
         self.threshold = float(model.threshold)
@@ -305,6 +320,7 @@ class SmartLogger(object):
         self._features = features_mod.OdometryFeatures(self.config)
         self._recent = collections.deque()  # stamps of the newest driving message and the pre before it
         self._last_stamp = None
+        self._armed = True  # 'onset': the next anomalous score triggers (no anomalous score since a nominal one)
 
     def _add_driving(self, record):
         buffer = self._buffer
@@ -313,6 +329,7 @@ class SmartLogger(object):
         done = buffer.add(record, row)
         if buffer.resets != resets:  # time jumped backwards: the buffer started over
             self._recent.clear()
+            self._armed = True
         self._last_stamp = record.stamp
         self._note_recent(record.stamp)
         self._complete(done)
@@ -327,8 +344,11 @@ class SmartLogger(object):
                 self._stats.classifier_max = max(self._stats.classifier_max, elapsed)
                 if anomalous:
                     self._stats.anomalous += 1
-            if anomalous:
+            if anomalous and (self._armed or self.retrigger == 'every'):
                 self._trigger('classifier', float(score))
+            self._armed = not anomalous
+        else:
+            self._armed = True  # not scored (start, after a gap): the next anomalous score is an onset
 
     def _note_recent(self, stamp):
         recent = self._recent
@@ -509,7 +529,7 @@ class SmartLogger(object):
 
 
 def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
-           side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None):
+           side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None, retrigger=DEFAULT_RETRIGGER):
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
@@ -522,7 +542,7 @@ def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_P
     from .model import AnomalyModel
     model = AnomalyModel.load(model_path)
     logger = SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
-                         max_window=max_window)
+                         max_window=max_window, retrigger=retrigger)
     windows = []
     failures = []
 

@@ -1,0 +1,196 @@
+#!/usr/bin/env python3
+"""Tuning the demo and the defaults on the simulator, offline (no roscore): feature window, training
+minutes and stride, and the smart logger's retrigger rule, judged on whole runs with labelled anomalies.
+
+    cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
+    python3 bench/detection_sim_tuning.py                 # the grid below (a few minutes)
+    python3 bench/detection_sim_tuning.py --quick         # tiny run (smoke test)
+    python3 bench/detection_sim_tuning.py --windows 1s --train-minutes 8 --retrigger onset
+
+For every (feature window, training minutes, stride):
+
+1. training: a nominal simulated run (cc_log.sim.Simulator, seed ``--train-seed``, no anomalies, 100 Hz), its
+   sliding feature vectors one every ``stride`` messages computed as the smart logger computes them, then
+   ``learning.train`` on nominal vectors only (defaults: nu, gamma, held-out threshold) -- exactly what
+   ``demo.py`` does;
+2. test runs, each replayed message by message through ``SmartLogger`` (the class behind the live node and
+   ``cclog replay``; json-xz, pre/post 100 messages, IMU as a side topic), once per retrigger rule:
+   - ``run10``: 10 minutes, 6 anomalies (one of each type), seed ``--run-seed``, gap 20 s (the storage
+     target's run);
+   - ``demo``: the demo's live run offline: 2.5 minutes, 6 anomalies, gap 10 s, seed ``--demo-seed``, no
+     stamp jitter (as sim_bwibot publishes).
+3. windows vs the ground truth ({type, start, end}): an anomaly is caught when a classifier trigger of a saved
+   window falls in [start, end + feature window]; a window with no such trigger is a false window; kept =
+   messages in saved windows / messages seen; raw/stored = row-per-message JSON bytes of every message /
+   bytes of the window files.
+"""
+import argparse
+import collections
+import os
+import shutil
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+
+from cc_log import learning, log_format, msg_codec, sim, smart_logger  # noqa: E402
+from cc_log.features import FeatureConfig  # noqa: E402
+from cc_log.smart_logger import WRITTEN, SmartLogger  # noqa: E402
+
+
+class RawBytesCache(object):
+    """msg_codec.row_json_bytes of each test message, computed once per run and looked up by the
+    SmartLogger in every replay (the raw count is the same whatever the configuration; this only saves
+    re-encoding every message as JSON in each replay)."""
+
+    def __init__(self):
+        self.sizes = {}
+
+    def add(self, records):
+        for record in records:
+            self.sizes[id(record.msg)] = msg_codec.row_json_bytes(record.msg)
+
+    def __call__(self, msg):
+        size = self.sizes.get(id(msg))
+        return msg_codec.row_json_bytes(msg) if size is None else size
+
+SHORT = {'planning_failure': 'plan', 'collision': 'coll', 'sudden_acceleration': 'accel',
+         'excessive_twisting': 'twist', 'localization_jump': 'loc', 'wheels_slipping': 'slip'}
+
+
+def replay(model, records, directory, retrigger, pre, post):
+    """Feed records to a SmartLogger; return (stats, windows [{start, end, messages, bytes, triggers}])."""
+    os.makedirs(directory)
+    logger = SmartLogger(model, directory, 'json-xz', pre, post, driving_topic=sim.ODOM_TOPIC,
+                         side_topics=(sim.IMU_TOPIC,), retrigger=retrigger)
+    windows = []
+
+    def collect(event):
+        if event.kind == WRITTEN:
+            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
+                            'path': event.path, 'bytes': event.bytes})
+    logger.on_event(collect)
+    for record in records:
+        logger.on_message(record.topic, record.msg, record.stamp)
+    logger.close()
+    for window in windows:
+        meta, _ = log_format.read_window(window['path'])
+        window['triggers'] = [t['stamp'] for t in meta.get('triggers', [])]
+    shutil.rmtree(directory)
+    return logger.stats(), sorted(windows, key=lambda w: w['start'])
+
+
+def judge(truth, windows, reach):
+    """(caught types Counter, caught count, false windows, per-anomaly delays)."""
+    caught = collections.Counter()
+    delays = []
+    for entry in truth:
+        near = [t for w in windows for t in w['triggers'] if entry['start'] <= t <= entry['end'] + reach]
+        if near:
+            caught[entry['type']] += 1
+            delays.append(min(near) - entry['start'])
+    false = sum(1 for w in windows
+                if not any(e['start'] <= t <= e['end'] + reach for t in w['triggers'] for e in truth))
+    return caught, sum(caught.values()), false, delays
+
+
+class _CachedCodec(object):
+    """Stands in for the msg_codec module inside smart_logger: row_json_bytes from the cache."""
+
+    def __init__(self, cache):
+        self.row_json_bytes = cache
+
+
+def window_seconds(config, rate):
+    span = config.span
+    return span.seconds if span.is_duration else span.count / rate
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--windows', default='500,2s,1s', help='feature windows to compare (comma-separated)')
+    parser.add_argument('--train-minutes', default='8,16', help='nominal training minutes (comma-separated)')
+    parser.add_argument('--strides', default='10', help='messages between training vectors (comma-separated)')
+    parser.add_argument('--retrigger', default='every,onset', help='SmartLogger retrigger rules to compare')
+    parser.add_argument('--runs', default='run10,demo', help='test runs: run10, demo')
+    parser.add_argument('--pre', default='100')
+    parser.add_argument('--post', default='100')
+    parser.add_argument('--train-seed', type=int, default=7)
+    parser.add_argument('--run-seed', type=int, default=1)
+    parser.add_argument('--demo-seed', type=int, default=8)
+    parser.add_argument('--quick', action='store_true', help='tiny run: 2 training minutes, 1s window, demo run')
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.windows, args.train_minutes, args.strides, args.runs = '1s', '2', '10', 'demo'
+    windows = args.windows.split(',')
+    minutes_list = [float(m) for m in args.train_minutes.split(',')]
+    strides = [int(s) for s in args.strides.split(',')]
+    rules = args.retrigger.split(',')
+    run_specs = {
+        'run10': sim.SimConfig(seed=args.run_seed, minutes=10.0, anomalies=6, imu=True),
+        'demo': sim.SimConfig(seed=args.demo_seed, minutes=2.5, anomalies=6, gap=10.0, imu=True, jitter=0.0),
+    }
+    runs = [name for name in args.runs.split(',')]
+    started = time.time()
+    common.header('Simulator tuning: feature window, training, retrigger rule (smart logger replay)', [
+        'data: cc_log.sim BWIBot 100 Hz; training: nominal runs, seed %d, %s min; test runs: %s' % (
+            args.train_seed, args.train_minutes, '; '.join(
+                '%s = %g min, %d anomalies (one per type), gap %g s, seed %d, IMU side topic' % (
+                    name, run_specs[name].minutes, run_specs[name].anomalies, run_specs[name].gap,
+                    run_specs[name].seed) for name in runs)),
+        'smart logger: json-xz, pre %s, post %s' % (args.pre, args.post)])
+
+    tests = {}
+    cache = RawBytesCache()
+    for name in runs:
+        records, truth = common.sim_records(run_specs[name])
+        tests[name] = ([r for r in records if r.topic in (sim.ODOM_TOPIC, sim.IMU_TOPIC)], truth)
+        cache.add(tests[name][0])
+    smart_logger.msg_codec = _CachedCodec(cache)
+    training = {}
+    for minutes in minutes_list:
+        records, _ = common.sim_records(sim.SimConfig(seed=args.train_seed, minutes=minutes, anomalies=0))
+        training[minutes] = [r for r in records if r.topic == sim.ODOM_TOPIC]
+    print('simulated in %.0f s' % (time.time() - started))
+
+    rows = []
+    tmp = tempfile.mkdtemp(prefix='cc_log_tuning_')
+    try:
+        for window in windows:
+            config = FeatureConfig('motion', window)
+            reach = window_seconds(config, 100.0)
+            for minutes in minutes_list:
+                for stride in strides:
+                    _, X = common.window_vectors(training[minutes], sim.ODOM_TOPIC, config, stride=stride)
+                    with common.Timer() as timer:
+                        model, info = learning.train(X, config=config)
+                    for name in runs:
+                        records, truth = tests[name]
+                        for rule in rules:
+                            stats, saved = replay(model, records, os.path.join(tmp, 'w%d' % len(rows)), rule,
+                                                  args.pre, args.post)
+                            caught, n_caught, false, delays = judge(truth, saved, reach)
+                            by_type = ' '.join('%s%d' % (SHORT[k], caught[k]) for k in sim.ANOMALY_TYPES
+                                               if any(e['type'] == k for e in truth))
+                            rows.append([window, '%g' % minutes, stride, len(X), '%.1f' % timer.wall,
+                                         name, rule, '%d/%d' % (n_caught, len(truth)), by_type, false,
+                                         len(saved), '%.1f%%' % (100.0 * stats['messages_kept'] / stats['messages_seen']),
+                                         '%.0fx' % (stats['raw_json_bytes'] / max(1, stats['stored_bytes'])),
+                                         '%.2f' % (max(delays) if delays else float('nan'))])
+                            print('  done: window %s, %g min, stride %d, %s, %s  [%.0f s]' % (
+                                window, minutes, stride, name, rule, time.time() - started))
+                            sys.stdout.flush()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print()
+    common.table(['window', 'train min', 'stride', 'vectors', 'train s', 'run', 'retrigger', 'caught',
+                  'caught by type', 'false windows', 'windows', 'kept', 'raw/stored', 'max delay s'], rows,
+                 'Smart logger on simulated runs (caught: a trigger in [onset, end + feature window]):')
+    print('total %.0f s' % (time.time() - started))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
