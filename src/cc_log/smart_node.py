@@ -397,8 +397,6 @@ class SmartNode(object):
         free = free_disk(self.directory)
         guard = self.logger.guard
         level, message = DiagnosticStatus.OK, 'logging' if stats['enabled'] else 'disabled'
-        if stats['windows_deleted']:
-            message += '; %d oldest window files deleted to stay within ~max_disk_mb' % stats['windows_deleted']
         if stats['messages_refused'] > self._refused:
             self._refused = stats['messages_refused']
             rospy.logwarn_throttle(10.0, stats['last_refused'])
@@ -425,6 +423,8 @@ class SmartNode(object):
             else:
                 message = 'cannot write: %s' % stats['last_error']
             message += '; %d windows (%d messages) held in memory' % (stats['windows_held'], stats['messages_held'])
+        if stats['windows_deleted']:
+            message += '; %d oldest window files deleted to stay within ~max_disk_mb' % stats['windows_deleted']
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('enabled', stats['enabled']),

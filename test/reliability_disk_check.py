@@ -1,0 +1,193 @@
+#!/usr/bin/python3
+"""Test node of reliability_disk.test: the live smart node on a 2 MB tmpfs mounted by this test (root).
+
+1. ~max_disk_mb: windows keep coming; the oldest cc_log window files are deleted so the newest fit the quota;
+   /diagnostics says how many were deleted; a file that is not a cc_log window is never touched.
+2. ~min_free_mb: the disk is filled below the floor; writing stops, /diagnostics is ERROR ("disk nearly
+   full"), windows wait in memory; space returns (the filler is removed): they are written, nothing lost.
+3. ENOSPC during a write (no floor, the disk filled to the last byte): the node reports ERROR, keeps the
+   windows in memory and keeps running; space returns: they are written, nothing lost.
+
+Skipped, with the reason printed, when a tmpfs cannot be mounted (not root, no mount permission).
+"""
+import errno
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+
+import rospy
+import rostest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import rostest_fixtures as fx  # noqa: E402
+from reliability_crash_check import Streamer, make_model, status_values  # noqa: E402
+
+from cc_log import log_format  # noqa: E402
+
+PKG = 'cc_log'
+NODE = 'smart_logger_disk'
+SIZE = '2m'
+MOUNT_ERROR = None
+
+
+def mount_tmpfs(path):
+    """Mount a SIZE tmpfs at ``path``; None, or why it cannot be done."""
+    if os.geteuid() != 0:
+        return 'not root (a tmpfs mount needs root)'
+    try:
+        result = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=%s,mode=2775' % SIZE, 'tmpfs', path],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True,
+                                timeout=20)
+    except (OSError, subprocess.TimeoutExpired) as error:
+        return 'mount failed: %s' % error
+    if result.returncode:
+        return 'mount -t tmpfs failed: %s' % (result.stderr.strip() or result.returncode)
+    return None
+
+
+def fill(path, leave_bytes):
+    """A filler file that leaves about ``leave_bytes`` free (0: fill to ENOSPC)."""
+    status = os.statvfs(os.path.dirname(path))
+    free = status.f_bavail * status.f_frsize
+    size = max(0, free - leave_bytes)
+    with open(path, 'ab') as stream:
+        block = b'\0' * 65536
+        written = 0
+        try:
+            while written < size or not leave_bytes:
+                stream.write(block[:max(1, min(len(block), size - written))] if leave_bytes else block)
+                stream.flush()
+                written += len(block)
+        except OSError as error:
+            if error.errno != errno.ENOSPC:
+                raise
+
+
+class DiskTest(unittest.TestCase):
+
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node('reliability_disk_check')
+        cls.tmp = tempfile.mkdtemp(prefix='cc_log_disk_')
+        cls.disk = os.path.join(cls.tmp, 'disk')
+        os.makedirs(cls.disk)
+        cls.mount_error = mount_tmpfs(cls.disk)
+        if cls.mount_error:
+            sys.stdout.write('SKIPPED reliability_disk: %s\n' % cls.mount_error)
+            sys.stderr.write('SKIPPED reliability_disk: %s\n' % cls.mount_error)
+        cls.model = make_model(os.path.join(cls.tmp, 'model.json'), always=True)
+        cls.diagnostics = []
+        rospy.Subscriber('/diagnostics', DiagnosticArray, cls.diagnostics.append, queue_size=None)
+        cls.stream = Streamer('disk_odom', 'disk_imu')
+        cls.node = None
+
+    @classmethod
+    def tearDownClass(cls):
+        if not cls.mount_error:
+            subprocess.call(['umount', '-l', cls.disk])
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def setUp(self):
+        if self.mount_error:
+            self.skipTest(self.mount_error)
+
+    def tearDown(self):
+        if self.node is not None:
+            code, out, err = fx.stop(self.node)
+            self.output = out + err
+            type(self).node = None
+
+    def start(self, directory, *params):
+        del self.diagnostics[:]
+        type(self).node = fx.start('smart_logger.py', '__name:=' + NODE, 'odom:=disk_odom', '_topics:=disk_imu',
+                                   '_model:=' + self.model, '_directory:=' + directory, '_pre:=10', '_post:=10',
+                                   '_max_window:=300', '_diagnostic_period:=0.2', '_format:=json-xz',
+                                   '_max_disk_mb:=0', '_min_free_mb:=0', *params)  # private params persist
+        fx.wait_for(lambda: status_values(self.diagnostics, NODE)[0] is not None, 30, 'the smart node to start')
+        fx.wait_for(lambda: self.stream.connected() and fx.subscribed('/disk_imu', '/' + NODE), 30,
+                    'the smart node to subscribe')
+        time.sleep(0.5)
+
+    def status(self):
+        return status_values(self.diagnostics, NODE)
+
+    def wait_status(self, predicate, what, timeout=15):
+        fx.wait_for(lambda: predicate(*self.status()), timeout, what)
+        return self.status()
+
+    def test_1_quota_keeps_the_newest_windows(self):
+        directory = os.path.join(self.disk, 'quota')
+        os.makedirs(directory)
+        other = os.path.join(directory, 'notes.txt')
+        with open(other, 'wb') as stream:
+            stream.write(b'n' * 50000)
+        quota = 0.25  # MB
+        self.start(directory, '_format:=bag-lz4', '_max_disk_mb:=%g' % quota)
+        self.stream.publish(3.0, 1000.0)
+        level, message, values = self.wait_status(
+            lambda level, message, values: values.get('intake queue') == '0' and values.get('writer queue') == '0'
+            and int(values.get('windows deleted (quota)', 0)) > 0, 'windows deleted by the quota', 30)
+        files = log_format.window_files(directory)
+        sizes = [os.path.getsize(path) for path in files]
+        self.assertLessEqual(sum(sizes), quota * 1e6 + max(sizes))  # at most the newest window over
+        saved, deleted = int(values['windows saved']), int(values['windows deleted (quota)'])
+        self.assertEqual(len(files), saved - deleted)
+        self.assertIn('deleted to stay within ~max_disk_mb', message)
+        self.assertEqual(values['last deleted'] < files[0], True)  # the oldest went
+        self.assertTrue(os.path.exists(other))
+        for path in files:
+            log_format.read_window(path)
+
+    def test_2_min_free_pauses_and_resumes(self):
+        directory = os.path.join(self.disk, 'floor')
+        os.makedirs(directory)
+        filler = os.path.join(self.disk, 'filler_floor')
+        self.start(directory, '_min_free_mb:=0.6')
+        fill(filler, 300000)  # 0.3 MB left, under the 0.6 MB floor
+        self.stream.publish(1.5, 500.0)
+        level, message, values = self.wait_status(
+            lambda level, message, values: int(values.get('windows held', 0)) >= 2, 'windows held in memory')
+        self.assertEqual(level, DiagnosticStatus.ERROR)
+        self.assertIn('disk nearly full', message)
+        self.assertEqual(values['writing paused'], 'True')
+        self.assertEqual(log_format.window_files(directory), [])
+        os.unlink(filler)  # space returns
+        level, message, values = self.wait_status(
+            lambda level, message, values: values.get('windows held') == '0' and values.get('writer queue') == '0',
+            'the held windows to be written')
+        self.assertEqual(values['messages lost'], '0')
+        self.assertNotEqual(level, DiagnosticStatus.ERROR)
+        files = log_format.window_files(directory)
+        self.assertEqual(len(files), int(values['windows saved']))
+        self.assertGreaterEqual(len(files), 2)
+
+    def test_3_enospc_keeps_windows_and_the_node_running(self):
+        directory = os.path.join(self.disk, 'full')
+        os.makedirs(directory)
+        filler = os.path.join(self.disk, 'filler_full')
+        self.start(directory)
+        fill(filler, 0)  # to the last byte
+        self.stream.publish(1.5, 500.0)
+        level, message, values = self.wait_status(
+            lambda level, message, values: int(values.get('windows held', 0)) >= 2, 'windows held after ENOSPC')
+        self.assertEqual(level, DiagnosticStatus.ERROR)
+        self.assertIn('No space left on device', message)
+        self.assertIsNone(self.node.poll())
+        self.assertEqual([p for p in os.listdir(directory) if log_format.TMP_MARK in p], [])
+        os.unlink(filler)
+        level, message, values = self.wait_status(
+            lambda level, message, values: values.get('windows held') == '0' and values.get('writer queue') == '0',
+            'the held windows to be written after ENOSPC')
+        self.assertEqual(values['messages lost'], '0')
+        self.assertEqual(level, DiagnosticStatus.WARN)  # recovered write errors stay visible as a warning
+        self.assertEqual(len(log_format.window_files(directory)), int(values['windows saved']))
+        self.assertIsNone(self.node.poll())
+
+
+if __name__ == '__main__':
+    rostest.rosrun(PKG, 'reliability_disk', DiskTest)
