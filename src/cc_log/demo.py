@@ -31,7 +31,7 @@ DEFAULT_TRAIN_MINUTES = 8.0
 DEFAULT_LIVE_MINUTES = 2.5
 DEFAULT_ANOMALIES = 6
 DEFAULT_SEED = 7
-DEFAULT_WINDOW = '500'
+DEFAULT_WINDOW = '1s'     # bench/detection_sim_tuning.py: fewest false windows, smallest windows (tail <= 1 s)
 DEFAULT_STRIDE = '10'
 MASTER_TIMEOUT = 30.0
 
