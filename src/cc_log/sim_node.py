@@ -1,7 +1,8 @@
 """The simulated BWIBot node (``rosrun cc_log sim_bwibot.py``): odometry with labelled anomalies, live.
 
 Node name: ``sim_bwibot``. The robot, its floor and its anomalies are ``cc_log.sim``; this node publishes
-them in real time, stamped with the ROS clock (``rospy.Time.now()``: wall time when use_sim_time is off).
+them in real time (rospy.Rate), stamped with the simulator's clock, which starts at the ROS time
+(``rospy.Time.now()``) when the node starts.
 
 Published topics (relative names: push the node into a namespace or remap them)
   ``odom`` (nav_msgs/Odometry, frame ``odom`` -> ``base_link``): at ``~rate`` Hz, steady (rospy.Rate).
@@ -102,18 +103,18 @@ class SimNode(object):
         last = None
         try:
             while not rospy.is_shutdown() and not self.simulator.done:
-                now = rospy.Time.now()
-                for topic, _, msg in self.simulator.step():
+                # Stamps are the simulator's clock (started at the ROS time the node started, with the
+                # simulator's own small jitter), not the moment of publishing: a loaded machine would
+                # otherwise put its scheduling jitter into every velocity and acceleration.
+                for topic, stamp, msg in self.simulator.step():
                     if topic == sim.ODOM_TOPIC:
-                        msg.header.stamp = now
                         self.odom_pub.publish(msg)
                         self.published += 1
                     elif topic == sim.IMU_TOPIC:
-                        msg.header.stamp = now
                         self.imu_pub.publish(msg)
                     elif topic == sim.TRUTH_TOPIC:
-                        self._truth_event(json.loads(msg.data), now.to_sec())
-                last = now.to_sec()
+                        self._truth_event(json.loads(msg.data), stamp)
+                    last = stamp
                 rate.sleep()
         except rospy.ROSInterruptException:
             pass

@@ -22,6 +22,8 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~window`` (string, default: the model's): only checked against the model; a mismatch is an error.
   ``~pre``, ``~post`` (string, default: 100): messages (``100``) or seconds (``2s``) before / after.
   ``~max_window`` (string, default: 100000): longer windows are written in parts.
+  ``~retrigger`` (string, default: every): ``every`` anomalous score opens or extends a window, or only
+  the ``onset`` of an anomaly (the score must come back above the threshold before it triggers again).
   ``~topics`` (list or space-separated string, default: none): other topics to keep.
   ``~enabled`` (bool, default: true): start logging, or start paused.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
@@ -66,6 +68,7 @@ DEFAULT_FORMAT = smart_logger.DEFAULT_FORMAT
 DEFAULT_PRE = str(smart_logger.DEFAULT_PRE)
 DEFAULT_POST = str(smart_logger.DEFAULT_POST)
 DEFAULT_MAX_WINDOW = str(smart_logger.DEFAULT_MAX_WINDOW)
+DEFAULT_RETRIGGER = smart_logger.DEFAULT_RETRIGGER
 DEFAULT_TOPICS = ()
 DEFAULT_ENABLED = True
 DEFAULT_DIAGNOSTIC_PERIOD = 1.0
@@ -334,6 +337,7 @@ class SmartNode(object):
         pre = param('pre', DEFAULT_PRE)
         post = param('post', DEFAULT_POST)
         max_window = param('max_window', DEFAULT_MAX_WINDOW)
+        retrigger = param('retrigger', DEFAULT_RETRIGGER)
         topics = param_topics()
         enabled = param_bool('enabled', DEFAULT_ENABLED)
         period = param_float('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
@@ -346,7 +350,7 @@ class SmartNode(object):
             self.logger = smart_logger.SmartLogger(
                 self.model, self.directory, fmt, pre, post, driving_topic=driving_topic,
                 side_topics=side_topics, max_window=max_window, enabled=enabled, max_disk_mb=max_disk_mb,
-                min_free_mb=min_free_mb)
+                min_free_mb=min_free_mb, retrigger=retrigger)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         self._refused = 0
