@@ -16,8 +16,11 @@ when a window opens, is written or fails to be written.
 Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
 """
 import collections
+import json
 import math
+import operator
 import queue
+import struct
 import threading
 import time
 
@@ -30,7 +33,7 @@ from .window_buffer import DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, Record
 
 __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
-           'RETRIGGER_MODES', 'DEFAULT_RETRIGGER']
+           'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY']
 
 DEFAULT_FORMAT = 'json-xz'
 DEFAULT_DRIVING_TOPIC = 'odom'
@@ -44,6 +47,14 @@ DEFAULT_DRIVING_TOPIC = 'odom'
 #   triggers again.
 RETRIGGER_MODES = ('every', 'onset')
 DEFAULT_RETRIGGER = 'every'
+
+# How often the classifier scores the feature window (a Span): '1' = every driving message (the paper's rule),
+# 'N' = every N-th message, a duration such as '50ms' = at most one decision per 50 ms of message time (20
+# decisions/s: every 5th message at 100 Hz, every message at 10 Hz). Skipping saves the window vector and the
+# model on the skipped messages; an anomaly is still triggered at the message where it is detected (at most
+# one period late), and the window's pre part keeps the skipped messages before it.
+DEFAULT_CLASSIFY_EVERY = '50ms'
+_CLASSIFY_SLACK = 1e-5  # seconds: stamps 10 ms apart add up to 50 ms give or take float rounding
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
 
@@ -68,6 +79,154 @@ threshold: the model's. start, end: header stamps (float s) of the first and las
 OPENED). messages, path, bytes: the window's message count (all topics), file and size on disk (0, '' and 0
 until WRITTEN).
 """
+
+
+# -- raw row-JSON bytes, exactly, at a fraction of the cost ---------------------------------------------
+# ``msg_codec.row_json_bytes(msg)`` is the statistic's definition. Most of its cost is repr() of the floats of
+# fixed-size float arrays (covariances), which hardly ever change between messages. ``_RawBytes`` computes the
+# same number from a per-type plan: constant JSON overhead (names, braces, separators), scalar floats and ints
+# in one repr() each, fixed-size float arrays memoised by their exact bytes (struct, so -0.0 != 0.0), times and
+# strings as msg_codec sizes them. A type with a field it does not plan for, and any message holding a
+# non-finite float or an unexpected value type, is counted by ``msg_codec.row_json_bytes`` itself.
+# test_smart_logger_cost checks it equals msg_codec.row_json_bytes on every message of the real bags.
+
+_MEMO_LIMIT = 4096  # distinct array values / strings remembered per logger before the memo starts over
+
+
+class _Unplanned(Exception):
+    """The message type has a field kind the plan does not cover: use msg_codec.row_json_bytes."""
+
+
+class _RawBytes(object):
+    """``count(msg) == msg_codec.row_json_bytes(msg)`` (exact), cheaper on repeated covariances."""
+
+    def __init__(self):
+        self._plans = {}
+        self._arrays = {}
+        self._strings = {}
+
+    def count(self, msg):
+        plan = self._plans.get(type(msg), False)
+        if plan is False:
+            plan = self._plans[type(msg)] = self._make_plan(msg)
+        if plan is None:
+            return msg_codec.row_json_bytes(msg)
+        try:
+            size = self._size(plan, msg)
+        except (TypeError, ValueError, AttributeError, OverflowError, struct.error):
+            size = None
+        return msg_codec.row_json_bytes(msg) if size is None else size
+
+    def _make_plan(self, msg):
+        floats, ints, times, strings, arrays, blobs = [], [], [], [], [], []
+        try:
+            constant = self._walk(type(msg), '', floats, ints, times, strings, arrays, blobs)
+        except _Unplanned:
+            return None
+        getter = operator.attrgetter
+        return (constant + 1,  # + the newline
+                getter(*floats) if floats else None, len(floats),
+                getter(*ints) if ints else None, len(ints),
+                [getter(path) for path in times],
+                [getter(path) for path in strings],
+                [(getter(path), struct.Struct('<%dd' % length)) for path, length in arrays],
+                [getter(path) for path in blobs])
+
+    def _walk(self, cls, prefix, floats, ints, times, strings, arrays, blobs):
+        """Add the leaves of message class ``cls`` to the lists; return its constant JSON overhead."""
+        slots = list(getattr(cls, '__slots__', ()))
+        types = list(getattr(cls, '_slot_types', ()))
+        if len(slots) != len(types):
+            raise _Unplanned()
+        constant = 2 * len(slots) if slots else 2
+        for name, slot_type in zip(slots, types):
+            constant += len(name) + 4
+            path = prefix + name
+            base, is_array, length = msg_codec.split_type(slot_type)
+            if is_array:
+                if base in msg_codec.BYTES_TYPES:
+                    blobs.append(path)
+                elif base in msg_codec.FLOAT_TYPES and length:
+                    arrays.append((path, length))
+                else:
+                    raise _Unplanned()
+            elif base in msg_codec.FLOAT_TYPES:
+                floats.append(path)
+            elif base in msg_codec.TIME_TYPES:
+                times.append(path)
+            elif base == 'string':
+                strings.append(path)
+            elif base in msg_codec.INT_TYPES or base == 'bool':
+                ints.append(path)
+            elif base in msg_codec.PRIMITIVE_TYPES:
+                raise _Unplanned()
+            else:
+                sub = _slot_class(cls, name)
+                if sub is None:
+                    raise _Unplanned()
+                constant += self._walk(sub, path + '.', floats, ints, times, strings, arrays, blobs)
+        return constant
+
+    def _size(self, plan, msg):
+        constant, floats, nfloats, ints, nints, times, strings, arrays, blobs = plan
+        size = constant
+        if floats is not None:
+            values = floats(msg)
+            if nfloats == 1:
+                values = (values,)
+            text = repr(list(map(float, values)))
+            if 'n' in text:  # nan, inf: msg_codec writes them as strings
+                return None
+            size += len(text) - 2 * nfloats
+        if ints is not None:
+            values = ints(msg)
+            if nints == 1:
+                values = (values,)
+            for value in values:
+                if type(value) is not int and type(value) is not bool:
+                    return None
+            size += len(repr(list(values))) - 2 * nints  # 'True'/'False' are as long as 'true'/'false'
+        for getter in times:
+            value = getter(msg)
+            size += 21 + len(str(int(value.secs))) + len(str(int(value.nsecs)))
+        memo = self._strings
+        for getter in strings:
+            value = getter(msg)
+            known = memo.get(value)
+            if known is None:
+                if type(value) is not str:
+                    return None
+                if len(memo) >= _MEMO_LIMIT:
+                    memo.clear()
+                known = memo[value] = len(json.dumps(value))
+            size += known
+        memo = self._arrays
+        for getter, packer in arrays:
+            value = getter(msg)
+            key = packer.pack(*value)
+            known = memo.get(key)
+            if known is None:
+                text = repr(list(map(float, value)))
+                if 'n' in text:
+                    return None
+                if len(memo) >= _MEMO_LIMIT:
+                    memo.clear()
+                known = memo[key] = len(text)
+            size += known
+        for getter in blobs:
+            size += 2 + 4 * ((len(getter(msg)) + 2) // 3)
+        return size
+
+
+def _slot_class(cls, name):
+    """The message class of the nested field ``name`` of ``cls`` (from a default instance), or None."""
+    try:
+        value = getattr(cls(), name)
+    except Exception:
+        return None
+    if not hasattr(value, '__slots__') or not hasattr(value, '_slot_types'):
+        return None
+    return type(value)
 
 
 class _Stats(object):
@@ -113,7 +272,9 @@ class SmartLogger(object):
     threshold from nominal to anomalous triggers; see RETRIGGER_MODES); max_disk_mb, min_free_mb: disk limits
     (0: off; see ``disk_guard``); retry_period: seconds between attempts to write windows that could not be
     written (disk full, unwritable directory, min_free_mb reached: they are kept in memory, in order, up to
-    max_held_messages messages; beyond, the oldest are dropped and counted as lost).
+    max_held_messages messages; beyond, the oldest are dropped and counted as lost); classify_every: score
+    the feature window on every driving message (``'1'``), every N-th (``'N'``) or at most once per duration
+    (``'50ms'``, the default: see DEFAULT_CLASSIFY_EVERY).
 
     Thread-safe: ``on_message``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be called
     from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -122,7 +283,11 @@ class SmartLogger(object):
     def __init__(self, model, directory, fmt=DEFAULT_FORMAT, pre=DEFAULT_PRE, post=DEFAULT_POST,
                  driving_topic=DEFAULT_DRIVING_TOPIC, side_topics=(), max_window=DEFAULT_MAX_WINDOW,
                  enabled=True, background=True, retrigger=DEFAULT_RETRIGGER, max_disk_mb=0, min_free_mb=0,
-                 retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES):
+                 retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
+                 classify_every=DEFAULT_CLASSIFY_EVERY):
+        self.classify_every = Span.parse(classify_every, 'classify_every')
+        if self.classify_every.count == 0:
+            raise ValueError('classify_every: 0 messages; use 1 to classify every message')
         if retrigger not in RETRIGGER_MODES:
             raise ValueError('retrigger: %r is not one of %s' % (retrigger, ', '.join(RETRIGGER_MODES)))
         self.retrigger = retrigger
@@ -150,6 +315,7 @@ class SmartLogger(object):
         self._types = {}  # side topic -> its message type (the first seen)
         self._lock = threading.RLock()
         self._stats = _Stats()
+        self._raw = _RawBytes()
         self._callbacks = []
         self._enabled = bool(enabled)
         self._closed = False
@@ -181,10 +347,10 @@ class SmartLogger(object):
         time, used when the message has no non-zero header stamp (the current time when None too)."""
         if topic != self.driving_topic and self.side_topics is not None and topic not in self.side_topics:
             return
-        raw = msg_codec.row_json_bytes(msg)
         with self._lock:
             if self._closed:
                 raise ValueError('on_message: the logger is closed')
+            raw = self._raw.count(msg)  # == msg_codec.row_json_bytes(msg); its memo is not thread-safe
             with self._stats.lock:
                 self._stats.messages_seen += 1
                 self._stats.raw_json_bytes += raw
@@ -318,6 +484,10 @@ class SmartLogger(object):
             self._resets = 0
         self._buffer = buffer
         self._features = features_mod.OdometryFeatures(self.config)
+        self._window_rows = features_mod.FeatureWindow(self.config)  # the same rows as the buffer's window
+        self._clock = None       # newest driving stamp since the buffer (re)started: as WindowBuffer's
+        self._since_scored = None  # driving messages since the last score (None: score at the next chance)
+        self._scored_at = None     # stamp of the last score
         self._recent = collections.deque()  # stamps of the newest driving message and the pre before it
         self._last_stamp = None
         self._armed = True  # 'onset': the next anomalous score triggers (no anomalous score since a nominal one)
@@ -325,17 +495,26 @@ class SmartLogger(object):
     def _add_driving(self, record):
         buffer = self._buffer
         resets = buffer.resets
-        row = self._features.row(record.msg, record.stamp)
+        stamp = record.stamp
+        row = self._features.row_values(record.msg, stamp)
         done = buffer.add(record, row)
         if buffer.resets != resets:  # time jumped backwards: the buffer started over
             self._recent.clear()
             self._armed = True
-        self._last_stamp = record.stamp
-        self._note_recent(record.stamp)
+            self._window_rows.clear()
+            self._clock = None
+            self._since_scored = self._scored_at = None
+        # The ring-array window gets what WindowBuffer's feature window got: the row at the buffer's clock.
+        self._clock = stamp if self._clock is None or stamp > self._clock else self._clock
+        self._window_rows.add(self._clock, row)
+        self._last_stamp = stamp
+        self._note_recent(stamp)
         self._complete(done)
-        if buffer.feature_window_full and self._features.covers(self.window, record.stamp):
+        if buffer.feature_window_full and self._features.covers(self.window, stamp):
+            if not self._due(stamp):
+                return
             started = time.perf_counter()
-            vector = features_mod.window_vector(buffer.feature_rows(), self.config)
+            vector = self._window_rows.vector()
             anomalous, score = self.model.is_anomalous(vector)
             elapsed = time.perf_counter() - started
             with self._stats.lock:
@@ -349,6 +528,21 @@ class SmartLogger(object):
             self._armed = not anomalous
         else:
             self._armed = True  # not scored (start, after a gap): the next anomalous score is an onset
+            self._since_scored = self._scored_at = None  # score as soon as the window is whole again
+
+    def _due(self, stamp):
+        """Whether this driving message is scored (classify_every); counts the messages since the last."""
+        every = self.classify_every
+        if self._since_scored is not None:
+            self._since_scored += 1
+            if every.is_duration:
+                if stamp - self._scored_at < every.seconds - _CLASSIFY_SLACK and stamp >= self._scored_at:
+                    return False
+            elif self._since_scored < every.count:
+                return False
+        self._since_scored = 0
+        self._scored_at = stamp
+        return True
 
     def _note_recent(self, stamp):
         recent = self._recent
@@ -529,7 +723,8 @@ class SmartLogger(object):
 
 
 def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
-           side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None, retrigger=DEFAULT_RETRIGGER):
+           side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None, retrigger=DEFAULT_RETRIGGER,
+           classify_every=DEFAULT_CLASSIFY_EVERY):
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
@@ -542,7 +737,7 @@ def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_P
     from .model import AnomalyModel
     model = AnomalyModel.load(model_path)
     logger = SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
-                         max_window=max_window, retrigger=retrigger)
+                         max_window=max_window, retrigger=retrigger, classify_every=classify_every)
     windows = []
     failures = []
 
