@@ -87,13 +87,18 @@ class SimBwibotRate(unittest.TestCase):
                         'no anomaly ended on sim/anomaly: %s' % self.events)
         with self.lock:
             events = list(self.events)
-            odom = [m for a, m in self.odom]
         self.assertEqual([e['event'] for e in events][:2], ['start', 'end'])
         begin, end = events[0], events[1]
         self.assertEqual(begin['type'], end['type'])
         self.assertEqual(begin['start'], end['start'])
         self.assertLess(end['start'] + 1.0, end['end'])
-        inside = [m for m in odom if end['start'] <= m.header.stamp.to_sec() <= end['end']]
+        # the odometry of the tick that ended it is published right after the event: wait for it
+        self.assertTrue(self.wait(lambda: self.odom[-1][1].header.stamp.to_sec() > end['end'] + 0.05, 2.0))
+        with self.lock:
+            odom = [m for a, m in self.odom]
+        # from the message before the start (the first jump) to the one at the end (the jump back)
+        first = max(i for i, m in enumerate(odom) if m.header.stamp.to_sec() < end['start'])
+        inside = [m for m in odom[first:] if m.header.stamp.to_sec() <= end['end']]
         self.assertGreater(len(inside), 50)
         if end['type'] == 'localization_jump':
             jumps = [math.hypot(b.pose.pose.position.x - a.pose.pose.position.x,
