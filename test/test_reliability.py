@@ -331,7 +331,7 @@ class FlakyDisk(object):
 def test_disk_full_keeps_the_window_in_memory_and_writes_it_when_space_returns(code, tmp_path, monkeypatch):
     disk = FlakyDisk(monkeypatch, code)
     model = EveryNthModel({10, 60})
-    logger = SmartLogger(model, str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', retry_period=0.05)
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1', retry_period=0.05)
     events = []
     logger.on_event(events.append)
     feed(logger, 200)
@@ -358,7 +358,7 @@ def test_disk_full_keeps_the_window_in_memory_and_writes_it_when_space_returns(c
 
 def test_still_failing_at_close_counts_the_loss_once(tmp_path, monkeypatch):
     FlakyDisk(monkeypatch)
-    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          background=False)
     events = []
     logger.on_event(events.append)
@@ -372,7 +372,7 @@ def test_still_failing_at_close_counts_the_loss_once(tmp_path, monkeypatch):
 
 def test_memory_held_is_bounded_oldest_dropped_and_counted(tmp_path, monkeypatch):
     FlakyDisk(monkeypatch)
-    logger = SmartLogger(EveryNthModel({10, 40, 70, 100}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({10, 40, 70, 100}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          background=False, max_held_messages=25)
     feed(logger, 200)
     stats = logger.stats()
@@ -382,7 +382,7 @@ def test_memory_held_is_bounded_oldest_dropped_and_counted(tmp_path, monkeypatch
 
 def test_min_free_pauses_writing_with_windows_in_memory_and_resumes(tmp_path):
     statvfs = FakeStatvfs(free=1)
-    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          background=False, min_free_mb=1)
     logger.guard._statvfs = statvfs
     events = []
@@ -402,7 +402,7 @@ def test_quota_in_the_logger_deletes_oldest_and_says_so(tmp_path):
     other = tmp_path / 'keep.me'
     other.write_bytes(b'z' * 1000)
     flags = {10 + 40 * k for k in range(6)}
-    logger = SmartLogger(EveryNthModel(flags), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel(flags), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          background=False, max_disk_mb=0.0035)
     events = []
     logger.on_event(events.append)
@@ -426,7 +426,7 @@ def test_unwritable_directory_does_not_kill_the_writer(tmp_path):
         blocked = tmp_path / 'logs'
         blocked.mkdir()
         blocked.chmod(0o500)
-    logger = SmartLogger(EveryNthModel({10}), str(blocked), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({10}), str(blocked), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          retry_period=0.05)
     feed(logger, 100)
     deadline = time.time() + 10
@@ -462,7 +462,7 @@ def _repeated_stamps(i, msg):
 
 @pytest.mark.parametrize('mutate', [_nan, _zero_stamps, _repeated_stamps], ids=['nan-inf', 'zero', 'repeated'])
 def test_bad_values_and_stamps_are_logged_not_fatal(mutate, tmp_path):
-    logger = SmartLogger(EveryNthModel({30, 90}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({30, 90}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          background=False)
     feed(logger, 300, mutate=mutate)
     logger.close()
@@ -476,7 +476,7 @@ def test_bad_values_and_stamps_are_logged_not_fatal(mutate, tmp_path):
 
 
 def test_time_jumping_back_and_a_10x_burst(tmp_path):
-    logger = SmartLogger(EveryNthModel({30, 150, 260}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({30, 150, 260}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          background=False)
     feed(logger, 120)          # 100 Hz
     feed(logger, 120)          # the same stamps again: a bag loop
@@ -491,7 +491,7 @@ def test_time_jumping_back_and_a_10x_burst(tmp_path):
 
 
 def test_a_side_topic_changing_type_does_not_lose_the_window(tmp_path):
-    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          side_topics=None, background=False)
     for i in range(100):
         msg = odom(i)
@@ -508,7 +508,7 @@ def test_a_side_topic_changing_type_does_not_lose_the_window(tmp_path):
 
 
 def test_wrong_message_type_on_the_driving_topic_is_refused(tmp_path):
-    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom',
+    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
                          background=False)
     feed(logger, 50)
     imu = Imu()
