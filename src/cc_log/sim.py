@@ -969,10 +969,10 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
     seconds apart; types that need a moving robot start where it drives (>= 0.3 m/s when it can).
 
     Inside an anomaly the twist follows the model plus the recording's own noise (the residual of the
-    recorded twist around its 0.5 s moving average, scaled down when the model is slower), the pose is integrated from that twist; then the
-    base gets back to the recorded speed within its limits and the pose blends smoothly back onto the
-    recorded track (at most ~0.8 m/s faster or slower than recorded), so every message from ``end`` on is the recorded
-    one. Modified messages are copies; the input is not changed.
+    recorded twist around its 0.5 s moving average, scaled down when the model is slower), and the pose is
+    integrated from that twist; then the base gets back to the recorded speed within its limits and the
+    pose blends smoothly back onto the recorded track (at most ~0.8 m/s faster or slower than recorded),
+    so every message from ``end`` on is the recorded one. Modified messages are copies; the input is not changed.
 
     Returns ``(records, truth)``: a new list of records and [{'type', 'start', 'end'}]. Raises ValueError
     when the anomalies do not fit into the stream.
