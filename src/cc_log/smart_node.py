@@ -32,6 +32,11 @@ Parameters (defaults below as module constants; each resolved value is logged on
   counted on /diagnostics.
   ``~min_free_mb`` (double, default: 0 = off): below this much free space writing stops (ERROR on
   /diagnostics), windows wait in memory (bounded) and are written when space returns.
+  ``~classify_every`` (string, default: 50ms): score the feature window on every message (``1``), every N-th
+  (``N``) or at most once per duration (``50ms``: ~20 decisions/s); see smart_logger.DEFAULT_CLASSIFY_EVERY.
+  ``~intake_max_messages`` (int, default: 20000), ``~intake_max_mb`` (double, default: 64): bounds of the
+  intake queue; a message arriving when it is full is dropped and counted (``intake dropped (queue full)``
+  and ``messages lost`` on /diagnostics, WARN): never silently.
 
 On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``) are recovered into window files or,
 when they cannot be, reported (logwarn and /diagnostics) and left in place: never deleted silently. A write
@@ -43,11 +48,12 @@ the window buffer (``SmartLogger``), whose writer thread compresses and writes. 
 (receipt time for messages without one), so ``use_sim_time`` and ``rosbag play --clock`` work, and time
 jumping backwards (a bag played again) restarts the buffer instead of failing.
 """
+import collections
 import math
 import os
-import queue
 import sys
 import threading
+import time
 
 import genpy
 import roslib.message
@@ -77,6 +83,10 @@ DEFAULT_MIN_FREE_MB = 0.0
 DISK_WARN_BYTES = 200 * 1000 ** 2   # diagnostics warn below this much free disk
 EXIT_BAD_CONFIG = 1                  # as cclog's bad input (2 is its command-line usage error)
 CLOSE_TIMEOUT = 60.0                 # seconds to wait at shutdown for the last windows to be written
+DEFAULT_CLASSIFY_EVERY = smart_logger.DEFAULT_CLASSIFY_EVERY
+DEFAULT_INTAKE_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
+DEFAULT_INTAKE_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
+FEED_BATCH_DELAY = 0.01              # seconds the feeder lets messages gather before draining them in a batch
 
 
 class ConfigError(ValueError):
@@ -170,18 +180,61 @@ def fail(node_name, error):
 
 # -- message intake (shared with collect_node) ----------------------------------------------------------
 
+class IntakeQueue(object):
+    """The bounded intake queue: at most ``max_messages`` messages and ``max_bytes`` serialized bytes.
+
+    ``put`` returns False (and counts ``overflowed``) when the message does not fit; ``take_all`` waits for
+    messages and returns every queued item at once (oldest first). ``qsize()`` as queue.Queue's.
+    """
+
+    def __init__(self, max_messages, max_bytes):
+        self.max_messages = int(max_messages)
+        self.max_bytes = int(max_bytes)
+        self.overflowed = 0
+        self.bytes = 0
+        self._items = collections.deque()
+        self._ready = threading.Condition(threading.Lock())
+
+    def qsize(self):
+        return len(self._items)
+
+    def put(self, item, size=0, force=False):
+        with self._ready:
+            if not force and (len(self._items) >= self.max_messages or self.bytes + size > self.max_bytes):
+                self.overflowed += 1
+                return False
+            self._items.append((item, size))
+            self.bytes += size
+            if len(self._items) == 1:
+                self._ready.notify()
+            return True
+
+    def take_all(self):
+        with self._ready:
+            while not self._items:
+                self._ready.wait()
+            items, self._items = self._items, collections.deque()
+            self.bytes = 0
+        return [item for item, _ in items]
+
+
 class Intake(object):
     """Subscribers that only enqueue; one feeder thread hands messages to ``sink.on_message`` in arrival
-    order. The driving topic is typed; other topics arrive as rospy.AnyMsg and are deserialized on the
-    feeder thread (their class from the publisher's type, or built from its message definition)."""
+    order, draining the queue in batches. Every topic (the driving one too) arrives as rospy.AnyMsg, i.e.
+    serialized bytes, and is deserialized on the feeder thread (its class from the publisher's type, or
+    built from its message definition). The queue is bounded (``max_messages``, ``max_bytes``): a message
+    arriving when it is full is dropped and counted in ``overflowed`` (and in ``dropped``, which also counts
+    messages that could not be decoded or handled)."""
 
-    def __init__(self, sink, driving_topic, driving_class, side_topics):
+    def __init__(self, sink, driving_topic, driving_class, side_topics, max_messages=DEFAULT_INTAKE_MAX_MESSAGES,
+                 max_bytes=int(DEFAULT_INTAKE_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY):
         self.sink = sink
-        self.queue = queue.Queue()   # unbounded: a slow classifier delays messages, never drops them
-        self.dropped = 0             # side messages that could not be deserialized
-        self._classes = {}
+        self.queue = IntakeQueue(max_messages, max_bytes)
+        self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
+        self.batch_delay = float(batch_delay)
+        self._classes = {driving_class._type: driving_class}
         self.driving_topic = rospy.resolve_name(driving_topic)
-        self.subscribers = [rospy.Subscriber(self.driving_topic, driving_class, self._enqueue, self.driving_topic,
+        self.subscribers = [rospy.Subscriber(self.driving_topic, rospy.AnyMsg, self._enqueue, self.driving_topic,
                                              queue_size=None)]
         self.side_topics = []
         for topic in side_topics:
@@ -198,9 +251,17 @@ class Intake(object):
         self._thread.daemon = True
         self._thread.start()
 
+    @property
+    def overflowed(self):
+        """Messages dropped because the intake queue was full."""
+        return self.queue.overflowed
+
     def _enqueue(self, msg, topic):
-        # Cheap: note the receipt time and queue the message; decoding happens on the feeder thread.
-        self.queue.put((topic, msg, rospy.get_rostime()))
+        # Cheap: note the receipt time and queue the serialized message; decoding happens on the feeder thread.
+        if not self.queue.put((topic, msg, rospy.get_rostime()), len(getattr(msg, '_buff', b'') or b'')):
+            self.dropped += 1
+            rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'
+                                   % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
 
     def _decode(self, msg):
         if not isinstance(msg, rospy.AnyMsg):
@@ -219,31 +280,33 @@ class Intake(object):
 
     def _feed(self):
         while True:
-            item = self.queue.get()
-            try:
+            batch = self.queue.take_all()
+            for item in batch:
                 if item is None:
                     return
-                topic, msg, receipt = item
-                try:
-                    decoded = self._decode(msg)
-                except (genpy.DeserializationError, ValueError) as error:
-                    self.dropped += 1
-                    rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
-                    continue
-                try:
-                    self.sink.on_message(topic, decoded, receipt.to_sec())
-                except Exception as error:  # a bad message must not stop the feeder (and so all logging)
-                    self.dropped += 1
-                    rospy.logerr_throttle(10.0, 'message of %s not handled: %s: %s'
-                                          % (topic, type(error).__name__, error))
-            finally:
-                self.queue.task_done()
+                self._feed_one(*item)
+            if self.batch_delay > 0:
+                time.sleep(self.batch_delay)  # let messages gather: one wake-up per batch, not per message
+
+    def _feed_one(self, topic, msg, receipt):
+        try:
+            decoded = self._decode(msg)
+        except (genpy.DeserializationError, ValueError, TypeError) as error:
+            self.dropped += 1
+            rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
+            return
+        try:
+            self.sink.on_message(topic, decoded, receipt.secs + 1e-9 * receipt.nsecs)
+        except Exception as error:  # a bad message must not stop the feeder (and so all logging)
+            self.dropped += 1
+            rospy.logerr_throttle(10.0, 'message of %s not handled: %s: %s'
+                                  % (topic, type(error).__name__, error))
 
     def stop(self):
         """Stop listening, feed what is queued, and wait for the feeder."""
         for subscriber in self.subscribers:
             subscriber.unregister()
-        self.queue.put(None)
+        self.queue.put(None, force=True)
         self._thread.join()
 
 
@@ -341,6 +404,9 @@ class SmartNode(object):
         topics = param_topics()
         enabled = param_bool('enabled', DEFAULT_ENABLED)
         period = param_float('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        classify_every = param('classify_every', DEFAULT_CLASSIFY_EVERY)
+        intake_max_messages = param_float('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES, minimum=1)
+        intake_max_mb = param_float('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
         driving_class = roslib.message.get_message_class(self.model.config.topic_type)
         if driving_class is None:
             raise ConfigError('~model: message type %s is not installed' % self.model.config.topic_type)
@@ -350,13 +416,14 @@ class SmartNode(object):
             self.logger = smart_logger.SmartLogger(
                 self.model, self.directory, fmt, pre, post, driving_topic=driving_topic,
                 side_topics=side_topics, max_window=max_window, enabled=enabled, max_disk_mb=max_disk_mb,
-                min_free_mb=min_free_mb, retrigger=retrigger)
+                min_free_mb=min_free_mb, retrigger=retrigger, classify_every=classify_every)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
-        self.intake = Intake(self.logger, DRIVING_TOPIC, driving_class, topics)
+        self.intake = Intake(self.logger, DRIVING_TOPIC, driving_class, topics, max_messages=int(intake_max_messages),
+                             max_bytes=int(intake_max_mb * 1000 ** 2))
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~enable', SetBool, self._enable)]
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
@@ -429,6 +496,10 @@ class SmartNode(object):
             message += '; %d windows (%d messages) held in memory' % (stats['windows_held'], stats['messages_held'])
         if stats['windows_deleted']:
             message += '; %d oldest window files deleted to stay within ~max_disk_mb' % stats['windows_deleted']
+        overflowed = self.intake.overflowed
+        if overflowed:
+            level = max(level, DiagnosticStatus.WARN)
+            message += '; %d messages dropped: intake queue full (the node falls behind)' % overflowed
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('enabled', stats['enabled']),
@@ -447,6 +518,8 @@ class SmartNode(object):
             ('anomalous messages', stats['anomalous_messages']),
             ('writer queue', stats['queue_depth']),
             ('intake queue', self.intake.queue.qsize()),
+            ('intake dropped (queue full)', overflowed),
+            ('classify every', str(self.logger.classify_every)),
             ('write errors', stats['write_errors']),
             ('time resets', stats['time_resets']),
             ('directory', self.directory),
