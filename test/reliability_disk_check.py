@@ -158,8 +158,9 @@ class DiskTest(unittest.TestCase):
         self.assertEqual(log_format.window_files(directory), [])
         os.unlink(filler)  # space returns
         level, message, values = self.wait_status(
-            lambda level, message, values: values.get('windows held') == '0' and values.get('writer queue') == '0',
-            'the held windows to be written')
+            lambda level, message, values: values.get('windows held') == '0' and values.get('writer queue') == '0'
+            and values.get('intake queue') == '0' and len(log_format.window_files(directory)) == int(
+                values.get('windows saved', -1)), 'the held windows to be written')
         self.assertEqual(values['messages lost'], '0')
         self.assertNotEqual(level, DiagnosticStatus.ERROR)
         files = log_format.window_files(directory)
@@ -181,8 +182,9 @@ class DiskTest(unittest.TestCase):
         self.assertEqual([p for p in os.listdir(directory) if log_format.TMP_MARK in p], [])
         os.unlink(filler)
         level, message, values = self.wait_status(
-            lambda level, message, values: values.get('windows held') == '0' and values.get('writer queue') == '0',
-            'the held windows to be written after ENOSPC')
+            lambda level, message, values: values.get('windows held') == '0' and values.get('writer queue') == '0'
+            and values.get('intake queue') == '0' and len(log_format.window_files(directory)) == int(
+                values.get('windows saved', -1)), 'the held windows to be written after ENOSPC')
         self.assertEqual(values['messages lost'], '0')
         self.assertEqual(level, DiagnosticStatus.WARN)  # recovered write errors stay visible as a warning
         self.assertEqual(len(log_format.window_files(directory)), int(values['windows saved']))
