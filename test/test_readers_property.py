@@ -76,11 +76,7 @@ def canonical(recs):
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
-@pytest.mark.parametrize('fmt', [Format.BAG_LZ4, pytest.param(Format.JSON_XZ, marks=pytest.mark.xfail(
-    strict=True, reason='json_xz.document omits "order" when the sequence of sections matches the stamp merge '
-    'but one topic\'s own stamps go backwards: the reader then sorts that topic by stamp (order changed, '
-    'values intact). Fix in json_xz.document: write "order" unless the (stamp, section) sort of the records '
-    'is the identity'))])
+@pytest.mark.parametrize('fmt', [Format.BAG_LZ4, Format.JSON_XZ])
 @SETTINGS
 @given(recs=records())
 def test_any_records_round_trip_in_any_order(fmt, recs):

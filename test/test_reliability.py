@@ -248,8 +248,6 @@ def test_window_files_and_directories_group_writable_never_world_writable_even_w
         _group_writable_not_world(file_path, False)
 
 
-@pytest.mark.xfail(strict=True, reason='learning.write_vector (not owned here) creates vector files with '
-                   'open(): 0666 under umask 0; needs os.open(..., 0o664) + the world-bit strip of log_format')
 def test_feature_vector_files_never_world_writable_even_with_umask_0(tmp_path):
     from cc_log import learning
     from cc_log.features import FeatureConfig

@@ -122,15 +122,21 @@ def document(records, metadata):
     meta.setdefault('codec', CODEC)
     meta['layout'] = LAYOUT_VERSION
     doc = {'metadata': meta, 'topics': topics}
-    if order != _merged_order(records, index):
+    if not _merges_back(records, order):
         doc['order'] = order
     return doc
 
 
-def _merged_order(records, index):
-    """Section indexes in the order a reader merges sections: by stamp, then by section."""
-    keyed = sorted(range(len(records)), key=lambda i: (records[i].stamp, index[records[i].topic]))
-    return [index[records[i].topic] for i in keyed]
+def _merges_back(records, order):
+    """Whether a reader without ``order`` (merging sections by stamp, then section, then position in the
+    section) gets the records back in their own order."""
+    seen = {}
+    keys = []
+    for record, section in zip(records, order):
+        position = seen.get(section, 0)
+        seen[section] = position + 1
+        keys.append((record.stamp, section, position))
+    return all(a < b for a, b in zip(keys, keys[1:]))
 
 
 def encode(records, metadata, preset=DEFAULT_PRESET):
