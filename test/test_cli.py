@@ -488,3 +488,23 @@ def test_bad_window_files_and_option_values(replayed, trained, tmp_path):
     assert 'window' in fails('collect', replayed['bag'], '--topic', '/odom', '--out', tmp_path, '--window',
                              '-5', status=2)
     assert 'invalid choice' in fails('export', replayed['out'], '--to', 'xml', '--out', tmp_path, status=2)
+
+
+def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
+    from cc_log import log_format
+    from cc_log.window_buffer import LogWindow, Record, Trigger
+    import rosbag
+    with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
+        records = [Record(m.header.stamp.to_sec(), topic, m) for topic, m, _ in
+                   bag.read_messages(topics=['/husky_velocity_controller/odom'])][:50]
+    final, _ = log_format.write_window(LogWindow(records, [Trigger(records[0].stamp, 'test', -1.0)]),
+                                       str(tmp_path), 'json-xz')
+    leftover = final + '.tmp-999999999'  # as if its writer had been killed before the rename
+    os.rename(final, leftover)
+    result = ok_json('recover', tmp_path)
+    [outcome] = result['leftovers']
+    assert outcome['status'] == 'complete' and outcome['messages'] == 50
+    assert not os.path.exists(leftover)
+    _, back = log_format.read_window(outcome['path'])
+    assert [r.stamp for r in back] == [r.stamp for r in records]
+    assert ok_json('recover', tmp_path)['leftovers'] == []

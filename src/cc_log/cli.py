@@ -907,6 +907,29 @@ def cmd_simulate(args):
     return EXIT_OK
 
 
+def cmd_recover(args):
+    """Leftovers of a crash (``cc_log_*.tmp-<pid>``) turned back into window files, or reported."""
+    from . import recovery
+    outcomes = []
+    for path in args.paths:
+        if os.path.isdir(path):
+            outcomes.extend(recovery.recover_directory(path))
+        elif os.path.exists(path):
+            outcomes.append(recovery.recover(path))
+        else:
+            raise CommandError('%s: no such file or directory' % path)
+    if args.json:
+        _print_json({'leftovers': [outcome._asdict() for outcome in outcomes]})
+    else:
+        for outcome in outcomes:
+            target = ' -> %s (%d messages)' % (outcome.path, outcome.messages) if outcome.path else ''
+            print('%-13s %s%s: %s' % (outcome.status, outcome.leftover, target, outcome.detail))
+        if not outcomes:
+            print('no leftovers')
+    unrecoverable = [o for o in outcomes if o.status == recovery.UNRECOVERABLE]
+    return EXIT_BAD_INPUT if unrecoverable else EXIT_OK
+
+
 # -- parser -----------------------------------------------------------------------------------------------
 
 class _Parser(argparse.ArgumentParser):
@@ -1148,6 +1171,21 @@ def build_parser():
     p.add_argument('--force', action='store_true', help='overwrite an existing bag')
     _common(p)
     p.set_defaults(run=cmd_simulate)
+
+    p = commands.add_parser('recover', help='turn crash leftovers (*.tmp-<pid>) back into window files', **_help(
+        """
+        A logger killed while writing a window leaves cc_log_*.tmp-<pid>. recover gives a complete leftover
+        its final name, rebuilds a cut-off bag-lz4 window from what it held (..._recovered.bag), removes
+        empty leftovers and duplicates of final files, and reports the rest, which it keeps. The smart node
+        does the same at start. Exit status 1 when any leftover could not be recovered.
+        """,
+        """
+          cclog recover ~/.ros/cc_log
+          cclog recover ~/.ros/cc_log/cc_log_20150521T191138.027Z_classifier.bag.tmp-4242 --json
+        """))
+    p.add_argument('paths', nargs='+', metavar='DIR|FILE', help='window directories or leftover files')
+    _common(p)
+    p.set_defaults(run=cmd_recover)
     return parser
 
 
