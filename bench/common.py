@@ -189,13 +189,13 @@ def window_vectors(records, topic, config, stride=1):
 
 
 def smart_replay(model, records, driving_topic, directory, side_topics=(), fmt='json-xz', pre='100',
-                 post='100'):
+                 post='100', retrigger='every'):
     """Feed records to a SmartLogger (as ``cclog replay`` does, without the bag); return a dict:
     stats (SmartLogger.stats()), windows [{start, end, messages, path, bytes, triggers: [stamps]}]."""
     from cc_log import log_format
     from cc_log.smart_logger import SmartLogger, WRITTEN
     logger = SmartLogger(model, directory, fmt, pre, post, driving_topic=driving_topic,
-                         side_topics=tuple(side_topics))
+                         side_topics=tuple(side_topics), retrigger=retrigger)
     windows = []
 
     def collect(event):

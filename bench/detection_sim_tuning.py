@@ -35,26 +35,9 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import learning, log_format, msg_codec, sim, smart_logger  # noqa: E402
+from cc_log import learning, sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
-from cc_log.smart_logger import WRITTEN, SmartLogger  # noqa: E402
 
-
-class RawBytesCache(object):
-    """msg_codec.row_json_bytes of each test message, computed once per run and looked up by the
-    SmartLogger in every replay (the raw count is the same whatever the configuration; this only saves
-    re-encoding every message as JSON in each replay)."""
-
-    def __init__(self):
-        self.sizes = {}
-
-    def add(self, records):
-        for record in records:
-            self.sizes[id(record.msg)] = msg_codec.row_json_bytes(record.msg)
-
-    def __call__(self, msg):
-        size = self.sizes.get(id(msg))
-        return msg_codec.row_json_bytes(msg) if size is None else size
 
 SHORT = {'planning_failure': 'plan', 'collision': 'coll', 'sudden_acceleration': 'accel',
          'excessive_twisting': 'twist', 'localization_jump': 'loc', 'wheels_slipping': 'slip'}
@@ -63,23 +46,10 @@ SHORT = {'planning_failure': 'plan', 'collision': 'coll', 'sudden_acceleration':
 def replay(model, records, directory, retrigger, pre, post):
     """Feed records to a SmartLogger; return (stats, windows [{start, end, messages, bytes, triggers}])."""
     os.makedirs(directory)
-    logger = SmartLogger(model, directory, 'json-xz', pre, post, driving_topic=sim.ODOM_TOPIC,
-                         side_topics=(sim.IMU_TOPIC,), retrigger=retrigger)
-    windows = []
-
-    def collect(event):
-        if event.kind == WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
-                            'path': event.path, 'bytes': event.bytes})
-    logger.on_event(collect)
-    for record in records:
-        logger.on_message(record.topic, record.msg, record.stamp)
-    logger.close()
-    for window in windows:
-        meta, _ = log_format.read_window(window['path'])
-        window['triggers'] = [t['stamp'] for t in meta.get('triggers', [])]
+    result = common.smart_replay(model, records, sim.ODOM_TOPIC, directory, side_topics=(sim.IMU_TOPIC,),
+                                 pre=pre, post=post, retrigger=retrigger)
     shutil.rmtree(directory)
-    return logger.stats(), sorted(windows, key=lambda w: w['start'])
+    return result['stats'], result['windows']
 
 
 def judge(truth, windows, reach):
@@ -94,13 +64,6 @@ def judge(truth, windows, reach):
     false = sum(1 for w in windows
                 if not any(e['start'] <= t <= e['end'] + reach for t in w['triggers'] for e in truth))
     return caught, sum(caught.values()), false, delays
-
-
-class _CachedCodec(object):
-    """Stands in for the msg_codec module inside smart_logger: row_json_bytes from the cache."""
-
-    def __init__(self, cache):
-        self.row_json_bytes = cache
 
 
 def window_seconds(config, rate):
@@ -143,12 +106,9 @@ def main(argv=None):
         'smart logger: json-xz, pre %s, post %s' % (args.pre, args.post)])
 
     tests = {}
-    cache = RawBytesCache()
     for name in runs:
         records, truth = common.sim_records(run_specs[name])
         tests[name] = ([r for r in records if r.topic in (sim.ODOM_TOPIC, sim.IMU_TOPIC)], truth)
-        cache.add(tests[name][0])
-    smart_logger.msg_codec = _CachedCodec(cache)
     training = {}
     for minutes in minutes_list:
         records, _ = common.sim_records(sim.SimConfig(seed=args.train_seed, minutes=minutes, anomalies=0))
