@@ -211,7 +211,7 @@ def summarize(out, windows_dir, truth, recorder, window_seconds):
     lines.append('  windows (%d) in:         %s' % (len(windows), windows_dir))
     if windows:
         lines.append('  look at one:            rosrun cc_log cclog info %s' % windows[0]['path'])
-        lines.append('                          xz -dc %s | jq .cc_log' % windows[0]['path'])
+        lines.append('                          xz -dc %s | jq .metadata' % windows[0]['path'])
     png = os.path.join(out, 'timeline.png')
     plot(png, recorder.track, truth, windows)
     lines.append('  timeline:               %s' % png)
