@@ -15,7 +15,7 @@ def test_raw_bytes_equal_row_json_bytes_on_real_bags():
     bags = sorted(glob.glob(os.path.join(REAL, '**', '*.bag'), recursive=True))
     if not bags:
         pytest.skip('no real bags')
-    counter = smart_logger._RawBytes()
+    counter = msg_codec.RowJsonCounter()
     checked = 0
     for path in bags:
         with rosbag.Bag(path) as bag:
@@ -27,7 +27,7 @@ def test_raw_bytes_equal_row_json_bytes_on_real_bags():
 
 def test_raw_bytes_edge_values():
     from nav_msgs.msg import Odometry
-    counter = smart_logger._RawBytes()
+    counter = msg_codec.RowJsonCounter()
     msg = Odometry()
     msg.header.frame_id = 'odom \u00e9"\\'
     assert counter.count(msg) == msg_codec.row_json_bytes(msg)

@@ -34,6 +34,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 
 from . import sim
+from .smart_node import ConfigError, to_bool
 
 NODE_NAME = 'sim_bwibot'
 ODOM_TOPIC = 'odom'
@@ -41,10 +42,6 @@ IMU_TOPIC = 'imu/data'
 TRUTH_TOPIC = 'sim/anomaly'
 DEFAULTS = {'rate': 100.0, 'seed': 0, 'anomalies': 0, 'anomaly_types': 'all', 'imu': False, 'minutes': 0.0,
             'truth_file': '', 'gap': 20.0, 'warmup': 20.0}
-
-
-class ConfigError(ValueError):
-    """Bad configuration: one line naming the parameter."""
 
 
 def _param(name):
@@ -56,24 +53,13 @@ def _param(name):
     return value
 
 
-def _bool(name, value):
-    if isinstance(value, bool):
-        return value
-    text = str(value).strip().lower()
-    if text in ('true', '1', 'yes', 'on'):
-        return True
-    if text in ('false', '0', 'no', 'off'):
-        return False
-    raise ConfigError('~%s: %r is not true or false' % (name, value))
-
-
 def read_config(start_time):
     """(SimConfig, truth file or None) from the private parameters; ConfigError names the parameter."""
     values = dict((name, _param(name)) for name in sorted(DEFAULTS))
     try:
         config = sim.SimConfig(rate=values['rate'], seed=values['seed'], minutes=values['minutes'],
                                anomalies=values['anomalies'], anomaly_types=values['anomaly_types'],
-                               imu=_bool('imu', values['imu']), start_time=start_time, gap=values['gap'],
+                               imu=to_bool('imu', values['imu']), start_time=start_time, gap=values['gap'],
                                warmup=values['warmup'], jitter=0.0).validate()
     except ConfigError:
         raise

@@ -16,11 +16,8 @@ when a window opens, is written or fails to be written.
 Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
 """
 import collections
-import json
 import math
-import operator
 import queue
-import struct
 import threading
 import time
 
@@ -79,154 +76,6 @@ threshold: the model's. start, end: header stamps (float s) of the first and las
 OPENED). messages, path, bytes: the window's message count (all topics), file and size on disk (0, '' and 0
 until WRITTEN).
 """
-
-
-# -- raw row-JSON bytes, exactly, at a fraction of the cost ---------------------------------------------
-# ``msg_codec.row_json_bytes(msg)`` is the statistic's definition. Most of its cost is repr() of the floats of
-# fixed-size float arrays (covariances), which hardly ever change between messages. ``_RawBytes`` computes the
-# same number from a per-type plan: constant JSON overhead (names, braces, separators), scalar floats and ints
-# in one repr() each, fixed-size float arrays memoised by their exact bytes (struct, so -0.0 != 0.0), times and
-# strings as msg_codec sizes them. A type with a field it does not plan for, and any message holding a
-# non-finite float or an unexpected value type, is counted by ``msg_codec.row_json_bytes`` itself.
-# test_smart_logger_cost checks it equals msg_codec.row_json_bytes on every message of the real bags.
-
-_MEMO_LIMIT = 4096  # distinct array values / strings remembered per logger before the memo starts over
-
-
-class _Unplanned(Exception):
-    """The message type has a field kind the plan does not cover: use msg_codec.row_json_bytes."""
-
-
-class _RawBytes(object):
-    """``count(msg) == msg_codec.row_json_bytes(msg)`` (exact), cheaper on repeated covariances."""
-
-    def __init__(self):
-        self._plans = {}
-        self._arrays = {}
-        self._strings = {}
-
-    def count(self, msg):
-        plan = self._plans.get(type(msg), False)
-        if plan is False:
-            plan = self._plans[type(msg)] = self._make_plan(msg)
-        if plan is None:
-            return msg_codec.row_json_bytes(msg)
-        try:
-            size = self._size(plan, msg)
-        except (TypeError, ValueError, AttributeError, OverflowError, struct.error):
-            size = None
-        return msg_codec.row_json_bytes(msg) if size is None else size
-
-    def _make_plan(self, msg):
-        floats, ints, times, strings, arrays, blobs = [], [], [], [], [], []
-        try:
-            constant = self._walk(type(msg), '', floats, ints, times, strings, arrays, blobs)
-        except _Unplanned:
-            return None
-        getter = operator.attrgetter
-        return (constant + 1,  # + the newline
-                getter(*floats) if floats else None, len(floats),
-                getter(*ints) if ints else None, len(ints),
-                [getter(path) for path in times],
-                [getter(path) for path in strings],
-                [(getter(path), struct.Struct('<%dd' % length)) for path, length in arrays],
-                [getter(path) for path in blobs])
-
-    def _walk(self, cls, prefix, floats, ints, times, strings, arrays, blobs):
-        """Add the leaves of message class ``cls`` to the lists; return its constant JSON overhead."""
-        slots = list(getattr(cls, '__slots__', ()))
-        types = list(getattr(cls, '_slot_types', ()))
-        if len(slots) != len(types):
-            raise _Unplanned()
-        constant = 2 * len(slots) if slots else 2
-        for name, slot_type in zip(slots, types):
-            constant += len(name) + 4
-            path = prefix + name
-            base, is_array, length = msg_codec.split_type(slot_type)
-            if is_array:
-                if base in msg_codec.BYTES_TYPES:
-                    blobs.append(path)
-                elif base in msg_codec.FLOAT_TYPES and length:
-                    arrays.append((path, length))
-                else:
-                    raise _Unplanned()
-            elif base in msg_codec.FLOAT_TYPES:
-                floats.append(path)
-            elif base in msg_codec.TIME_TYPES:
-                times.append(path)
-            elif base == 'string':
-                strings.append(path)
-            elif base in msg_codec.INT_TYPES or base == 'bool':
-                ints.append(path)
-            elif base in msg_codec.PRIMITIVE_TYPES:
-                raise _Unplanned()
-            else:
-                sub = _slot_class(cls, name)
-                if sub is None:
-                    raise _Unplanned()
-                constant += self._walk(sub, path + '.', floats, ints, times, strings, arrays, blobs)
-        return constant
-
-    def _size(self, plan, msg):
-        constant, floats, nfloats, ints, nints, times, strings, arrays, blobs = plan
-        size = constant
-        if floats is not None:
-            values = floats(msg)
-            if nfloats == 1:
-                values = (values,)
-            text = repr(list(map(float, values)))
-            if 'n' in text:  # nan, inf: msg_codec writes them as strings
-                return None
-            size += len(text) - 2 * nfloats
-        if ints is not None:
-            values = ints(msg)
-            if nints == 1:
-                values = (values,)
-            for value in values:
-                if type(value) is not int and type(value) is not bool:
-                    return None
-            size += len(repr(list(values))) - 2 * nints  # 'True'/'False' are as long as 'true'/'false'
-        for getter in times:
-            value = getter(msg)
-            size += 21 + len(str(int(value.secs))) + len(str(int(value.nsecs)))
-        memo = self._strings
-        for getter in strings:
-            value = getter(msg)
-            known = memo.get(value)
-            if known is None:
-                if type(value) is not str:
-                    return None
-                if len(memo) >= _MEMO_LIMIT:
-                    memo.clear()
-                known = memo[value] = len(json.dumps(value))
-            size += known
-        memo = self._arrays
-        for getter, packer in arrays:
-            value = getter(msg)
-            key = packer.pack(*value)
-            known = memo.get(key)
-            if known is None:
-                text = repr(list(map(float, value)))
-                if 'n' in text:
-                    return None
-                if len(memo) >= _MEMO_LIMIT:
-                    memo.clear()
-                known = memo[key] = len(text)
-            size += known
-        for getter in blobs:
-            size += 2 + 4 * ((len(getter(msg)) + 2) // 3)
-        return size
-
-
-def _slot_class(cls, name):
-    """The message class of the nested field ``name`` of ``cls`` (from a default instance), or None."""
-    try:
-        value = getattr(cls(), name)
-    except Exception:
-        return None
-    if not hasattr(value, '__slots__') or not hasattr(value, '_slot_types'):
-        return None
-    return type(value)
 
 
 class _Stats(object):
@@ -315,7 +164,7 @@ class SmartLogger(object):
         self._types = {}  # side topic -> its message type (the first seen)
         self._lock = threading.RLock()
         self._stats = _Stats()
-        self._raw = _RawBytes()
+        self._raw = msg_codec.RowJsonCounter()
         self._callbacks = []
         self._enabled = bool(enabled)
         self._closed = False

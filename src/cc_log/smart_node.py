@@ -106,8 +106,8 @@ def param(name, default, log=True):
     return value
 
 
-def param_bool(name, default):
-    value = param(name, default)
+def to_bool(name, value):
+    """A parameter value as a bool (``true``/``1``/``yes``/``on`` or the opposites); ConfigError otherwise."""
     if isinstance(value, bool):
         return value
     text = str(value).strip().lower()
@@ -116,6 +116,11 @@ def param_bool(name, default):
     if text in ('false', '0', 'no', 'off'):
         return False
     raise ConfigError('~%s: %r is not true or false' % (name, value))
+
+
+def param_bool(name, default):
+    """``~name`` as a bool (see ``to_bool``)."""
+    return to_bool(name, param(name, default))
 
 
 def param_float(name, default, minimum=0.0):
