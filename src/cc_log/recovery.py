@@ -41,6 +41,7 @@ import struct
 import time
 
 from . import log_format, msg_codec, safe_files
+from .bag_lz4 import MAGIC, METADATA_TOPIC
 
 __all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
            'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']
@@ -121,6 +122,8 @@ _OP_MSG_DATA, _OP_FILE_HEADER, _OP_INDEX_DATA, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CO
 _U32 = struct.Struct('<I')
 _LZ4_MAGIC = b'\x04\x22\x4d\x18'
 _LZ4_STEP = 1 << 16  # compressed bytes decompressed at a time (bounds what one step can expand to)
+_MAX_HEADER = 1024  # record headers rosbag writes outside chunks (bag header, chunk, index) are < 100 bytes
+_BAG_HEADER_END = len(MAGIC) + 4104  # rosbag pads its bag header record to 4096 bytes (+ two sizes)
 
 
 def _fields(header):
@@ -222,7 +225,6 @@ class _Salvage(object):
 
     def run(self):
         """Read the file; return self. ValueError when it is not a rosbag 2.0 file at all."""
-        from .bag_lz4 import MAGIC
         data, size = self.data, len(self.data)
         if data[:len(MAGIC)] != MAGIC[:size]:
             raise ValueError('not a rosbag 2.0 file')
@@ -230,6 +232,9 @@ class _Salvage(object):
         while pos < size:
             found = _record(data, pos, size)
             if found is None:
+                claimed = _U32.unpack_from(data, pos)[0] if pos + 4 <= size else 0
+                if claimed <= _MAX_HEADER and size < pos + 8 + claimed:
+                    self.decoded += size - pos  # a record header cut off: no message data in it yet
                 break
             fields, op, start, length = found
             if pos == len(MAGIC) and op != _OP_FILE_HEADER:
@@ -284,7 +289,7 @@ class _Salvage(object):
         payload = self.data[start:stop]
         raw, whole = self._decompress(fields, payload, MAX_CHUNK_BYTES)
         used = self._records(raw)
-        self.cut = len(self.messages) - before
+        self.cut = sum(1 for message in self.messages[before:] if message[0] != METADATA_TOPIC)
         if self.undecoded != undecoded:
             self.decoded += start - pos
         elif fields.get('compression') == b'none':
@@ -362,7 +367,7 @@ def _read_bag(path):
 def _window_of(salvage):
     """(metadata, records in the order they were written) of what a salvage decoded."""
     import genpy
-    from .bag_lz4 import METADATA_TOPIC, bag_time
+    from .bag_lz4 import bag_time
     from .window_buffer import Record
     metadata, records = None, []
     for topic, secs, nsecs, msg in salvage.messages:
@@ -429,7 +434,7 @@ def _recover_bag(path, directory, base, extension, size):
     why = ' (%s)' % '; '.join(salvage.problems) if salvage.problems else ''
     metadata, records = _window_of(salvage)
     if not records:
-        if not salvage.undecoded and (salvage.header_end is None or not lost):
+        if not salvage.undecoded and (not lost or salvage.header_end is None and size <= _BAG_HEADER_END):
             os.unlink(path)
             safe_files.fsync_directory(directory)
             return Outcome(path, EMPTY, '', 0, 'holds no message, nothing but rosbag headers (killed before any '
