@@ -8,7 +8,7 @@ takes them, SIGKILLs the node (its pid: we started it) at a random moment, three
 it on the same directory each time:
 
 - every final window file decodes completely (log_format.read_window), whatever the kill interrupted;
-- a leftover ``*.tmp-<pid>`` of the kill is recovered by the next start (renamed, reindexed, or, when it
+- a leftover ``*.tmp-<pid>`` of the kill is recovered by the next start (renamed, rebuilt from its chunks, or, when it
   cannot be, reported and kept), never silently deleted: the final files after the restart hold at least
   every message the leftovers held;
 - on the last start, two planted leftovers (a complete window under a temporary name and a bag cut off by a
@@ -204,7 +204,7 @@ class CrashTest(unittest.TestCase):
                     _, records = log_format.read_window(leftover)
                     leftovers_held[leftover] = len(records)
                 except ValueError:
-                    leftovers_held[leftover] = 0  # cut off: reindexed on the next start
+                    leftovers_held[leftover] = 0  # cut off: rebuilt from its chunks on the next start
             sys.stderr.write('round %d: %d final files, leftovers %s\n' % (round_number, len(files), leftovers_held))
 
     def test_start_recovers_planted_leftovers_and_reports_them(self):
