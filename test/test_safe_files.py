@@ -18,8 +18,8 @@ from cc_log import learning, log_format, recovery, safe_files
 from cc_log.features import FeatureConfig, vector_length
 from cc_log.log_format import Format, read_window, write_window
 
-from test_cli import ok_json, replayed, run, trained  # noqa: F401  (fixtures of the cclog runs)
-from test_reliability import DEAD_PID, ROOT, crashing_writer, window
+from test_cli import replayed, run, trained  # noqa: F401  (fixtures of the cclog runs)
+from test_reliability import ROOT, crashing_writer, window
 
 CONFIG = FeatureConfig('motion', '20')
 VICTIM_TEXT = b'precious: must never change\n'

@@ -49,7 +49,6 @@ import heapq
 import io
 import json
 import math
-import os
 import random
 import struct
 
