@@ -34,9 +34,9 @@ def _not_world_writable(fd, extra=0):
 
 
 def create(path, mode=FILE_MODE):
-    """Create the new file ``path`` for writing; return its descriptor. FileExistsError when anything (a
+    """Create the new file ``path`` for reading and writing; return its descriptor. FileExistsError when anything (a
     file, a link, even a dangling one) is there already."""
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, mode)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, mode)
     try:
         _not_world_writable(fd)
     except BaseException:
