@@ -1,6 +1,8 @@
 """Reliability without ROS nodes: crash leftovers and their recovery, disk quota and free-space floor,
 write errors kept in memory and retried, bad input into SmartLogger, permissions with umask 0."""
 import errno
+import io
+import json
 import math
 import os
 import signal
@@ -114,43 +116,236 @@ CRASHING_WRITER = textwrap.dedent('''
     import rosbag
     from test_reliability import window
     from cc_log import log_format
-    # the process dies while the bag is still open: rosbag wrote some chunks, no index
-    rosbag.Bag.close = lambda self: os.kill(os.getpid(), signal.SIGKILL)
-    rosbag.Bag.__del__ = lambda self: None
-    log_format.write_window(window(6000), {directory!r}, 'bag-lz4')
+    defaults = list(rosbag.Bag.__init__.__defaults__)
+    defaults[2] = {chunk_threshold!r}  # chunk_threshold: several complete chunks in one window
+    rosbag.Bag.__init__.__defaults__ = tuple(defaults)
+
+    def die(bag):
+        # what rosbag has finished: messages of the chunks it completed (their data all written)
+        print(sum(sum(chunk.connection_counts.values()) for chunk in bag._chunks), flush=True)
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    if {kill_at!r} is None:  # killed from outside, at whatever moment
+        pass
+    elif {kill_at!r} == 'close':  # the process dies while the bag is still open: no index, an open last chunk
+        rosbag.Bag.close = die
+    else:  # ... or after rosbag wrote chunk N's data, before it wrote that chunk's sizes into its header
+        rewrite = rosbag.Bag._write_chunk_header
+        def write_chunk_header(bag, header):
+            if header.compressed_size and len(bag._chunks) == {kill_at!r}:
+                die(bag)
+            rewrite(bag, header)
+        rosbag.Bag._write_chunk_header = write_chunk_header
+    log_format.write_window(window({messages!r}), {directory!r}, 'bag-lz4')
 ''')
 
 
-def test_bag_cut_off_by_sigkill_is_reindexed_with_what_it_held(tmp_path):
+def crashing_writer(directory, messages=6000, kill_at='close', chunk_threshold=768 * 1024, kill_after=None):
+    """Run a process that writes a bag-lz4 window of ``messages`` and is SIGKILLed mid-bag; return how many
+    window messages (the metadata message left out) the chunks it completed held.
+
+    ``kill_at``: 'close' (when rosbag would close the bag), N (after chunk N's data, before its header got its
+    sizes) or None: SIGKILLed from here once its leftover holds ``kill_after`` bytes (returns None).
+    """
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [os.path.join(ROOT, 'src'),
+                                                                    os.environ.get('PYTHONPATH')])))
+    script = CRASHING_WRITER.format(test=os.path.join(ROOT, 'test'), directory=directory, messages=messages,
+                                    kill_at=kill_at, chunk_threshold=chunk_threshold)
+    child = subprocess.Popen([sys.executable, '-c', script], env=env, stdout=subprocess.PIPE)
+    if kill_at is None:
+        deadline = time.time() + 60
+        while time.time() < deadline and child.poll() is None and not any(
+                os.path.getsize(path) >= kill_after for path in recovery.scan(directory)):
+            time.sleep(0.001)
+        child.kill()
+    out, _ = child.communicate(timeout=120)
+    assert child.returncode == -signal.SIGKILL, (child.returncode, out)
+    return int(out) - 1 if kill_at is not None else None
+
+
+@pytest.mark.parametrize('kill_at, threshold', [('close', 768 * 1024), ('close', 16 * 1024), (1, 768 * 1024),
+                                                (3, 16 * 1024)])
+def test_bag_cut_off_by_sigkill_keeps_every_message_of_every_complete_chunk(kill_at, threshold, tmp_path):
+    """A writer SIGKILLed while its bag is open (index missing, last chunk open) or after a chunk's data
+    but before its header got its sizes (rosbag reindex drops that chunk; a bag of one chunk was "empty"
+    and deleted): every message of every chunk whose data is on disk is recovered, exactly."""
     directory = str(tmp_path)
-    code = subprocess.call([sys.executable, '-c', CRASHING_WRITER.format(test=os.path.join(ROOT, 'test'),
-                                                                         directory=directory)])
-    assert code == -signal.SIGKILL
+    written = crashing_writer(directory, messages=6000 if kill_at == 'close' or threshold < 1e5 else 1000,
+                              kill_at=kill_at, chunk_threshold=threshold)
     leftover, = recovery.scan(directory)
+    size = os.path.getsize(leftover)
     with pytest.raises(ValueError) as error:
         read_window(leftover)
     assert leftover in str(error.value)
     outcome, = recovery.recover_directory(directory)
     assert outcome.status == recovery.PARTIAL, outcome
     assert outcome.path.endswith('_classifier_recovered.bag') and not os.path.exists(leftover)
+    assert outcome.lost_bytes == 0 and 'every byte decoded' in outcome.detail, outcome  # nothing else was on disk
     metadata, records = read_window(outcome.path)
     assert metadata['recovered'] is True and metadata['recovered_from'] == os.path.basename(leftover)
-    assert metadata['reason'] if 'reason' in metadata else True
-    assert metadata['triggers'][0]['reason'] == 'classifier'
+    assert metadata['triggers'][0]['reason'] == 'classifier' and metadata['triggers'][0]['score'] == -1.5
     full = window(6000).records
-    assert 0 < len(records) < len(full) and outcome.messages == len(records)
-    assert same(records, full[:len(records)])  # exactly the first messages, nothing invented
+    assert outcome.messages == len(records) == written > 0
+    assert same(records, full[:written])  # exactly the first messages, nothing invented
+    assert size > 4117 and recovery.scan(directory) == [] and os.listdir(directory) == [os.path.basename(outcome.path)]
 
 
-def test_bag_killed_before_its_first_chunk_held_nothing_and_is_removed_with_a_report(tmp_path):
+def test_bag_writer_sigkilled_from_outside_at_any_moment_loses_only_what_was_not_on_disk(tmp_path):
     directory = str(tmp_path)
-    script = CRASHING_WRITER.format(test=os.path.join(ROOT, 'test'), directory=directory).replace('window(6000)',
-                                                                                                 'window(10)')
-    assert subprocess.call([sys.executable, '-c', script]) == -signal.SIGKILL
+    assert crashing_writer(directory, messages=30000, kill_at=None, chunk_threshold=16 * 1024,
+                           kill_after=300000) is None
+    leftover, = recovery.scan(directory)
+    data = open(leftover, 'rb').read()
+    outcome, = recovery.recover_directory(directory)
+    assert outcome.status == recovery.PARTIAL, outcome
+    _, records = read_window(outcome.path)
+    assert len(records) > 300 and same(records, window(len(records)).records)
+    if outcome.lost_bytes:  # the tail rosbag was writing: kept, byte for byte
+        assert open(outcome.kept, 'rb').read() == data and str(outcome.lost_bytes) in outcome.detail
+    else:
+        assert outcome.kept == '' and not os.path.exists(leftover)
+
+
+def test_damaged_bags_larger_than_their_header_are_never_deleted(tmp_path):
+    """Garbage after the bag header, a file that is no bag, messages whose definition does not match the
+    md5sum of their connection: nothing decodes, so each is kept as it is and reported at every start."""
+    import genpy
+    from std_msgs.msg import Float64
+    directory = str(tmp_path)
+    other = str(tmp_path / 'other.bag')
+    with rosbag.Bag(other, 'w', compression=rosbag.Compression.LZ4) as bag:
+        for i in range(50):
+            value = Float64(data=i)
+            buffer = io.BytesIO()
+            value.serialize(buffer)
+            bag.write('/x', (Float64._type, buffer.getvalue(), 'f' * 32, Float64), genpy.Time(1000 + i), raw=True)
+    with open(other, 'rb') as stream:
+        wrong_md5 = stream.read()
+    os.unlink(other)
+    contents = {
+        'garbage': wrong_md5[:4117] + os.urandom(100000),
+        'not-a-bag': os.urandom(100000),
+        'md5': wrong_md5[:-200],  # its index cut off: read directly, the connection refused
+    }
+    paths = {}
+    for name, data in contents.items():
+        paths[name] = os.path.join(directory, 'cc_log_20150521T191138.000Z_%s.bag.tmp-%d' % (name, DEAD_PID))
+        with open(paths[name], 'wb') as stream:
+            stream.write(data)
+    for _ in range(2):
+        outcomes = {o.leftover: o for o in recovery.recover_directory(directory)}
+        for name, path in paths.items():
+            assert outcomes[path].status == recovery.UNRECOVERABLE, (name, outcomes[path])
+            assert outcomes[path].lost_bytes == len(contents[name]) and path in outcomes[path].detail
+            with open(path, 'rb') as stream:
+                assert stream.read() == contents[name]
+    assert 'md5sum' in outcomes[paths['md5']].detail
+    assert log_format.window_files(directory) == []
+
+
+def test_cclog_recover_reports_what_it_could_not_recover_and_exits_1_once(tmp_path):
+    from test_cli import run
+    directory = str(tmp_path)
+    written = crashing_writer(directory, messages=3000, kill_at=3, chunk_threshold=16 * 1024)
+    leftover, = recovery.scan(directory)
+    with open(leftover, 'rb') as stream:
+        data = stream.read()
+    with open(leftover, 'wb') as stream:
+        stream.write(data[:-30])  # the third chunk's block cut off: bytes that cannot be decoded
+    first = run('recover', directory, '--json')
+    assert first.returncode == 1 and first.stderr == '', first
+    outcome, = json.loads(first.stdout)['leftovers']
+    assert outcome['status'] == 'partial' and outcome['lost_bytes'] > 0, outcome
+    with open(outcome['kept'], 'rb') as stream:
+        assert stream.read() == data[:-30]
+    _, records = read_window(outcome['path'])
+    assert 0 < outcome['messages'] == len(records) < written and same(records, window(len(records)).records)
+    again = run('recover', directory)
+    assert again.returncode == 0 and again.stdout == 'no leftovers\n'
+
+
+def test_bag_killed_before_any_message_data_reached_the_disk_is_removed_with_a_report(tmp_path):
+    directory = str(tmp_path)
+    assert crashing_writer(directory, messages=10) == -1  # no chunk completed
     leftover, = recovery.scan(directory)
     outcome, = recovery.recover_directory(directory)
-    assert outcome.status == recovery.EMPTY and 'holds no message' in outcome.detail
+    assert outcome.status == recovery.EMPTY and 'holds no message' in outcome.detail, outcome
     assert os.listdir(directory) == []
+
+
+def _chunks(path):
+    """(data start, data end, window messages) of each chunk of a complete bag, from rosbag's own index."""
+    with rosbag.Bag(path) as bag:
+        chunks = []
+        for info in bag._chunks:
+            header = bag._chunk_headers[info.pos]
+            chunks.append((header.data_pos, header.data_pos + header.compressed_size,
+                           sum(info.connection_counts.values())))
+    data_start, data_end, count = chunks[0]
+    chunks[0] = (data_start, data_end, count - 1)  # the metadata message
+    return chunks
+
+
+@pytest.fixture(scope='module')
+def chunked_bag(tmp_path_factory):
+    """A bag-lz4 window of 600 odometry messages in about 30 chunks: its bytes and its chunks."""
+    directory = str(tmp_path_factory.mktemp('chunked'))
+    defaults = rosbag.Bag.__init__.__defaults__
+    rosbag.Bag.__init__.__defaults__ = defaults[:2] + (16 * 1024,) + defaults[3:]
+    try:
+        path, _ = write_window(window(600), directory, Format.BAG_LZ4)
+    finally:
+        rosbag.Bag.__init__.__defaults__ = defaults
+    with open(path, 'rb') as stream:
+        data = stream.read()
+    chunks = _chunks(path)
+    assert len(chunks) > 20
+    return data, chunks
+
+
+def test_bag_truncated_anywhere_keeps_every_complete_chunk_and_never_deletes_data(chunked_bag, tmp_path):
+    from cc_log import msg_codec
+    data, chunks = chunked_bag
+    full = [(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in window(600).records]
+    header_end = 4117
+    offsets = {13, 100, header_end, header_end + 1, len(data) - 1}
+    for number, (start, end, _) in enumerate(chunks):
+        offsets.update({end - 9, end - 8, end})  # the last byte of its block; its end mark; all of it
+        if number % 3 == 0:
+            offsets.update({start - 1, start + 20, (start + end) // 2, end + 30})
+    for offset in sorted(offsets):
+        directory = tmp_path / str(offset)
+        directory.mkdir()
+        leftover = directory / ('cc_log_20150521T191138.000Z_classifier.bag.tmp-%d' % DEAD_PID)
+        leftover.write_bytes(data[:offset])
+        outcome, = recovery.recover_directory(str(directory))
+        complete = sum(count for _, end, count in chunks if end <= offset)
+        following = [count for start, end, count in chunks if end > offset]
+        if offset <= chunks[0][0]:  # nothing but the bag header and (part of) the first chunk's header
+            assert outcome.status == recovery.EMPTY and os.listdir(str(directory)) == [], (offset, outcome)
+            continue
+        if outcome.status == recovery.UNRECOVERABLE:  # nothing decodes: kept as it is, at every start
+            assert complete == 0 and outcome.lost_bytes == offset, (offset, outcome)
+            assert leftover.read_bytes() == data[:offset]
+            again, = recovery.recover_directory(str(directory))
+            assert again.status == recovery.UNRECOVERABLE and leftover.read_bytes() == data[:offset]
+            continue
+        assert outcome.status == recovery.PARTIAL, (offset, outcome)
+        _, records = read_window(outcome.path)
+        # every complete chunk; the next one too when its compressed block is whole (only its end mark missing)
+        assert len(records) in (complete, complete + (following[0] if following else 0)), (offset, len(records))
+        assert [(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in records] == full[:len(records)], offset
+        assert outcome.messages == len(records)
+        assert not leftover.exists() and recovery.scan(str(directory)) == []
+        if outcome.lost_bytes:  # bytes that could not be decoded: the leftover is kept, out of the leftovers
+            assert outcome.kept.endswith('.bag' + recovery.KEPT_MARK + str(DEAD_PID))
+            with open(outcome.kept, 'rb') as stream:
+                assert stream.read() == data[:offset]
+            assert 0 < outcome.lost_bytes < offset - header_end
+            assert str(outcome.lost_bytes) in outcome.detail
+        else:
+            assert outcome.kept == '' and sorted(os.listdir(str(directory))) == [os.path.basename(outcome.path)]
+    assert len(offsets) > 100
 
 
 def test_no_empty_leftover_while_encoding(tmp_path, monkeypatch):

@@ -16,8 +16,10 @@ Edge module: rosbag is imported inside the functions only, so importing cc_log.b
 """
 import json
 import math
+import os
 
 from . import msg_codec
+from . import safe_files
 from .window_buffer import Record
 
 CODEC = 'bag-lz4'
@@ -41,9 +43,14 @@ def bag_time(stamp):
     return genpy.Time(secs, nsecs)
 
 
-def write(path, records, metadata):
-    """Write ``records`` (window order) and ``metadata`` (a JSON-able dict) as an LZ4 bag at ``path``."""
+def write(target, records, metadata):
+    """Write ``records`` (window order) and ``metadata`` (a JSON-able dict) as an LZ4 bag into ``target``: a
+    binary file object open for writing (rosbag closes it when done), or the path of a new file (created
+    with ``safe_files.create``: never over a file, never through a link)."""
     import rosbag
+    if isinstance(target, (str, bytes, os.PathLike)):
+        with os.fdopen(safe_files.create(target), 'w+b') as stream:
+            return write(stream, records, metadata)
     if not records:
         raise ValueError('window: has no records')
     topics = list(dict.fromkeys(record.topic for record in records))
@@ -64,13 +71,11 @@ def write(path, records, metadata):
     meta['bag'] = layout
     string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
     text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
-    bag = rosbag.Bag(path, 'w', compression=rosbag.Compression.LZ4)
-    try:
-        bag.write(METADATA_TOPIC, string_class(data=text), min(times))
-        for record, time in zip(records, times):
-            bag.write(record.topic, record.msg, time)
-    finally:
-        bag.close()
+    bag = rosbag.Bag(target, 'w', compression=rosbag.Compression.LZ4)
+    bag.write(METADATA_TOPIC, string_class(data=text), min(times))
+    for record, time in zip(records, times):
+        bag.write(record.topic, record.msg, time)
+    bag.close()  # on an error the owner of ``target`` closes it (a failed rosbag close would leave it open)
 
 
 def read(path):

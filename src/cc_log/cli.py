@@ -217,10 +217,11 @@ def _existing_file(path, what='file'):
 
 def _writable_dir(path, name):
     """Create directory ``path`` if needed; CommandError('<name>: ...') when that is impossible."""
+    from . import safe_files
     if os.path.exists(path) and not os.path.isdir(path):
         raise CommandError('%s: %s exists and is not a directory' % (name, path))
     try:
-        os.makedirs(path, exist_ok=True)
+        safe_files.make_dirs(path)
     except OSError as error:
         raise CommandError('%s: cannot create %s (%s)' % (name, path, error.strerror or error))
     return path
@@ -635,11 +636,12 @@ def cmd_export(args):
     """Window files to one bag, one CSV per topic, or one JSON-lines file."""
     import csv
     from . import msg_codec
+    from .safe_files import AtomicFile
     records = _selected_records(args)
     files = []
     if args.to == 'jsonl':
         _parent_exists(args.out, 'out')
-        with open(args.out, 'w') as stream:
+        with AtomicFile(args.out, overwrite=True, text=True) as stream:
             for record in records:
                 stream.write(json.dumps(_plain(_record_row(record)), allow_nan=False) + '\n')
         files.append(args.out)
@@ -651,7 +653,8 @@ def cmd_export(args):
             raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
         compression = rosbag.Compression.LZ4 if args.compression == 'lz4' else (
             rosbag.Compression.BZ2 if args.compression == 'bz2' else rosbag.Compression.NONE)
-        with _bar(args, 'export', len(records)) as bar, rosbag.Bag(args.out, 'w', compression=compression) as bag:
+        with _bar(args, 'export', len(records)) as bar, AtomicFile(args.out, overwrite=True) as stream, \
+                rosbag.Bag(stream, 'w', compression=compression) as bag:
             for record in records:
                 bag.write(record.topic, record.msg, bag_time(record.stamp))
                 bar.update()
@@ -666,7 +669,7 @@ def cmd_export(args):
                     for record in topic_records]
             fields = list(collections.OrderedDict.fromkeys(key for row in rows for key in row))
             path = os.path.join(args.out, _topic_file_name(topic))
-            with open(path, 'w', newline='') as stream:
+            with AtomicFile(path, overwrite=True, text=True, newline='') as stream:
                 writer = csv.writer(stream)
                 writer.writerow(['stamp'] + fields)
                 for record, row in zip(topic_records, rows):
@@ -871,7 +874,9 @@ def cmd_plot(args):
         bottom.legend(loc='lower right', fontsize=8)
     figure.tight_layout()
     _parent_exists(args.out, 'out')
-    figure.savefig(args.out, dpi=args.dpi)
+    from .safe_files import AtomicFile
+    with AtomicFile(args.out, overwrite=True) as stream:
+        figure.savefig(stream, dpi=args.dpi, format=os.path.splitext(args.out)[1][1:].lower() or None)
     plt.close(figure)
     summary = collections.OrderedDict([('out', args.out), ('windows', len(windows)), ('triggers', len(triggers)),
                                        ('speed_samples', len(speed)), ('scores', len(curve)), ('start', origin),
@@ -926,8 +931,10 @@ def cmd_recover(args):
             print('%-13s %s%s: %s' % (outcome.status, outcome.leftover, target, outcome.detail))
         if not outcomes:
             print('no leftovers')
-    unrecoverable = [o for o in outcomes if o.status == recovery.UNRECOVERABLE]
-    return EXIT_BAD_INPUT if unrecoverable else EXIT_OK
+        elif len(outcomes) > 1:
+            print('%d leftovers: %d messages recovered, %d bytes could not be' % (
+                len(outcomes), sum(o.messages for o in outcomes), sum(o.lost_bytes for o in outcomes)))
+    return EXIT_BAD_INPUT if recovery.incomplete(outcomes) else EXIT_OK
 
 
 # -- parser -----------------------------------------------------------------------------------------------
@@ -1175,9 +1182,10 @@ def build_parser():
     p = commands.add_parser('recover', help='turn crash leftovers (*.tmp-<pid>) back into window files', **_help(
         """
         A logger killed while writing a window leaves cc_log_*.tmp-<pid>. recover gives a complete leftover
-        its final name, rebuilds a cut-off bag-lz4 window from what it held (..._recovered.bag), removes
-        empty leftovers and duplicates of final files, and reports the rest, which it keeps. The smart node
-        does the same at start. Exit status 1 when any leftover could not be recovered.
+        its final name, rebuilds a cut-off bag-lz4 window from every message it still holds
+        (..._recovered.bag; the leftover is kept as *.unrecovered-<pid> when some of its bytes could not be
+        decoded), removes empty leftovers and duplicates of final files, and reports the rest, which it
+        keeps. The smart node does the same at start. Exit status 1 when anything could not be recovered.
         """,
         """
           cclog recover ~/.ros/cc_log

@@ -24,6 +24,7 @@ from . import collector
 from . import learning
 from . import log_format
 from . import msg_codec
+from . import safe_files
 from . import sim
 
 DEFAULT_OUT = os.path.join(os.path.expanduser('~'), '.ros', 'cc_log', 'demo')
@@ -56,7 +57,7 @@ class Processes(object):
         self.children = []
 
     def start(self, args, env, log_path):
-        stream = open(log_path, 'wb')
+        stream = os.fdopen(safe_files.create(log_path), 'wb')
         child = subprocess.Popen(args, env=env, stdout=stream, stderr=subprocess.STDOUT,
                                  stdin=subprocess.DEVNULL, start_new_session=True)
         self.children.append((child, stream))
@@ -246,7 +247,8 @@ def plot(png, track, truth, windows):
                          va='top')
     axes[1].set_xlabel('time (s); red: injected anomalies, green bars: windows cc_log saved')
     figure.tight_layout()
-    figure.savefig(png, dpi=100)
+    with safe_files.AtomicFile(png, overwrite=True) as stream:
+        figure.savefig(stream, dpi=100, format='png')
     plt.close(figure)
 
 
@@ -263,7 +265,7 @@ def main(argv=None):
     out = os.path.abspath(args.out)
     if os.path.isdir(out):
         shutil.rmtree(out)
-    os.makedirs(out)
+    safe_files.make_dirs(out)
     processes = Processes()
     started = time.time()
     try:

@@ -6,19 +6,17 @@ first directory that can be created and written to wins. ``fallback`` tells the 
 import os
 import tempfile
 
+from . import safe_files
+
 HOME_DIRECTORY = os.path.join('~', '.ros', 'cc_log')
 TMP_DIRECTORY = os.path.join(tempfile.gettempdir(), 'cc_log')
-DIR_MODE = 0o2775  # group-writable, never world-writable
+DIR_MODE = safe_files.DIR_MODE  # group-writable, setgid, never world-writable (parents made too)
 
 
 def _usable(path):
     """None when ``path`` is (made) a writable directory, else why not."""
     try:
-        if not os.path.isdir(path):
-            os.makedirs(path, DIR_MODE, exist_ok=True)
-            mode = os.stat(path).st_mode
-            if mode & 0o002:
-                os.chmod(path, mode & 0o7775)
+        safe_files.make_dirs(path)
         # access() can lie (root, read-only mounts, ACLs): create and remove a file.
         fd, probe = tempfile.mkstemp(prefix='.cc_log-probe-', dir=path)
         os.close(fd)

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from . import log_format
+from . import safe_files
 from .features import FeatureConfig, vector_length, vector_names
 from .model import AnomalyModel
 
@@ -49,9 +49,6 @@ def _label_ok(label):
             and os.sep not in label and '\0' not in label)
 
 
-VECTOR_FILE_MODE = 0o664  # group-writable like the window files, never world-writable
-
-
 def write_vector(directory, label, stamp, vector, config, names=None):
     """Write one feature vector to ``<directory>/<label>/<stamp>.json`` atomically; return the path."""
     if not _label_ok(label):
@@ -67,17 +64,10 @@ def write_vector(directory, label, stamp, vector, config, names=None):
         if len(names) != len(values):
             raise ValueError('names: %d names for %d features' % (len(names), len(values)))
         document['names'] = list(names)
-    folder = os.path.join(directory, label)
-    log_format.ensure_directory(directory)
-    log_format.ensure_directory(folder)
+    folder = safe_files.make_dirs(os.path.join(directory, label))
     path = os.path.join(folder, '%.6f.json' % stamp)
-    tmp = '%s.tmp-%d' % (path, os.getpid())
-    with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, VECTOR_FILE_MODE), 'w') as stream:
+    with safe_files.AtomicFile(path, overwrite=True, text=True) as stream:
         json.dump(document, stream, allow_nan=False, separators=(',', ':'))
-        stream.flush()
-        os.fchmod(stream.fileno(), os.fstat(stream.fileno()).st_mode & 0o7775)  # never world-writable
-        os.fsync(stream.fileno())
-    os.rename(tmp, path)
     return path
 
 

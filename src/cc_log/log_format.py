@@ -11,22 +11,23 @@ names sort by time::
 
 A file is written as ``<final name>.tmp-<pid>``, flushed and fsynced, moved to a final name that does not
 exist yet (hard link then unlink, so a file is never overwritten even by another process; rename on file
-systems without hard links), and the directory is fsynced. Readers ignore ``*.tmp-*``; they are leftovers
-of a crash (``temporary_files``).
+systems without hard links), and the directory is fsynced (``safe_files.AtomicFile``: created with
+``O_EXCL|O_NOFOLLOW``, never through a link). Readers ignore ``*.tmp-*``; they are leftovers of a crash
+(``temporary_files``).
 """
 import datetime
-import errno
 import os
 import re
 
 from . import __version__
 from . import json_xz
 from . import msg_codec
+from . import safe_files
 
 PREFIX = 'cc_log_'
-TMP_MARK = '.tmp-'
-FILE_MODE = 0o664  # group-writable, never world-writable (the umask may take more away)
-DIR_MODE = 0o2775
+TMP_MARK = safe_files.TMP_MARK
+FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
+DIR_MODE = safe_files.DIR_MODE
 
 
 class Format(object):
@@ -138,47 +139,17 @@ def temporary_files(directory):
 
 # -- writing --------------------------------------------------------------------------------------------
 
-def _fsync_path(path, directory=False):
-    flags = os.O_RDONLY | (getattr(os, 'O_DIRECTORY', 0) if directory else 0)
-    fd = os.open(path, flags)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def _no_world_write(path):
-    mode = os.stat(path).st_mode
-    if mode & 0o002:
-        os.chmod(path, mode & 0o7775)
-
-
 def ensure_directory(directory):
     """Create ``directory`` (and parents) group-writable, not world-writable, if it does not exist."""
-    if not os.path.isdir(directory):
-        os.makedirs(directory, DIR_MODE, exist_ok=True)
-        _no_world_write(directory)
+    return safe_files.make_dirs(directory)
 
 
-def _publish(tmp, directory, base, extension):
-    """Give ``tmp`` the first free name ``base[_N]extension``; never overwrite; return the final path."""
+def final_names(directory, base, extension):
+    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ..."""
     counter = 0
     while True:
-        final = os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
+        yield os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
         counter += 1
-        if os.path.lexists(final):
-            continue
-        try:
-            os.link(tmp, final)
-        except OSError as error:
-            if error.errno == errno.EEXIST:
-                continue
-            if error.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
-                raise
-            os.rename(tmp, final)  # no hard links here: checked free just above
-            return final
-        os.unlink(tmp)
-        return final
 
 
 def write_window(window, directory, fmt, metadata=None, base=None):
@@ -196,31 +167,17 @@ def write_window(window, directory, fmt, metadata=None, base=None):
     meta = window_metadata(window, fmt, metadata)
     base = base or base_name(window)
     extension = Format.EXTENSIONS[fmt]
-    tmp = os.path.join(directory, '%s%s%s%d' % (base, extension, TMP_MARK, os.getpid()))
     # Encode before the temporary file exists: a crash while encoding leaves no empty leftover.
     data = json_xz.encode(window.records, meta) if fmt == Format.JSON_XZ else None
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, FILE_MODE)
-    try:
-        try:
-            if fmt == Format.JSON_XZ:
-                view = memoryview(data)
-                while view:
-                    view = view[os.write(fd, view):]
-        finally:
-            os.close(fd)
-        if fmt == Format.BAG_LZ4:
+    target = safe_files.AtomicFile(os.path.join(directory, base + extension),
+                                   names=final_names(directory, base, extension))
+    with target as stream:
+        if fmt == Format.JSON_XZ:
+            stream.write(data)
+        else:
             from . import bag_lz4
-            bag_lz4.write(tmp, window.records, meta)
-        _no_world_write(tmp)
-        _fsync_path(tmp)
-        nbytes = os.path.getsize(tmp)
-        final = _publish(tmp, directory, base, extension)
-    except BaseException:
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
-        raise
-    _fsync_path(directory, directory=True)
-    return final, nbytes
+            bag_lz4.write(stream, window.records, meta)
+    return target.path, target.size
 
 
 # -- reading --------------------------------------------------------------------------------------------

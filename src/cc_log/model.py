@@ -131,30 +131,12 @@ class AnomalyModel(object):
         }
 
     def save(self, path):
-        """Write the model atomically (``<path>.tmp-<pid>``, fsync, rename); return ``path``."""
+        """Write the model atomically (``<path>.tmp-<pid>``, fsync, rename over ``path``: a link there is
+        replaced, never written through; see ``safe_files``); return ``path``."""
+        from . import safe_files
         text = json.dumps(self.to_dict(), allow_nan=False, separators=(',', ':'), default=_plain)
-        tmp = '%s.tmp-%d' % (path, os.getpid())
-        try:
-            with open(tmp, 'w') as stream:
-                stream.write(text)
-                stream.flush()
-                os.fsync(stream.fileno())
-            os.rename(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
-        directory = os.path.dirname(os.path.abspath(path))
-        try:
-            fd = os.open(directory, os.O_RDONLY)
-        except OSError:
-            return path
-        try:
-            os.fsync(fd)
-        except OSError:
-            pass
-        finally:
-            os.close(fd)
+        with safe_files.AtomicFile(path, overwrite=True, text=True) as stream:
+            stream.write(text)
         return path
 
     @classmethod

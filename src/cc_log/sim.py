@@ -49,7 +49,6 @@ import heapq
 import io
 import json
 import math
-import os
 import random
 import struct
 
@@ -872,12 +871,9 @@ def truth_path(bag_path):
 
 
 def _atomic_write(path, data):
-    tmp = '%s.tmp-%d' % (path, os.getpid())
-    with open(tmp, 'wb') as stream:
+    from .safe_files import AtomicFile
+    with AtomicFile(path, overwrite=True) as stream:
         stream.write(data)
-        stream.flush()
-        os.fsync(stream.fileno())
-    os.rename(tmp, path)
 
 
 def write_truth(path, truth, topic=ODOM_TOPIC, config=None, source='cc_log.sim'):
@@ -911,10 +907,10 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progr
         raise ValueError('minutes: a bag needs a finite run (minutes > 0)')
     if compression not in ('lz4', 'none', 'bz2'):
         raise ValueError('compression: expected lz4, bz2 or none, got %r' % (compression,))
+    from .safe_files import AtomicFile
     simulator = Simulator(config)
-    tmp = '%s.tmp-%d' % (path, os.getpid())
-    try:
-        with rosbag.Bag(tmp, 'w', compression=compression, chunk_threshold=1024 * 1024) as bag:
+    with AtomicFile(path, overwrite=True) as stream:
+        with rosbag.Bag(stream, 'w', compression=compression, chunk_threshold=1024 * 1024) as bag:
             write = bag.write
             total = simulator.total_ticks
             every = max(1, int(config.rate * 10))
@@ -929,12 +925,6 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progr
                     progress(simulator.tick, total)
             if progress is not None:
                 progress(total, total)
-        with open(tmp, 'rb+') as stream:
-            os.fsync(stream.fileno())
-        os.rename(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
     write_truth(truth_file or truth_path(path), simulator.truth, ODOM_TOPIC, config)
     return simulator.truth
 

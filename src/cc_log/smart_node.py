@@ -481,10 +481,10 @@ class SmartNode(object):
         if stats['messages_refused']:
             level, message = DiagnosticStatus.WARN, '%d messages of the wrong type refused (last: %s)' % (
                 stats['messages_refused'], stats['last_refused'])
-        unrecovered = [o for o in self.leftovers if o.status == recovery.UNRECOVERABLE]
+        unrecovered = recovery.incomplete(self.leftovers)
         if unrecovered:
             level, message = DiagnosticStatus.WARN, '%d crash leftovers could not be recovered (kept): %s' % (
-                len(unrecovered), unrecovered[0].leftover)
+                len(unrecovered), unrecovered[0].kept or unrecovered[0].leftover)
         if stats['write_errors'] and not stats['windows_held']:
             level = DiagnosticStatus.ERROR if stats['messages_lost'] else DiagnosticStatus.WARN
             message = 'write errors (%d, all retried and written): %s' % (stats['write_errors'], stats['last_error']) \
@@ -543,6 +543,8 @@ class SmartNode(object):
             ('leftovers recovered', sum(1 for o in self.leftovers if o.status in (
                 recovery.COMPLETE, recovery.PARTIAL, recovery.DUPLICATE, recovery.EMPTY))),
             ('leftovers unrecoverable', len(unrecovered)),
+            ('leftover messages recovered', sum(o.messages for o in self.leftovers if o.status == recovery.PARTIAL)),
+            ('leftover bytes unrecoverable', sum(o.lost_bytes for o in self.leftovers)),
         ]
         return level, message, values
 
