@@ -308,7 +308,8 @@ def test_failed_writes_are_reported_not_raised(husky, tmp_path):
     assert logger.close(30)
     stats = logger.stats()
     assert stats['write_errors'] == 1 and stats['messages_lost'] == 21 and stats['windows_saved'] == 0
-    assert [e.kind for e in events] == [OPENED, FAILED] and events[1].error
+    assert [e.kind for e in events] == [OPENED, FAILED, FAILED] and events[1].error  # held, then lost at close
+    assert 'still failing at close' in events[2].error and events[2].messages == 21
 
 
 def test_bad_configuration_names_the_parameter(tmp_path):
