@@ -127,7 +127,7 @@ class Collector(object):
     the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label:
     the vectors' label; background: write on a writer thread; max_buffer_mb: memory budget of the file
     being collected (MB; 0: none): reaching it starts a new file; max_disk_mb, min_free_mb, retry_period,
-    max_held_messages: the writer's (see ``window_writer.WindowWriter``).
+    max_held_messages, close_retry: the writer's (see ``window_writer.WindowWriter``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
@@ -136,7 +136,7 @@ class Collector(object):
                  window=DEFAULT_WINDOW, feature_set=DEFAULT_FEATURE_SET, stride=DEFAULT_STRIDE,
                  label=DEFAULT_LABEL, background=True, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, max_disk_mb=0,
                  min_free_mb=0, retry_period=window_writer.DEFAULT_RETRY_PERIOD,
-                 max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES):
+                 max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES, close_retry=0.0):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
         self.rotate = Rotation.parse(rotate)
@@ -164,7 +164,8 @@ class Collector(object):
         self.counters = collections.OrderedDict([('messages_seen', 0), ('raw_json_bytes', 0), ('time_resets', 0)])
         self.writer = window_writer.WindowWriter(
             self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
-            max_held_messages=max_held_messages, background=background, name='cc_log collect writer')
+            max_held_messages=max_held_messages, background=background, close_retry=close_retry,
+            name='cc_log collect writer')
         self.guard = self.writer.guard
         self.writer.on_event(self._written)
 

@@ -72,12 +72,17 @@ def write_vector(directory, label, stamp, vector, config, names=None):
     log_format.ensure_directory(folder)
     path = os.path.join(folder, '%.6f.json' % stamp)
     tmp = '%s.tmp-%d' % (path, os.getpid())
-    with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, VECTOR_FILE_MODE), 'w') as stream:
-        json.dump(document, stream, allow_nan=False, separators=(',', ':'))
-        stream.flush()
-        os.fchmod(stream.fileno(), os.fstat(stream.fileno()).st_mode & 0o7775)  # never world-writable
-        os.fsync(stream.fileno())
-    os.rename(tmp, path)
+    try:
+        with os.fdopen(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, VECTOR_FILE_MODE), 'w') as stream:
+            json.dump(document, stream, allow_nan=False, separators=(',', ':'))
+            stream.flush()
+            os.fchmod(stream.fileno(), os.fstat(stream.fileno()).st_mode & 0o7775)  # never world-writable
+            os.fsync(stream.fileno())
+        os.rename(tmp, path)
+    except BaseException:  # disk full...: no empty or partial leftover
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+        raise
     return path
 
 

@@ -175,6 +175,11 @@ class SmartLogger(object):
         self._callbacks.append(callback)
 
     @property
+    def buffer_budget(self):
+        """The memory budget of the buffer in bytes (0: none)."""
+        return self._buffer.max_buffer_bytes
+
+    @property
     def enabled(self):
         """True while messages are buffered and classified."""
         return self._enabled
