@@ -299,16 +299,18 @@ def vector_job(directory, label, stamp, vector, config):
 
 
 def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=DEFAULT_STRIDE,
-                feature_set=DEFAULT_FEATURE_SET, retry_seconds=window_writer.OFFLINE_RETRY_SECONDS):
+                feature_set=DEFAULT_FEATURE_SET, retry_seconds=None):
     """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each), as collect
     mode does live. Returns ``{'vectors': n, 'directory': out_dir/<label>}``. Raises ValueError for bad
     arguments or an unreadable bag; a vector that cannot be written (disk full...) is retried for
-    ``retry_seconds``, then OSError names the directory and how many vectors were not written.
+    ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``), then OSError names the directory and
+    how many vectors were not written.
     """
     from . import bagio  # rosbag: imported here so the module stays pure
     check_label(label)
     config = features_mod.FeatureConfig(feature_set, window)
     stamps, vectors = bagio.feature_vectors(bag_path, topic, config, parse_stride(stride))
+    retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
     writer = window_writer.WindowWriter(out_dir, background=False, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
                                         give_up_after=retry_seconds, close_retry=retry_seconds)
     for stamp, vector in zip(stamps, vectors):

@@ -454,19 +454,21 @@ class SmartLogger(object):
 def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
            side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None, retrigger=DEFAULT_RETRIGGER,
            classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB,
-           retry_seconds=window_writer.OFFLINE_RETRY_SECONDS):
+           retry_seconds=None):
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
     'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
     message saved). ``progress``: optional ``callback(messages read)``, called every PROGRESS_EVERY messages and
-    at the end. A window that cannot be written (disk full...) is retried for ``retry_seconds``; then the
-    replay stops. Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag
-    cannot be read or a window cannot be written (naming ``out_dir`` and what was not written).
+    at the end. A window that cannot be written (disk full...) is retried for ``retry_seconds`` (None:
+    ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops. Raises ValueError for bad arguments,
+    ModelError for a bad model, OSError when the bag cannot be read or a window cannot be written (naming
+    ``out_dir`` and what was not written).
     """
     from . import bagio  # rosbag: imported here so the module stays pure
     from .model import AnomalyModel
     model = AnomalyModel.load(model_path)
+    retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
     logger = SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
                          max_window=max_window, retrigger=retrigger, classify_every=classify_every,
                          max_buffer_mb=max_buffer_mb, retry_period=window_writer.OFFLINE_RETRY_PERIOD,

@@ -139,6 +139,7 @@ class _OpenWindow(object):
         self.records = list(records)
         self.triggers = []
         self.part = 0
+        self.continued = False  # a part was written: side records after it belong to the next part
         self.remaining = None  # messages still to take after the last trigger (count post)
         self.until = None      # last stamp to take (duration post)
         self.extend(trigger, post)
@@ -346,6 +347,7 @@ class WindowBuffer(object):
             done.append(self._emit(window, everything=True))
             window.part += 1
             window.records = []
+            window.continued = True
         if self._over_budget() and self._pending is not None:
             if self._pending.records:
                 done.append(self._emit(self._pending))
@@ -374,6 +376,7 @@ class WindowBuffer(object):
             done.append(self._emit(window, window.records[:size]))
             window.part += 1
             window.records = window.records[size:]
+            window.continued = True
         return done
 
     def _prune_ring(self):
@@ -403,9 +406,10 @@ class WindowBuffer(object):
 
     def _emit(self, window, records=None, everything=False):
         """Turn a window (or the given first records of it) into a LogWindow with the side records of its
-        time span (``everything``: every side record held from its start on), in stamp order."""
+        time span (``everything``: every side record held from its start on), in stamp order. A part after
+        the first takes the side records since the previous part (those of its time span and those between)."""
         records = window.records if records is None else records
-        start = records[0].stamp if records else float('-inf')
+        start = records[0].stamp if records and not getattr(window, 'continued', False) else float('-inf')
         end = float('inf') if everything else records[-1].stamp
         side = []
         cost = sum(record.cost for record in records)

@@ -262,9 +262,11 @@ class WindowWriter(object):
                 self._emit(WriterEvent(FAILED, job, '', 0, '%s (kept in memory; retrying every %g s)'
                                        % (error, self.retry_period), True))
             return False
-        if retryable:
-            error = '%s (%s)' % (error, 'given up after %g s' % (now - job.failed_at) if not final
-                                 else 'still failing at close')
+        if retryable and final:
+            error = '%s (still failing at close%s)' % (
+                error, ', after retrying for %g s' % self.close_retry if self.close_retry else '')
+        elif retryable:
+            error = '%s (given up after retrying for %.1f s)' % (error, now - job.failed_at)
         self._lose(job, error)
         return True
 
