@@ -2,7 +2,8 @@
 
 ``Collector`` keeps every message it is fed. The stream is cut into files by ``rotate`` (a message count
 ``'6000'``, a duration ``'60s'`` or a size ``'20MB'`` of raw row-JSON bytes), and earlier when the messages
-of the file being collected reach the memory budget ``max_buffer_mb``; every file is a complete window file
+of the file being collected reach half the memory budget ``max_buffer_mb`` (the other half is for the file
+being written); every file is a complete window file
 of the chosen format, readable on its own. From the driving topic it computes a feature vector every
 ``stride`` messages once a whole feature window of continuous data is in, and writes each vector as its own
 file under ``<directory>/features/<label>/`` with ``learning.write_vector`` — the training data of learn
@@ -27,7 +28,7 @@ from . import msg_codec
 from . import window_writer
 from .spans import Span
 from .window_buffer import (DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, WindowBuffer,
-                            budget_bytes)
+                            budget_bytes, part_bytes)
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']
@@ -126,7 +127,7 @@ class Collector(object):
     odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
     the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label:
     the vectors' label; background: write on a writer thread; max_buffer_mb: memory budget of the file
-    being collected (MB; 0: none): reaching it starts a new file; max_disk_mb, min_free_mb, retry_period,
+    being collected and the one being written (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period,
     max_held_messages, close_retry: the writer's (see ``window_writer.WindowWriter``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -194,7 +195,7 @@ class Collector(object):
                 self._rotate()
                 self._clock = None
             if self._chunk and (self._due(stamp, raw) or (
-                    self.max_buffer_bytes and self._chunk_cost + cost > self.max_buffer_bytes)):
+                    self.max_buffer_bytes and self._chunk_cost + cost > part_bytes(self.max_buffer_bytes))):
                 self._rotate()
             self._clock = stamp if self._clock is None else max(self._clock, stamp)
             if self._chunk_span is None:

@@ -10,10 +10,12 @@ It holds two things for the driving topic (the topic the classifier watches):
   the windows whose time span holds them.
 
 Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
-window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``). When they reach the
-budget, an open window is written in parts (as ``max_window`` splits it), with every message of other topics
-held; a window waiting to be completed is completed; then messages outside every window (the ``pre``
-buffer, oldest first) go, counted in ``trimmed``. No message inside a window is ever dropped.
+window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``). An open window is
+handed on in parts (as ``max_window`` splits it, with every message of other topics held) whenever the
+buffer reaches half the budget, so that the buffer and the part being compressed and written stay within
+the budget together. At the full budget a window waiting to be completed is completed, then messages
+outside every window (the ``pre`` buffer, oldest first) go, counted in ``trimmed``. No message inside a
+window is ever dropped.
 
 Everything is pure Python: records carry any message object, stamps are float seconds.
 """
@@ -87,6 +89,12 @@ class MemoryCost(object):
         if size and first:
             return max(RECORD_OVERHEAD, cost * size // first)
         return cost
+
+
+def part_bytes(budget):
+    """The most a buffer of ``budget`` bytes holds before it hands a window on in parts: half of it, the other
+    half being for the part the writer is busy with."""
+    return budget // 2
 
 
 def budget_bytes(max_buffer_mb, name='max_buffer_mb'):
@@ -338,7 +346,7 @@ class WindowBuffer(object):
     def _enforce_budget(self):
         """Stay within max_buffer_mb (see the module docstring); return the windows completed doing so."""
         done = []
-        if not self._over_budget():
+        if not self.max_buffer_bytes or self._bytes <= part_bytes(self.max_buffer_bytes):
             return done
         if self._open is not None and (self._open.records or self._side):
             # Written in parts, as max_window splits: what the window holds now, with every side record held.
