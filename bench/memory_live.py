@@ -7,7 +7,7 @@ IMU at 1 kHz stream in for 60 s, with the default ``~max_buffer_mb`` and without
     python3 bench/memory_live.py --budgets 64 --seconds 30
     python3 bench/memory_live.py --quick             # 4 s with a 16 MB budget (tests)
 
-What it starts (cost_live.Processes: own sessions, a roscore on a free port, all stopped by their ids):
+What it starts (cost_live.roscore_session: own sessions, a roscore on a free port, all stopped by their ids):
 - the smart node (``rosrun cc_log smart_logger.py``, json-xz, ``odom:=/odom _topics:=/imu``) with a model whose
   threshold calls every message anomalous, so one window stays open from the first second to the last and is
   written in parts (``~max_window`` 100000 messages would split it only after 100 s);
@@ -21,15 +21,13 @@ import argparse
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
-from cost_live import Processes, free_port, hwm_mb, wait_master, wait_subscribers  # noqa: E402
+from cost_live import memory_mb, roscore_session, wait_subscribers  # noqa: E402
 
 DEFAULT_BUDGETS = '256,0'
 CHECKPOINTS = (10, 30, 60)
@@ -94,17 +92,6 @@ def publisher(args):
 
 # -- the runs ------------------------------------------------------------------------------------------
 
-def rss_mb(pid):
-    try:
-        with open('/proc/%d/status' % pid) as stream:
-            for line in stream:
-                if line.startswith('VmRSS:'):
-                    return int(line.split()[1]) / 1024.0
-    except IOError:
-        pass
-    return float('nan')
-
-
 def always_anomalous_model(path):
     """A model trained on random vectors with a threshold that calls every message anomalous."""
     import numpy as np
@@ -132,10 +119,10 @@ def run(procs, tmp, model, budget, args):
     while child.poll() is None:
         if started is None:
             started = time.time()  # the publisher's own start is within ~1 s of this
-        samples.append((time.time() - started, rss_mb(node.pid)))
+        samples.append((time.time() - started, memory_mb(node.pid, 'VmRSS')))
         time.sleep(1.0)
     result = json.loads(child.stdout.read().strip().splitlines()[-1])
-    result['peak'] = hwm_mb(node.pid)
+    result['peak'] = memory_mb(node.pid)
     result['samples'] = samples
     result['budget'] = budget
     procs.stop(node)
@@ -148,41 +135,38 @@ def at(samples, second):
     return near[-1] if near and samples[-1][0] >= second - 1 else None
 
 
-def main(argv=None):
+QUICK = {'seconds': 4.0, 'budgets': '16'}  # --quick
+
+
+def parse(argv):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--seconds', type=float, default=60.0)
     parser.add_argument('--rate', type=float, default=1000.0, help='messages per second on each topic')
     parser.add_argument('--budgets', default=DEFAULT_BUDGETS, help='~max_buffer_mb values, one run each (0: none)')
-    parser.add_argument('--quick', action='store_true')
+    parser.add_argument('--quick', dest='preset', action='store_const', const=QUICK, default={},
+                        help='a 4 s run with a 16 MB budget')
     parser.add_argument('--publisher', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    vars(args).update(args.preset)
+    return args
+
+
+def main(argv=None):
+    started = time.time()
+    args = parse(argv)
     if args.publisher:
         return publisher(args)
-    if args.quick:
-        args.seconds, args.budgets = 4.0, '16'
     budgets = [float(b) for b in args.budgets.split(',') if b]
-    started = time.time()
     common.header('Memory of the live smart node with a window open all the time', [
         'data: synthetic nav_msgs/Odometry and sensor_msgs/Imu, %g Hz each for %g s, header stamps of now; model: '
         'motion 20-message window with a threshold that calls every message anomalous; json-xz, pre/post 2 s'
         % (args.rate, args.seconds),
         'runs: ~max_buffer_mb %s' % ', '.join('%g' % b for b in budgets)])
-    tmp = tempfile.mkdtemp(prefix='cc_log_bench_memory_')
-    port = free_port()
-    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:%d' % port, ROS_HOME=os.path.join(tmp, 'ros_home'),
-               ROS_LOG_DIR=os.path.join(tmp, 'ros_log'), ROS_IP='127.0.0.1')
-    env.pop('ROS_HOSTNAME', None)
-    procs = Processes(env, tmp)
     results = []
-    try:
+    with roscore_session('cc_log_bench_memory_') as (procs, tmp):
         model = always_anomalous_model(os.path.join(tmp, 'model.json'))
-        procs.start('roscore', ['roscore', '-p', str(port)])
-        wait_master(env)
         for budget in budgets:
             results.append(run(procs, tmp, model, budget, args))
-    finally:
-        procs.stop_all()
-        shutil.rmtree(tmp, ignore_errors=True)
     rows = []
     for r in results:
         rss = [at(r['samples'], second) for second in CHECKPOINTS]
