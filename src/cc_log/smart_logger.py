@@ -11,8 +11,8 @@
 Completed windows go to the ``window_writer.WindowWriter`` (shared with collect mode), whose background
 thread calls ``log_format.write_window``, so compression and disk writes never run on the message path and
 no message is lost while a window is written; it holds and retries windows on a disk problem and keeps the
-disk limits. All buffered messages together are bounded by ``max_buffer_mb`` (a window reaching it is
-written in parts). ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear when a window
+disk limits. All buffered messages together are bounded by ``max_buffer_mb`` (an open window is written
+in parts at half of it). ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear when a window
 opens, is written or fails to be written, and when the quota deletes an old window file.
 
 Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
@@ -114,7 +114,7 @@ class SmartLogger(object):
     many seconds; keep retrying that long at close); classify_every: score the feature window on every
     driving message (``'1'``), every N-th (``'N'``) or at most once per duration (``'50ms'``, the default:
     see DEFAULT_CLASSIFY_EVERY); max_buffer_mb: memory budget of every buffered message together (MB;
-    0: none): a window reaching it is written in parts (see ``WindowBuffer``).
+    0: none): an open window is written in parts at half of it (see ``WindowBuffer``).
 
     Thread-safe: ``on_message``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be called
     from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.

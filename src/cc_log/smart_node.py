@@ -38,7 +38,8 @@ Parameters (defaults below as module constants; each resolved value is logged on
   intake queue; a message arriving when it is full is dropped and counted (``intake dropped (queue full)``
   and ``messages lost`` on /diagnostics, WARN): never silently.
   ``~max_buffer_mb`` (double, default: 256; 0 = no budget): memory budget of every buffered message (all
-  topics, estimated); a window reaching it is written in parts, never dropped.
+  topics, estimated): an open window is written in parts at half of it (the other half is for the part being
+  written), never dropped.
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
