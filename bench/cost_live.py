@@ -26,6 +26,7 @@ A rate is sustained when the node has seen every published message within 2 s af
 intake queue and messages seen < published).
 """
 import argparse
+import contextlib
 import json
 import os
 import shutil
@@ -155,13 +156,14 @@ def cpu_of(pid):
     return total
 
 
-def hwm_mb(pid):
+def memory_mb(pid, key='VmHWM'):
+    """MB of ``key`` in /proc/<pid>/status (VmHWM: peak RSS, VmRSS: RSS now), summed over the process tree."""
     total = 0
     for process in tree(pid):
         try:
             with open('/proc/%d/status' % process.pid) as stream:
                 for line in stream:
-                    if line.startswith('VmHWM:'):
+                    if line.startswith(key + ':'):
                         total += int(line.split()[1])
         except IOError:
             pass
@@ -194,6 +196,25 @@ def wait_subscribers(topic, count, seconds=30.0):
     raise RuntimeError('%s: fewer than %d subscribers after %g s' % (topic, count, seconds))
 
 
+@contextlib.contextmanager
+def roscore_session(prefix):
+    """``(Processes, temporary directory)`` with a roscore on a free port running; at the end every process is
+    stopped and the directory removed."""
+    tmp = tempfile.mkdtemp(prefix=prefix)
+    port = free_port()
+    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:%d' % port, ROS_HOME=os.path.join(tmp, 'ros_home'),
+               ROS_LOG_DIR=os.path.join(tmp, 'ros_log'), ROS_IP='127.0.0.1')
+    env.pop('ROS_HOSTNAME', None)
+    procs = Processes(env, tmp)
+    try:
+        procs.start('roscore', ['roscore', '-p', str(port)])
+        wait_master(env)
+        yield procs, tmp
+    finally:
+        procs.stop_all()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def train_model(path):
     from cc_log import learning, sim
     from cc_log.features import FeatureConfig
@@ -220,10 +241,10 @@ def run(procs, tmp, model, rate, seconds, with_record):
                                      env=procs.env, universal_newlines=True)
     result = json.loads(output.strip().splitlines()[-1])
     result['node_cpu'] = cpu_of(node.pid) - cpu0['node']
-    result['node_rss'] = hwm_mb(node.pid)
+    result['node_rss'] = memory_mb(node.pid)
     if record:
         result['record_cpu'] = cpu_of(record.pid) - cpu0['record']
-        result['record_rss'] = hwm_mb(record.pid)
+        result['record_rss'] = memory_mb(record.pid)
         procs.stop(record)
     procs.stop(node)
     result['rate'] = rate
@@ -250,23 +271,12 @@ def main(argv=None):
         'motion 500-message window trained on a nominal simulated run (seed 2, 5 min)',
         'runs: 100 Hz for %g s with rosbag record beside the node; then %s Hz for %g s each, node alone'
         % (args.seconds, ', '.join(map(str, rates)), args.seconds)])
-    tmp = tempfile.mkdtemp(prefix='cc_log_bench_live_')
-    port = free_port()
-    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:%d' % port, ROS_HOME=os.path.join(tmp, 'ros_home'),
-               ROS_LOG_DIR=os.path.join(tmp, 'ros_log'), ROS_IP='127.0.0.1')
-    env.pop('ROS_HOSTNAME', None)
-    procs = Processes(env, tmp)
     results = []
-    try:
+    with roscore_session('cc_log_bench_live_') as (procs, tmp):
         model = train_model(os.path.join(tmp, 'model.json'))
-        procs.start('roscore', ['roscore', '-p', str(port)])
-        wait_master(env)
         results.append(run(procs, tmp, model, 100, args.seconds, True))
         for rate in rates:
             results.append(run(procs, tmp, model, rate, args.seconds, False))
-    finally:
-        procs.stop_all()
-        shutil.rmtree(tmp, ignore_errors=True)
     first = results[0]
     rows = [['cc_log smart node', 100, first['sent'], first['seen'], '%.2f%%' % (100 * first['node_cpu'] / first['publish_seconds']),
              '%.0f' % first['node_rss'], first['windows']],

@@ -22,3 +22,45 @@ def real_bag():
             pytest.fail('real data missing: %s (tests read ../shared/data/real/)' % path)
         return path
     return find
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path):
+    """``mount(size)`` mounts a tmpfs of ``size`` (``'2m'``) at a fresh directory and returns its path: a real
+    disk that fills up. Mounting needs root: without it (or when mount fails) the test is skipped, saying why.
+    Every mount is undone at the end."""
+    import subprocess
+    mounted = []
+
+    def mount(size='2m'):
+        if os.geteuid() != 0:
+            pytest.skip('a small tmpfs (a real full disk) can only be mounted by root; running as uid %d'
+                        % os.geteuid())
+        path = tmp_path / ('tmpfs%d' % len(mounted))
+        path.mkdir()
+        result = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=%s,mode=0775' % size, 'tmpfs', str(path)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True)
+        if result.returncode:
+            pytest.skip('mount -t tmpfs failed: %s' % (result.stderr.strip() or result.returncode))
+        mounted.append(path)
+        return str(path)
+    yield mount
+    for path in mounted:
+        subprocess.call(['umount', '-l', str(path)])
+
+
+def fill_disk(path):
+    """Create ``path`` and write zeros into it until the file system is full (ENOSPC); return its size."""
+    import errno
+    written = 0
+    with open(path, 'wb', buffering=0) as stream:
+        block = b'\0' * 65536
+        while True:
+            try:
+                written += stream.write(block)
+            except OSError as error:
+                if error.errno != errno.ENOSPC:
+                    raise
+                block = block[:len(block) // 2]
+                if not block:
+                    return written

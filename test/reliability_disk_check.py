@@ -7,6 +7,11 @@
    full"), windows wait in memory; space returns (the filler is removed): they are written, nothing lost.
 3. ENOSPC during a write (no floor, the disk filled to the last byte): the node reports ERROR, keeps the
    windows in memory and keeps running; space returns: they are written, nothing lost.
+4. The disk full to the last byte and old windows over ~max_disk_mb: the quota makes room, oldest written
+   first, so windows are written while it stays full, and none is lost at shutdown.
+5. The collect node on a full disk: files and feature vectors are held and retried (ERROR on /diagnostics),
+   no empty ``*.tmp-*`` file is left, a crash leftover planted before the start is recovered and counted;
+   space returns: every message is in a file.
 
 Skipped, with the reason printed, when a tmpfs cannot be mounted (not root, no mount permission).
 """
@@ -27,7 +32,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 from reliability_crash_check import Streamer, make_model, status_values  # noqa: E402
 
-from cc_log import log_format  # noqa: E402
+from cc_log import log_format, recovery  # noqa: E402
+from test_reliability import window  # noqa: E402
 
 PKG = 'cc_log'
 NODE = 'smart_logger_disk'
@@ -189,6 +195,89 @@ class DiskTest(unittest.TestCase):
         self.assertEqual(level, DiagnosticStatus.WARN)  # recovered write errors stay visible as a warning
         self.assertEqual(len(log_format.window_files(directory)), int(values['windows saved']))
         self.assertIsNone(self.node.poll())
+
+
+    def test_4_full_disk_with_old_windows_over_the_quota_makes_room(self):
+        directory = os.path.join(self.disk, 'quota_full')
+        old = [log_format.write_window(window(2000, start=5000 * k), directory, 'json-xz')[0] for k in range(5)]
+        for age, path in enumerate(reversed(old)):  # written a minute apart, oldest first
+            os.utime(path, (time.time() - 60 * (age + 1),) * 2)
+        quota = 2.5 * max(os.path.getsize(path) for path in old) / 1e6
+        filler = os.path.join(self.disk, 'filler_quota')
+        fill(filler, 0)  # to the last byte
+        try:
+            self.start(directory, '_max_disk_mb:=%g' % quota)
+            sent = self.stream.publish(1.5, 500.0)
+            level, message, values = self.wait_status(
+                lambda level, message, values: values.get('intake queue') == '0' and values.get('writer queue') == '0'
+                and values.get('messages seen') == str(2 * sent) and values.get('windows held') == '0'
+                and int(values.get('windows saved', 0)) >= 3, 'windows written on the full disk', 30)
+            deleted = int(values['windows deleted (quota)'])
+            self.assertGreater(deleted, 0)
+            self.assertEqual(values['messages lost'], '0')
+            code, out, err = fx.stop(self.node)
+            type(self).node = None
+            self.assertNotIn('still failing at close', out + err)  # what the node says of a window lost at shutdown
+            remaining = [path for path in old if os.path.exists(path)]
+            self.assertEqual(remaining, old[len(old) - len(remaining):])  # the oldest went first
+            new = [path for path in log_format.window_files(directory) if path not in old]
+            kept = sum(len(log_format.read_window(path)[1]) for path in new)
+            # everything but what came before the first window and the last IMU message (after the last odometry)
+            dropped = int(values['messages dropped'])
+            self.assertTrue(2 * sent - dropped - 1 <= kept <= 2 * sent - dropped, (kept, sent, dropped))
+        finally:
+            os.unlink(filler)
+            shutil.rmtree(directory, ignore_errors=True)
+
+    def test_5_collect_node_on_a_full_disk_holds_retries_and_recovers_leftovers(self):
+        directory = os.path.join(self.disk, 'collect_full')
+        planted = log_format.write_window(window(200), directory, 'json-xz')[0]
+        leftover = planted + log_format.TMP_MARK + '999999999'  # as if its writer had been killed
+        os.rename(planted, leftover)
+        filler = os.path.join(self.disk, 'filler_collect')
+        fill(filler, 0)
+        name = 'collect_logger_disk'
+        del self.diagnostics[:]
+        type(self).node = fx.start('collect_logger.py', '__name:=' + name, 'odom:=disk_odom', '_topics:=disk_imu',
+                                   '_directory:=' + directory, '_rotate:=300', '_window:=20', '_stride:=10',
+                                   '_diagnostic_period:=0.2')
+        try:
+            status = lambda: status_values(self.diagnostics, name)  # noqa: E731
+            fx.wait_for(lambda: status()[0] is not None, 30, 'the collect node to start')
+            fx.wait_for(lambda: self.stream.connected() and fx.subscribed('/disk_imu', '/' + name), 30,
+                        'the collect node to subscribe')
+            time.sleep(0.5)
+            sent = self.stream.publish(1.5, 500.0)
+            fx.wait_for(lambda: status()[2].get('messages seen') == str(2 * sent) and int(
+                status()[2].get('windows held', 0)) >= 2 and status()[2].get('writer queue') == '0', 20,
+                'files held after ENOSPC')
+            level, message, values = status()
+            self.assertEqual(level, DiagnosticStatus.ERROR)
+            self.assertIn('No space left on device', message)
+            self.assertEqual(values['messages lost'], '0')
+            self.assertEqual(values['leftovers recovered'], '1')
+            self.assertEqual([name for _, _, names in os.walk(directory) for name in names
+                              if log_format.TMP_MARK in name], [])  # no empty leftovers of failed writes
+            os.unlink(filler)  # space returns
+            fx.wait_for(lambda: status()[2].get('windows held') == '0' and status()[2].get('writer queue') == '0',
+                        20, 'the held files to be written')
+            level, message, values = status()
+            self.assertEqual(values['messages lost'], '0')
+            self.assertEqual(level, DiagnosticStatus.WARN)  # low disk (a 2 MB tmpfs) or write errors, all retried
+            code, out, err = fx.stop(self.node)
+            type(self).node = None
+            self.assertEqual(code, 0, err[-2000:])
+            files = [path for path in log_format.window_files(directory) if path != planted]
+            self.assertEqual(recovery.scan(directory), [])
+            self.assertEqual(len(log_format.read_window(planted)[1]), 200)  # the leftover, recovered
+            self.assertEqual(sum(len(log_format.read_window(path)[1]) for path in files), 2 * sent)
+            vectors = os.listdir(os.path.join(directory, 'features', 'nominal'))
+            self.assertEqual(len(vectors), int(values['vectors written']))
+            self.assertGreater(len(vectors), 0)
+        finally:
+            if os.path.exists(filler):
+                os.unlink(filler)
+            shutil.rmtree(directory, ignore_errors=True)
 
 
 if __name__ == '__main__':

@@ -100,10 +100,12 @@ def script(name):
     return os.path.join(ROOT, 'scripts', name)
 
 
-def start(name, *args):
-    """Start a cc_log script as a process with ROS arguments; stdout/stderr are kept for the asserts."""
+def start(name, *args, **kwargs):
+    """Start a cc_log script as a process with ROS arguments; stdout/stderr are kept for the asserts.
+    ``env``: environment variables to change (e.g. HOME)."""
+    env = dict(os.environ, **kwargs.pop('env', {}))
     return subprocess.Popen([sys.executable, script(name)] + list(args), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, universal_newlines=True)
+                            stderr=subprocess.PIPE, universal_newlines=True, env=env, **kwargs)
 
 
 def stop(process, timeout=30.0):

@@ -20,7 +20,7 @@ import unittest
 
 import rospy
 import rostest
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu
 from std_srvs.srv import SetBool, Trigger
@@ -105,6 +105,49 @@ class SmartWindowTest(unittest.TestCase):
         self.assertEqual(code, 1)
         self.assertIn('~window', err)
         self.assertEqual(err.strip().count('\n'), 0, err)
+        # every parameter type-checked, one line each: no TypeError, OverflowError, nor a directory "[1, 2]"
+        cwd = os.path.join(self.tmp, 'cwd')
+        os.makedirs(cwd)
+        for number, (args, expected) in enumerate((
+                (('_model:=[1]',), '~model: [1] is not a string'),
+                (('_model:=' + self.model_path, '_post:=99999999999999999999'), '~post: 99999999999999999999 is'),
+                (('_model:=' + self.model_path, '_directory:=[1,2]'), '~directory: [1, 2] is not a string'),
+                (('_model:=' + self.model_path, '_max_buffer_mb:=-5'), '~max_buffer_mb: -5 must be'))):
+            code, out, err = fx.finish(fx.start('smart_logger.py', '__name:=smart_logger_bad_%d' % number, *args,
+                                                cwd=cwd))
+            self.assertEqual((code, err.strip().count('\n')), (1, 0), err)
+            self.assertIn(expected, err)
+        code, out, err = fx.finish(fx.start('collect_logger.py', '__name:=collect_logger_bad', '_stride:=[5]',
+                                            cwd=cwd))
+        self.assertEqual((code, err.strip().count('\n')), (1, 0), err)
+        self.assertIn('~stride: [5] must be a number', err)
+        self.assertEqual(os.listdir(cwd), [])
+
+    def test_0_unusable_directory_is_a_warning_naming_the_directory_in_use(self):
+        blocker = os.path.join(self.tmp, 'a_file')
+        with open(blocker, 'w') as stream:
+            stream.write('x')
+        home = os.path.join(self.tmp, 'home')
+        in_use = os.path.join(home, '.ros', 'cc_log')
+        for script, name, extra in (('smart_logger.py', 'smart_logger_fallback', ('_model:=' + self.model_path,)),
+                                    ('collect_logger.py', 'collect_logger_fallback', ())):
+            node = fx.start(script, '__name:=' + name, '_directory:=' + os.path.join(blocker, 'logs'),
+                            '_diagnostic_period:=0.2', *extra, env={'HOME': home})
+            try:
+                def status():
+                    for array in reversed(self.diagnostics):
+                        for item in array.status:
+                            if item.name == 'cc_log: ' + name:
+                                return item
+                fx.wait_for(lambda: status() is not None, 30, 'diagnostics of ' + name)
+                item = status()
+                values = {kv.key: kv.value for kv in item.values}
+                self.assertEqual(item.level, DiagnosticStatus.WARN, item.message)
+                self.assertIn('cannot be used', item.message)
+                self.assertTrue(item.message.endswith('logging to ' + in_use), item.message)
+                self.assertEqual(values['directory'], in_use)
+            finally:
+                fx.stop(node)
 
     def test_1_anomaly_writes_exactly_the_expected_window(self):
         # the offline classifier sees only the burst (messages 100..126 of the run: its 20-row windows)

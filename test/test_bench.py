@@ -69,3 +69,11 @@ def test_cost_live_quick():
     out = run('cost_live.py', '--quick')
     assert 'rosbag record' in out and 'Sustained rate' in out
     assert len(targets(out)) == 2
+
+
+@pytest.mark.skipif(shutil.which('roscore') is None or shutil.which('rosrun') is None,
+                    reason='needs roscore and rosrun (a sourced ROS workspace)')
+def test_memory_live_quick():
+    out = run('memory_live.py', '--quick')
+    assert 'window open throughout' in out and 'peak RSS MB' in out and 'max buffered MB' in out
+    assert len(targets(out)) == 1

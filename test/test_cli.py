@@ -10,6 +10,7 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -508,3 +509,38 @@ def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
     _, back = log_format.read_window(outcome['path'])
     assert [r.stamp for r in back] == [r.stamp for r in records]
     assert ok_json('recover', tmp_path)['leftovers'] == []
+
+
+# -- a full disk: offline commands retry briefly, then fail naming what was not written ------------------------
+
+def test_replay_into_a_full_disk_retries_then_fails_naming_the_directory_and_the_loss(trained, replayed,
+                                                                                      small_tmpfs):
+    from conftest import fill_disk
+    from cc_log import window_writer
+    disk = small_tmpfs('1m')
+    out = os.path.join(disk, 'logs')
+    os.makedirs(out)
+    fill_disk(os.path.join(disk, 'filler'))
+    started = time.monotonic()
+    line = fails('replay', replayed['bag'], '--topic', '/odom', '--side-topic', '/scan', '--model',
+                 trained['model'], '--out', out, '--pre', '10', '--post', '10')
+    assert time.monotonic() - started >= window_writer.OFFLINE_RETRY_SECONDS  # it retried first
+    assert line.startswith('cclog replay: error: %s: ' % out), line
+    assert 'messages) not written' in line and 'No space left on device' in line, line
+    assert 'retrying every' not in line  # nothing is left retrying once the command has exited
+    assert [name for name in os.listdir(out) if '.tmp-' in name] == []
+
+
+def test_collect_into_a_full_disk_retries_then_fails_naming_the_directory(trained, real_bag, small_tmpfs):
+    from conftest import fill_disk
+    disk = small_tmpfs('1m')
+    fill_disk(os.path.join(disk, 'filler'))
+    out = os.path.join(disk, 'vectors')
+    line = fails('collect', real_bag(NORMAL), '--topic', '/odom', '--out', out, '--window', WINDOW, '--stride', 5)
+    from cc_log import bagio
+    from cc_log.features import FeatureConfig
+    expected = len(bagio.feature_vectors(real_bag(NORMAL), '/odom', FeatureConfig('motion', WINDOW), 5)[0])
+    assert line.startswith('cclog collect: error: %s: ' % os.path.join(out, 'nominal')), line
+    assert '%d of %d feature vectors not written' % (expected, expected) in line, line
+    assert 'No space left on device' in line, line
+    assert [name for name in os.listdir(os.path.join(out, 'nominal')) if '.tmp-' in name] == []

@@ -80,6 +80,19 @@ def test_rotation_by_duration_and_by_size(husky, tmp_path):
     assert sum(len(records) for _, _, records in files) == len(husky)
 
 
+def test_memory_budget_starts_a_new_file_before_rotation_is_due(husky, tmp_path):
+    collector = Collector(str(tmp_path), 'json-xz', '60s', driving_topic=ODOM, side_topics=[IMU], window='20',
+                          max_buffer_mb=0.2)
+    peaks = []
+    for record in husky:
+        collector.on_message(record.topic, record.msg, record.stamp)
+        peaks.append(collector.stats()['buffered_bytes'])
+    assert collector.close(60)
+    files = files_of(str(tmp_path))
+    assert max(peaks) <= 0.2e6 and len(files) > 5  # one 60 s file without the budget
+    assert sum(len(records) for _, _, records in files) == len(husky) == collector.stats()['messages_kept']
+
+
 def test_vectors_equal_the_offline_ones(husky, husky_path, tmp_path):
     """Live collect mode and bagio.feature_vectors (cclog collect, learning) compute the same vectors."""
     odom = [r for r in husky if r.topic == ODOM]

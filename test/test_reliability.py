@@ -560,7 +560,8 @@ def test_still_failing_at_close_counts_the_loss_once(tmp_path, monkeypatch):
     logger.close()
     stats = logger.stats()
     assert stats['messages_lost'] == 11 and stats['windows_held'] == 0 and stats['write_errors'] == 1
-    assert [e.kind for e in events] == [OPENED, FAILED]
+    assert [e.kind for e in events] == [OPENED, FAILED, FAILED]  # kept in memory, then lost: both said
+    assert 'retrying' in events[1].error and 'still failing at close' in events[2].error
 
 
 def test_memory_held_is_bounded_oldest_dropped_and_counted(tmp_path, monkeypatch):

@@ -157,6 +157,40 @@ def test_stats_count_every_message_and_byte(husky, tmp_path):
     assert stats['queue_depth'] == 0
 
 
+def test_memory_budget_bounds_every_topic_and_writes_an_endless_window_in_parts(husky, tmp_path):
+    """A window open the whole run (every message anomalous) with IMU messages too: the buffer stays within
+    max_buffer_mb, the window is written in parts, and the parts hold exactly what one unbounded window
+    holds."""
+    odom = [r for r in husky if r.topic == ODOM]
+    flags = set(range(len(odom)))
+    budget = 0.3  # MB: about 150 buffered messages
+
+    def run(directory, max_buffer_mb, check=None):
+        model = ScriptedModel(flags)
+        logger = SmartLogger(model, directory, 'json-xz', PRE, POST, driving_topic=ODOM, side_topics=[IMU],
+                             background=False, max_buffer_mb=max_buffer_mb)
+        index = -1
+        for record in husky:
+            if record.topic == ODOM:
+                index += 1
+                model.index = index
+            logger.on_message(record.topic, record.msg, record.stamp)
+            if check is not None:
+                check(logger.stats())
+        logger.close()
+        return logger.stats(), read_all(directory)
+    peaks = []
+    stats, parts = run(str(tmp_path / 'budget'), budget, lambda s: peaks.append(s['buffered_bytes']))
+    assert max(peaks) <= budget * 1e6 and stats['buffer_trimmed'] == 0 and stats['messages_lost'] == 0
+    unbounded_stats, whole = run(str(tmp_path / 'whole'), 0)
+    assert len(whole) == 1 and len(parts) > 10
+    assert [metadata['part'] for _, metadata, _ in sorted(parts, key=lambda f: f[2][0].stamp)] == list(
+        range(1, len(parts) + 1))
+    kept = sorted(((r.stamp, r.topic) for _, _, records in parts for r in records))
+    assert kept == [(r.stamp, r.topic) for r in whole[0][2]]
+    assert stats['messages_kept'] == unbounded_stats['messages_kept'] == len(kept)
+
+
 def test_writer_thread_never_blocks_the_message_path(husky, tmp_path, monkeypatch):
     release = threading.Event()
     real_write = log_format.write_window
@@ -308,7 +342,8 @@ def test_failed_writes_are_reported_not_raised(husky, tmp_path):
     assert logger.close(30)
     stats = logger.stats()
     assert stats['write_errors'] == 1 and stats['messages_lost'] == 21 and stats['windows_saved'] == 0
-    assert [e.kind for e in events] == [OPENED, FAILED] and events[1].error
+    assert [e.kind for e in events] == [OPENED, FAILED, FAILED] and events[1].error  # held, then lost at close
+    assert 'still failing at close' in events[2].error and events[2].messages == 21
 
 
 def test_bad_configuration_names_the_parameter(tmp_path):

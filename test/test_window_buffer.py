@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cc_log.spans import Span
-from cc_log.window_buffer import LogWindow, Record, WindowBuffer
+from cc_log.window_buffer import LogWindow, MemoryCost, Record, WindowBuffer, deep_size
 
 
 def run(buffer, stamps, anomalies, side=()):
@@ -20,7 +20,7 @@ def run(buffer, stamps, anomalies, side=()):
     for index, stamp in enumerate(stamps):
         while side and side[0][0] <= stamp:
             side_stamp, name = side.pop(0)
-            buffer.add_side(Record(side_stamp, '/side', name))
+            windows += buffer.add_side(Record(side_stamp, '/side', name))
         windows += buffer.add(Record(stamp, '/odom', index))
         if index in anomalies:
             windows += buffer.trigger('test', -1.0)
@@ -237,3 +237,107 @@ def test_windows_by_duration_never_duplicate_or_skip(gaps, pre, post, data):
         # every message within pre before / post after an anomaly is kept
         near = {j for j, t in enumerate(stamps) if stamps[i] - pre <= t <= stamps[i] + post}
         assert near <= set(kept)
+
+
+# -- memory budget (max_buffer_mb) -------------------------------------------------------------------------
+
+COST = 100  # bytes per record in these tests
+MB = 1000 ** 2
+
+
+def run_costed(buffer, n, anomalies, side_every=1, check=None):
+    """Driving records 0..n-1 (stamp i, cost COST), ``side_every`` side records between two driving ones;
+    trigger at the anomalies; ``check(buffer)`` after every call. Returns the windows after the flush."""
+    windows = []
+    for i in range(n):
+        for k in range(side_every):
+            windows += buffer.add_side(Record(i - 1 + (k + 1) / (side_every + 1.0), '/side', (i, k), COST))
+            check and check(buffer)
+        windows += buffer.add(Record(float(i), '/odom', i, COST))
+        check and check(buffer)
+        if i in anomalies:
+            windows += buffer.trigger('test', -1.0)
+            check and check(buffer)
+    return windows + buffer.flush()
+
+
+def within(budget):
+    def check(buffer):
+        assert buffer.buffered_bytes <= budget
+        assert buffer.buffered_bytes == COST * buffer.buffered_messages
+    return check
+
+
+def test_a_window_open_all_the_time_is_written_in_parts_within_the_budget():
+    budget = 5000  # 50 records
+    buffer = WindowBuffer(window=5, pre=10, post=10, max_buffer_mb=budget / MB)
+    windows = run_costed(buffer, 1000, set(range(0, 1000)), side_every=1, check=within(budget))
+    records = [r for w in windows for r in w.records]
+    assert [r.msg for r in records if r.topic == '/odom'] == list(range(1000))  # every one, once, in order
+    assert sorted(r.msg for r in records if r.topic == '/side') == [(i, 0) for i in range(1, 1000)]  # from 0.0 on
+    assert [r.stamp for r in records] == sorted(r.stamp for r in records)
+    assert [w.part for w in windows] == list(range(1, len(windows) + 1)) and len(windows) >= 35
+    assert all(len(w) <= budget // COST + 1 for w in windows)
+    assert buffer.trimmed == 0  # nothing inside a window is ever dropped
+
+
+def test_side_records_between_two_parts_of_a_split_window_are_kept():
+    """A side message after one part's last driving message and before the next part's first one."""
+    windows = run_costed(WindowBuffer(window=5, pre=2, post=2, max_window=10, max_buffer_mb=0), 100,
+                         set(range(100)), side_every=1)
+    assert len(windows) == 10 and [w.part for w in windows] == list(range(1, 11))
+    assert sorted(r.msg for w in windows for r in w.records if r.topic == '/side') == [(i, 0) for i in range(1, 100)]
+
+
+def test_outside_windows_the_budget_trims_the_oldest_and_counts_them():
+    budget = 2000
+    buffer = WindowBuffer(window=5, pre=100, post=5, max_buffer_mb=budget / MB)
+    windows = run_costed(buffer, 500, {400}, side_every=2, check=within(budget))
+    assert buffer.trimmed > 0
+    assert [w.part for w in windows] == list(range(1, len(windows) + 1))  # one window, in parts at the budget
+    odom = [r.msg for w in windows for r in w.records if r.topic == '/odom']
+    assert odom[-6:] == list(range(400, 406)) and odom == list(range(odom[0], 406))
+    assert sum(len(w) for w in windows) <= budget // COST + 1 + 5 * 3
+    without = run_costed(WindowBuffer(window=5, pre=100, post=5, max_buffer_mb=0), 500, {400}, side_every=2)
+    assert len(without[0]) == 101 * 3 + 5 * 3 - 2  # no budget: the whole pre part
+
+
+@settings(max_examples=200, deadline=None)
+@given(n=st.integers(1, 150), pre=st.integers(0, 30), post=st.integers(0, 30), budget=st.integers(3, 40),
+       side_every=st.integers(0, 3), data=st.data())
+def test_the_budget_never_drops_a_window_message_nor_writes_one_twice(n, pre, post, budget, side_every, data):
+    anomalies = set(data.draw(st.lists(st.integers(0, n - 1), max_size=10)))
+    buffer = WindowBuffer(window=5, pre=pre, post=post, max_window=1000, max_buffer_mb=budget * COST / MB)
+    windows = run_costed(buffer, n, anomalies, side_every, check=within(budget * COST))
+    odom = [r.msg for w in windows for r in w.records if r.topic == '/odom']
+    side = [r.msg for w in windows for r in w.records if r.topic == '/side']
+    assert odom == sorted(set(odom)) and len(side) == len(set(side))
+    for i in anomalies:  # the anomaly and its post part are never dropped
+        assert set(range(i, min(n, i + post + 1))) <= set(odom)
+    reference = [r.msg for w in run_costed(WindowBuffer(window=5, pre=pre, post=post, max_window=1000,
+                                                        max_buffer_mb=0), n, anomalies, side_every)
+                 for r in w.records if r.topic == '/odom']
+    assert set(odom) <= set(reference)  # nothing outside the windows is added either
+
+
+def test_memory_cost_is_measured_once_per_type_and_scales_with_the_serialized_length():
+    import io
+    nav_msgs = pytest.importorskip('nav_msgs.msg')
+    buff = io.BytesIO()
+    nav_msgs.Odometry().serialize(buff)
+    msg = nav_msgs.Odometry().deserialize(buff.getvalue())  # as received: every float its own object
+    cost = MemoryCost()
+    first = cost(msg, 700)
+    assert 3000 < deep_size(msg) < first < 6000  # a decoded Odometry: ~3.5 kB of Python objects
+    assert cost(nav_msgs.Odometry(), 700) == first and cost(nav_msgs.Odometry(), 1400) == 2 * first
+    assert cost(nav_msgs.Odometry()) == first  # no length known: the type's estimate
+    buffer = WindowBuffer(window=5, pre=2, post=2)
+    buffer.add(Record(1.0, '/odom', msg))  # no cost given: the buffer estimates it
+    assert buffer.buffered_bytes == MemoryCost()(msg) > 0
+
+
+@pytest.mark.parametrize('value', ['-1', 'lots', float('nan'), float('inf'), [1]])
+def test_bad_budget_names_the_parameter(value):
+    with pytest.raises(ValueError) as error:
+        WindowBuffer(max_buffer_mb=value)
+    assert str(error.value).startswith('max_buffer_mb:')

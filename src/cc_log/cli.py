@@ -247,14 +247,16 @@ def _span(name):
     return parse
 
 
-def _positive_float(name):
+def _positive_float(name, zero=False):
+    """argparse type for a finite number > 0 (>= 0 with ``zero``)."""
     def parse(value):
         try:
             number = float(value)
         except ValueError:
             number = float('nan')
-        if not (math.isfinite(number) and number > 0):
-            raise argparse.ArgumentTypeError('%s: %r must be a positive number' % (name, value))
+        if not (math.isfinite(number) and (number >= 0 if zero else number > 0)):
+            raise argparse.ArgumentTypeError('%s: %r must be a %s number' % (name, value, 'non-negative' if zero
+                                                                              else 'positive'))
         return number
     parse.__name__ = name
     return parse
@@ -473,7 +475,7 @@ def cmd_replay(args):
     _writable_dir(args.out, 'out')
     with _bar(args, 'replay', total) as bar:
         summary = _call(smart_logger.replay, bar, args.bag, args.topic, args.model, args.out, pre=str(pre),
-                        post=str(post), fmt=args.format, side_topics=tuple(side))
+                        post=str(post), fmt=args.format, side_topics=tuple(side), max_buffer_mb=args.max_buffer_mb)
     result = collections.OrderedDict([
         ('input_messages', summary['input_messages']),
         ('raw_json_bytes', summary['raw_json_bytes']),
@@ -988,7 +990,9 @@ def build_parser():
         """
         Collect mode from a bag: run the features over the driving topic (nav_msgs/Odometry) and write one
         feature vector file per --stride messages into DIR/<label>/, as the collect node does live. Those
-        directories are what `cclog learn --train` reads; label a run "nominal" or after its anomaly.
+        directories are what `cclog learn --train` reads; label a run "nominal" or after its anomaly. A
+        vector that cannot be written (disk full) is retried for a few seconds; then collect exits 1 with one
+        line naming DIR/<label> and how many vectors were not written.
         """,
         """
           cclog collect husky.bag --topic /husky_velocity_controller/odom --out train
@@ -1039,7 +1043,9 @@ def build_parser():
         runs. The driving topic is scored by the model; every anomaly saves --pre messages before and --post
         after (counts or durations), with the --side-topic messages of that time span, as window files in
         OUT. --json prints {input_messages, raw_json_bytes, stored_bytes, windows: [{start, end, messages,
-        path}]}; start/end are the header stamps (float seconds) of the first and last message saved.
+        path}]}; start/end are the header stamps (float seconds) of the first and last message saved. A window
+        that cannot be written (disk full) is retried for a few seconds; then replay stops and exits 1 with
+        one line naming OUT and how many windows and messages were not written.
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
@@ -1058,6 +1064,9 @@ def build_parser():
                    help='window file format (default: %(default)s)')
     p.add_argument('--side-topic', action='append', default=[], metavar='T',
                    help='another topic to save inside the windows (repeatable)')
+    p.add_argument('--max-buffer-mb', default=_max_buffer_mb(), type=_positive_float('max-buffer-mb', zero=True),
+                   metavar='MB', help='memory budget of every message buffered (estimated); a window reaching it '
+                   'is written in parts; 0: none (default: %(default)s)')
     _common(p)
     p.set_defaults(run=cmd_replay)
 
@@ -1208,6 +1217,11 @@ def _collect_stride():
     except ImportError:
         return 25
     return DEFAULT_STRIDE
+
+
+def _max_buffer_mb():
+    from .window_buffer import DEFAULT_MAX_BUFFER_MB
+    return DEFAULT_MAX_BUFFER_MB
 
 
 def _sim_rate():

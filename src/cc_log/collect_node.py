@@ -8,11 +8,11 @@ Subscribed topics
 
 Published topics
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
-  bytes, queues, free disk, every ``~diagnostic_period`` seconds (wall time).
+  bytes, queues, free disk, write errors and held files, every ``~diagnostic_period`` seconds (wall time).
 
 Parameters (defaults below as module constants; each resolved value is logged once)
   ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): window files go here, vectors into
-  ``<directory>/features/<label>/``.
+  ``<directory>/features/<label>/``; a fallback is a WARN on /diagnostics naming the directory in use.
   ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
   ``~rotate`` (string, default: 60s): a new file after this many messages (``6000``), seconds (``60s``) or
   raw row-JSON bytes (``20MB``).
@@ -22,9 +22,17 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~feature_set`` (string, default: motion): ``motion`` or ``raw``.
   ``~stride`` (int, default: 25): a vector every this many odometry messages.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
+  ``~max_buffer_mb`` (double, default: 256; 0 = no budget): memory budget of the file being collected; a new
+  file starts when it is reached.
+  ``~max_disk_mb`` (double, default: 0 = no quota), ``~min_free_mb`` (double, default: 0 = off): the disk
+  limits of the smart node, for the window files.
 
-At shutdown the current file is written, so every file is complete.
+Every parameter is type-checked (one line ``/collect_logger: ~<name>: ...``, exit 1). On start, crash
+leftovers in ``~directory`` are recovered or reported and kept, as the smart node does. Files and vectors
+go through the smart node's window writer: a write that fails (disk full...) is reported and kept in memory
+and retried; at shutdown the current file is written, so every file is complete.
 """
+import os
 import sys
 
 import rospy
@@ -32,8 +40,11 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 
 from . import collector
-from .smart_node import (ConfigError, Diagnostics, Intake, free_disk, fail, param, param_float, param_topics,
-                         resolve_directory, DEFAULT_DIAGNOSTIC_PERIOD, DISK_WARN_BYTES, CLOSE_TIMEOUT)
+from . import features
+from . import log_format
+from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_name, recover_leftovers,
+                          resolve_directory, writer_status)
+from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, Intake
 
 NODE_NAME = 'collect_logger'
 DRIVING_TOPIC = 'odom'
@@ -49,20 +60,27 @@ class CollectNode(object):
     """Parameters, subscribers and diagnostics around a Collector."""
 
     def __init__(self):
-        self.directory = resolve_directory(param('directory', ''))
-        fmt = param('format', DEFAULT_FORMAT)
-        rotate = param('rotate', DEFAULT_ROTATE)
-        topics = param_topics()
-        label = param('label', DEFAULT_LABEL)
-        window = param('window', DEFAULT_WINDOW)
-        feature_set = param('feature_set', DEFAULT_FEATURE_SET)
-        stride = param('stride', DEFAULT_STRIDE)
-        period = param_float('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        params = Params()
+        self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
+        self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
+                                                                        collector.FEATURES_SUBDIRECTORY))
+        fmt = params.choice('format', DEFAULT_FORMAT, log_format.Format.ALL)
+        rotate = params.scalar('rotate', DEFAULT_ROTATE)
+        topics = params.topics('topics')
+        label = params.scalar('label', DEFAULT_LABEL)
+        window = params.scalar('window', DEFAULT_WINDOW)
+        feature_set = params.choice('feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS)
+        stride = params.number('stride', DEFAULT_STRIDE, minimum=1, integer=True)
+        period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        max_buffer_mb = params.number('max_buffer_mb', DEFAULT_MAX_BUFFER_MB)
+        max_disk_mb = params.number('max_disk_mb', 0.0)
+        min_free_mb = params.number('min_free_mb', 0.0)
         try:
             self.collector = collector.Collector(
                 self.directory, fmt, rotate, driving_topic=rospy.resolve_name(DRIVING_TOPIC),
                 side_topics=[rospy.resolve_name(topic) for topic in topics], window=window,
-                feature_set=feature_set, stride=stride, label=label)
+                feature_set=feature_set, stride=stride, label=label, max_buffer_mb=max_buffer_mb,
+                max_disk_mb=max_disk_mb, min_free_mb=min_free_mb, close_retry=CLOSE_RETRY)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         self.collector.on_event(self._on_event)
@@ -76,16 +94,14 @@ class CollectNode(object):
         if kind == 'file':
             rospy.loginfo('wrote %s (%d messages, %d bytes)', detail['path'], detail['messages'], detail['bytes'])
         elif kind == 'failed':
-            rospy.logerr('write failed: %s', detail['error'])
+            rospy.logerr('%s of %d messages not written: %s', detail['what'], detail['messages'], detail['error'])
+        elif kind == 'deleted':
+            rospy.logwarn('window file deleted (~max_disk_mb): %s', detail['path'])
 
     def _status(self):
         stats = self.collector.stats()
-        free = free_disk(self.directory)
-        level, message = DiagnosticStatus.OK, 'collecting'
-        if free is not None and free < DISK_WARN_BYTES:
-            level, message = DiagnosticStatus.WARN, 'low disk space: %d MB free' % (free // 1000 ** 2)
-        if stats['write_errors']:
-            level, message = DiagnosticStatus.ERROR, 'write errors: %s' % stats['last_error']
+        level, message, disk = writer_status(DiagnosticStatus.OK, 'collecting', self.collector.writer,
+                                             self.leftovers, self.directory_warning)
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('files written', stats['files_written']),
@@ -93,17 +109,16 @@ class CollectNode(object):
             ('messages seen', stats['messages_seen']),
             ('messages kept', stats['messages_kept']),
             ('messages buffered', stats['messages_buffered']),
+            ('buffered bytes (estimated)', stats['buffered_bytes']),
             ('messages lost', stats['messages_lost'] + self.intake.dropped),
+            ('files lost', stats['files_lost']),
             ('raw JSON bytes', raw),
             ('stored bytes', stored),
             ('stored / raw', '%.4f' % (float(stored) / raw) if raw and stats['messages_kept'] else 'n/a'),
             ('writer queue', stats['queue_depth']),
             ('intake queue', self.intake.queue.qsize()),
-            ('write errors', stats['write_errors']),
             ('time resets', stats['time_resets']),
-            ('directory', self.directory),
-            ('free disk bytes', free if free is not None else 'unknown'),
-        ]
+        ] + disk
         return level, message, values
 
     def shutdown(self):
@@ -116,11 +131,12 @@ class CollectNode(object):
 
 def main(argv=None):
     """Run the node; return the exit status (1 with one line on stderr for bad configuration)."""
-    rospy.init_node(NODE_NAME, argv=sys.argv if argv is None else argv)
+    argv = sys.argv if argv is None else argv
     try:
+        init_node(NODE_NAME, argv)
         node = CollectNode()
     except ConfigError as error:
-        return fail(rospy.get_name(), error)
+        return fail(node_name(NODE_NAME, argv), error)
     rospy.spin()
     node.shutdown()
     return 0

@@ -1,19 +1,22 @@
 """Collect mode: log everything, rotated into complete window files, plus feature vectors for learning.
 
 ``Collector`` keeps every message it is fed. The stream is cut into files by ``rotate`` (a message count
-``'6000'``, a duration ``'60s'`` or a size ``'20MB'`` of raw row-JSON bytes); every file is a complete
-window file of the chosen format, readable on its own. From the driving topic it computes a feature vector
-every ``stride`` messages once a whole feature window of continuous data is in, and writes
-each vector as its own file under ``<directory>/features/<label>/`` with ``learning.write_vector`` — the
-training data of learn mode. File writes run on a background writer thread.
+``'6000'``, a duration ``'60s'`` or a size ``'20MB'`` of raw row-JSON bytes), and earlier when the messages
+of the file being collected reach half the memory budget ``max_buffer_mb`` (the other half is for the file
+being written); every file is a complete window file
+of the chosen format, readable on its own. From the driving topic it computes a feature vector every
+``stride`` messages once a whole feature window of continuous data is in, and writes each vector as its own
+file under ``<directory>/features/<label>/`` with ``learning.write_vector`` — the training data of learn
+mode. Files and vectors go through the ``window_writer.WindowWriter`` smart mode uses (background thread,
+held in memory and retried on a disk problem, quota, free-space floor).
 
-``collect_bag`` computes the same vectors from a bag (``cclog collect``).
+``collect_bag`` computes the same vectors from a bag (``cclog collect``), through the same writer.
 
 Pure: no rospy (``collect_bag`` imports ``bagio``, and so rosbag, only when called).
 """
 import collections
+import functools
 import os
-import queue
 import re
 import threading
 import time
@@ -22,8 +25,10 @@ from . import features as features_mod
 from . import learning
 from . import log_format
 from . import msg_codec
+from . import window_writer
 from .spans import Span
-from .window_buffer import LogWindow, Record, Trigger, WindowBuffer
+from .window_buffer import (DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, WindowBuffer,
+                            budget_bytes, part_bytes)
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']
@@ -94,7 +99,7 @@ class VectorStream(object):
 
     def add(self, msg, stamp):
         row = self.features.row(msg, stamp)
-        self.buffer.add(Record(stamp, None, None), row)
+        self.buffer.add(Record(stamp, None, None, 1), row)
         if not self.buffer.feature_window_full or not self.features.covers(self.window, stamp):
             return None
         self._index += 1
@@ -121,14 +126,18 @@ class Collector(object):
     ``'json-xz'`` or ``'bag-lz4'``; rotate: see ``Rotation.parse``; driving_topic: the topic name the
     odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
     the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label:
-    the vectors' label; background: write on a writer thread.
+    the vectors' label; background: write on a writer thread; max_buffer_mb: memory budget of the file
+    being collected and the one being written (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period,
+    max_held_messages, close_retry: the writer's (see ``window_writer.WindowWriter``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
 
     def __init__(self, directory, fmt='json-xz', rotate=DEFAULT_ROTATE, driving_topic='odom', side_topics=None,
                  window=DEFAULT_WINDOW, feature_set=DEFAULT_FEATURE_SET, stride=DEFAULT_STRIDE,
-                 label=DEFAULT_LABEL, background=True):
+                 label=DEFAULT_LABEL, background=True, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, max_disk_mb=0,
+                 min_free_mb=0, retry_period=window_writer.DEFAULT_RETRY_PERIOD,
+                 max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES, close_retry=0.0):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
         self.rotate = Rotation.parse(rotate)
@@ -140,35 +149,37 @@ class Collector(object):
         self.stride = parse_stride(stride)
         self.label = check_label(label)
         self.features_directory = os.path.join(self.directory, FEATURES_SUBDIRECTORY)
+        self.max_buffer_bytes = budget_bytes(max_buffer_mb)
         self._vectors = VectorStream(self.config, self.stride)
         self._lock = threading.Lock()
         self._stats_lock = threading.Lock()
+        self._cost = MemoryCost()
         self._chunk = []
         self._chunk_bytes = 0
+        self._chunk_cost = 0
         self._chunk_span = None
         self._clock = None
         self._part = 0
         self._closed = False
         self._callbacks = []
-        self.counters = collections.OrderedDict([
-            ('messages_seen', 0), ('messages_kept', 0), ('messages_lost', 0), ('raw_json_bytes', 0),
-            ('stored_bytes', 0), ('files_written', 0), ('vectors_written', 0), ('write_errors', 0),
-            ('time_resets', 0)])
-        self.last_error = ''
-        self._queue = queue.Queue()
-        self._writer = None
-        if background:
-            self._writer = threading.Thread(target=self._write_loop, name='cc_log collect writer')
-            self._writer.daemon = True
-            self._writer.start()
+        self.counters = collections.OrderedDict([('messages_seen', 0), ('raw_json_bytes', 0), ('time_resets', 0)])
+        self.writer = window_writer.WindowWriter(
+            self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
+            max_held_messages=max_held_messages, background=background, close_retry=close_retry,
+            name='cc_log collect writer')
+        self.guard = self.writer.guard
+        self.writer.on_event(self._written)
 
     def on_event(self, callback):
-        """Call ``callback(kind, detail)`` after each write: kind 'file', 'vector' or 'failed'; detail is
-        a dict (path, bytes, messages, start, end for files; path, stamp for vectors; error)."""
+        """Call ``callback(kind, detail)`` after each write: kind 'file', 'vector', 'failed' or 'deleted';
+        detail is a dict (path, bytes, messages, start, end for files; path, stamp for vectors; what ('window'
+        or 'vector'), messages, error, kept for failures: kept True while the file is held in memory and
+        retried; path for a window file the quota deleted)."""
         self._callbacks.append(callback)
 
-    def on_message(self, topic, msg, stamp=None):
-        """Keep one message (``stamp``: receipt/bag time, used when the message has no header stamp)."""
+    def on_message(self, topic, msg, stamp=None, size=None):
+        """Keep one message (``stamp``: receipt/bag time, used when the message has no header stamp;
+        ``size``: its serialized length when known, for the memory estimate)."""
         if topic != self.driving_topic and self.side_topics is not None and topic not in self.side_topics:
             return
         raw = msg_codec.row_json_bytes(msg)
@@ -176,25 +187,28 @@ class Collector(object):
         with self._lock:
             if self._closed:
                 raise ValueError('on_message: the collector is closed')
+            cost = self._cost(msg, size)
             self._count('messages_seen', 1)
             self._count('raw_json_bytes', raw)
             if self._clock is not None and stamp < self._clock - JUMP_BACK_TOLERANCE:
                 self._count('time_resets', 1)
                 self._rotate()
                 self._clock = None
-            if self._chunk and self._due(stamp, raw):
+            if self._chunk and (self._due(stamp, raw) or (
+                    self.max_buffer_bytes and self._chunk_cost + cost > part_bytes(self.max_buffer_bytes))):
                 self._rotate()
             self._clock = stamp if self._clock is None else max(self._clock, stamp)
             if self._chunk_span is None:
                 self._chunk_span = (stamp, stamp)
             else:
                 self._chunk_span = (min(self._chunk_span[0], stamp), max(self._chunk_span[1], stamp))
-            self._chunk.append(Record(stamp, topic, msg))
+            self._chunk.append(Record(stamp, topic, msg, cost))
             self._chunk_bytes += raw
+            self._chunk_cost += cost
             if topic == self.driving_topic:
                 vector = self._vectors.add(msg, stamp)
                 if vector is not None:
-                    self._submit(('vector', stamp, vector))
+                    self.writer.submit(vector_job(self.features_directory, self.label, stamp, vector, self.config))
 
     def flush(self):
         """Write the current file now (even when it is not due for rotation)."""
@@ -202,27 +216,30 @@ class Collector(object):
             self._rotate()
 
     def close(self, timeout=None):
-        """Write the current file and wait for the writer; idempotent. True when all was written."""
+        """Write the current file and wait for the writer (see ``WindowWriter.close``); idempotent. True when
+        the writer finished within ``timeout`` seconds."""
         with self._lock:
             if not self._closed:
                 self._rotate()
                 self._closed = True
-                if self._writer is not None:
-                    self._queue.put(None)
-        if self._writer is not None:
-            self._writer.join(timeout)
-            return not self._writer.is_alive()
-        return True
+        return self.writer.close(timeout)
 
     def stats(self):
-        """A snapshot of the counters (dict), with messages_buffered and queue_depth."""
+        """A snapshot of the counters (dict): messages_seen, raw_json_bytes, time_resets, messages_buffered,
+        buffered_bytes, files_written, vectors_written, and the writer's (messages_kept, messages_lost,
+        stored_bytes, write_errors, last_error, files_held, ... see ``WindowWriter.stats``)."""
         with self._lock:
-            buffered = len(self._chunk)
+            buffered, buffered_bytes = len(self._chunk), self._chunk_cost
         with self._stats_lock:
             result = dict(self.counters)
-            result['last_error'] = self.last_error
+        written = self.writer.stats()
+        result.update((key, value) for key, value in written.items() if key not in ('written', 'windows_saved'))
+        result['files_written'] = written['windows_saved']
+        result['vectors_written'] = written['written'].get(VECTOR, 0)
+        result['files_held'] = written['jobs_held']
+        result['files_lost'] = written['jobs_lost']
         result['messages_buffered'] = buffered
-        result['queue_depth'] = self._queue.qsize() if self._writer is not None else 0
+        result['buffered_bytes'] = buffered_bytes
         return result
 
     # -- internals ------------------------------------------------------------------------------------
@@ -249,66 +266,63 @@ class Collector(object):
         window = LogWindow(records, [Trigger(records[0].stamp, 'collect', None)], self._part)
         self._chunk = []
         self._chunk_bytes = 0
+        self._chunk_cost = 0
         self._chunk_span = None
-        self._submit(('file', window))
+        metadata = {'reason': 'collect', 'part': window.part, 'driving_topic': self.driving_topic,
+                    'rotate': str(self.rotate)}
+        self.writer.submit(window_writer.Job(window, metadata))
 
-    def _submit(self, item):
-        if self._writer is not None:
-            self._queue.put(item)
+    def _written(self, event):
+        """A WindowWriter event as this collector's ``(kind, detail)`` callback."""
+        job = event.job
+        if event.kind == window_writer.DELETED:
+            kind, detail = 'deleted', {'path': event.path, 'error': event.error}
+        elif event.kind == window_writer.FAILED:
+            kind, detail = 'failed', {'what': job.what, 'messages': job.messages, 'error': event.error,
+                                      'kept': event.kept}
+        elif job.window is not None:
+            window = job.window
+            kind, detail = 'file', {'path': event.path, 'bytes': event.bytes, 'messages': len(window),
+                                    'start': window.start, 'end': window.end}
         else:
-            self._write(item)
-
-    def _write_loop(self):
-        while True:
-            item = self._queue.get()
-            try:
-                if item is None:
-                    return
-                self._write(item)
-            finally:
-                self._queue.task_done()
-
-    def _write(self, item):
-        try:
-            if item[0] == 'file':
-                window = item[1]
-                metadata = {'reason': 'collect', 'part': window.part, 'driving_topic': self.driving_topic,
-                            'rotate': str(self.rotate)}
-                path, nbytes = log_format.write_window(window, self.directory, self.format, metadata)
-                with self._stats_lock:
-                    self.counters['files_written'] += 1
-                    self.counters['messages_kept'] += len(window)
-                    self.counters['stored_bytes'] += nbytes
-                detail = {'path': path, 'bytes': nbytes, 'messages': len(window), 'start': window.start,
-                          'end': window.end}
-            else:
-                _, stamp, vector = item
-                path = learning.write_vector(self.features_directory, self.label, stamp, vector, self.config)
-                self._count('vectors_written', 1)
-                detail = {'path': path, 'stamp': stamp}
-        except (OSError, ValueError) as error:
-            with self._stats_lock:
-                self.counters['write_errors'] += 1
-                if item[0] == 'file':
-                    self.counters['messages_lost'] += len(item[1])
-                self.last_error = str(error)
-            for callback in self._callbacks:
-                callback('failed', {'error': str(error)})
-            return
+            kind, detail = VECTOR, {'path': event.path, 'stamp': job.tag}
         for callback in self._callbacks:
-            callback(item[0], detail)
+            callback(kind, detail)
+
+
+VECTOR = 'vector'  # Job.what of a feature-vector file
+
+
+def vector_job(directory, label, stamp, vector, config):
+    """A WindowWriter job writing one feature vector with ``learning.write_vector`` (tag: its stamp)."""
+    return window_writer.Job(write=functools.partial(learning.write_vector, directory, label, stamp, vector, config),
+                             what=VECTOR, tag=stamp)
 
 
 def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=DEFAULT_STRIDE,
-                feature_set=DEFAULT_FEATURE_SET):
+                feature_set=DEFAULT_FEATURE_SET, retry_seconds=None):
     """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each), as collect
     mode does live. Returns ``{'vectors': n, 'directory': out_dir/<label>}``. Raises ValueError for bad
-    arguments or an unreadable bag, OSError when a vector cannot be written.
+    arguments or an unreadable bag; a vector that cannot be written (disk full...) is retried for
+    ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``), then OSError names the directory and
+    how many vectors were not written.
     """
     from . import bagio  # rosbag: imported here so the module stays pure
     check_label(label)
     config = features_mod.FeatureConfig(feature_set, window)
     stamps, vectors = bagio.feature_vectors(bag_path, topic, config, parse_stride(stride))
+    retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
+    writer = window_writer.WindowWriter(out_dir, background=False, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
+                                        give_up_after=retry_seconds, close_retry=retry_seconds)
     for stamp, vector in zip(stamps, vectors):
-        learning.write_vector(out_dir, label, stamp, vector, config)
-    return {'vectors': len(stamps), 'directory': os.path.join(out_dir, label)}
+        writer.submit(vector_job(out_dir, label, stamp, vector, config))
+        if writer.lost:
+            break
+    writer.close()
+    stats = writer.stats()
+    directory = os.path.join(out_dir, label)
+    written = stats['written'].get(VECTOR, 0)
+    if written < len(stamps):
+        raise OSError('%s: %d of %d feature vectors not written: %s' % (directory, len(stamps) - written,
+                                                                        len(stamps), stats['last_error']))
+    return {'vectors': len(stamps), 'directory': directory}

@@ -3,16 +3,20 @@
 ``DiskGuard(directory, max_disk_mb, min_free_mb)`` (MB = 10^6 bytes; 0 turns a limit off):
 
 - ``max_disk_mb``: after each window file is written, ``enforce_quota(keep=path)`` deletes the *oldest*
-  cc_log window files (final names ``cc_log_*.json.xz`` / ``cc_log_*.bag`` only, oldest by name, which is by
-  time) until the files of the directory fit the quota. The file just written is never deleted, so the
-  newest window is kept even when it alone is larger than the quota. Nothing else in the directory is
+  cc_log window files (final names ``cc_log_*.json.xz`` / ``cc_log_*.bag`` only; oldest by the time they
+  were written, ``st_mtime_ns``, ties by name: not by the message stamps in their names, which jump back
+  with a bag replayed or a simulation reset) until the files of the directory fit the quota. The file just
+  written is never deleted, so the newest window is kept even when it alone is larger than the quota.
+  When a write finds too little space, ``enforce_quota(reserve=bytes)`` makes room for the next file the
+  same way (oldest first) until the files and ``reserve`` fit the quota. Nothing else in the directory is
   ever deleted: not other files, not crash leftovers (``*.tmp-*``), not feature vectors.
 - ``min_free_mb``: ``check()`` says whether writing may go on: ``False`` while the file system holds less
   than ``min_free_mb`` free. The caller then keeps windows in memory (bounded) and tries again later;
   writing resumes by itself once space returns.
 
 ``is_retryable(error)``: whether an OSError from a write is worth retrying later (disk full, quota,
-permissions, read-only, I/O errors, directory gone) rather than a bug.
+permissions, read-only, I/O errors, directory gone) rather than a bug; ``is_out_of_space(error)``: whether
+it says the disk (or the user's disk quota) is full.
 
 Pure (os only); ``statvfs`` can be replaced for tests.
 """
@@ -21,17 +25,23 @@ import os
 
 from . import log_format
 
-__all__ = ['DiskGuard', 'MB', 'is_retryable', 'RETRYABLE_ERRNOS']
+__all__ = ['DiskGuard', 'MB', 'is_retryable', 'is_out_of_space', 'RETRYABLE_ERRNOS']
 
 MB = 1000 ** 2
 RETRYABLE_ERRNOS = frozenset(getattr(errno, name) for name in (
     'ENOSPC', 'EDQUOT', 'EACCES', 'EPERM', 'EROFS', 'EIO', 'ENOENT', 'ENOTDIR', 'EEXIST', 'EAGAIN', 'EINTR',
     'EMFILE', 'ENFILE', 'ENOMEM', 'EBUSY', 'ESTALE') if hasattr(errno, name))
+_OUT_OF_SPACE = frozenset(getattr(errno, name) for name in ('ENOSPC', 'EDQUOT') if hasattr(errno, name))
 
 
 def is_retryable(error):
     """True for an OSError that may go away (disk full, permissions, read-only or missing directory...)."""
     return isinstance(error, OSError) and (error.errno in RETRYABLE_ERRNOS or error.errno is None)
+
+
+def is_out_of_space(error):
+    """True for an OSError saying the file system (or the user's disk quota) is full."""
+    return isinstance(error, OSError) and error.errno in _OUT_OF_SPACE
 
 
 def _limit(value, name):
@@ -74,15 +84,22 @@ class DiskGuard(object):
             return None
         return status.f_bavail * status.f_frsize
 
-    def usage(self):
-        """Bytes of the cc_log window files in the directory (final names only)."""
-        total = 0
+    def window_files(self):
+        """``(path, bytes)`` of the cc_log window files in the directory (final names only), oldest written
+        first (``st_mtime_ns``, ties by name)."""
+        files = []
         for path in log_format.window_files(self.directory):
             try:
-                total += os.path.getsize(path)
+                status = os.stat(path)
             except OSError:
-                pass
-        return total
+                continue
+            files.append((status.st_mtime_ns, path, status.st_size))
+        files.sort()
+        return [(path, size) for _, path, size in files]
+
+    def usage(self):
+        """Bytes of the cc_log window files in the directory (final names only)."""
+        return sum(size for _, size in self.window_files())
 
     def check(self):
         """``(True, '')`` when writing may go on, else ``(False, why)``; sets ``paused``."""
@@ -97,23 +114,20 @@ class DiskGuard(object):
         self.paused = False
         return True, ''
 
-    def enforce_quota(self, keep=()):
-        """Delete the oldest window files until the rest fit ``max_disk_mb``; never the paths in ``keep``
-        (a path or a list). Returns the deleted paths (oldest first)."""
+    def enforce_quota(self, keep=(), reserve=0):
+        """Delete the oldest window files (by time written) until the rest, plus ``reserve`` bytes still to
+        be written, fit ``max_disk_mb``; never the paths in ``keep`` (a path or a list). Returns the deleted
+        paths (oldest first)."""
         if not self.max_bytes:
             return []
         keep = {keep} if isinstance(keep, str) else set(keep)
         keep = {os.path.abspath(path) for path in keep}
-        files = []
-        for path in log_format.window_files(self.directory):
-            try:
-                files.append((path, os.path.getsize(path)))
-            except OSError:
-                pass
+        files = self.window_files()
+        limit = max(0, self.max_bytes - max(0, int(reserve)))
         total = sum(size for _, size in files)
         deleted = []
         for path, size in files:  # oldest first
-            if total <= self.max_bytes:
+            if total <= limit:
                 break
             if os.path.abspath(path) in keep:
                 continue

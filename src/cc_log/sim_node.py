@@ -34,7 +34,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 
 from . import sim
-from .smart_node import ConfigError, to_bool
+from .node_common import ConfigError, Params, init_node, node_name, to_bool
 
 NODE_NAME = 'sim_bwibot'
 ODOM_TOPIC = 'odom'
@@ -44,18 +44,11 @@ DEFAULTS = {'rate': 100.0, 'seed': 0, 'anomalies': 0, 'anomaly_types': 'all', 'i
             'truth_file': '', 'gap': 20.0, 'warmup': 20.0}
 
 
-def _param(name):
-    default = DEFAULTS[name]
-    value = rospy.get_param('~' + name, default)
-    shown = value if not isinstance(value, (list, tuple)) else ','.join(str(v) for v in value)
-    rospy.loginfo('~%s: %s%s', name, shown if shown not in ('', None) else 'none',
-                  ' (default)' if value == default else '')
-    return value
-
-
 def read_config(start_time):
     """(SimConfig, truth file or None) from the private parameters; ConfigError names the parameter."""
-    values = dict((name, _param(name)) for name in sorted(DEFAULTS))
+    params = Params()
+    values = dict((name, params.value(name, DEFAULTS[name])) for name in sorted(DEFAULTS) if name != 'truth_file')
+    values['truth_file'] = params.text('truth_file', DEFAULTS['truth_file'])
     try:
         config = sim.SimConfig(rate=values['rate'], seed=values['seed'], minutes=values['minutes'],
                                anomalies=values['anomalies'], anomaly_types=values['anomaly_types'],
@@ -139,11 +132,11 @@ class SimNode(object):
 def main(argv=None):
     """Run the node; return the exit status (2 with one line on stderr for bad configuration)."""
     argv = sys.argv if argv is None else argv
-    rospy.init_node(NODE_NAME, argv=argv)
     try:
+        init_node(NODE_NAME, argv)
         config, truth_file = read_config(rospy.Time.now().to_sec())
     except ConfigError as error:
-        sys.stderr.write('%s: %s\n' % (rospy.get_name(), error))
+        sys.stderr.write('%s: %s\n' % (node_name(NODE_NAME, argv), error))
         return 2
     SimNode(config, truth_file).run()
     return 0

@@ -8,29 +8,31 @@
   window of ``pre`` messages before and ``post`` after;
 - other topics are buffered by time and saved in the windows whose time span holds them.
 
-Completed windows go through a queue to a background writer thread that calls
-``log_format.write_window``, so compression and disk writes never run on the message path and no message
-is lost while a window is written. ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear
-when a window opens, is written or fails to be written.
+Completed windows go to the ``window_writer.WindowWriter`` (shared with collect mode), whose background
+thread calls ``log_format.write_window``, so compression and disk writes never run on the message path and
+no message is lost while a window is written; it holds and retries windows on a disk problem and keeps the
+disk limits. All buffered messages together are bounded by ``max_buffer_mb`` (an open window is written
+in parts at half of it). ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear when a window
+opens, is written or fails to be written, and when the quota deletes an old window file.
 
 Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
 """
 import collections
 import math
-import queue
 import threading
 import time
 
-from . import disk_guard
 from . import features as features_mod
 from . import log_format
 from . import msg_codec
+from . import window_writer
 from .spans import Span
-from .window_buffer import DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, Record, WindowBuffer
+from .window_buffer import (DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, MemoryCost,
+                            Record, WindowBuffer)
 
 __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
-           'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY']
+           'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
 DEFAULT_FORMAT = 'json-xz'
 DEFAULT_DRIVING_TOPIC = 'odom'
@@ -60,15 +62,15 @@ WRITTEN = 'written'
 FAILED = 'failed'
 DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (path, bytes)
 
-DEFAULT_RETRY_PERIOD = 2.0         # seconds between attempts to write windows held after a failure
-DEFAULT_MAX_HELD_MESSAGES = 50000  # messages of unwritten windows kept in memory; beyond, the oldest go
+DEFAULT_RETRY_PERIOD = window_writer.DEFAULT_RETRY_PERIOD        # seconds between attempts at held windows
+DEFAULT_MAX_HELD_MESSAGES = window_writer.DEFAULT_MAX_HELD_MESSAGES  # unwritten messages kept in memory
 
 Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error')
 Event.__doc__ = """What happened to a logging window.
 
 kind: OPENED (the classifier or a manual trigger opened a window), WRITTEN (the window file is on disk),
 FAILED (writing it failed; ``error`` says why: once when a disk problem first keeps the window in memory to
-be retried, or when it is lost for good) or DELETED (``path``, an old window file, was deleted to stay within
+be retried, and again if it is lost for good) or DELETED (``path``, an old window file, was deleted to stay within
 max_disk_mb; stamp, start and end are None). stamp: of the message that triggered (the first trigger of
 the window for WRITTEN and FAILED). reason: the first trigger's reason ('classifier',
 'manual'); score: the lowest classifier score of the window's triggers (NaN for manual triggers);
@@ -79,31 +81,17 @@ until WRITTEN).
 
 
 class _Stats(object):
-    """Counters shared by the message path and the writer thread (guarded by one lock)."""
+    """Counters of the message path (guarded by one lock); the writer keeps its own."""
 
     def __init__(self):
         self.lock = threading.Lock()
         self.messages_seen = 0
-        self.messages_kept = 0       # in window files on disk
-        self.messages_queued = 0     # in windows waiting for the writer
-        self.messages_lost = 0       # in windows whose file could not be written
         self.raw_json_bytes = 0      # row-JSON bytes of every message seen
-        self.stored_bytes = 0        # bytes of the window files written
         self.windows_opened = 0
-        self.windows_saved = 0
-        self.windows_queued = 0
-        self.write_errors = 0
-        self.last_error = ''
         self.classifier_calls = 0
         self.classifier_seconds = 0.0
         self.classifier_max = 0.0
         self.anomalous = 0           # driving messages the classifier called anomalous
-        self.windows_held = 0        # windows kept in memory after a failed (or paused) write
-        self.messages_held = 0
-        self.write_retries = 0
-        self.windows_deleted = 0     # oldest window files deleted by the max_disk_mb quota
-        self.bytes_deleted = 0
-        self.last_deleted = ''
         self.messages_refused = 0    # a message type other than the topic's (first seen / the model's)
         self.last_refused = ''
 
@@ -121,9 +109,12 @@ class SmartLogger(object):
     threshold from nominal to anomalous triggers; see RETRIGGER_MODES); max_disk_mb, min_free_mb: disk limits
     (0: off; see ``disk_guard``); retry_period: seconds between attempts to write windows that could not be
     written (disk full, unwritable directory, min_free_mb reached: they are kept in memory, in order, up to
-    max_held_messages messages; beyond, the oldest are dropped and counted as lost); classify_every: score
-    the feature window on every driving message (``'1'``), every N-th (``'N'``) or at most once per duration
-    (``'50ms'``, the default: see DEFAULT_CLASSIFY_EVERY).
+    max_held_messages messages; beyond, the oldest are dropped and counted as lost); give_up_after,
+    close_retry: see ``window_writer.WindowWriter`` (offline use: lose a window still failing after that
+    many seconds; keep retrying that long at close); classify_every: score the feature window on every
+    driving message (``'1'``), every N-th (``'N'``) or at most once per duration (``'50ms'``, the default:
+    see DEFAULT_CLASSIFY_EVERY); max_buffer_mb: memory budget of every buffered message together (MB;
+    0: none): an open window is written in parts at half of it (see ``WindowBuffer``).
 
     Thread-safe: ``on_message``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be called
     from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -133,7 +124,8 @@ class SmartLogger(object):
                  driving_topic=DEFAULT_DRIVING_TOPIC, side_topics=(), max_window=DEFAULT_MAX_WINDOW,
                  enabled=True, background=True, retrigger=DEFAULT_RETRIGGER, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
-                 classify_every=DEFAULT_CLASSIFY_EVERY):
+                 classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
+                 close_retry=0.0):
         self.classify_every = Span.parse(classify_every, 'classify_every')
         if self.classify_every.count == 0:
             raise ValueError('classify_every: 0 messages; use 1 to classify every message')
@@ -153,47 +145,49 @@ class SmartLogger(object):
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
         self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
-        self.background = bool(background)
-        # Disk limits and write failures: see disk_guard; unwritten windows wait in _held (writer only).
-        self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb)
-        self.retry_period = float(retry_period)
-        if not self.retry_period > 0:
-            raise ValueError('retry_period: %r must be > 0 seconds' % (retry_period,))
-        self.max_held_messages = int(max_held_messages)
-        self._held = collections.deque()  # [window, metadata, reported] oldest first
+        self.max_buffer_mb = max_buffer_mb
         self._types = {}  # side topic -> its message type (the first seen)
         self._lock = threading.RLock()
         self._stats = _Stats()
         self._raw = msg_codec.RowJsonCounter()
+        self._cost = MemoryCost()
         self._callbacks = []
         self._enabled = bool(enabled)
         self._closed = False
-        self._new_buffer()  # raises ValueError for a bad pre/post/max_window combination
-        self._queue = queue.Queue()
-        self._writer = None
-        if self.background:
-            self._writer = threading.Thread(target=self._write_loop, name='cc_log window writer')
-            self._writer.daemon = True
-            self._writer.start()
+        self._new_buffer()  # raises ValueError for a bad pre/post/max_window/max_buffer_mb
+        # Writing, disk limits and write failures: see window_writer (and disk_guard).
+        self.writer = window_writer.WindowWriter(
+            self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
+            max_held_messages=max_held_messages, background=background, give_up_after=give_up_after,
+            close_retry=close_retry, name='cc_log window writer')
+        self.guard = self.writer.guard
+        self.retry_period = self.writer.retry_period
+        self.writer.on_event(self._written)
 
     # -- public API -----------------------------------------------------------------------------------
 
     def on_event(self, callback):
         """Call ``callback(Event)`` when a window opens, is written or fails to be written.
 
-        OPENED is called from the thread that fed the triggering message, WRITTEN and FAILED from the
-        writer thread; callbacks should be quick and must not raise.
+        OPENED is called from the thread that fed the triggering message, WRITTEN, FAILED and DELETED from
+        the writer thread; callbacks should be quick and must not raise.
         """
         self._callbacks.append(callback)
+
+    @property
+    def buffer_budget(self):
+        """The memory budget of the buffer in bytes (0: none)."""
+        return self._buffer.max_buffer_bytes
 
     @property
     def enabled(self):
         """True while messages are buffered and classified."""
         return self._enabled
 
-    def on_message(self, topic, msg, stamp=None):
+    def on_message(self, topic, msg, stamp=None, size=None):
         """Feed one message of ``topic``; ``stamp`` (float s or a rospy/genpy Time) is its receipt or bag
-        time, used when the message has no non-zero header stamp (the current time when None too)."""
+        time, used when the message has no non-zero header stamp (the current time when None too); ``size``:
+        its serialized length when known (it scales the memory estimate of messages of varying size)."""
         if topic != self.driving_topic and self.side_topics is not None and topic not in self.side_topics:
             return
         with self._lock:
@@ -208,9 +202,9 @@ class SmartLogger(object):
             if not self._type_ok(topic, msg):
                 return
             stamp = features_mod.stamp_of(msg, time.time() if stamp is None else stamp)
-            record = Record(stamp, topic, msg)
+            record = Record(stamp, topic, msg, self._cost(msg, size))
             if topic != self.driving_topic:
-                self._buffer.add_side(record)
+                self._complete(self._buffer.add_side(record))
                 return
             self._add_driving(record)
 
@@ -247,65 +241,63 @@ class SmartLogger(object):
             self._complete(self._buffer.flush())
 
     def close(self, timeout=None):
-        """Flush, then wait for the writer to write every queued window. Idempotent.
-
-        Returns True when every queued window was handled within ``timeout`` seconds (None: wait).
+        """Flush, then wait for the writer to write every queued window (see ``WindowWriter.close``).
+        Idempotent. Returns True when every queued window was handled within ``timeout`` s (None: wait).
         """
         with self._lock:
             if not self._closed:
                 self._complete(self._buffer.flush())
                 self._new_buffer()  # what the buffer still held was outside every window: dropped
                 self._closed = True
-                if self._writer is not None:
-                    self._queue.put(None)
-                else:
-                    self._retry_held(final=True)
-        if self._writer is not None:
-            self._writer.join(timeout)
-            return not self._writer.is_alive()
-        return True
+        return self.writer.close(timeout)
 
     def stats(self):
         """A snapshot of the counters (a dict; see the node's diagnostics for their meaning)."""
         with self._lock:
             buffered = self._buffer.buffered_messages
+            buffered_bytes = self._buffer.buffered_bytes
             resets = self._resets + self._buffer.resets
+            trimmed = self._trimmed + self._buffer.trimmed
+        written = self.writer.stats()
         s = self._stats
         with s.lock:
             calls = s.classifier_calls
             result = {
                 'enabled': self._enabled,
                 'messages_seen': s.messages_seen,
-                'messages_kept': s.messages_kept,
-                'messages_queued': s.messages_queued,
+                'messages_kept': written['messages_kept'],
+                'messages_queued': written['messages_queued'],
                 'messages_buffered': buffered,
-                'messages_lost': s.messages_lost,
+                'buffered_bytes': buffered_bytes,
+                'buffer_trimmed': trimmed,
+                'messages_lost': written['messages_lost'],
                 'raw_json_bytes': s.raw_json_bytes,
-                'stored_bytes': s.stored_bytes,
+                'stored_bytes': written['stored_bytes'],
                 'windows_opened': s.windows_opened,
-                'windows_saved': s.windows_saved,
-                'windows_queued': s.windows_queued,
-                'write_errors': s.write_errors,
-                'last_error': s.last_error,
+                'windows_saved': written['windows_saved'],
+                'windows_queued': written['jobs_queued'],
+                'windows_lost': written['jobs_lost'],
+                'write_errors': written['write_errors'],
+                'last_error': written['last_error'],
                 'classifier_calls': calls,
                 'classifier_mean_us': (s.classifier_seconds / calls * 1e6) if calls else 0.0,
                 'classifier_max_us': s.classifier_max * 1e6,
                 'anomalous_messages': s.anomalous,
                 'time_resets': resets,
-                'windows_held': s.windows_held,
-                'messages_held': s.messages_held,
-                'write_retries': s.write_retries,
-                'disk_paused': self.guard.paused,
-                'windows_deleted': s.windows_deleted,
-                'bytes_deleted': s.bytes_deleted,
-                'last_deleted': s.last_deleted,
+                'windows_held': written['jobs_held'],
+                'messages_held': written['messages_held'],
+                'write_retries': written['write_retries'],
+                'disk_paused': written['disk_paused'],
+                'windows_deleted': written['windows_deleted'],
+                'bytes_deleted': written['bytes_deleted'],
+                'last_deleted': written['last_deleted'],
                 'messages_refused': s.messages_refused,
                 'last_refused': s.last_refused,
+                'queue_depth': written['queue_depth'],
             }
-        # Not in any window (outside every anomaly, or seen while paused).
+        # Not in any window (outside every anomaly, seen while paused, or trimmed from the pre buffer).
         result['messages_dropped'] = (result['messages_seen'] - result['messages_kept'] - result['messages_queued']
                                       - result['messages_buffered'] - result['messages_lost'])
-        result['queue_depth'] = self._queue.qsize() if self._writer is not None else 0
         return result
 
     # -- message path ---------------------------------------------------------------------------------
@@ -326,11 +318,13 @@ class SmartLogger(object):
         return False
 
     def _new_buffer(self):
-        buffer = WindowBuffer(window=self.window, pre=self.pre, post=self.post, max_window=self.max_window)
+        buffer = WindowBuffer(window=self.window, pre=self.pre, post=self.post, max_window=self.max_window,
+                              max_buffer_mb=self.max_buffer_mb, cost=self._cost)
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
+            self._trimmed += self._buffer.trimmed
         else:
-            self._resets = 0
+            self._resets = self._trimmed = 0
         self._buffer = buffer
         self._features = features_mod.OdometryFeatures(self.config)
         self._window_rows = features_mod.FeatureWindow(self.config)  # the same rows as the buffer's window
@@ -424,14 +418,7 @@ class SmartLogger(object):
     def _complete(self, windows):
         """Hand completed windows to the writer."""
         for window in windows:
-            metadata = self._metadata(window)
-            with self._stats.lock:
-                self._stats.windows_queued += 1
-                self._stats.messages_queued += len(window)
-            if self._writer is not None:
-                self._queue.put((window, metadata))
-            else:
-                self._write(window, metadata)
+            self.writer.submit(window_writer.Job(window, self._metadata(window)))
 
     def _metadata(self, window):
         """Smart-mode metadata added to log_format's (which already holds triggers, part, counts)."""
@@ -444,127 +431,20 @@ class SmartLogger(object):
             'model': self.config.to_dict(),
         }
 
-    # -- writer ---------------------------------------------------------------------------------------
+    # -- writer events --------------------------------------------------------------------------------
 
-    def _write_loop(self):
-        while True:
-            try:
-                item = self._queue.get(timeout=self.retry_period if self._held else None)
-            except queue.Empty:
-                self._retry_held()
-                continue
-            try:
-                if item is None:
-                    self._retry_held(final=True)
-                    return
-                self._write(*item)
-            finally:
-                self._queue.task_done()
-
-    def _write(self, window, metadata):
-        """Write a completed window; on a disk problem keep it in memory (in order) to retry later."""
-        self._retry_held()
-        if self._held:  # older windows still wait: keep the order
-            self._hold([window, metadata, False])
+    def _written(self, event):
+        """A WindowWriter event as this logger's Event."""
+        if event.kind == window_writer.DELETED:
+            self._emit(Event(DELETED, None, 'max_disk_mb', float('nan'), self.threshold, None, None, 0, event.path,
+                             0, event.error))
             return
-        item = [window, metadata, False]
-        if not self._attempt(item, final=False):
-            self._hold(item)
-
-    def _attempt(self, item, final):
-        """Try to write a window once; True when it is on disk (or lost for good: bad content / final)."""
-        window, metadata, reported = item
+        window, metadata = event.job.window, event.job.metadata
         scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
-        score = min(scores) if scores else float('nan')
-        reason = metadata['reason']
         first = window.triggers[0].stamp if window.triggers else window.start
-        allowed, why = self.guard.check()
-        retryable = True
-        if not allowed:
-            error = why
-        else:
-            try:
-                path, nbytes = log_format.write_window(window, self.directory, self.format, metadata)
-            except Exception as failure:  # OSError, ValueError, rosbag's exceptions: the writer must go on
-                error = str(failure) or type(failure).__name__
-                retryable = disk_guard.is_retryable(failure)
-            else:
-                with self._stats.lock:
-                    self._stats.windows_queued -= 1
-                    self._stats.messages_queued -= len(window)
-                    self._stats.windows_saved += 1
-                    self._stats.messages_kept += len(window)
-                    self._stats.stored_bytes += nbytes
-                self._emit(Event(WRITTEN, first, reason, score, self.threshold, window.start, window.end,
-                                 len(window), path, nbytes, ''))
-                self._enforce_quota(path)
-                return True
-        if allowed:
-            with self._stats.lock:
-                if reported:
-                    self._stats.write_retries += 1
-                else:
-                    self._stats.write_errors += 1
-                self._stats.last_error = error
-        if retryable and not final:
-            if allowed and not reported:
-                item[2] = True
-                self._emit(Event(FAILED, first, reason, score, self.threshold, window.start, window.end,
-                                 len(window), '', 0, '%s (kept in memory; retrying every %g s)'
-                                 % (error, self.retry_period)))
-            return False
-        self._lose(item, error)
-        return True
-
-    def _lose(self, item, error):
-        window, metadata, reported = item
-        with self._stats.lock:
-            self._stats.windows_queued -= 1
-            self._stats.messages_queued -= len(window)
-            self._stats.messages_lost += len(window)
-            self._stats.last_error = error
-        if not reported:
-            scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
-            first = window.triggers[0].stamp if window.triggers else window.start
-            self._emit(Event(FAILED, first, metadata['reason'], min(scores) if scores else float('nan'),
-                             self.threshold, window.start, window.end, len(window), '', 0, error))
-
-    def _hold(self, item):
-        """Keep an unwritten window in memory; beyond max_held_messages the oldest held windows are lost."""
-        self._held.append(item)
-        with self._stats.lock:
-            self._stats.windows_held += 1
-            self._stats.messages_held += len(item[0])
-        while len(self._held) > 1 and self._stats.messages_held > self.max_held_messages:
-            old = self._held.popleft()
-            with self._stats.lock:
-                self._stats.windows_held -= 1
-                self._stats.messages_held -= len(old[0])
-            self._lose(old, 'more than %d messages held in memory: the oldest unwritten window (%d messages) '
-                       'was dropped' % (self.max_held_messages, len(old[0])))
-
-    def _retry_held(self, final=False):
-        """Write held windows, oldest first, until one fails again (then they wait for the next period)."""
-        while self._held:
-            item = self._held[0]
-            if not self._attempt(item, final):
-                return
-            self._held.popleft()
-            with self._stats.lock:
-                self._stats.windows_held -= 1
-                self._stats.messages_held -= len(item[0])
-
-    def _enforce_quota(self, path):
-        if not self.guard.max_bytes:
-            return
-        for deleted in self.guard.enforce_quota(keep=path):
-            with self._stats.lock:
-                self._stats.windows_deleted += 1
-                self._stats.last_deleted = deleted
-            self._emit(Event(DELETED, None, 'max_disk_mb', float('nan'), self.threshold, None, None, 0, deleted, 0,
-                             'deleted to stay within max_disk_mb %g' % (self.guard.max_bytes / float(disk_guard.MB))))
-        with self._stats.lock:
-            self._stats.bytes_deleted = self.guard.deleted_bytes
+        kind = WRITTEN if event.kind == window_writer.WRITTEN else FAILED
+        self._emit(Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'), self.threshold,
+                         window.start, window.end, len(window), event.path, event.bytes, event.error))
 
     def _emit(self, event):
         for callback in self._callbacks:
@@ -573,44 +453,52 @@ class SmartLogger(object):
 
 def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
            side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None, retrigger=DEFAULT_RETRIGGER,
-           classify_every=DEFAULT_CLASSIFY_EVERY):
+           classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB,
+           retry_seconds=None):
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
     'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
     message saved). ``progress``: optional ``callback(messages read)``, called every PROGRESS_EVERY messages and
-    at the end. Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag
-    cannot be read or a window cannot be written.
+    at the end. A window that cannot be written (disk full...) is retried for ``retry_seconds`` (None:
+    ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops. Raises ValueError for bad arguments,
+    ModelError for a bad model, OSError when the bag cannot be read or a window cannot be written (naming
+    ``out_dir`` and what was not written).
     """
     from . import bagio  # rosbag: imported here so the module stays pure
     from .model import AnomalyModel
     model = AnomalyModel.load(model_path)
+    retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
     logger = SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
-                         max_window=max_window, retrigger=retrigger, classify_every=classify_every)
+                         max_window=max_window, retrigger=retrigger, classify_every=classify_every,
+                         max_buffer_mb=max_buffer_mb, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
+                         give_up_after=retry_seconds, close_retry=retry_seconds)
     windows = []
-    failures = []
 
     def collect(event):
         if event.kind == WRITTEN:
             windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
                             'path': event.path})
-        elif event.kind == FAILED:
-            failures.append(event.error)
     logger.on_event(collect)
+    count, stopped = 0, False
     try:
-        count = 0
         for record in bagio.read_messages(bag_path, [topic] + [t for t in side_topics if t != topic]):
             logger.on_message(record.topic, record.msg, record.stamp)
             count += 1
             if progress is not None and count % PROGRESS_EVERY == 0:
                 progress(count)
+            if logger.writer.lost:
+                stopped = True  # a window is lost: stop reading, say so below
+                break
         if progress is not None:
             progress(count)
     finally:
         logger.close()
-    if failures:
-        raise OSError('%s: %d window(s) could not be written: %s' % (out_dir, len(failures), failures[0]))
     stats = logger.stats()
+    if stats['messages_lost']:
+        raise OSError('%s: %d window(s) (%d messages) not written: %s; %d window(s) written%s' % (
+            out_dir, stats['windows_lost'], stats['messages_lost'], stats['last_error'], stats['windows_saved'],
+            '; replay stopped after %d messages of %s' % (count, bag_path) if stopped else ''))
     return {
         'input_messages': stats['messages_seen'],
         'raw_json_bytes': stats['raw_json_bytes'],

@@ -37,11 +37,18 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~intake_max_messages`` (int, default: 20000), ``~intake_max_mb`` (double, default: 64): bounds of the
   intake queue; a message arriving when it is full is dropped and counted (``intake dropped (queue full)``
   and ``messages lost`` on /diagnostics, WARN): never silently.
+  ``~max_buffer_mb`` (double, default: 256; 0 = no budget): memory budget of every buffered message (all
+  topics, estimated): an open window is written in parts at half of it (the other half is for the part being
+  written), never dropped.
+
+Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
+the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
 
 On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``) are recovered into window files or,
 when they cannot be, reported (logwarn and /diagnostics) and left in place: never deleted silently. A write
 that fails (disk full, directory not writable) is reported (ERROR on /diagnostics, a FAILED event) and the
-window is kept in memory and retried every few seconds.
+window is kept in memory and retried every few seconds (``window_writer``); when space is short the quota
+makes room first. At shutdown held windows are retried for ``CLOSE_RETRY`` seconds.
 
 Subscriber callbacks only put the message on an intake queue; one feeder thread runs the classifier and
 the window buffer (``SmartLogger``), whose writer thread compresses and writes. Stamps are header stamps
@@ -58,15 +65,15 @@ import time
 import genpy
 import roslib.message
 import rospy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
+from . import log_format
 from . import msg_codec
-from . import recovery
 from . import smart_logger
-from .directory import LoggingDirectory
 from .model import AnomalyModel, ModelError
-from .spans import Span
+from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_name, recover_leftovers,
+                          resolve_directory, writer_status)
 
 NODE_NAME = 'smart_logger'
 DRIVING_TOPIC = 'odom'
@@ -80,107 +87,13 @@ DEFAULT_ENABLED = True
 DEFAULT_DIAGNOSTIC_PERIOD = 1.0
 DEFAULT_MAX_DISK_MB = 0.0
 DEFAULT_MIN_FREE_MB = 0.0
-DISK_WARN_BYTES = 200 * 1000 ** 2   # diagnostics warn below this much free disk
-EXIT_BAD_CONFIG = 1                  # as cclog's bad input (2 is its command-line usage error)
+DEFAULT_MAX_BUFFER_MB = smart_logger.DEFAULT_MAX_BUFFER_MB
 CLOSE_TIMEOUT = 60.0                 # seconds to wait at shutdown for the last windows to be written
+CLOSE_RETRY = 5.0                    # seconds held windows are retried at shutdown before they count as lost
 DEFAULT_CLASSIFY_EVERY = smart_logger.DEFAULT_CLASSIFY_EVERY
 DEFAULT_INTAKE_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
 DEFAULT_INTAKE_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
 FEED_BATCH_DELAY = 0.01              # seconds the feeder lets messages gather before draining them in a batch
-
-
-class ConfigError(ValueError):
-    """Bad configuration: the message is one line naming the parameter."""
-
-
-# -- parameters (shared with collect_node) --------------------------------------------------------------
-
-def param(name, default, log=True):
-    """``~name`` or ``default``; the resolved value is logged once."""
-    value = rospy.get_param('~' + name, default)
-    if log:
-        shown = value
-        if value in (None, '') or value == default:
-            shown = '%s (default)' % (value if value not in (None, '', ()) else 'none')
-        rospy.loginfo('~%s: %s', name, shown)
-    return value
-
-
-def to_bool(name, value):
-    """A parameter value as a bool (``true``/``1``/``yes``/``on`` or the opposites); ConfigError otherwise."""
-    if isinstance(value, bool):
-        return value
-    text = str(value).strip().lower()
-    if text in ('true', '1', 'yes', 'on'):
-        return True
-    if text in ('false', '0', 'no', 'off'):
-        return False
-    raise ConfigError('~%s: %r is not true or false' % (name, value))
-
-
-def param_bool(name, default):
-    """``~name`` as a bool (see ``to_bool``)."""
-    return to_bool(name, param(name, default))
-
-
-def param_float(name, default, minimum=0.0):
-    value = param(name, default)
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError('~%s: %r is not a number' % (name, value))
-    if not math.isfinite(number) or number < minimum:
-        raise ConfigError('~%s: %r must be a number >= %g' % (name, value, minimum))
-    return number
-
-
-def param_topics(name='topics', default=DEFAULT_TOPICS):
-    """A list of topic names from a YAML list or a space/comma-separated string."""
-    value = param(name, default)
-    if isinstance(value, str):
-        items = value.replace(',', ' ').split()
-    elif isinstance(value, (list, tuple)):
-        items = value
-    else:
-        raise ConfigError('~%s: %r is not a list of topic names' % (name, value))
-    topics = []
-    for item in items:
-        if not isinstance(item, str) or not item.strip():
-            raise ConfigError('~%s: %r is not a topic name' % (name, item))
-        if item.strip() not in topics:
-            topics.append(item.strip())
-    return topics
-
-
-def resolve_directory(value):
-    """The logging directory: ``value``, else ~/.ros/cc_log, else /tmp/cc_log (created)."""
-    try:
-        directory = LoggingDirectory(value or None)
-    except OSError as error:
-        raise ConfigError('~directory: %s' % error)
-    for path, reason in directory.tried:
-        rospy.logwarn('~directory: cannot use %s (%s)', path, reason)
-    rospy.loginfo('logging to %s', directory.path)
-    return directory.path
-
-
-def recover_leftovers(directory):
-    """Recover crash leftovers in ``directory`` (see ``recovery``); log each; return the outcomes."""
-    outcomes = recovery.recover_directory(directory)
-    for outcome in outcomes:
-        if outcome.status == recovery.BUSY:
-            rospy.loginfo('leftover %s: %s', outcome.leftover, outcome.detail)
-        elif outcome.status == recovery.UNRECOVERABLE:
-            rospy.logwarn('crash leftover NOT recovered, kept: %s: %s', outcome.leftover, outcome.detail)
-        else:
-            rospy.logwarn('crash leftover %s: %s', outcome.leftover, outcome.detail)
-    return outcomes
-
-
-def fail(node_name, error):
-    """Print the one-line configuration error and return the exit status."""
-    sys.stderr.write('%s: %s\n' % (node_name, error))
-    return EXIT_BAD_CONFIG
 
 
 # -- message intake (shared with collect_node) ----------------------------------------------------------
@@ -301,7 +214,8 @@ class Intake(object):
             rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
             return
         try:
-            self.sink.on_message(topic, decoded, receipt.secs + 1e-9 * receipt.nsecs)
+            self.sink.on_message(topic, decoded, receipt.secs + 1e-9 * receipt.nsecs,
+                                 len(getattr(msg, '_buff', b'') or b''))
         except Exception as error:  # a bad message must not stop the feeder (and so all logging)
             self.dropped += 1
             rospy.logerr_throttle(10.0, 'message of %s not handled: %s: %s'
@@ -313,54 +227,6 @@ class Intake(object):
             subscriber.unregister()
         self.queue.put(None, force=True)
         self._thread.join()
-
-
-# -- diagnostics (shared with collect_node) -------------------------------------------------------------
-
-def free_disk(path):
-    """Bytes free for an unprivileged user on the file system of ``path`` (None if unknown)."""
-    try:
-        status = os.statvfs(path)
-    except OSError:
-        return None
-    return status.f_bavail * status.f_frsize
-
-
-class Diagnostics(object):
-    """Publish one DiagnosticStatus on /diagnostics every ``period`` seconds of wall time (so a paused or
-    jumping simulated clock never stops it)."""
-
-    def __init__(self, name, period, status_fn):
-        self.name = name
-        self.period = period
-        self.status_fn = status_fn
-        self.publisher = rospy.Publisher('/diagnostics', DiagnosticArray, queue_size=10)
-        self._stop = threading.Event()
-        self._thread = None
-        if period > 0:
-            self._thread = threading.Thread(target=self._loop, name='cc_log diagnostics')
-            self._thread.daemon = True
-            self._thread.start()
-
-    def _loop(self):
-        while not self._stop.wait(self.period) and not rospy.is_shutdown():
-            self.publish()
-
-    def publish(self):
-        level, message, values = self.status_fn()
-        status = DiagnosticStatus(level=level, name=self.name, message=message, hardware_id=rospy.get_name())
-        status.values = [KeyValue(key=key, value=str(value)) for key, value in values]
-        array = DiagnosticArray(status=[status])
-        try:
-            array.header.stamp = rospy.get_rostime()
-            self.publisher.publish(array)
-        except rospy.ROSException:  # shutting down (rospy.ROSTimeMovedBackwardsException is one too)
-            pass
-
-    def stop(self):
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
 
 
 def time_of(stamp):
@@ -378,7 +244,8 @@ class SmartNode(object):
     def __init__(self):
         from cc_log.msg import AnomalyEvent  # generated message: only in a built workspace
         self._event_class = AnomalyEvent
-        model_path = param('model', '', log=False)
+        params = Params()
+        model_path = params.text('model', '', log=False)
         if not model_path:
             raise ConfigError('~model: required (the model file written by learn mode)')
         try:
@@ -386,32 +253,30 @@ class SmartNode(object):
         except ModelError as error:
             raise ConfigError('~model: %s' % error)
         rospy.loginfo('~model: %s', model_path)
-        window = param('window', '')
-        if window not in ('', None):
-            try:
-                span = Span.parse(window, 'window')
-            except ValueError as error:
-                raise ConfigError('~%s' % error)
+        if params.value('window', '', log=False) not in ('', None):
+            span = params.span('window', '')
             if span != self.model.config.span:
                 raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
                                   'the model; leave ~window unset)' % (span, self.model.config.window))
         rospy.loginfo('model: %s features, window %s, threshold %g', self.model.config.feature_set,
                       self.model.config.window, self.model.threshold)
-        self.directory = resolve_directory(param('directory', ''))
+        self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         self.leftovers = recover_leftovers(self.directory)
-        max_disk_mb = param_float('max_disk_mb', DEFAULT_MAX_DISK_MB)
-        min_free_mb = param_float('min_free_mb', DEFAULT_MIN_FREE_MB)
-        fmt = param('format', DEFAULT_FORMAT)
-        pre = param('pre', DEFAULT_PRE)
-        post = param('post', DEFAULT_POST)
-        max_window = param('max_window', DEFAULT_MAX_WINDOW)
-        retrigger = param('retrigger', DEFAULT_RETRIGGER)
-        topics = param_topics()
-        enabled = param_bool('enabled', DEFAULT_ENABLED)
-        period = param_float('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        classify_every = param('classify_every', DEFAULT_CLASSIFY_EVERY)
-        intake_max_messages = param_float('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES, minimum=1)
-        intake_max_mb = param_float('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
+        max_disk_mb = params.number('max_disk_mb', DEFAULT_MAX_DISK_MB)
+        min_free_mb = params.number('min_free_mb', DEFAULT_MIN_FREE_MB)
+        fmt = params.choice('format', DEFAULT_FORMAT, log_format.Format.ALL)
+        pre = params.span('pre', DEFAULT_PRE)
+        post = params.span('post', DEFAULT_POST)
+        max_window = params.span('max_window', DEFAULT_MAX_WINDOW)
+        retrigger = params.choice('retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES)
+        topics = params.topics('topics', DEFAULT_TOPICS)
+        enabled = params.boolean('enabled', DEFAULT_ENABLED)
+        period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        classify_every = params.span('classify_every', DEFAULT_CLASSIFY_EVERY)
+        intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES, minimum=1,
+                                             integer=True)
+        intake_max_mb = params.number('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
+        max_buffer_mb = params.number('max_buffer_mb', DEFAULT_MAX_BUFFER_MB)
         driving_class = roslib.message.get_message_class(self.model.config.topic_type)
         if driving_class is None:
             raise ConfigError('~model: message type %s is not installed' % self.model.config.topic_type)
@@ -421,13 +286,14 @@ class SmartNode(object):
             self.logger = smart_logger.SmartLogger(
                 self.model, self.directory, fmt, pre, post, driving_topic=driving_topic,
                 side_topics=side_topics, max_window=max_window, enabled=enabled, max_disk_mb=max_disk_mb,
-                min_free_mb=min_free_mb, retrigger=retrigger, classify_every=classify_every)
+                min_free_mb=min_free_mb, retrigger=retrigger, classify_every=classify_every,
+                max_buffer_mb=max_buffer_mb, close_retry=CLOSE_RETRY)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
-        self.intake = Intake(self.logger, DRIVING_TOPIC, driving_class, topics, max_messages=int(intake_max_messages),
+        self.intake = Intake(self.logger, DRIVING_TOPIC, driving_class, topics, max_messages=intake_max_messages,
                              max_bytes=int(intake_max_mb * 1000 ** 2))
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~enable', SetBool, self._enable)]
@@ -470,37 +336,15 @@ class SmartNode(object):
 
     def _status(self):
         stats = self.logger.stats()
-        free = free_disk(self.directory)
-        guard = self.logger.guard
         level, message = DiagnosticStatus.OK, 'logging' if stats['enabled'] else 'disabled'
         if stats['messages_refused'] > self._refused:
             self._refused = stats['messages_refused']
             rospy.logwarn_throttle(10.0, stats['last_refused'])
-        if free is not None and free < DISK_WARN_BYTES:
-            level, message = DiagnosticStatus.WARN, 'low disk space: %d MB free' % (free // 1000 ** 2)
         if stats['messages_refused']:
             level, message = DiagnosticStatus.WARN, '%d messages of the wrong type refused (last: %s)' % (
                 stats['messages_refused'], stats['last_refused'])
-        unrecovered = recovery.incomplete(self.leftovers)
-        if unrecovered:
-            level, message = DiagnosticStatus.WARN, '%d crash leftovers could not be recovered (kept): %s' % (
-                len(unrecovered), unrecovered[0].kept or unrecovered[0].leftover)
-        if stats['write_errors'] and not stats['windows_held']:
-            level = DiagnosticStatus.ERROR if stats['messages_lost'] else DiagnosticStatus.WARN
-            message = 'write errors (%d, all retried and written): %s' % (stats['write_errors'], stats['last_error']) \
-                if not stats['messages_lost'] else 'write errors, %d messages lost: %s' % (
-                    stats['messages_lost'], stats['last_error'])
-        low = guard.min_free_bytes and free is not None and free < guard.min_free_bytes
-        if stats['windows_held'] or low or stats['disk_paused']:
-            level = DiagnosticStatus.ERROR
-            if low or stats['disk_paused']:
-                message = 'disk nearly full: %.1f MB free < ~min_free_mb %g: writing paused' % (
-                    (free or 0) / 1e6, guard.min_free_bytes / 1e6)
-            else:
-                message = 'cannot write: %s' % stats['last_error']
-            message += '; %d windows (%d messages) held in memory' % (stats['windows_held'], stats['messages_held'])
-        if stats['windows_deleted']:
-            message += '; %d oldest window files deleted to stay within ~max_disk_mb' % stats['windows_deleted']
+        level, message, disk = writer_status(level, message, self.logger.writer, self.leftovers,
+                                             self.directory_warning)
         overflowed = self.intake.overflowed
         if overflowed:
             level = max(level, DiagnosticStatus.WARN)
@@ -514,6 +358,9 @@ class SmartNode(object):
             ('messages kept', stats['messages_kept']),
             ('messages dropped', stats['messages_dropped']),
             ('messages buffered', stats['messages_buffered']),
+            ('buffered bytes (estimated)', stats['buffered_bytes']),
+            ('max buffer bytes', self.logger.buffer_budget or 'no budget'),
+            ('messages trimmed (buffer budget)', stats['buffer_trimmed']),
             ('messages lost', stats['messages_lost'] + self.intake.dropped),
             ('raw JSON bytes', raw),
             ('stored bytes', stored),
@@ -525,27 +372,9 @@ class SmartNode(object):
             ('intake queue', self.intake.queue.qsize()),
             ('intake dropped (queue full)', overflowed),
             ('classify every', str(self.logger.classify_every)),
-            ('write errors', stats['write_errors']),
             ('time resets', stats['time_resets']),
-            ('directory', self.directory),
-            ('free disk bytes', free if free is not None else 'unknown'),
-            ('windows held', stats['windows_held']),
-            ('messages held', stats['messages_held']),
-            ('write retries', stats['write_retries']),
-            ('writing paused', bool(low or stats['disk_paused'])),
-            ('max disk bytes', guard.max_bytes or 'no quota'),
-            ('min free bytes', guard.min_free_bytes or 'off'),
-            ('disk usage bytes', guard.usage()),
-            ('windows deleted (quota)', stats['windows_deleted']),
-            ('bytes deleted (quota)', stats['bytes_deleted']),
-            ('last deleted', stats['last_deleted']),
             ('messages refused', stats['messages_refused']),
-            ('leftovers recovered', sum(1 for o in self.leftovers if o.status in (
-                recovery.COMPLETE, recovery.PARTIAL, recovery.DUPLICATE, recovery.EMPTY))),
-            ('leftovers unrecoverable', len(unrecovered)),
-            ('leftover messages recovered', sum(o.messages for o in self.leftovers if o.status == recovery.PARTIAL)),
-            ('leftover bytes unrecoverable', sum(o.lost_bytes for o in self.leftovers)),
-        ]
+        ] + disk
         return level, message, values
 
     def shutdown(self):
@@ -559,11 +388,11 @@ class SmartNode(object):
 def main(argv=None):
     """Run the node; return the exit status (1 with one line on stderr for bad configuration)."""
     argv = sys.argv if argv is None else argv
-    rospy.init_node(NODE_NAME, argv=argv)
     try:
+        init_node(NODE_NAME, argv)
         node = SmartNode()
     except ConfigError as error:
-        return fail(rospy.get_name(), error)
+        return fail(node_name(NODE_NAME, argv), error)
     rospy.spin()
     node.shutdown()
     return 0

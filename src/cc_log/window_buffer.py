@@ -9,14 +9,24 @@ It holds two things for the driving topic (the topic the classifier watches):
   twice and none inside a window is skipped. Messages of other topics are buffered by time and saved in
   the windows whose time span holds them.
 
+Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
+window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``). An open window is
+handed on in parts (as ``max_window`` splits it, with every message of other topics held) whenever the
+buffer reaches half the budget, so that the buffer and the part being compressed and written stay within
+the budget together. At the full budget a window waiting to be completed is completed, then messages
+outside every window (the ``pre`` buffer, oldest first) go, counted in ``trimmed``. No message inside a
+window is ever dropped.
+
 Everything is pure Python: records carry any message object, stamps are float seconds.
 """
 import collections
+import sys
 
 from .spans import Span
 
-Record = collections.namedtuple('Record', 'stamp topic msg')
-Record.__doc__ = 'One message: its stamp (float seconds), topic and message object.'
+Record = collections.namedtuple('Record', 'stamp topic msg cost', defaults=(0,))
+Record.__doc__ = """One message: its stamp (float seconds), topic, message object and estimated memory in
+bytes (``cost``; 0: not known, WindowBuffer estimates it)."""
 
 Trigger = collections.namedtuple('Trigger', 'stamp reason score')
 Trigger.__doc__ = 'Why a window was opened or extended: stamp of the message, reason, classifier score.'
@@ -26,6 +36,76 @@ DEFAULT_PRE = Span.messages(100)
 DEFAULT_POST = Span.messages(100)
 DEFAULT_MAX_WINDOW = Span.messages(100000)
 DEFAULT_JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the buffer resets
+DEFAULT_MAX_BUFFER_MB = 256.0      # memory budget of everything buffered (MB = 10^6 bytes); 0: none
+MB = 1000 ** 2
+RECORD_OVERHEAD = 130              # bytes of a Record around its message: the tuple, stamp, cost, a deque slot
+ALLOCATOR_FACTOR = 1.15            # measured RSS per buffered nav_msgs/Odometry / its deep sys.getsizeof
+
+
+def deep_size(obj):
+    """Bytes of ``obj`` and everything it holds (sys.getsizeof over slots, lists, tuples, dicts; shared
+    objects counted once)."""
+    seen = set()
+    total = 0
+    stack = [obj]
+    while stack:
+        item = stack.pop()
+        if id(item) in seen:
+            continue
+        seen.add(id(item))
+        total += sys.getsizeof(item)
+        if isinstance(item, (str, bytes, bytearray, int, float, complex, bool)) or item is None:
+            continue
+        if isinstance(item, (list, tuple, set, frozenset)):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            stack.extend(item.keys())
+            stack.extend(item.values())
+        else:
+            for cls in type(item).__mro__:
+                for name in getattr(cls, '__slots__', ()):
+                    if isinstance(name, str) and hasattr(item, name):
+                        stack.append(getattr(item, name))
+            if hasattr(item, '__dict__'):
+                stack.append(item.__dict__)
+    return total
+
+
+class MemoryCost(object):
+    """Estimated memory of a buffered message, cheap: the deep size of the first message of each type is
+    measured once (``deep_size``, times ALLOCATOR_FACTOR, plus RECORD_OVERHEAD) and memoised; when the
+    serialized length of messages is known (``size``), later messages of the type scale it by their length
+    over the first one's, so a scan or an image twice as long counts twice. Not thread-safe (one per owner)."""
+
+    def __init__(self):
+        self._memo = {}
+
+    def __call__(self, msg, size=None):
+        """Bytes ``msg`` takes in memory, estimated (``size``: its serialized length, or None)."""
+        memo = self._memo.get(type(msg))
+        if memo is None:
+            memo = self._memo[type(msg)] = (int(deep_size(msg) * ALLOCATOR_FACTOR) + RECORD_OVERHEAD, size)
+        cost, first = memo
+        if size and first:
+            return max(RECORD_OVERHEAD, cost * size // first)
+        return cost
+
+
+def part_bytes(budget):
+    """The most a buffer of ``budget`` bytes holds before it hands a window on in parts: half of it, the other
+    half being for the part the writer is busy with."""
+    return budget // 2
+
+
+def budget_bytes(max_buffer_mb, name='max_buffer_mb'):
+    """``max_buffer_mb`` (a number >= 0; 0 or None: no budget) in bytes; ValueError('<name>: ...')."""
+    try:
+        number = float(max_buffer_mb or 0)
+    except (TypeError, ValueError):
+        number = float('nan')
+    if not number >= 0 or number == float('inf'):
+        raise ValueError('%s: %r must be a number of MB >= 0 (0: no budget)' % (name, max_buffer_mb))
+    return int(number * MB)
 
 
 class LogWindow(object):
@@ -67,6 +147,7 @@ class _OpenWindow(object):
         self.records = list(records)
         self.triggers = []
         self.part = 0
+        self.continued = False  # a part was written: side records after it belong to the next part
         self.remaining = None  # messages still to take after the last trigger (count post)
         self.until = None      # last stamp to take (duration post)
         self.extend(trigger, post)
@@ -95,13 +176,15 @@ class WindowBuffer(object):
 
     Call ``add`` for every driving message (with its feature row, if any), ``add_side`` for messages of
     other topics, ``trigger`` when the last driving message is anomalous, and ``flush`` at the end of the
-    stream. ``add``, ``trigger`` and ``flush`` return the windows completed by that call (a list of
-    LogWindow); a window is complete once ``pre`` further messages have shown that the next window does
-    not touch it.
+    stream. ``add``, ``add_side``, ``trigger`` and ``flush`` return the windows completed by that call (a
+    list of LogWindow); a window is complete once ``pre`` further messages have shown that the next window
+    does not touch it, or when it reaches ``max_window`` or the memory budget ``max_buffer_mb`` (written in
+    parts). ``cost``: the MemoryCost estimating records that carry no cost.
     """
 
     def __init__(self, window=DEFAULT_WINDOW, pre=DEFAULT_PRE, post=DEFAULT_POST,
-                 max_window=DEFAULT_MAX_WINDOW, jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE):
+                 max_window=DEFAULT_MAX_WINDOW, jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE,
+                 max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None):
         self.window = Span.parse(window, 'window')
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
@@ -114,6 +197,10 @@ class WindowBuffer(object):
                 (self.pre.count or self.pre.seconds or 0) >= (self.max_window.count or self.max_window.seconds):
             raise ValueError('pre: %s is larger than the buffer can hold (max_window %s)' % (self.pre, self.max_window))
         self.jump_back_tolerance = jump_back_tolerance
+        self.max_buffer_bytes = budget_bytes(max_buffer_mb)
+        self._cost = cost if cost is not None else MemoryCost()
+        self._bytes = 0                    # estimated memory of every record held
+        self.trimmed = 0                   # records outside any window dropped early to stay within the budget
         self._rows = collections.deque()   # (stamp, feature row) of the feature window
         self._rows_since = None            # stamp of the first row since the last reset
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
@@ -156,6 +243,11 @@ class WindowBuffer(object):
         return self._open is not None
 
     @property
+    def buffered_bytes(self):
+        """Estimated memory (bytes) of the messages held (see ``buffered_messages``)."""
+        return self._bytes
+
+    @property
     def buffered_messages(self):
         """Messages held in memory: pre buffer, windows not yet written, other topics."""
         held = len(self._ring) + len(self._side)
@@ -166,6 +258,7 @@ class WindowBuffer(object):
 
     def add(self, record, row=None):
         """Add a driving record (and its feature row); return the windows this completes."""
+        record = self._costed(record)
         done = []
         if self._clock is not None and record.stamp < self._clock - self.jump_back_tolerance:
             done.extend(self.flush())
@@ -176,21 +269,29 @@ class WindowBuffer(object):
         if self._open is not None:
             if self._open.takes(self._clock):
                 self._open.take(record)
+                self._bytes += record.cost
                 done.extend(self._split(self._open))
+                done.extend(self._enforce_budget())
                 return done
             # Pending even when a split left it empty: a touching window continues its parts.
             self._pending, self._open = self._open, None
         self._ring.append(record)
+        self._bytes += record.cost
         if self._prune_ring() and self._pending is not None:
             if self._pending.records:
                 done.append(self._emit(self._pending))
             self._pending = None
         self._prune_side()
+        done.extend(self._enforce_budget())
         return done
 
     def add_side(self, record):
-        """Add a record of another topic; it is saved in the window whose time span holds it."""
+        """Add a record of another topic; it is saved in the window whose time span holds it. Returns the
+        windows this completes (parts written because the memory budget was reached)."""
+        record = self._costed(record)
         self._side.append(record)
+        self._bytes += record.cost
+        return self._enforce_budget()
 
     def trigger(self, reason, score=None):
         """Mark the last driving record as anomalous: open a window around it or extend the open one.
@@ -229,9 +330,45 @@ class WindowBuffer(object):
         self.resets += 1
         self._rows.clear()
         self._rows_since = None
+        self._bytes -= sum(record.cost for record in self._ring) + sum(record.cost for record in self._side)
         self._ring.clear()
         self._side.clear()
         self._clock = None
+
+    def _costed(self, record):
+        if record.cost:
+            return record
+        return Record(record.stamp, record.topic, record.msg, self._cost(record.msg))
+
+    def _over_budget(self):
+        return self.max_buffer_bytes and self._bytes > self.max_buffer_bytes
+
+    def _enforce_budget(self):
+        """Stay within max_buffer_mb (see the module docstring); return the windows completed doing so."""
+        done = []
+        if not self.max_buffer_bytes or self._bytes <= part_bytes(self.max_buffer_bytes):
+            return done
+        if self._open is not None and (self._open.records or self._side):
+            # Written in parts, as max_window splits: what the window holds now, with every side record held.
+            window = self._open
+            window.part = max(window.part, 1)
+            done.append(self._emit(window, everything=True))
+            window.part += 1
+            window.records = []
+            window.continued = True
+        if self._over_budget() and self._pending is not None:
+            if self._pending.records:
+                done.append(self._emit(self._pending))
+            self._pending = None
+        while self._over_budget() and (len(self._ring) > 1 or self._side):
+            # Outside every window: the oldest go first; the newest driving record stays (a trigger needs it).
+            if self._side and (len(self._ring) <= 1 or self._side[0].stamp <= self._ring[0].stamp):
+                record = self._side.popleft()
+            else:
+                record = self._ring.popleft()
+            self._bytes -= record.cost
+            self.trimmed += 1
+        return done
 
     def _full(self, window):
         if self.max_window.is_duration:
@@ -247,6 +384,7 @@ class WindowBuffer(object):
             done.append(self._emit(window, window.records[:size]))
             window.part += 1
             window.records = window.records[size:]
+            window.continued = True
         return done
 
     def _prune_ring(self):
@@ -254,11 +392,11 @@ class WindowBuffer(object):
         dropped = False
         if self.pre.is_duration:
             while self._ring[0].stamp < self._clock - self.pre.seconds:
-                self._ring.popleft()
+                self._bytes -= self._ring.popleft().cost
                 dropped = True
         else:
             while len(self._ring) > self.pre.count + 1:
-                self._ring.popleft()
+                self._bytes -= self._ring.popleft().cost
                 dropped = True
         return dropped
 
@@ -272,18 +410,23 @@ class WindowBuffer(object):
         if oldest is None and self._ring:
             oldest = self._ring[0].stamp
         while self._side and oldest is not None and self._side[0].stamp < oldest:
-            self._side.popleft()
+            self._bytes -= self._side.popleft().cost
 
-    def _emit(self, window, records=None):
+    def _emit(self, window, records=None, everything=False):
         """Turn a window (or the given first records of it) into a LogWindow with the side records of its
-        time span, in stamp order."""
+        time span (``everything``: every side record held from its start on), in stamp order. A part after
+        the first takes the side records since the previous part (those of its time span and those between)."""
         records = window.records if records is None else records
-        start, end = records[0].stamp, records[-1].stamp
+        start = records[0].stamp if records and not getattr(window, 'continued', False) else float('-inf')
+        end = float('inf') if everything else records[-1].stamp
         side = []
+        cost = sum(record.cost for record in records)
         while self._side and self._side[0].stamp <= end:
             record = self._side.popleft()
+            cost += record.cost
             if record.stamp >= start:
                 side.append(record)
+        self._bytes -= cost
         if side:
             records = sorted(records + side, key=lambda record: record.stamp)
         return LogWindow(list(records), list(window.triggers), window.part)

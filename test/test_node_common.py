@@ -1,0 +1,100 @@
+"""Parameters of every node, read through one typed helper (a dict stands in for the parameter server): each
+wrong type or value is one ConfigError line naming the parameter, never a TypeError or OverflowError, and
+nothing is created from a value of the wrong type. The real nodes are checked in smart_window.test."""
+import os
+
+import pytest
+
+pytest.importorskip('rospy')
+from cc_log import node_common  # noqa: E402
+from cc_log.node_common import ConfigError, Params  # noqa: E402
+from cc_log.spans import Span  # noqa: E402
+
+
+def params(**values):
+    logged = []
+    return Params(get=values.get, log=lambda text, *args: logged.append(text % args)), logged
+
+
+def error_of(read):
+    with pytest.raises(ConfigError) as error:
+        read()
+    text = str(error.value)
+    assert '\n' not in text
+    return text
+
+
+def test_values_of_the_right_type_are_read_and_logged_once():
+    p, logged = params(model='m.json', pre='2s', post=100, enabled='yes', max_disk_mb=5, topics='a, b a',
+                       format='bag-lz4', stride='7', rotate=6000)
+    assert p.text('model', '') == 'm.json'
+    assert p.span('pre', '100') == Span.duration(2.0) and p.span('post', '100') == Span.messages(100)
+    assert p.boolean('enabled', True) is True
+    assert p.number('max_disk_mb', 0.0) == 5.0
+    assert p.number('stride', 25, minimum=1, integer=True) == 7
+    assert p.topics('topics') == ['a', 'b']
+    assert p.choice('format', 'json-xz', ('json-xz', 'bag-lz4')) == 'bag-lz4'
+    assert p.scalar('rotate', '60s') == '6000'
+    assert p.text('directory', '') == '' and p.span('max_window', '100000') == Span.messages(100000)
+    assert '~directory: none (default)' in logged and '~model: m.json' in logged and len(logged) == 11
+
+
+@pytest.mark.parametrize('name, value, read, expected', [
+    ('model', [1], lambda p: p.text('model', ''), "~model: [1] is not a string"),
+    ('directory', [1, 2], lambda p: p.text('directory', ''), "~directory: [1, 2] is not a string"),
+    ('post', [1], lambda p: p.span('post', '100'), "~post: [1] is not a message count"),
+    ('post', '99999999999999999999999999999999999e999', lambda p: p.span('post', '100'), '~post:'),
+    ('pre', True, lambda p: p.span('pre', '100'), '~pre: True is not a message count'),
+    ('pre', '-3', lambda p: p.span('pre', '100'), '~pre:'),
+    ('max_disk_mb', 'lots', lambda p: p.number('max_disk_mb', 0.0), "~max_disk_mb: 'lots' must be a number"),
+    ('max_disk_mb', -1, lambda p: p.number('max_disk_mb', 0.0), '~max_disk_mb: -1 must be a number >= 0'),
+    ('max_disk_mb', float('nan'), lambda p: p.number('max_disk_mb', 0.0), '~max_disk_mb:'),
+    ('diagnostic_period', True, lambda p: p.number('diagnostic_period', 1.0), '~diagnostic_period: True'),
+    ('intake_max_messages', 2.5, lambda p: p.number('intake_max_messages', 1, 1, integer=True),
+     '~intake_max_messages: 2.5 is not a whole number'),
+    ('intake_max_messages', 1e400, lambda p: p.number('intake_max_messages', 1, 1, integer=True),
+     '~intake_max_messages: inf'),
+    ('enabled', [True], lambda p: p.boolean('enabled', True), '~enabled: [True] is not true or false'),
+    ('topics', 5, lambda p: p.topics('topics'), '~topics: 5 is not a list of topic names'),
+    ('topics', ['a', 3], lambda p: p.topics('topics'), '~topics: 3 is not a topic name'),
+    ('format', ['json-xz'], lambda p: p.choice('format', 'json-xz', ('json-xz',)), "~format: ['json-xz'] is not"),
+    ('retrigger', 'sometimes', lambda p: p.choice('retrigger', 'every', ('every', 'onset')),
+     "~retrigger: 'sometimes' is not one of: every, onset"),
+    ('rotate', {'a': 1}, lambda p: p.scalar('rotate', '60s'), "~rotate: {'a': 1} is not a string or a number"),
+])
+def test_a_wrong_type_or_value_is_one_line_naming_the_parameter(name, value, read, expected):
+    p, _ = params(**{name: value})
+    assert error_of(lambda: read(p)).startswith(expected)
+
+
+def test_an_integer_rospy_cannot_send_is_refused_before_init_node():
+    """rospy.init_node sends ``_name:=value`` to the parameter server over XML-RPC (32-bit integers): an
+    OverflowError traceback before any node code runs, unless the command line is checked first."""
+    for argv in (['node', '_post:=99999999999999999999'], ['node', '_topics:=[1, 99999999999]'],
+                 ['node', '_seed:=-2147483649']):
+        text = error_of(lambda: node_common.check_command_line(argv))
+        assert text.startswith('~' + argv[1][1:argv[1].index(':')] + ': ') and 'too large' in text
+    assert error_of(lambda: node_common.check_command_line(['node', '_pre:=[1'])).startswith('invalid command-line')
+    node_common.check_command_line(['node', '_post:=2147483647', '_pre:=2s', 'odom:=/x', '__name:=n'])
+    assert node_common.node_name('smart_logger', ['node', '__name:=renamed']) == '/renamed'
+
+
+def test_an_unusable_directory_falls_back_with_a_warning_naming_the_one_in_use(tmp_path, monkeypatch):
+    blocker = tmp_path / 'a_file'
+    blocker.write_text('x')
+    home = tmp_path / 'home'
+    monkeypatch.setenv('HOME', str(home))
+    path, warning = node_common.resolve_directory(str(blocker / 'logs'))
+    assert path == str(home / '.ros' / 'cc_log') and os.path.isdir(path)
+    assert warning.startswith('~directory %s cannot be used (' % (blocker / 'logs')) and warning.endswith(path)
+    path, warning = node_common.resolve_directory(str(tmp_path / 'fine'))
+    assert path == str(tmp_path / 'fine') and warning == ''
+
+
+def test_a_read_only_directory_falls_back_with_a_warning(small_tmpfs, tmp_path, monkeypatch):
+    import subprocess
+    disk = small_tmpfs('1m')
+    assert subprocess.call(['mount', '-o', 'remount,ro', disk]) == 0
+    monkeypatch.setenv('HOME', str(tmp_path / 'home'))
+    path, warning = node_common.resolve_directory(disk)
+    assert path != disk and 'Read-only file system' in warning and path in warning
