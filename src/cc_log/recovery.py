@@ -30,7 +30,7 @@ import os
 import shutil
 import time
 
-from . import log_format
+from . import log_format, safe_input
 
 __all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'DUPLICATE', 'COMPLETE', 'PARTIAL', 'EMPTY',
            'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX']
@@ -122,12 +122,15 @@ def _reindexed_records(path):
                 for _ in bag.reindex():
                     pass
             with rosbag.Bag(copy) as bag:
+                safe_input.check_bag(bag, path)  # before rosbag generates a class from any definition
                 for topic, msg, time in bag.read_messages():
                     if topic == bag_lz4.METADATA_TOPIC:
                         if metadata is None:
-                            metadata = json.loads(msg.data)
+                            metadata = safe_input.json_loads(msg.data)
                         continue
                     records.append(Record(features.stamp_of(msg, time.to_sec()), topic, msg))
+        except safe_input.UnsafeDefinition:
+            raise
         except Exception as error:  # rosbag raises many kinds: ROSBag*Exception, struct.error, lz4 ...
             if not records:
                 raise ValueError('%s: cannot be reindexed (%s: %s)' % (path, type(error).__name__, error))
