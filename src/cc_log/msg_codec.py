@@ -386,6 +386,8 @@ _CLASSES_LOCK = threading.Lock()  # the background writer and the main thread ma
 def message_classes(msg_type, definition):
     """All classes (by full type name) generated from ``definition`` of ``msg_type``; cached. The definition
     is checked first (``safe_input.check_definition``): ValueError('message definition of ...: ...')."""
+    if type(msg_type) is not str or type(definition) is not str:  # from JSON: maybe a list, never a key
+        safe_input.check_definition(msg_type, definition)
     key = (msg_type, definition)
     classes = _CLASSES.get(key)
     if classes is None:

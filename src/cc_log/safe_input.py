@@ -75,7 +75,10 @@ def check_type_name(msg_type):
 def check_definition(msg_type, definition):
     """Raise ValueError('message definition of <type>: <what is wrong>') unless ``definition`` (the full
     text, as ``msg._full_text`` or a connection's ``message_definition``) is safe to give genpy."""
-    problem = _definition_problem(msg_type, definition)
+    if not isinstance(msg_type, str) or not isinstance(definition, str):
+        problem = 'the type name and the definition must be text'
+    else:
+        problem = _definition_problem(msg_type, definition)
     if problem:
         raise UnsafeDefinition('message definition of %s: %s' % (_shown(msg_type), problem))
 
@@ -104,10 +107,8 @@ def check_bag(bag, source):
 @functools.lru_cache(maxsize=128)
 def _definition_problem(msg_type, definition):
     """What makes the definition unsafe or unusable, or None (cached: bags repeat definitions)."""
-    if not isinstance(msg_type, str) or not _TYPE_NAME.match(msg_type):
+    if not _TYPE_NAME.match(msg_type):
         return 'the type name is not package/Name'
-    if not isinstance(definition, str):
-        return 'not text'
     if len(definition) > MAX_DEFINITION_CHARS:
         return 'longer than %d characters' % MAX_DEFINITION_CHARS
     bad = _BAD_CHARACTER.search(definition)
@@ -191,7 +192,8 @@ def _check_name(name, where):
 
 def _constant(line, clean, where):
     """Check one constant line as genmsg splits it and genpy writes it; return its name."""
-    constant_type = [part for part in (piece.strip() for piece in clean.split(' ')) if part][0]
+    parts = [part for part in (piece.strip() for piece in clean.split(' ')) if part]
+    constant_type = parts[0]
     if constant_type not in CONSTANT_TYPES:
         raise ValueError('%s: constant type %r is not a primitive type' % (where, constant_type[:80]))
     if constant_type == 'string':  # genmsg: name between the first space and '=', value all after '='
@@ -199,7 +201,7 @@ def _constant(line, clean, where):
         name = line[line.find(' ') + 1:equals].rstrip(' \t')
         value = line[equals + 1:].strip()
     else:
-        pieces = [piece.strip() for piece in ' '.join(clean.split(' ')[1:]).split('=')]
+        pieces = [piece.strip() for piece in ' '.join(parts[1:]).split('=')]
         if len(pieces) != 2:
             raise ValueError('%s: %r is not "TYPE NAME=VALUE"' % (where, clean[:80]))
         name, value = pieces
