@@ -178,6 +178,10 @@ def test_type_names_and_sizes_are_checked(marker):
         safe_input.check_definition('a/B', nested)
     with pytest.raises(ValueError, match='longer than'):
         safe_input.check_definition('a/B', '#' * (safe_input.MAX_DEFINITION_CHARS + 1))
+    with pytest.raises(ValueError, match='more than 128 message types'):  # genpy: 67 s for 1,000
+        safe_input.check_definition('a/B', 'int32 x' + ''.join(SEP + 'MSG: a/C%d\n' % i for i in range(200)))
+    with pytest.raises(ValueError, match='more than 10000 fields'):
+        safe_input.check_definition('a/B', ''.join('int32 x%d\n' % i for i in range(10001)))
 
 
 def test_a_message_with_an_empty_dependency_round_trips_compacted():

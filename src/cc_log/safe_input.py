@@ -9,8 +9,9 @@ connection it reads), so a definition is checked here before any class is genera
   ASCII identifiers (not Python keywords), field types are ROS builtins, ``Header`` or types defined in the
   same text (short names resolved within the package, as genmsg does), constants are primitives whose value
   parses as their type, and every piece of text genpy copies into its source (string constants, the
-  ``_full_text`` triple-quoted literal) stays one Python string literal with the same value. Nesting, cycles
-  and the size of a default instance (fixed-size arrays) are bounded.
+  ``_full_text`` triple-quoted literal) stays one Python string literal with the same value. Cycles are
+  refused; length, nesting, the number of types and of fields (genpy's time) and the size of a default
+  instance (fixed-size arrays) are bounded.
 - ``check_bag(bag, path)``: every connection of an open rosbag, before any message is read.
 - ``json_loads(text)``: ``json.loads`` after a nesting check (a deeply nested document would raise
   RecursionError inside ``json``).
@@ -29,12 +30,17 @@ import stat
 
 __all__ = ['UnsafeDefinition', 'check_definition', 'check_connection', 'check_bag', 'check_type_name',
            'check_json_depth', 'json_loads', 'open_input', 'check_regular', 'MAX_DEFINITION_CHARS', 'MAX_NESTING',
-           'MAX_DEFAULT_VALUES', 'MAX_JSON_DEPTH']
+           'MAX_TYPES', 'MAX_DECLARATIONS', 'MAX_DEFAULT_VALUES', 'MAX_JSON_DEPTH']
 
 #: Longest message definition accepted (characters); real ones, comments included, are a few kB to ~50 kB.
 MAX_DEFINITION_CHARS = 1 << 20
 #: Deepest nesting of message types (a message is level 1); nav_msgs/Odometry reaches 4.
 MAX_NESTING = 32
+#: Most message types in one definition (Odometry: 6; large MoveIt messages: ~50). genpy's time grows
+#: faster than the square of it: 100 types take 1.2 s, 1,000 take 67 s.
+MAX_TYPES = 128
+#: Most fields and constants in one definition: 10,000 take genpy 1.2 s.
+MAX_DECLARATIONS = 10000
 #: Most values in a default instance of a message (fixed-size arrays multiply): genpy builds one per class.
 MAX_DEFAULT_VALUES = 1 << 20
 #: Deepest JSON nesting accepted; a json-xz window document reaches about 2 * MAX_NESTING + 4.
@@ -117,7 +123,12 @@ def _definition_problem(msg_type, definition):
     text = definition.replace('roslib/Header', 'std_msgs/Header')  # as genpy does first
     try:
         sections = _sections(msg_type, text)
-        messages = {name: _fields(name, body) for name, body in sections}
+        messages, declarations = {}, 0
+        for name, body in sections:
+            messages[name], count = _fields(name, body)
+            declarations += count
+        if declarations > MAX_DECLARATIONS:
+            raise ValueError('holds more than %d fields and constants' % MAX_DECLARATIONS)
         for name, body in sections:
             _check_triple_quoted(body)
         _check_not_rewritten(text, list(messages))
@@ -130,6 +141,8 @@ def _definition_problem(msg_type, definition):
 def _sections(msg_type, text):
     """[(type, text)]: the message itself, then each ``MSG: pkg/Type`` section (split as genpy splits)."""
     parts = text.split(SEPARATOR)
+    if len(parts) > MAX_TYPES:
+        raise ValueError('defines more than %d message types' % MAX_TYPES)
     sections = [(msg_type, parts[0])]
     for part in parts[1:]:
         newline = part.find('\n')
@@ -150,8 +163,9 @@ def _sections(msg_type, text):
 
 
 def _fields(msg_type, body):
-    """[(name, resolved base type or None for a builtin, array length or None/-1)] of one section, line by
-    line as genmsg reads it; constants are checked and left out."""
+    """``(fields, declarations)`` of one section, line by line as genmsg reads it: fields are (name, resolved
+    message type or None for a builtin, array length: None, -1 for ``[]`` or N); constants are checked and
+    only counted in ``declarations``."""
     package = msg_type.split('/')[0]
     fields, names = [], set()
     for number, line in enumerate(body.split('\n'), 1):
@@ -181,7 +195,7 @@ def _fields(msg_type, body):
         if name in names:
             raise ValueError('%s: the name %s is used twice' % (where, name))
         names.add(name)
-    return fields
+    return fields, len(names)
 
 
 def _check_name(name, where):
