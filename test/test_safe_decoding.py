@@ -353,7 +353,7 @@ def test_a_crafted_leftover_is_kept_unrecovered_and_never_runs(fmt, marker, tmp_
             stream.truncate(os.path.getsize(leftover) * 2 // 3)
     outcome, = recovery.recover_directory(directory)
     assert outcome.status == recovery.UNRECOVERABLE and os.path.exists(leftover)
-    assert 'topic /odom: message definition of nav_msgs/Odometry' in one_line(outcome.detail)
+    assert 'message definition of nav_msgs/Odometry: ' in one_line(outcome.detail) and leftover in outcome.detail
     result = run('recover', directory)
     assert result.returncode == 1 and 'message definition' in result.stdout
 
