@@ -18,8 +18,7 @@ import json
 import math
 import os
 
-from . import msg_codec
-from . import safe_files
+from . import msg_codec, safe_files, safe_input
 from .window_buffer import Record
 
 CODEC = 'bag-lz4'
@@ -78,30 +77,40 @@ def write(target, records, metadata):
     bag.close()  # on an error the owner of ``target`` closes it (a failed rosbag close would leave it open)
 
 
-def read(path):
-    """``(metadata, records)`` of a bag-lz4 window file; ValueError('<path>: <what is wrong>') otherwise."""
+def read(path, stream=None):
+    """``(metadata, records)`` of a bag-lz4 window file (``stream``: that file, already open);
+    ValueError('<path>: <what is wrong>') otherwise, also before any message is read when a connection's
+    message definition is unsafe (``safe_input.check_bag``)."""
     import rosbag
     try:
-        with open(path, 'rb') as stream:
-            magic = stream.read(len(MAGIC))
+        stream = stream or safe_input.open_input(path)
+        magic = stream.read(len(MAGIC))
+        stream.seek(0)
     except OSError as error:
         raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
     if magic != MAGIC:
+        stream.close()
         raise ValueError('%s: not a rosbag 2.0 file' % path)
     metadata = None
     read_records = []
-    try:
-        with rosbag.Bag(path) as bag:
-            for topic, msg, time in bag.read_messages():
-                if topic == METADATA_TOPIC:
-                    if metadata is None:
-                        metadata = json.loads(msg.data)
-                    continue
-                read_records.append((time, Record(time.to_sec(), topic, msg)))
-    except ValueError as error:
-        raise ValueError('%s: bad metadata JSON on %s (%s)' % (path, METADATA_TOPIC, error))
-    except Exception as error:  # rosbag raises ROSBag*Exception, struct.error, lz4 errors, ...
-        raise ValueError('%s: corrupt or truncated bag (%s: %s)' % (path, type(error).__name__, error))
+    with stream:
+        try:
+            bag = rosbag.Bag(stream)
+        except Exception as error:  # rosbag raises ROSBag*Exception, struct.error, lz4 errors, ...
+            raise ValueError('%s: corrupt or truncated bag (%s: %s)' % (path, type(error).__name__, error))
+        with bag:
+            safe_input.check_bag(bag, path)
+            try:
+                for topic, msg, time in bag.read_messages():
+                    if topic == METADATA_TOPIC:
+                        if metadata is None:
+                            metadata = _metadata(msg.data)
+                        continue
+                    read_records.append((time, Record(time.to_sec(), topic, msg)))
+            except _BadMetadata as error:
+                raise ValueError('%s: bad metadata JSON on %s (%s)' % (path, METADATA_TOPIC, error))
+            except Exception as error:
+                raise ValueError('%s: corrupt or truncated bag (%s: %s)' % (path, type(error).__name__, error))
     if not isinstance(metadata, dict) or not isinstance(metadata.get('bag'), dict):
         raise ValueError('%s: not a cc_log window (no metadata on %s)' % (path, METADATA_TOPIC))
     layout = metadata.pop('bag')
@@ -110,6 +119,17 @@ def read(path):
     except (ValueError, TypeError, KeyError, IndexError) as error:
         raise ValueError('%s: metadata does not fit the records (%s)' % (path, error))
     return metadata, records
+
+
+class _BadMetadata(ValueError):
+    pass
+
+
+def _metadata(text):
+    try:
+        return safe_input.json_loads(text)
+    except ValueError as error:
+        raise _BadMetadata(error)
 
 
 def _restore(read_records, layout):

@@ -1,7 +1,8 @@
 """Reading bags for replay, collect and learning (edge module: imports rosbag).
 
-Every failure to read a bag is a ValueError with one clear line naming the file: missing, not a bag,
-truncated or unindexed, topic not in the bag (the topics are listed), topic of another type.
+Every failure to read a bag is a ValueError with one clear line naming the file: missing, not a regular
+file, not a bag, truncated or unindexed, a connection with an unsafe message definition, topic not in the
+bag (the topics are listed), topic of another type.
 """
 import os
 import struct
@@ -9,18 +10,21 @@ import struct
 import numpy as np
 import rosbag
 
+from . import safe_input
 from .features import OdometryFeatures, stamp_of, window_vector
 from .window_buffer import Record, WindowBuffer
 
 
 def open_bag(path):
-    """Open a bag for reading; raise ValueError('<path>: <what is wrong>') when it cannot be read."""
+    """Open a bag for reading; raise ValueError('<path>: <what is wrong>') when it cannot be read, is not a
+    regular file, or a connection's message definition is unsafe (checked before any message is read:
+    rosbag generates a class from each definition)."""
     if not os.path.exists(path):
         raise ValueError('%s: no such bag file' % path)
     if os.path.isdir(path):
         raise ValueError('%s: is a directory, not a bag file' % path)
     try:
-        with open(path, 'rb') as stream:
+        with safe_input.open_input(path) as stream:
             magic = stream.read(13)
     except (IOError, OSError) as error:
         raise ValueError('%s: cannot read: %s' % (path, error.strerror or error))
@@ -38,6 +42,7 @@ def open_bag(path):
         raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
     try:
         _check_index(bag, path)
+        safe_input.check_bag(bag, path)
     except Exception:
         bag.close()
         raise

@@ -553,9 +553,11 @@ def _record_row(record, path=None):
 
 def _cc_log_json(path):
     """A cc_log JSON file (model, feature vector, simulator truth); CommandError when it is none of them."""
+    from . import safe_input
+    with safe_input.open_input(path) as stream:
+        data = stream.read()
     try:
-        with open(path) as stream:
-            document = json.load(stream)
+        document = safe_input.json_loads(data)
     except UnicodeDecodeError:
         raise CommandError('%s: not a cc_log file (not a window file and not JSON text)' % path)
     except ValueError as error:
@@ -568,8 +570,8 @@ def _cc_log_json(path):
 
 
 def _is_window_file(path):
-    from . import bag_lz4, json_xz
-    with open(path, 'rb') as stream:
+    from . import bag_lz4, json_xz, safe_input
+    with safe_input.open_input(path) as stream:
         head = stream.read(16)
     return head.startswith(json_xz.MAGIC) or head.startswith(bag_lz4.MAGIC)
 
@@ -776,8 +778,8 @@ def cmd_codecs(args):
 
 def _is_plain_bag(path):
     """True for a rosbag that is not a cc_log bag-lz4 window file (which ``codecs`` reads as a LOG)."""
-    from . import bag_lz4
-    with open(path, 'rb') as stream:
+    from . import bag_lz4, safe_input
+    with safe_input.open_input(path) as stream:
         if not stream.read(16).startswith(bag_lz4.MAGIC):
             return False
     return not os.path.basename(path).startswith('cc_log_')

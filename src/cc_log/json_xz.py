@@ -23,8 +23,9 @@ Pure: no rospy, no rosbag.
 """
 import json
 import lzma
+import os
 
-from . import msg_codec
+from . import msg_codec, safe_input
 from .window_buffer import Record
 
 CODEC = 'json-xz'
@@ -37,6 +38,16 @@ MAGIC = b'\xfd7zXZ\x00'
 DEFAULT_PRESET = 6
 
 HEADER_STAMP = 'header.stamp'
+
+#: Largest document (decompressed bytes) and file read. A window holds at most ``max_window`` (100,000)
+#: driving messages: about 200 bytes each in the column layout (Husky odometry + IMU), at most ~2 kB when
+#: every field changes, so 20-200 MB; 1 GiB is well above, and an xz bomb stops there.
+MAX_DOCUMENT_BYTES = 1 << 30
+#: Documents up to this size are decompressed in one pass; a larger one is first counted without being
+#: kept, so a bomb costs decompression time up to MAX_DOCUMENT_BYTES but never that much memory.
+ONE_PASS_BYTES = 64 << 20
+#: Memory the xz decoder may use (its dictionary): cc_log writes at most 64 MiB dictionaries.
+DECODER_MEMORY = 256 << 20
 
 
 # -- columns --------------------------------------------------------------------------------------------
@@ -158,17 +169,68 @@ def compress(data, preset=DEFAULT_PRESET):
 
 # -- reading --------------------------------------------------------------------------------------------
 
-def decode(data, name='<bytes>'):
-    """``(metadata, records)`` from ``.json.xz`` bytes; ValueError('<name>: <what is wrong>') otherwise."""
-    if not data.startswith(MAGIC):
-        raise ValueError('%s: not an xz file' % name)
+def decompress(data, name='<bytes>', limit=MAX_DOCUMENT_BYTES):
+    """xz ``data`` decompressed as ``lzma.decompress`` does (concatenated streams; trailing garbage after
+    a stream ignored), refused with ValueError('<name>: ...') beyond ``limit`` bytes or when corrupt."""
     try:
-        text = lzma.decompress(data, format=lzma.FORMAT_XZ)
+        if limit > ONE_PASS_BYTES:
+            try:
+                return _decompress(data, ONE_PASS_BYTES, keep=True)
+            except _TooLarge:
+                _decompress(data, limit, keep=False)
+        return _decompress(data, limit, keep=True)
+    except _TooLarge:
+        raise ValueError('%s: decompresses to more than %d bytes (the limit of a window document)' % (name, limit))
     except (lzma.LZMAError, EOFError) as error:
         raise ValueError('%s: corrupt or truncated xz data (%s)' % (name, error))
+
+
+class _TooLarge(Exception):
+    pass
+
+
+def _decompress(data, limit, keep):
+    """The streams of ``data``, joined when ``keep`` (else only counted, 1 MiB at a time); _TooLarge beyond
+    ``limit``."""
+    parts, size, streams = [], 0, 0
+    while True:
+        decompressor = lzma.LZMADecompressor(format=lzma.FORMAT_XZ, memlimit=DECODER_MEMORY)
+        try:
+            if keep:
+                part = decompressor.decompress(data, max_length=limit - size + 1)
+            else:
+                part = decompressor.decompress(data, max_length=1 << 20)
+                while not decompressor.eof and not decompressor.needs_input and size + len(part) <= limit:
+                    size += len(part)
+                    part = decompressor.decompress(b'', max_length=1 << 20)
+        except lzma.LZMAError:
+            if streams:
+                break  # what follows a complete stream is not one: ignored, as lzma.decompress does
+            raise
+        size += len(part)
+        if size > limit:
+            raise _TooLarge()
+        if keep:
+            parts.append(part)
+        if not decompressor.eof:
+            raise lzma.LZMAError('Compressed data ended before the end-of-stream marker was reached')
+        streams += 1
+        data = decompressor.unused_data
+        if not data:
+            break
+    return b''.join(parts)
+
+
+def decode(data, name='<bytes>'):
+    """``(metadata, records)`` from ``.json.xz`` bytes; ValueError('<name>: <what is wrong>') otherwise (also
+    for a document beyond MAX_DOCUMENT_BYTES, nested beyond safe_input.MAX_JSON_DEPTH, or holding an unsafe
+    message definition)."""
+    if not data.startswith(MAGIC):
+        raise ValueError('%s: not an xz file' % name)
+    text = decompress(data, name)
     try:
-        doc = json.loads(text.decode('utf-8'))
-    except (UnicodeDecodeError, ValueError) as error:
+        doc = safe_input.json_loads(text)
+    except ValueError as error:
         raise ValueError('%s: not a JSON document (%s)' % (name, error))
     try:
         return from_document(doc)
@@ -176,9 +238,12 @@ def decode(data, name='<bytes>'):
         raise ValueError('%s: %s' % (name, error))
 
 
-def read(path):
-    """``(metadata, records)`` of a ``.json.xz`` window file."""
-    with open(path, 'rb') as stream:
+def read(path, stream=None):
+    """``(metadata, records)`` of a ``.json.xz`` window file (``stream``: that file, already open)."""
+    with (stream or safe_input.open_input(path)) as stream:
+        if os.fstat(stream.fileno()).st_size > MAX_DOCUMENT_BYTES:
+            raise ValueError('%s: larger than %d bytes: not a cc_log window' % (path, MAX_DOCUMENT_BYTES))
+        stream.seek(0)
         return decode(stream.read(), path)
 
 

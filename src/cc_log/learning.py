@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from . import safe_files
+from . import safe_files, safe_input
 from .features import FeatureConfig, vector_length, vector_names
 from .model import AnomalyModel
 
@@ -95,8 +95,8 @@ def load_vectors(directory, with_stamps=False):
                 continue
             path = os.path.join(folder, name)
             try:
-                with open(path) as stream:
-                    document = json.load(stream, parse_constant=_refuse)
+                with safe_input.open_input(path) as stream:
+                    document = safe_input.json_loads(stream.read(), parse_constant=_refuse)
             except (IOError, OSError, ValueError) as error:
                 raise ValueError('%s: not a feature vector file (%s)' % (path, error))
             if not isinstance(document, dict) or 'features' not in document or 'config' not in document:

@@ -22,7 +22,7 @@ import re
 from . import __version__
 from . import json_xz
 from . import msg_codec
-from . import safe_files
+from . import safe_files, safe_input
 
 PREFIX = 'cc_log_'
 TMP_MARK = safe_files.TMP_MARK
@@ -90,6 +90,46 @@ def window_metadata(window, codec, extra=None):
     }
     meta.update(extra or {})
     return meta
+
+
+def _is_number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_score(value):
+    return value is None or _is_number(value) or (isinstance(value, str) and value in msg_codec.NON_FINITE)
+
+
+_METADATA_TYPES = (  # key, test, what it must be (keys a reader uses; each may be absent)
+    ('count', lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, 'a count'),
+    ('part', lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, 'a count'),
+    ('start', _is_number, 'a number'),
+    ('end', _is_number, 'a number'),
+    ('threshold', lambda v: v is None or _is_number(v), 'a number'),
+    ('topics', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
+    ('reasons', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
+    ('types', lambda v: isinstance(v, dict) and all(isinstance(t, str) for t in v.values()),
+     'an object of strings'),
+    ('counts', lambda v: isinstance(v, dict) and all(_is_number(n) for n in v.values()), 'an object of counts'),
+    ('triggers', lambda v: isinstance(v, list) and all(
+        isinstance(t, dict) and _is_number(t.get('stamp')) and isinstance(t.get('reason', ''), str)
+        and _is_score(t.get('score')) for t in v),
+     'a list of objects {"stamp": number, "reason": string, "score": number or null}'),
+)
+_METADATA_STRINGS = ('codec', 'reason', 'driving_topic', 'start_utc', 'end_utc', 'cc_log_version')
+
+
+def check_metadata(metadata):
+    """Raise ValueError('metadata: <key> must be ...') unless ``metadata`` is an object whose known keys have
+    the types cc_log writes (readers such as ``cclog info`` and ``plot`` rely on them)."""
+    if not isinstance(metadata, dict):
+        raise ValueError('metadata must be an object')
+    for key, test, what in _METADATA_TYPES:
+        if key in metadata and not test(metadata[key]):
+            raise ValueError('metadata: %s must be %s' % (key, what))
+    for key in _METADATA_STRINGS:
+        if key in metadata and not isinstance(metadata[key], str):
+            raise ValueError('metadata: %s must be a string' % key)
 
 
 # -- names ----------------------------------------------------------------------------------------------
@@ -185,18 +225,31 @@ def write_window(window, directory, fmt, metadata=None, base=None):
 def read_window(path):
     """``(metadata, records)`` of a window file, by its magic bytes (then extension).
 
-    Raises ValueError('<path>: <what is wrong>') for a missing, truncated, corrupt or foreign file.
+    Raises ValueError('<path>: <what is wrong>') for a missing, truncated, corrupt or foreign file, one that
+    is not a regular file (a FIFO), metadata of the wrong types (``check_metadata``) or an unsafe message
+    definition (``safe_input.check_definition``).
     """
     try:
-        with open(path, 'rb') as stream:
-            head = stream.read(16)
+        stream = safe_input.open_input(path)
     except OSError as error:
         raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
-    if head.startswith(json_xz.MAGIC):
-        return json_xz.read(path)
-    from . import bag_lz4
-    if head.startswith(bag_lz4.MAGIC):
-        return bag_lz4.read(path)
+    with stream:
+        try:
+            head = stream.read(16)
+            stream.seek(0)
+        except OSError as error:
+            raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
+        if head.startswith(json_xz.MAGIC):
+            metadata, records = json_xz.read(path, stream)
+        else:
+            from . import bag_lz4
+            metadata, records = bag_lz4.read(path, stream) if head.startswith(bag_lz4.MAGIC) else (None, None)
+    if records is not None:
+        try:
+            check_metadata(metadata)
+        except ValueError as error:
+            raise ValueError('%s: %s' % (path, error))
+        return metadata, records
     fmt = _extension(path)
     if not head:
         raise ValueError('%s: empty file' % path)

@@ -15,15 +15,17 @@ executes code (no pickle, no joblib), and anything but a well-formed model raise
 """
 import json
 import math
-import os
 
 import numpy as np
 
+from . import safe_input
 from .features import FeatureConfig, vector_length
 
 FORMAT = 'cc_log-model'
 VERSION = 1
 KINDS = ('ocsvm', 'nystroem-sgd')
+#: Largest model file read: an ``ocsvm`` model of 20,000 support vectors of 200 features is ~80 MB of JSON.
+MAX_MODEL_BYTES = 1 << 30
 
 
 class ModelError(ValueError):
@@ -143,10 +145,14 @@ class AnomalyModel(object):
     def load(cls, path):
         """Read a model file; raise ModelError('<path>: <what is wrong>') for anything but a valid model."""
         try:
-            with open(path, 'rb') as stream:
-                data = stream.read()
+            with safe_input.open_input(path) as stream:
+                data = stream.read(MAX_MODEL_BYTES + 1)
         except (IOError, OSError) as error:
             raise ModelError('%s: cannot read: %s' % (path, error.strerror or error))
+        except ValueError as error:  # a FIFO, a device: never read (a FIFO would block)
+            raise ModelError(str(error))
+        if len(data) > MAX_MODEL_BYTES:
+            raise ModelError('%s: not a cc_log model (larger than %d bytes)' % (path, MAX_MODEL_BYTES))
         if data[:1] == b'\x80':
             raise ModelError('%s: not a cc_log model (a pickle/joblib payload? models are JSON, never pickles)'
                              % path)
@@ -159,7 +165,7 @@ class AnomalyModel(object):
             raise ValueError('%s is not allowed' % name)
 
         try:
-            document = json.loads(text, parse_constant=refuse_constant)
+            document = safe_input.json_loads(text, parse_constant=refuse_constant)
         except ValueError as error:
             raise ModelError('%s: not a cc_log model (invalid JSON: %s)' % (path, error))
         return cls.from_dict(document, path)

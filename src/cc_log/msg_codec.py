@@ -31,6 +31,8 @@ import threading
 import genpy
 import genpy.dynamic
 
+from . import safe_input
+
 __all__ = ['to_dict', 'from_dict', 'message_class', 'message_classes', 'row_json', 'row_json_bytes',
            'field_types', 'encode_float', 'decode_float', 'compact_definition', 'to_float32', 'short_float32',
            'NON_FINITE']
@@ -382,13 +384,17 @@ _CLASSES_LOCK = threading.Lock()  # the background writer and the main thread ma
 
 
 def message_classes(msg_type, definition):
-    """All classes (by full type name) generated from ``definition`` of ``msg_type``; cached."""
+    """All classes (by full type name) generated from ``definition`` of ``msg_type``; cached. The definition
+    is checked first (``safe_input.check_definition``): ValueError('message definition of ...: ...')."""
+    if type(msg_type) is not str or type(definition) is not str:  # from JSON: maybe a list, never a key
+        safe_input.check_definition(msg_type, definition)
     key = (msg_type, definition)
     classes = _CLASSES.get(key)
     if classes is None:
         with _CLASSES_LOCK:
             classes = _CLASSES.get(key)
             if classes is None:
+                safe_input.check_definition(msg_type, definition)  # genpy runs what it generates
                 try:
                     classes = genpy.dynamic.generate_dynamic(msg_type, definition)
                 except Exception as error:  # genpy raises several kinds for a bad definition
@@ -406,6 +412,7 @@ def message_class(msg_type, definition):
 
 
 _STRING_CONSTANT = re.compile(r'^string\s+\w+\s*=')
+_SEPARATOR_LINE = '=' * 80
 
 
 def compact_definition(text):
@@ -419,6 +426,8 @@ def compact_definition(text):
         line = line.strip()
         if not _STRING_CONSTANT.match(line):
             line = ' '.join(line.split('#', 1)[0].split())
+        if line == _SEPARATOR_LINE and lines and lines[-1].startswith('MSG: '):
+            lines.append('')  # a section with no field keeps its newline: genpy needs "MSG: pkg/Type\n"
         if line:
             lines.append(line)
     return '\n'.join(lines) + '\n'

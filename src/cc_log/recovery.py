@@ -32,7 +32,6 @@ Pure: roslz4 is imported only to decompress the chunks of a bag leftover; messag
 import collections
 import errno
 import itertools
-import json
 import mmap
 import os
 import re
@@ -40,7 +39,7 @@ import stat
 import struct
 import time
 
-from . import log_format, msg_codec, safe_files
+from . import log_format, msg_codec, safe_files, safe_input
 from .bag_lz4 import MAGIC, METADATA_TOPIC
 
 __all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
@@ -374,8 +373,8 @@ def _window_of(salvage):
         if topic == METADATA_TOPIC:
             if metadata is None:
                 try:
-                    metadata = json.loads(msg.data)
-                except (ValueError, RecursionError):
+                    metadata = safe_input.json_loads(msg.data)
+                except ValueError:
                     metadata = {}
             continue
         records.append((Record(genpy.Time(secs, nsecs).to_sec(), topic, msg), secs, nsecs))

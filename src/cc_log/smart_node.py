@@ -70,6 +70,7 @@ from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
 from . import log_format
 from . import msg_codec
+from . import safe_input
 from . import smart_logger
 from .model import AnomalyModel, ModelError
 from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_name, recover_leftovers,
@@ -136,13 +137,55 @@ class IntakeQueue(object):
         return [item for item, _ in items]
 
 
+class MessageDecoder(object):
+    """Deserializes what the intake receives as rospy.AnyMsg: with the installed class of the publisher's
+    type, else with a class built from the publisher's message definition, which must pass
+    ``safe_input.check_definition`` first (genpy runs the code it generates). A definition that does not is
+    refused for good: the topic is warned about once, and its messages are counted in ``refused``."""
+
+    MAX_REFUSALS = 256  # (type, definition) pairs remembered as refused
+
+    def __init__(self, classes):
+        self.classes = dict(classes)  # type name -> class
+        self.refused = 0
+        self._refusals = set()
+
+    def decode(self, msg, topic):
+        """The deserialized message, or None when its definition is refused."""
+        if not isinstance(msg, rospy.AnyMsg):
+            return msg
+        header = msg._connection_header
+        msg_type = header.get('type', '')
+        cls = self.classes.get(msg_type)
+        if cls is None:
+            definition = header.get('message_definition', '')
+            if (msg_type, definition) in self._refusals:
+                self.refused += 1
+                return None
+            try:
+                safe_input.check_type_name(msg_type)  # before anything imports <package>.msg
+                cls = roslib.message.get_message_class(msg_type) or msg_codec.message_class(msg_type, definition)
+            except ValueError as error:
+                if len(self._refusals) >= self.MAX_REFUSALS:
+                    self._refusals.clear()
+                self._refusals.add((msg_type, definition))
+                self.refused += 1
+                rospy.logwarn('topic %s: messages refused, never decoded: %s', topic, error)
+                return None
+            self.classes[msg_type] = cls
+        decoded = cls()
+        decoded.deserialize(msg._buff)
+        return decoded
+
+
 class Intake(object):
     """Subscribers that only enqueue; one feeder thread hands messages to ``sink.on_message`` in arrival
     order, draining the queue in batches. Every topic (the driving one too) arrives as rospy.AnyMsg, i.e.
     serialized bytes, and is deserialized on the feeder thread (its class from the publisher's type, or
     built from its message definition). The queue is bounded (``max_messages``, ``max_bytes``): a message
     arriving when it is full is dropped and counted in ``overflowed`` (and in ``dropped``, which also counts
-    messages that could not be decoded or handled)."""
+    messages that could not be decoded or handled, and those of a refused message definition:
+    ``decoder.refused``)."""
 
     def __init__(self, sink, driving_topic, driving_class, side_topics, max_messages=DEFAULT_INTAKE_MAX_MESSAGES,
                  max_bytes=int(DEFAULT_INTAKE_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY):
@@ -150,7 +193,7 @@ class Intake(object):
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
         self.batch_delay = float(batch_delay)
-        self._classes = {driving_class._type: driving_class}
+        self.decoder = MessageDecoder({driving_class._type: driving_class})
         self.driving_topic = rospy.resolve_name(driving_topic)
         self.subscribers = [rospy.Subscriber(self.driving_topic, rospy.AnyMsg, self._enqueue, self.driving_topic,
                                              queue_size=None)]
@@ -181,21 +224,6 @@ class Intake(object):
             rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'
                                    % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
 
-    def _decode(self, msg):
-        if not isinstance(msg, rospy.AnyMsg):
-            return msg
-        header = msg._connection_header
-        msg_type = header.get('type', '')
-        cls = self._classes.get(msg_type)
-        if cls is None:
-            cls = roslib.message.get_message_class(msg_type)
-            if cls is None:
-                cls = msg_codec.message_class(msg_type, header.get('message_definition', ''))
-            self._classes[msg_type] = cls
-        decoded = cls()
-        decoded.deserialize(msg._buff)
-        return decoded
-
     def _feed(self):
         while True:
             batch = self.queue.take_all()
@@ -208,10 +236,13 @@ class Intake(object):
 
     def _feed_one(self, topic, msg, receipt):
         try:
-            decoded = self._decode(msg)
+            decoded = self.decoder.decode(msg, topic)
         except (genpy.DeserializationError, ValueError, TypeError) as error:
             self.dropped += 1
             rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
+            return
+        if decoded is None:  # refused (warned once by the decoder)
+            self.dropped += 1
             return
         try:
             self.sink.on_message(topic, decoded, receipt.secs + 1e-9 * receipt.nsecs,
@@ -374,6 +405,7 @@ class SmartNode(object):
             ('classify every', str(self.logger.classify_every)),
             ('time resets', stats['time_resets']),
             ('messages refused', stats['messages_refused']),
+            ('messages refused (unsafe definition)', self.intake.decoder.refused),
         ] + disk
         return level, message, values
 
