@@ -1,16 +1,36 @@
 #!/usr/bin/python3
 """Tally JUnit XML results below the given directories; print 'N passed, N failed, N skipped'.
 
-Exit status is non-zero when any test failed or errored, or when no test ran at all.
+Exit status is non-zero when any test failed or errored, or when no test ran at all. In CI (CI=true) a test
+skipped for a missing dependency (a module that does not import, a command that is not installed) counts as
+failed: cc_log declares everything its tests need, so such a skip hides a broken install. Skips for any
+other reason (not root, an expected failure of a known gap) stay skips.
 """
 import glob
 import os
+import re
 import sys
 import xml.etree.ElementTree as ET
 
+#: Reasons of a skip that mean something cc_log depends on is missing.
+MISSING_DEPENDENCY = re.compile(r'could not import|no module named|not installed|not on path|command not found|'
+                                r'missing dependency', re.IGNORECASE)
 
-def tally(directory):
-    """Return (passed, failed, skipped, failed test names) over every XML file below directory."""
+
+def in_ci(environ=os.environ):
+    """True when running under CI (the CI variable set to anything but empty, 0 or false)."""
+    return environ.get('CI', '').strip().lower() not in ('', '0', 'false', 'no')
+
+
+def skip_reason(skipped):
+    """The reason a <skipped> element gives: its message and its text."""
+    return ' '.join(part for part in (skipped.get('message', ''), skipped.text or '') if part).strip()
+
+
+def tally(directory, strict_skips=False):
+    """Return (passed, failed, skipped, failed test names) over every XML file below directory.
+
+    ``strict_skips``: a skip for a missing dependency counts as failed (named with its reason)."""
     passed = failed = skipped = 0
     failures = []
     for path in sorted(glob.glob(os.path.join(directory, '**', '*.xml'), recursive=True)):
@@ -22,21 +42,25 @@ def tally(directory):
             continue
         for case in root.iter('testcase'):
             name = '%s.%s' % (case.get('classname', ''), case.get('name', ''))
+            skip = case.find('skipped')
             if case.find('failure') is not None or case.find('error') is not None:
                 failed += 1
                 failures.append(name)
-            elif case.find('skipped') is not None:
+            elif skip is not None and strict_skips and MISSING_DEPENDENCY.search(skip_reason(skip)):
+                failed += 1
+                failures.append('%s: skipped for a missing dependency in CI (%s)' % (name, skip_reason(skip)[:200]))
+            elif skip is not None:
                 skipped += 1
             else:
                 passed += 1
     return passed, failed, skipped, failures
 
 
-def main(argv):
+def main(argv, environ=os.environ):
     passed = failed = skipped = 0
     failures = []
     for directory in argv[1:]:
-        counts = tally(directory)
+        counts = tally(directory, strict_skips=in_ci(environ))
         passed, failed, skipped = passed + counts[0], failed + counts[1], skipped + counts[2]
         failures += counts[3]
     for name in failures:

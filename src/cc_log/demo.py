@@ -91,8 +91,8 @@ def train(out, minutes, seed, window, stride):
     model, info = learning.train(vectors['nominal'], None, config)
     path = os.path.join(out, 'model.json')
     model.save(path)
-    log('    model -> %s (%s)' % (path, ', '.join('%s %s' % item for item in sorted(info.items())
-                                                 if isinstance(item[1], (int, float, str)))[:200]))
+    figures = ', '.join('%s %s' % item for item in sorted(info.items()) if isinstance(item[1], (int, float, str)))
+    log('    model -> %s (%s)' % (path, figures[:200]))
     os.remove(bag)
     os.remove(sim.truth_path(bag))
     return path
@@ -204,8 +204,8 @@ def summarize(out, windows_dir, truth, recorder, window_seconds):
         lines.append('    %-22s %d / %d' % (kind, hit, injected))
     lines.append('    %-22s %d / %d' % ('all', len(caught), len(truth)))
     lines.append('  false windows:          %d' % len(false_windows))
-    lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept,
-                                                              100.0 * kept / max(recorder.messages, 1)))
+    share = 100.0 * kept / max(recorder.messages, 1)
+    lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept, share))
     lines.append('  raw row JSON / stored:  %s / %s  (%.0fx less)' % (
         human(recorder.raw_bytes), human(stored), recorder.raw_bytes / max(stored, 1)))
     lines.append('  windows (%d) in:         %s' % (len(windows), windows_dir))
