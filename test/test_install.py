@@ -75,7 +75,8 @@ def test_smart_logger_and_smart_launch_from_the_install_space(installed):
     assert learned.returncode == 0 and model.is_file(), learned.stderr[-3000:]
     processes = Processes()
     try:
-        processes.start(['bash', '-c', 'source "%s/setup.bash" && exec roscore -p %s' % (prefix, uri.rsplit(':', 1)[1])],
+        port = uri.rsplit(':', 1)[1]
+        processes.start(['bash', '-c', 'source "%s/setup.bash" && exec roscore -p %s' % (prefix, port)],
                         clean_env(top, **ros), str(top / 'roscore.log'))
         wait_for_master(uri)
         no_model = in_install_space(installed, 'rosrun cc_log smart_logger.py', timeout=NODE_TIMEOUT, **ros)
