@@ -34,6 +34,11 @@ DEFAULT_SEED = 7
 DEFAULT_WINDOW = '1s'     # bench/detection_sim_tuning.py: fewest false windows, smallest windows (tail <= 1 s)
 DEFAULT_STRIDE = '10'
 MASTER_TIMEOUT = 30.0
+#: A directory holding this file was made by the demo.
+MARKER = '.cc_log_demo'
+#: Everything the demo writes in its directory (``train`` removes the bag and its truth file again).
+OUTPUTS = ('nominal.bag', sim.truth_path('nominal.bag'), 'features', 'model.json', 'windows', 'truth.json',
+           'ros_log', 'roscore.log', 'roslaunch.log', 'timeline.png')
 
 
 def log(text):
@@ -75,6 +80,30 @@ class Processes(object):
                 child.wait()
             stream.close()
         self.children = []
+
+
+def prepare_out(out):
+    """Make ``out`` the demo's directory without deleting anything the demo did not create.
+
+    A new or empty directory is created and marked as the demo's (``MARKER``); in one the demo marked before,
+    the demo's own outputs (``OUTPUTS``) are removed and nothing else; any other directory is refused with a
+    ValueError naming it, untouched."""
+    try:
+        os.makedirs(out, exist_ok=True)
+        entries = os.listdir(out)
+    except OSError as error:
+        raise ValueError('--out %s: %s' % (out, error.strerror or error))
+    if entries and MARKER not in entries:
+        raise ValueError('--out %s: not empty and not made by the demo (no %s in it): give a new or empty '
+                         'directory' % (out, MARKER))
+    for name in OUTPUTS:
+        path = os.path.join(out, name)
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path)
+        elif os.path.lexists(path):
+            os.remove(path)
+    with open(os.path.join(out, MARKER), 'w') as marker:
+        marker.write('made by the cc_log demo; running it again here replaces: %s\n' % ', '.join(OUTPUTS))
 
 
 def train(out, minutes, seed, window, stride):
@@ -254,19 +283,19 @@ def main(argv=None):
     parser = argparse.ArgumentParser(
         prog='demo.py', description=__doc__.split('\n\n')[0],
         epilog='example: rosrun cc_log demo.py --out /tmp/cc_log_demo --live-minutes 2')
-    parser.add_argument('--out', default=DEFAULT_OUT, help='working directory, emptied first (default: %(default)s)')
+    parser.add_argument('--out', default=DEFAULT_OUT,
+                        help='a new or empty directory, or one an earlier demo made (its outputs are replaced, '
+                             'nothing else is touched; default: %(default)s)')
     parser.add_argument('--train-minutes', type=float, default=DEFAULT_TRAIN_MINUTES)
     parser.add_argument('--live-minutes', type=float, default=DEFAULT_LIVE_MINUTES)
     parser.add_argument('--anomalies', type=int, default=DEFAULT_ANOMALIES)
     parser.add_argument('--seed', type=int, default=DEFAULT_SEED)
     args = parser.parse_args(argv)
     out = os.path.abspath(args.out)
-    if os.path.isdir(out):
-        shutil.rmtree(out)
-    os.makedirs(out)
     processes = Processes()
     started = time.time()
     try:
+        prepare_out(out)
         model = train(out, args.train_minutes, args.seed, DEFAULT_WINDOW, DEFAULT_STRIDE)
         windows, truth, recorder = run_live(out, model, args.live_minutes, args.anomalies, args.seed + 1, processes)
         summarize(out, windows, truth, recorder, window_seconds=5.0)
