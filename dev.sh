@@ -101,12 +101,12 @@ activate() {
 
 run_tests() {
   # Every test is registered in CMakeLists.txt: the launch file check, each unit test file (pytest) and each
-  # rostest, one after the other (-j1: they share 2 cores and some of them measure rates).
+  # rostest, one after the other (-j1: they share the cores and some of them measure rates). Progress: the name
+  # of each test file as it starts; the whole output is in run_tests.log.
   local results="$WS/build/test_results/cc_log"
   log "every test (catkin_make run_tests; log: $WS/run_tests.log)"
-  (cd "$WS" && catkin_make run_tests -j1 -DPYTHON_EXECUTABLE=/usr/bin/python3 >"$WS/run_tests.log" 2>&1) || true
-  grep -E "^-- run_tests.py: execute commands|^[0-9]+ (passed|failed|skipped|error)|^FAILED |^ERROR |^\[ROSTEST\]| \* RESULT" \
-    "$WS/run_tests.log" | sed -E 's#^-- run_tests.py: execute commands#--#' >&2 || true
+  (cd "$WS" && catkin_make run_tests -j1 -DPYTHON_EXECUTABLE=/usr/bin/python3 2>&1) | tee "$WS/run_tests.log" \
+    | awk '/run_tests.py: execute commands/ { getline; n = split($NF, part, "/"); print "[dev.sh]   " part[n]; fflush() }' >&2 || true
   python3 "$ROOT/tools/test_summary.py" "$results"
 }
 

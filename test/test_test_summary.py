@@ -9,7 +9,7 @@ TOOL = os.path.join(ROOT, 'tools', 'test_summary.py')
 CASES = '''<?xml version="1.0"?>
 <testsuites><testsuite name="s">
   <testcase classname="t" name="ok"/>
-  <testcase classname="t" name="broken"><failure message="assert 1 == 2"/></testcase>
+  <testcase classname="t" name="broken"><failure message="assert 1 == 2&#10;where 1 = f()"/></testcase>
   <testcase classname="t" name="crashed"><error message="boom"/></testcase>
   <testcase classname="t" name="no_rosbag"><skipped message="could not import 'rosbag': No module named 'rosbag'"/>
   </testcase>
@@ -39,7 +39,10 @@ def test_failures_errors_and_skips_are_counted(tmp_path):
     write(tmp_path / 'cc_log', 'pytest-a.xml', CASES)
     code, lines = summary(tmp_path, None)
     assert lines[-1] == '1 passed, 2 failed, 4 skipped' and code == 1
-    assert 'FAILED t.broken' in lines and 'FAILED t.crashed' in lines
+    assert lines[0].split() == ['cc_log/pytest-a.xml', '1', 'passed,', '2', 'failed,', '4', 'skipped']
+    broken = lines.index('FAILED t.broken')
+    assert lines[broken + 1:broken + 3] == ['    assert 1 == 2', '    where 1 = f()']
+    assert 'FAILED t.crashed' in lines and '    boom' in lines
 
 
 def test_in_ci_a_skip_for_a_missing_dependency_fails(tmp_path):
@@ -56,7 +59,8 @@ def test_in_ci_a_skip_for_a_missing_dependency_fails(tmp_path):
 def test_all_passed_is_success_and_nothing_ran_is_failure(tmp_path):
     write(tmp_path, 'a.xml', '<testsuite><testcase classname="t" name="ok"/>'
                              '<testcase classname="t" name="gap"><skipped type="pytest.xfail"/></testcase></testsuite>')
-    assert summary(tmp_path, 'true') == (0, ['1 passed, 0 failed, 1 skipped'])
+    code, lines = summary(tmp_path, 'true')
+    assert code == 0 and lines[-1] == '1 passed, 0 failed, 1 skipped' and not any('FAILED' in x for x in lines)
     empty = tmp_path / 'empty'
     empty.mkdir()
     assert summary(empty, None) == (1, ['no test ran'])
@@ -67,4 +71,5 @@ def test_an_unreadable_result_file_is_a_failure(tmp_path):
     write(tmp_path, 'b.xml', '<testsuite><testcase')
     code, lines = summary(tmp_path, None)
     assert code == 1 and lines[-1] == '1 passed, 1 failed, 0 skipped'
-    assert 'unreadable result file' in lines[0]
+    assert any(line.startswith('FAILED ') and 'b.xml: unreadable result file' in line for line in lines)
+    assert [line.split()[:3] for line in lines[:2]] == [['a.xml', '1', 'passed,'], ['b.xml', '0', 'passed,']]
