@@ -102,8 +102,10 @@ def prepare_out(out):
             shutil.rmtree(path)
         elif os.path.lexists(path):
             os.remove(path)
-    with open(os.path.join(out, MARKER), 'w') as marker:
-        marker.write('made by the cc_log demo; running it again here replaces: %s\n' % ', '.join(OUTPUTS))
+    if MARKER not in entries:  # created, never written through a link or over a file
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW
+        with os.fdopen(os.open(os.path.join(out, MARKER), flags, 0o664), 'w') as marker:
+            marker.write('made by the cc_log demo; running it again here replaces: %s\n' % ', '.join(OUTPUTS))
 
 
 def train(out, minutes, seed, window, stride):
