@@ -4,6 +4,7 @@
 #   ./dev.sh demo     install what is missing, build, run the demo
 #   ./dev.sh test     install what is missing, build, run every test (unit tests and rostests)
 #   ./dev.sh setup    install what is missing and build only
+#   ./dev.sh packages the Debian packages setup installs when missing (package.xml's keys and the toolchain)
 #
 # Setup installs the Debian packages cc_log needs when they are missing (quick when they are present) and
 # builds a catkin workspace in .catkin_ws/ whose src/cc_log points at this repository (entry by entry). Afterwards
@@ -114,7 +115,8 @@ main() {
   local job=${1:-}
   case "$job" in
     setup|demo|test) ;;
-    *) echo "usage: ./dev.sh demo|test|setup" >&2; exit 2 ;;
+    packages) debian_packages; exit ;;
+    *) echo "usage: ./dev.sh demo|test|setup|packages" >&2; exit 2 ;;
   esac
   install_missing
   build
