@@ -107,7 +107,10 @@ run_tests() {
   local results="$WS/build/test_results/cc_log"
   log "every test (catkin_make run_tests; log: $WS/run_tests.log)"
   (cd "$WS" && catkin_make run_tests -j1 -DPYTHON_EXECUTABLE=/usr/bin/python3 2>&1) | tee "$WS/run_tests.log" \
-    | awk '/run_tests.py: execute commands/ { getline; n = split($NF, part, "/"); print "[dev.sh]   " part[n]; fflush() }' >&2 || true
+    | awk '/run_tests.py: execute commands/ {
+        getline; n = split($NF, part, "/"); name = part[n]
+        if (name !~ /[.](py|test)$/) name = "launch file check"
+        print "[dev.sh]   " name; fflush() }' >&2 || true
   python3 "$ROOT/tools/test_summary.py" "$results"
 }
 
