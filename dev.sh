@@ -4,6 +4,7 @@
 #   ./dev.sh demo     install what is missing, build, run the demo
 #   ./dev.sh test     install what is missing, build, run every test (unit tests and rostests)
 #   ./dev.sh setup    install what is missing and build only
+#   ./dev.sh packages the Debian packages setup installs when missing (package.xml's keys and the toolchain)
 #
 # Setup installs the Debian packages cc_log needs when they are missing (quick when they are present) and
 # builds a catkin workspace in .catkin_ws/ whose src/cc_log points at this repository (entry by entry). Afterwards
@@ -15,20 +16,50 @@ WS="$ROOT/.catkin_ws"
 # Debian's ROS lives in the system interpreter; another python3 first on PATH cannot see it.
 export PATH="/usr/bin:/bin:$PATH"
 
-DEBIAN_PACKAGES=(
-  ros-core catkin cmake g++ ros-message-generation ros-environment
-  python3-rospy python3-rosbag python3-roslz4 python3-rostest python3-roslaunch
-  ros-std-msgs python3-std-msgs ros-nav-msgs python3-nav-msgs ros-sensor-msgs python3-sensor-msgs
-  ros-std-srvs python3-std-srvs ros-diagnostic-msgs python3-diagnostic-msgs
-  python3-numpy python3-sklearn python3-matplotlib python3-zstandard python3-lz4 python3-psutil
-  python3-pytest python3-hypothesis xz-utils jq
-)
+# What building needs besides package.xml's keys: catkin_make configures a C/C++ project and runs make.
+BUILD_TOOLCHAIN=(g++ make cmake)
 
 log() { printf '[dev.sh] %s\n' "$*" >&2; }
 
+# The rosdep keys package.xml declares (every kind of dependency), one a line; comments are left out.
+package_keys() {
+  perl -0777 -ne 's/<!--.*?-->//gs;
+    print "$1\n" while /<(?:buildtool_|buildtool_export_|build_|build_export_|exec_|test_|doc_)?depend(?:\s[^>]*)?>\s*([^<\s]+)\s*</g' \
+    "$ROOT/package.xml" | sort -u
+}
+
+# The Debian 12 packages of one rosdep key. The one place keys are mapped: a key added to package.xml is
+# installed from here, and a key this does not know stops setup with a line naming it.
+debian_packages_of() {
+  local key=$1 name=${1//_/-}
+  case "$key" in
+    catkin|rosbash|rosout) echo "$key" ;;
+    message_generation|message_runtime) echo "ros-$name" ;;
+    genpy|roslib|rospy|rosbag|roslz4|rosgraph|roslaunch|rostest|rosnode|rostopic|rosparam|rosservice|rosmsg)
+      echo "python3-$name" ;;
+    *_msgs|*_srvs) echo "ros-$name python3-$name" ;;     # message definitions and their Python classes
+    python3-catkin-lint) echo catkin-lint ;;
+    python3-*|xz-utils|jq) echo "$key" ;;                 # rosdep's Debian rule: the same name
+    *) return 1 ;;
+  esac
+}
+
+debian_packages() {
+  local key packages unknown=()
+  printf '%s\n' "${BUILD_TOOLCHAIN[@]}"
+  for key in $(package_keys); do
+    if packages=$(debian_packages_of "$key"); then printf '%s\n' $packages; else unknown+=("$key"); fi
+  done
+  if [ ${#unknown[@]} -gt 0 ]; then
+    log "package.xml: no Debian package known for rosdep key(s) ${unknown[*]}: add them to debian_packages_of in dev.sh"
+    return 1
+  fi
+}
+
 install_missing() {
-  local missing=()
-  for pkg in "${DEBIAN_PACKAGES[@]}"; do
+  local missing=() list pkg
+  list=$(debian_packages) || exit 1
+  for pkg in $list; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
   done
   [ ${#missing[@]} -eq 0 ] && return 0
@@ -70,22 +101,25 @@ activate() {
 }
 
 run_tests() {
-  # catkin's run_tests empties build/test_results first, so the unit test results live beside it.
-  local unit="$WS/build/unit_test_results" rostests="$WS/build/test_results/cc_log"
-  rm -rf "$unit" && mkdir -p "$unit"
-  log "unit tests (pytest, no roscore)"
-  (cd "$ROOT" && python3 -m pytest -q -p no:cacheprovider --junitxml="$unit/pytest-unit.xml" test) || true
-  log "rostests and launch file checks (catkin run_tests)"
-  (cd "$WS" && catkin_make run_tests -DPYTHON_EXECUTABLE=/usr/bin/python3 >"$WS/run_tests.log" 2>&1) || true
-  grep -E "^\[ROSTEST\]|^ SUMMARY|^ \* RESULT|^ \* TESTS|^ \* ERRORS|^ \* FAILURES" "$WS/run_tests.log" >&2 || true
-  python3 "$ROOT/tools/test_summary.py" "$unit" "$rostests"
+  # Every test is registered in CMakeLists.txt: the launch file check, each unit test file (pytest) and each
+  # rostest, one after the other (-j1: they share the cores and some of them measure rates). Progress: the name
+  # of each test file as it starts; the whole output is in run_tests.log.
+  local results="$WS/build/test_results/cc_log"
+  log "every test (catkin_make run_tests; log: $WS/run_tests.log)"
+  (cd "$WS" && catkin_make run_tests -j1 -DPYTHON_EXECUTABLE=/usr/bin/python3 2>&1) | tee "$WS/run_tests.log" \
+    | awk '/run_tests.py: execute commands/ {
+        getline; n = split($NF, part, "/"); name = part[n]
+        if (name !~ /[.](py|test)$/) name = "launch file check"
+        print "[dev.sh]   " name; fflush() }' >&2 || true
+  python3 "$ROOT/tools/test_summary.py" "$results"
 }
 
 main() {
   local job=${1:-}
   case "$job" in
     setup|demo|test) ;;
-    *) echo "usage: ./dev.sh demo|test|setup" >&2; exit 2 ;;
+    packages) debian_packages; exit ;;
+    *) echo "usage: ./dev.sh demo|test|setup|packages" >&2; exit 2 ;;
   esac
   install_missing
   build

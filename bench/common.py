@@ -63,16 +63,16 @@ def sha12(path):
 
 def describe_data(path, note=''):
     """``data: <file> (sha256 <12 hex>..., <bytes> bytes)<note>`` for a file."""
-    return 'data: %s (sha256 %s..., %d bytes)%s' % (os.path.relpath(path, ROOT) if path.startswith(ROOT)
-                                                  else path, sha12(path), os.path.getsize(path),
-                                                  (' ' + note) if note else '')
+    shown = os.path.relpath(path, ROOT) if path.startswith(ROOT) else path
+    return 'data: %s (sha256 %s..., %d bytes)%s' % (shown, sha12(path), os.path.getsize(path),
+                                                    (' ' + note) if note else '')
 
 
 def header(title, data_lines=(), argv=None):
     """Print the standard header of a bench script."""
     print('# %s' % title)
-    print('command: python3 %s' % ' '.join([os.path.relpath(os.path.abspath(sys.argv[0]), ROOT)]
-                                          + list(sys.argv[1:] if argv is None else argv)))
+    words = [os.path.relpath(os.path.abspath(sys.argv[0]), ROOT)] + list(sys.argv[1:] if argv is None else argv)
+    print('command: python3 %s' % ' '.join(words))
     print('machine: %s' % machine())
     for line in data_lines:
         print(line)

@@ -278,7 +278,8 @@ def main(argv=None):
         for rate in rates:
             results.append(run(procs, tmp, model, rate, args.seconds, False))
     first = results[0]
-    rows = [['cc_log smart node', 100, first['sent'], first['seen'], '%.2f%%' % (100 * first['node_cpu'] / first['publish_seconds']),
+    rows = [['cc_log smart node', 100, first['sent'], first['seen'],
+             '%.2f%%' % (100 * first['node_cpu'] / first['publish_seconds']),
              '%.0f' % first['node_rss'], first['windows']],
             ['rosbag record (same topic, same run)', 100, first['sent'], '-',
              '%.2f%%' % (100 * first['record_cpu'] / first['publish_seconds']), '%.0f' % first['record_rss'], '-']]

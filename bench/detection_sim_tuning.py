@@ -136,7 +136,8 @@ def main(argv=None):
                                                if any(e['type'] == k for e in truth))
                             rows.append([window, '%g' % minutes, stride, len(X), '%.1f' % timer.wall,
                                          name, rule, '%d/%d' % (n_caught, len(truth)), by_type, false,
-                                         len(saved), '%.1f%%' % (100.0 * stats['messages_kept'] / stats['messages_seen']),
+                                         len(saved),
+                                         '%.1f%%' % (100.0 * stats['messages_kept'] / stats['messages_seen']),
                                          '%.0fx' % (stats['raw_json_bytes'] / max(1, stats['stored_bytes'])),
                                          '%.2f' % (max(delays) if delays else float('nan'))])
                             print('  done: window %s, %g min, stride %d, %s, %s  [%.0f s]' % (

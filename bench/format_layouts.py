@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Window file layouts on real odometry (and one LaserScan topic): size against row-per-message JSON, and the cost of writing.
+"""Window file layouts on real odometry (and one LaserScan topic): size against row-per-message JSON, and the
+cost of writing.
 
     source .catkin_ws/devel/setup.bash && /usr/bin/python3 bench/format_layouts.py [--window 300] [--quick]
 
@@ -31,11 +32,10 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 REAL = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real'))
 try:
-    import cc_log  # noqa: F401
+    import cc_log
 except ImportError:
     sys.path.insert(0, os.path.join(ROOT, 'src'))
-
-import cc_log  # noqa: E402
+    import cc_log
 from cc_log import json_xz, msg_codec  # noqa: E402
 from cc_log.window_buffer import Record  # noqa: E402
 

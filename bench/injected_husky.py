@@ -43,7 +43,8 @@ def main(argv=None):
     types = sim.ANOMALY_TYPES[:3] if args.quick else sim.ANOMALY_TYPES
     started = time.time()
     common.header('Simulator anomalies injected into the real Husky run',
-                  [common.describe_data(common.HUSKY_BAG, '(odometry %s, IMU %s)' % (common.HUSKY_ODOM, common.HUSKY_IMU)),
+                  [common.describe_data(common.HUSKY_BAG,
+                                        '(odometry %s, IMU %s)' % (common.HUSKY_ODOM, common.HUSKY_IMU)),
                    'injection: sim.inject_anomalies, types %s, seeds %s' % (', '.join(types), seeds)])
     records = common.husky_records((common.HUSKY_ODOM, common.HUSKY_IMU))
     first, second = common.split_half(records, common.HUSKY_ODOM)
@@ -73,7 +74,8 @@ def main(argv=None):
                 if m['caught']:
                     caught[m['type']] += 1
                     delays[m['type']].append(m['delay'])
-            run_rows.append(['injected, seed %d' % seed, len(truth), '%d/%d' % (sum(m['caught'] for m in matches), len(truth)),
+            run_rows.append(['injected, seed %d' % seed, len(truth),
+                             '%d/%d' % (sum(m['caught'] for m in matches), len(truth)),
                              len(result['windows']), false, '%.1f' % (false / hours)])
     common.table(['run (second half, %.0f s)' % (hours * 3600), 'anomalies', 'caught', 'windows', 'false windows',
                   'false windows/h'], run_rows, 'Per run:')
@@ -83,7 +85,8 @@ def main(argv=None):
     common.table(['anomaly type', 'caught', 'worst first-trigger delay s'], rows, 'Caught by type (all seeds):')
     all_caught = sum(caught.values()) == sum(total.values())
     rate = false_total / (hours * len(seeds))
-    print('target all caught: %d/%d -> %s' % (sum(caught.values()), sum(total.values()), 'met' if all_caught else 'NOT met'))
+    print('target all caught: %d/%d -> %s' % (sum(caught.values()), sum(total.values()),
+                                              'met' if all_caught else 'NOT met'))
     print('target <= 1 false window per hour: %.1f /h over %d injected runs (%.1f /h without injection) -> %s' % (
         rate, len(seeds), len(base['windows']) / hours, 'met' if rate <= 1 else 'NOT met'))
     print('total %.1f s' % (time.time() - started))

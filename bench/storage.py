@@ -51,7 +51,8 @@ def cc_log_format_size(records, fmt, directory):
     if len(back) != len(records):
         raise AssertionError('%s: %d records back, %d written' % (path, len(back), len(records)))
     for a, b in zip(records, back):
-        if a.topic != b.topic or msg_codec.row_json(a.msg) != msg_codec.row_json(b.msg) or abs(a.stamp - b.stamp) > 1e-9:
+        if (a.topic != b.topic or msg_codec.row_json(a.msg) != msg_codec.row_json(b.msg)
+                or abs(a.stamp - b.stamp) > 1e-9):
             raise AssertionError('%s: a record differs after reading back (%s at %.9f)' % (path, a.topic, a.stamp))
     os.unlink(path)
     return nbytes

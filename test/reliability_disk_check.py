@@ -196,7 +196,6 @@ class DiskTest(unittest.TestCase):
         self.assertEqual(len(log_format.window_files(directory)), int(values['windows saved']))
         self.assertIsNone(self.node.poll())
 
-
     def test_4_full_disk_with_old_windows_over_the_quota_makes_room(self):
         directory = os.path.join(self.disk, 'quota_full')
         old = [log_format.write_window(window(2000, start=5000 * k), directory, 'json-xz')[0] for k in range(5)]

@@ -101,7 +101,7 @@ class SmartWindowTest(unittest.TestCase):
         self.assertEqual(err.strip().count('\n'), 0, err)
         self.assertIn('~model', err)
         code, out, err = fx.finish(fx.start('smart_logger.py', '__name:=smart_logger_bad_window',
-                                          '_model:=' + self.model_path, '_window:=30'))
+                                            '_model:=' + self.model_path, '_window:=30'))
         self.assertEqual(code, 1)
         self.assertIn('~window', err)
         self.assertEqual(err.strip().count('\n'), 0, err)

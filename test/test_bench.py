@@ -63,9 +63,11 @@ def test_training_quick():
     assert len(targets(out)) == 2
 
 
-@pytest.mark.skipif(shutil.which('roscore') is None or shutil.which('rosrun') is None,
-                    reason='needs roscore and rosrun (a sourced ROS workspace)')
 def test_cost_live_quick():
+    for command in ('roscore', 'rosrun', 'rospack'):  # package.xml declares them (roslaunch, rosbash)
+        assert shutil.which(command), '%s not found: install what package.xml declares (./dev.sh setup)' % command
+    if subprocess.run(['rospack', 'find', 'cc_log'], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode:
+        pytest.skip('cc_log is not on ROS_PACKAGE_PATH: source .catkin_ws/devel/setup.bash first')
     out = run('cost_live.py', '--quick')
     assert 'rosbag record' in out and 'Sustained rate' in out
     assert len(targets(out)) == 2

@@ -305,12 +305,13 @@ def test_codecs_on_a_bag_topic(real_bag):
     assert [row['codec'] for row in table['rows']] == TABLE_2
     assert rows['none']['size'] == raw and rows['none']['ratio'] == 100.0
     for name in TABLE_2[1:]:
-        if name == 'LZFSE' and not rows[name]['available']:
-            continue
         row = rows[name]
+        if name in ('LZ4', 'LZFSE', 'zstd') and not row['available']:  # optional Python bindings: said so
+            assert row['size'] is None and 'no Python binding' in row['note']
+            continue
         assert 0 < row['size'] < raw and row['mb_s'] > 0
         assert abs(row['ratio'] - 100.0 * row['size'] / raw) < 1e-9
-    assert rows['LZMA-6']['size'] < rows['LZ4']['size']
+    assert rows['LZMA-6']['size'] < rows['gzip']['size']
 
 
 def test_codecs_on_window_files(replayed):
@@ -330,8 +331,8 @@ def test_plot_writes_a_png(replayed, trained, tmp_path):
     assert result['windows'] == len(replayed['summary']['windows'])
     assert result['speed_samples'] == 271 and result['scores'] > 0 and result['triggers'] > 0
     only = ok_json('plot', replayed['summary']['windows'][0]['path'], '--out', tmp_path / 'w.png')
-    assert only['speed_samples'] == sum(1 for line in ok('cat', replayed['summary']['windows'][0]['path'],
-                                                          '--topic', '/odom').splitlines())
+    window_odom = ok('cat', replayed['summary']['windows'][0]['path'], '--topic', '/odom')
+    assert only['speed_samples'] == len(window_odom.splitlines())
 
 
 def test_simulate_writes_bag_and_truth(tmp_path):
@@ -448,6 +449,7 @@ def test_wrong_message_type(real_bag, trained, tmp_path):
         args = [args for args in _bag_commands(bag, trained['model'], tmp_path, topic) if args[0] == command][0]
         line = fails(*args)
         assert 'std_msgs/Bool' in line and 'expected nav_msgs/Odometry' in line
+
 
 def test_wrong_message_type_for_plot(replayed, real_bag, tmp_path):
     line = fails('plot', replayed['out'], '--bag', real_bag(HUSKY), '--topic', '/imu/data', '--out',

@@ -1,4 +1,6 @@
 """The paper's Table 2 (codecs.codec_table) on the row-per-message JSON of real odometry."""
+import importlib
+
 import pytest
 
 from cc_log import codecs, msg_codec
@@ -6,6 +8,15 @@ from cc_log import codecs, msg_codec
 rosbag = pytest.importorskip('rosbag')
 
 NAMES = ['none', 'LZ4', 'LZFSE', 'ZIP', 'gzip', 'bzip2', 'LZMA-6', 'zstd']
+OPTIONAL = {'LZ4': 'lz4.frame', 'zstd': 'zstandard'}
+
+
+def importable(module):
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        return False
+    return True
 
 
 @pytest.fixture(scope='module')
@@ -38,9 +49,13 @@ def test_codec_table_on_real_json(husky_json, monkeypatch):
                 assert row['size'] < len(husky_json) * 0.25, row  # real JSON compresses at least 4x
         else:
             assert row['size'] is None and row['note']
-    for name in ('LZ4', 'ZIP', 'gzip', 'bzip2', 'LZMA-6', 'zstd'):
-        assert by_name[name]['available'], name  # python3-lz4 and python3-zstandard are dependencies
-    assert by_name['LZMA-6']['size'] < by_name['gzip']['size'] < by_name['LZ4']['size']
+    for name in ('ZIP', 'gzip', 'bzip2', 'LZMA-6'):
+        assert by_name[name]['available'], name  # the standard library's
+    for name, module in OPTIONAL.items():  # python3-lz4, python3-zstandard: optional extras
+        assert by_name[name]['available'] == importable(module), by_name[name]
+    if by_name['LZ4']['available']:
+        assert by_name['gzip']['size'] < by_name['LZ4']['size']
+    assert by_name['LZMA-6']['size'] < by_name['gzip']['size']
     assert by_name['LZMA-6']['ratio'] < 8.0  # the paper reports 7.2% for row JSON + LZMA-6
 
 
@@ -60,6 +75,22 @@ def test_lzfse_reported_unavailable_without_binding(monkeypatch):
     text = codecs.format_table(rows)
     assert text.splitlines()[0].split() == ['codec', 'bytes', 'ratio', 'MB/s']
     assert 'LZFSE' in text and 'no Python binding' in text and '100.00%' in text
+
+
+def test_optional_codecs_missing_are_reported_unavailable(monkeypatch):
+    import builtins
+    real_import = builtins.__import__
+
+    def without_extras(name, *args, **kwargs):
+        if name.split('.')[0] in ('lz4', 'zstandard'):
+            raise ImportError('No module named %r' % name)
+        return real_import(name, *args, **kwargs)
+    monkeypatch.setattr(builtins, '__import__', without_extras)
+    monkeypatch.setattr(codecs, 'MIN_SECONDS', 0.0)
+    rows = {row['codec']: row for row in codecs.codec_table(b'{"x": 1.0}\n' * 500)}
+    for name in OPTIONAL:
+        assert rows[name]['available'] is False and 'no Python binding' in rows[name]['note']
+    assert rows['LZMA-6']['available'] and rows['gzip']['available']
 
 
 def test_format_table_lists_every_codec(monkeypatch):

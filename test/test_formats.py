@@ -24,7 +24,7 @@ ALFA = 'alfa_carbonZ_engine_failure.bag'
 ALFA_ODOM = '/mavros/local_position/odom'
 
 REAL = os.path.normpath(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                    '..', 'shared', 'data', 'real'))
+                                     '..', 'shared', 'data', 'real'))
 NAME = re.compile(r'^cc_log_\d{8}T\d{6}\.\d{3}Z_[A-Za-z0-9-]+(_part\d+)?(_\d+)?\.(json\.xz|bag)$')
 
 

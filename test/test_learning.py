@@ -60,7 +60,8 @@ def test_load_vectors_refuses_mixed_configs_and_missing_data(tmp_path):
     other = write_vector(root, 'nominal', 2.0, np.zeros(D), FeatureConfig('motion', '5s'))
     with pytest.raises(ValueError) as error:
         load_vectors(root)
-    assert 'differs' in str(error.value) and ('2.000000.json' in str(error.value) or '1.000000.json' in str(error.value))
+    assert 'differs' in str(error.value)
+    assert '2.000000.json' in str(error.value) or '1.000000.json' in str(error.value)
     os.unlink(other)
     bad = os.path.join(root, 'nominal', '3.000000.json')
     open(bad, 'w').write('{"stamp": 3, "features": [1, 2')

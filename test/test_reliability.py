@@ -98,7 +98,8 @@ def test_empty_and_garbled_leftovers_are_reported_and_garbled_kept(tmp_path):
     cut = good + log_format.TMP_MARK + str(DEAD_PID)
     with open(cut, 'wb') as stream:
         stream.write(data[:len(data) // 2])  # a json-xz cut off mid-write
-    empty = os.path.join(str(tmp_path), 'cc_log_20150521T191138.027Z_manual.json.xz' + log_format.TMP_MARK + str(DEAD_PID))
+    empty = os.path.join(str(tmp_path),
+                         'cc_log_20150521T191138.027Z_manual.json.xz' + log_format.TMP_MARK + str(DEAD_PID))
     open(empty, 'wb').close()
     outcomes = {o.leftover: o for o in recovery.recover_directory(str(tmp_path))}
     assert outcomes[cut].status == recovery.UNRECOVERABLE and str(cut) in outcomes[cut].detail
@@ -473,7 +474,6 @@ def test_no_shell_anywhere():
 
 # -- SmartLogger: write failures, disk limits, bad input -------------------------------------------------
 
-from cc_log import smart_logger  # noqa: E402
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
 from cc_log.smart_logger import DELETED, FAILED, OPENED, WRITTEN, SmartLogger  # noqa: E402
 
@@ -524,7 +524,8 @@ class FlakyDisk(object):
 def test_disk_full_keeps_the_window_in_memory_and_writes_it_when_space_returns(code, tmp_path, monkeypatch):
     disk = FlakyDisk(monkeypatch, code)
     model = EveryNthModel({10, 60})
-    logger = SmartLogger(model, str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1', retry_period=0.05)
+    logger = SmartLogger(model, str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
+                         retry_period=0.05)
     events = []
     logger.on_event(events.append)
     feed(logger, 200)
@@ -551,8 +552,8 @@ def test_disk_full_keeps_the_window_in_memory_and_writes_it_when_space_returns(c
 
 def test_still_failing_at_close_counts_the_loss_once(tmp_path, monkeypatch):
     FlakyDisk(monkeypatch)
-    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         background=False)
+    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', background=False)
     events = []
     logger.on_event(events.append)
     feed(logger, 100)
@@ -566,8 +567,8 @@ def test_still_failing_at_close_counts_the_loss_once(tmp_path, monkeypatch):
 
 def test_memory_held_is_bounded_oldest_dropped_and_counted(tmp_path, monkeypatch):
     FlakyDisk(monkeypatch)
-    logger = SmartLogger(EveryNthModel({10, 40, 70, 100}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         background=False, max_held_messages=25)
+    logger = SmartLogger(EveryNthModel({10, 40, 70, 100}), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', background=False, max_held_messages=25)
     feed(logger, 200)
     stats = logger.stats()
     assert stats['windows_held'] == 2 and stats['messages_held'] == 22 and stats['messages_lost'] == 22
@@ -576,8 +577,8 @@ def test_memory_held_is_bounded_oldest_dropped_and_counted(tmp_path, monkeypatch
 
 def test_min_free_pauses_writing_with_windows_in_memory_and_resumes(tmp_path):
     statvfs = FakeStatvfs(free=1)
-    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         background=False, min_free_mb=1)
+    logger = SmartLogger(EveryNthModel({10}), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', background=False, min_free_mb=1)
     logger.guard._statvfs = statvfs
     events = []
     logger.on_event(events.append)
@@ -596,8 +597,8 @@ def test_quota_in_the_logger_deletes_oldest_and_says_so(tmp_path):
     other = tmp_path / 'keep.me'
     other.write_bytes(b'z' * 1000)
     flags = {10 + 40 * k for k in range(6)}
-    logger = SmartLogger(EveryNthModel(flags), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         background=False, max_disk_mb=0.0035)
+    logger = SmartLogger(EveryNthModel(flags), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', background=False, max_disk_mb=0.0035)
     events = []
     logger.on_event(events.append)
     feed(logger, 300)
@@ -656,8 +657,8 @@ def _repeated_stamps(i, msg):
 
 @pytest.mark.parametrize('mutate', [_nan, _zero_stamps, _repeated_stamps], ids=['nan-inf', 'zero', 'repeated'])
 def test_bad_values_and_stamps_are_logged_not_fatal(mutate, tmp_path):
-    logger = SmartLogger(EveryNthModel({30, 90}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         background=False)
+    logger = SmartLogger(EveryNthModel({30, 90}), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', background=False)
     feed(logger, 300, mutate=mutate)
     logger.close()
     stats = logger.stats()
@@ -670,8 +671,8 @@ def test_bad_values_and_stamps_are_logged_not_fatal(mutate, tmp_path):
 
 
 def test_time_jumping_back_and_a_10x_burst(tmp_path):
-    logger = SmartLogger(EveryNthModel({30, 150, 260}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         background=False)
+    logger = SmartLogger(EveryNthModel({30, 150, 260}), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', background=False)
     feed(logger, 120)          # 100 Hz
     feed(logger, 120)          # the same stamps again: a bag loop
     for i in range(240, 400):  # a burst at 1 kHz
@@ -685,8 +686,8 @@ def test_time_jumping_back_and_a_10x_burst(tmp_path):
 
 
 def test_a_side_topic_changing_type_does_not_lose_the_window(tmp_path):
-    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         side_topics=None, background=False)
+    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', side_topics=None, background=False)
     for i in range(100):
         msg = odom(i)
         logger.on_message('/odom', msg, msg.header.stamp.to_sec())
@@ -702,8 +703,8 @@ def test_a_side_topic_changing_type_does_not_lose_the_window(tmp_path):
 
 
 def test_wrong_message_type_on_the_driving_topic_is_refused(tmp_path):
-    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5, driving_topic='/odom', classify_every='1',
-                         background=False)
+    logger = SmartLogger(EveryNthModel({30}), str(tmp_path), 'json-xz', 5, 5,
+                         driving_topic='/odom', classify_every='1', background=False)
     feed(logger, 50)
     imu = Imu()
     imu.header.stamp = odom(50).header.stamp

@@ -11,7 +11,6 @@ FIFOs, each answered with one line, in bounded memory and time.
 import ast
 import hashlib
 import io
-import json
 import lzma
 import os
 import struct
@@ -25,7 +24,7 @@ from hypothesis import strategies as st
 
 from cc_log import json_xz, log_format, msg_codec, recovery, safe_input
 from cc_log.log_format import read_window, write_window
-from cc_log.window_buffer import LogWindow, Record, Trigger
+from cc_log.window_buffer import LogWindow, Record
 
 rosbag = pytest.importorskip('rosbag')
 import genpy.dynamic  # noqa: E402
@@ -491,7 +490,8 @@ def test_fifos_and_devices_are_refused_by_every_command_that_reads_a_file(tmp_pa
     os.mkfifo(str(directory / 'cc_log_20150521T191138.027Z_x.json.xz'))
     bag = real_bag('husky_outdoor_2015.bag')
     commands = [
-        ('info', fifo), ('info', directory), ('cat', fifo), ('codecs', fifo), ('plot', fifo, '--out', tmp_path / 'p.png'),
+        ('info', fifo), ('info', directory), ('cat', fifo), ('codecs', fifo),
+        ('plot', fifo, '--out', tmp_path / 'p.png'),
         ('export', fifo, '--to', 'jsonl', '--out', tmp_path / 'x.jsonl'),
         ('collect', fifo, '--topic', '/odom', '--out', tmp_path / 'v'),
         ('replay', fifo, '--topic', '/odom', '--model', quick_model(tmp_path), '--out', tmp_path / 'l'),

@@ -193,11 +193,13 @@ def test_memory_budget_bounds_every_topic_and_writes_an_endless_window_in_parts(
 
 def test_writer_thread_never_blocks_the_message_path(husky, tmp_path, monkeypatch):
     release = threading.Event()
+    writing = threading.Event()
     real_write = log_format.write_window
     calls = []
 
     def slow_write(window, directory, fmt, metadata=None):
         calls.append(len(window))
+        writing.set()
         release.wait(30)
         return real_write(window, directory, fmt, metadata)
 
@@ -207,7 +209,8 @@ def test_writer_thread_never_blocks_the_message_path(husky, tmp_path, monkeypatc
     started = time.time()
     feed(logger, husky, model)
     elapsed = time.time() - started
-    assert not release.is_set() and calls  # the first write is still blocked ...
+    assert writing.wait(30)  # the writer thread took the first window (it may start after feeding ended) ...
+    assert not release.is_set() and len(calls) == 1  # ... and that write is still blocked ...
     assert elapsed < 25                      # ... and feeding went on regardless
     stats = logger.stats()
     assert stats['windows_saved'] == 0 and stats['queue_depth'] >= 2

@@ -1,44 +1,85 @@
 #!/usr/bin/python3
-"""Tally JUnit XML results below the given directories; print 'N passed, N failed, N skipped'.
+"""Tally JUnit XML results below the given directories: a line per result file, each failure with the first
+lines of its message, and last the one line 'N passed, N failed, N skipped'.
 
-Exit status is non-zero when any test failed or errored, or when no test ran at all.
+Exit status is non-zero when any test failed or errored, or when no test ran at all. In CI (CI=true) a test
+skipped for a missing dependency (a module that does not import, a command that is not installed) counts as
+failed: cc_log declares everything its tests need, so such a skip hides a broken install. Skips for any
+other reason (not root, an expected failure of a known gap) stay skips.
 """
 import glob
 import os
+import re
 import sys
 import xml.etree.ElementTree as ET
 
+#: Reasons of a skip that mean something cc_log depends on is missing.
+MISSING_DEPENDENCY = re.compile(r'could not import|no module named|not installed|not on path|command not found|'
+                                r'missing dependency', re.IGNORECASE)
+MESSAGE_LINES = 20  # of each failure's message
 
-def tally(directory):
-    """Return (passed, failed, skipped, failed test names) over every XML file below directory."""
+
+def in_ci(environ=os.environ):
+    """True when running under CI (the CI variable set to anything but empty, 0 or false)."""
+    return environ.get('CI', '').strip().lower() not in ('', '0', 'false', 'no')
+
+
+def skip_reason(skipped):
+    """The reason a <skipped> element gives: its message and its text."""
+    return ' '.join(part for part in (skipped.get('message', ''), skipped.text or '') if part).strip()
+
+
+def failure_text(element):
+    """The first lines of a <failure> or <error>: its message, else its text."""
+    lines = (element.get('message') or element.text or '').strip().splitlines()
+    return '\n'.join('    ' + line for line in lines[:MESSAGE_LINES])
+
+
+def tally(directory, strict_skips=False, files=None):
+    """Return (passed, failed, skipped, failed test names) over every XML file below directory.
+
+    ``strict_skips``: a skip for a missing dependency counts as failed (named with its reason). ``files``: a
+    list that gets (path, passed, failed, skipped) of each result file."""
     passed = failed = skipped = 0
     failures = []
     for path in sorted(glob.glob(os.path.join(directory, '**', '*.xml'), recursive=True)):
+        before = (passed, failed, skipped)
         try:
             root = ET.parse(path).getroot()
         except ET.ParseError as error:
             failed += 1
             failures.append('%s: unreadable result file (%s)' % (path, error))
-            continue
+            root = ET.Element('testsuite')
         for case in root.iter('testcase'):
             name = '%s.%s' % (case.get('classname', ''), case.get('name', ''))
-            if case.find('failure') is not None or case.find('error') is not None:
+            skip = case.find('skipped')
+            broken = case.find('failure') if case.find('failure') is not None else case.find('error')
+            if broken is not None:
                 failed += 1
-                failures.append(name)
-            elif case.find('skipped') is not None:
+                failures.append('%s\n%s' % (name, failure_text(broken)) if failure_text(broken) else name)
+            elif skip is not None and strict_skips and MISSING_DEPENDENCY.search(skip_reason(skip)):
+                failed += 1
+                failures.append('%s: skipped for a missing dependency in CI (%s)' % (name, skip_reason(skip)[:200]))
+            elif skip is not None:
                 skipped += 1
             else:
                 passed += 1
+        if files is not None:
+            files.append((os.path.relpath(path, directory), passed - before[0], failed - before[1],
+                          skipped - before[2]))
     return passed, failed, skipped, failures
 
 
-def main(argv):
+def main(argv, environ=os.environ):
     passed = failed = skipped = 0
     failures = []
     for directory in argv[1:]:
-        counts = tally(directory)
+        files = []
+        counts = tally(directory, strict_skips=in_ci(environ), files=files)
         passed, failed, skipped = passed + counts[0], failed + counts[1], skipped + counts[2]
         failures += counts[3]
+        for path, *figures in files:
+            print('  %-44s %d passed, %d failed, %d skipped' % (path, *figures))
     for name in failures:
         print('FAILED %s' % name)
     if passed + failed == 0:

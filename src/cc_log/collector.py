@@ -127,8 +127,8 @@ class Collector(object):
     odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
     the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label:
     the vectors' label; background: write on a writer thread; max_buffer_mb: memory budget of the file
-    being collected and the one being written (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period,
-    max_held_messages, close_retry: the writer's (see ``window_writer.WindowWriter``).
+    being collected and the one being written (MB; 0: none): half of it starts a new file; max_disk_mb,
+    min_free_mb, retry_period, max_held_messages, close_retry: the writer's (see ``window_writer.WindowWriter``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """

@@ -35,6 +35,11 @@ DEFAULT_SEED = 7
 DEFAULT_WINDOW = '1s'     # bench/detection_sim_tuning.py: fewest false windows, smallest windows (tail <= 1 s)
 DEFAULT_STRIDE = '10'
 MASTER_TIMEOUT = 30.0
+#: A directory holding this file was made by the demo.
+MARKER = '.cc_log_demo'
+#: Everything the demo writes in its directory (``train`` removes the bag and its truth file again).
+OUTPUTS = ('nominal.bag', sim.truth_path('nominal.bag'), 'features', 'model.json', 'windows', 'truth.json',
+           'ros_log', 'roscore.log', 'roslaunch.log', 'timeline.png')
 
 
 def log(text):
@@ -78,6 +83,31 @@ class Processes(object):
         self.children = []
 
 
+def prepare_out(out):
+    """Make ``out`` the demo's directory without deleting anything the demo did not create.
+
+    A new or empty directory is created and marked as the demo's (``MARKER``); in one the demo marked before,
+    the demo's own outputs (``OUTPUTS``) are removed and nothing else; any other directory is refused with a
+    ValueError naming it, untouched."""
+    try:
+        safe_files.make_dirs(out)
+        entries = os.listdir(out)
+    except OSError as error:
+        raise ValueError('--out %s: %s' % (out, error.strerror or error))
+    if entries and MARKER not in entries:
+        raise ValueError('--out %s: not empty and not made by the demo (no %s in it): give a new or empty '
+                         'directory' % (out, MARKER))
+    for name in OUTPUTS:
+        path = os.path.join(out, name)
+        if os.path.isdir(path) and not os.path.islink(path):
+            shutil.rmtree(path)
+        elif os.path.lexists(path):
+            os.remove(path)
+    if MARKER not in entries:  # created, never written through a link or over a file
+        with os.fdopen(safe_files.create(os.path.join(out, MARKER)), 'w') as marker:
+            marker.write('made by the cc_log demo; running it again here replaces: %s\n' % ', '.join(OUTPUTS))
+
+
 def train(out, minutes, seed, window, stride):
     """Steps 1 and 2: a nominal simulated run, its feature vectors, a model. Returns the model path."""
     bag = os.path.join(out, 'nominal.bag')
@@ -92,8 +122,8 @@ def train(out, minutes, seed, window, stride):
     model, info = learning.train(vectors['nominal'], None, config)
     path = os.path.join(out, 'model.json')
     model.save(path)
-    log('    model -> %s (%s)' % (path, ', '.join('%s %s' % item for item in sorted(info.items())
-                                                 if isinstance(item[1], (int, float, str)))[:200]))
+    figures = ', '.join('%s %s' % item for item in sorted(info.items()) if isinstance(item[1], (int, float, str)))
+    log('    model -> %s (%s)' % (path, figures[:200]))
     os.remove(bag)
     os.remove(sim.truth_path(bag))
     return path
@@ -205,8 +235,8 @@ def summarize(out, windows_dir, truth, recorder, window_seconds):
         lines.append('    %-22s %d / %d' % (kind, hit, injected))
     lines.append('    %-22s %d / %d' % ('all', len(caught), len(truth)))
     lines.append('  false windows:          %d' % len(false_windows))
-    lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept,
-                                                              100.0 * kept / max(recorder.messages, 1)))
+    share = 100.0 * kept / max(recorder.messages, 1)
+    lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept, share))
     lines.append('  raw row JSON / stored:  %s / %s  (%.0fx less)' % (
         human(recorder.raw_bytes), human(stored), recorder.raw_bytes / max(stored, 1)))
     lines.append('  windows (%d) in:         %s' % (len(windows), windows_dir))
@@ -256,19 +286,19 @@ def main(argv=None):
     parser = argparse.ArgumentParser(
         prog='demo.py', description=__doc__.split('\n\n')[0],
         epilog='example: rosrun cc_log demo.py --out /tmp/cc_log_demo --live-minutes 2')
-    parser.add_argument('--out', default=DEFAULT_OUT, help='working directory, emptied first (default: %(default)s)')
+    parser.add_argument('--out', default=DEFAULT_OUT,
+                        help='a new or empty directory, or one an earlier demo made (its outputs are replaced, '
+                             'nothing else is touched; default: %(default)s)')
     parser.add_argument('--train-minutes', type=float, default=DEFAULT_TRAIN_MINUTES)
     parser.add_argument('--live-minutes', type=float, default=DEFAULT_LIVE_MINUTES)
     parser.add_argument('--anomalies', type=int, default=DEFAULT_ANOMALIES)
     parser.add_argument('--seed', type=int, default=DEFAULT_SEED)
     args = parser.parse_args(argv)
     out = os.path.abspath(args.out)
-    if os.path.isdir(out):
-        shutil.rmtree(out)
-    safe_files.make_dirs(out)
     processes = Processes()
     started = time.time()
     try:
+        prepare_out(out)
         model = train(out, args.train_minutes, args.seed, DEFAULT_WINDOW, DEFAULT_STRIDE)
         windows, truth, recorder = run_live(out, model, args.live_minutes, args.anomalies, args.seed + 1, processes)
         summarize(out, windows, truth, recorder, window_seconds=5.0)

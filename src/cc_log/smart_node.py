@@ -304,8 +304,8 @@ class SmartNode(object):
         enabled = params.boolean('enabled', DEFAULT_ENABLED)
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
         classify_every = params.span('classify_every', DEFAULT_CLASSIFY_EVERY)
-        intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES, minimum=1,
-                                             integer=True)
+        intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES,
+                                            minimum=1, integer=True)
         intake_max_mb = params.number('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
         max_buffer_mb = params.number('max_buffer_mb', DEFAULT_MAX_BUFFER_MB)
         driving_class = roslib.message.get_message_class(self.model.config.topic_type)
