@@ -229,12 +229,12 @@ def _field_size(slot_type):
 
 
 # -- row JSON bytes of a stream of messages, memoised ---------------------------------------------
-# ``row_json_bytes(msg)`` is the definition. On a stream, most of its cost is repr() of the floats of
-# fixed-size float arrays (covariances), which hardly ever change between messages. ``RowJsonCounter``
-# computes the same number from a per-type plan: constant JSON overhead (names, braces, separators),
-# scalar floats and ints in one repr() each, fixed-size float arrays memoised by their exact bytes (struct, so
-# -0.0 != 0.0), times and strings as row_json_bytes sizes them. A type with a field it does not plan for, and any message holding a
-# non-finite float or an unexpected value type, is counted by ``row_json_bytes`` itself.
+# ``row_json_bytes(msg)`` is the definition. On a stream, most of its cost is repr() of the floats of fixed-size
+# float arrays (covariances), which hardly ever change between messages. ``RowJsonCounter`` computes the same
+# number from a per-type plan: constant JSON overhead (names, braces, separators), scalar floats and ints in one
+# repr() each, fixed-size float arrays memoised by their exact bytes (struct, so -0.0 != 0.0), times and strings
+# as row_json_bytes sizes them. A type with a field it does not plan for, and any message holding a non-finite
+# float or an unexpected value type, is counted by ``row_json_bytes`` itself.
 # test_smart_logger_cost checks it equals row_json_bytes on every message of the real bags.
 
 _MEMO_LIMIT = 4096  # distinct array values / strings remembered per logger before the memo starts over
