@@ -14,6 +14,7 @@ CASES = '''<?xml version="1.0"?>
   <testcase classname="t" name="no_rosbag"><skipped message="could not import 'rosbag': No module named 'rosbag'"/>
   </testcase>
   <testcase classname="t" name="no_jq"><skipped type="pytest.skip">jq is not installed</skipped></testcase>
+  <testcase classname="t" name="no_rosrun"><skipped type="pytest.skip" message="needs roscore and rosrun"/></testcase>
   <testcase classname="t" name="not_root"><skipped message="not root (a tmpfs mount needs root)"/></testcase>
   <testcase classname="t" name="known_gap"><skipped type="pytest.xfail" message="json-xz reorders"/></testcase>
 </testsuite></testsuites>
@@ -38,22 +39,24 @@ def write(directory, name, text):
 def test_failures_errors_and_skips_are_counted(tmp_path):
     write(tmp_path / 'cc_log', 'pytest-a.xml', CASES)
     code, lines = summary(tmp_path, None)
-    assert lines[-1] == '1 passed, 2 failed, 4 skipped' and code == 1
-    assert lines[0].split() == ['cc_log/pytest-a.xml', '1', 'passed,', '2', 'failed,', '4', 'skipped']
+    assert lines[-1] == '1 passed, 2 failed, 5 skipped' and code == 1
+    assert lines[0].split() == ['cc_log/pytest-a.xml', '1', 'passed,', '2', 'failed,', '5', 'skipped']
     broken = lines.index('FAILED t.broken')
     assert lines[broken + 1:broken + 3] == ['    assert 1 == 2', '    where 1 = f()']
     assert 'FAILED t.crashed' in lines and '    boom' in lines
 
 
-def test_in_ci_a_skip_for_a_missing_dependency_fails(tmp_path):
+def test_in_ci_a_skip_fails_unless_it_is_not_about_a_dependency(tmp_path):
     write(tmp_path, 'a.xml', CASES)
     for ci in ('true', '1'):
         code, lines = summary(tmp_path, ci)
-        assert lines[-1] == '1 passed, 4 failed, 2 skipped' and code == 1
-        named = [line for line in lines if 'missing dependency' in line]
-        assert len(named) == 2 and any('t.no_rosbag' in line for line in named)
+        assert lines[-1] == '1 passed, 5 failed, 2 skipped' and code == 1
+        named = [line for line in lines if 'skipped in CI' in line]
+        assert len(named) == 3 and any('t.no_rosbag' in line for line in named)
         assert any('t.no_jq' in line and 'jq is not installed' in line for line in named)
-    assert summary(tmp_path, 'false')[1][-1] == '1 passed, 2 failed, 4 skipped'
+        assert any('t.no_rosrun' in line and 'needs roscore and rosrun' in line for line in named)
+        assert not any('t.not_root' in line or 't.known_gap' in line for line in named)
+    assert summary(tmp_path, 'false')[1][-1] == '1 passed, 2 failed, 5 skipped'
 
 
 def test_all_passed_is_success_and_nothing_ran_is_failure(tmp_path):
