@@ -76,3 +76,14 @@ def test_an_unreadable_result_file_is_a_failure(tmp_path):
     assert code == 1 and lines[-1] == '1 passed, 1 failed, 0 skipped'
     assert any(line.startswith('FAILED ') and 'b.xml: unreadable result file' in line for line in lines)
     assert [line.split()[:3] for line in lines[:2]] == [['a.xml', '1', 'passed,'], ['b.xml', '0', 'passed,']]
+
+
+def test_a_rostest_launch_counts_only_when_it_fails(tmp_path):
+    launch = '<testsuite><testcase classname="rostest.runner.RosTest" name="testwindow"%s</testsuite>'
+    write(tmp_path, 'rostest-test_window.xml', launch % '/>')
+    write(tmp_path, 'rosunit-window.xml', '<testsuite><testcase classname="w" name="test_1"/>'
+                                          '<testcase classname="w" name="test_2"/></testsuite>')
+    assert summary(tmp_path, 'true')[1][-1] == '2 passed, 0 failed, 0 skipped'
+    write(tmp_path, 'rostest-test_window.xml', launch % '><failure message="no results"/></testcase>')
+    code, lines = summary(tmp_path, 'true')
+    assert lines[-1] == '2 passed, 1 failed, 0 skipped' and code == 1
