@@ -362,8 +362,8 @@ def cmd_collect(args):
     from . import collector
     _existing_file(args.bag, 'bag file')
     with _bar(args, 'collect') as bar:
-        result = _call(collector.collect_bag, bar, args.bag, args.topic, args.out, label=args.label,
-                       window=args.window, stride=args.stride, feature_set=args.features)
+        result = _call(collector.collect_bag, bar, args.bag, [args.topic] + args.input_topic, args.out,
+                       label=args.label, window=args.window, stride=args.stride, feature_set=args.features)
     summary = collections.OrderedDict([
         ('bag', args.bag), ('topic', args.topic), ('label', args.label), ('window', args.window),
         ('stride', args.stride), ('features', args.features), ('vectors', result['vectors']),
@@ -1002,7 +1002,8 @@ def build_parser():
           cclog collect run.bag --topic /odom --out train --window 200 --json
         """))
     p.add_argument('bag', metavar='BAG', help='input bag (indexed, rosbag 2.0)')
-    p.add_argument('--topic', required=True, metavar='T', help='driving topic (nav_msgs/Odometry)')
+    p.add_argument('--topic', required=True, metavar='T', help="driving topic: the feature set's first input "
+                   '(nav_msgs/Odometry; imu: sensor_msgs/Imu)')
     p.add_argument('--out', required=True, metavar='DIR', help='vectors go to DIR/<label>/')
     p.add_argument('--label', default='nominal', help='label directory (default: %(default)s; anything but '
                    '"nominal" counts as anomalous)')
@@ -1010,8 +1011,10 @@ def build_parser():
                    help='feature window: messages (500) or seconds (5s) (default: %(default)s)')
     p.add_argument('--stride', default=_collect_stride(), type=_non_negative_int('stride', 1), metavar='N',
                    help='a vector every N driving messages (default: %(default)s)')
-    p.add_argument('--features', default='motion', choices=('motion', 'raw'),
+    p.add_argument('--features', default=_feature_sets()[0], choices=_feature_sets(),
                    help='feature set (default: %(default)s)')
+    p.add_argument('--input-topic', action='append', default=[], metavar='T',
+                   help="a topic of the feature set's other inputs, in its order (command: the cmd_vel topic)")
     _common(p)
     p.set_defaults(run=cmd_collect)
 
@@ -1219,6 +1222,11 @@ def _collect_stride():
     except ImportError:
         return 25
     return DEFAULT_STRIDE
+
+
+def _feature_sets():
+    from .features import FEATURE_SETS
+    return FEATURE_SETS
 
 
 def _max_buffer_mb():

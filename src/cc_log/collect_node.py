@@ -19,7 +19,9 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~topics`` (list or space-separated string, default: none): other topics to log.
   ``~label`` (string, default: nominal): label of the feature vectors.
   ``~window`` (string, default: 500): feature window, messages or seconds.
-  ``~feature_set`` (string, default: motion): ``motion`` or ``raw``.
+  ``~feature_set`` (string, default: motion): a registered feature set (``features.FEATURE_SETS``: motion,
+  raw, imu, command, progress). Its first input is the driving topic (``odom``; ``imu`` for the imu set) and
+  its other inputs are subscribed under their role names (``cmd_vel`` for the command set): remap them.
   ``~stride`` (int, default: 25): a vector every this many odometry messages.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
   ``~max_buffer_mb`` (double, default: 256; 0 = no budget): memory budget of the file being collected; a new
@@ -35,9 +37,9 @@ and retried; at shutdown the current file is written, so every file is complete.
 import os
 import sys
 
+import roslib.message
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
-from nav_msgs.msg import Odometry
 
 from . import collector
 from . import features
@@ -47,7 +49,6 @@ from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, nod
 from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, Intake
 
 NODE_NAME = 'collect_logger'
-DRIVING_TOPIC = 'odom'
 DEFAULT_FORMAT = 'json-xz'
 DEFAULT_ROTATE = collector.DEFAULT_ROTATE
 DEFAULT_LABEL = collector.DEFAULT_LABEL
@@ -75,16 +76,21 @@ class CollectNode(object):
         max_buffer_mb = params.number('max_buffer_mb', DEFAULT_MAX_BUFFER_MB)
         max_disk_mb = params.number('max_disk_mb', 0.0)
         min_free_mb = params.number('min_free_mb', 0.0)
+        inputs = features.get(feature_set).inputs
+        driving_topic = inputs[0][0]  # the role name: odom (imu for the imu set), relative: remap it
+        input_topics = [role for role, _ in inputs[1:]]  # relative names: remap them
+        driving_class = roslib.message.get_message_class(inputs[0][1])
         try:
             self.collector = collector.Collector(
-                self.directory, fmt, rotate, driving_topic=rospy.resolve_name(DRIVING_TOPIC),
+                self.directory, fmt, rotate, driving_topic=rospy.resolve_name(driving_topic),
                 side_topics=[rospy.resolve_name(topic) for topic in topics], window=window,
+                input_topics=[rospy.resolve_name(topic) for topic in input_topics],
                 feature_set=feature_set, stride=stride, label=label, max_buffer_mb=max_buffer_mb,
                 max_disk_mb=max_disk_mb, min_free_mb=min_free_mb, close_retry=CLOSE_RETRY)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         self.collector.on_event(self._on_event)
-        self.intake = Intake(self.collector, DRIVING_TOPIC, Odometry, topics)
+        self.intake = Intake(self.collector, driving_topic, driving_class, topics + input_topics)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',

@@ -27,8 +27,7 @@ from . import log_format
 from . import msg_codec
 from . import window_writer
 from .spans import Span
-from .window_buffer import (DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, WindowBuffer,
-                            budget_bytes, part_bytes)
+from .window_buffer import DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, budget_bytes, part_bytes
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']
@@ -82,33 +81,24 @@ def check_label(label):
     return label
 
 
-class VectorStream(object):
-    """Feature vectors of one driving topic, computed exactly as ``bagio.feature_vectors`` does offline:
-    rows go through OdometryFeatures into WindowBuffer's feature window, and once the window is full of
-    continuous data (no gap, no backwards time since the rows began) every ``stride``-th message yields a
-    vector. ``add(msg, stamp)`` returns that vector (numpy array) or None.
-    """
+class VectorStream(features_mod.FeatureStream):
+    """The feature vectors collect mode writes: ``features.FeatureStream`` with a vector every ``stride``
+    messages of the set's first input (``add(msg, stamp)`` returns it, or None)."""
 
     def __init__(self, config, stride=DEFAULT_STRIDE):
-        self.config = config
-        self.window = config.span
         self.stride = parse_stride(stride)
-        self.features = features_mod.OdometryFeatures(config)
-        self.buffer = WindowBuffer(window=self.window, pre=0, post=0)
-        self._index = 0
+        super(VectorStream, self).__init__(config, every=self.stride)
 
-    def add(self, msg, stamp):
-        row = self.features.row(msg, stamp)
-        self.buffer.add(Record(stamp, None, None, 1), row)
-        if not self.buffer.feature_window_full or not self.features.covers(self.window, stamp):
-            return None
-        self._index += 1
-        if (self._index - 1) % self.stride:
-            return None
-        rows = self.buffer.feature_rows()
-        if not self.window.is_duration and len(rows) < self.window.count:
-            return None
-        return features_mod.window_vector(rows, self.config)
+
+def input_roles(config, topics=None):
+    """``{topic: role}`` of the other inputs of ``config``'s feature set: ``topics`` names them in the set's
+    order (None: their role names); ValueError('input_topics: ...') when the number does not match."""
+    roles = [role for role, _ in config.feature.inputs[1:]]
+    topics = roles if topics is None else list(topics)
+    if len(topics) != len(roles):
+        raise ValueError('input_topics: the %s feature set reads %d other topic(s) (%s), got %d'
+                         % (config.feature_set, len(roles), ', '.join(roles) or 'none', len(topics)))
+    return dict(zip(topics, roles))
 
 
 def parse_stride(value):
@@ -124,7 +114,9 @@ class Collector(object):
 
     directory: the logging directory (window files there, vectors under ``features/<label>/``); fmt:
     ``'json-xz'`` or ``'bag-lz4'``; rotate: see ``Rotation.parse``; driving_topic: the topic name the
-    odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
+    feature set's first input (the odometry) is fed with; input_topics: the topic names of the set's other
+    inputs, in its order (default: their role names, e.g. ``cmd_vel``; logged too); side_topics: other
+    topics to keep (None: every topic fed); window, feature_set:
     the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label:
     the vectors' label; background: write on a writer thread; max_buffer_mb: memory budget of the file
     being collected and the one being written (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period,
@@ -134,6 +126,7 @@ class Collector(object):
     """
 
     def __init__(self, directory, fmt='json-xz', rotate=DEFAULT_ROTATE, driving_topic='odom', side_topics=None,
+                 input_topics=None,
                  window=DEFAULT_WINDOW, feature_set=DEFAULT_FEATURE_SET, stride=DEFAULT_STRIDE,
                  label=DEFAULT_LABEL, background=True, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, max_disk_mb=0,
                  min_free_mb=0, retry_period=window_writer.DEFAULT_RETRY_PERIOD,
@@ -144,8 +137,9 @@ class Collector(object):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
-        self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
         self.config = features_mod.FeatureConfig(feature_set, window)
+        self.inputs = input_roles(self.config, input_topics)
+        self.side_topics = None if side_topics is None else frozenset(side_topics).union(self.inputs) - {driving_topic}
         self.stride = parse_stride(stride)
         self.label = check_label(label)
         self.features_directory = os.path.join(self.directory, FEATURES_SUBDIRECTORY)
@@ -205,7 +199,9 @@ class Collector(object):
             self._chunk.append(Record(stamp, topic, msg, cost))
             self._chunk_bytes += raw
             self._chunk_cost += cost
-            if topic == self.driving_topic:
+            if topic in self.inputs:
+                self._vectors.observe(self.inputs[topic], msg, stamp)
+            elif topic == self.driving_topic:
                 vector = self._vectors.add(msg, stamp)
                 if vector is not None:
                     self.writer.submit(vector_job(self.features_directory, self.label, stamp, vector, self.config))
@@ -302,7 +298,8 @@ def vector_job(directory, label, stamp, vector, config):
 def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=DEFAULT_STRIDE,
                 feature_set=DEFAULT_FEATURE_SET, retry_seconds=None):
     """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each), as collect
-    mode does live. Returns ``{'vectors': n, 'directory': out_dir/<label>}``. Raises ValueError for bad
+    mode does live (``topic``: of the feature set's first input, or a list: it and the topics of the set's
+    other inputs, in its order). Returns ``{'vectors': n, 'directory': out_dir/<label>}``. Raises ValueError for bad
     arguments or an unreadable bag; a vector that cannot be written (disk full...) is retried for
     ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``), then OSError names the directory and
     how many vectors were not written.

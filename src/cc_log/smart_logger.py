@@ -53,7 +53,6 @@ DEFAULT_RETRIGGER = 'every'
 # model on the skipped messages; an anomaly is still triggered at the message where it is detected (at most
 # one period late), and the window's pre part keeps the skipped messages before it.
 DEFAULT_CLASSIFY_EVERY = '50ms'
-_CLASSIFY_SLACK = 1e-5  # seconds: stamps 10 ms apart add up to 50 ms give or take float rounding
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
 
@@ -318,7 +317,7 @@ class SmartLogger(object):
         return False
 
     def _new_buffer(self):
-        buffer = WindowBuffer(window=self.window, pre=self.pre, post=self.post, max_window=self.max_window,
+        buffer = WindowBuffer(pre=self.pre, post=self.post, max_window=self.max_window,
                               max_buffer_mb=self.max_buffer_mb, cost=self._cost)
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
@@ -326,11 +325,7 @@ class SmartLogger(object):
         else:
             self._resets = self._trimmed = 0
         self._buffer = buffer
-        self._features = features_mod.OdometryFeatures(self.config)
-        self._window_rows = features_mod.FeatureWindow(self.config)  # the same rows as the buffer's window
-        self._clock = None       # newest driving stamp since the buffer (re)started: as WindowBuffer's
-        self._since_scored = None  # driving messages since the last score (None: score at the next chance)
-        self._scored_at = None     # stamp of the last score
+        self._vectors = features_mod.FeatureStream(self.config, every=self.classify_every)
         self._recent = collections.deque()  # stamps of the newest driving message and the pre before it
         self._last_stamp = None
         self._armed = True  # 'onset': the next anomalous score triggers (no anomalous score since a nominal one)
@@ -339,53 +334,33 @@ class SmartLogger(object):
         buffer = self._buffer
         resets = buffer.resets
         stamp = record.stamp
-        row = self._features.row_values(record.msg, stamp)
-        done = buffer.add(record, row)
-        if buffer.resets != resets:  # time jumped backwards: the buffer started over
+        vectors = self._vectors
+        stream_resets = vectors.resets
+        started = time.perf_counter()
+        vector = vectors.add(record.msg, stamp)
+        feature_seconds = time.perf_counter() - started
+        done = buffer.add(record)
+        if buffer.resets != resets:  # time jumped backwards: the buffer started over (and so did the stream)
             self._recent.clear()
-            self._armed = True
-            self._window_rows.clear()
-            self._clock = None
-            self._since_scored = self._scored_at = None
-        # The ring-array window gets what WindowBuffer's feature window got: the row at the buffer's clock.
-        self._clock = stamp if self._clock is None or stamp > self._clock else self._clock
-        self._window_rows.add(self._clock, row)
         self._last_stamp = stamp
         self._note_recent(stamp)
         self._complete(done)
-        if buffer.feature_window_full and self._features.covers(self.window, stamp):
-            if not self._due(stamp):
-                return
-            started = time.perf_counter()
-            vector = self._window_rows.vector()
-            anomalous, score = self.model.is_anomalous(vector)
-            elapsed = time.perf_counter() - started
-            with self._stats.lock:
-                self._stats.classifier_calls += 1
-                self._stats.classifier_seconds += elapsed
-                self._stats.classifier_max = max(self._stats.classifier_max, elapsed)
-                if anomalous:
-                    self._stats.anomalous += 1
-            if anomalous and (self._armed or self.retrigger == 'every'):
-                self._trigger('classifier', float(score))
-            self._armed = not anomalous
-        else:
+        if not vectors.whole or vectors.resets != stream_resets:
             self._armed = True  # not scored (start, after a gap): the next anomalous score is an onset
-            self._since_scored = self._scored_at = None  # score as soon as the window is whole again
-
-    def _due(self, stamp):
-        """Whether this driving message is scored (classify_every); counts the messages since the last."""
-        every = self.classify_every
-        if self._since_scored is not None:
-            self._since_scored += 1
-            if every.is_duration:
-                if stamp - self._scored_at < every.seconds - _CLASSIFY_SLACK and stamp >= self._scored_at:
-                    return False
-            elif self._since_scored < every.count:
-                return False
-        self._since_scored = 0
-        self._scored_at = stamp
-        return True
+        if vector is None:
+            return
+        started = time.perf_counter()
+        anomalous, score = self.model.is_anomalous(vector)
+        elapsed = feature_seconds + time.perf_counter() - started
+        with self._stats.lock:
+            self._stats.classifier_calls += 1
+            self._stats.classifier_seconds += elapsed
+            self._stats.classifier_max = max(self._stats.classifier_max, elapsed)
+            if anomalous:
+                self._stats.anomalous += 1
+        if anomalous and (self._armed or self.retrigger == 'every'):
+            self._trigger('classifier', float(score))
+        self._armed = not anomalous
 
     def _note_recent(self, stamp):
         recent = self._recent
