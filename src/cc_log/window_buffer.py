@@ -26,8 +26,9 @@ Record.__doc__ = """One message: its stamp (float seconds), topic, message objec
 bytes (``cost``; 0: not known, WindowBuffer estimates it); ``raw`` and ``connection`` may carry its serialized
 bytes and connection header (dict) alongside or instead of the decoded ``msg`` (None when not kept)."""
 
-Trigger = collections.namedtuple('Trigger', 'stamp reason score')
-Trigger.__doc__ = 'Why a window was opened or extended: stamp of the message, reason, classifier score.'
+Trigger = collections.namedtuple('Trigger', 'stamp reason score name', defaults=(None,))
+Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
+NaN when none) and the name of the trigger (None: the reason is the name, as in files written before names)."""
 
 DEFAULT_PRE = Span.messages(100)
 DEFAULT_POST = Span.messages(100)
@@ -145,26 +146,26 @@ class _OpenWindow(object):
         self.triggers = []
         self.part = 0
         self.continued = False  # a part was written: side records after it belong to the next part
-        self.remaining = None  # messages still to take after the last trigger (count post)
+        self.remaining = 0     # messages still to take after the last trigger (count post)
         self.until = None      # last stamp to take (duration post)
         self.extend(trigger, post)
 
     def extend(self, trigger, post):
+        """Add a trigger; the window takes what the longest post of its triggers still asks for."""
         self.triggers.append(trigger)
         if post.is_duration:
-            self.until = trigger.stamp + post.seconds
+            until = trigger.stamp + post.seconds
+            self.until = until if self.until is None else max(self.until, until)
         else:
-            self.remaining = post.count
+            self.remaining = max(self.remaining, post.count)
 
     def takes(self, stamp):
         """Whether a driving record at ``stamp`` still belongs to this window."""
-        if self.until is not None:
-            return stamp <= self.until
-        return self.remaining > 0
+        return self.remaining > 0 or (self.until is not None and stamp <= self.until)
 
     def take(self, record):
         self.records.append(record)
-        if self.remaining is not None:
+        if self.remaining > 0:
             self.remaining -= 1
 
 
@@ -241,7 +242,7 @@ class WindowBuffer(object):
             self._pending, self._open = self._open, None
         self._ring.append(record)
         self._bytes += record.cost
-        if self._prune_ring() and self._pending is not None:
+        if self._trim_ring(self.pre) and self._pending is not None:
             if self._pending.records:
                 done.append(self._emit(self._pending))
             self._pending = None
@@ -257,28 +258,60 @@ class WindowBuffer(object):
         self._bytes += record.cost
         return self._enforce_budget()
 
-    def trigger(self, reason, score=None):
-        """Mark the last driving record as anomalous: open a window around it or extend the open one.
+    def trigger(self, reason, score=None, name=None, pre=None, post=None):
+        """Mark the last driving record: open a window around it or extend the open one.
 
-        Returns the windows this completes: only parts of a window that reached max_window, since a new
-        window either extends the open one or merges with the pending one (a pending window is completed
-        as soon as a message after it leaves the pre buffer).
+        ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the
+        buffer's). A ``pre`` longer than the buffer's gets what the buffer holds (its ``pre``); a window that
+        is open or may still merge keeps what it has. Returns the windows this completes: only parts of a
+        window that reached max_window, since a new window either extends the open one or merges with the
+        pending one (a pending window is completed as soon as a message after it leaves the pre buffer).
         """
         if self._clock is None:
             raise ValueError('trigger: no message has been added yet')
-        trigger = Trigger(self._clock, reason, score)
+        trigger = Trigger(self._clock, reason, score, name)
+        post = self.post if post is None else Span.parse(post, 'post')
         if self._open is not None:
-            self._open.extend(trigger, self.post)
+            self._open.extend(trigger, post)
             return []
         if self._pending is not None:
             # Every record after the pending window is still in the ring: the new window touches it.
             self._open, self._pending = self._pending, None
             self._open.records.extend(self._ring)
-            self._open.extend(trigger, self.post)
+            self._open.extend(trigger, post)
         else:
-            self._open = _OpenWindow(self._ring, trigger, self.post)
+            if pre is not None:
+                self._trim_ring(Span.parse(pre, 'pre'))
+            self._open = _OpenWindow(self._ring, trigger, post)
         self._ring.clear()
         return self._split(self._open)
+
+    @property
+    def window_active(self):
+        """Whether a window is open or complete but not yet handed on (a new trigger then joins it)."""
+        return self._open is not None or (self._pending is not None and bool(self._pending.records))
+
+    @property
+    def window_start(self):
+        """Stamp of the first driving record of the open window (None when none is open or it was split)."""
+        if self._open is None or not self._open.records or self._open.continued:
+            return None
+        return self._open.records[0].stamp
+
+    def _trim_ring(self, pre):
+        """Keep the newest driving record plus ``pre`` before it (the others stay outside every window);
+        return whether any was dropped."""
+        ring = self._ring
+        dropped = False
+        if pre.is_duration:
+            while ring and ring[0].stamp < self._clock - pre.seconds:
+                self._bytes -= ring.popleft().cost
+                dropped = True
+        else:
+            while len(ring) > pre.count + 1:
+                self._bytes -= ring.popleft().cost
+                dropped = True
+        return dropped
 
     def flush(self):
         """Complete every window now (end of stream): the open one is written with what it has."""
@@ -348,19 +381,6 @@ class WindowBuffer(object):
             window.records = window.records[size:]
             window.continued = True
         return done
-
-    def _prune_ring(self):
-        """Keep the newest driving record plus ``pre`` before it; return whether any was dropped."""
-        dropped = False
-        if self.pre.is_duration:
-            while self._ring[0].stamp < self._clock - self.pre.seconds:
-                self._bytes -= self._ring.popleft().cost
-                dropped = True
-        else:
-            while len(self._ring) > self.pre.count + 1:
-                self._bytes -= self._ring.popleft().cost
-                dropped = True
-        return dropped
 
     def _prune_side(self):
         """Drop records of other topics older than every driving record still held."""
