@@ -59,7 +59,6 @@ jumping backwards (a bag played again) restarts the buffer instead of failing.
 """
 import collections
 import math
-import os
 import sys
 import threading
 import time
@@ -74,9 +73,11 @@ from . import log_format
 from . import msg_codec
 from . import safe_input
 from . import smart_logger
-from .model import AnomalyModel, ModelError
-from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_name, recover_leftovers,
-                          resolve_directory, writer_status)
+from . import config
+from .model import AnomalyModel
+from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
+                          recover_leftovers, resolve_directory, writer_status)
+from .triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
 DEFAULT_FORMAT = smart_logger.DEFAULT_FORMAT
@@ -195,7 +196,7 @@ class Intake(object):
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
         self.batch_delay = float(batch_delay)
-        self.decoder = MessageDecoder({driving_class._type: driving_class})
+        self.decoder = MessageDecoder({driving_class._type: driving_class} if driving_class is not None else {})
         self.driving_topic = rospy.resolve_name(driving_topic)
         self.subscribers = [rospy.Subscriber(self.driving_topic, rospy.AnyMsg, self._enqueue, self.driving_topic,
                                              queue_size=None)]
@@ -279,60 +280,59 @@ class SmartNode(object):
         from cc_log.srv import TriggerWindow
         self._event_class = AnomalyEvent
         params = Params()
-        model_path = params.text('model', '', log=False)
-        if not model_path:
-            raise ConfigError('~model: required (the model file written by learn mode)')
+
+        def given(reader, name, *args):
+            """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
+            return reader(name, *args) if params.given(name) else None
+        model_path = given(params.text, 'model', '')
+        cfg = node_config(params, {
+            'pre': given(params.span, 'pre', DEFAULT_PRE), 'post': given(params.span, 'post', DEFAULT_POST),
+            'max_window': given(params.span, 'max_window', DEFAULT_MAX_WINDOW),
+            'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
+            'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
+            'max_disk_mb': given(params.number, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
+            'min_free_mb': given(params.number, 'min_free_mb', DEFAULT_MIN_FREE_MB),
+            'max_buffer_mb': given(params.number, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
+            {'model': model_path,
+             'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES),
+             'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY)})
+        if not cfg.triggers:
+            raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
         try:
-            self.model = AnomalyModel.load(os.path.expanduser(model_path))
-        except ModelError as error:
-            raise ConfigError('~model: %s' % error)
-        rospy.loginfo('~model: %s', model_path)
-        if params.value('window', '', log=False) not in ('', None):
-            span = params.span('window', '')
-            if span != self.model.config.span:
-                raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
-                                  'the model; leave ~window unset)' % (span, self.model.config.window))
-        rospy.loginfo('model: %s features, window %s, threshold %g', self.model.config.feature_set,
-                      self.model.config.window, self.model.threshold)
+            triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
+            options = cfg.logger_options(triggers, rospy.resolve_name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+        classifiers = [t for t in triggers if isinstance(t, ClassifierTrigger)]
+        window = given(params.span, 'window', '')
+        named = [t for t in classifiers if t.name == 'classifier']
+        if window is not None and named and window != named[0].config.span:
+            raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
+                              'the model; leave ~window unset)' % (window, named[0].config.window))
+        self.model = classifiers[0].model if classifiers else None
+        for trigger in triggers:
+            rospy.loginfo('trigger %s: %s', trigger.name, trigger.describe())
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         self.leftovers = recover_leftovers(self.directory)
-        max_disk_mb = params.number('max_disk_mb', DEFAULT_MAX_DISK_MB)
-        min_free_mb = params.number('min_free_mb', DEFAULT_MIN_FREE_MB)
-        fmt = params.choice('format', DEFAULT_FORMAT, log_format.Format.ALL)
-        pre = params.span('pre', DEFAULT_PRE)
-        post = params.span('post', DEFAULT_POST)
-        max_window = params.span('max_window', DEFAULT_MAX_WINDOW)
-        retrigger = params.choice('retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES)
-        topics = params.topics('topics', DEFAULT_TOPICS)
         enabled = params.boolean('enabled', DEFAULT_ENABLED)
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        classify_every = params.span('classify_every', DEFAULT_CLASSIFY_EVERY)
         intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES, minimum=1,
                                              integer=True)
         intake_max_mb = params.number('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
-        max_buffer_mb = params.number('max_buffer_mb', DEFAULT_MAX_BUFFER_MB)
-        driving_class = roslib.message.get_message_class(self.model.config.topic_type)
-        if driving_class is None:
-            raise ConfigError('~model: message type %s is not installed' % self.model.config.topic_type)
-        # The feature set's inputs by their role names (odom, imu, cmd_vel), relative: remap them.
-        inputs = self.model.config.feature.inputs
-        driving_name = inputs[0][0]
-        input_topics = [role for role, _ in inputs[1:]]
-        driving_topic = rospy.resolve_name(driving_name)
-        side_topics = [rospy.resolve_name(topic) for topic in topics]
         try:
-            self.logger = smart_logger.SmartLogger(
-                self.model, self.directory, fmt, pre, post, driving_topic=driving_topic,
-                side_topics=side_topics, max_window=max_window, enabled=enabled, max_disk_mb=max_disk_mb,
-                min_free_mb=min_free_mb, retrigger=retrigger, classify_every=classify_every,
-                max_buffer_mb=max_buffer_mb, close_retry=CLOSE_RETRY,
-                input_topics=[rospy.resolve_name(topic) for topic in input_topics])
+            self.logger = smart_logger.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
+                                                   **options)
         except ValueError as error:
             raise ConfigError('~%s' % error)
+        types = smart_logger.topic_types(triggers)
+        driving_class = config.installed_class(types[self.logger.driving_topic]) \
+            if self.logger.driving_topic in types else None
+        if self.logger.driving_topic in types and driving_class is None:
+            raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
-        self.intake = Intake(self.logger, driving_name, driving_class, topics + input_topics,
+        self.intake = Intake(self.logger, self.logger.driving_topic, driving_class, sorted(self.logger.side_topics),
                              max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),

@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from ..registry import Registry
 from ..spans import Span
 
 STATISTICS = ('mean', 'std', 'min', 'max')
@@ -35,28 +36,16 @@ CLIP = 1e6              # every row value is clipped to +-CLIP so window statist
 
 RESTART, REPEAT, STEP = 'restart', 'repeat', 'step'
 
-_REGISTRY = collections.OrderedDict()
+_REGISTRY = Registry('feature_set', 'name')
+names = _REGISTRY.names
+get = _REGISTRY.get
 
 
 def register(cls):
     """Class decorator: add a FeatureSet subclass to the registry under ``cls.name``."""
     if not cls.name or not cls.inputs or not cls.columns:
         raise ValueError('feature set %s: needs a name, inputs and columns' % cls.__name__)
-    _REGISTRY[cls.name] = cls
-    return cls
-
-
-def names():
-    """Names of the registered feature sets, in registration order."""
-    return tuple(_REGISTRY)
-
-
-def get(name):
-    """The FeatureSet class registered as ``name``; ValueError('feature_set: ...') otherwise."""
-    try:
-        return _REGISTRY[name]
-    except (KeyError, TypeError):
-        raise ValueError('feature_set: %r is not one of %s' % (name, ', '.join(_REGISTRY)))
+    return _REGISTRY.register(cls)
 
 
 def _parse_window(value):

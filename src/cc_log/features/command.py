@@ -8,8 +8,8 @@ stuck) and goes beyond it (``over_v``, ``over_w``: overshooting, running away), 
 minus the speed the pose actually moved at (``slip_v``: wheels turning on the spot) and the age of the
 command. A window becomes the mean, std, min and max of every column.
 """
-from .base import REPEAT, RESTART, FeatureSet, register
-from .motion import ODOMETRY, read_odometry, to_body, unit_quaternion
+from .base import REPEAT, RESTART, register
+from .motion import OdometrySet, to_body
 
 COMMAND_COLUMNS = ('cmd_v', 'cmd_w', 'v', 'w', 'v_err', 'w_err', 'lag_v', 'lag_w', 'over_v', 'over_w', 'slip_v',
                    'cmd_age')
@@ -18,11 +18,11 @@ MAX_AGE = 10.0         # seconds: cmd_age is capped here (also before the first 
 
 
 @register
-class CommandFeatures(FeatureSet):
+class CommandFeatures(OdometrySet):
     """Velocity command against odometry (see the module docstring)."""
 
     name = 'command'
-    inputs = (('odom', ODOMETRY), ('cmd_vel', 'geometry_msgs/Twist'))
+    inputs = OdometrySet.inputs + (('cmd_vel', 'geometry_msgs/Twist'),)
     columns = COMMAND_COLUMNS
 
     def reset_state(self):
@@ -44,14 +44,11 @@ class CommandFeatures(FeatureSet):
             return
         self._command = (stamp, v, w)
 
-    def read(self, msg):
-        return read_odometry(msg)
-
     def make_row(self, stamp, values):
-        q = unit_quaternion(values[3:7])
-        if q is None:
+        pose = self.pose_of(values)
+        if pose is None:
             return None
-        p, v, w = values[0:3], values[7], values[12]
+        p, q, v, w = pose[0], pose[1], pose[2][0], pose[3][2]
         kind, dt = self._step(stamp)
         if kind == RESTART:
             self._slip = 0.0

@@ -48,26 +48,38 @@ def unit_quaternion(q):
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
+class OdometrySet(FeatureSet):
+    """A feature set whose first input is nav_msgs/Odometry (``odom``): ``read`` takes all of a message (so a
+    message with a broken field is rejected by every such set alike); ``pose_of(values)`` splits it."""
+
+    inputs = (('odom', ODOMETRY),)
+
+    def read(self, msg):
+        return read_odometry(msg)
+
+    @staticmethod
+    def pose_of(values):
+        """``(p, q, v, w)`` of ``read``'s values with q normalised, or None when q has (nearly) no length."""
+        q = unit_quaternion(values[3:7])
+        return None if q is None else (values[0:3], q, values[7:10], values[10:13])
+
+
 @register
-class MotionFeatures(FeatureSet):
+class MotionFeatures(OdometrySet):
     """Body-frame motion of nav_msgs/Odometry (see the module docstring)."""
 
     name = 'motion'
-    inputs = (('odom', ODOMETRY),)
     columns = MOTION_COLUMNS
 
     def reset_state(self):
         self._prev = None        # (p, q, v, w, a) of the last accepted message
         self._deriv = None       # last derivative channels (held on a repeated stamp)
 
-    def read(self, msg):
-        return read_odometry(msg)
-
     def make_row(self, stamp, values):
-        q = unit_quaternion(values[3:7])
-        if q is None:
+        pose = self.pose_of(values)
+        if pose is None:
             return None
-        p, v, w = values[0:3], values[7:10], values[10:13]
+        p, q, v, w = pose
         kind, dt = self._step(stamp)
         prev = self._prev
         if kind == RESTART:

@@ -13,8 +13,8 @@ towards a goal; only a window longer than such turns tells them apart by ``rotat
 """
 import numpy as np
 
-from .base import RESTART, FeatureSet, register
-from .motion import ODOMETRY, read_odometry
+from .base import RESTART, register
+from .motion import OdometrySet
 
 PROGRESS_COLUMNS = ('x', 'y', 'v', 'w', 'dt')
 PROGRESS_VECTOR = ('displacement', 'path_length', 'progress_ratio', 'rotation', 'net_rotation', 'rotation_in_place',
@@ -31,16 +31,12 @@ def reversals(values, dead_band):
 
 
 @register
-class ProgressFeatures(FeatureSet):
+class ProgressFeatures(OdometrySet):
     """Progress of the robot over the window (see the module docstring)."""
 
     name = 'progress'
-    inputs = (('odom', ODOMETRY),)
     columns = PROGRESS_COLUMNS
     ordered = True
-
-    def read(self, msg):
-        return read_odometry(msg)  # all of it: a message with a broken field is rejected as by the other sets
 
     def make_row(self, stamp, values):
         kind, dt = self._step(stamp)

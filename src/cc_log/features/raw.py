@@ -3,26 +3,21 @@
 The concatenation of position, orientation, linear and angular twist of the W messages of a count window
 (nav_msgs/Odometry). It depends on where the robot is and which way it faces.
 """
-import numpy as np
 
-from .base import FeatureSet, register
-from .motion import ODOMETRY, read_odometry
+from .base import register
+from .motion import OdometrySet
 
 RAW_COLUMNS = ('px', 'py', 'pz', 'qx', 'qy', 'qz', 'qw', 'vx', 'vy', 'vz', 'wx', 'wy', 'wz')
 
 
 @register
-class RawFeatures(FeatureSet):
+class RawFeatures(OdometrySet):
     """The paper's concatenation of odometry messages (see the module docstring)."""
 
     name = 'raw'
-    inputs = (('odom', ODOMETRY),)
     columns = RAW_COLUMNS
     ordered = True
     count_window = True
-
-    def read(self, msg):
-        return read_odometry(msg)
 
     def make_row(self, stamp, values):
         self._count(stamp)

@@ -14,6 +14,7 @@ trigger kind otherwise). Each kind builds itself from a configuration dict with 
 import collections
 import re
 
+from ..registry import Registry
 from ..spans import Span
 
 Fire = collections.namedtuple('Fire', 'name reason score pre post', defaults=(None, None))
@@ -22,26 +23,10 @@ and optional ``pre`` / ``post`` Spans for this window (None: the logger's)."""
 
 NAN = float('nan')
 _NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_-]{0,63}$')
-_KINDS = collections.OrderedDict()
-
-
-def register(cls):
-    """Class decorator: add a Trigger subclass to the registry under ``cls.kind``."""
-    _KINDS[cls.kind] = cls
-    return cls
-
-
-def kinds():
-    """The registered trigger kinds."""
-    return tuple(_KINDS)
-
-
-def get(kind):
-    """The Trigger class registered as ``kind``; ValueError('trigger: ...') otherwise."""
-    try:
-        return _KINDS[kind]
-    except (KeyError, TypeError):
-        raise ValueError('trigger: kind %r is not one of %s' % (kind, ', '.join(_KINDS)))
+_KINDS = Registry('kind', 'kind')
+register = _KINDS.register
+kinds = _KINDS.names
+get = _KINDS.get
 
 
 def check_name(name):
