@@ -3,4 +3,4 @@ from setuptools import setup
 
 from catkin_pkg.python_setup import generate_distutils_setup
 
-setup(**generate_distutils_setup(packages=['cc_log'], package_dir={'': 'src'}))
+setup(**generate_distutils_setup(packages=['cc_log', 'cc_log.features', 'cc_log.triggers'], package_dir={'': 'src'}))

@@ -166,25 +166,18 @@ def sim_records(config):
 
 def window_vectors(records, topic, config, stride=1):
     """(stamps, vectors) of sliding windows over ``topic``'s odometry, one every ``stride`` messages, computed
-    as the smart logger computes them (OdometryFeatures rows, whole windows since the last restart)."""
+    as every mode computes them (``features.FeatureStream``: whole windows since the last restart)."""
     import numpy as np
-    from cc_log.features import FeatureWindow, OdometryFeatures
-    features = OdometryFeatures(config)
-    window = FeatureWindow(config)
-    span = config.span
-    stamps, vectors, index = [], [], 0
+    from cc_log.features import FeatureStream
+    stream = FeatureStream(config, every=stride)
+    stamps, vectors = [], []
     for record in records:
         if record.topic != topic:
             continue
-        row = features.row(record.msg, record.stamp)
-        window.add(record.stamp, row)
-        if not (window.full and features.covers(span, record.stamp)):
-            continue
-        index += 1
-        if (index - 1) % stride:
-            continue
-        stamps.append(record.stamp)
-        vectors.append(window.vector())
+        vector = stream.add(record.msg, record.stamp)
+        if vector is not None:
+            stamps.append(record.stamp)
+            vectors.append(vector)
     return np.array(stamps), np.array(vectors)
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cc_log.features import (FEATURE_SETS, MOTION_COLUMNS, RAW_COLUMNS, FeatureConfig, FeatureWindow,
-                             OdometryFeatures, stamp_of, vector_length, vector_names, window_vector)
+                             OdometryFeatures, get, stamp_of, vector_length, vector_names, window_vector)
 from cc_log.spans import Span
 
 rosbag = pytest.importorskip('rosbag')
@@ -129,7 +129,10 @@ def test_irregular_time_gives_finite_rows_without_spikes():
     assert features.rejected == 0
 
 
-@pytest.mark.parametrize('feature_set', FEATURE_SETS)
+ODOMETRY_SETS = [name for name in FEATURE_SETS if get(name).inputs[0][1] == 'nav_msgs/Odometry']
+
+
+@pytest.mark.parametrize('feature_set', ODOMETRY_SETS)
 def test_non_finite_input_gives_finite_row_and_counts(feature_set):
     config = FeatureConfig(feature_set, '10')
     features = OdometryFeatures(config)
@@ -202,6 +205,31 @@ def test_feature_window_ring_matches_window_vector():
     for i in range(6):
         ring.add(float(i), np.full(len(RAW_COLUMNS), float(i)))
     assert np.array_equal(ring.vector()[::len(RAW_COLUMNS)], [2.0, 3.0, 4.0, 5.0])
+
+
+def test_feature_window_by_count_and_duration():
+    width = len(MOTION_COLUMNS)
+    window = FeatureWindow(FeatureConfig('motion', '3'))
+    for i in range(5):
+        window.add(float(i), np.full(width, float(i)))
+        assert window.full == (i >= 2)
+    assert list(window.rows()[:, 0]) == [2, 3, 4]
+    window = FeatureWindow(FeatureConfig('motion', '1s'))
+    for i in range(5):
+        window.add(i * 0.4, np.full(width, float(i)))
+    assert list(window.rows()[:, 0]) == [2, 3, 4]  # 0.8 .. 1.6 s
+    assert window.full
+
+
+def test_duration_feature_window_refills_after_a_gap():
+    width = len(MOTION_COLUMNS)
+    window = FeatureWindow(FeatureConfig('motion', '1s'))
+    for stamp in (0.0, 0.5, 1.0, 3600.0, 3600.5):
+        window.add(stamp, np.full(width, stamp))
+    assert list(window.rows()[:, 0]) == [3600.0, 3600.5]
+    assert not window.full
+    window.add(3601.0, np.full(width, 3601.0))
+    assert window.full
 
 
 def test_feature_config_round_trip_and_validation():

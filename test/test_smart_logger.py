@@ -65,7 +65,7 @@ def feed(logger, records, model=None):
 
 def reference_windows(records, flags, pre=PRE, post=POST):
     """What WindowBuffer itself makes of the same stream with the same anomalies."""
-    buffer = WindowBuffer(window=CONFIG.window, pre=pre, post=post)
+    buffer = WindowBuffer(pre=pre, post=post)
     done, index = [], -1
     for record in records:
         if record.topic != ODOM:

@@ -11,8 +11,8 @@ import numpy as np
 import rosbag
 
 from . import safe_input
-from .features import OdometryFeatures, stamp_of, window_vector
-from .window_buffer import Record, WindowBuffer
+from .features import FeatureStream, stamp_of
+from .window_buffer import Record
 
 
 def open_bag(path):
@@ -99,37 +99,33 @@ def read_messages(path, topics, expected_types=None):
         bag.close()
 
 
-def feature_vectors(path, topic, config, stride=1, max_dt=None, whole_windows=True):
+def feature_vectors(path, topic, config, stride=1, max_dt=None):
     """Run the features over ``topic`` of a bag: return ``(stamps, X)`` (1-D array, 2-D array).
 
-    Rows go through OdometryFeatures into WindowBuffer's feature window (as in collect and smart mode);
-    a vector is computed at every ``stride``-th message once the feature window is full. With
-    ``whole_windows`` (default), a vector also needs the rows since the last gap or backwards jump to fill
-    the window, so no vector mixes data from both sides of a gap or is computed from a few rows after one.
+    ``topic``: the topic of the feature set's first input, or a list of it and the topics of the set's other
+    inputs (in the order of ``config.feature.inputs``; each checked for its type). Vectors come from the
+    ``features.FeatureStream`` every mode uses: one at every ``stride``-th message once the feature window
+    holds a whole window of continuous data (no vector mixes data from both sides of a gap or a backwards
+    jump, or is computed from a few rows after one).
     """
     if stride < 1:
         raise ValueError('stride: must be at least 1, got %r' % stride)
-    kwargs = {} if max_dt is None else {'max_dt': max_dt}
-    features = OdometryFeatures(config, **kwargs)
-    span = config.span
-    buffer = WindowBuffer(window=span)
+    topics = [topic] if isinstance(topic, str) else list(topic)
+    inputs = config.feature.inputs
+    if len(topics) != len(inputs):
+        raise ValueError('topic: the %s feature set reads %d topic(s) (%s), got %d'
+                         % (config.feature_set, len(inputs), ', '.join(role for role, _ in inputs), len(topics)))
+    roles = {name: role for name, (role, _) in zip(topics[1:], inputs[1:])}
+    stream = FeatureStream(config, every=stride, max_dt=max_dt)
     stamps, vectors = [], []
-    index = 0
-    for record in read_messages(path, [topic], {topic: config.topic_type}):
-        row = features.row(record.msg, record.stamp)
-        buffer.add(record, row)
-        if not buffer.feature_window_full:
+    for record in read_messages(path, topics, {name: kind for name, (_, kind) in zip(topics, inputs)}):
+        if record.topic in roles:
+            stream.observe(roles[record.topic], record.msg, record.stamp)
             continue
-        if whole_windows and not features.covers(span, record.stamp):
-            continue
-        index += 1
-        if (index - 1) % stride:
-            continue
-        rows = buffer.feature_rows()
-        if whole_windows and not span.is_duration and len(rows) < span.count:
-            continue
-        stamps.append(record.stamp)
-        vectors.append(window_vector(rows, config))
+        vector = stream.add(record.msg, record.stamp)
+        if vector is not None:
+            stamps.append(record.stamp)
+            vectors.append(vector)
     width = len(vectors[0]) if vectors else 0
     return np.array(stamps, dtype=float), np.array(vectors, dtype=float).reshape(len(vectors), width)
 

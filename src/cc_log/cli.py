@@ -359,25 +359,54 @@ def _window_summary(path, metadata, records):
 # -- commands ---------------------------------------------------------------------------------------------
 
 def cmd_collect(args):
-    """Feature vectors of a bag's driving topic into ``OUT/<label>/``, as collect mode writes them."""
+    """Feature vectors of a bag's driving topic into ``OUT/<label>/``, as collect mode writes them; with
+    ``--config``, of every classifier's feature set into ``OUT/<name>/<label>/``."""
     from . import collector
+    from .model import AnomalyModel
     _existing_file(args.bag, 'bag file')
+    if not args.config and args.topic is None:
+        raise CommandError('collect: give --topic, or --config (a configuration with classifiers)')
+    single = {}
+    if args.topic is not None:
+        single = {'topics': [args.topic] + args.input_topic, 'feature_set': args.features or _feature_sets()[0],
+                  'window': args.window or collector.DEFAULT_WINDOW}
+    cfg = _configuration(args, {'label': args.label, 'stride': args.stride, 'classifier': single})
+    label = cfg.label or collector.DEFAULT_LABEL
+    stride = cfg.stride or collector.DEFAULT_STRIDE
+    specs = cfg.feature_specs(AnomalyModel.load)
+    if not specs:
+        raise CommandError('collect: %s has no classifier: nothing to compute' % args.config)
     with _bar(args, 'collect') as bar:
-        result = _call(collector.collect_bag, bar, args.bag, args.topic, args.out, label=args.label,
-                       window=args.window, stride=args.stride, feature_set=args.features)
+        if args.config:
+            result = _call(collector.collect_bag, bar, args.bag, None, args.out, label=label, stride=stride,
+                           feature_specs=specs)
+        else:
+            name, config, topics = specs[0]
+            result = _call(collector.collect_bag, bar, args.bag, topics, args.out, label=label,
+                           window=config.window, stride=stride, feature_set=config.feature_set)
+    first = specs[0][1]
     summary = collections.OrderedDict([
-        ('bag', args.bag), ('topic', args.topic), ('label', args.label), ('window', args.window),
-        ('stride', args.stride), ('features', args.features), ('vectors', result['vectors']),
+        ('bag', args.bag), ('topic', specs[0][2][0]), ('label', label), ('window', first.window),
+        ('stride', stride), ('features', first.feature_set), ('vectors', result['vectors']),
         ('directory', result['directory'])])
+    if args.config:
+        summary['sets'] = collections.OrderedDict(
+            (name, collections.OrderedDict([('features', config.feature_set), ('window', config.window),
+                                            ('topics', topics), ('vectors', result['sets'][name][0]),
+                                            ('directory', result['sets'][name][1])]))
+            for name, config, topics in specs)
     if args.json:
         _print_json(summary)
     else:
-        print('%d feature vectors (%s features, window %s, every %s messages) from %s %s -> %s'
-              % (summary['vectors'], args.features, args.window, args.stride, args.bag, args.topic,
-                 summary['directory']))
-    if not result['vectors']:
-        sys.stderr.write('%s collect: warning: no vector: the topic never filled a whole feature window of '
-                         '%s messages\n' % (PROG, args.window))
+        for name, config, topics in specs:
+            count, directory = result['sets'][name if args.config else '']
+            print('%d feature vectors (%s features, window %s, every %s messages) from %s %s -> %s'
+                  % (count, config.feature_set, config.window, stride, args.bag, ' '.join(topics), directory))
+    for name, config, topics in specs:
+        if not result['sets'][name if args.config else ''][0]:
+            sys.stderr.write('%s collect: warning: no vector%s: %s never filled a whole feature window of %s\n'
+                             % (PROG, ' for ' + name if args.config else '', topics[0],
+                                config.window + ('' if config.span.is_duration else ' messages')))
     return EXIT_OK
 
 
@@ -450,33 +479,64 @@ def cmd_learn(args):
     return EXIT_OK
 
 
-def _check_driving_topic(bag_path, topic, topic_type, side_topics=()):
-    """One clear line before any work: readable bag, topic present and of the type the model reads."""
+def _check_topics(bag_path, topics, types=None):
+    """One clear line before any work: a readable bag holding ``topics``, each of the type ``types`` says
+    (``{topic: type}``; others any); returns how many messages they have."""
     from . import bagio
     bag = bagio.open_bag(bag_path)
     try:
-        bagio.check_topic(bag, topic, topic_type)
-        for side in side_topics:
-            bagio.check_topic(bag, side)
-        return bag.get_message_count([topic] + list(side_topics))
+        for topic in topics:
+            bagio.check_topic(bag, topic, (types or {}).get(topic))
+        return bag.get_message_count(list(topics))
     finally:
         bag.close()
 
 
+def _configuration(args, flat):
+    """The Config of ``--config`` (if given) with the options of ``flat`` (None: not given) and the single
+    classifier of ``--model``/``--topic`` over it."""
+    from . import config as config_mod
+    data = config_mod.load_file(_existing_file(args.config, 'configuration file')) if args.config else {}
+    side = flat.pop('side_topics', None)
+    classifier = flat.pop('classifier', {})
+    data = config_mod.with_flat(data, flat)
+    if side:
+        topics = data.get('topics') or []
+        data['topics'] = (topics.replace(',', ' ').split() if isinstance(topics, str) else list(topics)) + side
+    data = config_mod.with_classifier(data, **classifier)
+    return config_mod.Config.from_dict(data, args.config or 'options')
+
+
 def cmd_replay(args):
-    """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read."""
-    from . import smart_logger
+    """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read, with the
+    triggers of ``--config`` and/or the classifier of ``--model`` on ``--topic``."""
+    from . import config as config_mod
+    from . import smart_logger, window_writer
     from .model import AnomalyModel
-    from .spans import Span
     _existing_file(args.bag, 'bag file')
-    model = AnomalyModel.load(_existing_file(args.model, 'model file'))
-    pre, post = Span.parse(args.pre, 'pre'), Span.parse(args.post, 'post')
-    side = [topic for topic in args.side_topic if topic != args.topic]
-    total = _check_driving_topic(args.bag, args.topic, model.config.topic_type, side)
+    if not args.config and (args.topic is None or args.model is None):
+        raise CommandError('replay: give --topic and --model, or --config (a configuration with triggers)')
+    if args.model is not None:
+        _existing_file(args.model, 'model file')
+    if args.model is not None and args.topic is None:
+        raise CommandError('replay: --model needs --topic (the topic the model reads)')
+    cfg = _configuration(args, {
+        'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
+        'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
+        'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
+                       'classify_every': args.classify_every, 'retrigger': args.retrigger}})
+    triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
+    options = cfg.logger_options(triggers)
+    logger_types = smart_logger.topic_types(triggers)
+    topics = [options['driving_topic']] + [t for t in sorted(set(options['side_topics']).union(logger_types))
+                                           if t != options['driving_topic']]
+    total = _check_topics(args.bag, topics, logger_types)
     _writable_dir(args.out, 'out')
+    retry = window_writer.OFFLINE_RETRY_SECONDS
+    logger = smart_logger.SmartLogger(None, args.out, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
+                                      give_up_after=retry, close_retry=retry, **options)
     with _bar(args, 'replay', total) as bar:
-        summary = _call(smart_logger.replay, bar, args.bag, args.topic, args.model, args.out, pre=str(pre),
-                        post=str(post), fmt=args.format, side_topics=tuple(side), max_buffer_mb=args.max_buffer_mb)
+        summary = _call(smart_logger.replay_into, bar, logger, args.bag)
     result = collections.OrderedDict([
         ('input_messages', summary['input_messages']),
         ('raw_json_bytes', summary['raw_json_bytes']),
@@ -491,7 +551,7 @@ def cmd_replay(args):
     windows = result['windows']
     saved = sum(window['messages'] for window in windows)
     print('%s %s: %d messages in, %d saved in %d window(s) (%s files in %s)'
-          % (args.bag, args.topic, result['input_messages'], saved, len(windows), args.format, args.out))
+          % (args.bag, options['driving_topic'], result['input_messages'], saved, len(windows), cfg.format, args.out))
     ratio = _ratio(result['raw_json_bytes'], result['stored_bytes'])
     print('  raw row-per-message JSON %s, stored %s%s' % (
         human_bytes(result['raw_json_bytes']), human_bytes(result['stored_bytes']),
@@ -1003,16 +1063,21 @@ def build_parser():
           cclog collect run.bag --topic /odom --out train --window 200 --json
         """))
     p.add_argument('bag', metavar='BAG', help='input bag (indexed, rosbag 2.0)')
-    p.add_argument('--topic', required=True, metavar='T', help='driving topic (nav_msgs/Odometry)')
+    p.add_argument('--config', metavar='YAML', help='configuration: vectors of every classifier (its feature set '
+                   'and window, else its model\'s) into DIR/<name>/<label>/; collect.label and collect.stride too')
+    p.add_argument('--topic', metavar='T', help="driving topic: the feature set's first input "
+                   '(nav_msgs/Odometry; imu: sensor_msgs/Imu); needed without --config')
     p.add_argument('--out', required=True, metavar='DIR', help='vectors go to DIR/<label>/')
-    p.add_argument('--label', default='nominal', help='label directory (default: %(default)s; anything but '
+    p.add_argument('--label', help='label directory (default: nominal; anything but '
                    '"nominal" counts as anomalous)')
-    p.add_argument('--window', default='500', type=_span('window'), metavar='N|Ns',
-                   help='feature window: messages (500) or seconds (5s) (default: %(default)s)')
-    p.add_argument('--stride', default=_collect_stride(), type=_non_negative_int('stride', 1), metavar='N',
-                   help='a vector every N driving messages (default: %(default)s)')
-    p.add_argument('--features', default='motion', choices=('motion', 'raw'),
-                   help='feature set (default: %(default)s)')
+    p.add_argument('--window', type=_span('window'), metavar='N|Ns',
+                   help='feature window: messages (500) or seconds (5s) (default: 500)')
+    p.add_argument('--stride', type=_non_negative_int('stride', 1), metavar='N',
+                   help='a vector every N driving messages (default: %d)' % _collect_stride())
+    p.add_argument('--features', choices=_feature_sets(),
+                   help='feature set (default: %s)' % _feature_sets()[0])
+    p.add_argument('--input-topic', action='append', default=[], metavar='T',
+                   help="a topic of the feature set's other inputs, in its order (command: the cmd_vel topic)")
     _common(p)
     p.set_defaults(run=cmd_collect)
 
@@ -1043,33 +1108,42 @@ def build_parser():
     p = commands.add_parser('replay', help='the smart logger over a bag (windows around anomalies)', **_help(
         """
         Smart mode offline: feed the bag, as fast as it can be read, to the same SmartLogger the live node
-        runs. The driving topic is scored by the model; every anomaly saves --pre messages before and --post
+        runs, with the triggers of --config (the YAML file smart_logger.py reads: classifiers, rules) and/or
+        a classifier scoring --topic with --model. Every trigger saves --pre messages before and --post
         after (counts or durations), with the --side-topic messages of that time span, as window files in
-        OUT. --json prints {input_messages, raw_json_bytes, stored_bytes, windows: [{start, end, messages,
-        path}]}; start/end are the header stamps (float seconds) of the first and last message saved. A window
-        that cannot be written (disk full) is retried for a few seconds; then replay stops and exits 1 with
-        one line naming OUT and how many windows and messages were not written.
+        OUT; options given override the configuration. --json prints {input_messages, raw_json_bytes,
+        stored_bytes, windows: [{start, end, messages, path}]}; start/end are the header stamps (float
+        seconds) of the first and last message saved. A window that cannot be written (disk full) is retried
+        for a few seconds; then replay stops and exits 1 with one line naming OUT and how many windows and
+        messages were not written.
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
           cclog replay crash.bag --topic /odom --model model.json --out logs --pre 2s --post 2s --json
           cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
+          cclog replay run.bag --config robot.yaml --out logs --classify-every 1 --retrigger onset
         """))
     p.add_argument('bag', metavar='BAG', help='input bag')
-    p.add_argument('--topic', required=True, metavar='T', help='driving topic (the model\'s message type)')
-    p.add_argument('--model', required=True, metavar='PATH', help='model file (cclog learn)')
+    p.add_argument('--config', metavar='YAML', help='configuration (topics, triggers, windows, format, limits): '
+                   'the file smart_logger.py reads; the options below override it')
+    p.add_argument('--topic', metavar='T', help="driving topic (the model's message type); needed without --config")
+    p.add_argument('--model', metavar='PATH', help='model file (cclog learn) of a classifier on --topic; needed '
+                   'without --config')
     p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
-    p.add_argument('--pre', default='100', type=_span('pre'), metavar='N|Ns',
-                   help='messages (100) or seconds (2s) kept before an anomaly (default: %(default)s)')
-    p.add_argument('--post', default='100', type=_span('post'), metavar='N|Ns',
-                   help='messages or seconds kept after the last anomaly (default: %(default)s)')
-    p.add_argument('--format', default='json-xz', choices=('json-xz', 'bag-lz4'),
-                   help='window file format (default: %(default)s)')
+    p.add_argument('--pre', type=_span('pre'), metavar='N|Ns',
+                   help='messages (100) or seconds (2s) kept before an anomaly (default: 100)')
+    p.add_argument('--post', type=_span('post'), metavar='N|Ns',
+                   help='messages or seconds kept after the last anomaly (default: 100)')
+    p.add_argument('--format', choices=('json-xz', 'bag-lz4'), help='window file format (default: json-xz)')
     p.add_argument('--side-topic', action='append', default=[], metavar='T',
                    help='another topic to save inside the windows (repeatable)')
-    p.add_argument('--max-buffer-mb', default=_max_buffer_mb(), type=_positive_float('max-buffer-mb', zero=True),
+    p.add_argument('--classify-every', type=_span('classify-every'), metavar='N|Ns',
+                   help='score every N-th message or at most once per duration (default: 50ms)')
+    p.add_argument('--retrigger', choices=_retrigger_modes(),
+                   help='every anomalous score extends a window, or only the onset of an anomaly (default: every)')
+    p.add_argument('--max-buffer-mb', type=_positive_float('max-buffer-mb', zero=True),
                    metavar='MB', help='memory budget of every message buffered (estimated); a window reaching it '
-                   'is written in parts; 0: none (default: %(default)s)')
+                   'is written in parts; 0: none (default: %g)' % _max_buffer_mb())
     _common(p)
     p.set_defaults(run=cmd_replay)
 
@@ -1220,6 +1294,16 @@ def _collect_stride():
     except ImportError:
         return 25
     return DEFAULT_STRIDE
+
+
+def _retrigger_modes():
+    from .triggers import RETRIGGER_MODES
+    return RETRIGGER_MODES
+
+
+def _feature_sets():
+    from .features import FEATURE_SETS
+    return FEATURE_SETS
 
 
 def _max_buffer_mb():

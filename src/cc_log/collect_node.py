@@ -19,7 +19,9 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~topics`` (list or space-separated string, default: none): other topics to log.
   ``~label`` (string, default: nominal): label of the feature vectors.
   ``~window`` (string, default: 500): feature window, messages or seconds.
-  ``~feature_set`` (string, default: motion): ``motion`` or ``raw``.
+  ``~feature_set`` (string, default: motion): a registered feature set (``features.FEATURE_SETS``: motion,
+  raw, imu, command, progress). Its first input is the driving topic (``odom``; ``imu`` for the imu set) and
+  its other inputs are subscribed under their role names (``cmd_vel`` for the command set): remap them.
   ``~stride`` (int, default: 25): a vector every this many odometry messages.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
   ``~max_buffer_mb`` (double, default: 256; 0 = no budget): memory budget of the file being collected; a new
@@ -37,17 +39,17 @@ import sys
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
-from nav_msgs.msg import Odometry
 
 from . import collector
 from . import features
 from . import log_format
-from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_name, recover_leftovers,
-                          resolve_directory, writer_status)
+from . import config
+from .model import AnomalyModel
+from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
+                          recover_leftovers, resolve_directory, writer_status)
 from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, Intake
 
 NODE_NAME = 'collect_logger'
-DRIVING_TOPIC = 'odom'
 DEFAULT_FORMAT = 'json-xz'
 DEFAULT_ROTATE = collector.DEFAULT_ROTATE
 DEFAULT_LABEL = collector.DEFAULT_LABEL
@@ -64,27 +66,52 @@ class CollectNode(object):
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
                                                                         collector.FEATURES_SUBDIRECTORY))
-        fmt = params.choice('format', DEFAULT_FORMAT, log_format.Format.ALL)
-        rotate = params.scalar('rotate', DEFAULT_ROTATE)
-        topics = params.topics('topics')
-        label = params.scalar('label', DEFAULT_LABEL)
-        window = params.scalar('window', DEFAULT_WINDOW)
-        feature_set = params.choice('feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS)
-        stride = params.number('stride', DEFAULT_STRIDE, minimum=1, integer=True)
+
+        def given(reader, name, *args):
+            """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
+            return reader(name, *args) if params.given(name) else None
+
+        cfg = node_config(params, {
+            'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
+            'rotate': given(params.scalar, 'rotate', DEFAULT_ROTATE), 'topics': given(params.topics, 'topics'),
+            'label': given(params.scalar, 'label', DEFAULT_LABEL),
+            'stride': given(params.number, 'stride', DEFAULT_STRIDE, 1, True),
+            'max_buffer_mb': given(params.number, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB),
+            'max_disk_mb': given(params.number, 'max_disk_mb', 0.0),
+            'min_free_mb': given(params.number, 'min_free_mb', 0.0)})
+        window = given(params.scalar, 'window', DEFAULT_WINDOW) or DEFAULT_WINDOW
+        feature_set = given(params.choice, 'feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS) or \
+            DEFAULT_FEATURE_SET
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        max_buffer_mb = params.number('max_buffer_mb', DEFAULT_MAX_BUFFER_MB)
-        max_disk_mb = params.number('max_disk_mb', 0.0)
-        min_free_mb = params.number('min_free_mb', 0.0)
+        options = {'side_topics': [rospy.resolve_name(topic) for topic in cfg.topics], 'close_retry': CLOSE_RETRY,
+                   'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,
+                   'max_buffer_mb': cfg.max_buffer_mb, 'max_disk_mb': cfg.max_disk_mb,
+                   'min_free_mb': cfg.min_free_mb}
         try:
-            self.collector = collector.Collector(
-                self.directory, fmt, rotate, driving_topic=rospy.resolve_name(DRIVING_TOPIC),
-                side_topics=[rospy.resolve_name(topic) for topic in topics], window=window,
-                feature_set=feature_set, stride=stride, label=label, max_buffer_mb=max_buffer_mb,
-                max_disk_mb=max_disk_mb, min_free_mb=min_free_mb, close_retry=CLOSE_RETRY)
+            specs = cfg.feature_specs(AnomalyModel.load, rospy.resolve_name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+        if specs:  # the configuration's classifiers: vectors of each into features/<name>/<label>/
+            if params.given('feature_set') or params.given('window'):
+                rospy.logwarn('~feature_set and ~window are not used: the configuration names its classifiers')
+            driving = rospy.resolve_name(cfg.driving_topic) if cfg.driving_topic else None
+            options.update(feature_specs=specs, driving_topic=driving)
+        else:  # one feature set, its inputs by their role names (odom, imu, cmd_vel): remap them
+            inputs = features.get(feature_set).inputs
+            options.update(window=window, feature_set=feature_set, driving_topic=rospy.resolve_name(inputs[0][0]),
+                           input_topics=[rospy.resolve_name(role) for role, _ in inputs[1:]])
+        try:
+            self.collector = collector.Collector(self.directory, cfg.format, cfg.rotate or DEFAULT_ROTATE,
+                                                 **options)
         except ValueError as error:
             raise ConfigError('~%s' % error)
+        label = self.collector.label
+        types = dict((spec.topic, spec.config.topic_type) for spec in self.collector.specs)
+        driving_class = config.installed_class(types[self.collector.driving_topic]) \
+            if self.collector.driving_topic in types else None
+        topics = sorted(self.collector.side_topics)
         self.collector.on_event(self._on_event)
-        self.intake = Intake(self.collector, DRIVING_TOPIC, Odometry, topics)
+        self.intake = Intake(self.collector, self.collector.driving_topic, driving_class, topics)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',

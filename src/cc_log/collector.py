@@ -27,8 +27,7 @@ from . import log_format
 from . import msg_codec
 from . import window_writer
 from .spans import Span
-from .window_buffer import (DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, WindowBuffer,
-                            budget_bytes, part_bytes)
+from .window_buffer import DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, budget_bytes, part_bytes
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']
@@ -82,33 +81,24 @@ def check_label(label):
     return label
 
 
-class VectorStream(object):
-    """Feature vectors of one driving topic, computed exactly as ``bagio.feature_vectors`` does offline:
-    rows go through OdometryFeatures into WindowBuffer's feature window, and once the window is full of
-    continuous data (no gap, no backwards time since the rows began) every ``stride``-th message yields a
-    vector. ``add(msg, stamp)`` returns that vector (numpy array) or None.
-    """
+class VectorStream(features_mod.FeatureStream):
+    """The feature vectors collect mode writes: ``features.FeatureStream`` with a vector every ``stride``
+    messages of the set's first input (``add(msg, stamp)`` returns it, or None)."""
 
     def __init__(self, config, stride=DEFAULT_STRIDE):
-        self.config = config
-        self.window = config.span
         self.stride = parse_stride(stride)
-        self.features = features_mod.OdometryFeatures(config)
-        self.buffer = WindowBuffer(window=self.window, pre=0, post=0)
-        self._index = 0
+        super(VectorStream, self).__init__(config, every=self.stride)
 
-    def add(self, msg, stamp):
-        row = self.features.row(msg, stamp)
-        self.buffer.add(Record(stamp, None, None, 1), row)
-        if not self.buffer.feature_window_full or not self.features.covers(self.window, stamp):
-            return None
-        self._index += 1
-        if (self._index - 1) % self.stride:
-            return None
-        rows = self.buffer.feature_rows()
-        if not self.window.is_duration and len(rows) < self.window.count:
-            return None
-        return features_mod.window_vector(rows, self.config)
+
+def input_roles(config, topics=None):
+    """``{topic: role}`` of the other inputs of ``config``'s feature set: ``topics`` names them in the set's
+    order (None: their role names); ValueError('input_topics: ...') when the number does not match."""
+    roles = [role for role, _ in config.feature.inputs[1:]]
+    topics = roles if topics is None else list(topics)
+    if len(topics) != len(roles):
+        raise ValueError('input_topics: the %s feature set reads %d other topic(s) (%s), got %d'
+                         % (config.feature_set, len(roles), ', '.join(roles) or 'none', len(topics)))
+    return dict(zip(topics, roles))
 
 
 def parse_stride(value):
@@ -119,38 +109,72 @@ def parse_stride(value):
     return span.count
 
 
-class Collector(object):
-    """Log every message into rotated window files and write feature vectors of the driving topic.
+class VectorSpec(object):
+    """One feature set collect mode computes: its ``name``, FeatureConfig, ``topics`` (one per input of the
+    set) and the directory its vectors go to (``<directory>/<label>/<stamp>.json``)."""
 
-    directory: the logging directory (window files there, vectors under ``features/<label>/``); fmt:
-    ``'json-xz'`` or ``'bag-lz4'``; rotate: see ``Rotation.parse``; driving_topic: the topic name the
-    odometry is fed with; side_topics: other topics to keep (None: every topic fed); window, feature_set:
-    the feature window and set of the vectors; stride: a vector every ``stride`` driving messages; label:
-    the vectors' label; background: write on a writer thread; max_buffer_mb: memory budget of the file
-    being collected and the one being written (MB; 0: none): half of it starts a new file; max_disk_mb,
-    min_free_mb, retry_period, max_held_messages, close_retry: the writer's (see ``window_writer.WindowWriter``).
+    def __init__(self, name, config, topics, directory, stride):
+        self.name = name
+        self.config = config
+        self.topic = topics[0]
+        self.roles = input_roles(config, topics[1:])
+        self.directory = directory
+        self.stream = VectorStream(config, stride)
+
+    @property
+    def topics(self):
+        """Every topic the set reads."""
+        return {self.topic}.union(self.roles)
+
+
+class Collector(object):
+    """Log every message into rotated window files and write feature vectors of every feature set.
+
+    directory: the logging directory (window files there, vectors under ``features/<label>/``, or
+    ``features/<name>/<label>/`` for each of ``feature_specs``); fmt: ``'json-xz'`` or ``'bag-lz4'``;
+    rotate: see ``Rotation.parse``; driving_topic: the topic name the feature set's first input (the
+    odometry) is fed with; input_topics: the topic names of the set's other inputs, in its order (default:
+    their role names, e.g. ``cmd_vel``; logged too); window, feature_set: the feature window and set of the
+    vectors; feature_specs: instead of those, ``[(name, FeatureConfig, topics)]``: several sets, each with
+    the topics of its inputs (the collect side of a configuration's classifiers; driving_topic then defaults
+    to the first one's first topic); side_topics: other topics to keep (None: every topic fed); stride: a
+    vector every ``stride`` messages of a set's first input; label: the vectors' label; background: write
+    on a writer thread; max_buffer_mb: memory budget of the file being collected and the one being written
+    (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period, max_held_messages,
+    close_retry: the writer's (see ``window_writer.WindowWriter``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
 
     def __init__(self, directory, fmt='json-xz', rotate=DEFAULT_ROTATE, driving_topic='odom', side_topics=None,
+                 input_topics=None,
                  window=DEFAULT_WINDOW, feature_set=DEFAULT_FEATURE_SET, stride=DEFAULT_STRIDE,
                  label=DEFAULT_LABEL, background=True, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, max_disk_mb=0,
                  min_free_mb=0, retry_period=window_writer.DEFAULT_RETRY_PERIOD,
-                 max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES, close_retry=0.0):
+                 max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES, close_retry=0.0, feature_specs=None):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
         self.rotate = Rotation.parse(rotate)
-        if not driving_topic:
-            raise ValueError('driving_topic: must not be empty')
-        self.driving_topic = driving_topic
-        self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
-        self.config = features_mod.FeatureConfig(feature_set, window)
         self.stride = parse_stride(stride)
         self.label = check_label(label)
         self.features_directory = os.path.join(self.directory, FEATURES_SUBDIRECTORY)
         self.max_buffer_bytes = budget_bytes(max_buffer_mb)
-        self._vectors = VectorStream(self.config, self.stride)
+        if feature_specs is None:
+            config = features_mod.FeatureConfig(feature_set, window)
+            roles = [role for role, _ in config.feature.inputs[1:]]
+            others = roles if input_topics is None else list(input_topics)
+            self.specs = [VectorSpec('', config, [driving_topic] + others, self.features_directory, self.stride)]
+        else:
+            self.specs = [VectorSpec(name, config, list(topics), os.path.join(self.features_directory, name),
+                                     self.stride) for name, config, topics in feature_specs]
+            if driving_topic is None and self.specs:
+                driving_topic = self.specs[0].topic
+        if not driving_topic:
+            raise ValueError('driving_topic: must not be empty')
+        self.driving_topic = driving_topic
+        self.config = self.specs[0].config if self.specs else None
+        watched = set().union(*(spec.topics for spec in self.specs))
+        self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self._lock = threading.Lock()
         self._stats_lock = threading.Lock()
         self._cost = MemoryCost()
@@ -205,10 +229,13 @@ class Collector(object):
             self._chunk.append(Record(stamp, topic, msg, cost))
             self._chunk_bytes += raw
             self._chunk_cost += cost
-            if topic == self.driving_topic:
-                vector = self._vectors.add(msg, stamp)
-                if vector is not None:
-                    self.writer.submit(vector_job(self.features_directory, self.label, stamp, vector, self.config))
+            for spec in self.specs:
+                if topic == spec.topic:
+                    vector = spec.stream.add(msg, stamp)
+                    if vector is not None:
+                        self.writer.submit(vector_job(spec.directory, self.label, stamp, vector, spec.config))
+                elif topic in spec.roles:
+                    spec.stream.observe(spec.roles[topic], msg, stamp)
 
     def flush(self):
         """Write the current file now (even when it is not due for rotation)."""
@@ -300,29 +327,43 @@ def vector_job(directory, label, stamp, vector, config):
 
 
 def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=DEFAULT_STRIDE,
-                feature_set=DEFAULT_FEATURE_SET, retry_seconds=None):
+                feature_set=DEFAULT_FEATURE_SET, retry_seconds=None, feature_specs=None):
     """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each), as collect
-    mode does live. Returns ``{'vectors': n, 'directory': out_dir/<label>}``. Raises ValueError for bad
-    arguments or an unreadable bag; a vector that cannot be written (disk full...) is retried for
+    mode does live (``topic``: of the feature set's first input, or a list: it and the topics of the set's
+    other inputs, in its order); with ``feature_specs`` (``[(name, FeatureConfig, topics)]``, as Collector's)
+    instead, the vectors of each set into ``out_dir/<name>/<label>/``. Returns ``{'vectors': n, 'directory':
+    out_dir/<label>, 'sets': {name: (vectors, directory)}}`` (directory: the first set's). Raises ValueError
+    for bad arguments or an unreadable bag; a vector that cannot be written (disk full...) is retried for
     ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``), then OSError names the directory and
     how many vectors were not written.
     """
     from . import bagio  # rosbag: imported here so the module stays pure
     check_label(label)
-    config = features_mod.FeatureConfig(feature_set, window)
-    stamps, vectors = bagio.feature_vectors(bag_path, topic, config, parse_stride(stride))
+    stride = parse_stride(stride)
+    if feature_specs is None:
+        specs = [('', features_mod.FeatureConfig(feature_set, window), topic, out_dir)]
+    else:
+        specs = [(name, config, topics, os.path.join(out_dir, name)) for name, config, topics in feature_specs]
+    computed = [(name, config, directory) + bagio.feature_vectors(bag_path, topics, config, stride)
+                for name, config, topics, directory in specs]
     retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
     writer = window_writer.WindowWriter(out_dir, background=False, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
                                         give_up_after=retry_seconds, close_retry=retry_seconds)
-    for stamp, vector in zip(stamps, vectors):
-        writer.submit(vector_job(out_dir, label, stamp, vector, config))
-        if writer.lost:
-            break
+    result = {'sets': {}}
+    for name, config, directory, stamps, vectors in computed:
+        before = writer.stats()['written'].get(VECTOR, 0)
+        for stamp, vector in zip(stamps, vectors):
+            writer.submit(vector_job(directory, label, stamp, vector, config))
+            if writer.lost:
+                break
+        written = writer.stats()['written'].get(VECTOR, 0) - before
+        where = os.path.join(directory, label)
+        if written < len(stamps):
+            writer.close()
+            raise OSError('%s: %d of %d feature vectors not written: %s' % (
+                where, len(stamps) - written, len(stamps), writer.stats()['last_error']))
+        result['sets'][name] = (len(stamps), where)
     writer.close()
-    stats = writer.stats()
-    directory = os.path.join(out_dir, label)
-    written = stats['written'].get(VECTOR, 0)
-    if written < len(stamps):
-        raise OSError('%s: %d of %d feature vectors not written: %s' % (directory, len(stamps) - written,
-                                                                        len(stamps), stats['last_error']))
-    return {'vectors': len(stamps), 'directory': directory}
+    first = result['sets'][computed[0][0]] if computed else (0, out_dir)
+    result.update(vectors=first[0], directory=first[1])
+    return result

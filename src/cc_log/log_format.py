@@ -64,15 +64,20 @@ def window_metadata(window, codec, extra=None):
     """The metadata every window file carries; keys of ``extra`` (JSON-able) are added, overriding.
 
     topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the
-    first/last record), start_utc/end_utc, triggers ([{stamp, reason, score}]), reasons (distinct, in
-    order), part (0, or 1, 2, ... for a split window), codec, cc_log_version.
+    first/last record), start_utc/end_utc, triggers ([{stamp, reason, score, name}]; name only for
+    triggers that have one), reasons and names (distinct, in order: every trigger of the window), part (0, or
+    1, 2, ... for a split window), codec, cc_log_version.
     """
     types, counts = {}, {}
     for record in window.records:
         types.setdefault(record.topic, record.msg._type)
         counts[record.topic] = counts.get(record.topic, 0) + 1
-    triggers = [{'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
-                for trigger in window.triggers]
+    triggers = []
+    for trigger in window.triggers:
+        entry = {'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
+        if getattr(trigger, 'name', None) is not None:
+            entry['name'] = str(trigger.name)
+        triggers.append(entry)
     meta = {
         'topics': list(types),
         'types': types,
@@ -84,12 +89,19 @@ def window_metadata(window, codec, extra=None):
         'end_utc': utc_text(window.end),
         'triggers': triggers,
         'reasons': list(dict.fromkeys(trigger['reason'] for trigger in triggers)),
+        'names': list(dict.fromkeys(trigger.get('name', trigger['reason']) for trigger in triggers)),
         'part': int(getattr(window, 'part', 0)),
         'codec': codec,
         'cc_log_version': __version__,
     }
     meta.update(extra or {})
     return meta
+
+
+def trigger_name(trigger):
+    """The name of a window_buffer.Trigger: its ``name``, or its reason when it has none."""
+    name = getattr(trigger, 'name', None)
+    return str(trigger.reason if name is None else name)
 
 
 def _is_number(value):
@@ -108,15 +120,16 @@ _METADATA_TYPES = (  # key, test, what it must be (keys a reader uses; each may 
     ('threshold', lambda v: v is None or _is_number(v), 'a number'),
     ('topics', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
     ('reasons', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
+    ('names', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
     ('types', lambda v: isinstance(v, dict) and all(isinstance(t, str) for t in v.values()),
      'an object of strings'),
     ('counts', lambda v: isinstance(v, dict) and all(_is_number(n) for n in v.values()), 'an object of counts'),
     ('triggers', lambda v: isinstance(v, list) and all(
         isinstance(t, dict) and _is_number(t.get('stamp')) and isinstance(t.get('reason', ''), str)
-        and _is_score(t.get('score')) for t in v),
-     'a list of objects {"stamp": number, "reason": string, "score": number or null}'),
+        and _is_score(t.get('score')) and isinstance(t.get('name', ''), str) for t in v),
+     'a list of objects {"stamp": number, "reason": string, "score": number or null, "name": string}'),
 )
-_METADATA_STRINGS = ('codec', 'reason', 'driving_topic', 'start_utc', 'end_utc', 'cc_log_version')
+_METADATA_STRINGS = ('codec', 'reason', 'trigger', 'driving_topic', 'start_utc', 'end_utc', 'cc_log_version')
 
 
 def check_metadata(metadata):
@@ -135,13 +148,13 @@ def check_metadata(metadata):
 # -- names ----------------------------------------------------------------------------------------------
 
 def _reason_text(window):
-    reason = window.triggers[0].reason if window.triggers else 'window'
-    text = re.sub(r'[^A-Za-z0-9-]+', '-', str(reason)).strip('-')
+    reason = trigger_name(window.triggers[0]) if window.triggers else 'window'
+    text = re.sub(r'[^A-Za-z0-9-]+', '-', reason).strip('-')
     return text or 'window'
 
 
 def base_name(window):
-    """``cc_log_<UTC of the first stamp>_<first reason>[_part<N>]`` (no extension)."""
+    """``cc_log_<UTC of the first stamp>_<name of the first trigger>[_part<N>]`` (no extension)."""
     moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
     stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
     name = PREFIX + stamp + '_' + _reason_text(window)

@@ -21,6 +21,7 @@ import threading
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+from . import config
 from . import log_format
 from . import recovery
 from .directory import LoggingDirectory
@@ -72,6 +73,10 @@ class Params(object):
                 shown = '%s (default)' % (value if value not in (None, '', ()) else 'none')
             self._log('~%s: %s', name, shown)
         return value
+
+    def given(self, name):
+        """Whether the parameter is set to something other than '' (launch files pass '' for "not given")."""
+        return self.value(name, None, log=False) not in (None, '')
 
     def text(self, name, default='', log=True):
         """A string (None and '' give ``default``)."""
@@ -127,20 +132,10 @@ class Params(object):
 
     def topics(self, name='topics', default=()):
         """Topic names from a YAML list or a space/comma-separated string (duplicates removed)."""
-        value = self.value(name, default)
-        if isinstance(value, str):
-            items = value.replace(',', ' ').split()
-        elif isinstance(value, (list, tuple)):
-            items = value
-        else:
-            raise ConfigError('~%s: %r is not a list of topic names' % (name, value))
-        topics = []
-        for item in items:
-            if not isinstance(item, str) or not item.strip():
-                raise ConfigError('~%s: %r is not a topic name' % (name, item))
-            if item.strip() not in topics:
-                topics.append(item.strip())
-        return topics
+        try:
+            return config.topic_list(self.value(name, default), '~' + name)
+        except ValueError as error:
+            raise ConfigError(str(error))
 
 
 def _too_large(value):
@@ -186,6 +181,32 @@ def fail(node, error):
     """Print the one-line configuration error and return the exit status."""
     sys.stderr.write('%s: %s\n' % (node, ' '.join(str(error).split())))
     return EXIT_BAD_CONFIG
+
+
+# -- configuration ----------------------------------------------------------------------------------------
+
+STRUCTURED = ('driving_topic', 'windows', 'limits', 'collect', 'triggers')
+
+
+def node_config(params, flat, classifier=None):
+    """The node's ``config.Config``: the YAML file ``~config``, then the structured parameters (``~triggers``,
+    ``~windows``, ``~limits``, ``~collect``, ``~driving_topic``: what ``rosparam load`` of such a file into the
+    node's namespace sets), then the flat ones (``flat``: ``{'pre': value or None, ...}``, see
+    ``config.FLAT``) and the single classifier of ``classifier`` (see ``config.with_classifier``): later ones
+    override. ConfigError naming what is wrong."""
+    path = params.text('config', '')
+    data = {}
+    if path:
+        try:
+            data = config.load_file(os.path.expanduser(path))
+        except ValueError as error:
+            raise ConfigError('~config: %s' % error)
+    structured = dict((key, params.value(key, None)) for key in STRUCTURED if params.given(key))
+    data = config.with_classifier(config.with_flat(config.merge(data, structured), flat), **(classifier or {}))
+    try:
+        return config.Config.from_dict(data, ('~config %s' % path) if path else 'parameters')
+    except ValueError as error:
+        raise ConfigError(str(error))
 
 
 # -- directory and leftovers ------------------------------------------------------------------------------

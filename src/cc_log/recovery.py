@@ -403,7 +403,9 @@ def _triggers(metadata, first_stamp):
             score = msg_codec.decode_float(trigger['score']) if trigger.get('score') is not None else None
         except ValueError:
             stamp, score = first_stamp, None
-        triggers.append(Trigger(stamp, str(trigger.get('reason', 'recovered')), score))
+        name = trigger.get('name')
+        triggers.append(Trigger(stamp, str(trigger.get('reason', 'recovered')), score,
+                                name if isinstance(name, str) else None))
     return triggers
 
 

@@ -1,11 +1,13 @@
-"""Smart mode: keep only the messages around anomalous behaviour.
+"""Smart mode: keep only the messages around what the triggers find.
 
 ``SmartLogger`` is the one implementation behind the live node (``smart_node``) and offline replay
-(``replay``, used by ``cclog replay``). Feed it every message with ``on_message``:
+(``replay``, used by ``cclog replay``). Feed it every message with ``on_message``; it runs a list of
+triggers (``triggers``: classifiers, rules, the manual trigger) over the records of their topics:
 
-- the driving topic (nav_msgs/Odometry) becomes a feature row; once the feature window is full, the window
-  is turned into a vector and scored by the model, and an anomalous score opens (or extends) a logging
-  window of ``pre`` messages before and ``post`` after;
+- a trigger's Fire opens (or extends) a logging window of ``pre`` messages before and ``post`` after the
+  newest message of the driving topic (the topic whose messages count ``pre`` and ``post``, by default the
+  first classifier's), or its own span; windows that touch or overlap merge into one file naming every
+  trigger;
 - other topics are buffered by time and saved in the windows whose time span holds them.
 
 Completed windows go to the ``window_writer.WindowWriter`` (shared with collect mode), whose background
@@ -27,33 +29,17 @@ from . import log_format
 from . import msg_codec
 from . import window_writer
 from .spans import Span
+from .triggers import (DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger,
+                       ManualTrigger)
 from .window_buffer import (DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, MemoryCost,
                             Record, WindowBuffer)
 
-__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay',
+__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
            'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
 DEFAULT_FORMAT = 'json-xz'
 DEFAULT_DRIVING_TOPIC = 'odom'
-
-# Which anomalous scores trigger (open or extend a logging window):
-# - 'every': every driving message scored anomalous (the paper's rule). A feature window of W messages keeps
-#   scoring anomalous for up to W messages after the anomaly itself ended, so windows grow by that tail.
-# - 'onset': only the onset, i.e. a message scored anomalous after a message scored nominal (or the first
-#   score since the start / a restart): hysteresis at the threshold. While the score stays below the
-#   threshold nothing extends the window; a new crossing (the score went back above, then below again)
-#   triggers again.
-RETRIGGER_MODES = ('every', 'onset')
-DEFAULT_RETRIGGER = 'every'
-
-# How often the classifier scores the feature window (a Span): '1' = every driving message (the paper's rule),
-# 'N' = every N-th message, a duration such as '50ms' = at most one decision per 50 ms of message time (20
-# decisions/s: every 5th message at 100 Hz, every message at 10 Hz). Skipping saves the window vector and the
-# model on the skipped messages; an anomaly is still triggered at the message where it is detected (at most
-# one period late), and the window's pre part keeps the skipped messages before it.
-DEFAULT_CLASSIFY_EVERY = '50ms'
-_CLASSIFY_SLACK = 1e-5  # seconds: stamps 10 ms apart add up to 50 ms give or take float rounding
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
 
@@ -65,18 +51,20 @@ DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (pa
 DEFAULT_RETRY_PERIOD = window_writer.DEFAULT_RETRY_PERIOD        # seconds between attempts at held windows
 DEFAULT_MAX_HELD_MESSAGES = window_writer.DEFAULT_MAX_HELD_MESSAGES  # unwritten messages kept in memory
 
-Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error')
+Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error trigger',
+                               defaults=('',))
 Event.__doc__ = """What happened to a logging window.
 
-kind: OPENED (the classifier or a manual trigger opened a window), WRITTEN (the window file is on disk),
-FAILED (writing it failed; ``error`` says why: once when a disk problem first keeps the window in memory to
-be retried, and again if it is lost for good) or DELETED (``path``, an old window file, was deleted to stay within
-max_disk_mb; stamp, start and end are None). stamp: of the message that triggered (the first trigger of
-the window for WRITTEN and FAILED). reason: the first trigger's reason ('classifier',
-'manual'); score: the lowest classifier score of the window's triggers (NaN for manual triggers);
-threshold: the model's. start, end: header stamps (float s) of the first and last message (end is None for
-OPENED). messages, path, bytes: the window's message count (all topics), file and size on disk (0, '' and 0
-until WRITTEN).
+kind: OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED (writing it failed;
+``error`` says why: once when a disk problem first keeps the window in memory to be retried, and again if it
+is lost for good) or DELETED (``path``, an old window file, was deleted to stay within max_disk_mb; stamp,
+start and end are None). stamp: of the message that triggered (the first trigger of the window for WRITTEN
+and FAILED). trigger: the name of that trigger ('classifier', 'manual', a rule's name...); reason: its
+reason ('classifier' for classifiers, a rule's condition, a manual request's text); score: the lowest
+classifier score of the window's triggers (NaN when none); threshold: of the classifier that fired (else
+of the first classifier; NaN without one). start, end: header stamps (float s) of the first and last
+message (end is None for OPENED). messages, path, bytes: the window's message count (all topics), file and
+size on disk (0, '' and 0 until WRITTEN).
 """
 
 
@@ -88,36 +76,35 @@ class _Stats(object):
         self.messages_seen = 0
         self.raw_json_bytes = 0      # row-JSON bytes of every message seen
         self.windows_opened = 0
-        self.classifier_calls = 0
-        self.classifier_seconds = 0.0
-        self.classifier_max = 0.0
-        self.anomalous = 0           # driving messages the classifier called anomalous
+        self.fires_dropped = 0       # Fires before any driving message (no window to keep yet)
         self.messages_refused = 0    # a message type other than the topic's (first seen / the model's)
         self.last_refused = ''
 
 
 class SmartLogger(object):
-    """Anomaly-triggered logging of one driving topic plus side topics.
+    """Triggered logging of a driving topic plus side topics.
 
-    model: an ``AnomalyModel`` (its ``config`` says the feature set, feature window and topic type);
+    model: an ``AnomalyModel`` (its ``config`` says the feature set, feature window and topic type) for the
+    classifier named ``'classifier'`` on ``driving_topic`` (and ``input_topics``, the topics of the set's other
+    inputs: default their role names), with ``classify_every`` (score on every message ``'1'``, every N-th
+    ``'N'``, or at most once per duration, ``'50ms'`` the default) and ``retrigger`` (``'every'`` anomalous
+    score fires, or only the ``'onset'``); or None. triggers: more triggers (``triggers.Trigger``: other
+    classifiers, rules; a ``manual`` trigger is added unless one is given); names must differ.
     directory: where window files go; fmt: ``'json-xz'`` or ``'bag-lz4'``; pre, post, max_window: counts
-    (``'100'``) or durations (``'2s'``); driving_topic: the topic name ``on_message`` will be called with
-    for the odometry; side_topics: other topic names to keep (messages of any topic not listed are ignored
-    unless ``side_topics`` is None, which keeps every other topic); enabled: start enabled or paused;
-    background: write windows on a writer thread (True) or inline in the calling thread (False);
-    retrigger: ``'every'`` (default: every anomalous score triggers) or ``'onset'`` (only a crossing of the
-    threshold from nominal to anomalous triggers; see RETRIGGER_MODES); max_disk_mb, min_free_mb: disk limits
-    (0: off; see ``disk_guard``); retry_period: seconds between attempts to write windows that could not be
-    written (disk full, unwritable directory, min_free_mb reached: they are kept in memory, in order, up to
-    max_held_messages messages; beyond, the oldest are dropped and counted as lost); give_up_after,
-    close_retry: see ``window_writer.WindowWriter`` (offline use: lose a window still failing after that
-    many seconds; keep retrying that long at close); classify_every: score the feature window on every
-    driving message (``'1'``), every N-th (``'N'``) or at most once per duration (``'50ms'``, the default:
-    see DEFAULT_CLASSIFY_EVERY); max_buffer_mb: memory budget of every buffered message together (MB;
-    0: none): an open window is written in parts at half of it (see ``WindowBuffer``).
+    (``'100'``) or durations (``'2s'``) of the driving topic; driving_topic: the topic whose messages count
+    pre and post; side_topics: other topic names to keep (messages of any topic not listed, nor watched by
+    a trigger, are ignored unless ``side_topics`` is None, which keeps every other topic); enabled: start
+    enabled or paused; background: write windows on a writer thread (True) or inline in the calling thread
+    (False); max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period: seconds between
+    attempts to write windows that could not be written (disk full, unwritable directory, min_free_mb
+    reached: they are kept in memory, in order, up to max_held_messages messages; beyond, the oldest are
+    dropped and counted as lost); give_up_after, close_retry: see ``window_writer.WindowWriter`` (offline use:
+    lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
+    memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
+    half of it (see ``WindowBuffer``).
 
-    Thread-safe: ``on_message``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be called
-    from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
+    Thread-safe: ``on_message``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be
+    called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
 
     def __init__(self, model, directory, fmt=DEFAULT_FORMAT, pre=DEFAULT_PRE, post=DEFAULT_POST,
@@ -125,28 +112,43 @@ class SmartLogger(object):
                  enabled=True, background=True, retrigger=DEFAULT_RETRIGGER, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
-                 close_retry=0.0):
-        self.classify_every = Span.parse(classify_every, 'classify_every')
-        if self.classify_every.count == 0:
-            raise ValueError('classify_every: 0 messages; use 1 to classify every message')
-        if retrigger not in RETRIGGER_MODES:
-            raise ValueError('retrigger: %r is not one of %s' % (retrigger, ', '.join(RETRIGGER_MODES)))
-        self.retrigger = retrigger
-        self.model = model
-        self.config = model.config
-        self.threshold = float(model.threshold)
+                 close_retry=0.0, triggers=(), input_topics=None):
+        if not driving_topic:
+            raise ValueError('driving_topic: must not be empty')
+        self.driving_topic = driving_topic
+        triggers = list(triggers)
+        if model is not None:
+            inputs = model.config.feature.inputs[1:]
+            others = [role for role, _ in inputs] if input_topics is None else list(input_topics)
+            triggers.insert(0, ClassifierTrigger('classifier', model, [driving_topic] + others,
+                                                 classify_every=classify_every, retrigger=retrigger))
+        if not any(isinstance(trigger, ManualTrigger) for trigger in triggers):
+            triggers.append(ManualTrigger())
+        self.triggers = _check_triggers(triggers)
+        self.classifiers = [t for t in self.triggers if isinstance(t, ClassifierTrigger)]
+        self.manual = [t for t in self.triggers if isinstance(t, ManualTrigger)][0]
+        primary = self.classifiers[0] if self.classifiers else None
+        self.model = primary.model if primary else None
+        self.config = primary.config if primary else None
+        self.threshold = primary.threshold if primary else float('nan')
+        self.window = self.config.span if primary else None
+        self.classify_every = primary.classify_every if primary else Span.parse(classify_every, 'classify_every')
+        self.retrigger = primary.retrigger if primary else retrigger
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
         self.max_window = Span.parse(max_window, 'max_window')
-        self.window = self.config.span
-        if not driving_topic:
-            raise ValueError('driving_topic: must not be empty')
-        self.driving_topic = driving_topic
-        self.side_topics = None if side_topics is None else frozenset(side_topics) - {driving_topic}
+        watched = set().union(*(trigger.topics for trigger in self.triggers))
+        self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self.max_buffer_mb = max_buffer_mb
-        self._types = {}  # side topic -> its message type (the first seen)
+        self._expected = topic_types(self.triggers)  # topic -> the type its triggers read
+        self._types = {}  # other topics -> their message type (the first seen)
+        self._by_topic = collections.defaultdict(list)
+        for trigger in self.triggers:
+            for topic in trigger.topics:
+                self._by_topic[topic].append(trigger)
+        self._timed = [trigger for trigger in self.triggers if trigger.watches_time]
         self._lock = threading.RLock()
         self._stats = _Stats()
         self._raw = msg_codec.RowJsonCounter()
@@ -203,15 +205,31 @@ class SmartLogger(object):
                 return
             stamp = features_mod.stamp_of(msg, time.time() if stamp is None else stamp)
             record = Record(stamp, topic, msg, self._cost(msg, size))
-            if topic != self.driving_topic:
+            if topic == self.driving_topic:
+                self._add_driving(record)
+            else:
                 self._complete(self._buffer.add_side(record))
+            for trigger in self._by_topic.get(topic, ()):
+                self._fire(trigger.on_record(record))
+            for trigger in self._timed:
+                self._fire(trigger.on_time(stamp))
+
+    def tick(self, stamp):
+        """Message time has reached ``stamp`` (float s) although no message came: lets the triggers that watch
+        for silence fire. The node calls it periodically."""
+        with self._lock:
+            if self._closed or not self._enabled:
                 return
-            self._add_driving(record)
+            for trigger in self._timed:
+                self._fire(trigger.on_time(float(stamp)))
 
-    def trigger_now(self, reason='manual'):
-        """Save a window around the newest driving message now (``post`` messages after it still follow).
+    def trigger_now(self, reason='manual', before=None, after=None):
+        """Save a window around the newest driving message now, with the manual trigger: ``reason`` (text),
+        ``before`` and ``after`` in seconds (None or 0: ``pre`` and ``post``; the past only as far as the
+        logger holds it, at most ``pre``).
 
-        Returns ``(True, message)`` or ``(False, why not)``: disabled, closed or no driving message yet.
+        Returns ``(True, message)`` or ``(False, why not)``: disabled, closed, no driving message yet, or a
+        bad span.
         """
         with self._lock:
             if self._closed:
@@ -220,8 +238,14 @@ class SmartLogger(object):
                 return False, 'the logger is disabled'
             if self._last_stamp is None:
                 return False, 'no %s message received yet' % self.driving_topic
-            self._trigger(reason, float('nan'))
-            return True, 'window triggered at %.3f (%s)' % (self._last_stamp, reason)
+            try:
+                fire = self.manual.request(reason, before, after)
+            except ValueError as error:
+                return False, str(error)
+            self._fire([fire])
+            start = self._buffer.window_start
+            return True, 'window triggered at %.3f (%s)%s' % (
+                self._last_stamp, fire.reason, '' if start is None else ', from %.3f' % start)
 
     def set_enabled(self, flag):
         """Enable or pause the logger. Pausing completes any open window with what it holds; messages seen
@@ -252,16 +276,19 @@ class SmartLogger(object):
         return self.writer.close(timeout)
 
     def stats(self):
-        """A snapshot of the counters (a dict; see the node's diagnostics for their meaning)."""
+        """A snapshot of the counters (a dict; see the node's diagnostics for their meaning); ``triggers``:
+        ``{name: that trigger's counters}``."""
         with self._lock:
             buffered = self._buffer.buffered_messages
             buffered_bytes = self._buffer.buffered_bytes
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
         written = self.writer.stats()
+        triggers = {trigger.name: trigger.stats() for trigger in self.triggers}
+        classified = [triggers[trigger.name] for trigger in self.classifiers]
+        calls = sum(t['classifier_calls'] for t in classified)
         s = self._stats
         with s.lock:
-            calls = s.classifier_calls
             result = {
                 'enabled': self._enabled,
                 'messages_seen': s.messages_seen,
@@ -280,9 +307,12 @@ class SmartLogger(object):
                 'write_errors': written['write_errors'],
                 'last_error': written['last_error'],
                 'classifier_calls': calls,
-                'classifier_mean_us': (s.classifier_seconds / calls * 1e6) if calls else 0.0,
-                'classifier_max_us': s.classifier_max * 1e6,
-                'anomalous_messages': s.anomalous,
+                'classifier_mean_us': (sum(t['classifier_seconds'] for t in classified) / calls * 1e6
+                                       if calls else 0.0),
+                'classifier_max_us': max([t['classifier_max_seconds'] for t in classified] or [0.0]) * 1e6,
+                'anomalous_messages': sum(t['anomalous_messages'] for t in classified),
+                'fires_dropped': s.fires_dropped,
+                'triggers': triggers,
                 'time_resets': resets,
                 'windows_held': written['jobs_held'],
                 'messages_held': written['messages_held'],
@@ -303,12 +333,11 @@ class SmartLogger(object):
     # -- message path ---------------------------------------------------------------------------------
 
     def _type_ok(self, topic, msg):
-        """Whether ``msg`` has the type of its topic (the model's for the driving topic, else the first type
-        seen there); other messages are counted as refused (one window file holds one type per topic)."""
+        """Whether ``msg`` has the type of its topic (the one its triggers read, else the first type seen
+        there); other messages are counted as refused (one window file holds one type per topic)."""
         msg_type = getattr(msg, '_type', type(msg).__name__)
-        if topic == self.driving_topic:
-            expected = self.config.topic_type
-        else:
+        expected = self._expected.get(topic)
+        if expected is None:
             expected = self._types.setdefault(topic, msg_type)
         if msg_type == expected:
             return True
@@ -318,7 +347,7 @@ class SmartLogger(object):
         return False
 
     def _new_buffer(self):
-        buffer = WindowBuffer(window=self.window, pre=self.pre, post=self.post, max_window=self.max_window,
+        buffer = WindowBuffer(pre=self.pre, post=self.post, max_window=self.max_window,
                               max_buffer_mb=self.max_buffer_mb, cost=self._cost)
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
@@ -326,94 +355,36 @@ class SmartLogger(object):
         else:
             self._resets = self._trimmed = 0
         self._buffer = buffer
-        self._features = features_mod.OdometryFeatures(self.config)
-        self._window_rows = features_mod.FeatureWindow(self.config)  # the same rows as the buffer's window
-        self._clock = None       # newest driving stamp since the buffer (re)started: as WindowBuffer's
-        self._since_scored = None  # driving messages since the last score (None: score at the next chance)
-        self._scored_at = None     # stamp of the last score
-        self._recent = collections.deque()  # stamps of the newest driving message and the pre before it
+        for trigger in self.triggers:
+            trigger.reset()
         self._last_stamp = None
-        self._armed = True  # 'onset': the next anomalous score triggers (no anomalous score since a nominal one)
 
     def _add_driving(self, record):
-        buffer = self._buffer
-        resets = buffer.resets
-        stamp = record.stamp
-        row = self._features.row_values(record.msg, stamp)
-        done = buffer.add(record, row)
-        if buffer.resets != resets:  # time jumped backwards: the buffer started over
-            self._recent.clear()
-            self._armed = True
-            self._window_rows.clear()
-            self._clock = None
-            self._since_scored = self._scored_at = None
-        # The ring-array window gets what WindowBuffer's feature window got: the row at the buffer's clock.
-        self._clock = stamp if self._clock is None or stamp > self._clock else self._clock
-        self._window_rows.add(self._clock, row)
-        self._last_stamp = stamp
-        self._note_recent(stamp)
-        self._complete(done)
-        if buffer.feature_window_full and self._features.covers(self.window, stamp):
-            if not self._due(stamp):
-                return
-            started = time.perf_counter()
-            vector = self._window_rows.vector()
-            anomalous, score = self.model.is_anomalous(vector)
-            elapsed = time.perf_counter() - started
-            with self._stats.lock:
-                self._stats.classifier_calls += 1
-                self._stats.classifier_seconds += elapsed
-                self._stats.classifier_max = max(self._stats.classifier_max, elapsed)
-                if anomalous:
-                    self._stats.anomalous += 1
-            if anomalous and (self._armed or self.retrigger == 'every'):
-                self._trigger('classifier', float(score))
-            self._armed = not anomalous
-        else:
-            self._armed = True  # not scored (start, after a gap): the next anomalous score is an onset
-            self._since_scored = self._scored_at = None  # score as soon as the window is whole again
+        self._complete(self._buffer.add(record))
+        self._last_stamp = record.stamp
 
-    def _due(self, stamp):
-        """Whether this driving message is scored (classify_every); counts the messages since the last."""
-        every = self.classify_every
-        if self._since_scored is not None:
-            self._since_scored += 1
-            if every.is_duration:
-                if stamp - self._scored_at < every.seconds - _CLASSIFY_SLACK and stamp >= self._scored_at:
-                    return False
-            elif self._since_scored < every.count:
-                return False
-        self._since_scored = 0
-        self._scored_at = stamp
-        return True
+    def _fire(self, fires):
+        """Open or extend windows for the Fires of a trigger."""
+        for fire in fires:
+            if self._last_stamp is None:  # nothing to keep around yet
+                with self._stats.lock:
+                    self._stats.fires_dropped += 1
+                continue
+            announce = not self._buffer.window_active
+            done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post)
+            if announce:
+                with self._stats.lock:
+                    self._stats.windows_opened += 1
+                start = self._buffer.window_start
+                self._emit(Event(OPENED, self._last_stamp, fire.reason, fire.score, self._threshold_of(fire.name),
+                                 self._last_stamp if start is None else start, None, 0, '', 0, '', fire.name))
+            self._complete(done)
 
-    def _note_recent(self, stamp):
-        recent = self._recent
-        recent.append(stamp)
-        if self.pre.is_duration:
-            newest = max(recent[-1], stamp)
-            while recent and recent[0] < newest - self.pre.seconds:
-                recent.popleft()
-        else:
-            while len(recent) > self.pre.count + 1:
-                recent.popleft()
-
-    def _window_active(self):
-        """Whether a window is open or complete but not yet written (a new trigger then joins it)."""
-        buffer = self._buffer
-        # WindowBuffer has no public view of its pending window yet; read it without changing it.
-        pending = getattr(buffer, '_pending', None)
-        return buffer.window_open or (pending is not None and bool(pending.records))
-
-    def _trigger(self, reason, score):
-        announce = not self._window_active()
-        done = self._buffer.trigger(reason, score)
-        if announce:
-            with self._stats.lock:
-                self._stats.windows_opened += 1
-            start = self._recent[0] if self._recent else self._last_stamp
-            self._emit(Event(OPENED, self._last_stamp, reason, score, self.threshold, start, None, 0, '', 0, ''))
-        self._complete(done)
+    def _threshold_of(self, name):
+        for trigger in self.classifiers:
+            if trigger.name == name:
+                return trigger.threshold
+        return self.threshold
 
     def _complete(self, windows):
         """Hand completed windows to the writer."""
@@ -421,15 +392,21 @@ class SmartLogger(object):
             self.writer.submit(window_writer.Job(window, self._metadata(window)))
 
     def _metadata(self, window):
-        """Smart-mode metadata added to log_format's (which already holds triggers, part, counts)."""
-        return {
-            'reason': window.triggers[0].reason if window.triggers else '',
-            'threshold': self.threshold,
+        """Smart-mode metadata added to log_format's (which already holds triggers, names, part, counts)."""
+        first = window.triggers[0] if window.triggers else None
+        names = set(log_format.trigger_name(trigger) for trigger in window.triggers)
+        meta = {
+            'reason': first.reason if first else '',
+            'trigger': log_format.trigger_name(first) if first else '',
+            'threshold': self.threshold if self.classifiers else None,
             'driving_topic': self.driving_topic,
             'pre': str(self.pre),
             'post': str(self.post),
-            'model': self.config.to_dict(),
+            'trigger_info': {t.name: t.describe() for t in self.triggers if t.name in names},
         }
+        if self.config is not None:
+            meta['model'] = self.config.to_dict()
+        return meta
 
     # -- writer events --------------------------------------------------------------------------------
 
@@ -443,36 +420,72 @@ class SmartLogger(object):
         scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
         first = window.triggers[0].stamp if window.triggers else window.start
         kind = WRITTEN if event.kind == window_writer.WRITTEN else FAILED
-        self._emit(Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'), self.threshold,
-                         window.start, window.end, len(window), event.path, event.bytes, event.error))
+        self._emit(Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
+                         self._threshold_of(metadata['trigger']), window.start, window.end, len(window), event.path,
+                         event.bytes, event.error, metadata['trigger']))
 
     def _emit(self, event):
         for callback in self._callbacks:
             callback(event)
 
 
+def _check_triggers(triggers):
+    """The triggers, each a ``triggers.Trigger`` with a name of its own; ValueError('triggers: ...')."""
+    seen = set()
+    for trigger in triggers:
+        name = getattr(trigger, 'name', None)
+        if not hasattr(trigger, 'on_record') or not hasattr(trigger, 'topics'):
+            raise ValueError('triggers: %r is not a trigger' % (trigger,))
+        if name in seen:
+            raise ValueError('triggers: two triggers are named %r' % name)
+        seen.add(name)
+    return list(triggers)
+
+
+def topic_types(triggers):
+    """``{topic: type}`` the triggers read; ValueError('topics: ...') when two read one topic as two types."""
+    types, owners = {}, {}
+    for trigger in triggers:
+        for topic, kind in trigger.topic_types().items():
+            if types.setdefault(topic, kind) != kind:
+                raise ValueError('topics: %s is %s for trigger %s and %s for trigger %s'
+                                 % (topic, types[topic], owners[topic], kind, trigger.name))
+            owners.setdefault(topic, trigger.name)
+    return types
+
+
 def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
            side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None, retrigger=DEFAULT_RETRIGGER,
            classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB,
-           retry_seconds=None):
+           retry_seconds=None, triggers=(), input_topics=None):
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
     'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
-    message saved). ``progress``: optional ``callback(messages read)``, called every PROGRESS_EVERY messages and
-    at the end. A window that cannot be written (disk full...) is retried for ``retry_seconds`` (None:
-    ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops. Raises ValueError for bad arguments,
-    ModelError for a bad model, OSError when the bag cannot be read or a window cannot be written (naming
-    ``out_dir`` and what was not written).
+    message saved). ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``);
+    ``triggers``, ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``,
+    called every PROGRESS_EVERY messages and at the end. A window that cannot be written (disk full...) is
+    retried for ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops.
+    Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag cannot be read or a
+    window cannot be written (naming ``out_dir`` and what was not written).
     """
-    from . import bagio  # rosbag: imported here so the module stays pure
     from .model import AnomalyModel
-    model = AnomalyModel.load(model_path)
+    model = AnomalyModel.load(model_path) if model_path else None
     retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
     logger = SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
                          max_window=max_window, retrigger=retrigger, classify_every=classify_every,
                          max_buffer_mb=max_buffer_mb, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
-                         give_up_after=retry_seconds, close_retry=retry_seconds)
+                         give_up_after=retry_seconds, close_retry=retry_seconds, triggers=triggers,
+                         input_topics=input_topics)
+    return replay_into(logger, bag_path, progress)
+
+
+def replay_into(logger, bag_path, progress=None):
+    """Feed every message of the bag that ``logger`` keeps or watches (its driving topic, side topics and
+    trigger topics; every topic when its side topics are None) to it, close it, and return ``replay``'s
+    summary; the same errors."""
+    from . import bagio  # rosbag: imported here so the module stays pure
+    out_dir = logger.directory
     windows = []
 
     def collect(event):
@@ -480,9 +493,17 @@ def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_P
             windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
                             'path': event.path})
     logger.on_event(collect)
+    if logger.side_topics is None:
+        bag = bagio.open_bag(bag_path)
+        try:
+            topics = sorted(bagio.topics_of(bag))
+        finally:
+            bag.close()
+    else:
+        topics = [logger.driving_topic] + sorted(logger.side_topics)
     count, stopped = 0, False
     try:
-        for record in bagio.read_messages(bag_path, [topic] + [t for t in side_topics if t != topic]):
+        for record in bagio.read_messages(bag_path, topics):
             logger.on_message(record.topic, record.msg, record.stamp)
             count += 1
             if progress is not None and count % PROGRESS_EVERY == 0:

@@ -13,6 +13,8 @@ Published topics
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
+  ``~trigger_window`` (cc_log/TriggerWindow): the same with a reason and, optionally, the seconds before and
+  after to keep.
   ``~enable`` (std_srvs/SetBool): resume (true) or pause (false) logging.
 
 Parameters (defaults below as module constants; each resolved value is logged once)
@@ -57,7 +59,6 @@ jumping backwards (a bag played again) restarts the buffer instead of failing.
 """
 import collections
 import math
-import os
 import sys
 import threading
 import time
@@ -72,12 +73,13 @@ from . import log_format
 from . import msg_codec
 from . import safe_input
 from . import smart_logger
-from .model import AnomalyModel, ModelError
-from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_name, recover_leftovers,
-                          resolve_directory, writer_status)
+from . import config
+from .model import AnomalyModel
+from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
+                          recover_leftovers, resolve_directory, writer_status)
+from .triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
-DRIVING_TOPIC = 'odom'
 DEFAULT_FORMAT = smart_logger.DEFAULT_FORMAT
 DEFAULT_PRE = str(smart_logger.DEFAULT_PRE)
 DEFAULT_POST = str(smart_logger.DEFAULT_POST)
@@ -95,6 +97,7 @@ DEFAULT_CLASSIFY_EVERY = smart_logger.DEFAULT_CLASSIFY_EVERY
 DEFAULT_INTAKE_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
 DEFAULT_INTAKE_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
 FEED_BATCH_DELAY = 0.01              # seconds the feeder lets messages gather before draining them in a batch
+TICK_PERIOD = 0.5                    # seconds (ROS time) between ticks for the triggers that watch for silence
 
 
 # -- message intake (shared with collect_node) ----------------------------------------------------------
@@ -193,7 +196,7 @@ class Intake(object):
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
         self.batch_delay = float(batch_delay)
-        self.decoder = MessageDecoder({driving_class._type: driving_class})
+        self.decoder = MessageDecoder({driving_class._type: driving_class} if driving_class is not None else {})
         self.driving_topic = rospy.resolve_name(driving_topic)
         self.subscribers = [rospy.Subscriber(self.driving_topic, rospy.AnyMsg, self._enqueue, self.driving_topic,
                                              queue_size=None)]
@@ -273,61 +276,68 @@ class SmartNode(object):
     """Parameters, subscribers, publishers, services and diagnostics around a SmartLogger."""
 
     def __init__(self):
-        from cc_log.msg import AnomalyEvent  # generated message: only in a built workspace
+        from cc_log.msg import AnomalyEvent  # generated message and service: only in a built workspace
+        from cc_log.srv import TriggerWindow
         self._event_class = AnomalyEvent
         params = Params()
-        model_path = params.text('model', '', log=False)
-        if not model_path:
-            raise ConfigError('~model: required (the model file written by learn mode)')
+
+        def given(reader, name, *args):
+            """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
+            return reader(name, *args) if params.given(name) else None
+        model_path = given(params.text, 'model', '')
+        cfg = node_config(params, {
+            'pre': given(params.span, 'pre', DEFAULT_PRE), 'post': given(params.span, 'post', DEFAULT_POST),
+            'max_window': given(params.span, 'max_window', DEFAULT_MAX_WINDOW),
+            'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
+            'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
+            'max_disk_mb': given(params.number, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
+            'min_free_mb': given(params.number, 'min_free_mb', DEFAULT_MIN_FREE_MB),
+            'max_buffer_mb': given(params.number, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
+            {'model': model_path,
+             'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES),
+             'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY)})
+        if not cfg.triggers:
+            raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
         try:
-            self.model = AnomalyModel.load(os.path.expanduser(model_path))
-        except ModelError as error:
-            raise ConfigError('~model: %s' % error)
-        rospy.loginfo('~model: %s', model_path)
-        if params.value('window', '', log=False) not in ('', None):
-            span = params.span('window', '')
-            if span != self.model.config.span:
-                raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
-                                  'the model; leave ~window unset)' % (span, self.model.config.window))
-        rospy.loginfo('model: %s features, window %s, threshold %g', self.model.config.feature_set,
-                      self.model.config.window, self.model.threshold)
+            triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
+            options = cfg.logger_options(triggers, rospy.resolve_name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+        classifiers = [t for t in triggers if isinstance(t, ClassifierTrigger)]
+        window = given(params.span, 'window', '')
+        named = [t for t in classifiers if t.name == 'classifier']
+        if window is not None and named and window != named[0].config.span:
+            raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
+                              'the model; leave ~window unset)' % (window, named[0].config.window))
+        self.model = classifiers[0].model if classifiers else None
+        for trigger in triggers:
+            rospy.loginfo('trigger %s: %s', trigger.name, trigger.describe())
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         self.leftovers = recover_leftovers(self.directory)
-        max_disk_mb = params.number('max_disk_mb', DEFAULT_MAX_DISK_MB)
-        min_free_mb = params.number('min_free_mb', DEFAULT_MIN_FREE_MB)
-        fmt = params.choice('format', DEFAULT_FORMAT, log_format.Format.ALL)
-        pre = params.span('pre', DEFAULT_PRE)
-        post = params.span('post', DEFAULT_POST)
-        max_window = params.span('max_window', DEFAULT_MAX_WINDOW)
-        retrigger = params.choice('retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES)
-        topics = params.topics('topics', DEFAULT_TOPICS)
         enabled = params.boolean('enabled', DEFAULT_ENABLED)
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        classify_every = params.span('classify_every', DEFAULT_CLASSIFY_EVERY)
         intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES,
                                             minimum=1, integer=True)
         intake_max_mb = params.number('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
-        max_buffer_mb = params.number('max_buffer_mb', DEFAULT_MAX_BUFFER_MB)
-        driving_class = roslib.message.get_message_class(self.model.config.topic_type)
-        if driving_class is None:
-            raise ConfigError('~model: message type %s is not installed' % self.model.config.topic_type)
-        driving_topic = rospy.resolve_name(DRIVING_TOPIC)
-        side_topics = [rospy.resolve_name(topic) for topic in topics]
         try:
-            self.logger = smart_logger.SmartLogger(
-                self.model, self.directory, fmt, pre, post, driving_topic=driving_topic,
-                side_topics=side_topics, max_window=max_window, enabled=enabled, max_disk_mb=max_disk_mb,
-                min_free_mb=min_free_mb, retrigger=retrigger, classify_every=classify_every,
-                max_buffer_mb=max_buffer_mb, close_retry=CLOSE_RETRY)
+            self.logger = smart_logger.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
+                                                   **options)
         except ValueError as error:
             raise ConfigError('~%s' % error)
+        types = smart_logger.topic_types(triggers)
+        driving_class = config.installed_class(types[self.logger.driving_topic]) \
+            if self.logger.driving_topic in types else None
+        if self.logger.driving_topic in types and driving_class is None:
+            raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
-        self.intake = Intake(self.logger, DRIVING_TOPIC, driving_class, topics, max_messages=intake_max_messages,
-                             max_bytes=int(intake_max_mb * 1000 ** 2))
+        self.intake = Intake(self.logger, self.logger.driving_topic, driving_class, sorted(self.logger.side_topics),
+                             max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
+                         rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
+        self._ticker = rospy.Timer(rospy.Duration(TICK_PERIOD), self._tick)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
@@ -339,16 +349,16 @@ class SmartNode(object):
             return
         kind = {smart_logger.OPENED: self._event_class.OPENED, smart_logger.WRITTEN: self._event_class.WRITTEN,
                 smart_logger.FAILED: self._event_class.FAILED}[event.kind]
-        msg = self._event_class(event=kind, reason=event.reason, score=event.score, threshold=event.threshold,
-                                start=time_of(event.start), end=time_of(event.end), messages=event.messages,
-                                path=event.path, bytes=event.bytes)
+        msg = self._event_class(event=kind, trigger=event.trigger, reason=event.reason, score=event.score,
+                                threshold=event.threshold, start=time_of(event.start), end=time_of(event.end),
+                                messages=event.messages, path=event.path, bytes=event.bytes)
         msg.header.stamp = time_of(event.stamp)
         if event.kind == smart_logger.WRITTEN:
             rospy.loginfo('window written: %s (%d messages, %d bytes)', event.path, event.messages, event.bytes)
         elif event.kind == smart_logger.FAILED:
             rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
         else:
-            rospy.loginfo('window opened (%s, score %.4g)', event.reason, event.score)
+            rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, event.reason, event.score)
         try:
             self.events.publish(msg)
         except rospy.ROSException:  # shutting down
@@ -358,6 +368,17 @@ class SmartNode(object):
         ok, message = self.logger.trigger_now('manual')
         # Messages still in the intake queue came before the call: the trigger applies to the newest fed.
         return TriggerResponse(success=ok, message=message)
+
+    def _trigger_window(self, request):
+        ok, message = self.logger.trigger_now(request.reason, request.before, request.after)
+        return ok, message
+
+    def _tick(self, _event):
+        """Message time passes even when no message comes: triggers watching for silence hear of it."""
+        try:
+            self.logger.tick(rospy.get_rostime().to_sec())
+        except Exception as error:  # the timer thread must go on
+            rospy.logerr_throttle(10.0, 'tick: %s: %s' % (type(error).__name__, error))
 
     def _enable(self, request):
         self.logger.set_enabled(request.data)
@@ -403,6 +424,9 @@ class SmartNode(object):
             ('intake queue', self.intake.queue.qsize()),
             ('intake dropped (queue full)', overflowed),
             ('classify every', str(self.logger.classify_every)),
+            ('triggers fired', ', '.join('%s: %d' % (name, counters['fired'])
+                                         for name, counters in sorted(stats['triggers'].items()))),
+            ('fires dropped (no message yet)', stats['fires_dropped']),
             ('time resets', stats['time_resets']),
             ('messages refused', stats['messages_refused']),
             ('messages refused (unsafe definition)', self.intake.decoder.refused),
@@ -411,6 +435,7 @@ class SmartNode(object):
 
     def shutdown(self):
         """Feed what is queued, write the last windows, stop diagnostics."""
+        self._ticker.shutdown()
         self.intake.stop()
         if not self.logger.close(CLOSE_TIMEOUT):
             rospy.logerr('windows still unwritten after %g s', CLOSE_TIMEOUT)

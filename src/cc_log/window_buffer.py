@@ -1,13 +1,10 @@
-"""The window buffer shared by collect, learn and smart mode.
+"""The window buffer of smart mode.
 
-It holds two things for the driving topic (the topic the classifier watches):
-
-- the *feature window*: the feature rows of the last ``window`` messages, which the classifier turns into
-  one vector;
-- the *logging windows*: on an anomaly at message i, messages i-pre ... i+post are kept. An anomaly inside
-  an open window extends it, and two windows that touch or overlap become one, so no message is written
-  twice and none inside a window is skipped. Messages of other topics are buffered by time and saved in
-  the windows whose time span holds them.
+It holds the *logging windows* of the driving topic (the topic whose messages count ``pre`` and ``post``):
+on a trigger at message i, messages i-pre ... i+post are kept. A trigger inside an open window extends it,
+and two windows that touch or overlap become one, so no message is written twice and none inside a window
+is skipped. Messages of other topics are buffered by time and saved in the windows whose time span holds
+them. (The feature window the classifiers score is ``features.FeatureWindow``.)
 
 Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
 window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``). An open window is
@@ -24,14 +21,15 @@ import sys
 
 from .spans import Span
 
-Record = collections.namedtuple('Record', 'stamp topic msg cost', defaults=(0,))
+Record = collections.namedtuple('Record', 'stamp topic msg cost raw connection', defaults=(0, None, None))
 Record.__doc__ = """One message: its stamp (float seconds), topic, message object and estimated memory in
-bytes (``cost``; 0: not known, WindowBuffer estimates it)."""
+bytes (``cost``; 0: not known, WindowBuffer estimates it); ``raw`` and ``connection`` may carry its serialized
+bytes and connection header (dict) alongside or instead of the decoded ``msg`` (None when not kept)."""
 
-Trigger = collections.namedtuple('Trigger', 'stamp reason score')
-Trigger.__doc__ = 'Why a window was opened or extended: stamp of the message, reason, classifier score.'
+Trigger = collections.namedtuple('Trigger', 'stamp reason score name', defaults=(None,))
+Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
+NaN when none) and the name of the trigger (None: the reason is the name, as in files written before names)."""
 
-DEFAULT_WINDOW = Span.messages(500)
 DEFAULT_PRE = Span.messages(100)
 DEFAULT_POST = Span.messages(100)
 DEFAULT_MAX_WINDOW = Span.messages(100000)
@@ -148,33 +146,33 @@ class _OpenWindow(object):
         self.triggers = []
         self.part = 0
         self.continued = False  # a part was written: side records after it belong to the next part
-        self.remaining = None  # messages still to take after the last trigger (count post)
+        self.remaining = 0     # messages still to take after the last trigger (count post)
         self.until = None      # last stamp to take (duration post)
         self.extend(trigger, post)
 
     def extend(self, trigger, post):
+        """Add a trigger; the window takes what the longest post of its triggers still asks for."""
         self.triggers.append(trigger)
         if post.is_duration:
-            self.until = trigger.stamp + post.seconds
+            until = trigger.stamp + post.seconds
+            self.until = until if self.until is None else max(self.until, until)
         else:
-            self.remaining = post.count
+            self.remaining = max(self.remaining, post.count)
 
     def takes(self, stamp):
         """Whether a driving record at ``stamp`` still belongs to this window."""
-        if self.until is not None:
-            return stamp <= self.until
-        return self.remaining > 0
+        return self.remaining > 0 or (self.until is not None and stamp <= self.until)
 
     def take(self, record):
         self.records.append(record)
-        if self.remaining is not None:
+        if self.remaining > 0:
             self.remaining -= 1
 
 
 class WindowBuffer(object):
-    """Sliding feature window plus logging windows around anomalies.
+    """Logging windows around triggers.
 
-    Call ``add`` for every driving message (with its feature row, if any), ``add_side`` for messages of
+    Call ``add`` for every driving message, ``add_side`` for messages of
     other topics, ``trigger`` when the last driving message is anomalous, and ``flush`` at the end of the
     stream. ``add``, ``add_side``, ``trigger`` and ``flush`` return the windows completed by that call (a
     list of LogWindow); a window is complete once ``pre`` further messages have shown that the next window
@@ -182,15 +180,11 @@ class WindowBuffer(object):
     parts). ``cost``: the MemoryCost estimating records that carry no cost.
     """
 
-    def __init__(self, window=DEFAULT_WINDOW, pre=DEFAULT_PRE, post=DEFAULT_POST,
-                 max_window=DEFAULT_MAX_WINDOW, jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE,
-                 max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None):
-        self.window = Span.parse(window, 'window')
+    def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
+                 jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None):
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
         self.max_window = Span.parse(max_window, 'max_window')
-        if self.window.count == 0 or self.window.seconds == 0:
-            raise ValueError('window: must hold at least one message')
         if self.max_window.count == 0 or self.max_window.seconds == 0:
             raise ValueError('max_window: must hold at least one message')
         if (self.pre.is_duration == self.max_window.is_duration) and \
@@ -201,39 +195,12 @@ class WindowBuffer(object):
         self._cost = cost if cost is not None else MemoryCost()
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
-        self._rows = collections.deque()   # (stamp, feature row) of the feature window
-        self._rows_since = None            # stamp of the first row since the last reset
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
         self._side = collections.deque()   # records of other topics, by time
         self._open = None                  # window taking driving records
         self._pending = None               # closed window that the next one may still touch
         self._clock = None                 # newest stamp seen (stamps may jitter backwards a little)
         self.resets = 0                    # times time jumped backwards and the buffer started over
-
-    # -- feature window -------------------------------------------------------------------------------
-
-    def feature_rows(self):
-        """Feature rows of the feature window, oldest first (a list; empty until rows are added)."""
-        return [row for _, row in self._rows]
-
-    @property
-    def feature_window_full(self):
-        """True once the feature window spans ``window`` messages or seconds."""
-        if not self._rows:
-            return False
-        if self.window.is_duration:
-            return self._rows[-1][0] - self._rows_since >= self.window.seconds
-        return len(self._rows) >= self.window.count
-
-    def _add_row(self, stamp, row):
-        if self._rows_since is None or (self.window.is_duration and stamp - self._rows[-1][0] > self.window.seconds):
-            self._rows_since = stamp  # after a gap longer than the window, it fills again from here
-        self._rows.append((stamp, row))
-        if self.window.is_duration:
-            while self._rows[0][0] < stamp - self.window.seconds:
-                self._rows.popleft()
-        elif len(self._rows) > self.window.count:
-            self._rows.popleft()
 
     # -- logging windows ------------------------------------------------------------------------------
 
@@ -256,16 +223,14 @@ class WindowBuffer(object):
                 held += len(window.records)
         return held
 
-    def add(self, record, row=None):
-        """Add a driving record (and its feature row); return the windows this completes."""
+    def add(self, record):
+        """Add a driving record; return the windows this completes."""
         record = self._costed(record)
         done = []
         if self._clock is not None and record.stamp < self._clock - self.jump_back_tolerance:
             done.extend(self.flush())
             self._reset()
         self._clock = record.stamp if self._clock is None else max(self._clock, record.stamp)
-        if row is not None:
-            self._add_row(self._clock, row)
         if self._open is not None:
             if self._open.takes(self._clock):
                 self._open.take(record)
@@ -277,7 +242,7 @@ class WindowBuffer(object):
             self._pending, self._open = self._open, None
         self._ring.append(record)
         self._bytes += record.cost
-        if self._prune_ring() and self._pending is not None:
+        if self._trim_ring(self.pre) and self._pending is not None:
             if self._pending.records:
                 done.append(self._emit(self._pending))
             self._pending = None
@@ -293,28 +258,60 @@ class WindowBuffer(object):
         self._bytes += record.cost
         return self._enforce_budget()
 
-    def trigger(self, reason, score=None):
-        """Mark the last driving record as anomalous: open a window around it or extend the open one.
+    def trigger(self, reason, score=None, name=None, pre=None, post=None):
+        """Mark the last driving record: open a window around it or extend the open one.
 
-        Returns the windows this completes: only parts of a window that reached max_window, since a new
-        window either extends the open one or merges with the pending one (a pending window is completed
-        as soon as a message after it leaves the pre buffer).
+        ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the
+        buffer's). A ``pre`` longer than the buffer's gets what the buffer holds (its ``pre``); a window that
+        is open or may still merge keeps what it has. Returns the windows this completes: only parts of a
+        window that reached max_window, since a new window either extends the open one or merges with the
+        pending one (a pending window is completed as soon as a message after it leaves the pre buffer).
         """
         if self._clock is None:
             raise ValueError('trigger: no message has been added yet')
-        trigger = Trigger(self._clock, reason, score)
+        trigger = Trigger(self._clock, reason, score, name)
+        post = self.post if post is None else Span.parse(post, 'post')
         if self._open is not None:
-            self._open.extend(trigger, self.post)
+            self._open.extend(trigger, post)
             return []
         if self._pending is not None:
             # Every record after the pending window is still in the ring: the new window touches it.
             self._open, self._pending = self._pending, None
             self._open.records.extend(self._ring)
-            self._open.extend(trigger, self.post)
+            self._open.extend(trigger, post)
         else:
-            self._open = _OpenWindow(self._ring, trigger, self.post)
+            if pre is not None:
+                self._trim_ring(Span.parse(pre, 'pre'))
+            self._open = _OpenWindow(self._ring, trigger, post)
         self._ring.clear()
         return self._split(self._open)
+
+    @property
+    def window_active(self):
+        """Whether a window is open or complete but not yet handed on (a new trigger then joins it)."""
+        return self._open is not None or (self._pending is not None and bool(self._pending.records))
+
+    @property
+    def window_start(self):
+        """Stamp of the first driving record of the open window (None when none is open or it was split)."""
+        if self._open is None or not self._open.records or self._open.continued:
+            return None
+        return self._open.records[0].stamp
+
+    def _trim_ring(self, pre):
+        """Keep the newest driving record plus ``pre`` before it (the others stay outside every window);
+        return whether any was dropped."""
+        ring = self._ring
+        dropped = False
+        if pre.is_duration:
+            while ring and ring[0].stamp < self._clock - pre.seconds:
+                self._bytes -= ring.popleft().cost
+                dropped = True
+        else:
+            while len(ring) > pre.count + 1:
+                self._bytes -= ring.popleft().cost
+                dropped = True
+        return dropped
 
     def flush(self):
         """Complete every window now (end of stream): the open one is written with what it has."""
@@ -328,8 +325,6 @@ class WindowBuffer(object):
     def _reset(self):
         """Start over after time jumped backwards (bag loop, simulator reset)."""
         self.resets += 1
-        self._rows.clear()
-        self._rows_since = None
         self._bytes -= sum(record.cost for record in self._ring) + sum(record.cost for record in self._side)
         self._ring.clear()
         self._side.clear()
@@ -338,7 +333,7 @@ class WindowBuffer(object):
     def _costed(self, record):
         if record.cost:
             return record
-        return Record(record.stamp, record.topic, record.msg, self._cost(record.msg))
+        return record._replace(cost=self._cost(record.msg))
 
     def _over_budget(self):
         return self.max_buffer_bytes and self._bytes > self.max_buffer_bytes
@@ -386,19 +381,6 @@ class WindowBuffer(object):
             window.records = window.records[size:]
             window.continued = True
         return done
-
-    def _prune_ring(self):
-        """Keep the newest driving record plus ``pre`` before it; return whether any was dropped."""
-        dropped = False
-        if self.pre.is_duration:
-            while self._ring[0].stamp < self._clock - self.pre.seconds:
-                self._bytes -= self._ring.popleft().cost
-                dropped = True
-        else:
-            while len(self._ring) > self.pre.count + 1:
-                self._bytes -= self._ring.popleft().cost
-                dropped = True
-        return dropped
 
     def _prune_side(self):
         """Drop records of other topics older than every driving record still held."""

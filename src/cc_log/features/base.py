@@ -1,0 +1,293 @@
+"""What every feature set shares: the registry, ``FeatureSet`` (message -> row), ``FeatureConfig``.
+
+A feature set turns the messages of its input topics into per-message feature *rows* and a window of rows
+into one fixed-length *vector* the model scores. It declares:
+
+- ``inputs``: ``((role, message type), ...)``; the first input makes the rows (one per message, and its
+  stamps are the feature window's clock); messages of the others only update the set's state
+  (``observe``), e.g. the latest velocity command;
+- ``columns``: the names of the row's entries; ``vector_names(span)`` those of the vector;
+- ``read(msg)``: the numbers it takes from a message of the first input (a tuple of floats) and
+  ``make_row(stamp, values)``: the row (a tuple of floats; None rejects the message);
+- ``vector(array, span)``: the vector of a window (a 2-D array of rows, oldest first); by default the
+  mean, std, min and max of every column (``ordered = False``: the order of the rows does not matter).
+
+``register`` adds a class to the registry under its ``name``; ``get(name)`` finds it (ValueError naming the
+feature set otherwise). The base class handles bad input and irregular time the same way for every set: a
+message with a non-finite or missing field never raises, its row repeats the last good row (zeros before
+any) and ``rejected`` counts it; sets that use derivatives call ``_step(stamp)``: a repeated stamp (closer
+than ``min_dt``) keeps the previous derivatives, time going backwards or a gap longer than ``max_dt``
+restarts them (``restarts``), and ``covers(span, stamp)`` says whether the rows since then fill a window.
+
+Pure Python plus numpy: no rospy. Messages are read by attribute, so any object with the layout works.
+"""
+import collections
+import math
+
+import numpy as np
+
+from ..registry import Registry
+from ..spans import Span
+
+STATISTICS = ('mean', 'std', 'min', 'max')
+DEFAULT_MAX_DT = 1.0    # seconds: a longer gap between messages restarts the derivatives
+DEFAULT_MIN_DT = 1e-4   # seconds: a shorter step counts as a repeated stamp
+CLIP = 1e6              # every row value is clipped to +-CLIP so window statistics stay finite
+
+RESTART, REPEAT, STEP = 'restart', 'repeat', 'step'
+
+_REGISTRY = Registry('feature_set', 'name')
+names = _REGISTRY.names
+get = _REGISTRY.get
+
+
+def register(cls):
+    """Class decorator: add a FeatureSet subclass to the registry under ``cls.name``."""
+    if not cls.name or not cls.inputs or not cls.columns:
+        raise ValueError('feature set %s: needs a name, inputs and columns' % cls.__name__)
+    return _REGISTRY.register(cls)
+
+
+def _parse_window(value):
+    span = Span.parse(value, 'window')
+    if span.count == 0 or span.seconds == 0:
+        raise ValueError('window: must hold at least one message')
+    return span
+
+
+class FeatureConfig(collections.namedtuple('FeatureConfig', 'feature_set window topic_type')):
+    """What a model was trained on: feature set, feature window (``'500'`` or ``'5s'``), and the message type
+    of the set's first input (None: the set's own).
+
+    The window is normalised to its canonical text (``'500'``, ``'5s'``); bad values raise
+    ``ValueError('<field>: <what is wrong>')``.
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, feature_set='motion', window='500', topic_type=None):
+        feature = get(feature_set)
+        span = _parse_window(window)
+        expected = feature.inputs[0][1]
+        topic_type = expected if topic_type is None else topic_type
+        if topic_type != expected:
+            raise ValueError('topic_type: %r is not supported by the %s feature set (it reads %s)'
+                             % (topic_type, feature_set, expected))
+        if feature.count_window and span.is_duration:
+            raise ValueError('window: the %s feature set needs a message count, not %s' % (feature_set, span))
+        return super(FeatureConfig, cls).__new__(cls, feature_set, str(span), topic_type)
+
+    @property
+    def span(self):
+        """The feature window as a Span."""
+        return Span.parse(self.window, 'window')
+
+    @property
+    def feature(self):
+        """The FeatureSet class of ``feature_set``."""
+        return get(self.feature_set)
+
+    def to_dict(self):
+        """Plain dict (JSON-ready)."""
+        return {'feature_set': self.feature_set, 'window': self.window, 'topic_type': self.topic_type}
+
+    @classmethod
+    def from_dict(cls, data):
+        """Build from ``to_dict()`` output; raise ValueError for anything else."""
+        if not isinstance(data, dict):
+            raise ValueError('config: expected an object, got %s' % type(data).__name__)
+        missing = [key for key in cls._fields if key not in data]
+        if missing:
+            raise ValueError('config: missing %s' % ', '.join(missing))
+        extra = sorted(set(data) - set(cls._fields))
+        if extra:
+            raise ValueError('config: unknown field(s) %s' % ', '.join(map(str, extra)))
+        for key in cls._fields:
+            if not isinstance(data[key], str):
+                raise ValueError('config: %s must be a string, got %r' % (key, data[key]))
+        return cls(data['feature_set'], data['window'], data['topic_type'])
+
+
+def stamp_of(msg, fallback):
+    """``msg.header.stamp`` in float seconds when the message has a non-zero one, else ``fallback``."""
+    header = getattr(msg, 'header', None)
+    stamp = getattr(header, 'stamp', None)
+    if stamp is not None:
+        secs = getattr(stamp, 'secs', None)
+        if secs is not None:
+            value = secs + getattr(stamp, 'nsecs', 0) * 1e-9
+            if value != 0:
+                return float(value)
+    if hasattr(fallback, 'to_sec'):
+        return fallback.to_sec()
+    return float(fallback)
+
+
+def _clip(value):
+    if value > CLIP:
+        return CLIP
+    if value < -CLIP:
+        return -CLIP
+    return value
+
+
+def clipped(values):
+    """``values`` (a tuple of floats) with every entry clipped to +-CLIP (itself when none is out of range)."""
+    if max(values) > CLIP or min(values) < -CLIP:
+        return tuple(_clip(value) for value in values)
+    return values
+
+
+def finite(values):
+    """Whether every float of ``values`` is finite."""
+    # finite iff x - x == 0 (NaN and +-inf give NaN); the sum is the fast path
+    return sum(values) * 0.0 == 0.0 or all(math.isfinite(x) for x in values)
+
+
+def statistics(array):
+    """mean, std, min, max of every column of a 2-D array, concatenated."""
+    mean = array.mean(axis=0)
+    centred = array - mean
+    std = np.sqrt(np.einsum('ij,ij->j', centred, centred) / array.shape[0])
+    return np.concatenate((mean, std, array.min(axis=0), array.max(axis=0)))
+
+
+def xyz(vector):
+    """``(x, y, z)`` of a geometry_msgs/Vector3 or Point as floats."""
+    return (float(vector.x), float(vector.y), float(vector.z))
+
+
+class FeatureSet(object):
+    """A feature set: per-message rows of its first input, a vector per window (see the module docstring).
+
+    Instances are stateful (derivatives need the previous message): one per stream of messages.
+    ``row(msg, stamp)`` returns a new 1-D float array (never NaN or inf), ``row_values(msg, stamp)`` the
+    same row as a tuple of plain floats (the per-message fast path), ``observe(role, msg, stamp)`` takes a
+    message of another input.
+    """
+
+    name = None
+    inputs = ()          # ((role, message type), ...): the first makes the rows
+    columns = ()
+    ordered = False      # True when the window vector depends on the order of the rows
+    count_window = False  # True when the window must be a message count
+
+    def __init__(self, config=None, max_dt=DEFAULT_MAX_DT, min_dt=DEFAULT_MIN_DT):
+        self.config = config if config is not None else FeatureConfig(self.name)
+        if not isinstance(self.config, FeatureConfig):
+            raise ValueError('config: expected a FeatureConfig, got %s' % type(self.config).__name__)
+        if self.config.feature_set != self.name:
+            raise ValueError('config: feature set %r, not %r' % (self.config.feature_set, self.name))
+        if not (max_dt > min_dt > 0):
+            raise ValueError('max_dt: must be larger than min_dt (%r) and positive' % min_dt)
+        self.max_dt = float(max_dt)
+        self.min_dt = float(min_dt)
+        self.rejected = 0
+        self.restarts = 0
+        self.reset()
+
+    # -- what a set defines ---------------------------------------------------------------------------
+
+    def read(self, msg):
+        """The floats this set takes from a message of its first input (AttributeError etc. when missing)."""
+        raise NotImplementedError
+
+    def make_row(self, stamp, values):
+        """The row of ``values`` (from ``read``) at ``stamp``, or None to reject the message."""
+        raise NotImplementedError
+
+    def observe(self, role, msg, stamp):
+        """Take a message of another input (``role`` as in ``inputs``); the default ignores it."""
+
+    def reset_state(self):
+        """Forget what the set keeps between messages (called by ``reset``)."""
+
+    @classmethod
+    def vector(cls, array, span):
+        """The vector of a window of rows (2-D array, oldest first); default: mean, std, min, max."""
+        return statistics(array)
+
+    @classmethod
+    def vector_names(cls, span):
+        """Names of the entries of ``vector``."""
+        return ['%s(%s)' % (stat, name) for stat in STATISTICS for name in cls.columns]
+
+    @classmethod
+    def vector_length(cls, span):
+        """Length of ``vector``."""
+        return len(cls.vector_names(span))
+
+    # -- shared machinery -----------------------------------------------------------------------------
+
+    def reset(self):
+        """Forget the previous message (derivatives restart at the next one)."""
+        self._prev_stamp = None   # stamp of the last message a derivative was taken against
+        self._last_row = None
+        self.segment_start = None  # stamp of the first row since the derivatives last restarted
+        self.segment_rows = 0      # rows since then
+        self.reset_state()
+
+    def row(self, msg, stamp):
+        """The feature row of ``msg`` received at ``stamp`` (float seconds)."""
+        return np.array(self.row_values(msg, stamp), dtype=float)
+
+    def row_values(self, msg, stamp):
+        """``row(msg, stamp)`` as a tuple of plain floats (no numpy)."""
+        try:
+            values = self.read(msg)
+            stamp = float(stamp)
+            ok = finite(values + (stamp,))
+        except (AttributeError, TypeError, ValueError, OverflowError):
+            ok = False
+        row = self.make_row(stamp, values) if ok else None
+        if row is None:
+            return self._reject()
+        row = clipped(row)
+        self._last_row = row
+        return row
+
+    def covers(self, span, stamp):
+        """True when the rows since the last restart (gap, backwards time) fill ``span`` up to ``stamp``.
+
+        A feature window is time-based and may hold rows from before a gap or only a few rows after one;
+        callers that want only whole windows of continuous data check this as well.
+        """
+        span = Span.parse(span, 'window')
+        if self.segment_start is None:
+            return False
+        if span.is_duration:
+            return stamp - self.segment_start >= span.seconds
+        return self.segment_rows >= span.count
+
+    def _reject(self):
+        self.rejected += 1
+        if self._last_row is None:
+            return (0.0,) * len(self.columns)
+        return self._last_row
+
+    def _count(self, stamp):
+        if self.segment_start is None:
+            self.segment_start = stamp
+        self.segment_rows += 1
+
+    def _step(self, stamp):
+        """``(RESTART | REPEAT | STEP, dt)`` of a message at ``stamp`` against the previous one, counting the
+        row: RESTART for the first message, time going backwards or a gap beyond max_dt (the stamp becomes
+        the reference), REPEAT for a step below min_dt (the reference stays), STEP otherwise (``stamp``
+        becomes the reference)."""
+        prev = self._prev_stamp
+        dt = None if prev is None else stamp - prev
+        if dt is None or dt < 0 or dt > self.max_dt:
+            if prev is not None:
+                self.segment_start = None
+                self.segment_rows = 0
+            self.restarts += 1
+            self._prev_stamp = stamp
+            kind = RESTART
+        elif dt < self.min_dt:
+            kind = REPEAT
+        else:
+            kind = STEP
+            self._prev_stamp = stamp
+        self._count(stamp)
+        return kind, dt

@@ -1,0 +1,114 @@
+"""The classifier trigger: a learned model (one-class SVM) over a feature set of one or more topics.
+
+The model's feature configuration names the set and its window; ``topics`` are the topic names of the set's
+inputs, in its order (the first makes the rows). Its ``features.FeatureStream`` scores the window every
+``classify_every`` (a count or a duration) once the window holds continuous data; an anomalous score
+(``score < threshold``) fires, every time (``retrigger='every'``, the paper's rule) or only at the onset
+(``'onset'``: the score must come back above the threshold before it fires again). Several classifiers may
+run at once, each with its own model, topics, ``classify_every`` and ``retrigger``. Pure: no rospy.
+"""
+import time
+
+from ..features import FeatureStream
+from ..spans import Span
+from .base import Trigger, register
+
+# Which anomalous scores fire:
+# - 'every': every message scored anomalous (the paper's rule). A feature window of W messages keeps scoring
+#   anomalous for up to W messages after the anomaly itself ended, so windows grow by that tail.
+# - 'onset': only the onset, i.e. a message scored anomalous after a message scored nominal (or the first
+#   score since the start / a restart): hysteresis at the threshold.
+RETRIGGER_MODES = ('every', 'onset')
+DEFAULT_RETRIGGER = 'every'
+
+# How often the classifier scores the feature window (a Span): '1' = every message of the first input (the
+# paper's rule), 'N' = every N-th message, a duration such as '50ms' = at most one decision per 50 ms of
+# message time (20 decisions/s: every 5th message at 100 Hz, every message at 10 Hz). Skipping saves the
+# window vector and the model on the skipped messages; an anomaly still fires at the message where it is
+# detected (at most one period late), and the window's pre part keeps the skipped messages before it.
+DEFAULT_CLASSIFY_EVERY = '50ms'
+
+
+@register
+class ClassifierTrigger(Trigger):
+    """Fires on anomalous classifier scores (see the module docstring).
+
+    model: an ``AnomalyModel`` (or anything with ``config``, ``threshold`` and ``is_anomalous(vector)``);
+    topics: a topic name or a list of them, one per input of the model's feature set.
+    """
+
+    kind = 'classifier'
+
+    def __init__(self, name, model, topics, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER,
+                 pre=None, post=None):
+        super(ClassifierTrigger, self).__init__(name, pre, post)
+        if retrigger not in RETRIGGER_MODES:
+            raise ValueError('retrigger: %r is not one of %s' % (retrigger, ', '.join(RETRIGGER_MODES)))
+        self.model = model
+        self.config = model.config
+        self.threshold = float(model.threshold)
+        self.retrigger = retrigger
+        inputs = self.config.feature.inputs
+        names = [topics] if isinstance(topics, str) else list(topics)
+        if len(names) != len(inputs) or not all(isinstance(t, str) and t for t in names):
+            raise ValueError('%s: topics: the %s feature set reads %d topic(s) (%s), got %r'
+                             % (name, self.config.feature_set, len(inputs), ', '.join(r for r, _ in inputs), topics))
+        self.input_topics = tuple(names)
+        self.topic = names[0]
+        self.topics = frozenset(names)
+        self._roles = {topic: role for topic, (role, _) in zip(names[1:], inputs[1:])}
+        self._types = {topic: kind for topic, (_, kind) in zip(names, inputs)}
+        self.classify_every = Span.parse(classify_every, 'classify_every')
+        if self.classify_every.count == 0:
+            raise ValueError('classify_every: 0 messages; use 1 to classify every message')
+        self.calls = 0
+        self.seconds = 0.0
+        self.max_seconds = 0.0
+        self.anomalous = 0
+        self.reset()
+
+    def reset(self):
+        self.stream = FeatureStream(self.config, every=self.classify_every)
+        self._armed = True  # 'onset': the next anomalous score fires (no anomalous score since a nominal one)
+
+    def topic_types(self):
+        return dict(self._types)
+
+    def on_record(self, record):
+        if record.topic in self._roles:
+            self.stream.observe(self._roles[record.topic], record.msg, record.stamp)
+            return []
+        stream = self.stream
+        resets = stream.resets
+        started = time.perf_counter()
+        vector = stream.add(record.msg, record.stamp)
+        feature_seconds = time.perf_counter() - started
+        if not stream.whole or stream.resets != resets:
+            self._armed = True  # not scored (start, after a gap or a jump back): the next anomalous score is an onset
+        if vector is None:
+            return []
+        started = time.perf_counter()
+        anomalous, score = self.model.is_anomalous(vector)
+        elapsed = feature_seconds + time.perf_counter() - started
+        self.calls += 1
+        self.seconds += elapsed
+        self.max_seconds = max(self.max_seconds, elapsed)
+        fires = []
+        if anomalous:
+            self.anomalous += 1
+            if self._armed or self.retrigger == 'every':
+                fires.append(self.fire('classifier', float(score)))
+        self._armed = not anomalous
+        return fires
+
+    def stats(self):
+        result = super(ClassifierTrigger, self).stats()
+        result.update(classifier_calls=self.calls, classifier_seconds=self.seconds,
+                      classifier_max_seconds=self.max_seconds, anomalous_messages=self.anomalous)
+        return result
+
+    def describe(self):
+        result = super(ClassifierTrigger, self).describe()
+        result.update(topics=list(self.input_topics), model=self.config.to_dict(), threshold=self.threshold,
+                      classify_every=str(self.classify_every), retrigger=self.retrigger)
+        return result

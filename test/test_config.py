@@ -1,0 +1,230 @@
+"""One configuration (YAML) for smart and collect mode, live and offline; cclog replay/collect --config."""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from cc_log import config, learning, log_format
+from cc_log.config import Config, installed_class
+from cc_log.features import FeatureConfig
+from cc_log.model import AnomalyModel
+from cc_log.triggers import ClassifierTrigger, RuleTrigger
+
+bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+HUSKY = 'husky_outdoor_2015.bag'
+HUSKY_ODOM = '/husky_velocity_controller/odom'
+
+EXAMPLE = """
+topics: [imu/data]
+driving_topic: husky_velocity_controller/odom
+format: bag-lz4
+windows: {pre: 1s, post: 2s, max: 5000}
+limits: {max_disk_mb: 50, min_free_mb: 0, max_buffer_mb: 64}
+collect: {rotate: 30s, label: drive, stride: 10}
+triggers:
+  - {name: motion, kind: classifier, model: MODEL, topics: [husky_velocity_controller/odom],
+     classify_every: '1', retrigger: onset}
+  - {name: too_fast, kind: rule, topic: husky_velocity_controller/odom, type: nav_msgs/Odometry,
+     when: 'abs(twist.twist.angular.z) > 0.4', hold_off: 3s}
+  - {name: motors, kind: rule, level: ERROR, status: 'motor*'}
+"""
+
+
+def cclog(*args):
+    return subprocess.run([sys.executable, os.path.join(ROOT, 'scripts', 'cclog')] + [str(a) for a in args],
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture
+def real_bag_path(real_bag):
+    return real_bag(HUSKY)
+
+
+@pytest.fixture(scope='module')
+def model_path(tmp_path_factory):
+    """A motion model (2 s window) trained on the first half of the Husky odometry."""
+    from conftest import REAL_DATA
+    config_ = FeatureConfig('motion', '2s')
+    _, X = bagio.feature_vectors(os.path.join(REAL_DATA, HUSKY), HUSKY_ODOM, config_, 5)  # missing: fails
+    model, _ = learning.train(X[:len(X) // 2], config=config_)
+    path = str(tmp_path_factory.mktemp('model') / 'motion.json')
+    model.save(path)
+    return path
+
+
+def write(tmp_path, text, name='robot.yaml'):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, model_path):
+    data = config.load_file(write(tmp_path, EXAMPLE.replace('MODEL', model_path)))
+    cfg = Config.from_dict(data, 'robot.yaml')
+    assert (str(cfg.pre), str(cfg.post), str(cfg.max_window), cfg.format) == ('1s', '2s', '5000', 'bag-lz4')
+    assert (cfg.max_disk_mb, cfg.max_buffer_mb, cfg.rotate, cfg.label, cfg.stride) == (50.0, 64.0, '30s', 'drive', 10)
+    triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
+    assert [type(t) for t in triggers] == [ClassifierTrigger, RuleTrigger, RuleTrigger]
+    motion, fast, motors = triggers
+    assert motion.topic == HUSKY_ODOM and str(motion.classify_every) == '1' and motion.retrigger == 'onset'
+    assert fast.topic == HUSKY_ODOM and fast.hold_off == 3.0 and motors.topic == '/diagnostics'
+    options = cfg.logger_options(triggers)
+    assert options['driving_topic'] == HUSKY_ODOM and options['side_topics'] == ['/imu/data']
+    assert [name for name, _, _ in cfg.feature_specs(AnomalyModel.load)] == ['motion']
+    assert cfg.feature_specs(AnomalyModel.load)[0][1] == FeatureConfig('motion', '2s')  # the model's
+
+
+@pytest.mark.parametrize('text, message', [
+    ('windows: {pre: 1s, psot: 2s}', "windows: unknown key 'psot'"),
+    ('topic: [a]', "unknown key 'topic' (known: topics, driving_topic"),
+    ('triggers: [{name: x, kind: alarm}]', "triggers[0] (x): kind: 'alarm' is not one of classifier, rule, "
+                                           'manual'),
+    ('triggers: [{kind: classifier, feature_set: pixels}]', "triggers[0] (classifier): feature_set: 'pixels' is "
+                                                            'not one of motion, raw, imu, command, progress'),
+    ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]', "triggers[0] (r): unknown key 'whenn'"),
+    ('triggers: [{name: r, kind: rule, topic: odom, arrival: true}, {name: r, kind: manual}]',
+     "triggers[1]: name 'r' is used twice"),
+    ('format: zip', "format: 'zip' is not one of: json-xz, bag-lz4"),
+    ('limits: {max_disk_mb: -1}', 'limits.max_disk_mb: -1 must be a number of MB >= 0'),
+    ('collect: {label: "../x"}', "label: '../x' must be letters"),
+    ('windows: {pre: soon}', "windows.pre: 'soon' is not a message count"),
+    ('[1, 2]', 'a configuration is a mapping of topics'),
+    ('topics: {a: 1', 'not YAML'),
+    ('!!python/object/apply:os.system ["touch /tmp/cc_log_yaml_pwned"]', 'not YAML'),
+])
+def test_a_bad_configuration_fails_at_start_with_one_line_naming_what(tmp_path, text, message):
+    path = write(tmp_path, text)
+    with pytest.raises(ValueError) as error:
+        Config.from_dict(config.load_file(path), path)
+    assert message in str(error.value) and '\n' not in str(error.value), str(error.value)
+    assert str(error.value).startswith(path + ': ')
+    assert not os.path.exists('/tmp/cc_log_yaml_pwned')
+
+
+@pytest.mark.parametrize('trigger, message', [
+    ('{name: r, kind: rule, topic: odom, type: nav_msgs/Odometry, when: "twist.linear.x > 1"}',
+     "triggers[0] (r): when: nav_msgs/Odometry.twist has no field 'linear'"),
+    ('{name: r, kind: rule, topic: odom, type: nav_msgs/Odometree, when: "a > 1"}',
+     "triggers[0] (r): type: unknown message type 'nav_msgs/Odometree' (not installed)"),
+    ('{name: r, kind: rule, topic: odom, when: "a >> 1"}', 'triggers[0] (r): when: '),
+    ('{name: c, kind: classifier}', 'triggers[0] (c): model: required'),
+    ('{name: c, kind: classifier, model: /nonexistent/m.json}', 'triggers[0] (c): model: /nonexistent/m.json: '),
+    ('{name: c, kind: classifier, model: MODEL, window: "3s"}', "triggers[0] (c): window: 3s does not match"),
+    ('{name: c, kind: classifier, model: MODEL, topics: [a, b]}', 'triggers[0] (c): topics: the motion feature '
+                                                                  'set reads 1 topic(s)'),
+])
+def test_triggers_that_cannot_be_built_fail_naming_the_trigger(tmp_path, model_path, trigger, message):
+    cfg = Config.from_dict(config.load_file(write(tmp_path, 'triggers: [%s]' % trigger.replace('MODEL', model_path))),
+                           'robot.yaml')
+    with pytest.raises(ValueError) as error:
+        cfg.build_triggers(AnomalyModel.load, installed_class)
+    assert str(error.value).startswith('robot.yaml: ' + message) and '\n' not in str(error.value), str(error.value)
+
+
+def test_parameters_override_the_file_and_the_single_classifier_joins_it(tmp_path, model_path):
+    data = config.load_file(write(tmp_path, EXAMPLE.replace('MODEL', model_path)))
+    data = config.merge(data, {'windows': {'post': '5s'}, 'topics': ['scan']})  # `rosparam load`-ed keys
+    data = config.with_flat(data, {'pre': '300', 'format': None, 'max_buffer_mb': 0.0})
+    data = config.with_classifier(data, model=model_path, classify_every='100ms', retrigger='every')
+    cfg = Config.from_dict(data)
+    assert (str(cfg.pre), str(cfg.post), cfg.format, cfg.max_buffer_mb, cfg.topics) == \
+        ('300', '5s', 'bag-lz4', 0.0, ['scan'])
+    triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
+    assert [t.name for t in triggers] == ['classifier', 'motion', 'too_fast', 'motors']
+    assert triggers[0].topic == '/odom'  # the motion set's role name, resolved as a global name
+    assert [(str(t.classify_every), t.retrigger) for t in triggers[:2]] == [('0.1s', 'every')] * 2
+    resolved = cfg.build_triggers(AnomalyModel.load, installed_class, resolve=lambda t: '/robot1/' + t.lstrip('/'))
+    assert resolved[1].topic == '/robot1/husky_velocity_controller/odom'
+
+
+def test_cclog_replay_with_a_configuration_runs_every_trigger_and_sets_retrigger_and_classify_every(
+        tmp_path, model_path, real_bag_path):
+    text = EXAMPLE.replace('MODEL', model_path).replace('format: bag-lz4', 'format: json-xz')
+    text = text.replace('  - {name: motors, kind: rule, level: ERROR, status: \'motor*\'}\n', '')
+    path = write(tmp_path, text)
+    result = cclog('replay', real_bag_path, '--config', path, '--out', tmp_path / 'logs', '--json')
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    names = set()
+    for window in summary['windows']:
+        metadata, records = log_format.read_window(window['path'])
+        names.update(metadata['names'])
+        assert metadata['pre'] == '1s' and metadata['post'] == '2s'
+        assert {r.topic for r in records} <= {HUSKY_ODOM, '/imu/data'}
+        for trigger in metadata['triggers']:
+            assert trigger['name'] in ('motion', 'too_fast', 'manual')
+    assert names == {'motion', 'too_fast'}
+    # the same with the options that override the file: classify every 10th message, every anomalous score
+    again = cclog('replay', real_bag_path, '--config', path, '--out', tmp_path / 'again', '--json',
+                  '--classify-every', '10', '--retrigger', 'every', '--post', '0.5s')
+    assert again.returncode == 0, again.stderr
+    found = [log_format.read_window(w['path'])[0] for w in json.loads(again.stdout)['windows']]
+    infos = [metadata['trigger_info']['motion'] for metadata in found if 'motion' in metadata['trigger_info']]
+    assert infos and all((info['classify_every'], info['retrigger']) == ('10', 'every') for info in infos)
+    assert all(metadata['post'] == '0.5s' for metadata in found)
+
+
+def test_cclog_replay_needs_a_model_and_a_topic_or_a_configuration(tmp_path, real_bag_path, model_path):
+    result = cclog('replay', real_bag_path, '--out', tmp_path / 'logs')
+    assert result.returncode == 1 and result.stderr.strip() == \
+        'cclog replay: error: replay: give --topic and --model, or --config (a configuration with triggers)'
+    bad = write(tmp_path, 'triggers: [{name: r, kind: rule, topic: /odom, level: LOUD}]')
+    result = cclog('replay', real_bag_path, '--config', bad, '--out', tmp_path / 'logs')
+    assert result.returncode == 1 and result.stderr.count('\n') == 1
+    assert "%s: triggers[0] (r): level: 'LOUD' is not one of" % bad in result.stderr
+
+
+def test_cclog_collect_with_a_configuration_writes_vectors_of_every_classifier(tmp_path, real_bag_path):
+    path = write(tmp_path, """
+collect: {label: drive, stride: 20}
+triggers:
+  - {name: motion, kind: classifier, model: /nowhere/yet.json, window: 2s, topics: [husky_velocity_controller/odom]}
+  - {name: progress, kind: classifier, feature_set: progress, window: 4s, topics: [husky_velocity_controller/odom]}
+  - {name: shock, kind: classifier, feature_set: imu, window: 1s, topics: [imu/data]}
+  - {name: too_fast, kind: rule, topic: odom, arrival: true}
+""")
+    result = cclog('collect', real_bag_path, '--config', path, '--out', tmp_path / 'vectors', '--json')
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert list(summary['sets']) == ['motion', 'progress', 'shock']
+    for name, feature_set in (('motion', 'motion'), ('progress', 'progress'), ('shock', 'imu')):
+        entry = summary['sets'][name]
+        assert entry['directory'] == str(tmp_path / 'vectors' / name / 'drive') and entry['vectors'] > 10
+        vectors, loaded = learning.load_vectors(str(tmp_path / 'vectors' / name))
+        assert loaded.feature_set == feature_set and len(vectors['drive']) == entry['vectors']
+
+
+def test_a_node_reads_the_file_then_its_structured_parameters_then_the_flat_ones(tmp_path, model_path):
+    pytest.importorskip('rospy')
+    from cc_log.node_common import ConfigError, Params, node_config
+    path = write(tmp_path, EXAMPLE.replace('MODEL', model_path))
+    values = {'config': path, 'windows': {'post': '3s'}, 'triggers': [
+        {'name': 'bump', 'kind': 'rule', 'topic': 'bumper', 'arrival': True}]}
+    cfg = node_config(Params(get=values.get, log=lambda *args: None), {'pre': '20', 'post': None},
+                      {'model': model_path})
+    assert (str(cfg.pre), str(cfg.post), cfg.format, cfg.label) == ('20', '3s', 'bag-lz4', 'drive')
+    assert [t['name'] for t in cfg.triggers] == ['classifier', 'bump']  # ~triggers replaces the file's list
+    values = {'config': str(tmp_path / 'missing.yaml')}
+    with pytest.raises(ConfigError, match=r'^~config: .*missing.yaml: cannot read'):
+        node_config(Params(get=values.get, log=lambda *args: None), {})
+    values = {'config': path, 'windows': {'pre': 'never'}}
+    with pytest.raises(ConfigError, match=r"^~config .*robot.yaml: windows.pre: 'never' is not"):
+        node_config(Params(get=values.get, log=lambda *args: None), {})
+
+
+def test_the_example_configuration_is_valid(tmp_path):
+    cfg = Config.from_dict(config.load_file(os.path.join(ROOT, 'config', 'example.yaml')), 'example.yaml')
+    assert [t['name'] for t in cfg.triggers] == ['motion', 'stuck', 'shock', 'motors', 'goal_aborted', 'too_fast',
+                                                 'bumper', 'scan_dead']
+    specs = cfg.feature_specs()
+    assert [(name, c.feature_set, c.window, topics) for name, c, topics in specs] == [
+        ('motion', 'motion', '500', ['/odom']), ('stuck', 'command', '2s', ['/odom', '/cmd_vel']),
+        ('shock', 'imu', '1s', ['/imu/data'])]
+    rules = Config.from_dict({'triggers': [dict((k, v) for k, v in t.items() if k != 'index')
+                                           for t in cfg.triggers if t['kind'] == 'rule']})
+    built = rules.build_triggers(AnomalyModel.load, installed_class)  # fields checked against installed types
+    assert [t.topic for t in built] == ['/diagnostics', '/move_base/status', '/odom', '/bumper', '/scan']

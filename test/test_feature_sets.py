@@ -1,0 +1,209 @@
+"""The feature-set registry and the sets beyond odometry motion: imu, command, progress (no roscore)."""
+import math
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+
+from cc_log import features, learning, sim
+from cc_log.features import FEATURE_SETS, FeatureConfig, FeatureStream, vector_length, vector_names, window_vector
+
+
+def vec3(x=0.0, y=0.0, z=0.0):
+    return NS(x=x, y=y, z=z)
+
+
+def odom(x, y, yaw, v, w):
+    """A planar nav_msgs/Odometry-shaped object (no header: the stamp is given)."""
+    orientation = NS(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+    return NS(pose=NS(pose=NS(position=vec3(x, y), orientation=orientation)),
+              twist=NS(twist=NS(linear=vec3(v), angular=vec3(z=w))))
+
+
+def twist(v, w):
+    return NS(linear=vec3(v), angular=vec3(z=w))
+
+
+def imu(acc, gyro):
+    return NS(linear_acceleration=vec3(*acc), angular_velocity=vec3(*gyro))
+
+
+def test_registry_names_every_set_and_refuses_unknown_ones():
+    assert FEATURE_SETS == ('motion', 'raw', 'imu', 'command', 'progress')
+    for name in FEATURE_SETS:
+        feature = features.get(name)
+        assert feature.name == name and feature.inputs and feature.columns
+        config = FeatureConfig(name, '10')
+        assert config.topic_type == feature.inputs[0][1]
+        assert len(vector_names(config)) == vector_length(config)
+    assert features.get('command').inputs == (('odom', 'nav_msgs/Odometry'), ('cmd_vel', 'geometry_msgs/Twist'))
+    with pytest.raises(ValueError, match="^feature_set: 'pixels' is not one of motion, raw, imu, command, progress$"):
+        FeatureConfig('pixels', '10')
+    with pytest.raises(ValueError, match='^topic_type: '):
+        FeatureConfig('imu', '1s', 'nav_msgs/Odometry')
+    with pytest.raises(ValueError, match='^window: the raw feature set needs a message count'):
+        FeatureConfig('raw', '1s')
+
+
+def test_old_model_configs_still_load():
+    """Model and vector files written before the registry hold exactly these three fields."""
+    for document in ({'feature_set': 'motion', 'window': '2s', 'topic_type': 'nav_msgs/Odometry'},
+                     {'feature_set': 'raw', 'window': '250', 'topic_type': 'nav_msgs/Odometry'}):
+        config = FeatureConfig.from_dict(document)
+        assert config.to_dict() == document
+
+
+@pytest.mark.parametrize('name', FEATURE_SETS)
+def test_every_set_gives_finite_vectors_of_its_length_from_a_stream(name):
+    config = FeatureConfig(name, '20')
+    stream = FeatureStream(config, every=5)
+    first, others = config.feature.inputs[0], config.feature.inputs[1:]
+    vectors = []
+    for i in range(200):
+        stamp = 10.0 + 0.01 * i
+        for role, _ in others:
+            stream.observe(role, twist(0.5, 0.1), stamp)
+        msg = imu((0.1 * math.sin(i), 0.0, 9.8), (0.0, 0.0, 0.1)) if first[1] == 'sensor_msgs/Imu' else \
+            odom(0.005 * i, 0.0, 0.001 * i, 0.5, 0.1)
+        vector = stream.add(msg, stamp)
+        if vector is not None:
+            vectors.append(vector)
+    assert len(vectors) == len(range(19, 200, 5))  # the first at the 20th message, then every 5th
+    assert all(v.shape == (vector_length(config),) and np.all(np.isfinite(v)) for v in vectors)
+
+
+def test_imu_sees_shocks_and_vibration():
+    config = FeatureConfig('imu', '1s')
+    names = vector_names(config)
+    rng = np.random.default_rng(0)
+
+    def window(extra):
+        stream, vector = FeatureStream(config), None
+        for i in range(101):
+            acc = rng.normal(0.0, 0.05, 3) + (0.0, 0.0, 9.81) + extra(i * 0.01)
+            vector = stream.add(imu(acc, rng.normal(0.0, 0.005, 3)), i * 0.01)
+        return vector
+
+    quiet = window(lambda t: 0.0)
+    shock = window(lambda t: (-25.0 if 0.5 <= t < 0.53 else 0.0, 0.0, 0.0))
+    shaking = window(lambda t: (0.0, 0.0, 2.0 * math.sin(2 * math.pi * 23.0 * t)))
+    assert shock[names.index('max(jerk)')] > 10 * quiet[names.index('max(jerk)')]
+    assert shock[names.index('max(acc_norm)')] > 20.0 > quiet[names.index('max(acc_norm)')]
+    assert shaking[names.index('std(acc_z)')] > 1.0 > 0.1 > quiet[names.index('std(acc_z)')]
+
+
+def test_imu_separates_collisions_and_surges_from_driving_on_simulator_data():
+    """Simulated BWIBot with its IMU: every collision and sudden acceleration has a 1 s window whose hardest
+    jerk and acceleration spread are beyond every nominal window's."""
+    config = sim.SimConfig(minutes=4, anomalies=4, anomaly_types=('collision', 'sudden_acceleration'), seed=2,
+                           imu=True)
+    simulator = sim.Simulator(config)
+    feature = FeatureConfig('imu', '1s')
+    stream = FeatureStream(feature, every=10)
+    out = [(stamp, stream.add(msg, stamp)) for topic, stamp, msg in simulator.messages() if topic == sim.IMU_TOPIC]
+    out = [(stamp, vector) for stamp, vector in out if vector is not None]
+    truth = simulator.truth
+    assert len(truth) == 4
+    names = vector_names(feature)
+    for name in ('max(jerk)', 'std(acc_x)'):
+        index = names.index(name)
+        nominal = max(v[index] for s, v in out if not any(e['start'] - 0.1 <= s <= e['end'] + 1.1 for e in truth))
+        for entry in truth:
+            assert max(v[index] for s, v in out if entry['start'] <= s <= entry['end'] + 1.0) > 1.5 * nominal, name
+
+
+def command_run(stuck=None, seconds=60.0, seed=0):
+    """(stamp, odometry, command) at 50 Hz: the robot follows varying commands with noise; between the
+    ``stuck`` (start, end) seconds the commands go on but the robot does not move."""
+    rng = np.random.default_rng(seed)
+    x = y = yaw = v = w = 0.0
+    out = []
+    for i in range(int(seconds * 50)):
+        t = i * 0.02
+        cmd_v = 0.6 + 0.3 * math.sin(t / 3.0)
+        cmd_w = 0.4 * math.sin(t / 2.0)
+        blocked = stuck is not None and stuck[0] <= t < stuck[1]
+        v = 0.0 if blocked else v + 0.2 * (cmd_v - v)
+        w = 0.0 if blocked else w + 0.2 * (cmd_w - w)
+        yaw += w * 0.02
+        x += v * 0.02 * math.cos(yaw)
+        y += v * 0.02 * math.sin(yaw)
+        out.append((100.0 + t, odom(x, y, yaw, v + rng.normal(0, 0.01), w + rng.normal(0, 0.01)),
+                    twist(cmd_v, cmd_w)))
+    return out
+
+
+def command_vectors(run, config, every=5):
+    stream = FeatureStream(config, every=every)
+    out = []
+    for stamp, msg, command in run:
+        stream.observe('cmd_vel', command, stamp - 0.005)
+        vector = stream.add(msg, stamp)
+        if vector is not None:
+            out.append((stamp - 100.0, vector))
+    return out
+
+
+def test_command_flags_a_stuck_robot():
+    """A model trained on a robot following its commands calls the windows where it is commanded to move and
+    does not anomalous, and the windows of another nominal run not."""
+    config = FeatureConfig('command', '1s')
+    train = np.array([v for _, v in command_vectors(command_run(seed=1), config)])
+    model, _ = learning.train(train, config=config)
+    nominal = np.array([v for _, v in command_vectors(command_run(seconds=30.0, seed=2), config)])
+    stuck = command_vectors(command_run(stuck=(20.0, 25.0), seconds=30.0, seed=3), config)
+    inside = np.array([v for t, v in stuck if 21.0 <= t < 25.0])
+    assert model.scores(inside).max() < model.threshold
+    assert (model.scores(nominal) < model.threshold).mean() < 0.02
+    names = vector_names(config)
+    moving = nominal[10:]  # after the start from standing
+    assert inside[:, names.index('min(lag_v)')].min() > 0.2 > moving[:, names.index('max(lag_v)')].max()
+
+
+def test_command_sees_slipping_and_stale_commands():
+    config = FeatureConfig('command', '10')
+    names = vector_names(config)
+    stream = FeatureStream(config)
+    stream.observe('cmd_vel', twist(0.5, 0.0), 0.0)
+    for i in range(11):  # the wheels report 0.5 m/s, the pose does not move (10 steps after the first)
+        vector = stream.add(odom(0.0, 0.0, 0.0, 0.5, 0.0), 0.01 * (i + 1))
+    assert vector[names.index('min(slip_v)')] == pytest.approx(0.5)
+    assert vector[names.index('max(lag_v)')] == pytest.approx(0.0)
+    vector = [stream.add(odom(0.0, 0.0, 0.0, 0.0, 0.0), 2.0 + 0.01 * i) for i in range(10)][-1]
+    assert vector[names.index('max(cmd_v)')] == 0.0  # no command for 2 s: it no longer holds
+    assert vector[names.index('min(cmd_age)')] == pytest.approx(2.0)
+
+
+def test_progress_separates_oscillation_from_driving_on_simulator_data():
+    """Simulated planning failures: every oscillation reverses the speed 3 or more times in a 3 s window,
+    nominal driving (turns towards goals, stops, corners) at most once; a spin in place turns without
+    getting anywhere."""
+    config = sim.SimConfig(minutes=6, anomalies=6, anomaly_types=('planning_failure',), seed=3)
+    simulator = sim.Simulator(config)
+    feature = FeatureConfig('progress', '3s')
+    stream = FeatureStream(feature, every=10)
+    out = [(stamp, stream.add(msg, stamp)) for topic, stamp, msg in simulator.messages() if topic == sim.ODOM_TOPIC]
+    out = [(stamp, vector) for stamp, vector in out if vector is not None]
+    names = vector_names(feature)
+    reversals, rotation, displacement = (names.index(name) for name in
+                                         ('speed_reversals', 'rotation_in_place', 'displacement'))
+    nominal = np.array([v for s, v in out if not any(e['start'] - 0.1 <= s <= e['end'] + 3.0
+                                                     for e in simulator.truth)])
+    assert len(nominal) > 1000 and nominal[:, reversals].max() <= 1
+    kinds = []
+    for entry in simulator.truth:
+        inside = np.array([v for s, v in out if entry['start'] + 3.0 <= s <= entry['end']])
+        if inside[:, reversals].max() >= 3:
+            kinds.append('oscillate')
+        else:
+            kinds.append('spin')
+            assert inside[:, rotation].max() > 2.0 and inside[:, displacement].min() < 0.05
+    assert sorted(set(kinds)) == ['oscillate', 'spin']
+
+
+def test_progress_vector_does_not_depend_on_where_the_robot_is():
+    config = FeatureConfig('progress', '50')
+    rows = [np.array([0.1 * i, 0.02 * i * i, 0.5, 0.2 * (-1) ** (i // 10), 0.02]) for i in range(50)]
+    shifted = [row + np.array([1000.0, -300.0, 0.0, 0.0, 0.0]) for row in rows]
+    assert np.allclose(window_vector(rows, config), window_vector(shifted, config))
+    assert window_vector(rows, config)[vector_names(config).index('yaw_reversals')] == 4
