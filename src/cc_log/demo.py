@@ -39,7 +39,7 @@ DEFAULT_STRIDE = '10'
 MASTER_TIMEOUT = 30.0
 DEMO_CONFIG = """# written by demo.py: the triggers of the demo's smart logger (demo.launch sets topics and retrigger)
 triggers:
-  - {name: motion, kind: classifier, model: '%s', topics: [odom]}
+  - {name: classifier, kind: classifier, model: '%s', topics: [odom]}
   - {name: goal_aborted, kind: rule, topic: move_base/status, type: actionlib_msgs/GoalStatusArray,
      when: 'status_list[0].status == 4'}
 """
@@ -154,7 +154,7 @@ def run_live(out, model, minutes, anomalies, seed, processes):
     windows = os.path.join(out, 'windows')
     truth_file = os.path.join(out, 'truth.json')
     launch = processes.start(
-        ['roslaunch', 'cc_log', 'demo.launch', 'model:=', 'config:=%s' % write_config(out, model),
+        ['roslaunch', 'cc_log', 'demo.launch', 'model:=%s' % model, 'config:=%s' % write_config(out, model),
          'directory:=%s' % windows,
          'minutes:=%g' % minutes, 'anomalies:=%d' % anomalies, 'seed:=%d' % seed, 'truth_file:=%s' % truth_file],
         env, os.path.join(out, 'roslaunch.log'))
