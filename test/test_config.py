@@ -10,7 +10,7 @@ from cc_log import config, learning, log_format
 from cc_log.config import Config, installed_class
 from cc_log.features import FeatureConfig
 from cc_log.model import AnomalyModel
-from cc_log.triggers import ClassifierTrigger, ManualTrigger, RuleTrigger
+from cc_log.triggers import ClassifierTrigger, RuleTrigger
 
 bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
 

@@ -15,8 +15,8 @@ def vec3(x=0.0, y=0.0, z=0.0):
 
 def odom(x, y, yaw, v, w):
     """A planar nav_msgs/Odometry-shaped object (no header: the stamp is given)."""
-    return NS(pose=NS(pose=NS(position=vec3(x, y), orientation=NS(x=0.0, y=0.0, z=math.sin(yaw / 2),
-                                                                   w=math.cos(yaw / 2)))),
+    orientation = NS(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+    return NS(pose=NS(pose=NS(position=vec3(x, y), orientation=orientation)),
               twist=NS(twist=NS(linear=vec3(v), angular=vec3(z=w))))
 
 

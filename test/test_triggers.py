@@ -305,8 +305,8 @@ def test_triggers_are_checked_together_at_start(tmp_path):
 
 
 def test_a_fire_before_any_driving_message_is_counted_not_kept(tmp_path):
-    logger = SmartLogger(None, str(tmp_path), driving_topic=ODOM, triggers=[RuleTrigger('b', '/bumper',
-                                                                                         arrival=True)])
+    bumper = RuleTrigger('b', '/bumper', arrival=True)
+    logger = SmartLogger(None, str(tmp_path), driving_topic=ODOM, triggers=[bumper])
     logger.on_message('/bumper', odom_msg(1.0), 1.0)
     assert logger.stats()['fires_dropped'] == 1 and logger.stats()['triggers']['b']['fired'] == 1
     assert logger.trigger_now() == (False, 'no /odom message received yet')

@@ -114,8 +114,9 @@ class Progress(object):
         if self.total:
             fraction = min(1.0, max(0.0, float(self.done) / self.total))
             filled = int(round(fraction * self.WIDTH))
-            return '%s [%s%s] %3d%%  %d/%d  %.1fs' % (self.label, '#' * filled, '.' * (self.WIDTH - filled),
-                                                   int(fraction * 100), self.done, self.total, elapsed)
+            bar = '#' * filled + '.' * (self.WIDTH - filled)
+            return '%s [%s] %3d%%  %d/%d  %.1fs' % (self.label, bar, int(fraction * 100), self.done, self.total,
+                                                    elapsed)
         return '%s  %d  %.1fs' % (self.label, self.done, elapsed)
 
     def _draw(self, force=False, final=False):
@@ -255,8 +256,8 @@ def _positive_float(name, zero=False):
         except ValueError:
             number = float('nan')
         if not (math.isfinite(number) and (number >= 0 if zero else number > 0)):
-            raise argparse.ArgumentTypeError('%s: %r must be a %s number' % (name, value, 'non-negative' if zero
-                                                                              else 'positive'))
+            kind = 'non-negative' if zero else 'positive'
+            raise argparse.ArgumentTypeError('%s: %r must be a %s number' % (name, value, kind))
         return number
     parse.__name__ = name
     return parse
@@ -581,9 +582,9 @@ def cmd_info(args):
     for w in windows:
         print(w['path'])
         print('  codec      %s' % w['codec'])
+        utc = ', from %s' % w['start_utc'] if w['start_utc'] else ''
         print('  span       %s .. %s  (%.2f s%s)' % (_stamp_text(w['start']), _stamp_text(w['end']),
-                                                   w['duration'] or 0.0,
-                                                   ', from %s' % w['start_utc'] if w['start_utc'] else ''))
+                                                     w['duration'] or 0.0, utc))
         print('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
         print('  size       %s (row JSON %s, %s)' % (
             human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
@@ -829,8 +830,8 @@ def cmd_codecs(args):
     if args.json:
         _print_json(result)
         return EXIT_OK
-    print('%d messages, %s of row-per-message JSON (%s)' % (len(records), human_bytes(len(data)),
-                                                             ', '.join(source['topics'])))
+    print('%d messages, %s of row-per-message JSON (%s)' % (
+        len(records), human_bytes(len(data)), ', '.join(source['topics'])))
     print(format_codec_table(rows))
     print('ratio: compressed size in % of the raw JSON; MB/s: raw JSON compressed per second')
     return EXIT_OK
@@ -1111,10 +1112,11 @@ def build_parser():
         runs, with the triggers of --config (the YAML file smart_logger.py reads: classifiers, rules) and/or
         a classifier scoring --topic with --model. Every trigger saves --pre messages before and --post
         after (counts or durations), with the --side-topic messages of that time span, as window files in
-        OUT; options given override the configuration. --json prints {input_messages, raw_json_bytes, stored_bytes, windows: [{start, end, messages,
-        path}]}; start/end are the header stamps (float seconds) of the first and last message saved. A window
-        that cannot be written (disk full) is retried for a few seconds; then replay stops and exits 1 with
-        one line naming OUT and how many windows and messages were not written.
+        OUT; options given override the configuration. --json prints {input_messages, raw_json_bytes,
+        stored_bytes, windows: [{start, end, messages, path}]}; start/end are the header stamps (float
+        seconds) of the first and last message saved. A window that cannot be written (disk full) is retried
+        for a few seconds; then replay stops and exits 1 with one line naming OUT and how many windows and
+        messages were not written.
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs

@@ -69,6 +69,7 @@ class CollectNode(object):
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
                                                                         collector.FEATURES_SUBDIRECTORY))
+
         def given(reader, name, *args):
             """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
             return reader(name, *args) if params.given(name) else None

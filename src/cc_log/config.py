@@ -71,8 +71,8 @@ def load_file(path):
     if document is None:
         return {}
     if not isinstance(document, dict):
-        raise ValueError('%s: a configuration is a mapping of %s, not %s' % (path, ', '.join(KEYS),
-                                                                         type(document).__name__))
+        raise ValueError('%s: a configuration is a mapping of %s, not %s' % (
+            path, ', '.join(KEYS), type(document).__name__))
     return document
 
 
@@ -183,7 +183,8 @@ class Config(object):
         self.min_free_mb = _megabytes(limits.get('min_free_mb', 0), 'limits.min_free_mb')
         self.max_buffer_mb = _megabytes(limits.get('max_buffer_mb', 256.0), 'limits.max_buffer_mb')
         collect = _mapping(data.get('collect'), 'collect', COLLECT_KEYS)
-        self.rotate = None if collect.get('rotate') is None else str(Rotation.parse(collect['rotate'], 'collect.rotate'))
+        rotate = collect.get('rotate')
+        self.rotate = None if rotate is None else str(Rotation.parse(rotate, 'collect.rotate'))
         self.label = None if collect.get('label') is None else check_label(collect['label'])
         self.stride = None if collect.get('stride') is None else parse_stride(collect['stride'])
         triggers = data.get('triggers', [])

@@ -100,8 +100,8 @@ def train(out, minutes, seed, window, stride):
     model, info = learning.train(vectors['nominal'], None, config)
     path = os.path.join(out, 'model.json')
     model.save(path)
-    log('    model -> %s (%s)' % (path, ', '.join('%s %s' % item for item in sorted(info.items())
-                                                 if isinstance(item[1], (int, float, str)))[:200]))
+    figures = ', '.join('%s %s' % item for item in sorted(info.items()) if isinstance(item[1], (int, float, str)))
+    log('    model -> %s (%s)' % (path, figures[:200]))
     os.remove(bag)
     os.remove(sim.truth_path(bag))
     return path
@@ -220,11 +220,12 @@ def summarize(out, windows_dir, truth, recorder, window_seconds):
     lines = ['', 'cc_log demo: smart logger on a simulated BWIBot (100 Hz odometry + IMU, cmd_vel, goal status)',
              '  anomalies injected vs caught (by trigger):']
     for kind, (injected, hit, names) in sorted(by_type.items()):
-        lines.append('    %-22s %d / %d%s' % (kind, hit, injected, '  (%s)' % ', '.join(sorted(names)) if names else ''))
+        by = '  (%s)' % ', '.join(sorted(names)) if names else ''
+        lines.append('    %-22s %d / %d%s' % (kind, hit, injected, by))
     lines.append('    %-22s %d / %d' % ('all', len(caught), len(truth)))
     lines.append('  false windows:          %d' % len(false_windows))
-    lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept,
-                                                              100.0 * kept / max(recorder.messages, 1)))
+    share = 100.0 * kept / max(recorder.messages, 1)
+    lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept, share))
     lines.append('  raw row JSON / stored:  %s / %s  (%.0fx less)' % (
         human(recorder.raw_bytes), human(stored), recorder.raw_bytes / max(stored, 1)))
     lines.append('  windows (%d) in:         %s' % (len(windows), windows_dir))

@@ -20,8 +20,8 @@ What it publishes
     planner's during a planning failure) and a move_base-like ``actionlib_msgs/GoalStatusArray`` on
     ``/move_base/status`` at ``STATUS_RATE`` Hz (the current goal ACTIVE while the robot heads for a
     destination, SUCCEEDED once there; a planning failure ends with its goal ABORTED, published at once, and
-    the robot going on under a new goal). Ground truth on ``/sim/anomaly`` (``std_msgs/String`` holding JSON, one message
-    when an anomaly starts and one when it ends).
+    the robot going on under a new goal). Ground truth on ``/sim/anomaly`` (``std_msgs/String`` holding JSON,
+    one message when an anomaly starts and one when it ends).
 
 Anomalies (``ANOMALY_TYPES``), each a separate event with nominal driving (at least ``gap`` seconds)
 between events:

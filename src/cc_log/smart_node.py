@@ -322,8 +322,8 @@ class SmartNode(object):
         self.leftovers = recover_leftovers(self.directory)
         enabled = params.boolean('enabled', DEFAULT_ENABLED)
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES, minimum=1,
-                                             integer=True)
+        intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES,
+                                            minimum=1, integer=True)
         intake_max_mb = params.number('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
         try:
             self.logger = smart_logger.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,

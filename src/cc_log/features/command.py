@@ -67,4 +67,3 @@ class CommandFeatures(OdometrySet):
         lag_v, lag_w = abs(cmd_v) - abs(v), abs(cmd_w) - abs(w)
         return (cmd_v, cmd_w, v, w, v - cmd_v, w - cmd_w, max(0.0, lag_v), max(0.0, lag_w), max(0.0, -lag_v),
                 max(0.0, -lag_w), self._slip, age)
-
