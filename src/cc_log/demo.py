@@ -37,12 +37,6 @@ DEFAULT_SEED = 7
 DEFAULT_WINDOW = '1s'     # bench/detection_sim_tuning.py: fewest false windows, smallest windows (tail <= 1 s)
 DEFAULT_STRIDE = '10'
 MASTER_TIMEOUT = 30.0
-DEMO_CONFIG = """# written by demo.py: the triggers of the demo's smart logger (demo.launch sets topics and retrigger)
-triggers:
-  - {name: classifier, kind: classifier, model: '%s', topics: [odom]}
-  - {name: goal_aborted, kind: rule, topic: move_base/status, type: actionlib_msgs/GoalStatusArray,
-     when: 'status_list[0].status == 4'}
-"""
 
 
 def log(text):
@@ -131,6 +125,14 @@ class LiveRecorder(object):
         self._count(msg)
         with self.lock:
             self.track.append((msg.header.stamp.to_sec(), msg.twist.twist.linear.x, msg.twist.twist.angular.z))
+
+
+DEMO_CONFIG = """# written by demo.py: the triggers of the demo's smart logger (demo.launch sets topics and retrigger)
+triggers:
+  - {name: classifier, kind: classifier, model: '%s', topics: [odom]}
+  - {name: goal_aborted, kind: rule, topic: move_base/status, type: actionlib_msgs/GoalStatusArray,
+     when: 'status_list[0].status == 4'}
+"""
 
 
 def write_config(out, model):
