@@ -228,3 +228,24 @@ def test_the_example_configuration_is_valid(tmp_path):
                                            for t in cfg.triggers if t['kind'] == 'rule']})
     built = rules.build_triggers(AnomalyModel.load, installed_class)  # fields checked against installed types
     assert [t.topic for t in built] == ['/diagnostics', '/move_base/status', '/odom', '/bumper', '/scan']
+
+
+def test_collect_mode_live_writes_the_same_vectors_of_every_classifier_as_cclog_collect(tmp_path, real_bag_path):
+    """Collector with a configuration's classifiers (the collect node's path) against collect_bag (cclog
+    collect --config): the same vector files, in features/<name>/<label>/."""
+    from cc_log.collector import Collector, collect_bag
+    cfg = Config.from_dict({'triggers': [
+        {'name': 'motion', 'kind': 'classifier', 'feature_set': 'motion', 'window': '2s', 'topics': [HUSKY_ODOM]},
+        {'name': 'shock', 'kind': 'classifier', 'feature_set': 'imu', 'window': '1s', 'topics': ['/imu/data']}]})
+    specs = cfg.feature_specs()
+    collector = Collector(str(tmp_path / 'live'), rotate='1000', feature_specs=specs, driving_topic=None,
+                          stride=20, side_topics=[])
+    assert collector.driving_topic == HUSKY_ODOM and collector.side_topics == {'/imu/data'}
+    for record in bagio.read_messages(real_bag_path, [HUSKY_ODOM, '/imu/data']):
+        collector.on_message(record.topic, record.msg, record.stamp)
+    assert collector.close(60)
+    offline = collect_bag(real_bag_path, None, str(tmp_path / 'offline'), stride=20, feature_specs=specs)
+    for name, _, _ in specs:
+        live = sorted(os.listdir(str(tmp_path / 'live' / 'features' / name / 'nominal')))
+        assert live and live == sorted(os.listdir(offline['sets'][name][1])), name
+    assert collector.stats()['vectors_written'] == sum(count for count, _ in offline['sets'].values())

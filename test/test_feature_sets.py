@@ -207,3 +207,34 @@ def test_progress_vector_does_not_depend_on_where_the_robot_is():
     shifted = [row + np.array([1000.0, -300.0, 0.0, 0.0, 0.0]) for row in rows]
     assert np.allclose(window_vector(rows, config), window_vector(shifted, config))
     assert window_vector(rows, config)[vector_names(config).index('yaw_reversals')] == 4
+
+
+def test_command_catches_collisions_and_slipping_wheels_on_the_simulator_with_its_cmd_vel():
+    """The simulated BWIBot publishes its planner's cmd_vel: a command model trained on two nominal runs (two
+    wheel calibrations) flags nearly every window inside every collision and wheel slip of another run, and few
+    windows of a third robot's nominal run."""
+    config = FeatureConfig('command', '1s')
+
+    def vectors(run, every):
+        stream, out = FeatureStream(config, every=every), []
+        for topic, stamp, msg in sim.Simulator(run).messages():
+            if topic == sim.CMD_TOPIC:
+                stream.observe('cmd_vel', msg, stamp)
+            elif topic == sim.ODOM_TOPIC:
+                vector = stream.add(msg, stamp)
+                if vector is not None:
+                    out.append((stamp, vector))
+        return out
+    train = np.array([v for seed in (11, 13) for _, v in
+                      vectors(sim.SimConfig(minutes=4, anomalies=0, seed=seed, commands=True), 10)])
+    model, _ = learning.train(train, config=config)
+    nominal = np.array([v for _, v in vectors(sim.SimConfig(minutes=3, anomalies=0, seed=12, commands=True), 10)])
+    assert (model.scores(nominal) < model.threshold).mean() < 0.03  # measured 0.013
+    run = sim.SimConfig(minutes=4, anomalies=4, anomaly_types=('collision', 'wheels_slipping'), seed=5, commands=True)
+    out = vectors(run, 5)
+    truth = sim.Simulator(run)
+    list(truth.messages())  # the same run again, for its ground truth
+    assert sorted(e['type'] for e in truth.truth) == ['collision', 'collision', 'wheels_slipping', 'wheels_slipping']
+    for entry in truth.truth:
+        inside = np.array([v for s, v in out if entry['start'] <= s <= entry['end']])
+        assert (model.scores(inside) < model.threshold).mean() > 0.9, entry['type']  # measured 0.97 at least

@@ -329,3 +329,25 @@ def test_a_silent_sensor_is_caught_by_message_time_and_by_ticks(tmp_path):
     assert metadata['reason'] == '/imu/data silent for more than 0.5s'
     assert metadata['triggers'][0]['stamp'] == pytest.approx(102.5)  # the last IMU message came at 101.981
     assert [e.kind for e in events] == [OPENED, WRITTEN]
+
+
+def test_a_goal_status_rule_catches_every_simulated_planning_failure_once(tmp_path):
+    """The simulated move_base aborts its goal when a planning failure ends: a rule on /move_base/status
+    saves one window at the end of each failure, and none elsewhere."""
+    from cc_log import sim
+    run = sim.SimConfig(minutes=4, anomalies=3, anomaly_types=('planning_failure', 'collision'), seed=4,
+                        commands=True)
+    simulator = sim.Simulator(run)
+    rule = RuleTrigger('goal_aborted', sim.STATUS_TOPIC, type='actionlib_msgs/GoalStatusArray',
+                       when='status_list[0].status == 4')
+    from cc_log.config import installed_class
+    rule.check(installed_class(rule.type))
+    logger = SmartLogger(None, str(tmp_path), 'json-xz', '1s', '1s', driving_topic=sim.ODOM_TOPIC, triggers=[rule])
+    feed(logger, [(topic, msg, stamp) for topic, stamp, msg in simulator.messages()])
+    failures = [e for e in simulator.truth if e['type'] == 'planning_failure']
+    found = sorted(windows(tmp_path), key=lambda w: w[0]['start'])
+    assert failures and len(found) == len(failures)
+    for (metadata, _), entry in zip(found, failures):
+        assert metadata['names'] == ['goal_aborted'] and len(metadata['triggers']) == 1
+        assert abs(metadata['triggers'][0]['stamp'] - entry['end']) < 0.02
+        assert metadata['reason'] == 'status_list[0].status == 4 (4)'

@@ -962,7 +962,8 @@ def cmd_simulate(args):
     if os.path.exists(args.out) and not args.force:
         raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
     config = sim.SimConfig(rate=args.rate, seed=args.seed, minutes=args.minutes, anomalies=args.anomalies,
-                           imu=args.imu, **({'anomaly_types': args.types} if args.types else {}))
+                           imu=args.imu, commands=args.commands,
+                           **({'anomaly_types': args.types} if args.types else {}))
     with _bar(args, 'simulate') as bar:
         truth = _call(sim.simulate_to_bag, bar, args.out, config)
     truth_path = sim.truth_path(args.out)
@@ -1261,6 +1262,8 @@ def build_parser():
                    help='odometry Hz (default: %(default)s)')
     p.add_argument('--types', metavar='A,B', help='anomaly types to draw from (default: all)')
     p.add_argument('--imu', action='store_true', help='also write sensor_msgs/Imu')
+    p.add_argument('--commands', action='store_true', help='also write the planner\'s /cmd_vel and a move_base-like '
+                   '/move_base/status')
     p.add_argument('--force', action='store_true', help='overwrite an existing bag')
     _common(p)
     p.set_defaults(run=cmd_simulate)

@@ -11,6 +11,9 @@ Published topics
   bytes, queues, free disk, write errors and held files, every ``~diagnostic_period`` seconds (wall time).
 
 Parameters (defaults below as module constants; each resolved value is logged once)
+  ``~config`` (string, default: none): the configuration file (``cc_log.config``); with classifiers, the
+  vectors of each go to ``<directory>/features/<name>/<label>/`` (``~feature_set`` and ``~window`` are then
+  not used); the parameters below override it.
   ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): window files go here, vectors into
   ``<directory>/features/<label>/``; a fallback is a WARN on /diagnostics naming the directory in use.
   ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.

@@ -33,19 +33,14 @@ from . import features
 from . import log_format
 from . import safe_input
 from .spans import Span
-from .triggers import (DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, ClassifierTrigger, ManualTrigger, RuleTrigger,
-                       get as trigger_kind)
-from .triggers.base import check_name
+from .triggers import get as trigger_kind
+from .triggers.base import Context, check_name
+from .triggers.classifier import default_topics
 
 KEYS = ('topics', 'driving_topic', 'format', 'windows', 'limits', 'collect', 'triggers')
 WINDOW_KEYS = ('pre', 'post', 'max')
 LIMIT_KEYS = ('max_disk_mb', 'min_free_mb', 'max_buffer_mb')
 COLLECT_KEYS = ('rotate', 'label', 'stride')
-TRIGGER_KEYS = {
-    'classifier': ('model', 'topics', 'feature_set', 'window', 'classify_every', 'retrigger'),
-    'rule': ('topic', 'type', 'when', 'level', 'status', 'arrival', 'silent', 'min_rate', 'over', 'hold_off'),
-    'manual': (),
-}
 COMMON_TRIGGER_KEYS = ('name', 'kind', 'pre', 'post')
 DEFAULT_FEATURE_SET = 'motion'
 DEFAULT_WINDOW = '500'
@@ -209,52 +204,22 @@ class Config(object):
     def _where(self, entry):
         return '%s: triggers[%d] (%s)' % (self.source, entry['index'], entry['name'])
 
-    def classifier_topics(self, entry, feature_set, resolve=global_name):
-        """The resolved topics of a classifier entry: its ``topics``, else its feature set's role names."""
-        topics = entry.get('topics')
-        if topics is None:
-            topics = [role for role, _ in features.get(feature_set).inputs]
-        return [resolve(topic) for topic in topic_list(topics, '%s: topics' % self._where(entry))]
-
     def build_triggers(self, load_model, message_class, resolve=global_name):
         """The Trigger objects of smart mode. ``load_model(path)``: a model (raising ValueError naming the
         file); ``message_class(type)``: the class of a message type, or None when it is not installed;
         ``resolve(topic)``: a topic's full name. ValueError naming the trigger for anything wrong."""
+        context = Context(load_model, message_class, resolve)
         built = []
         for entry in self.triggers:
-            where = self._where(entry)
-            options = {key: value for key, value in entry.items() if key not in ('name', 'kind', 'index')}
+            options = dict((key, value) for key, value in entry.items() if key not in ('name', 'kind', 'index'))
             try:
-                if entry['kind'] == 'classifier':
-                    built.append(self._classifier(entry, options, load_model, resolve))
-                elif entry['kind'] == 'rule':
-                    built.append(_rule(entry['name'], options, message_class, resolve))
-                else:
-                    built.append(ManualTrigger(entry['name'], options.get('pre'), options.get('post')))
+                built.append(trigger_kind(entry['kind']).from_config(entry['name'], options, context))
             except ValueError as error:
                 text = str(error)
                 prefix = entry['name'] + ': '
-                raise ValueError('%s: %s' % (where, text[len(prefix):] if text.startswith(prefix) else text))
+                raise ValueError('%s: %s' % (self._where(entry), text[len(prefix):] if text.startswith(prefix)
+                                             else text))
         return built
-
-    def _classifier(self, entry, options, load_model, resolve):
-        path = options.get('model')
-        if not isinstance(path, str) or not path:
-            raise ValueError('model: required (the model file written by learn mode)')
-        try:
-            model = load_model(os.path.expanduser(path))
-        except ValueError as error:
-            raise ValueError('model: %s' % error)
-        for key in ('feature_set', 'window'):
-            if key in options and str(options[key]) != getattr(model.config, key) and not (
-                    key == 'window' and Span.parse(options[key], 'window') == model.config.span):
-                raise ValueError('%s: %s does not match the model\'s %s (it is part of the model; leave it out)'
-                                 % (key, options[key], getattr(model.config, key)))
-        topics = self.classifier_topics(entry, model.config.feature_set, resolve)
-        return ClassifierTrigger(entry['name'], model, topics,
-                                 classify_every=options.get('classify_every', DEFAULT_CLASSIFY_EVERY),
-                                 retrigger=options.get('retrigger', DEFAULT_RETRIGGER),
-                                 pre=options.get('pre'), post=options.get('post'))
 
     def feature_specs(self, load_model=None, resolve=global_name):
         """What collect mode computes: ``[(name, FeatureConfig, topics)]`` of every classifier entry (its
@@ -276,7 +241,11 @@ class Config(object):
                 config = features.FeatureConfig(feature_set, str(window))
             except ValueError as error:
                 raise ValueError('%s: %s' % (where, error))
-            specs.append((entry['name'], config, self.classifier_topics(entry, feature_set, resolve)))
+            try:
+                topics = default_topics(entry.get('topics'), feature_set, resolve)
+            except ValueError as error:
+                raise ValueError('%s: %s' % (where, error))
+            specs.append((entry['name'], config, topics))
         return specs
 
     def logger_options(self, triggers, resolve=global_name):
@@ -345,7 +314,7 @@ def _trigger_entry(entry, index):
         check_name(name)
     except ValueError as error:
         raise ValueError('triggers[%d]: %s' % (index, error))
-    _known(entry, COMMON_TRIGGER_KEYS + TRIGGER_KEYS[kind], 'triggers[%d] (%s): ' % (index, name))
+    _known(entry, COMMON_TRIGGER_KEYS + trigger_kind(kind).config_keys, 'triggers[%d] (%s): ' % (index, name))
     if kind == 'classifier' and 'feature_set' in entry:
         try:
             features.get(entry['feature_set'])
@@ -354,16 +323,3 @@ def _trigger_entry(entry, index):
     checked = dict(entry)
     checked.update(name=name, kind=kind, index=index)
     return checked
-
-
-def _rule(name, options, message_class, resolve):
-    options = dict(options)
-    if options.get('topic'):
-        options['topic'] = resolve(options['topic'])
-    rule = RuleTrigger(name, **options)
-    if rule.type is not None:
-        cls = message_class(rule.type)
-        if cls is None:
-            raise ValueError('type: unknown message type %r (not installed)' % rule.type)
-        rule.check(cls)
-    return rule

@@ -4,9 +4,11 @@
 
 1. simulates a nominal run of the BWIBot (no roscore) and collects its feature vectors, as collect mode;
 2. learns a model from them, as learn mode;
-3. starts a roscore and ``demo.launch`` (simulator with injected anomalies + smart logger), live;
-4. prints what was injected and caught, false windows, messages seen vs kept, raw vs stored bytes, and
-   writes a PNG timeline.
+3. starts a roscore and ``demo.launch`` (simulator with injected anomalies, its planner's ``cmd_vel`` and a
+   move_base-like goal status + the smart logger with a configuration: the motion classifier and a rule on
+   aborted goals, ``DEMO_CONFIG``), live;
+4. prints what was injected and caught (and by which trigger), false windows, messages seen vs kept, raw vs
+   stored bytes, and writes a PNG timeline.
 
 Everything it starts is stopped when it ends, whatever way it ends.
 """
@@ -155,6 +157,22 @@ class LiveRecorder(object):
             self.track.append((msg.header.stamp.to_sec(), msg.twist.twist.linear.x, msg.twist.twist.angular.z))
 
 
+DEMO_CONFIG = """# written by demo.py: the triggers of the demo's smart logger (demo.launch sets topics and retrigger)
+triggers:
+  - {name: classifier, kind: classifier, model: '%s', topics: [odom]}
+  - {name: goal_aborted, kind: rule, topic: move_base/status, type: actionlib_msgs/GoalStatusArray,
+     when: 'status_list[0].status == 4'}
+"""
+
+
+def write_config(out, model):
+    """The smart logger's configuration file (DEMO_CONFIG with ``model``); returns its path."""
+    path = os.path.join(out, 'demo.yaml')
+    with safe_files.AtomicFile(path, overwrite=True, text=True) as stream:
+        stream.write(DEMO_CONFIG % model.replace("'", "''"))
+    return path
+
+
 def run_live(out, model, minutes, anomalies, seed, processes):
     """Step 3: roscore + demo.launch until the simulator finishes. Returns (windows dir, truth, recorder)."""
     port = free_port()
@@ -168,7 +186,8 @@ def run_live(out, model, minutes, anomalies, seed, processes):
     windows = os.path.join(out, 'windows')
     truth_file = os.path.join(out, 'truth.json')
     launch = processes.start(
-        ['roslaunch', 'cc_log', 'demo.launch', 'model:=%s' % model, 'directory:=%s' % windows,
+        ['roslaunch', 'cc_log', 'demo.launch', 'model:=%s' % model, 'config:=%s' % write_config(out, model),
+         'directory:=%s' % windows,
          'minutes:=%g' % minutes, 'anomalies:=%d' % anomalies, 'seed:=%d' % seed, 'truth_file:=%s' % truth_file],
         env, os.path.join(out, 'roslaunch.log'))
     started = time.time()
@@ -209,7 +228,7 @@ def match(windows, truth, slack):
     for window in windows:
         hits = [event for event in truth if window['start'] <= event['end'] + slack and window['end'] >= event['start']]
         for event in hits:
-            caught[id(event)] = True
+            caught.setdefault(id(event), set()).update(window.get('names', ()))
         if not hits:
             false_windows.append(window)
     return caught, false_windows
@@ -221,18 +240,20 @@ def summarize(out, windows_dir, truth, recorder, window_seconds):
     for path in log_format.window_files(windows_dir):
         meta, _ = log_format.read_window(path)
         windows.append({'path': path, 'start': meta['start'], 'end': meta['end'], 'count': meta['count'],
-                        'bytes': os.path.getsize(path)})
+                        'bytes': os.path.getsize(path), 'names': meta.get('names', [])})
     caught, false_windows = match(windows, truth, window_seconds)
     stored = sum(window['bytes'] for window in windows)
     kept = sum(window['count'] for window in windows)
     by_type = {}
     for event in truth:
-        injected, hit = by_type.get(event['type'], (0, 0))
-        by_type[event['type']] = (injected + 1, hit + (1 if id(event) in caught else 0))
-    lines = ['', 'cc_log demo: smart logger on a simulated BWIBot (100 Hz odometry + IMU)',
-             '  anomalies injected vs caught:']
-    for kind, (injected, hit) in sorted(by_type.items()):
-        lines.append('    %-22s %d / %d' % (kind, hit, injected))
+        injected, hit, names = by_type.get(event['type'], (0, 0, set()))
+        by_type[event['type']] = (injected + 1, hit + (1 if id(event) in caught else 0),
+                                  names | caught.get(id(event), set()))
+    lines = ['', 'cc_log demo: smart logger on a simulated BWIBot (100 Hz odometry + IMU, cmd_vel, goal status)',
+             '  anomalies injected vs caught (by trigger):']
+    for kind, (injected, hit, names) in sorted(by_type.items()):
+        by = '  (%s)' % ', '.join(sorted(names)) if names else ''
+        lines.append('    %-22s %d / %d%s' % (kind, hit, injected, by))
     lines.append('    %-22s %d / %d' % ('all', len(caught), len(truth)))
     lines.append('  false windows:          %d' % len(false_windows))
     share = 100.0 * kept / max(recorder.messages, 1)

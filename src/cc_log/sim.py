@@ -15,8 +15,13 @@ What it publishes
     i.e. the pose integrated from measured wheel speeds, with a wheel-scale error, white speed noise, a
     slowly wandering yaw-rate bias (slow drift) and jittered stamps. Optionally ``sensor_msgs/Imu`` on
     ``/imu/data`` (body acceleration, centripetal term and gravity with noise, gyro with bias, orientation
-    with slow yaw drift). Ground truth on ``/sim/anomaly`` (``std_msgs/String`` holding JSON, one message
-    when an anomaly starts and one when it ends).
+    with slow yaw drift). Optionally (``commands``) what the navigation stack says: ``geometry_msgs/Twist``
+    on ``/cmd_vel`` at ``COMMAND_RATE`` Hz (the planner's velocity command: the controller's, or the failing
+    planner's during a planning failure) and a move_base-like ``actionlib_msgs/GoalStatusArray`` on
+    ``/move_base/status`` at ``STATUS_RATE`` Hz (the current goal ACTIVE while the robot heads for a
+    destination, SUCCEEDED once there; a planning failure ends with its goal ABORTED, published at once, and
+    the robot going on under a new goal). Ground truth on ``/sim/anomaly`` (``std_msgs/String`` holding JSON,
+    one message when an anomaly starts and one when it ends).
 
 Anomalies (``ANOMALY_TYPES``), each a separate event with nominal driving (at least ``gap`` seconds)
 between events:
@@ -53,6 +58,7 @@ import random
 import struct
 
 import genpy
+from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
@@ -62,7 +68,12 @@ ANOMALY_TYPES = ('planning_failure', 'collision', 'sudden_acceleration', 'excess
 
 ODOM_TOPIC = '/odom'
 IMU_TOPIC = '/imu/data'
+CMD_TOPIC = '/cmd_vel'
+STATUS_TOPIC = '/move_base/status'
 TRUTH_TOPIC = '/sim/anomaly'
+COMMAND_RATE = 20.0  # Hz of /cmd_vel (at most the odometry rate)
+STATUS_RATE = 2.0    # Hz of /move_base/status
+ACTIVE, SUCCEEDED, ABORTED = 1, 3, 4  # actionlib_msgs/GoalStatus values used
 ODOM_FRAME = 'odom'
 BASE_FRAME = 'base_link'
 IMU_FRAME = 'imu_link'
@@ -118,6 +129,7 @@ class SimConfig(object):
                    order, cycling through ``anomaly_types``)
     anomaly_types  which types to use (tuple, or comma-separated string)
     imu            also publish sensor_msgs/Imu on /imu/data
+    commands       also publish /cmd_vel and /move_base/status (see the module docstring)
     start_time     stamp (float seconds) of the first message
     gap            at least this many seconds of nominal driving between anomalies (and before the first)
     warmup         seconds of nominal driving before the first anomaly
@@ -126,7 +138,7 @@ class SimConfig(object):
     """
 
     def __init__(self, rate=100.0, seed=0, minutes=10.0, anomalies=6, anomaly_types=ANOMALY_TYPES, imu=False,
-                 start_time=DEFAULT_START_TIME, gap=20.0, warmup=20.0, jitter=0.0005, noise=1.0):
+                 start_time=DEFAULT_START_TIME, gap=20.0, warmup=20.0, jitter=0.0005, noise=1.0, commands=False):
         self.rate = rate
         self.seed = seed
         self.minutes = minutes
@@ -138,6 +150,7 @@ class SimConfig(object):
         self.warmup = warmup
         self.jitter = jitter
         self.noise = noise
+        self.commands = commands
 
     def validate(self):
         """Check and normalise the fields; raise ValueError('<field>: <what is wrong>')."""
@@ -166,6 +179,7 @@ class SimConfig(object):
         number('noise', 0.0, 10.0)
         self.anomaly_types = parse_anomaly_types(self.anomaly_types)
         self.imu = bool(self.imu)
+        self.commands = bool(self.commands)
         if self.anomalies and self.minutes > 0:
             slot = self.slot_seconds()
             need = self.gap + MAX_ANOMALY_SECONDS
@@ -494,6 +508,13 @@ _IMU_GYRO_COVARIANCE_BYTES = struct.pack('<9d', *_IMU_GYRO_COVARIANCE)
 _IMU_ACCEL_COVARIANCE_BYTES = struct.pack('<9d', *_IMU_ACCEL_COVARIANCE)
 
 
+def _twist(v, w):
+    msg = Twist()
+    msg.linear.x = v
+    msg.angular.z = w
+    return msg
+
+
 def _odometry(stamp, seq, x, y, yaw, v, w):
     msg = Odometry()
     msg.header.seq = seq
@@ -651,6 +672,10 @@ class Simulator(object):
         self._path = None
         self._mode = 'dwell'
         self._dwell_until = 2.0
+        self._goal = 0                         # number of the current move_base goal (0: none yet)
+        self._goal_status = None
+        self._command_every = max(1, int(round(config.rate / COMMAND_RATE)))
+        self._status_every = max(1, int(round(config.rate / STATUS_RATE)))
         # the odometry estimate (integrated wheel speeds, starting at 0)
         self.odom_x = self.odom_y = self.odom_yaw = 0.0
         # anomalies
@@ -710,6 +735,10 @@ class Simulator(object):
             entry = _truth_entry(active['type'], active['start'], stamp_s)
             self.truth.append(entry)
             out.append((TRUTH_TOPIC, stamp_s, truth_event('end', entry)))
+            if active['type'] == 'planning_failure' and config.commands:
+                # move_base gives up on the goal (its recoveries failed), the robot goes on under a new goal
+                out.append((STATUS_TOPIC, stamp_s, self._status(stamp, ABORTED)))
+                self._goal += 1
             self._cmd_v, self._cmd_w = self.v, self.w       # the controller takes over from where the base is
             self._last_end = t
             self._active = active = None
@@ -765,10 +794,23 @@ class Simulator(object):
 
         if config.imu:
             out.append(self._imu(k, t, accel))
+        if config.commands:
+            if k % self._command_every == 0:
+                out.append((CMD_TOPIC, stamp_s, _twist(self._cmd_v, self._cmd_w)))
+            if k % self._status_every == 0 and self._goal:
+                out.append((STATUS_TOPIC, stamp_s, self._status(stamp, self._goal_status)))
         self.tick += 1
         if len(out) > 1:
             out.sort(key=lambda item: item[1])
         return out
+
+    def _status(self, stamp, status):
+        """The move_base-like status of the current goal."""
+        from actionlib_msgs.msg import GoalID, GoalStatus, GoalStatusArray
+        array = GoalStatusArray()
+        array.header.stamp = stamp
+        array.status_list = [GoalStatus(goal_id=GoalID(id='goal_%d' % self._goal), status=status)]
+        return array
 
     def _imu(self, k, t, accel):
         rng, noise = self._rng_imu, self.config.noise
@@ -820,6 +862,8 @@ class Simulator(object):
         self._path = _Path(points, speeds, self.limits)
         self._node = goal
         self._mode = 'turn'
+        self._goal += 1
+        self._goal_status = ACTIVE
 
     def _control(self, t):
         """The planner and pure-pursuit controller: acceleration-limited (v, w) command for this tick."""
@@ -835,6 +879,7 @@ class Simulator(object):
             gx, gy = path.points[-1]
             if remaining < 0.1 or math.hypot(gx - self.x, gy - self.y) < 0.1:
                 self._mode = 'dwell'
+                self._goal_status = SUCCEEDED
                 self._dwell_until = t + self._rng_route.uniform(2.0, 6.0)
             else:
                 lookahead = 0.5 + 0.6 * max(self._cmd_v, 0.0)
@@ -897,7 +942,7 @@ def load_truth(path):
 def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progress=None):
     """Simulate a whole run straight into a bag (no roscore) and its ground truth next to it.
 
-    Writes ``path`` (odometry, IMU when configured, /sim/anomaly events; ``compression`` 'lz4', 'bz2' or
+    Writes ``path`` (odometry, IMU and commands when configured, /sim/anomaly events; ``compression`` 'lz4', 'bz2' or
     'none') and the sidecar ``truth_file`` (default ``<path>.truth.json``); ``progress(done, total)`` is
     called now and then with simulated ticks. Returns the truth list.
     """
@@ -914,11 +959,11 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progr
             write = bag.write
             total = simulator.total_ticks
             every = max(1, int(config.rate * 10))
-            kinds = {ODOM_TOPIC: Odometry, IMU_TOPIC: Imu, TRUTH_TOPIC: String}
+            kinds = {ODOM_TOPIC: Odometry, IMU_TOPIC: Imu, TRUTH_TOPIC: String, CMD_TOPIC: Twist}
             while not simulator.done:
                 for topic, stamp, item in simulator._advance():
-                    cls = kinds[topic]
-                    when = _time(stamp)[0] if topic == TRUTH_TOPIC else item[1]
+                    cls = kinds.get(topic) or type(item)
+                    when = item[1] if isinstance(item, tuple) else _time(stamp)[0]
                     write(topic, (cls._type, _serialized(item), cls._md5sum, cls), _BagTime(when.secs, when.nsecs),
                           raw=True)
                 if progress is not None and simulator.tick % every == 0:

@@ -7,6 +7,8 @@ them in real time (rospy.Rate), stamped with the simulator's clock, which starts
 Published topics (relative names: push the node into a namespace or remap them)
   ``odom`` (nav_msgs/Odometry, frame ``odom`` -> ``base_link``): at ``~rate`` Hz, steady (rospy.Rate).
   ``imu/data`` (sensor_msgs/Imu): at the same rate when ``~imu`` is true.
+  ``cmd_vel`` (geometry_msgs/Twist, the planner's command) and ``move_base/status``
+  (actionlib_msgs/GoalStatusArray) when ``~commands`` is true (see ``cc_log.sim``).
   ``sim/anomaly`` (std_msgs/String, JSON): ground truth, one message when an anomaly starts
   ``{"event": "start", "type", "start", "end": null}`` and one when it ends
   ``{"event": "end", "type", "start", "end"}``; stamps are those of the odometry published at that moment.
@@ -17,6 +19,7 @@ Parameters (each resolved value is logged once)
   ``~anomalies`` (int, default 0): how many anomalies to inject.
   ``~anomaly_types`` (list or comma-separated string, default: all): which types.
   ``~imu`` (bool, default false): also publish ``imu/data``.
+  ``~commands`` (bool, default false): also publish ``cmd_vel`` and ``move_base/status``.
   ``~minutes`` (double, default 0): how long to run; 0 = until shutdown. The node exits at the end.
   ``~truth_file`` (string, default: none): ground-truth JSON (as ``cc_log.sim.write_truth``), rewritten
   whenever an anomaly ends (and at shutdown when one was cut short; its end is then the last stamp).
@@ -40,8 +43,10 @@ NODE_NAME = 'sim_bwibot'
 ODOM_TOPIC = 'odom'
 IMU_TOPIC = 'imu/data'
 TRUTH_TOPIC = 'sim/anomaly'
+CMD_TOPIC = 'cmd_vel'
+STATUS_TOPIC = 'move_base/status'
 DEFAULTS = {'rate': 100.0, 'seed': 0, 'anomalies': 0, 'anomaly_types': 'all', 'imu': False, 'minutes': 0.0,
-            'truth_file': '', 'gap': 20.0, 'warmup': 20.0}
+            'truth_file': '', 'gap': 20.0, 'warmup': 20.0, 'commands': False}
 
 
 def read_config(start_time):
@@ -53,7 +58,8 @@ def read_config(start_time):
         config = sim.SimConfig(rate=values['rate'], seed=values['seed'], minutes=values['minutes'],
                                anomalies=values['anomalies'], anomaly_types=values['anomaly_types'],
                                imu=to_bool('imu', values['imu']), start_time=start_time, gap=values['gap'],
-                               warmup=values['warmup'], jitter=0.0).validate()
+                               warmup=values['warmup'], jitter=0.0,
+                               commands=to_bool('commands', values['commands'])).validate()
     except ConfigError:
         raise
     except ValueError as error:
@@ -74,6 +80,12 @@ class SimNode(object):
         self.odom_pub = rospy.Publisher(ODOM_TOPIC, Odometry, queue_size=50)
         self.imu_pub = rospy.Publisher(IMU_TOPIC, Imu, queue_size=50) if config.imu else None
         self.truth_pub = rospy.Publisher(TRUTH_TOPIC, String, queue_size=20)
+        self.command_pubs = {}
+        if config.commands:
+            from actionlib_msgs.msg import GoalStatusArray
+            from geometry_msgs.msg import Twist
+            self.command_pubs = {sim.CMD_TOPIC: rospy.Publisher(CMD_TOPIC, Twist, queue_size=50),
+                                 sim.STATUS_TOPIC: rospy.Publisher(STATUS_TOPIC, GoalStatusArray, queue_size=20)}
         self.published = 0
 
     def run(self):
@@ -93,6 +105,8 @@ class SimNode(object):
                         self.imu_pub.publish(msg)
                     elif topic == sim.TRUTH_TOPIC:
                         self._truth_event(json.loads(msg.data), stamp)
+                    elif topic in self.command_pubs:
+                        self.command_pubs[topic].publish(msg)
                     last = stamp
                 rate.sleep()
         except rospy.ROSInterruptException:

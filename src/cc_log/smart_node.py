@@ -3,7 +3,9 @@
 Node name: ``smart_logger``.
 
 Subscribed topics
-  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it).
+  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it); the topics of
+  the model's other inputs by their role names (``cmd_vel`` for a command model; ``imu`` is the driving
+  topic of an imu model), or those of the configuration's triggers.
   every topic in ``~topics`` (any type): saved in the windows whose time span holds them.
 
 Published topics
@@ -18,7 +20,11 @@ Services
   ``~enable`` (std_srvs/SetBool): resume (true) or pause (false) logging.
 
 Parameters (defaults below as module constants; each resolved value is logged once)
-  ``~model`` (string, required): model file from learn mode (its feature window is used).
+  ``~config`` (string, default: none): the configuration file (``cc_log.config``: topics, triggers, windows,
+  format, limits); keys loaded into the node's namespace (``rosparam load``) and the parameters below
+  override it.
+  ``~model`` (string, required without triggers in the configuration): model file from learn mode of the
+  classifier named ``classifier`` (its feature window is used).
   ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): where window files go.
   ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
   ``~window`` (string, default: the model's): only checked against the model; a mismatch is an error.

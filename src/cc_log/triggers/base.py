@@ -8,14 +8,18 @@ None: the logger's) may widen or narrow that window. ``SmartLogger`` runs a list
 merge in ``WindowBuffer`` (one file for overlapping spans).
 
 ``register`` adds a Trigger subclass under its ``kind``; ``get(kind)`` finds it (ValueError naming the
-trigger kind otherwise). Each kind builds itself from a configuration dict with ``from_config`` (see
-``config``). Pure: no rospy.
+trigger kind otherwise). Each kind declares the keys of its configuration entry (``config_keys``) and builds
+itself from one (``from_config``; see ``config``). Pure: no rospy.
 """
 import collections
 import re
 
 from ..registry import Registry
 from ..spans import Span
+
+Context = collections.namedtuple('Context', 'load_model message_class resolve')
+Context.__doc__ = """What building a trigger from a configuration may need: ``load_model(path)`` (a model; ValueError
+naming the file), ``message_class(type)`` (an installed class or None), ``resolve(topic)`` (a full name)."""
 
 Fire = collections.namedtuple('Fire', 'name reason score pre post', defaults=(None, None))
 Fire.__doc__ = """A trigger's decision to keep a window: its name, a reason (text), a score (float; NaN when none),
@@ -51,6 +55,13 @@ class Trigger(object):
 
     kind = None
     watches_time = False
+    config_keys = ()  # the keys of its configuration entry besides name, kind, pre and post
+
+    @classmethod
+    def from_config(cls, name, options, context):
+        """The trigger of a configuration entry (``options``: its keys but name and kind; ``context``: a
+        Context); ValueError('<what>: ...')."""
+        return cls(name, **options)
 
     def __init__(self, name, pre=None, post=None):
         self.name = check_name(name)

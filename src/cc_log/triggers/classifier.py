@@ -7,8 +7,10 @@ inputs, in its order (the first makes the rows). Its ``features.FeatureStream`` 
 (``'onset'``: the score must come back above the threshold before it fires again). Several classifiers may
 run at once, each with its own model, topics, ``classify_every`` and ``retrigger``. Pure: no rospy.
 """
+import os
 import time
 
+from .. import features
 from ..features import FeatureStream
 from ..spans import Span
 from .base import Trigger, register
@@ -29,6 +31,15 @@ DEFAULT_RETRIGGER = 'every'
 DEFAULT_CLASSIFY_EVERY = '50ms'
 
 
+def default_topics(topics, feature_set, resolve):
+    """The resolved topics of a classifier: ``topics`` (a list or a space-separated string), else the role
+    names of its feature set's inputs (``odom``, ``imu``, ``cmd_vel``)."""
+    from ..config import topic_list
+    if topics is None:
+        topics = [role for role, _ in features.get(feature_set).inputs]
+    return [resolve(topic) for topic in topic_list(topics, 'topics')]
+
+
 @register
 class ClassifierTrigger(Trigger):
     """Fires on anomalous classifier scores (see the module docstring).
@@ -38,6 +49,28 @@ class ClassifierTrigger(Trigger):
     """
 
     kind = 'classifier'
+    config_keys = ('model', 'topics', 'feature_set', 'window', 'classify_every', 'retrigger')
+
+    @classmethod
+    def from_config(cls, name, options, context):
+        """The model file of ``model``; ``feature_set`` and ``window``, when given, must be the model's;
+        ``topics`` default to the feature set's role names."""
+        options = dict(options)
+        path = options.pop('model', None)
+        if not isinstance(path, str) or not path:
+            raise ValueError('model: required (the model file written by learn mode)')
+        try:
+            model = context.load_model(os.path.expanduser(path))
+        except ValueError as error:
+            raise ValueError('model: %s' % error)
+        for key in ('feature_set', 'window'):
+            value = options.pop(key, None)
+            if value is not None and str(value) != getattr(model.config, key) and not (
+                    key == 'window' and Span.parse(value, 'window') == model.config.span):
+                raise ValueError('%s: %s does not match the model\'s %s (it is part of the model; leave it out)'
+                                 % (key, value, getattr(model.config, key)))
+        topics = default_topics(options.pop('topics', None), model.config.feature_set, context.resolve)
+        return cls(name, model, topics, **options)
 
     def __init__(self, name, model, topics, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER,
                  pre=None, post=None):

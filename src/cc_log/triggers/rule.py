@@ -153,6 +153,21 @@ class RuleTrigger(Trigger):
     ``arrival``, ``silent``, ``min_rate``. ``type``: the topic's message type (checked at start for ``when``)."""
 
     kind = 'rule'
+    config_keys = ('topic', 'type', 'when', 'level', 'status', 'arrival', 'silent', 'min_rate', 'over', 'hold_off')
+
+    @classmethod
+    def from_config(cls, name, options, context):
+        """The rule on its resolved topic, its ``when`` checked against ``type`` (which must be installed)."""
+        options = dict(options)
+        if options.get('topic'):
+            options['topic'] = context.resolve(options['topic'])
+        rule = cls(name, **options)
+        if rule.type is not None:
+            msg_class = context.message_class(rule.type)
+            if msg_class is None:
+                raise ValueError('type: unknown message type %r (not installed)' % rule.type)
+            rule.check(msg_class)
+        return rule
 
     def __init__(self, name, topic=None, when=None, type=None, level=None, status=None, arrival=False,
                  silent=None, min_rate=None, over=DEFAULT_OVER, hold_off=DEFAULT_HOLD_OFF, pre=None, post=None):
