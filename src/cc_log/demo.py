@@ -41,7 +41,7 @@ MASTER_TIMEOUT = 30.0
 MARKER = '.cc_log_demo'
 #: Everything the demo writes in its directory (``train`` removes the bag and its truth file again).
 OUTPUTS = ('nominal.bag', sim.truth_path('nominal.bag'), 'features', 'model.json', 'windows', 'truth.json',
-           'ros_log', 'roscore.log', 'roslaunch.log', 'timeline.png')
+           'ros_log', 'roscore.log', 'roslaunch.log', 'timeline.png', 'demo.yaml')
 
 
 def log(text):
