@@ -3,4 +3,6 @@ from setuptools import setup
 
 from catkin_pkg.python_setup import generate_distutils_setup
 
-setup(**generate_distutils_setup(packages=['cc_log', 'cc_log.features', 'cc_log.triggers'], package_dir={'': 'src'}))
+PACKAGES = ['cc_log', 'cc_log.features', 'cc_log.formats', 'cc_log.triggers']
+
+setup(**generate_distutils_setup(packages=PACKAGES, package_dir={'': 'src'}))

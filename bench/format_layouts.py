@@ -36,7 +36,8 @@ try:
 except ImportError:
     sys.path.insert(0, os.path.join(ROOT, 'src'))
     import cc_log
-from cc_log import json_xz, msg_codec  # noqa: E402
+from cc_log import msg_codec  # noqa: E402
+from cc_log.formats import json_xz  # noqa: E402
 from cc_log.window_buffer import Record  # noqa: E402
 
 BAGS = [
@@ -124,7 +125,7 @@ LAYOUTS = [('rows', rows_layout), ('columns', columns_layout), ('columns-elem', 
 
 
 def bag_bytes(records):
-    from cc_log import bag_lz4
+    from cc_log.formats import bag_lz4
     with tempfile.TemporaryDirectory() as directory:
         path = os.path.join(directory, 'w.bag')
         bag_lz4.write(path, records, dict(METADATA, codec='bag-lz4'))

@@ -11,7 +11,8 @@ import sys
 
 import pytest
 
-from cc_log import json_xz, log_format, msg_codec
+from cc_log import log_format, msg_codec
+from cc_log.formats import json_xz
 from cc_log.log_format import Format, read_window, write_window
 from cc_log.window_buffer import LogWindow, Record, Trigger
 
@@ -459,8 +460,9 @@ def test_compact_definition_keeps_md5(real_bag):
     assert msg_codec.compact_definition('string S=a # b\nint32 X=1 # one\n') == 'string S=a # b\nint32 X=1\n'
 
 
-@pytest.mark.parametrize('module', ['cc_log.msg_codec', 'cc_log.json_xz', 'cc_log.log_format',
-                                    'cc_log.bag_lz4', 'cc_log.codecs', 'cc_log.directory'])
+@pytest.mark.parametrize('module', ['cc_log.msg_codec', 'cc_log.formats.json_xz', 'cc_log.log_format',
+                                    'cc_log.formats.bag_lz4', 'cc_log.formats.bag_salvage', 'cc_log.codecs',
+                                    'cc_log.directory', 'cc_log.export'])
 def test_pure_modules_do_not_import_rospy(module):
     code = ('import sys, %s\n'
             'bad = sorted(m for m in sys.modules if m.split(".")[0] in ("rospy", "rosbag", "roslib"))\n'

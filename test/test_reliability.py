@@ -351,7 +351,7 @@ def test_bag_truncated_anywhere_keeps_every_complete_chunk_and_never_deletes_dat
 
 def test_no_empty_leftover_while_encoding(tmp_path, monkeypatch):
     """json-xz is encoded before the temporary file exists: dying while encoding leaves nothing."""
-    from cc_log import json_xz
+    from cc_log.formats import json_xz
 
     def boom(*args, **kwargs):
         assert recovery.scan(str(tmp_path)) == []

@@ -22,7 +22,8 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from cc_log import json_xz, log_format, msg_codec, recovery, safe_input
+from cc_log import log_format, msg_codec, recovery, safe_input
+from cc_log.formats import json_xz
 from cc_log.log_format import read_window, write_window
 from cc_log.window_buffer import LogWindow, Record
 

@@ -30,6 +30,8 @@ import textwrap
 import threading
 import time
 
+from . import export, formats
+
 PROG = 'cclog'
 EXIT_OK = 0
 EXIT_BAD_INPUT = 1
@@ -174,17 +176,7 @@ def _call(function, progress, *positional, **keywords):
 
 # -- output helpers ---------------------------------------------------------------------------------------
 
-def _plain(value):
-    """JSON-safe copy: numpy numbers to Python, NaN/inf to None, tuples to lists."""
-    if isinstance(value, dict):
-        return {str(key): _plain(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(item) for item in value]
-    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
-        return _plain(value.tolist())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+_plain = export.plain
 
 
 def _print_json(document):
@@ -603,15 +595,6 @@ def cmd_info(args):
     return EXIT_OK
 
 
-def _record_row(record, path=None):
-    from . import msg_codec
-    row = collections.OrderedDict([('stamp', record.stamp), ('topic', record.topic),
-                                   ('type', record.msg._type), ('msg', msg_codec.to_dict(record.msg))])
-    if path is not None:
-        row['file'] = path
-    return row
-
-
 def _cc_log_json(path):
     """A cc_log JSON file (model, feature vector, simulator truth); CommandError when it is none of them."""
     from . import safe_input
@@ -631,10 +614,9 @@ def _cc_log_json(path):
 
 
 def _is_window_file(path):
-    from . import bag_lz4, json_xz, safe_input
+    from . import formats, safe_input
     with safe_input.open_input(path) as stream:
-        head = stream.read(16)
-    return head.startswith(json_xz.MAGIC) or head.startswith(bag_lz4.MAGIC)
+        return formats.by_magic(stream.read(16)) is not None
 
 
 def cmd_cat(args):
@@ -642,8 +624,7 @@ def cmd_cat(args):
     topics = set(args.topic) if args.topic else None
     out = sys.stdout
     for argument in args.paths:
-        if os.path.isfile(argument) and not _is_window_file(argument) and not argument.endswith(
-                ('.json.xz', '.bag')):
+        if os.path.isfile(argument) and not _is_window_file(argument) and not formats.by_extension(argument):
             out.write(json.dumps(_plain(_cc_log_json(argument)), allow_nan=False) + '\n')
             continue
         for path, metadata, records in _read_windows(args, [argument], 'cat'):
@@ -651,7 +632,7 @@ def cmd_cat(args):
                 out.write(json.dumps(_plain({'file': path, 'metadata': metadata}), allow_nan=False) + '\n')
             for record in records:
                 if topics is None or record.topic in topics:
-                    out.write(json.dumps(_plain(_record_row(record, path if args.with_file else None)),
+                    out.write(json.dumps(_plain(export.record_row(record, path if args.with_file else None)),
                                          allow_nan=False) + '\n')
     return EXIT_OK
 
@@ -669,77 +650,21 @@ def _selected_records(args):
     return records
 
 
-def _csv_cell(value):
-    if isinstance(value, (list, dict)):
-        return json.dumps(value, allow_nan=False)
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, float):
-        return repr(value)
-    return value
-
-
-def _flatten(row, prefix, out):
-    for name, value in row.items():
-        if isinstance(value, dict) and value and not set(value) == {'secs', 'nsecs'}:
-            _flatten(value, prefix + name + '.', out)
-        elif isinstance(value, dict):
-            out[prefix + name] = value['secs'] + value['nsecs'] * 1e-9 if value else value
-            out[prefix + name + '.secs'] = value['secs']
-            out[prefix + name + '.nsecs'] = value['nsecs']
-        else:
-            out[prefix + name] = value
-    return out
-
-
-def _topic_file_name(topic):
-    name = ''.join(c if c.isalnum() or c in '-_.' else '_' for c in topic.strip('/')) or 'root'
-    return name + '.csv'
-
-
 def cmd_export(args):
-    """Window files to one bag, one CSV per topic, or one JSON-lines file."""
-    import csv
-    from . import msg_codec
-    from .safe_files import AtomicFile
+    """Window files to one bag, one CSV per topic, or one JSON-lines file (``export``)."""
     records = _selected_records(args)
-    files = []
     if args.to == 'jsonl':
         _parent_exists(args.out, 'out')
-        with AtomicFile(args.out, overwrite=True, text=True) as stream:
-            for record in records:
-                stream.write(json.dumps(_plain(_record_row(record)), allow_nan=False) + '\n')
-        files.append(args.out)
+        files = export.to_jsonl(records, args.out)
     elif args.to == 'bag':
-        import rosbag
-        from .bag_lz4 import bag_time
         _parent_exists(args.out, 'out')
         if os.path.exists(args.out) and not args.force:
             raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
-        compression = rosbag.Compression.LZ4 if args.compression == 'lz4' else (
-            rosbag.Compression.BZ2 if args.compression == 'bz2' else rosbag.Compression.NONE)
-        with _bar(args, 'export', len(records)) as bar, AtomicFile(args.out, overwrite=True) as stream, \
-                rosbag.Bag(stream, 'w', compression=compression) as bag:
-            for record in records:
-                bag.write(record.topic, record.msg, bag_time(record.stamp))
-                bar.update()
-        files.append(args.out)
+        with _bar(args, 'export', len(records)) as bar:
+            files = export.to_bag(records, args.out, args.compression, bar.update)
     else:
         _writable_dir(args.out, 'out')
-        by_topic = collections.OrderedDict()
-        for record in records:
-            by_topic.setdefault(record.topic, []).append(record)
-        for topic, topic_records in by_topic.items():
-            rows = [_flatten(msg_codec.to_dict(record.msg), '', collections.OrderedDict())
-                    for record in topic_records]
-            fields = list(collections.OrderedDict.fromkeys(key for row in rows for key in row))
-            path = os.path.join(args.out, _topic_file_name(topic))
-            with AtomicFile(path, overwrite=True, text=True, newline='') as stream:
-                writer = csv.writer(stream)
-                writer.writerow(['stamp'] + fields)
-                for record, row in zip(topic_records, rows):
-                    writer.writerow([repr(float(record.stamp))] + [_csv_cell(row.get(field, '')) for field in fields])
-            files.append(path)
+        files = export.to_csv(records, args.out)
     summary = collections.OrderedDict([('to', args.to), ('messages', len(records)),
                                        ('topics', sorted(set(record.topic for record in records))),
                                        ('files', files)])
@@ -839,7 +764,8 @@ def cmd_codecs(args):
 
 def _is_plain_bag(path):
     """True for a rosbag that is not a cc_log bag-lz4 window file (which ``codecs`` reads as a LOG)."""
-    from . import bag_lz4, safe_input
+    from . import safe_input
+    from .formats import bag_lz4
     with safe_input.open_input(path) as stream:
         if not stream.read(16).startswith(bag_lz4.MAGIC):
             return False
@@ -1135,7 +1061,7 @@ def build_parser():
                    help='messages (100) or seconds (2s) kept before an anomaly (default: 100)')
     p.add_argument('--post', type=_span('post'), metavar='N|Ns',
                    help='messages or seconds kept after the last anomaly (default: 100)')
-    p.add_argument('--format', choices=('json-xz', 'bag-lz4'), help='window file format (default: json-xz)')
+    p.add_argument('--format', choices=formats.names(), help='window file format (default: %s)' % formats.DEFAULT)
     p.add_argument('--side-topic', action='append', default=[], metavar='T',
                    help='another topic to save inside the windows (repeatable)')
     p.add_argument('--classify-every', type=_span('classify-every'), metavar='N|Ns',
@@ -1196,7 +1122,7 @@ def build_parser():
     p.add_argument('--to', required=True, choices=EXPORT_TARGETS, help='output kind')
     p.add_argument('--out', required=True, metavar='PATH', help='output file (bag, jsonl) or directory (csv)')
     p.add_argument('--topic', action='append', metavar='T', help='only this topic (repeatable)')
-    p.add_argument('--compression', default='none', choices=('none', 'lz4', 'bz2'),
+    p.add_argument('--compression', default='none', choices=export.BAG_COMPRESSIONS,
                    help='bag compression (default: %(default)s)')
     p.add_argument('--force', action='store_true', help='overwrite an existing bag')
     _common(p)

@@ -1,9 +1,9 @@
 """Window files: the formats, their names, atomic writing and reading.
 
-``write_window(window, directory, fmt, metadata)`` writes one LogWindow as ``json-xz`` (pure, see
-``json_xz``) or ``bag-lz4`` (a rosbag, see ``bag_lz4``; rosbag is imported only when that format is
-written or read). Files are named by the UTC time of their first stamp and the first trigger reason, so
-names sort by time::
+``write_window(window, directory, fmt, metadata)`` writes one LogWindow in a format of ``formats``
+(``json-xz``: pure, ``formats.json_xz``; ``bag-lz4``: a rosbag, ``formats.bag_lz4``, rosbag imported only
+when that format is written or read); ``read_window(path)`` reads any of them by its magic bytes. Files are
+named by the UTC time of their first stamp and the first trigger reason, so names sort by time::
 
     cc_log_20150521T191138.027Z_classifier.json.xz
     cc_log_20150521T191138.027Z_classifier_part2.json.xz   (second part of a split window)
@@ -20,7 +20,7 @@ import os
 import re
 
 from . import __version__
-from . import json_xz
+from . import formats
 from . import msg_codec
 from . import safe_files, safe_input
 
@@ -31,19 +31,13 @@ DIR_MODE = safe_files.DIR_MODE
 
 
 class Format(object):
-    """The window file formats."""
+    """The window file formats, as named in the code (the table is ``formats.FORMATS``)."""
 
-    JSON_XZ = 'json-xz'
-    BAG_LZ4 = 'bag-lz4'
-    ALL = (JSON_XZ, BAG_LZ4)
-    EXTENSIONS = {JSON_XZ: json_xz.EXTENSION, BAG_LZ4: '.bag'}
-
-    @classmethod
-    def check(cls, name, param='format'):
-        """Return ``name`` when it is a format; else ValueError("format: 'xyz' is not one of: ...")."""
-        if name not in cls.ALL:
-            raise ValueError('%s: %r is not one of: %s' % (param, name, ', '.join(cls.ALL)))
-        return name
+    JSON_XZ = formats.json_xz.CODEC
+    BAG_LZ4 = formats.bag_lz4.CODEC
+    ALL = formats.names()
+    EXTENSIONS = {name: module.EXTENSION for name, module in formats.FORMATS.items()}
+    check = staticmethod(formats.check)
 
 
 # -- metadata -------------------------------------------------------------------------------------------
@@ -164,10 +158,8 @@ def base_name(window):
 
 
 def _extension(path):
-    for fmt, extension in Format.EXTENSIONS.items():
-        if path.endswith(extension):
-            return fmt
-    return None
+    module = formats.by_extension(path)
+    return module.CODEC if module else None
 
 
 def window_files(directory):
@@ -213,23 +205,18 @@ def write_window(window, directory, fmt, metadata=None, base=None):
     ``metadata`` (JSON-able dict) is added to ``window_metadata``. Raises ValueError for a bad format or
     an empty window, OSError when the file cannot be written (the temporary file is removed).
     """
-    Format.check(fmt)
+    module = formats.get(fmt)
     if not window.records:
         raise ValueError('window: has no records')
     ensure_directory(directory)
     meta = window_metadata(window, fmt, metadata)
     base = base or base_name(window)
-    extension = Format.EXTENSIONS[fmt]
-    # Encode before the temporary file exists: a crash while encoding leaves no empty leftover.
-    data = json_xz.encode(window.records, meta) if fmt == Format.JSON_XZ else None
+    extension = module.EXTENSION
+    write = module.encoder(window.records, meta)  # a format may encode now, before the temporary file exists
     target = safe_files.AtomicFile(os.path.join(directory, base + extension),
                                    names=final_names(directory, base, extension))
     with target as stream:
-        if fmt == Format.JSON_XZ:
-            stream.write(data)
-        else:
-            from . import bag_lz4
-            bag_lz4.write(stream, window.records, meta)
+        write(stream)
     return target.path, target.size
 
 
@@ -252,11 +239,8 @@ def read_window(path):
             stream.seek(0)
         except OSError as error:
             raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
-        if head.startswith(json_xz.MAGIC):
-            metadata, records = json_xz.read(path, stream)
-        else:
-            from . import bag_lz4
-            metadata, records = bag_lz4.read(path, stream) if head.startswith(bag_lz4.MAGIC) else (None, None)
+        module = formats.by_magic(head)
+        metadata, records = module.read(path, stream) if module else (None, None)
     if records is not None:
         try:
             check_metadata(metadata)
@@ -268,4 +252,4 @@ def read_window(path):
         raise ValueError('%s: empty file' % path)
     if fmt is not None:
         raise ValueError('%s: not a %s file (wrong magic bytes; truncated or corrupt?)' % (path, fmt))
-    raise ValueError('%s: not a cc_log window file (neither xz nor rosbag)' % path)
+    raise ValueError('%s: not a cc_log window file (not %s)' % (path, ' nor '.join(formats.names())))

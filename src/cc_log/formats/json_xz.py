@@ -25,8 +25,8 @@ import json
 import lzma
 import os
 
-from . import msg_codec, safe_input
-from .window_buffer import Record
+from .. import msg_codec, safe_input
+from ..window_buffer import Record
 
 CODEC = 'json-xz'
 EXTENSION = '.json.xz'
@@ -155,6 +155,13 @@ def encode(records, metadata, preset=DEFAULT_PRESET):
     text = json.dumps(document(records, metadata), separators=(',', ':'), allow_nan=False)
     data = text.encode('utf-8')
     return compress(data, preset)
+
+
+def encoder(records, metadata):
+    """A function that writes the window into a stream; the document is encoded now, before the file exists
+    (a crash while encoding leaves no empty leftover)."""
+    data = encode(records, metadata)
+    return lambda stream: stream.write(data)
 
 
 def compress(data, preset=DEFAULT_PRESET):

@@ -18,8 +18,8 @@ import json
 import math
 import os
 
-from . import msg_codec, safe_files, safe_input
-from .window_buffer import Record
+from .. import msg_codec, safe_files, safe_input
+from ..window_buffer import Record
 
 CODEC = 'bag-lz4'
 EXTENSION = '.bag'
@@ -75,6 +75,17 @@ def write(target, records, metadata):
     for record, time in zip(records, times):
         bag.write(record.topic, record.msg, time)
     bag.close()  # on an error the owner of ``target`` closes it (a failed rosbag close would leave it open)
+
+
+def encoder(records, metadata):
+    """A function that writes the window into a stream (rosbag encodes while it writes)."""
+    return lambda stream: write(stream, records, metadata)
+
+
+def salvage(path):
+    """What a bag cut off mid-write still holds (``bag_salvage.Salvaged``); ValueError when it is no rosbag."""
+    from . import bag_salvage
+    return bag_salvage.salvage(path)
 
 
 def read(path, stream=None):

@@ -1,0 +1,109 @@
+"""Window records out to other tools: one JSON-lines file, one rosbag, or one CSV per topic (``cclog export``).
+
+Each writer takes records in stamp order and returns the files it wrote; every file is written atomically
+(``safe_files.AtomicFile``). Pure but for ``to_bag`` (rosbag, imported inside it).
+"""
+import collections
+import csv
+import json
+import math
+import os
+
+from . import msg_codec
+from .safe_files import AtomicFile
+
+BAG_COMPRESSIONS = ('lz4', 'bz2', 'none')
+
+
+def plain(value):
+    """JSON-safe copy: numpy numbers to Python, NaN/inf to None, tuples to lists."""
+    if isinstance(value, dict):
+        return {str(key): plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(item) for item in value]
+    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
+        return plain(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def record_row(record, path=None):
+    """``{"stamp", "topic", "type", "msg"[, "file"]}`` of one record (the JSON line of ``cat`` and ``jsonl``)."""
+    row = collections.OrderedDict([('stamp', record.stamp), ('topic', record.topic),
+                                   ('type', record.msg._type), ('msg', msg_codec.to_dict(record.msg))])
+    if path is not None:
+        row['file'] = path
+    return row
+
+
+def to_jsonl(records, out):
+    """One JSON line per record into the file ``out`` (replaced); ``[out]``."""
+    with AtomicFile(out, overwrite=True, text=True) as stream:
+        for record in records:
+            stream.write(json.dumps(plain(record_row(record)), allow_nan=False) + '\n')
+    return [out]
+
+
+def to_bag(records, out, compression='lz4', progress=None):
+    """The records as one rosbag ``out`` (replaced), each at its stamp; ``progress()`` after each; ``[out]``."""
+    import rosbag
+    from .formats.bag_lz4 import bag_time
+    if compression not in BAG_COMPRESSIONS:
+        raise ValueError('compression: %r is not one of: %s' % (compression, ', '.join(BAG_COMPRESSIONS)))
+    kind = {'lz4': rosbag.Compression.LZ4, 'bz2': rosbag.Compression.BZ2}.get(compression, rosbag.Compression.NONE)
+    with AtomicFile(out, overwrite=True) as stream, rosbag.Bag(stream, 'w', compression=kind) as bag:
+        for record in records:
+            bag.write(record.topic, record.msg, bag_time(record.stamp))
+            if progress:
+                progress()
+    return [out]
+
+
+def _csv_cell(value):
+    if isinstance(value, (list, dict)):
+        return json.dumps(value, allow_nan=False)
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, float):
+        return repr(value)
+    return value
+
+
+def _flatten(row, prefix, out):
+    """Dotted columns of a message dict; a time is one float column plus its ``.secs`` and ``.nsecs``."""
+    for name, value in row.items():
+        if isinstance(value, dict) and value and not set(value) == {'secs', 'nsecs'}:
+            _flatten(value, prefix + name + '.', out)
+        elif isinstance(value, dict):
+            out[prefix + name] = value['secs'] + value['nsecs'] * 1e-9 if value else value
+            out[prefix + name + '.secs'] = value['secs']
+            out[prefix + name + '.nsecs'] = value['nsecs']
+        else:
+            out[prefix + name] = value
+    return out
+
+
+def csv_file_name(topic):
+    """``/base/odom`` -> ``base_odom.csv``."""
+    name = ''.join(c if c.isalnum() or c in '-_.' else '_' for c in topic.strip('/')) or 'root'
+    return name + '.csv'
+
+
+def to_csv(records, directory):
+    """One CSV per topic in ``directory`` (``stamp`` then the message's dotted fields); the files written."""
+    by_topic = collections.OrderedDict()
+    for record in records:
+        by_topic.setdefault(record.topic, []).append(record)
+    files = []
+    for topic, topic_records in by_topic.items():
+        rows = [_flatten(msg_codec.to_dict(record.msg), '', collections.OrderedDict()) for record in topic_records]
+        fields = list(collections.OrderedDict.fromkeys(key for row in rows for key in row))
+        path = os.path.join(directory, csv_file_name(topic))
+        with AtomicFile(path, overwrite=True, text=True, newline='') as stream:
+            writer = csv.writer(stream)
+            writer.writerow(['stamp'] + fields)
+            for record, row in zip(topic_records, rows):
+                writer.writerow([repr(float(record.stamp))] + [_csv_cell(row.get(field, '')) for field in fields])
+        files.append(path)
+    return files

@@ -1,0 +1,48 @@
+"""Window file formats: one module per format, one table.
+
+A format module defines ``CODEC`` (its name, e.g. ``'json-xz'``), ``EXTENSION``, ``MAGIC`` (the bytes every
+file of it starts with), ``encoder(records, metadata)`` (a function that writes the window into a binary
+stream; it may encode first, before the file exists), ``read(path, stream)`` -> ``(metadata, records)``
+raising ``ValueError('<path>: ...')``, and optionally ``salvage(path)`` for a file cut off mid-write
+(``recovery``; see ``bag_salvage.Salvaged``). To add a format: its module here and one entry in ``FORMATS``.
+
+Pure: a module that needs rosbag imports it inside its functions.
+"""
+import collections
+
+from . import bag_lz4, json_xz
+
+FORMATS = collections.OrderedDict((module.CODEC, module) for module in (json_xz, bag_lz4))  # the first: default
+DEFAULT = next(iter(FORMATS))
+
+
+def names():
+    """The format names, the default first."""
+    return tuple(FORMATS)
+
+
+def check(name, param='format'):
+    """Return ``name`` when it is a format; else ValueError("format: 'xyz' is not one of: ...")."""
+    if name not in FORMATS:
+        raise ValueError('%s: %r is not one of: %s' % (param, name, ', '.join(FORMATS)))
+    return name
+
+
+def get(name, param='format'):
+    """The module of format ``name`` (ValueError as ``check``)."""
+    return FORMATS[check(name, param)]
+
+
+def by_magic(head):
+    """The module whose files start like ``head`` (the first 16 bytes of a file), else None."""
+    return next((module for module in FORMATS.values() if head.startswith(module.MAGIC)), None)
+
+
+def by_extension(path):
+    """The module whose extension ``path`` ends with, else None."""
+    return next((module for module in FORMATS.values() if path.endswith(module.EXTENSION)), None)
+
+
+def extensions():
+    """Every format's file extension."""
+    return tuple(module.EXTENSION for module in FORMATS.values())
