@@ -372,7 +372,7 @@ def cmd_collect(args):
                   'window': args.window or collector.DEFAULT_WINDOW}
     cfg = _configuration(args, {'label': args.label, 'stride': args.stride, 'classifier': single})
     label = cfg.label or collector.DEFAULT_LABEL
-    stride = cfg.stride or collector.DEFAULT_STRIDE
+    stride = cfg.stride  # None: the default, or smaller for a short bag (collector.auto_stride)
     specs = cfg.feature_specs(AnomalyModel.load)
     if not specs:
         raise CommandError('collect: %s has no classifier: nothing to compute' % args.config)
@@ -387,7 +387,7 @@ def cmd_collect(args):
     first = specs[0][1]
     summary = collections.OrderedDict([
         ('bag', args.bag), ('topic', specs[0][2][0]), ('label', label), ('window', first.window),
-        ('stride', stride), ('features', first.feature_set), ('vectors', result['vectors']),
+        ('stride', result['stride']), ('features', first.feature_set), ('vectors', result['vectors']),
         ('directory', result['directory'])])
     if args.config:
         summary['sets'] = collections.OrderedDict(
@@ -401,7 +401,8 @@ def cmd_collect(args):
         for name, config, topics in specs:
             count, directory = result['sets'][name if args.config else '']
             print('%d feature vectors (%s features, window %s, every %s messages) from %s %s -> %s'
-                  % (count, config.feature_set, config.window, stride, args.bag, ' '.join(topics), directory))
+                  % (count, config.feature_set, config.window, result['strides'][name if args.config else ''],
+                     args.bag, ' '.join(topics), directory))
     for name, config, topics in specs:
         if not result['sets'][name if args.config else ''][0]:
             sys.stderr.write('%s collect: warning: no vector%s: %s never filled a whole feature window of %s\n'
@@ -1074,7 +1075,8 @@ def build_parser():
     p.add_argument('--window', type=_span('window'), metavar='N|Ns',
                    help='feature window: messages (500) or seconds (5s) (default: 500)')
     p.add_argument('--stride', type=_non_negative_int('stride', 1), metavar='N',
-                   help='a vector every N driving messages (default: %d)' % _collect_stride())
+                   help='a vector every N driving messages (default: %d, or smaller so that a short bag '
+                   'still gives about 200 vectors)' % _collect_stride())
     p.add_argument('--features', choices=_feature_sets(),
                    help='feature set (default: %s)' % _feature_sets()[0])
     p.add_argument('--input-topic', action='append', default=[], metavar='T',
