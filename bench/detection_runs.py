@@ -90,7 +90,7 @@ def config_of(feature_set, rate):
     return FeatureConfig(feature_set, WINDOW)
 
 
-def train(records, config, options):
+def train(records, config, options, margin=learning.DEFAULT_MARGIN):
     stream = FeatureStream(config, every=1)
     X = [v for v in (stream.add(r.msg, r.stamp) for r in records) if v is not None]
     if len(X) < learning.MIN_VECTORS:
@@ -100,7 +100,7 @@ def train(records, config, options):
         model, _ = learning.train(X, config=config, nu=0.5, gamma=1.0 / vector_length(config))
         model.threshold = 0.0
     else:
-        model, _ = learning.train(X, config=config)
+        model, _ = learning.train(X, config=config, margin=margin)
     return model, len(X)
 
 
@@ -124,7 +124,7 @@ def inside(stamps, intervals):
     return sum(1 for t in stamps if any(a <= t <= b for a, b in intervals))
 
 
-def evaluate_run(name, topic, stop, setting, seeds, fraction):
+def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DEFAULT_MARGIN):
     """One run, one setting: a dict of the figures."""
     feature_set, rule, options = SETTINGS[setting]
     records = load(name, topic, stop)
@@ -132,7 +132,7 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction):
     rate = rate_of(records)
     config = config_of(feature_set, rate)
     reach = config.span.seconds if config.span.is_duration else config.span.count / rate
-    model, vectors = train(first, config, options)
+    model, vectors = train(first, config, options, margin)
     seconds = rest[-1].stamp - rest[0].stamp
     nominal_fires = fires(model, rest, topic, rule)
     nominal_windows = windows_of(nominal_fires)
@@ -178,6 +178,8 @@ def main(argv=None):
     parser.add_argument('--seeds', default='0,1,2')
     parser.add_argument('--settings', default=','.join(SETTINGS), help='comma-separated: ours, every, paper')
     parser.add_argument('--train', type=float, default=0.5, help='fraction of each run that trains (default 0.5)')
+    parser.add_argument('--margin', type=float, default=learning.DEFAULT_MARGIN,
+                        help='threshold margin of learning.train (default %g)' % learning.DEFAULT_MARGIN)
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
@@ -186,8 +188,8 @@ def main(argv=None):
     common.header('Every real run with odometry: trained on its first part, replayed with injected anomalies',
                   [common.describe_data(bag_path(name)) for name, _, _ in runs] +
                   ['training: first %g of each run; injection: one anomaly per type and seed %s into the rest; '
-                   'window %s, pre/post %gs/%gs, classify_every %s' % (args.train, seeds, WINDOW, PRE, POST,
-                                                                      CLASSIFY_EVERY)])
+                   'window %s, pre/post %gs/%gs, classify_every %s, threshold margin %g' % (
+                       args.train, seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin)])
     for setting in settings:
         rows, totals = [], collections.Counter()
         by_type = collections.defaultdict(collections.Counter)
@@ -195,7 +197,7 @@ def main(argv=None):
         oddities = []
         for name, topic, stop in runs:
             try:
-                r = evaluate_run(name, topic, stop, setting, seeds, args.train)
+                r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin)
             except ValueError as error:
                 rows.append([name, '-', '-', '-', '-', '-', 'not run: %s' % error, '-', '-'])
                 continue

@@ -847,16 +847,10 @@ def _is_plain_bag(path):
     return not os.path.basename(path).startswith('cc_log_')
 
 
-def _speed(msg):
-    twist = msg.twist.twist.linear
-    return math.sqrt(twist.x ** 2 + twist.y ** 2 + twist.z ** 2)
-
-
 def cmd_plot(args):
-    """A timeline: speed of the driving topic with the saved windows shaded, and the triggers' scores."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    """A timeline: speed of the driving topic with the saved windows shaded (and the true events of
+    ``--truth``), and the scores with the threshold (``plot``)."""
+    from . import plot
     windows = []
     driving = args.topic
     for path, metadata, records in _read_windows(args, args.paths, 'plot'):
@@ -864,95 +858,44 @@ def cmd_plot(args):
         windows.append((path, metadata, records))
     if not driving:
         raise CommandError('topic: the windows do not name their driving topic; give --topic')
-    speed = []  # (stamp, speed) of the whole run (--bag) or of the saved windows
+    truth = plot.load_truth(args.truth) if args.truth else []
     if args.bag:
         from . import bagio
         bag = bagio.open_bag(args.bag)
         try:
-            bagio.check_topic(bag, driving, 'nav_msgs/Odometry')
+            bagio.check_topic(bag, driving, plot.ODOMETRY)
             total = bag.get_message_count([driving])
         finally:
             bag.close()
+        speed = []
         with _bar(args, 'read', total) as bar:
             for record in bagio.read_messages(args.bag, [driving]):
-                speed.append((record.stamp, _speed(record.msg)))
+                speed.append((record.stamp, plot.speed_of(record.msg)))
                 bar.update()
     else:
-        for _, _, records in windows:
-            speed.extend((r.stamp, _speed(r.msg)) for r in records
-                         if r.topic == driving and r.msg._type == 'nav_msgs/Odometry')
-        if not speed:
+        speed = plot.window_speeds(windows, driving)
+        if not any(speed):
             raise CommandError('topic: no nav_msgs/Odometry messages on %s in the windows' % driving)
-    speed.sort()
-    curve = []  # (stamp, score) of every feature window of the run (--model with --bag)
+    curve, threshold = [], None
     if args.model:
-        from . import bagio
         from .model import AnomalyModel
         if not args.bag:
             raise CommandError('model: --model scores the whole run and needs --bag')
         model = AnomalyModel.load(args.model)
-        with _bar(args, 'score').busy():
-            stamps, vectors = bagio.feature_vectors(args.bag, driving, model.config, args.stride)
-            if len(stamps):
-                curve = list(zip(stamps.tolist(), model.scores(vectors).tolist()))
-    origin = min([speed[0][0]] + [min(r.stamp for r in records) for _, _, records in windows])
-    triggers, threshold = [], None
-    for _, metadata, _ in windows:
-        for trigger in metadata.get('triggers') or []:
-            if isinstance(trigger.get('score'), (int, float)):
-                triggers.append((trigger['stamp'] - origin, trigger['score']))
-        if isinstance(metadata.get('threshold'), (int, float)):
-            threshold = metadata['threshold']
-    if args.model and threshold is None:
         threshold = model.threshold
-    figure, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(args.width, 6),
-                                         gridspec_kw={'height_ratios': [3, 1]})
-    if args.bag:
-        top.plot([s - origin for s, _ in speed], [v for _, v in speed], lw=0.8, color='tab:blue',
-                 label='speed (%s)' % driving)
-    else:
-        for _, _, records in windows:
-            part = [(r.stamp - origin, _speed(r.msg)) for r in records
-                    if r.topic == driving and r.msg._type == 'nav_msgs/Odometry']
-            top.plot([s for s, _ in part], [v for _, v in part], lw=0.8, color='tab:blue')
-    for number, (_, _, records) in enumerate(windows):
-        start = min(r.stamp for r in records) - origin
-        end = max(r.stamp for r in records) - origin
-        for axis in (top, bottom):
-            axis.axvspan(start, end, color='tab:orange', alpha=0.25, lw=0,
-                         label='saved window' if number == 0 and axis is top else None)
-    if curve:
-        bottom.plot([t - origin for t, _ in curve], [v for _, v in curve], lw=0.7, color='tab:gray',
-                    label='score (%s)' % os.path.basename(args.model))
-    if triggers:
-        bottom.plot([t for t, _ in triggers], [s for _, s in triggers], 'v', color='tab:red', ms=4,
-                    label='trigger score')
-    if threshold is not None:
-        bottom.axhline(threshold, color='k', ls='--', lw=0.8, label='threshold %.3g' % threshold)
-    top.set_ylabel('speed (m/s)')
-    top.set_title(args.title or '%s: %d saved window(s)%s' % (
-        args.bag or ', '.join(args.paths), len(windows), '' if args.bag else ' (speed inside the windows only)'),
-        fontsize=9)
-    top.legend(loc='upper right', fontsize=8)
-    bottom.set_ylabel('score')
-    bottom.set_xlabel('time since %.3f (s)' % origin)
-    if curve or triggers or threshold is not None:
-        bottom.legend(loc='lower right', fontsize=8)
-    figure.tight_layout()
+        with _bar(args, 'score').busy():
+            curve = plot.run_scores(args.bag, driving, model, args.stride)
     _parent_exists(args.out, 'out')
-    from .safe_files import AtomicFile
-    with AtomicFile(args.out, overwrite=True) as stream:
-        figure.savefig(stream, dpi=args.dpi, format=os.path.splitext(args.out)[1][1:].lower() or None)
-    plt.close(figure)
-    summary = collections.OrderedDict([('out', args.out), ('windows', len(windows)), ('triggers', len(triggers)),
-                                       ('speed_samples', len(speed)), ('scores', len(curve)), ('start', origin),
-                                       ('end', max(speed[-1][0], max(max(r.stamp for r in rs)
-                                                                     for _, _, rs in windows)))])
+    title = args.title or '%s: %d saved window(s)%s' % (
+        args.bag or ', '.join(args.paths), len(windows), '' if args.bag else ' (speed inside the windows only)')
+    summary = plot.timeline(args.out, windows, speed, curve, threshold, truth, title, args.width, args.dpi,
+                            'speed (%s)' % driving)
     if args.json:
         _print_json(summary)
     else:
-        print('%s: %d window(s), %d trigger score(s), %d speed samples' % (
-            args.out, len(windows), len(triggers), len(speed)))
+        print('%s: %d window(s), %d trigger score(s), %d speed samples%s' % (
+            args.out, len(windows), summary['triggers'], summary['speed_samples'],
+            ', %d of %d true events inside windows' % (summary['truth_in_windows'], len(truth)) if truth else ''))
     return EXIT_OK
 
 
@@ -1226,19 +1169,23 @@ def build_parser():
         Draw a timeline: speed of the driving topic (nav_msgs/Odometry) over time with the saved windows
         shaded, and below it the classifier scores of the triggers and the model threshold. With --bag the
         speed curve covers the whole run, else only the messages inside the windows; with --bag and
-        --model the model's score of every feature window of the run is drawn too. Uses matplotlib's Agg
+        --model the model's score of every feature window of the run is drawn too; with --truth the true
+        events, so a window that was or was not kept can be told from the score. Uses matplotlib's Agg
         backend (no display needed).
         """,
         """
           cclog plot logs --bag husky.bag --out run.png
           cclog plot logs --bag husky.bag --model model.json --out run-scores.png
           cclog plot logs/cc_log_20150521T191138.027Z_classifier.json.xz --out window.png
+          cclog plot logs --bag sim.bag --model model.json --truth sim.bag.truth.json --out why.png
         """))
     p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
     p.add_argument('--out', required=True, metavar='PNG', help='image to write')
     p.add_argument('--bag', metavar='BAG', help='the full run, for the speed curve')
     p.add_argument('--topic', metavar='T', help='driving topic (default: the windows\' driving_topic)')
     p.add_argument('--model', metavar='PATH', help='with --bag: draw this model\'s score over the whole run')
+    p.add_argument('--truth', metavar='JSON', help='true events to draw: cclog simulate\'s <bag>.truth.json, or a '
+                   'JSON list of {type, start, end}')
     p.add_argument('--stride', type=_non_negative_int('stride', 1), default=1, metavar='N',
                    help='with --model: score every N-th message (default: %(default)s)')
     p.add_argument('--title', help='figure title')
