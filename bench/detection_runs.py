@@ -15,7 +15,8 @@ in ``WindowBuffer``). Without injection every window is false. With injection, `
 puts one anomaly of one simulator type into the replayed part (warmup 3 s, gap 2 s), per type and seed:
 caught when a fire falls in [onset, end + feature window]; latency = first such fire - onset (target
 <= 0.5 s); a window with no such fire is false; kept = odometry messages inside windows, needed = those in
-[onset - pre, end + post] (target kept <= 1.5 x needed). Types that do not fit into a short replay are
+[onset - pre, end + post] (target kept <= 1.5 x needed); 'kept' without injection: the share of the replayed
+part's messages inside windows. Types that do not fit into a short replay are
 counted as 'no room'.
 
 Settings: ``ours`` = motion features, 2 s window, retrigger 'event'; ``every`` = the same with retrigger
@@ -140,7 +141,8 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
               'replay_s': seconds, 'false_nominal': len(nominal_windows), 'nominal_windows': nominal_windows,
               'caught': collections.Counter(), 'total': collections.Counter(), 'late': collections.Counter(),
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
-              'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window}
+              'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window,
+              'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest))}
     for kind in sim.ANOMALY_TYPES:
         for seed in seeds:
             try:
@@ -199,12 +201,13 @@ def main(argv=None):
             try:
                 r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin)
             except ValueError as error:
-                rows.append([name, '-', '-', '-', '-', '-', 'not run: %s' % error, '-', '-'])
+                rows.append([name, '-', '-', '-', '-', '-', '-', 'not run: %s' % error, '-', '-'])
                 continue
             caught, total = sum(r['caught'].values()), sum(r['total'].values())
             late = sum(r['late'].values())
             rows.append([name, '%.0f' % r['rate'], '%.0f' % r['train_s'], '%.0f' % r['replay_s'],
                          r['false_nominal'], '%.1f' % (3600.0 * r['false_nominal'] / r['replay_s']),
+                         '%.0f%%' % (100.0 * r['nominal_kept']),
                          '%s (%d late, %d no room)' % (pct(caught, total), late, sum(r['no_room'].values())),
                          r['false_injected'], '%.2fx' % (r['kept'] / float(r['needed'])) if r['needed'] else '-'])
             totals.update({'false': r['false_nominal'], 'replay_s': r['replay_s'], 'caught': caught,
@@ -222,7 +225,7 @@ def main(argv=None):
                                    r['train_s']))
         print('setting %s: %s features, retrigger %s %s' % (setting, SETTINGS[setting][0], SETTINGS[setting][1],
                                                             SETTINGS[setting][2] or ''))
-        common.table(['run', 'Hz', 'train s', 'replay s', 'false windows (no injection)', 'false/h',
+        common.table(['run', 'Hz', 'train s', 'replay s', 'false windows (no injection)', 'false/h', 'kept',
                       'caught (late > %gs)' % LATENCY, 'false windows (injected)', 'kept/needed'], rows)
         common.table(['type', 'caught', 'late', 'no room', 'median latency s', 'worst latency s'],
                      [[kind, pct(c['caught'], c['total']), c['late'], c['no_room'],
