@@ -92,3 +92,18 @@ def test_newest_rows_of_the_feature_window():
     assert window.newest(Span.messages(2))[:, 0].tolist() == [28.0, 29.0]
     assert window.newest(Span.messages(100)).shape == window.rows().shape
     assert FeatureWindow(FeatureConfig('motion', '1s')).newest(Span.messages(2)).shape == (0, 18)
+
+
+def test_a_configuration_sets_event_and_recent_and_refuses_a_bad_recent(model, tmp_path):
+    from cc_log.config import Config
+    from cc_log.model import AnomalyModel
+    path = str(tmp_path / 'model.json')
+    model.save(path)
+    entry = {'name': 'motion', 'kind': 'classifier', 'model': path, 'topics': [ODOM], 'retrigger': 'event',
+             'recent': '250ms'}
+    trigger, = Config.from_dict({'triggers': [entry]}).build_triggers(AnomalyModel.load, lambda kind: None)
+    assert (trigger.retrigger, trigger.recent) == ('event', Span.duration(0.25))
+    assert trigger.describe()['recent'] == '0.25s'
+    with pytest.raises(ValueError, match=r'\(motion\): recent: 3s is longer than the feature window 2s'):
+        Config.from_dict({'triggers': [dict(entry, recent='3s')]}).build_triggers(AnomalyModel.load,
+                                                                                  lambda kind: None)
