@@ -36,9 +36,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import bagio, learning, sim  # noqa: E402
+from cc_log import bagio, learning, sim, tuning  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream, vector_length  # noqa: E402
-from cc_log.triggers import ClassifierTrigger  # noqa: E402
 
 # (name, odometry topic, seconds after the start where nominal driving ends or None)
 RUNS = [
@@ -106,19 +105,13 @@ def train(records, config, options, margin=learning.DEFAULT_MARGIN):
 
 
 def fires(model, records, topic, rule):
-    trigger = ClassifierTrigger('classifier', model, topic, classify_every=CLASSIFY_EVERY, retrigger=rule)
-    return [r.stamp for r in records if trigger.on_record(r)]
+    """Stamps at which the classifier trigger fires (the model's threshold, CLASSIFY_EVERY, ``rule``)."""
+    return tuning.fires(model, records, topic, model.threshold, CLASSIFY_EVERY, rule)
 
 
-def windows_of(stamps, pre=PRE, post=POST):
-    """Merged [fire - pre, fire + post] intervals of sorted fire stamps."""
-    out = []
-    for t in stamps:
-        if out and t - pre <= out[-1][1]:
-            out[-1][1] = t + post
-        else:
-            out.append([t - pre, t + post])
-    return out
+def windows_of(stamps):
+    """Merged [fire - PRE, fire + POST] intervals."""
+    return tuning.windows_of(stamps, PRE, POST)
 
 
 def inside(stamps, intervals):
@@ -137,7 +130,8 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     seconds = rest[-1].stamp - rest[0].stamp
     nominal_fires = fires(model, rest, topic, rule)
     nominal_windows = windows_of(nominal_fires)
-    result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': first[-1].stamp - first[0].stamp, 'vectors': vectors,
+    result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': first[-1].stamp - first[0].stamp,
+              'vectors': vectors,
               'replay_s': seconds, 'false_nominal': len(nominal_windows), 'nominal_windows': nominal_windows,
               'caught': collections.Counter(), 'total': collections.Counter(), 'late': collections.Counter(),
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
