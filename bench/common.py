@@ -206,6 +206,17 @@ def smart_replay(model, records, driving_topic, directory, side_topics=(), fmt='
     return {'stats': logger.stats(), 'windows': windows}
 
 
+def kept_messages(records, topic, windows, truth, pre, post):
+    """(messages of ``topic`` inside saved windows, messages of ``topic`` within [start - pre, end + post] of
+    any anomaly of ``truth``): what was kept against what the anomalies needed (pre, post in seconds)."""
+    stamps = [r.stamp for r in records if r.topic == topic]
+    spans = [(w['start'], w['end']) for w in windows]
+    needed = [(e['start'] - pre, e['end'] + post) for e in truth]
+    kept = sum(1 for t in stamps if any(a <= t <= b for a, b in spans))
+    need = sum(1 for t in stamps if any(a <= t <= b for a, b in needed))
+    return kept, need
+
+
 def match_anomalies(truth, windows, reach):
     """Which anomalies were caught (a trigger in [start, end + reach]) and kept (every message of
     [start, end] inside saved windows); which windows are false (no trigger near any anomaly).

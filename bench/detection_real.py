@@ -13,6 +13,9 @@ Experiments (see docs/DETECTION.md for what the figures mean):
 - sequor: train on 15 of the 20 E2 (normal) trials, score the 5 held-back E2 trials (false alarms), the N2
   (jerky) trial and the 20 N3 (crash) trials; a trial counts as flagged when any of its vectors is.
 
+- runs (``--only runs``): every real run with continuous odometry, trained on its first half, replayed with
+  injected simulator anomalies of every type (bench/detection_runs.py).
+
 Each is run with the default 'motion' features and with the paper's 'raw' features (the same training and
 threshold calibration), plus the paper's own setting (raw features, nu 0.5, threshold 0 = sklearn predict).
 """
@@ -228,8 +231,16 @@ SETTINGS = collections.OrderedDict([
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--only', choices=('husky', 'alfa', 'sequor'), action='append')
+    parser.add_argument('--only', choices=('husky', 'alfa', 'sequor', 'runs'), action='append',
+                        help='runs: every real run with odometry, injected anomalies (bench/detection_runs.py)')
     args = parser.parse_args(argv)
+    if args.only and 'runs' in args.only:
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        import detection_runs
+        detection_runs.main([])
+        args.only.remove('runs')
+        if not args.only:
+            return 0
     print('machine: %s' % machine())
     for name in (HUSKY[0], ALFA[0], SEQUOR_E2[0], SEQUOR_N2[0], SEQUOR_N3[0]):
         print('data: %s (sha256 %s...)' % (name, sha(name)))

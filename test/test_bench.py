@@ -33,8 +33,8 @@ def targets(out):
 def test_detection_sim_quick():
     out = run('detection_sim.py', '--quick')
     assert 'Table 1' in out and '| TP ' in out and '| Precision ' in out
-    assert 'paper features' in out and 'paper settings' in out
-    assert len(targets(out)) == 1
+    assert 'paper features' in out and 'paper settings' in out and 'motion + progress' in out
+    assert len(targets(out)) == 2
 
 
 def test_storage_quick():
@@ -47,8 +47,14 @@ def test_storage_quick():
 
 def test_injected_husky_quick():
     out = run('injected_husky.py', '--quick')
-    assert 'Caught by type' in out and 'false windows/h' in out
-    assert len(targets(out)) == 2
+    assert 'Caught by type' in out and 'false windows/h' in out and 'kept/needed' in out
+    assert len(targets(out)) == 3
+
+
+def test_detection_runs_quick():
+    out = run('detection_runs.py', '--runs', 'icelab_normal_plan', '--seeds', '0', '--settings', 'ours')
+    assert 'icelab_normal_plan' in out and 'false/h' in out and 'kept/needed' in out and 'by type:' in out
+    assert 'all runs: caught ' in out
 
 
 def test_cost_offline_quick():

@@ -4,7 +4,8 @@
 
 Commands: ``collect`` (feature vectors from a bag), ``learn`` (train / evaluate a model), ``replay`` (the
 smart logger over a bag), ``info``, ``cat``, ``export`` (window files), ``codecs`` (the paper's Table 2 on
-some data), ``plot`` (a timeline of a run), ``simulate`` (a simulated BWIBot bag with labelled anomalies).
+some data), ``plot`` (a timeline of a run), ``tune`` (a threshold for a false-window budget), ``simulate`` (a
+simulated BWIBot bag with labelled anomalies).
 
 Conventions shared by every command:
 
@@ -364,7 +365,7 @@ def cmd_collect(args):
                   'window': args.window or collector.DEFAULT_WINDOW}
     cfg = _configuration(args, {'label': args.label, 'stride': args.stride, 'classifier': single})
     label = cfg.label or collector.DEFAULT_LABEL
-    stride = cfg.stride or collector.DEFAULT_STRIDE
+    stride = cfg.stride  # None: the default, or smaller for a short bag (collector.auto_stride)
     specs = cfg.feature_specs(AnomalyModel.load)
     if not specs:
         raise CommandError('collect: %s has no classifier: nothing to compute' % args.config)
@@ -379,7 +380,7 @@ def cmd_collect(args):
     first = specs[0][1]
     summary = collections.OrderedDict([
         ('bag', args.bag), ('topic', specs[0][2][0]), ('label', label), ('window', first.window),
-        ('stride', stride), ('features', first.feature_set), ('vectors', result['vectors']),
+        ('stride', result['stride']), ('features', first.feature_set), ('vectors', result['vectors']),
         ('directory', result['directory'])])
     if args.config:
         summary['sets'] = collections.OrderedDict(
@@ -393,7 +394,8 @@ def cmd_collect(args):
         for name, config, topics in specs:
             count, directory = result['sets'][name if args.config else '']
             print('%d feature vectors (%s features, window %s, every %s messages) from %s %s -> %s'
-                  % (count, config.feature_set, config.window, stride, args.bag, ' '.join(topics), directory))
+                  % (count, config.feature_set, config.window, result['strides'][name if args.config else ''],
+                     args.bag, ' '.join(topics), directory))
     for name, config, topics in specs:
         if not result['sets'][name if args.config else ''][0]:
             sys.stderr.write('%s collect: warning: no vector%s: %s never filled a whole feature window of %s\n'
@@ -468,6 +470,37 @@ def cmd_learn(args):
     if args.train is not None:
         print('%-16s %s (%s features, window %s)' % ('Saved', args.model, model.config.feature_set,
                                                      model.config.window))
+    return EXIT_OK
+
+
+def cmd_tune(args):
+    """Set a model's threshold to a false-window budget on nominal bags (``tuning.tune``); write it to --out."""
+    from . import bagio, tuning
+    from .model import AnomalyModel
+    model = AnomalyModel.load(_existing_file(args.model, 'model file'))
+    for bag in args.bag:
+        _existing_file(bag, 'bag file')
+        _check_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
+    _parent_exists(args.out, 'out')
+    with _bar(args, 'tune').busy():
+        runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]
+        record = tuning.tune(model, runs, args.topic, args.max_false_per_hour, args.pre, args.post,
+                             args.classify_every, args.retrigger, sources=args.bag)
+    try:
+        model.save(args.out)
+    except OSError as error:
+        raise CommandError('out: cannot write %s: %s' % (args.out, error.strerror or error))
+    if args.json:
+        _print_json(dict(record, out=args.out))
+        return EXIT_OK
+    print('%.3f h of nominal driving: %d false window(s) at threshold %.4g (%.1f/h), %d at %.4g (%.1f/h; budget '
+          '%g/h, measured on the tuning bags)' % (
+              record['hours'], record['false_windows_before'], record['threshold_before'],
+              record['false_windows_before'] / record['hours'], record['false_windows'], record['threshold'],
+              record['false_per_hour'], record['max_false_per_hour']))
+    print('still caught (one injected anomaly each): %s; missed: %s' % (
+        ', '.join(record['catches']) or 'none', ', '.join(record['misses']) or 'none'))
+    print('%-16s %s' % ('Saved', args.out))
     return EXIT_OK
 
 
@@ -772,16 +805,10 @@ def _is_plain_bag(path):
     return not os.path.basename(path).startswith('cc_log_')
 
 
-def _speed(msg):
-    twist = msg.twist.twist.linear
-    return math.sqrt(twist.x ** 2 + twist.y ** 2 + twist.z ** 2)
-
-
 def cmd_plot(args):
-    """A timeline: speed of the driving topic with the saved windows shaded, and the triggers' scores."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    """A timeline: speed of the driving topic with the saved windows shaded (and the true events of
+    ``--truth``), and the scores with the threshold (``plot``)."""
+    from . import plot
     windows = []
     driving = args.topic
     for path, metadata, records in _read_windows(args, args.paths, 'plot'):
@@ -789,95 +816,44 @@ def cmd_plot(args):
         windows.append((path, metadata, records))
     if not driving:
         raise CommandError('topic: the windows do not name their driving topic; give --topic')
-    speed = []  # (stamp, speed) of the whole run (--bag) or of the saved windows
+    truth = plot.load_truth(args.truth) if args.truth else []
     if args.bag:
         from . import bagio
         bag = bagio.open_bag(args.bag)
         try:
-            bagio.check_topic(bag, driving, 'nav_msgs/Odometry')
+            bagio.check_topic(bag, driving, plot.ODOMETRY)
             total = bag.get_message_count([driving])
         finally:
             bag.close()
+        speed = []
         with _bar(args, 'read', total) as bar:
             for record in bagio.read_messages(args.bag, [driving]):
-                speed.append((record.stamp, _speed(record.msg)))
+                speed.append((record.stamp, plot.speed_of(record.msg)))
                 bar.update()
     else:
-        for _, _, records in windows:
-            speed.extend((r.stamp, _speed(r.msg)) for r in records
-                         if r.topic == driving and r.msg._type == 'nav_msgs/Odometry')
-        if not speed:
+        speed = plot.window_speeds(windows, driving)
+        if not any(speed):
             raise CommandError('topic: no nav_msgs/Odometry messages on %s in the windows' % driving)
-    speed.sort()
-    curve = []  # (stamp, score) of every feature window of the run (--model with --bag)
+    curve, threshold = [], None
     if args.model:
-        from . import bagio
         from .model import AnomalyModel
         if not args.bag:
             raise CommandError('model: --model scores the whole run and needs --bag')
         model = AnomalyModel.load(args.model)
-        with _bar(args, 'score').busy():
-            stamps, vectors = bagio.feature_vectors(args.bag, driving, model.config, args.stride)
-            if len(stamps):
-                curve = list(zip(stamps.tolist(), model.scores(vectors).tolist()))
-    origin = min([speed[0][0]] + [min(r.stamp for r in records) for _, _, records in windows])
-    triggers, threshold = [], None
-    for _, metadata, _ in windows:
-        for trigger in metadata.get('triggers') or []:
-            if isinstance(trigger.get('score'), (int, float)):
-                triggers.append((trigger['stamp'] - origin, trigger['score']))
-        if isinstance(metadata.get('threshold'), (int, float)):
-            threshold = metadata['threshold']
-    if args.model and threshold is None:
         threshold = model.threshold
-    figure, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(args.width, 6),
-                                         gridspec_kw={'height_ratios': [3, 1]})
-    if args.bag:
-        top.plot([s - origin for s, _ in speed], [v for _, v in speed], lw=0.8, color='tab:blue',
-                 label='speed (%s)' % driving)
-    else:
-        for _, _, records in windows:
-            part = [(r.stamp - origin, _speed(r.msg)) for r in records
-                    if r.topic == driving and r.msg._type == 'nav_msgs/Odometry']
-            top.plot([s for s, _ in part], [v for _, v in part], lw=0.8, color='tab:blue')
-    for number, (_, _, records) in enumerate(windows):
-        start = min(r.stamp for r in records) - origin
-        end = max(r.stamp for r in records) - origin
-        for axis in (top, bottom):
-            axis.axvspan(start, end, color='tab:orange', alpha=0.25, lw=0,
-                         label='saved window' if number == 0 and axis is top else None)
-    if curve:
-        bottom.plot([t - origin for t, _ in curve], [v for _, v in curve], lw=0.7, color='tab:gray',
-                    label='score (%s)' % os.path.basename(args.model))
-    if triggers:
-        bottom.plot([t for t, _ in triggers], [s for _, s in triggers], 'v', color='tab:red', ms=4,
-                    label='trigger score')
-    if threshold is not None:
-        bottom.axhline(threshold, color='k', ls='--', lw=0.8, label='threshold %.3g' % threshold)
-    top.set_ylabel('speed (m/s)')
-    top.set_title(args.title or '%s: %d saved window(s)%s' % (
-        args.bag or ', '.join(args.paths), len(windows), '' if args.bag else ' (speed inside the windows only)'),
-        fontsize=9)
-    top.legend(loc='upper right', fontsize=8)
-    bottom.set_ylabel('score')
-    bottom.set_xlabel('time since %.3f (s)' % origin)
-    if curve or triggers or threshold is not None:
-        bottom.legend(loc='lower right', fontsize=8)
-    figure.tight_layout()
+        with _bar(args, 'score').busy():
+            curve = plot.run_scores(args.bag, driving, model, args.stride)
     _parent_exists(args.out, 'out')
-    from .safe_files import AtomicFile
-    with AtomicFile(args.out, overwrite=True) as stream:
-        figure.savefig(stream, dpi=args.dpi, format=os.path.splitext(args.out)[1][1:].lower() or None)
-    plt.close(figure)
-    summary = collections.OrderedDict([('out', args.out), ('windows', len(windows)), ('triggers', len(triggers)),
-                                       ('speed_samples', len(speed)), ('scores', len(curve)), ('start', origin),
-                                       ('end', max(speed[-1][0], max(max(r.stamp for r in rs)
-                                                                     for _, _, rs in windows)))])
+    title = args.title or '%s: %d saved window(s)%s' % (
+        args.bag or ', '.join(args.paths), len(windows), '' if args.bag else ' (speed inside the windows only)')
+    summary = plot.timeline(args.out, windows, speed, curve, threshold, truth, title, args.width, args.dpi,
+                            'speed (%s)' % driving)
     if args.json:
         _print_json(summary)
     else:
-        print('%s: %d window(s), %d trigger score(s), %d speed samples' % (
-            args.out, len(windows), len(triggers), len(speed)))
+        print('%s: %d window(s), %d trigger score(s), %d speed samples%s' % (
+            args.out, len(windows), summary['triggers'], summary['speed_samples'],
+            ', %d of %d true events inside windows' % (summary['truth_in_windows'], len(truth)) if truth else ''))
     return EXIT_OK
 
 
@@ -1000,7 +976,8 @@ def build_parser():
     p.add_argument('--window', type=_span('window'), metavar='N|Ns',
                    help='feature window: messages (500) or seconds (5s) (default: 500)')
     p.add_argument('--stride', type=_non_negative_int('stride', 1), metavar='N',
-                   help='a vector every N driving messages (default: %d)' % _collect_stride())
+                   help='a vector every N driving messages (default: %d, or smaller so that a short bag '
+                   'still gives about 200 vectors)' % _collect_stride())
     p.add_argument('--features', choices=_feature_sets(),
                    help='feature set (default: %s)' % _feature_sets()[0])
     p.add_argument('--input-topic', action='append', default=[], metavar='T',
@@ -1031,6 +1008,32 @@ def build_parser():
                    help='exact OneClassSVM, Nystroem + SGD, or auto (default: %(default)s)')
     _common(p)
     p.set_defaults(run=cmd_learn)
+
+    p = commands.add_parser('tune', help='set a model\'s threshold to a false-window budget on nominal bags', **_help(
+        """
+        Replay nominal bags through the classifier trigger the smart logger runs (--classify-every,
+        --retrigger), merge its fires into windows (--pre, --post) and lower the model's threshold until
+        the bags give at most --max-false-per-hour windows per hour; then inject one anomaly of every
+        simulator type into the first bag and report which the tuned model still catches. The model
+        written to --out records what it was tuned for (info.tuned). Figures on the tuning bags are
+        in-sample: check on other nominal bags with cclog replay.
+        """,
+        """
+          cclog tune --model model.json --bag nominal.bag --topic /odom --max-false-per-hour 1 --out tuned.json
+        """))
+    p.add_argument('--model', required=True, metavar='PATH', help='the model to tune (not changed)')
+    p.add_argument('--bag', required=True, action='append', metavar='BAG', help='a nominal bag (repeatable)')
+    p.add_argument('--topic', required=True, metavar='T', help="the model's driving topic in the bags")
+    p.add_argument('--max-false-per-hour', required=True, type=_positive_float('max-false-per-hour', zero=True),
+                   metavar='N', help='false-window budget')
+    p.add_argument('--out', required=True, metavar='PATH', help='the tuned model file to write')
+    p.add_argument('--pre', type=_span('pre'), default='2s', metavar='N|Ns', help='(default: %(default)s)')
+    p.add_argument('--post', type=_span('post'), default='2s', metavar='N|Ns', help='(default: %(default)s)')
+    p.add_argument('--classify-every', type=_span('classify_every'), default='50ms', metavar='N|Ns',
+                   help='(default: %(default)s)')
+    p.add_argument('--retrigger', choices=_retrigger_modes(), default='event', help='(default: %(default)s)')
+    _common(p)
+    p.set_defaults(run=cmd_tune)
 
     p = commands.add_parser('replay', help='the smart logger over a bag (windows around anomalies)', **_help(
         """
@@ -1150,19 +1153,23 @@ def build_parser():
         Draw a timeline: speed of the driving topic (nav_msgs/Odometry) over time with the saved windows
         shaded, and below it the classifier scores of the triggers and the model threshold. With --bag the
         speed curve covers the whole run, else only the messages inside the windows; with --bag and
-        --model the model's score of every feature window of the run is drawn too. Uses matplotlib's Agg
+        --model the model's score of every feature window of the run is drawn too; with --truth the true
+        events, so a window that was or was not kept can be told from the score. Uses matplotlib's Agg
         backend (no display needed).
         """,
         """
           cclog plot logs --bag husky.bag --out run.png
           cclog plot logs --bag husky.bag --model model.json --out run-scores.png
           cclog plot logs/cc_log_20150521T191138.027Z_classifier.json.xz --out window.png
+          cclog plot logs --bag sim.bag --model model.json --truth sim.bag.truth.json --out why.png
         """))
     p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
     p.add_argument('--out', required=True, metavar='PNG', help='image to write')
     p.add_argument('--bag', metavar='BAG', help='the full run, for the speed curve')
     p.add_argument('--topic', metavar='T', help='driving topic (default: the windows\' driving_topic)')
     p.add_argument('--model', metavar='PATH', help='with --bag: draw this model\'s score over the whole run')
+    p.add_argument('--truth', metavar='JSON', help='true events to draw: cclog simulate\'s <bag>.truth.json, or a '
+                   'JSON list of {type, start, end}')
     p.add_argument('--stride', type=_non_negative_int('stride', 1), default=1, metavar='N',
                    help='with --model: score every N-th message (default: %(default)s)')
     p.add_argument('--title', help='figure title')

@@ -34,6 +34,7 @@ __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_ST
 
 DEFAULT_ROTATE = '60s'
 DEFAULT_STRIDE = 25  # driving messages between feature vectors (4 per second at 100 Hz)
+ENOUGH_VECTORS = 200  # offline, without a stride given: a smaller stride when the default gives fewer vectors
 DEFAULT_LABEL = 'nominal'
 DEFAULT_WINDOW = '500'
 DEFAULT_FEATURE_SET = 'motion'
@@ -326,31 +327,54 @@ def vector_job(directory, label, stamp, vector, config):
                              what=VECTOR, tag=stamp)
 
 
-def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=DEFAULT_STRIDE,
+def auto_stride(count, stride, enough=ENOUGH_VECTORS):
+    """The stride that gives about ``enough`` vectors where ``stride`` gave ``count`` (never larger than
+    ``stride``, at least 1)."""
+    if count >= enough:
+        return stride
+    return max(1, min(stride, count * stride // enough))
+
+
+def _vectors_of(bag_path, topics, config, stride):
+    """``(stride, stamps, vectors)`` of a bag; ``stride`` None: DEFAULT_STRIDE, or smaller (``auto_stride``)
+    when that gives fewer than ENOUGH_VECTORS vectors."""
+    from . import bagio  # rosbag: imported here so the module stays pure
+    chosen = DEFAULT_STRIDE if stride is None else stride
+    stamps, vectors = bagio.feature_vectors(bag_path, topics, config, chosen)
+    smaller = chosen if stride is not None else auto_stride(len(stamps), chosen)
+    if smaller < chosen:
+        chosen = smaller
+        stamps, vectors = bagio.feature_vectors(bag_path, topics, config, chosen)
+    return chosen, stamps, vectors
+
+
+def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WINDOW, stride=None,
                 feature_set=DEFAULT_FEATURE_SET, retry_seconds=None, feature_specs=None):
     """Write the feature vectors of ``topic`` in a bag into ``out_dir/<label>/`` (one file each), as collect
     mode does live (``topic``: of the feature set's first input, or a list: it and the topics of the set's
     other inputs, in its order); with ``feature_specs`` (``[(name, FeatureConfig, topics)]``, as Collector's)
     instead, the vectors of each set into ``out_dir/<name>/<label>/``. Returns ``{'vectors': n, 'directory':
-    out_dir/<label>, 'sets': {name: (vectors, directory)}}`` (directory: the first set's). Raises ValueError
+    out_dir/<label>, 'sets': {name: (vectors, directory)}, 'strides': {name: stride}, 'stride': the first
+    set's}`` (directory: the first set's). ``stride`` None: DEFAULT_STRIDE, or a smaller one that gives about
+    ENOUGH_VECTORS vectors when the bag is short (``auto_stride``). Raises ValueError
     for bad arguments or an unreadable bag; a vector that cannot be written (disk full...) is retried for
     ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``), then OSError names the directory and
     how many vectors were not written.
     """
-    from . import bagio  # rosbag: imported here so the module stays pure
     check_label(label)
-    stride = parse_stride(stride)
+    stride = None if stride is None else parse_stride(stride)
     if feature_specs is None:
         specs = [('', features_mod.FeatureConfig(feature_set, window), topic, out_dir)]
     else:
         specs = [(name, config, topics, os.path.join(out_dir, name)) for name, config, topics in feature_specs]
-    computed = [(name, config, directory) + bagio.feature_vectors(bag_path, topics, config, stride)
+    computed = [(name, config, directory) + _vectors_of(bag_path, topics, config, stride)
                 for name, config, topics, directory in specs]
     retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
     writer = window_writer.WindowWriter(out_dir, background=False, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
                                         give_up_after=retry_seconds, close_retry=retry_seconds)
-    result = {'sets': {}}
-    for name, config, directory, stamps, vectors in computed:
+    result = {'sets': {}, 'strides': {}}
+    for name, config, directory, chosen, stamps, vectors in computed:
+        result['strides'][name] = chosen
         before = writer.stats()['written'].get(VECTOR, 0)
         for stamp, vector in zip(stamps, vectors):
             writer.submit(vector_job(directory, label, stamp, vector, config))
@@ -365,5 +389,6 @@ def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WI
         result['sets'][name] = (len(stamps), where)
     writer.close()
     first = result['sets'][computed[0][0]] if computed else (0, out_dir)
-    result.update(vectors=first[0], directory=first[1])
+    result.update(vectors=first[0], directory=first[1],
+                  stride=result['strides'][computed[0][0]] if computed else stride)
     return result

@@ -36,6 +36,7 @@ DEFAULT_MAX_EXACT = 20000       # above this many training vectors: 'auto' subsa
 NYSTROEM_COMPONENTS = 300
 NU_GRID = (0.005, 0.02, 0.05, 0.1)
 GAMMA_FACTOR_GRID = (0.1, 0.25, 0.5, 1.0, 2.0)
+MIN_VECTORS = 10               # fewer nominal vectors cannot be split into training and held-out blocks
 METHODS = ('auto', 'exact', 'nystroem')
 
 Report = collections.namedtuple('Report', 'total tp fp fn tn precision recall')
@@ -224,8 +225,12 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     if method not in METHODS:
         raise ValueError('method: %r is not one of %s' % (method, ', '.join(METHODS)))
     X = np.asarray(nominal, dtype=float)
-    if X.ndim != 2 or len(X) < 10:
-        raise ValueError('nominal: need a 2-D array of at least 10 vectors, got shape %s' % (X.shape,))
+    if X.ndim != 2:
+        raise ValueError('nominal: need a 2-D array of vectors, got shape %s' % (X.shape,))
+    if len(X) < MIN_VECTORS:
+        raise ValueError('nominal: %d vectors, need at least %d: collect with a smaller stride (--stride 1 gives '
+                         'one per message), a shorter feature window, or from more nominal driving'
+                         % (len(X), MIN_VECTORS))
     dimension = vector_length(config)
     if X.shape[1] != dimension:
         raise ValueError('nominal: vectors have %d features, the config %s needs %d'

@@ -124,6 +124,21 @@ class FeatureWindow(object):
         order = (self._start + np.arange(self._n)) % len(self._stamps)
         return self._data[order]
 
+    def newest(self, span):
+        """The rows of the newest ``span`` (a Span: that many messages, or no older than that many seconds
+        before the newest row; at least one row), oldest first, as a 2-D array (a copy)."""
+        span = Span.parse(span, 'span')
+        if self._n == 0:
+            return self._data[:0].copy()
+        if span.is_duration:
+            order = (self._start + np.arange(self._n)) % len(self._stamps)
+            count = int(np.count_nonzero(self._stamps[order] >= self._newest() - span.seconds))
+        else:
+            count = span.count
+        count = min(self._n, max(1, count))
+        order = (self._start + np.arange(self._n - count, self._n)) % len(self._stamps)
+        return self._data[order]
+
     def vector(self):
         """The window vector of the rows held (ValueError when empty, or for raw when not full)."""
         if self._n == 0:

@@ -4,11 +4,15 @@ The model's feature configuration names the set and its window; ``topics`` are t
 inputs, in its order (the first makes the rows). Its ``features.FeatureStream`` scores the window every
 ``classify_every`` (a count or a duration) once the window holds continuous data; an anomalous score
 (``score < threshold``) fires, every time (``retrigger='every'``, the paper's rule) or only at the onset
-(``'onset'``: the score must come back above the threshold before it fires again). Several classifiers may
-run at once, each with its own model, topics, ``classify_every`` and ``retrigger``. Pure: no rospy.
+(``'onset'``: the score must come back above the threshold before it fires again), or at the onset and then
+only while the newest rows are anomalous (``'event'``: the window ends at the anomaly's end plus post, not a
+whole feature window later). Several classifiers may run at once, each with its own model, topics,
+``classify_every`` and ``retrigger``. Pure: no rospy.
 """
 import os
 import time
+
+import numpy as np
 
 from .. import features
 from ..features import FeatureStream
@@ -20,8 +24,14 @@ from .base import Trigger, register
 #   anomalous for up to W messages after the anomaly itself ended, so windows grow by that tail.
 # - 'onset': only the onset, i.e. a message scored anomalous after a message scored nominal (or the first
 #   score since the start / a restart): hysteresis at the threshold.
-RETRIGGER_MODES = ('every', 'onset')
+# - 'event': the onset (as 'onset'), then, while the whole feature window stays anomalous, only the scores of the
+#   newest rows: the ``recent`` rows (default: the newest quarter of the feature window) put in place of the
+#   newest rows of the last window scored nominal. Once the anomalous rows are older than ``recent`` this
+#   window is nominal again, so the logging window ends at the anomaly's end + recent + post instead of
+#   end + feature window + post (the anomalous rows still in the feature window no longer extend it).
+RETRIGGER_MODES = ('every', 'onset', 'event')
 DEFAULT_RETRIGGER = 'every'
+RECENT_FRACTION = 0.25  # default ``recent``: this fraction of the feature window
 
 # How often the classifier scores the feature window (a Span): '1' = every message of the first input (the
 # paper's rule), 'N' = every N-th message, a duration such as '50ms' = at most one decision per 50 ms of
@@ -49,7 +59,7 @@ class ClassifierTrigger(Trigger):
     """
 
     kind = 'classifier'
-    config_keys = ('model', 'topics', 'feature_set', 'window', 'classify_every', 'retrigger')
+    config_keys = ('model', 'topics', 'feature_set', 'window', 'classify_every', 'retrigger', 'recent')
 
     @classmethod
     def from_config(cls, name, options, context):
@@ -73,7 +83,7 @@ class ClassifierTrigger(Trigger):
         return cls(name, model, topics, **options)
 
     def __init__(self, name, model, topics, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER,
-                 pre=None, post=None):
+                 pre=None, post=None, recent=None):
         super(ClassifierTrigger, self).__init__(name, pre, post)
         if retrigger not in RETRIGGER_MODES:
             raise ValueError('retrigger: %r is not one of %s' % (retrigger, ', '.join(RETRIGGER_MODES)))
@@ -94,6 +104,7 @@ class ClassifierTrigger(Trigger):
         self.classify_every = Span.parse(classify_every, 'classify_every')
         if self.classify_every.count == 0:
             raise ValueError('classify_every: 0 messages; use 1 to classify every message')
+        self.recent = recent_span(self.config.span, recent, name)
         self.calls = 0
         self.seconds = 0.0
         self.max_seconds = 0.0
@@ -103,6 +114,7 @@ class ClassifierTrigger(Trigger):
     def reset(self):
         self.stream = FeatureStream(self.config, every=self.classify_every)
         self._armed = True  # 'onset': the next anomalous score fires (no anomalous score since a nominal one)
+        self._nominal_rows = None  # 'event': the rows of the last feature window scored nominal
 
     def topic_types(self):
         return dict(self._types)
@@ -129,10 +141,27 @@ class ClassifierTrigger(Trigger):
         fires = []
         if anomalous:
             self.anomalous += 1
-            if self._armed or self.retrigger == 'every':
+            if not self._armed and self.retrigger == 'event':
+                anomalous, score = self._score_recent()
+            if anomalous and (self._armed or self.retrigger != 'onset'):
                 fires.append(self.fire('classifier', float(score)))
-        self._armed = not anomalous
+            self._armed = False
+        else:
+            self._armed = True
+            if self.retrigger == 'event':
+                self._nominal_rows = stream.window.rows()
         return fires
+
+    def _score_recent(self):
+        """``(anomalous, score)`` of the newest ``recent`` rows in place of the newest rows of the last window
+        scored nominal (of the whole feature window when there is none)."""
+        window = self.stream.window
+        recent = window.newest(self.recent)
+        if self._nominal_rows is None or len(recent) >= len(self._nominal_rows):
+            rows = window.rows() if self._nominal_rows is None else recent
+        else:
+            rows = np.concatenate((self._nominal_rows[len(recent):], recent))
+        return self.model.is_anomalous(self.config.feature.vector(rows, self.config.span))
 
     def stats(self):
         result = super(ClassifierTrigger, self).stats()
@@ -144,4 +173,22 @@ class ClassifierTrigger(Trigger):
         result = super(ClassifierTrigger, self).describe()
         result.update(topics=list(self.input_topics), model=self.config.to_dict(), threshold=self.threshold,
                       classify_every=str(self.classify_every), retrigger=self.retrigger)
+        if self.retrigger == 'event':
+            result['recent'] = str(self.recent)
         return result
+
+
+def recent_span(window, recent, name='classifier'):
+    """The ``recent`` Span of the 'event' rule: ``recent`` parsed (a count or duration of the feature window's
+    kind, at most the window), or RECENT_FRACTION of the feature window ``window`` (a Span) when None."""
+    if recent in (None, ''):
+        if window.is_duration:
+            return Span.duration(window.seconds * RECENT_FRACTION)
+        return Span.messages(max(1, int(round(window.count * RECENT_FRACTION))))
+    span = Span.parse(recent, '%s: recent' % name)
+    if span.is_duration != window.is_duration or (span.count or span.seconds or 0) <= 0:
+        raise ValueError('%s: recent: %s must be a positive %s like the feature window %s' % (
+            name, span, 'duration' if window.is_duration else 'message count', window))
+    if (span.seconds or span.count) > (window.seconds or window.count):
+        raise ValueError('%s: recent: %s is longer than the feature window %s' % (name, span, window))
+    return span

@@ -1,0 +1,244 @@
+#!/usr/bin/env python3
+"""Every real run with continuous odometry: train on its first part, replay the rest with and without injected
+simulator anomalies; recall by type and latency, false windows per hour, kept messages against the need.
+
+    cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
+    python3 bench/detection_runs.py                       # all runs, seeds 0 1 2, ours and the paper's
+    python3 bench/detection_runs.py --runs f1tenth_DS1 --seeds 0 --settings ours   # one run, quick
+    python3 bench/detection_real.py --only runs           # the same, from the detection bench
+
+For each run of RUNS (../shared/data/real/, SOURCES.md there): the odometry up to ``--train`` of its duration
+(default 0.5) trains a model (``learning.train`` defaults, nominal only); the rest is replayed through the
+classifier trigger (``triggers.ClassifierTrigger``, the one the smart logger runs, classify_every 50ms).
+Fires open or extend logging windows of [fire - pre, fire + post] (pre/post 2 s; overlapping ones merge, as
+in ``WindowBuffer``). Without injection every window is false. With injection, ``sim.inject_anomalies``
+puts one anomaly of one simulator type into the replayed part (warmup 3 s, gap 2 s), per type and seed:
+caught when a fire falls in [onset, end + feature window]; latency = first such fire - onset (target
+<= 0.5 s); a window with no such fire is false; kept = odometry messages inside windows, needed = those in
+[onset - pre, end + post] (target kept <= 1.5 x needed); 'kept' without injection: the share of the replayed
+part's messages inside windows. Types that do not fit into a short replay are
+counted as 'no room'.
+
+Settings: ``ours`` = motion features, 2 s window, retrigger 'event'; ``every`` = the same with retrigger
+'every' (the paper's rule); ``paper`` = raw features over a count window of about 2 s, nu 0.5, threshold 0
+(OneClassSVM.predict), retrigger 'every'. Sequor is left out (trials of a few frames hours apart: no
+continuous driving to inject into; bench/detection_real.py scores it by trial); ALFA is used up to its
+engine failure (+116.25 s).
+"""
+import argparse
+import collections
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+
+from cc_log import bagio, learning, sim, tuning  # noqa: E402
+from cc_log.features import FeatureConfig, FeatureStream, vector_length  # noqa: E402
+
+# (name, odometry topic, seconds after the start where nominal driving ends or None)
+RUNS = [
+    ('husky_outdoor_2015', '/husky_velocity_controller/odom', None),
+    ('f1tenth_DS1', '/odom', None), ('f1tenth_DS2', '/odom', None), ('f1tenth_DS3', '/odom', None),
+    ('f1tenth_DS4', '/odom', None), ('f1tenth_DS5', '/odom', None),
+    ('icelab_normal_plan', '/odom', None), ('icelab_normal_plan_1', '/odom', None),
+    ('icelab_window_plan', '/odom', None), ('icelab_window_plan_1', '/odom', None),
+    ('socspioneer_trace0', '/odom', None), ('socspioneer_trace1', '/odom', None),
+    ('alfa_carbonZ_engine_failure', '/mavros/local_position/odom', 116.25),
+]
+WINDOW = '2s'
+PRE = POST = 2.0
+CLASSIFY_EVERY = '50ms'
+LATENCY = 0.5
+SETTINGS = collections.OrderedDict([
+    ('ours', ('motion', 'event', {})),
+    ('every', ('motion', 'every', {})),
+    ('paper', ('raw', 'every', {'nu': 0.5})),
+])
+
+
+def bag_path(name):
+    return os.path.normpath(os.path.join(os.path.dirname(common.HUSKY_BAG), name + '.bag'))
+
+
+def load(name, topic, stop):
+    """The odometry records of a run (up to ``stop`` seconds after its start when given)."""
+    records = list(bagio.read_messages(bag_path(name), [topic]))
+    start = records[0].stamp
+    if stop is not None:
+        records = [r for r in records if r.stamp - start < stop]
+    return records
+
+
+def split(records, fraction):
+    start, end = records[0].stamp, records[-1].stamp
+    cut = start + fraction * (end - start)
+    return [r for r in records if r.stamp < cut], [r for r in records if r.stamp >= cut]
+
+
+def rate_of(records):
+    steps = np.diff([r.stamp for r in records])
+    return 1.0 / float(np.median(steps[steps > 0]))
+
+
+def config_of(feature_set, rate):
+    if feature_set == 'raw':
+        return FeatureConfig('raw', str(max(2, int(round(2.0 * rate)))))
+    return FeatureConfig(feature_set, WINDOW)
+
+
+def train(records, config, options, margin=learning.DEFAULT_MARGIN):
+    stream = FeatureStream(config, every=1)
+    X = [v for v in (stream.add(r.msg, r.stamp) for r in records) if v is not None]
+    if len(X) < learning.MIN_VECTORS:
+        raise ValueError('%d training vectors' % len(X))
+    X = np.array(X)
+    if options.get('nu') == 0.5:
+        model, _ = learning.train(X, config=config, nu=0.5, gamma=1.0 / vector_length(config))
+        model.threshold = 0.0
+    else:
+        model, _ = learning.train(X, config=config, margin=margin)
+    return model, len(X)
+
+
+def fires(model, records, topic, rule):
+    """Stamps at which the classifier trigger fires (the model's threshold, CLASSIFY_EVERY, ``rule``)."""
+    return tuning.fires(model, records, topic, model.threshold, CLASSIFY_EVERY, rule)
+
+
+def windows_of(stamps):
+    """Merged [fire - PRE, fire + POST] intervals."""
+    return tuning.windows_of(stamps, PRE, POST)
+
+
+def inside(stamps, intervals):
+    return sum(1 for t in stamps if any(a <= t <= b for a, b in intervals))
+
+
+def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DEFAULT_MARGIN):
+    """One run, one setting: a dict of the figures."""
+    feature_set, rule, options = SETTINGS[setting]
+    records = load(name, topic, stop)
+    first, rest = split(records, fraction)
+    rate = rate_of(records)
+    config = config_of(feature_set, rate)
+    reach = config.span.seconds if config.span.is_duration else config.span.count / rate
+    model, vectors = train(first, config, options, margin)
+    seconds = rest[-1].stamp - rest[0].stamp
+    nominal_fires = fires(model, rest, topic, rule)
+    nominal_windows = windows_of(nominal_fires)
+    result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': first[-1].stamp - first[0].stamp,
+              'vectors': vectors,
+              'replay_s': seconds, 'false_nominal': len(nominal_windows), 'nominal_windows': nominal_windows,
+              'caught': collections.Counter(), 'total': collections.Counter(), 'late': collections.Counter(),
+              'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
+              'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window,
+              'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest))}
+    for kind in sim.ANOMALY_TYPES:
+        for seed in seeds:
+            try:
+                injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+            except ValueError:
+                result['no_room'][kind] += 1
+                continue
+            entry = truth[0]
+            stamps = fires(model, injected, topic, rule)
+            windows = windows_of(stamps)
+            near = [t for t in stamps if entry['start'] <= t <= entry['end'] + reach]
+            result['total'][kind] += 1
+            if near:
+                result['caught'][kind] += 1
+                result['latency'][kind].append(near[0] - entry['start'])
+                if near[0] - entry['start'] > LATENCY:
+                    result['late'][kind] += 1
+            result['false_injected'] += sum(
+                1 for a, b in windows if not any(entry['start'] <= t <= entry['end'] + reach and a <= t <= b
+                                                 for t in stamps))
+            result['injected_s'] += seconds
+            odom = [r.stamp for r in injected]
+            result['kept'] += inside(odom, windows)
+            result['needed'] += inside(odom, [(entry['start'] - PRE, entry['end'] + POST)])
+    return result
+
+
+def pct(a, b):
+    return '-' if not b else '%d/%d' % (a, b)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--runs', help='comma-separated run names (default: all of RUNS)')
+    parser.add_argument('--seeds', default='0,1,2')
+    parser.add_argument('--settings', default=','.join(SETTINGS), help='comma-separated: ours, every, paper')
+    parser.add_argument('--train', type=float, default=0.5, help='fraction of each run that trains (default 0.5)')
+    parser.add_argument('--margin', type=float, default=learning.DEFAULT_MARGIN,
+                        help='threshold margin of learning.train (default %g)' % learning.DEFAULT_MARGIN)
+    args = parser.parse_args(argv)
+    seeds = [int(s) for s in args.seeds.split(',')]
+    runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
+    settings = args.settings.split(',')
+    started = time.time()
+    common.header('Every real run with odometry: trained on its first part, replayed with injected anomalies',
+                  [common.describe_data(bag_path(name)) for name, _, _ in runs] +
+                  ['training: first %g of each run; injection: one anomaly per type and seed %s into the rest; '
+                   'window %s, pre/post %gs/%gs, classify_every %s, threshold margin %g' % (
+                       args.train, seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin)])
+    for setting in settings:
+        rows, totals = [], collections.Counter()
+        by_type = collections.defaultdict(collections.Counter)
+        latencies = collections.defaultdict(list)
+        oddities = []
+        for name, topic, stop in runs:
+            try:
+                r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin)
+            except ValueError as error:
+                rows.append([name, '-', '-', '-', '-', '-', '-', 'not run: %s' % error, '-', '-'])
+                continue
+            caught, total = sum(r['caught'].values()), sum(r['total'].values())
+            late = sum(r['late'].values())
+            rows.append([name, '%.0f' % r['rate'], '%.0f' % r['train_s'], '%.0f' % r['replay_s'],
+                         r['false_nominal'], '%.1f' % (3600.0 * r['false_nominal'] / r['replay_s']),
+                         '%.0f%%' % (100.0 * r['nominal_kept']),
+                         '%s (%d late, %d no room)' % (pct(caught, total), late, sum(r['no_room'].values())),
+                         r['false_injected'], '%.2fx' % (r['kept'] / float(r['needed'])) if r['needed'] else '-'])
+            totals.update({'false': r['false_nominal'], 'replay_s': r['replay_s'], 'caught': caught,
+                           'total': total, 'late': late, 'kept': r['kept'], 'needed': r['needed'],
+                           'false_injected': r['false_injected']})
+            totals['injected_s'] += r['injected_s']
+            for kind in sim.ANOMALY_TYPES:
+                by_type[kind].update({'caught': r['caught'][kind], 'total': r['total'][kind],
+                                      'late': r['late'][kind], 'no_room': r['no_room'][kind]})
+                latencies[kind].extend(r['latency'][kind])
+            if name in ('f1tenth_DS2', 'f1tenth_DS5'):
+                oddities.append('%s: windows without injection from %s s after the run start (replay from %.0f s)'
+                                % (name, ', '.join('%.1f-%.1f' % (a - r['start'], b - r['start'])
+                                                   for a, b in r['nominal_windows']) or 'none',
+                                   r['train_s']))
+        print('setting %s: %s features, retrigger %s %s' % (setting, SETTINGS[setting][0], SETTINGS[setting][1],
+                                                            SETTINGS[setting][2] or ''))
+        common.table(['run', 'Hz', 'train s', 'replay s', 'false windows (no injection)', 'false/h', 'kept',
+                      'caught (late > %gs)' % LATENCY, 'false windows (injected)', 'kept/needed'], rows)
+        common.table(['type', 'caught', 'late', 'no room', 'median latency s', 'worst latency s'],
+                     [[kind, pct(c['caught'], c['total']), c['late'], c['no_room'],
+                       '%.2f' % np.median(latencies[kind]) if latencies[kind] else '-',
+                       '%.2f' % max(latencies[kind]) if latencies[kind] else '-']
+                      for kind, c in by_type.items()], 'by type:')
+        hours = totals['replay_s'] / 3600.0
+        print('all runs: caught %s (%d later than %gs); false windows without injection %d in %.3f h = %.1f/h; '
+              'false windows with injection %d in %.3f h = %.1f/h; kept/needed %.2fx' % (
+                  pct(totals['caught'], totals['total']), totals['late'], LATENCY, totals['false'], hours,
+                  totals['false'] / hours if hours else 0.0, totals['false_injected'], totals['injected_s'] / 3600.0,
+                  totals['false_injected'] / (totals['injected_s'] / 3600.0) if totals['injected_s'] else 0.0,
+                  totals['kept'] / float(totals['needed']) if totals['needed'] else float('nan')))
+        for line in oddities:
+            print('real oddity: ' + line)
+        print()
+    print('total %.1f s' % (time.time() - started))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
