@@ -23,12 +23,13 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import bag_lz4, sim, stats  # noqa: E402
+from cc_log import sim, stats  # noqa: E402
 from cc_log.context_track import ContextTrack  # noqa: E402
 from cc_log.window_buffer import Record  # noqa: E402
 
 
 def run(minutes, noise, directory):
+    import genpy
     import rosbag
     simulator = sim.Simulator(sim.SimConfig(minutes=minutes, anomalies=0, noise=noise, seed=1, imu=True))
     track = ContextTrack(directory, {sim.ODOM_TOPIC: 1.0})
@@ -37,7 +38,7 @@ def run(minutes, noise, directory):
     fed = 0
     with rosbag.Bag(full, 'w') as bag:
         for topic, stamp, msg in simulator.messages():
-            bag.write(topic, msg, bag_lz4.bag_time(stamp))
+            bag.write(topic, msg, genpy.Time.from_sec(stamp))
             if topic == sim.ODOM_TOPIC:
                 begin = time.process_time()
                 track.add(Record(stamp, topic, msg))

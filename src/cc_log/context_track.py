@@ -191,12 +191,11 @@ class ContextTrack(object):
         with self._lock:
             if not self.wants(record):
                 return False
-            from . import bag_lz4
-            try:
-                time = bag_lz4.bag_time(record.stamp)
-            except ValueError as error:
-                self._failed('%s: %s' % (record.topic, error))
+            if not math.isfinite(record.stamp) or record.stamp < 0:
+                self._failed('%s: stamp %r cannot be a bag time' % (record.topic, record.stamp))
                 return False
+            import genpy
+            time = genpy.Time.from_sec(record.stamp)
             bag = self._bag
             if bag is not None and (record.stamp - bag.first >= self.rotate or
                                     record.stamp < self._last - JUMP_BACK):
