@@ -88,7 +88,8 @@ class CollectNode(object):
         feature_set = given(params.choice, 'feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS) or \
             DEFAULT_FEATURE_SET
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        options = {'side_topics': [rospy.resolve_name(topic) for topic in cfg.topics], 'close_retry': CLOSE_RETRY,
+        options = {'side_topics': None if cfg.selection.dynamic else [rospy.resolve_name(t) for t in cfg.topics],
+                   'close_retry': CLOSE_RETRY,
                    'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,
                    'max_buffer_mb': cfg.max_buffer_mb, 'max_disk_mb': cfg.max_disk_mb,
                    'min_free_mb': cfg.min_free_mb}
@@ -114,11 +115,12 @@ class CollectNode(object):
         types = dict((spec.topic, spec.config.topic_type) for spec in self.collector.specs)
         driving_class = config.installed_class(types[self.collector.driving_topic]) \
             if self.collector.driving_topic in types else None
-        topics = sorted(self.collector.side_topics)
+        topics = sorted(self.collector.side_topics or [rospy.resolve_name(t) for t in cfg.topics])
         self.collector.on_event(self._on_event)
         self.extras = NodeExtras(params, self.collector.writer, self.directory, self.collector.driving_topic)
         self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic, driving_class,
-                             sorted(set(topics).union(self.extras.topics) - {self.collector.driving_topic}))
+                             sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}))
+        self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',

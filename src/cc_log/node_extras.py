@@ -18,6 +18,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from . import context_track, disk_guard, upload, window_writer
 from .node_common import ConfigError
+from .topic_watch import TopicWatcher
 
 __all__ = ['NodeExtras']
 
@@ -37,7 +38,7 @@ class NodeExtras(object):
         self.rates = dict((rospy.resolve_name(topic), rate) for topic, rate in rates.items())
         rotate = params.number('context_rotate', context_track.DEFAULT_ROTATE, minimum=1e-3) \
             if params.given('context_rotate') else context_track.DEFAULT_ROTATE
-        self.track = self.writer = None
+        self.track = self.writer = self.watcher = None
         self.leftovers = []
         if self.rates:
             recovered, self.leftovers = context_track.recover(directory)
@@ -63,6 +64,17 @@ class NodeExtras(object):
             if self.writer is not None:
                 self.writer.on_event(self.hook.on_event)
             rospy.loginfo('upload command: %s', ' '.join(self.hook.command))
+
+    def watch(self, selection, intake, skip):
+        """With ``~topics`` patterns (``*``, ``re:...``): subscribe to matching topics as they appear, through
+        ``intake.subscribe`` (``skip``: topics subscribed already)."""
+        if not selection.dynamic:
+            return
+        if not hasattr(intake, 'subscribe'):
+            raise ConfigError('~topics: %s: topics that appear later need an intake that subscribes at run time '
+                              '(intake.subscribe)' % selection.describe())
+        rospy.loginfo('topics: %s (subscribed as they appear)', selection.describe())
+        self.watcher = TopicWatcher(selection, intake.subscribe, skip=skip).start()
 
     @property
     def topics(self):
@@ -97,6 +109,11 @@ class NodeExtras(object):
             if self.leftovers:
                 level = max(level, DiagnosticStatus.WARN)
                 message += '; %d context leftovers kept (not recovered)' % len(self.leftovers)
+        if self.watcher is not None:
+            values += [('topics discovered', len(self.watcher.added)), ('topic watch errors', self.watcher.errors)]
+            if self.watcher.errors:
+                level = max(level, DiagnosticStatus.WARN)
+                message += '; topic watch: %s' % self.watcher.last_error
         if self.hook.enabled:
             stats = self.hook.stats()
             values += [('uploads started', stats['started']), ('uploads failed', stats['failed']),
@@ -107,7 +124,9 @@ class NodeExtras(object):
         return level, message, values
 
     def close(self):
-        """Close the open context file and wait for its writer."""
+        """Stop watching for topics, close the open context file and wait for its writer."""
+        if self.watcher is not None:
+            self.watcher.stop()
         if self.track is not None:
             self.track.close()
             if not self.writer.close(CLOSE_TIMEOUT):

@@ -341,9 +341,10 @@ class SmartNode(object):
         self.logger.on_event(self._publish_event)
         self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
         self.intake = Intake(self.extras.sink(self.logger), self.logger.driving_topic, driving_class,
-                             sorted(set(self.logger.side_topics).union(self.extras.topics) -
+                             sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
                                     {self.logger.driving_topic}),
                              max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
+        self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
