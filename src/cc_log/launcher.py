@@ -2,8 +2,9 @@
 
 ``record_node.py --mode=auto|smart|collect --model=PATH [--config=FILE] [ROS arguments]``: ``auto``
 (record.launch's default) runs the smart logger (``smart_node``) when ``PATH`` is a file or a configuration is
-given, and the collect logger (``collect_node``) otherwise, which then says on the log and on /diagnostics that it collects feature vectors because it has
-no model yet. Both read their private parameters as usual (record.launch sets those of both).
+given, and the collect logger (``collect_node``) otherwise, which then says on the log and on /diagnostics
+that it collects feature vectors because it has no model yet. Both read their private parameters as usual
+(record.launch sets those of both).
 """
 import argparse
 import os
