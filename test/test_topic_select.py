@@ -70,3 +70,19 @@ def test_watcher_failures_are_counted_and_retried():
     watcher = TopicWatcher(TopicSelection(all_topics=True), flaky, lambda: [('/a', 'x')])
     assert watcher.poll() == [] and watcher.errors == 1
     assert watcher.poll() == ['/a'] and calls == ['/a', '/a']
+
+
+def test_cclog_replay_selects_the_bags_topics_with_patterns(tmp_path, real_bag):
+    from cc_log import cli, log_format
+    cfg = tmp_path / 'patterns.yaml'
+    cfg.write_text('topics: ["*", "!re:/imu/.*"]\ndriving_topic: /husky_velocity_controller/odom\n'
+                   'windows: {pre: 5, post: 5}\n'
+                   'triggers: [{name: far, kind: rule, topic: /husky_velocity_controller/odom, '
+                   'type: nav_msgs/Odometry, when: "pose.pose.position.x > -1000000", hold_off: 1000s}]\n')
+    out = tmp_path / 'out'
+    bag = real_bag('husky_outdoor_2015.bag')
+    assert cli.main(['replay', bag, '--config', str(cfg), '--out', str(out), '--json']) == 0
+    paths = log_format.window_files(str(out))
+    assert paths
+    metadata, _ = log_format.read_window(paths[0])
+    assert '/imu/data' not in metadata['topics'] and '/husky_velocity_controller/odom' in metadata['topics']

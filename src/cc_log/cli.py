@@ -527,6 +527,13 @@ def cmd_replay(args):
                        'classify_every': args.classify_every, 'retrigger': args.retrigger}})
     triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
     options = cfg.logger_options(triggers)
+    if options['side_topics'] is None:  # topic patterns (*, re:, !): the bag's topics they select
+        from . import bagio
+        bag = bagio.open_bag(args.bag)
+        try:
+            options['side_topics'] = cfg.selection.select(sorted(bagio.topics_of(bag)))
+        finally:
+            bag.close()
     logger_types = smart_logger.topic_types(triggers)
     topics = [options['driving_topic']] + [t for t in sorted(set(options['side_topics']).union(logger_types))
                                            if t != options['driving_topic']]
