@@ -7,7 +7,6 @@ Waits (for conditions) until two split files are written, then checks they are L
 """
 import os
 import sys
-import time
 import unittest
 
 import rosbag
@@ -15,19 +14,12 @@ import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 
-from cc_log import context_track, log_format
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rostest_fixtures import wait_for  # noqa: E402
+
+from cc_log import context_track, log_format  # noqa: E402
 
 PKG = 'cc_log'
-
-
-def wait_for(condition, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and not rospy.is_shutdown():
-        result = condition()
-        if result:
-            return result
-        time.sleep(0.2)
-    raise AssertionError('timed out after %g s waiting for %s' % (timeout, what))
 
 
 class RecordCliTest(unittest.TestCase):
@@ -52,6 +44,7 @@ class RecordCliTest(unittest.TestCase):
         mine = wait_for(lambda: [s for s in statuses if s.name == 'cc_log: record'], 10, 'the node\'s status')
         values = dict((v.key, v.value) for v in mine[-1].values)
         self.assertIn('context topics', values)
+        self.assertEqual(values['min free bytes'], str(1 << 20))  # -L 1M
         self.assertIn('no model yet', mine[-1].message)
 
 

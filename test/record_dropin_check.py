@@ -9,7 +9,6 @@ exactly once, and the failing uploads show as WARN on /diagnostics.
 import math
 import os
 import sys
-import time
 import unittest
 
 import rosbag
@@ -17,20 +16,13 @@ import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from cc_log import context_track, log_format
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rostest_fixtures import wait_for  # noqa: E402
+
+from cc_log import context_track, log_format  # noqa: E402
 
 PKG = 'cc_log'
 CONTEXT_FILES = 4  # of 10 s each: the first may start late; three full ones hold 30 s
-
-
-def wait_for(condition, timeout, what):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and not rospy.is_shutdown():
-        result = condition()
-        if result:
-            return result
-        time.sleep(0.2)
-    raise AssertionError('timed out after %g s waiting for %s' % (timeout, what))
 
 
 class RecordDropinTest(unittest.TestCase):

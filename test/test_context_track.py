@@ -143,3 +143,12 @@ def test_recover_reindexes_a_crashed_file(tmp_path):
     recovered, kept = context_track.recover(tmp_path)
     assert kept == [] and len(recovered) == 1
     assert len(read(recovered[0])) == 5
+
+
+def test_topics_on_different_clocks_are_not_a_jump_back(tmp_path):
+    track = ContextTrack(tmp_path, {'odom': None, 'chatter': None}, rotate=100)
+    for second in range(20):  # odometry stamps lag the receipt times of a header-less topic by 5 s
+        track.on_message('odom', odom(1000.0 + second), None)
+        track.on_message('chatter', String(data='x'), 1005.0 + second)
+    track.close()
+    assert len(files(tmp_path)) == 1 and len(read(files(tmp_path)[0])) == 40

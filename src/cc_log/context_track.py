@@ -9,7 +9,8 @@ as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, r
   odometry at ``:1`` is exactly one message per second; ``None`` keeps every message.
 - files go to ``<directory>/context/cc_log_context_<UTC of the first stamp>.bag`` (LZ4 chunks); the open file
   is ``<name>.tmp-<pid>`` and is closed, fsynced and renamed when it spans ``rotate`` seconds (stamps), when
-  stamps jump back (a replayed bag, a simulation reset) and at ``close``. A closed file is handed to
+  a topic's stamps jump back (a replayed bag, a simulation reset; topics on different clocks are not a jump)
+  and at ``close``. A closed file is handed to
   ``submit(job)`` as a ``window_writer.Job(write=..., what=CONTEXT)`` (the node's context writer: quota,
   retries, WRITTEN events for the upload hook); without ``submit`` it is finished in the caller's thread.
 - ``add(record)`` takes a ``window_buffer.Record``: with ``raw`` and ``connection`` set (serialized bytes and
@@ -53,15 +54,10 @@ def parse_topics(value, name='context_topics', aliases=None):
     if isinstance(value, dict):
         entries = [(topic, rate) for topic, rate in value.items()]
     else:
-        if isinstance(value, str):
-            items = value.replace(',', ' ').split()
-        elif isinstance(value, (list, tuple)):
-            items = list(value)
-        else:
-            raise ValueError('%s: %r is not a list of topics (topic or topic:Hz)' % (name, value))
+        from .config import topic_list
         entries = []
-        for item in items:
-            match = _ENTRY.match(item.strip()) if isinstance(item, str) else None
+        for item in topic_list(value, name):
+            match = _ENTRY.match(item)
             if match is None:
                 raise ValueError('%s: %r is not a topic or topic:Hz' % (name, item))
             entries.append((match.group('topic'), match.group('rate')))
@@ -155,7 +151,7 @@ class ContextTrack(object):
         self._lock = threading.Lock()
         self._slots = {}
         self._bag = None
-        self._last = None
+        self._last = {}  # topic -> its last stamp written (topics may run on different clocks)
         self.counts = {'messages_kept': 0, 'messages_thinned': 0, 'files_closed': 0, 'write_errors': 0}
         self.last_error = ''
         self.last_file = ''
@@ -198,7 +194,7 @@ class ContextTrack(object):
             time = genpy.Time.from_sec(record.stamp)
             bag = self._bag
             if bag is not None and (record.stamp - bag.first >= self.rotate or
-                                    record.stamp < self._last - JUMP_BACK):
+                                    record.stamp < self._last.get(record.topic, record.stamp) - JUMP_BACK):
                 self._close_locked()
             try:
                 if self._bag is None:
@@ -208,7 +204,7 @@ class ContextTrack(object):
                 self._failed('%s: %s' % (record.topic, error or type(error).__name__))
                 self._close_locked()
                 return False
-            self._last = record.stamp
+            self._last[record.topic] = record.stamp
             self.counts['messages_kept'] += 1
             return True
 
