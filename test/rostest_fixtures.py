@@ -131,11 +131,13 @@ def finish(process, timeout=30.0):
 
 
 def wait_for(predicate, timeout, what):
-    """Poll ``predicate`` (wall time) until true; AssertionError naming ``what`` after ``timeout``."""
+    """Poll ``predicate`` (wall time) until true and return its value; AssertionError naming ``what`` after
+    ``timeout``."""
     deadline = time.time() + timeout
     while time.time() < deadline:
-        if predicate():
-            return
+        result = predicate()
+        if result:
+            return result
         time.sleep(0.05)
     raise AssertionError('timed out after %g s waiting for %s' % (timeout, what))
 

@@ -85,3 +85,8 @@ def test_memory_live_quick():
     out = run('memory_live.py', '--quick')
     assert 'window open throughout' in out and 'peak RSS MB' in out and 'max buffered MB' in out
     assert len(targets(out)) == 1
+
+
+def test_context_track_quick():
+    out = run('context_track.py', '--quick')
+    assert '| sensor noise ' in out and 'cclog stats m' in out and out.count('%') >= 2

@@ -552,6 +552,13 @@ def cmd_replay(args):
                        'classify_every': args.classify_every, 'retrigger': args.retrigger}})
     triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
     options = cfg.logger_options(triggers)
+    if options['side_topics'] is None:  # topic patterns (*, re:, !): the bag's topics they select
+        from . import bagio
+        bag = bagio.open_bag(args.bag)
+        try:
+            options['side_topics'] = cfg.selection.select(sorted(bagio.topics_of(bag)))
+        finally:
+            bag.close()
     logger_types = smart_logger.topic_types(triggers)
     topics = [options['driving_topic']] + [t for t in sorted(set(options['side_topics']).union(logger_types))
                                            if t != options['driving_topic']]
@@ -877,6 +884,18 @@ def cmd_simulate(args):
     else:
         print('%s: %.1f min at %g Hz, %d anomalies (%s), %s' % (
             args.out, args.minutes, args.rate, len(truth), truth_path, human_bytes(summary['bytes'])))
+    return EXIT_OK
+
+
+def cmd_stats(args):
+    """Distance, time moving/stopped, windows per hour by trigger, bytes vs rosbag record (``stats``)."""
+    from . import stats
+    result = stats.run_stats(args.directory, stats.parse_time(args.since, 'since') if args.since else None,
+                             stats.parse_time(args.until, 'until') if args.until else None, args.odom)
+    if args.json:
+        _print_json(result)
+    else:
+        print('\n'.join(stats.format_text(result)))
     return EXIT_OK
 
 
@@ -1216,6 +1235,25 @@ def build_parser():
     p.add_argument('paths', nargs='+', metavar='DIR|FILE', help='window directories or leftover files')
     _common(p)
     p.set_defaults(run=cmd_recover)
+
+    p = commands.add_parser('stats', help='distance, time moving, windows per hour, bytes vs rosbag record', **_help(
+        """
+        What the robot did and what cc_log kept, from the context track (DIR/context/*.bag) and the windows
+        in DIR: distance driven (odometry of the context track, chords lengthened to arcs), time moving and
+        stopped, windows (and per hour) by trigger, bytes stored against an estimate of what rosbag record of
+        the same topics would have stored (full rates measured inside windows). --since/--until: seconds or a
+        UTC time.
+        """,
+        """
+          cclog stats ~/.ros/cc_log
+          cclog stats ~/.ros/cc_log --since 2026-01-01 --until 2026-02-01T00:00:00Z --json
+        """))
+    p.add_argument('directory', metavar='DIR', help='a cc_log directory (windows, context/)')
+    p.add_argument('--since', help='count from this stamp (seconds or UTC time)')
+    p.add_argument('--until', help='count up to this stamp (seconds or UTC time)')
+    p.add_argument('--odom', help='the odometry topic of the context track (default: the one with most messages)')
+    _common(p)
+    p.set_defaults(run=cmd_stats)
     return parser
 
 

@@ -50,6 +50,7 @@ from . import config
 from .model import AnomalyModel
 from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
                           recover_leftovers, resolve_directory, writer_status)
+from .node_extras import NodeExtras
 from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, Intake
 
 NODE_NAME = 'collect_logger'
@@ -64,7 +65,8 @@ DEFAULT_STRIDE = collector.DEFAULT_STRIDE
 class CollectNode(object):
     """Parameters, subscribers and diagnostics around a Collector."""
 
-    def __init__(self):
+    def __init__(self, note=''):
+        self.note = note  # why collect mode runs (record.launch without a model): said on /diagnostics
         params = Params()
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
@@ -86,7 +88,8 @@ class CollectNode(object):
         feature_set = given(params.choice, 'feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS) or \
             DEFAULT_FEATURE_SET
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        options = {'side_topics': [rospy.resolve_name(topic) for topic in cfg.topics], 'close_retry': CLOSE_RETRY,
+        options = {'side_topics': None if cfg.selection.dynamic else [rospy.resolve_name(t) for t in cfg.topics],
+                   'close_retry': CLOSE_RETRY,
                    'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,
                    'max_buffer_mb': cfg.max_buffer_mb, 'max_disk_mb': cfg.max_disk_mb,
                    'min_free_mb': cfg.min_free_mb}
@@ -112,9 +115,12 @@ class CollectNode(object):
         types = dict((spec.topic, spec.config.topic_type) for spec in self.collector.specs)
         driving_class = config.installed_class(types[self.collector.driving_topic]) \
             if self.collector.driving_topic in types else None
-        topics = sorted(self.collector.side_topics)
+        topics = sorted(self.collector.side_topics or [rospy.resolve_name(t) for t in cfg.topics])
         self.collector.on_event(self._on_event)
-        self.intake = Intake(self.collector, self.collector.driving_topic, driving_class, topics)
+        self.extras = NodeExtras(params, self.collector.writer, self.directory, self.collector.driving_topic)
+        self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic, driving_class,
+                             sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}))
+        self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
@@ -130,8 +136,9 @@ class CollectNode(object):
 
     def _status(self):
         stats = self.collector.stats()
-        level, message, disk = writer_status(DiagnosticStatus.OK, 'collecting', self.collector.writer,
+        level, message, disk = writer_status(DiagnosticStatus.OK, self.note or 'collecting', self.collector.writer,
                                              self.leftovers, self.directory_warning)
+        level, message, extra = self.extras.status(level, message)
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('files written', stats['files_written']),
@@ -148,7 +155,7 @@ class CollectNode(object):
             ('writer queue', stats['queue_depth']),
             ('intake queue', self.intake.queue.qsize()),
             ('time resets', stats['time_resets']),
-        ] + disk
+        ] + extra + disk
         return level, message, values
 
     def shutdown(self):
@@ -156,15 +163,19 @@ class CollectNode(object):
         self.intake.stop()
         if not self.collector.close(CLOSE_TIMEOUT):
             rospy.logerr('files still unwritten after %g s', CLOSE_TIMEOUT)
+        self.extras.close()
         self.diagnostics.stop()
 
 
-def main(argv=None):
-    """Run the node; return the exit status (1 with one line on stderr for bad configuration)."""
+def main(argv=None, note=''):
+    """Run the node; return the exit status (1 with one line on stderr for bad configuration). ``note``: why
+    collect mode runs, logged and shown as the status message."""
     argv = sys.argv if argv is None else argv
     try:
         init_node(NODE_NAME, argv)
-        node = CollectNode()
+        if note:
+            rospy.logwarn(note)
+        node = CollectNode(note)
     except ConfigError as error:
         return fail(node_name(NODE_NAME, argv), error)
     rospy.spin()

@@ -4,7 +4,7 @@ The same YAML file drives ``smart_logger.py`` and ``collect_logger.py`` (``~conf
 private namespace with ``rosparam load``), ``cclog replay --config`` and ``cclog collect --config``, so a
 configuration tuned offline on bags behaves the same on the robot::
 
-    topics: [imu/data, scan]          # other topics to keep in the windows
+    topics: [imu/data, scan]          # other topics to keep in the windows; also '*', 're:/camera/.*', '!/tf'
     driving_topic: odom               # counts pre and post (default: the first trigger's first topic)
     format: json-xz
     windows: {pre: 2s, post: 2s, max: 100000}
@@ -36,6 +36,7 @@ from .spans import Span
 from .triggers import get as trigger_kind
 from .triggers.base import Context, check_name
 from .triggers.classifier import default_topics
+from .topic_select import TopicSelection
 
 KEYS = ('topics', 'driving_topic', 'format', 'windows', 'limits', 'collect', 'triggers')
 WINDOW_KEYS = ('pre', 'post', 'max')
@@ -168,7 +169,9 @@ class Config(object):
     def _read(self, data):
         from .collector import Rotation, check_label, parse_stride
         _known(data, KEYS, '')
-        self.topics = topic_list(data.get('topics', ()), 'topics')
+        entries = topic_list(data.get('topics', ()), 'topics')
+        self.selection = TopicSelection.parse(entries, 'topics')  # names and patterns (*, re:..., !...)
+        self.topics = [entry for entry in entries if not TopicSelection.is_pattern(entry)]
         driving = data.get('driving_topic')
         if driving is not None and (not isinstance(driving, str) or not driving.strip()):
             raise ValueError('driving_topic: %r is not a topic name' % (driving,))
@@ -257,7 +260,8 @@ class Config(object):
                 raise ValueError('%s: driving_topic: needed when no trigger watches a topic' % self.source)
             driving = first[0].topic if hasattr(first[0], 'topic') else sorted(first[0].topics)[0]
         return {'fmt': self.format, 'pre': self.pre, 'post': self.post, 'max_window': self.max_window,
-                'driving_topic': resolve(driving), 'side_topics': [resolve(t) for t in self.topics],
+                'driving_topic': resolve(driving),
+                'side_topics': None if self.selection.dynamic else [resolve(t) for t in self.topics],
                 'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb,
                 'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers}
 

@@ -63,6 +63,7 @@ class DiskGuard(object):
 
     def __init__(self, directory, max_disk_mb=0, min_free_mb=0, statvfs=os.statvfs):
         self.directory = str(directory)
+        self.directories = [self.directory]  # the quota counts the cc_log files of each (add the context track's)
         self.max_bytes = _limit(max_disk_mb, 'max_disk_mb')
         self.min_free_bytes = _limit(min_free_mb, 'min_free_mb')
         self._statvfs = statvfs
@@ -88,7 +89,7 @@ class DiskGuard(object):
         """``(path, bytes)`` of the cc_log window files in the directory (final names only), oldest written
         first (``st_mtime_ns``, ties by name)."""
         files = []
-        for path in log_format.window_files(self.directory):
+        for path in (path for directory in self.directories for path in log_format.window_files(directory)):
             try:
                 status = os.stat(path)
             except OSError:

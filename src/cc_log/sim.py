@@ -666,6 +666,7 @@ class Simulator(object):
         # the true base
         sx, sy = self.floor.nodes[self.floor.start]
         self.x, self.y, self.yaw = sx, sy, 0.0
+        self.distance = 0.0                   # metres the true base has driven (its path length)
         self.v = self.w = 0.0                 # body twist
         self._cmd_v = self._cmd_w = 0.0        # what the controller commands (acceleration-limited)
         self._node = self.floor.start
@@ -774,6 +775,7 @@ class Simulator(object):
         self.x += v_b * dt * math.cos(heading)
         self.y += v_b * dt * math.sin(heading)
         self.yaw += w_b * dt
+        self.distance += abs(v_b) * dt
         self.v, self.w = v_b, w_b
 
         # wheel odometry

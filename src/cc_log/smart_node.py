@@ -83,6 +83,7 @@ from . import config
 from .model import AnomalyModel
 from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
                           recover_leftovers, resolve_directory, writer_status)
+from .node_extras import NodeExtras
 from .triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
@@ -338,8 +339,12 @@ class SmartNode(object):
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
-        self.intake = Intake(self.logger, self.logger.driving_topic, driving_class, sorted(self.logger.side_topics),
+        self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
+        self.intake = Intake(self.extras.sink(self.logger), self.logger.driving_topic, driving_class,
+                             sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
+                                    {self.logger.driving_topic}),
                              max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
+        self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
@@ -403,6 +408,7 @@ class SmartNode(object):
                 stats['messages_refused'], stats['last_refused'])
         level, message, disk = writer_status(level, message, self.logger.writer, self.leftovers,
                                              self.directory_warning)
+        level, message, extra = self.extras.status(level, message)
         overflowed = self.intake.overflowed
         if overflowed:
             level = max(level, DiagnosticStatus.WARN)
@@ -436,7 +442,7 @@ class SmartNode(object):
             ('time resets', stats['time_resets']),
             ('messages refused', stats['messages_refused']),
             ('messages refused (unsafe definition)', self.intake.decoder.refused),
-        ] + disk
+        ] + extra + disk
         return level, message, values
 
     def shutdown(self):
@@ -445,6 +451,7 @@ class SmartNode(object):
         self.intake.stop()
         if not self.logger.close(CLOSE_TIMEOUT):
             rospy.logerr('windows still unwritten after %g s', CLOSE_TIMEOUT)
+        self.extras.close()
         self.diagnostics.stop()
 
 

@@ -30,12 +30,13 @@ from . import disk_guard
 from . import log_format
 
 __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'WRITTEN', 'FAILED', 'DELETED', 'DEFAULT_RETRY_PERIOD',
-           'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW']
+           'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
 
 WRITTEN = 'written'
 FAILED = 'failed'
 DELETED = 'deleted'
 WINDOW = 'window'  # Job.what of a window file
+CONTEXT = 'context'  # Job.what of a closed context-track file (counted in the quota like a window)
 
 DEFAULT_RETRY_PERIOD = 2.0         # seconds between attempts to write held jobs
 DEFAULT_MAX_HELD_MESSAGES = 50000  # messages of unwritten windows kept in memory; beyond, the oldest go
@@ -305,7 +306,7 @@ class WindowWriter(object):
             self._counts['stored_bytes'] += nbytes
             self._written[job.what] += 1
         self._emit(WriterEvent(WRITTEN, job, path, nbytes, '', False))
-        if job.window is not None:
+        if job.window is not None or job.what == CONTEXT:
             self._quota(keep=path)
 
     def _make_room(self, job):

@@ -1,0 +1,303 @@
+"""The context track: an always-on, low-rate recording of chosen topics in rotated LZ4 rosbags.
+
+Windows keep the data around anomalies; the context track keeps, between them, enough to say where the robot
+went and what it reported (BWI's choice by default: odometry thinned to 1 Hz, ``amcl_pose``, ``/diagnostics``),
+as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, rates)``:
+
+- ``rates``: ``{topic: Hz or None}`` (``parse_topics('odom:1 amcl_pose /diagnostics')``); a topic with a
+  rate keeps at most one message per ``1/Hz`` slot of its stamps (``floor(stamp * Hz)``), so 100 Hz
+  odometry at ``:1`` is exactly one message per second; ``None`` keeps every message.
+- files go to ``<directory>/context/cc_log_context_<UTC of the first stamp>.bag`` (LZ4 chunks); the open file
+  is ``<name>.tmp-<pid>`` and is closed, fsynced and renamed when it spans ``rotate`` seconds (stamps), when
+  a topic's stamps jump back (a replayed bag, a simulation reset; topics on different clocks are not a jump)
+  and at ``close``. A closed file is handed to
+  ``submit(job)`` as a ``window_writer.Job(write=..., what=CONTEXT)`` (the node's context writer: quota,
+  retries, WRITTEN events for the upload hook); without ``submit`` it is finished in the caller's thread.
+- ``add(record)`` takes a ``window_buffer.Record``: with ``raw`` and ``connection`` set (serialized bytes and
+  the publisher's connection header) the bytes are written as they came (``rosbag.Bag.write(..., raw=True,
+  connection_header=...)``), else the decoded message. ``on_message(topic, msg, stamp, size)`` is the same
+  for the intake's sink interface, so ``Tee`` can feed a logger and the track together.
+- a write that fails (disk full...) is counted and said in ``last_error``; the file is closed and a new one
+  opened for the next message: what was written before is kept.
+
+Crash leftovers (``cc_log_context_*.bag.tmp-*``) are reindexed and given their final name by ``recover``.
+Pure apart from rosbag (imported when a file opens).
+"""
+import datetime
+import math
+import os
+import re
+import threading
+
+from . import features as features_mod
+from . import log_format, safe_files, window_writer
+from .window_buffer import Record
+
+__all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PREFIX', 'DEFAULT_TOPICS',
+           'DEFAULT_ROTATE', 'BWI_ALIASES']
+
+SUBDIRECTORY = 'context'
+PREFIX = log_format.PREFIX + 'context_'
+EXTENSION = '.bag'
+DEFAULT_TOPICS = 'odom:1 amcl_pose /diagnostics'
+DEFAULT_ROTATE = 600.0   # seconds of stamps per file
+JUMP_BACK = 1.0          # stamps going back more than this start a new file
+# bwi_logging/record.launch names its odometry thinned to 1 Hz (topic_tools drop) odom_1hz; here it means the same.
+BWI_ALIASES = {'odom_1hz': ('odom', 1.0)}
+_ENTRY = re.compile(r'^(?P<topic>[^\s:]+)(?::(?P<rate>[^\s:]+))?$')
+
+
+def parse_topics(value, name='context_topics', aliases=None):
+    """``{topic: Hz or None}`` from ``'odom:1 amcl_pose /diagnostics'`` (or a list of such entries, or a dict);
+    ``aliases`` maps a name to ``(topic, Hz)`` (``BWI_ALIASES``). ValueError('<name>: ...') for a bad entry."""
+    aliases = aliases or {}
+    if isinstance(value, dict):
+        entries = [(topic, rate) for topic, rate in value.items()]
+    else:
+        from .config import topic_list
+        entries = []
+        for item in topic_list(value, name):
+            match = _ENTRY.match(item)
+            if match is None:
+                raise ValueError('%s: %r is not a topic or topic:Hz' % (name, item))
+            entries.append((match.group('topic'), match.group('rate')))
+    rates = {}
+    for topic, rate in entries:
+        if rate is None and topic in aliases:
+            topic, rate = aliases[topic]
+        rates[topic] = _rate(rate, '%s: %s' % (name, topic))
+    return rates
+
+
+def _rate(value, name):
+    if value is None or value == '':
+        return None
+    try:
+        rate = float(str(value).lower().replace('hz', ''))
+    except ValueError:
+        rate = float('nan')
+    if not rate > 0 or not math.isfinite(rate):
+        raise ValueError('%s: rate %r must be a positive number of Hz' % (name, value))
+    return rate
+
+
+def file_name(stamp):
+    """``cc_log_context_<UTC of stamp>`` (no extension)."""
+    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(stamp))
+    return PREFIX + moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
+
+
+class _OpenBag(object):
+    """One context file being written: a rosbag on ``<final>.tmp-<pid>``; ``finish`` closes it (rosbag writes
+    its index), fsyncs it and gives it the first free final name. Idempotent, so a retried finish is safe."""
+
+    def __init__(self, directory, first_stamp):
+        import rosbag
+        safe_files.make_dirs(directory)
+        self.directory = directory
+        self.base = file_name(first_stamp)
+        self.first = first_stamp
+        self.tmp = os.path.join(directory, '%s%s%s%d' % (self.base, EXTENSION, safe_files.TMP_MARK, os.getpid()))
+        fd = safe_files.create(self.tmp)
+        self._sync_fd = os.dup(fd)
+        self.bag = rosbag.Bag(os.fdopen(fd, 'w+b'), 'w', compression=rosbag.Compression.LZ4)
+        self.path = None
+        self.messages = 0
+
+    def write(self, record, time):
+        if record.raw is not None and record.connection:
+            header = dict(record.connection)
+            kind = header.get('type') or record.msg._type
+            md5 = header.get('md5sum') or record.msg._md5sum
+            header.setdefault('topic', record.topic)
+            header.setdefault('type', kind)
+            header.setdefault('md5sum', md5)
+            header.setdefault('message_definition', getattr(type(record.msg), '_full_text', ''))
+            self.bag.write(record.topic, (kind, bytes(record.raw), md5, type(record.msg)), time, raw=True,
+                           connection_header=header)
+        else:
+            self.bag.write(record.topic, record.msg, time)
+        self.messages += 1
+
+    def finish(self):
+        """Close, fsync and name the file; its final path."""
+        if self.path is not None:
+            return self.path
+        if self.bag is not None:
+            bag, self.bag = self.bag, None
+            bag.close()
+        if self._sync_fd is not None:
+            os.fsync(self._sync_fd)
+            os.close(self._sync_fd)
+            self._sync_fd = None
+        self.path = safe_files.publish(self.tmp, log_format.final_names(self.directory, self.base, EXTENSION))
+        safe_files.fsync_directory(self.directory)
+        return self.path
+
+
+class ContextTrack(object):
+    """The context track of one logging directory (see the module docstring). Thread-safe."""
+
+    def __init__(self, directory, rates, rotate=DEFAULT_ROTATE, submit=None):
+        self.directory = os.path.join(str(directory), SUBDIRECTORY)
+        self.rates = dict(rates)
+        try:
+            self.rotate = float(rotate)
+        except (TypeError, ValueError):
+            self.rotate = float('nan')
+        if not self.rotate > 0 or not math.isfinite(self.rotate):
+            raise ValueError('context_rotate: %r must be a positive number of seconds' % (rotate,))
+        self._submit = submit
+        self._lock = threading.Lock()
+        self._slots = {}
+        self._bag = None
+        self._last = {}  # topic -> its last stamp written (topics may run on different clocks)
+        self.counts = {'messages_kept': 0, 'messages_thinned': 0, 'files_closed': 0, 'write_errors': 0}
+        self.last_error = ''
+        self.last_file = ''
+
+    @property
+    def topics(self):
+        """The topics the track records."""
+        return sorted(self.rates)
+
+    def wants(self, record):
+        """Whether ``record`` is kept (its topic is tracked and its rate slot is new); notes the slot."""
+        if record.topic not in self.rates:
+            return False
+        rate = self.rates[record.topic]
+        if rate is None:
+            return True
+        slot = math.floor(record.stamp * rate)
+        if self._slots.get(record.topic) == slot:
+            self.counts['messages_thinned'] += 1
+            return False
+        self._slots[record.topic] = slot
+        return True
+
+    def on_message(self, topic, msg, stamp=None, size=None, raw=None, connection=None):
+        """The intake's sink interface: ``add`` a Record of the message (stamp: its header stamp, else ``stamp``)."""
+        if topic not in self.rates:
+            return False
+        stamp = features_mod.stamp_of(msg, 0.0 if stamp is None else stamp)
+        return self.add(Record(stamp, topic, msg, 0, raw, connection))
+
+    def add(self, record):
+        """Write ``record`` when the track wants it; True when written."""
+        with self._lock:
+            if not self.wants(record):
+                return False
+            if not math.isfinite(record.stamp) or record.stamp < 0:
+                self._failed('%s: stamp %r cannot be a bag time' % (record.topic, record.stamp))
+                return False
+            import genpy
+            time = genpy.Time.from_sec(record.stamp)
+            bag = self._bag
+            if bag is not None and (record.stamp - bag.first >= self.rotate or
+                                    record.stamp < self._last.get(record.topic, record.stamp) - JUMP_BACK):
+                self._close_locked()
+            try:
+                if self._bag is None:
+                    self._bag = _OpenBag(self.directory, record.stamp)
+                self._bag.write(record, time)
+            except Exception as error:  # OSError (disk full), rosbag's, a bad message: the track goes on
+                self._failed('%s: %s' % (record.topic, error or type(error).__name__))
+                self._close_locked()
+                return False
+            self._last[record.topic] = record.stamp
+            self.counts['messages_kept'] += 1
+            return True
+
+    def close(self):
+        """Close the open file (it is handed to ``submit``, or finished here)."""
+        with self._lock:
+            self._close_locked()
+
+    def stats(self):
+        """Counters: messages_kept, messages_thinned, files_closed, write_errors; last_error, last_file."""
+        with self._lock:
+            result = dict(self.counts)
+            result.update(last_error=self.last_error, last_file=self.last_file)
+        return result
+
+    def _failed(self, error):
+        self.counts['write_errors'] += 1
+        self.last_error = error
+
+    def _close_locked(self):
+        bag, self._bag = self._bag, None
+        if bag is None:
+            return
+        if not bag.messages:  # nothing written (the first write failed): no file worth keeping
+            try:
+                bag.finish()
+            except Exception as error:
+                self._failed('closing %s: %s' % (bag.tmp, error))
+            return
+        self.counts['files_closed'] += 1
+
+        def finish():
+            path = bag.finish()
+            self.last_file = path
+            return path
+        if self._submit is not None:
+            self._submit(window_writer.Job(write=finish, what=window_writer.CONTEXT, tag=bag.base))
+            return
+        try:
+            finish()
+        except Exception as error:
+            self._failed('closing %s: %s' % (bag.tmp, error))
+
+
+class Tee(object):
+    """A sink feeding every message to each of ``sinks`` (``on_message(topic, msg, stamp, size)``) in order."""
+
+    def __init__(self, *sinks):
+        self.sinks = [sink for sink in sinks if sink is not None]
+
+    def on_message(self, topic, msg, stamp=None, size=None):
+        """Feed the message to every sink; the first exception is raised after all were fed."""
+        failure = None
+        for sink in self.sinks:
+            try:
+                sink.on_message(topic, msg, stamp, size)
+            except Exception as error:
+                failure = failure or error
+        if failure is not None:
+            raise failure
+
+
+def recover(directory):
+    """Give crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>`` of a dead
+    process) their final names after ``rosbag reindex``; returns ``(recovered paths, [(path, why)] kept)``."""
+    import rosbag
+    folder = os.path.join(str(directory), SUBDIRECTORY)
+    recovered, kept = [], []
+    for path in log_format.temporary_files(folder):
+        name = os.path.basename(path)
+        base, _, pid = name.partition(EXTENSION + safe_files.TMP_MARK)
+        if not name.startswith(PREFIX) or not pid.isdigit() or _alive(int(pid)):
+            continue
+        try:
+            bag = rosbag.Bag(path, 'a', allow_unindexed=True)
+            try:
+                for _ in bag.reindex():
+                    pass
+            finally:
+                bag.close()
+            recovered.append(safe_files.publish(path, log_format.final_names(folder, base, EXTENSION)))
+        except Exception as error:  # an unreadable leftover is kept for a person to look at
+            kept.append((path, str(error) or type(error).__name__))
+    return recovered, kept
+
+
+def _alive(pid):
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True

@@ -1,0 +1,52 @@
+#!/usr/bin/python3
+"""Test node of record_cli.test: `rosrun cc_log record` with rosbag record's flags (see the .test file).
+
+Waits (for conditions) until two split files are written, then checks they are LZ4 bags in the directory of
+-o holding both topics over about 5 s each, that the context track closed a file, and that the node
+(named as launched) publishes its status with the free-space floor of -L.
+"""
+import os
+import sys
+import unittest
+
+import rosbag
+import rospy
+import rostest
+from diagnostic_msgs.msg import DiagnosticArray
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rostest_fixtures import wait_for  # noqa: E402
+
+from cc_log import context_track, log_format  # noqa: E402
+
+PKG = 'cc_log'
+
+
+class RecordCliTest(unittest.TestCase):
+
+    def test_record(self):
+        rospy.init_node('record_cli_check')
+        directory = rospy.get_param('~directory')
+        statuses = []
+        rospy.Subscriber('/diagnostics', DiagnosticArray, lambda msg: statuses.extend(msg.status))
+        files = wait_for(lambda: len(log_format.window_files(directory)) >= 2 and log_format.window_files(directory),
+                         60, 'two split files')
+        for path in files[:2]:
+            self.assertTrue(path.endswith('.bag'), path)
+            with rosbag.Bag(path) as bag:
+                self.assertEqual(bag.get_compression_info().compression, 'lz4')
+                topics = bag.get_type_and_topic_info().topics
+                self.assertIn('/odom', topics)
+                self.assertIn('/imu/data', topics)
+                self.assertAlmostEqual(bag.get_end_time() - bag.get_start_time(), 5.0, delta=0.5)
+        wait_for(lambda: log_format.window_files(os.path.join(directory, context_track.SUBDIRECTORY)), 30,
+                 'a context file')
+        mine = wait_for(lambda: [s for s in statuses if s.name == 'cc_log: record'], 10, 'the node\'s status')
+        values = dict((v.key, v.value) for v in mine[-1].values)
+        self.assertIn('context topics', values)
+        self.assertEqual(values['min free bytes'], str(1 << 20))  # -L 1M
+        self.assertIn('no model yet', mine[-1].message)
+
+
+if __name__ == '__main__':
+    rostest.rosrun(PKG, 'record_cli', RecordCliTest, sys.argv)

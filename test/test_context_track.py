@@ -1,0 +1,154 @@
+"""The context track: topic/rate parsing, thinning, rotation, raw writes, quota and crash leftovers (real rosbag)."""
+import os
+
+import pytest
+import rosbag
+from nav_msgs.msg import Odometry
+from std_msgs.msg import String
+
+from cc_log import context_track, window_writer
+from cc_log.context_track import ContextTrack, Tee, parse_topics
+from cc_log.window_buffer import Record
+
+
+def odom(stamp):
+    msg = Odometry()
+    msg.header.stamp.secs = int(stamp)
+    msg.header.stamp.nsecs = int(round((stamp - int(stamp)) * 1e9))
+    msg.pose.pose.position.x = stamp
+    return msg
+
+
+def files(directory):
+    folder = os.path.join(str(directory), context_track.SUBDIRECTORY)
+    return sorted(os.path.join(folder, name) for name in os.listdir(folder))
+
+
+def read(path):
+    with rosbag.Bag(path) as bag:
+        return [(topic, msg, t.to_sec()) for topic, msg, t in bag.read_messages()]
+
+
+def test_parse_topics_rates_aliases_and_errors():
+    assert parse_topics('odom:1 amcl_pose /diagnostics') == {'odom': 1.0, 'amcl_pose': None, '/diagnostics': None}
+    assert parse_topics(['scan:0.5hz'], 'x') == {'scan': 0.5}
+    assert parse_topics({'odom': 2}) == {'odom': 2.0}
+    assert parse_topics('odom_1hz amcl_pose', aliases=context_track.BWI_ALIASES) == {'odom': 1.0, 'amcl_pose': None}
+    for bad in ('odom:0', 'odom:fast', 'a:b:c', 5):
+        with pytest.raises(ValueError, match='^context_topics'):
+            parse_topics(bad)
+
+
+def test_thins_100hz_odometry_to_exactly_one_message_per_second(tmp_path):
+    track = ContextTrack(tmp_path, parse_topics('odom:1 chatter'))
+    for i in range(3000):  # 30 s at 100 Hz
+        track.on_message('odom', odom(1000.0 + i * 0.01), None)
+    track.on_message('chatter', String(data='x'), 1029.5)
+    track.on_message('other', String(data='not tracked'), 1010.0)
+    track.close()
+    [path] = files(tmp_path)
+    assert os.path.basename(path).startswith('cc_log_context_') and path.endswith('.bag')
+    messages = read(path)
+    stamps = [t for topic, _, t in messages if topic == 'odom']
+    assert len(stamps) == 30
+    assert all(abs(b - a - 1.0) < 1e-6 for a, b in zip(stamps, stamps[1:]))
+    assert [topic for topic, _, _ in messages].count('chatter') == 1
+    assert 'other' not in [topic for topic, _, _ in messages]
+    assert track.stats()['messages_thinned'] == 3000 - 30
+    with rosbag.Bag(path) as bag:
+        assert bag.get_compression_info().compression == 'lz4'
+
+
+def test_rotates_by_stamps_and_on_a_jump_back(tmp_path):
+    track = ContextTrack(tmp_path, {'odom': None}, rotate=10)
+    for second in list(range(25)) + [3, 4]:  # 0-9, 10-19, 20-24, then time goes back
+        track.on_message('odom', odom(100.0 + second), None)
+    track.close()
+    paths = files(tmp_path)
+    # named by their first stamps: 100 (10 messages), 103 (2, after the jump back), 110 (10), 120 (5)
+    assert [len(read(path)) for path in paths] == [10, 2, 10, 5]
+    assert track.stats()['files_closed'] == 4
+
+
+def test_raw_records_keep_bytes_and_connection_header(tmp_path):
+    import io
+    msg = odom(5.0)
+    buffer = io.BytesIO()
+    msg.serialize(buffer)
+    connection = {'topic': '/odom', 'type': Odometry._type, 'md5sum': Odometry._md5sum,
+                  'message_definition': Odometry._full_text, 'callerid': '/sim', 'latching': '1'}
+    track = ContextTrack(tmp_path, {'/odom': None})
+    assert track.add(Record(5.0, '/odom', msg, 0, buffer.getvalue(), connection))
+    track.close()
+    [path] = files(tmp_path)
+    with rosbag.Bag(path) as bag:
+        [(topic, got, _)] = list(bag.read_messages())
+        [info] = bag._connections.values()
+    assert got.pose.pose.position.x == 5.0
+    assert info.header['callerid'] == b'/sim' and info.header['latching'] == b'1'
+
+
+def test_closed_files_go_through_the_writer_and_share_the_quota(tmp_path):
+    old = tmp_path / 'cc_log_20000101T000000.000Z_old.json.xz'
+    old.write_bytes(b'x' * 3000000)
+    os.utime(old, (1, 1))
+    writer = window_writer.WindowWriter(str(tmp_path / context_track.SUBDIRECTORY), max_disk_mb=1, background=False)
+    writer.guard.directories.append(str(tmp_path))
+    events = []
+    writer.on_event(events.append)
+    track = ContextTrack(tmp_path, {'odom': None}, submit=writer.submit)
+    for i in range(20):
+        track.on_message('odom', odom(10.0 + i), None)
+    track.close()
+    writer.close()
+    kinds = [(event.kind, event.job.what if event.job else None) for event in events]
+    assert (window_writer.WRITTEN, window_writer.CONTEXT) in kinds
+    assert (window_writer.DELETED, None) in kinds and not old.exists()  # the window beyond the quota went
+    [written] = [event.path for event in events if event.kind == window_writer.WRITTEN]
+    assert os.path.exists(written) and len(read(written)) == 20
+
+
+def test_a_failing_write_is_counted_and_the_track_goes_on(tmp_path):
+    track = ContextTrack(tmp_path, {'odom': None})
+    track.on_message('odom', odom(1.0), None)
+    track.add(Record(float('inf'), 'odom', odom(2.0)))  # not a bag time
+    track.on_message('odom', odom(3.0), None)
+    track.close()
+    stats = track.stats()
+    assert stats['write_errors'] == 1 and 'odom' in stats['last_error'] and stats['messages_kept'] == 2
+
+
+def test_tee_feeds_every_sink_and_raises_the_first_failure(tmp_path):
+    seen = []
+
+    class Sink(object):
+        def on_message(self, topic, msg, stamp=None, size=None):
+            seen.append(topic)
+            raise RuntimeError('bad')
+    tee = Tee(Sink(), None, Sink())
+    with pytest.raises(RuntimeError):
+        tee.on_message('a', String(), 1.0)
+    assert seen == ['a', 'a']
+
+
+def test_recover_reindexes_a_crashed_file(tmp_path):
+    track = ContextTrack(tmp_path, {'odom': None})
+    for i in range(5):
+        track.on_message('odom', odom(1.0 + i), None)
+    bag = track._bag
+    bag.bag._stop_writing_chunk()  # the data reached the file; the index never did (a crash)
+    bag.bag._file.flush()
+    dead = bag.tmp.replace('.tmp-%d' % os.getpid(), '.tmp-999999999')
+    os.rename(bag.tmp, dead)
+    recovered, kept = context_track.recover(tmp_path)
+    assert kept == [] and len(recovered) == 1
+    assert len(read(recovered[0])) == 5
+
+
+def test_topics_on_different_clocks_are_not_a_jump_back(tmp_path):
+    track = ContextTrack(tmp_path, {'odom': None, 'chatter': None}, rotate=100)
+    for second in range(20):  # odometry stamps lag the receipt times of a header-less topic by 5 s
+        track.on_message('odom', odom(1000.0 + second), None)
+        track.on_message('chatter', String(data='x'), 1005.0 + second)
+    track.close()
+    assert len(files(tmp_path)) == 1 and len(read(files(tmp_path)[0])) == 40

@@ -1,0 +1,53 @@
+"""rosrun cc_log record: rosbag record's flags mapped onto the nodes' parameters."""
+import os
+
+import pytest
+
+from cc_log import record_main
+from cc_log.record_main import parse, parse_duration, parse_size
+
+
+def test_sizes_and_durations_as_rosbag_writes_them():
+    assert parse_size('1G') == 1 << 30 and parse_size('500M') == 500 << 20 and parse_size('100k') == 100 << 10
+    assert parse_size('2048') == 2048
+    assert parse_duration('30') == 30 and parse_duration('5m') == 300 and parse_duration('2h') == 7200
+    for bad in ('lots', '-1G'):
+        with pytest.raises(ValueError, match='^min-space: '):
+            parse_size(bad)
+    with pytest.raises(ValueError, match='^duration: '):
+        parse_duration('0')
+
+
+def test_rosbag_record_flags_map_onto_the_node_parameters(tmp_path):
+    model = tmp_path / 'model.json'
+    model.write_text('{}')
+    module, params, note = parse(['-a', '-x', '/camera/.*', '-o', str(tmp_path / 'run'), '--lz4', '--split',
+                                  '--duration', '5m', '-L', '2G', '-b', '0', '--model', str(model)])
+    assert module == 'smart_node' and note == ''
+    assert params['topics'] == ['*', '!re:/camera/.*']
+    assert params['directory'] == str(tmp_path) and params['format'] == 'bag-lz4'
+    assert params['rotate'] == '300s' and params['context_rotate'] == 300.0
+    assert params['min_free_mb'] == pytest.approx(2 * 2 ** 30 / 1e6)
+    assert params['intake_max_mb'] == record_main.UNLIMITED_MB and params['model'] == str(model)
+
+
+def test_without_a_model_it_collects_and_says_why(tmp_path):
+    module, params, note = parse(['-e', '/scan.*', '/imu/.*', '-O', 'out.bag', '--split', '--size', '20',
+                                  '--model', str(tmp_path / 'none.json'), '--context', 'odom:1 amcl_pose'])
+    assert module == 'collect_node' and 'no model yet' in note
+    assert params['topics'] == ['re:/scan.*', 're:/imu/.*'] and params['rotate'] == '20MB'
+    assert params['directory'] == os.path.abspath('.') and params['context_topics'] == 'odom:1 amcl_pose'
+    assert params['min_free_mb'] == pytest.approx(2 ** 30 / 1e6)  # rosbag's default -L 1G
+
+
+@pytest.mark.parametrize('argv, message', [
+    ([], 'no topics given'),
+    (['/odom', '--split'], '--split needs --size or --duration'),
+    (['/odom', '--publish'], 'unrecognized arguments: --publish'),
+    (['/odom', '-L', 'much'], 'min-space'),
+    (['/odom', '--mode', 'fast'], 'invalid choice'),
+])
+def test_bad_flags_are_one_line(argv, message, capsys):
+    assert record_main.main(['record'] + argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('record: error: ') and message in err and len(err.strip().splitlines()) == 1
