@@ -199,9 +199,16 @@ _ROUNDING = decimal.Context(prec=60, rounding=decimal.ROUND_HALF_EVEN)
 
 
 def check_precision(precision, name='precision'):
-    """``{field pattern: step}`` with every step a finite number > 0, else ValueError('<name>: ...')."""
+    """``{field pattern: step}`` with every step a finite number > 0, else ValueError('<name>: ...').
+    ``precision`` is such a mapping, None (no rounding) or text ``'pattern=step, pattern=step'`` (a node
+    parameter, a command-line option)."""
     if precision is None:
         return {}
+    if isinstance(precision, str):
+        items = [item.strip() for item in precision.split(',') if item.strip()]
+        if not all(item.count('=') == 1 for item in items):
+            raise ValueError('%s: %r is not "pattern=step, pattern=step, ..."' % (name, precision))
+        precision = dict((pattern.strip(), step.strip()) for pattern, step in (item.split('=') for item in items))
     if not isinstance(precision, dict):
         raise ValueError('%s: a mapping of field patterns to steps (e.g. {"pose.pose.position.*": 1e-4}), '
                          'not %r' % (name, precision))
