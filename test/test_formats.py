@@ -1,5 +1,6 @@
 """Window files: json-xz and bag-lz4 round trips on real robot messages, names, atomic writing, errors,
 and the json-xz size target on the Husky odometry."""
+import fnmatch
 import io
 import json
 import lzma
@@ -267,6 +268,41 @@ def test_json_xz_delta_columns_and_jq_sums(real_bag, tmp_path):
     assert len(sums) == 300
     for line, record in zip(sums, records):
         assert abs(float(line) - record.msg.pose.pose.position.x) < 1e-12
+
+
+HUSKY_PRECISION = {'pose.pose.position.*': 1e-4, 'pose.pose.orientation.*': 1e-5, 'twist.twist.linear.*': 1e-4,
+                   'twist.twist.angular.*': 1e-5}
+
+
+def test_json_xz_precision_on_husky_odometry(real_bag, tmp_path):
+    """Opt-in lossy: 1e-4 m / 1e-5 rad (and m/s, rad/s) on the Husky odometry: at most 2% of row JSON (whole
+    topic and 300-message windows), the steps in the metadata, every field within half its step."""
+    records = read_records(real_bag(HUSKY), [HUSKY_ODOM])
+    raw = sum(msg_codec.row_json_bytes(record.msg) for record in records)
+    data = json_xz.encode(records, {'precision': HUSKY_PRECISION})
+    assert 100.0 * len(data) / raw <= 2.0  # 1.27% measured
+    windows = [records[i:i + 300] for i in range(0, 3900, 300)]
+    window_bytes = sum(len(json_xz.encode(chunk, {'precision': HUSKY_PRECISION})) for chunk in windows)
+    window_raw = sum(msg_codec.row_json_bytes(record.msg) for chunk in windows for record in chunk)
+    assert 100.0 * window_bytes / window_raw <= 2.0  # 1.71% measured
+    path = str(tmp_path / 'w.json.xz')
+    with open(path, 'wb') as stream:
+        stream.write(data)
+    metadata, back = json_xz.read(path)
+    assert metadata['precision'] == HUSKY_PRECISION
+    worst = {}
+    for a, b in zip(records, back):
+        flat_a = json_xz._flatten(msg_codec.to_dict(a.msg), '', {})
+        flat_b = json_xz._flatten(msg_codec.to_dict(b.msg), '', {})
+        for key, value in flat_a.items():
+            if isinstance(value, float):
+                worst[key] = max(worst.get(key, 0.0), abs(flat_b[key] - value))
+            else:
+                assert flat_b[key] == value, key  # integers, strings, arrays: untouched
+    for pattern, step in HUSKY_PRECISION.items():
+        fields = [key for key in worst if fnmatch.fnmatchcase(key, pattern)]
+        assert fields and all(worst[key] <= step / 2 * (1 + 1e-9) for key in fields), (pattern, worst)
+    assert worst['pose.pose.position.x'] > 1e-5  # the values did change: it is lossy
 
 
 @pytest.mark.parametrize('values', [
