@@ -248,6 +248,23 @@ def _rounder(precision):
     return rounded
 
 
+def max_errors(records, back):
+    """``{topic: {field: largest absolute difference}}`` of every float field (array elements included)
+    between ``records`` and ``back`` (the same messages read back, e.g. after rounding); non-finite values
+    must stay the same (else the error is ``inf``)."""
+    errors = {}
+    for a, b in zip(records, back):
+        topic = errors.setdefault(a.topic, {})
+        flat_b = _flatten(msg_codec.to_dict(b.msg), '', {})
+        for key, value in _flatten(msg_codec.to_dict(a.msg), '', {}).items():
+            pairs = zip(value, flat_b[key]) if isinstance(value, list) else [(value, flat_b[key])]
+            for old, new in pairs:
+                if isinstance(old, float) or isinstance(new, float):
+                    error = abs(new - old) if math.isfinite(old) else (0.0 if repr(old) == repr(new) else math.inf)
+                    topic[key] = max(topic.get(key, 0.0), error)
+    return errors
+
+
 def document(records, metadata):
     """The JSON document (a dict) of a window's records and its metadata; ``metadata['precision']`` (if any)
     rounds fields (module docstring). Delta columns of floats hold Decimals: write it with ``dumps``."""
