@@ -148,26 +148,28 @@ def decimal_text(value):
     return plain if len(plain) <= len(scientific) else scientific
 
 
-def _differences(values):
-    """``values`` as their first value and differences (ints, or Decimals for floats) when that is smaller
-    (see DELTA_GAIN), else None."""
+def differences(values, choose=True):
+    """``values`` as their first value and differences (ints, or Decimals for floats), or None when they
+    are not all integers or all finite floats (no -0.0), or (``choose``) when the plain column is likely
+    smaller (integers: not shorter as text; floats: see DELTA_GAIN and REPEATS_SHARE)."""
     if len(values) < 3:
         return None
     if all(_is_int(value) for value in values):
         deltas = values[:1] + [b - a for a, b in zip(values, values[1:])]
-        return deltas if len(str(deltas)) < len(str(values)) else None
+        return deltas if not choose or len(str(deltas)) < len(str(values)) else None
     if not all(_is_plain_float(value) for value in values):
         return None
     texts = [repr(value) for value in values]
     adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
-    if len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
+    if choose and len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
         return None
     exact = [decimal.Decimal(text) for text in texts]
     try:
         deltas = [exact[0]] + [_EXACT.subtract(b, a) for a, b in zip(exact, exact[1:])]
     except decimal.DecimalException:
         return None
-    if sum(_digits(decimal_text(delta)) for delta in deltas) > DELTA_GAIN * sum(_digits(text) for text in texts):
+    if choose and sum(_digits(decimal_text(delta)) for delta in deltas) \
+            > DELTA_GAIN * sum(_digits(text) for text in texts):
         return None
     return deltas
 
@@ -265,9 +267,11 @@ def max_errors(records, back):
     return errors
 
 
-def document(records, metadata):
+def document(records, metadata, delta=differences):
     """The JSON document (a dict) of a window's records and its metadata; ``metadata['precision']`` (if any)
-    rounds fields (module docstring). Delta columns of floats hold Decimals: write it with ``dumps``."""
+    rounds fields (module docstring). Delta columns of floats hold Decimals: write it with ``dumps``.
+    ``delta(values)``: a column's differences, or None to write it plain (bench/format_layouts.py compares
+    choices)."""
     if not records:
         raise ValueError('window: has no records')
     meta = dict(metadata or {})
@@ -295,12 +299,12 @@ def document(records, metadata):
         if rounded is not None:
             rows = [dict((key, rounded(key, value)) for key, value in row.items()) for row in rows]
         constant, columns = _columns(rows)
-        delta = []
+        delta_keys = []
         for key, values in columns.items():
-            deltas = _differences(values)
+            deltas = delta(values)
             if deltas is not None:
                 columns[key] = deltas
-                delta.append(key)
+                delta_keys.append(key)
         stamps = [record.stamp for record in recs]
         if all(_header_stamp(record.msg) == record.stamp for record in recs):
             stamps = HEADER_STAMP
@@ -308,8 +312,8 @@ def document(records, metadata):
             stamps = [msg_codec.encode_float(float(stamp)) for stamp in stamps]
         topic = {'topic': section['topic'], 'type': section['type'], 'md5sum': section['md5sum'],
                  'count': len(recs), 'stamps': stamps, 'constant': constant, 'columns': columns}
-        if delta:
-            topic['delta'] = delta
+        if delta_keys:
+            topic['delta'] = delta_keys
         topic['definition'] = section['definition']
         topics.append(topic)
     meta.setdefault('codec', CODEC)
