@@ -290,4 +290,3 @@ def test_json_xz_precision_from_the_file_and_from_cclog_replay(tmp_path, model_p
                     assert abs(record.msg.twist.twist.linear.x - original.twist.twist.linear.x) <= 0.5e-5 * 1.001
                 else:
                     assert record.msg.twist.twist.linear.x == original.twist.twist.linear.x  # not rounded
-

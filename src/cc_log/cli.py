@@ -514,7 +514,8 @@ def cmd_replay(args):
         raise CommandError('replay: --model needs --topic (the topic the model reads)')
     cfg = _configuration(args, {
         'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
-        'precision': args.precision, 'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
+        'precision': args.precision, 'driving_topic': args.topic,
+        'side_topics': [t for t in args.side_topic if t != args.topic],
         'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
                        'classify_every': args.classify_every, 'retrigger': args.retrigger}})
     triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)

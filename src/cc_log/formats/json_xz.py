@@ -70,8 +70,8 @@ SAMPLE = 50
 SAMPLE_GAIN = 0.97
 #: Decimal arithmetic for differences: exact for any double's shortest text (at most 17 digits, exponents
 #: -324..308) and any difference of two; a document needing more is refused (decimal.Inexact).
-_EXACT = decimal.Context(prec=400, Emin=-999, Emax=999, traps=[decimal.Inexact, decimal.Overflow,
-                                                                  decimal.InvalidOperation])
+_EXACT = decimal.Context(prec=400, Emin=-999, Emax=999,
+                         traps=[decimal.Inexact, decimal.Overflow, decimal.InvalidOperation])
 
 #: Largest document (decompressed bytes) and file read. A window holds at most ``max_window`` (100,000)
 #: driving messages: about 200 bytes each in the column layout (Husky odometry + IMU), at most ~2 kB when
@@ -201,8 +201,8 @@ def _sums(values, key):
     out = [total]
     try:
         for delta in values[1:]:
-            total = _EXACT.add(total, delta) if isinstance(total, decimal.Decimal) or isinstance(delta, decimal.Decimal) \
-                else total + delta
+            exact = isinstance(total, decimal.Decimal) or isinstance(delta, decimal.Decimal)
+            total = _EXACT.add(total, delta) if exact else total + delta
             out.append(total)
     except decimal.DecimalException:
         raise ValueError('delta column %s: differences do not add up exactly' % key)
