@@ -3,12 +3,12 @@
 ``xz -dc FILE | jq .`` shows it; docs/FORMAT.md describes the layout and the measurements behind it.
 The document (layout 2)::
 
-    {"metadata": {... window metadata, "layout": 1 ...},
+    {"metadata": {... window metadata, "layout": 2 ...},
      "topics": [
        {"topic": "/odom", "type": "nav_msgs/Odometry", "md5sum": "...", "count": 300,
         "stamps": "header.stamp",             # or a list of float seconds, one per message
         "constant": {"header.frame_id": "odom", "pose.covariance": [...], ...},
-        "columns": {"header.seq": [855, 1, 1, ...], "pose.pose.position.x": [8.2515627923679, 0.02311227, ...],
+        "columns": {"header.seq": [855, 1, ...], "pose.pose.position.x": [8.251562792367952, 0.02311227020083, ...],
                     "twist.twist.linear.x": [...], ...},
         "delta": ["header.seq", "pose.pose.position.x", ...],   # columns written as differences
         "definition": "<full message definition, comments left out>"}, ...],
@@ -24,9 +24,10 @@ strings; float32 fields as the shortest decimal of their float32 value). ``stamp
 A column named in ``delta`` (layout 2) holds its first value, then each value's exact difference from the
 one before: integers as integers, floats as the exact decimal difference of their shortest texts (a reader
 adds them up in decimal and gets every float back bit for bit; ``jq`` adds them as doubles). The writer
-delta-codes an integer column when that makes its text shorter, and a column of finite floats when that makes
-the text at least ``DELTA_GAIN`` shorter and few values repeat an earlier, non-adjacent one (LZMA finds those
-repeats in the plain column, not in its differences). Layout 1 (no ``delta``) is still read.
+delta-codes an integer column when that makes its text shorter, and a column of finite floats when the
+differences need at most ``DELTA_GAIN`` of the significant digits and few values repeat an earlier,
+non-adjacent one (LZMA finds those repeats in the plain column, not in its differences): ``differences``.
+Layout 1 (no ``delta``) is still read.
 
 ``precision`` (optional, lossy): ``{field pattern: step}`` rounds every float of a field matching the
 pattern (``fnmatch`` on the dotted name, e.g. ``pose.pose.position.*``) to a multiple of its step before
