@@ -324,7 +324,7 @@ def test_json_xz_bad_delta_columns_are_one_line_errors(tmp_path):
     assert doc['topics'][0]['delta'] == ['data']
     text = json_xz.dumps(doc)
     for old, new, says in (('"delta":["data"]', '"delta":["nothing"]', 'names a column'),
-                           ('"layout":2', '"layout":3', 'json-xz layout 3 is not supported (this cc_log reads layouts 1, 2)'),
+                           ('"layout":2', '"layout":3', 'layout 3 is not supported (this cc_log reads layouts 1, 2)'),
                            ('"data":[100.12345678901,', '"data":["1",', 'other than numbers'),
                            ('"data":[100.12345678901,', '"data":[1e999,', 'do not add up')):
         assert old in text
