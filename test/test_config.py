@@ -290,3 +290,17 @@ def test_json_xz_precision_from_the_file_and_from_cclog_replay(tmp_path, model_p
                     assert abs(record.msg.twist.twist.linear.x - original.twist.twist.linear.x) <= 0.5e-5 * 1.001
                 else:
                     assert record.msg.twist.twist.linear.x == original.twist.twist.linear.x  # not rounded
+
+
+def test_a_node_precision_parameter_overrides_the_file(tmp_path, model_path):
+    pytest.importorskip('rospy')
+    from cc_log.node_common import ConfigError, Params, node_config
+    text = EXAMPLE.replace('MODEL', model_path).replace('format: bag-lz4', 'format: json-xz')
+    path = write(tmp_path, text + "json_xz: {precision: {'pose.pose.position.*': 1e-4}}\n")
+    params = Params(get={'config': path}.get, log=lambda *args: None)
+    assert node_config(params, {'precision': None}).precision == {'pose.pose.position.*': 1e-4}
+    cfg = node_config(params, {'precision': 'pose.pose.position.*=1e-3, twist.twist.*=1e-5'})
+    assert cfg.logger_options([])['format_options'] == {'precision': {'pose.pose.position.*': 1e-3,
+                                                                      'twist.twist.*': 1e-5}}
+    with pytest.raises(ConfigError, match=r'json_xz.precision: pose.pose.position.\*: step -1.0 is not a number > 0'):
+        node_config(params, {'precision': {'pose.pose.position.*': -1.0}})
