@@ -326,7 +326,8 @@ def test_json_xz_bad_delta_columns_are_one_line_errors(tmp_path):
     for old, new, says in (('"delta":["data"]', '"delta":["nothing"]', 'names a column'),
                            ('"layout":2', '"layout":3', 'layout 3 is not supported (this cc_log reads layouts 1, 2)'),
                            ('"data":[100.12345678901,', '"data":["1",', 'other than numbers'),
-                           ('"data":[100.12345678901,', '"data":[1e999,', 'do not add up')):
+                           ('"data":[100.12345678901,', '"data":[1e999,', 'do not add up'),
+                           ('"data":[100.12345678901,', '"data":[1e9999999999999999999,', 'out of range')):
         assert old in text
         path = str(tmp_path / 'bad.json.xz')
         with open(path, 'wb') as stream:

@@ -467,7 +467,7 @@ def decode(data, name='<bytes>'):
         raise ValueError('%s: not an xz file' % name)
     text = decompress(data, name)
     try:
-        doc = safe_input.json_loads(text, parse_float=decimal.Decimal)
+        doc = safe_input.json_loads(text, parse_float=_parse_decimal)
     except ValueError as error:
         raise ValueError('%s: not a JSON document (%s)' % (name, error))
     try:
@@ -483,6 +483,15 @@ def read(path, stream=None):
             raise ValueError('%s: larger than %d bytes: not a cc_log window' % (path, MAX_DOCUMENT_BYTES))
         stream.seek(0)
         return decode(stream.read(), path)
+
+
+def _parse_decimal(text):
+    """A JSON number with a fraction or exponent, exactly; ValueError (not decimal's own exception) for an
+    exponent beyond what Decimal holds."""
+    try:
+        return decimal.Decimal(text)
+    except decimal.DecimalException:
+        raise ValueError('number %s... is out of range' % text[:20])
 
 
 def _floats(value):
