@@ -141,7 +141,8 @@ class Collector(object):
     vector every ``stride`` messages of a set's first input; label: the vectors' label; background: write
     on a writer thread; max_buffer_mb: memory budget of the file being collected and the one being written
     (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period, max_held_messages,
-    close_retry: the writer's (see ``window_writer.WindowWriter``).
+    close_retry: the writer's (see ``window_writer.WindowWriter``); format_options: keys added to every
+    window's metadata that the format reads (json-xz: ``precision``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
