@@ -12,13 +12,19 @@ milliseconds per window (building the document + compressing) on this machine.
 
 Layouts:
   rows            row-per-message JSON lines (the paper's plain log), LZMA
-  columns         the json-xz file as written (json_xz.encode): column per field, constants once,
-                  arrays as a column of lists, metadata + message definition included
+  columns-v1      json-xz layout 1: column per field, constants once, arrays as a column of lists,
+                  metadata + message definition included
+  columns         the json-xz file as written (json_xz.encode, layout 2): as columns-v1, with slowly varying
+                  columns (integers, positions, ...) as exact differences where json_xz.differences chooses
+  columns-alldiff as columns, but every integer and finite-float column as differences (no choice)
   columns-elem    as columns, but fixed-size arrays split into one column per element
   columns-noconst as columns, without stating constant columns once
+  lossy-4/5       json-xz with precision (opt-in, lossy): positions and linear velocity to 1e-4,
+                  orientation and angular velocity to 1e-5 (LOSSY); the largest error per field is printed
+  lossy-3/4       the same to 1e-3 and 1e-4
   bag-lz4         the bag-lz4 file (rosbag, LZ4 chunks), for reference (no preset)
   binary-floor    reference only, not a format: numeric fields as little-endian 64-bit arrays
-                  (integers delta-coded), LZMA preset 9: roughly what any lossless coding can reach
+                  (integers delta-coded), LZMA preset 9: roughly what a binary lossless coding reaches
 """
 import argparse
 import json
@@ -88,7 +94,34 @@ def rows_layout(records):
 
 
 def columns_layout(records):
-    return json.dumps(json_xz.document(records, METADATA), separators=(',', ':')).encode()
+    return json_xz.dumps(json_xz.document(records, METADATA)).encode()
+
+
+def v1_layout(records):
+    return json_xz.dumps(json_xz.document(records, METADATA, delta=lambda values: None)).encode()
+
+
+def alldiff_layout(records):
+    return json_xz.dumps(json_xz.document(records, METADATA,
+                                          delta=lambda values: json_xz.differences(values, choose=False))).encode()
+
+
+#: Steps of the lossy rows: the Husky odometry's resolution (1e-4 m, 1e-5 rad) and ten times coarser.
+LOSSY = [('lossy-4/5', {'pose.pose.position.*': 1e-4, 'pose.pose.orientation.*': 1e-5, 'twist.twist.linear.*': 1e-4,
+                        'twist.twist.angular.*': 1e-5}),
+         ('lossy-3/4', {'pose.pose.position.*': 1e-3, 'pose.pose.orientation.*': 1e-4, 'twist.twist.linear.*': 1e-3,
+                        'twist.twist.angular.*': 1e-4})]
+
+
+def lossy_layout(precision):
+    return lambda records: json_xz.dumps(json_xz.document(records, dict(METADATA, precision=precision))).encode()
+
+
+def lossy_errors(records, precision):
+    """The largest error per rounded field over ``records`` (written and read back as one window)."""
+    _, back = json_xz.decode(json_xz.encode(records, dict(METADATA, precision=precision)))
+    errors = json_xz.max_errors(records, back)[records[0].topic]
+    return dict((key, error) for key, error in errors.items() if error)
 
 
 def _variant(records, split_arrays, constants):
@@ -109,7 +142,8 @@ def _variant(records, split_arrays, constants):
             section['constant'], section['columns'] = json_xz._columns(rows)
         else:
             section['constant'], section['columns'] = {}, columns
-    return json.dumps(doc, separators=(',', ':')).encode()
+        section['delta'] = [key for key in section.get('delta', ()) if key in section['columns']]
+    return json_xz.dumps(doc).encode()
 
 
 def elem_layout(records):
@@ -120,8 +154,9 @@ def noconst_layout(records):
     return _variant(records, False, False)
 
 
-LAYOUTS = [('rows', rows_layout), ('columns', columns_layout), ('columns-elem', elem_layout),
-           ('columns-noconst', noconst_layout)]
+LAYOUTS = [('rows', rows_layout), ('columns-v1', v1_layout), ('columns', columns_layout),
+           ('columns-alldiff', alldiff_layout), ('columns-elem', elem_layout), ('columns-noconst', noconst_layout)] \
+    + [(name, lossy_layout(precision)) for name, precision in LOSSY]
 
 
 def bag_bytes(records):
@@ -188,6 +223,7 @@ def main(argv=None):
     began = time.perf_counter()
     print('# format_layouts: json-xz layouts and LZMA presets against row-per-message JSON')
     print('machine: %s' % machine())
+    print('load: %.2f %.2f %.2f (os.getloadavg: 1, 5, 15 min)' % os.getloadavg())
     print('data: %s (see SOURCES.md there)' % REAL)
     print('row JSON = msg_codec.row_json_bytes (json.dumps of the nested message dict + newline)')
     for bag_name, topic in (BAGS[:2] if args.quick else BAGS):
@@ -203,6 +239,11 @@ def main(argv=None):
             for name, label, total, percent, ms in results:
                 print('  %-16s %-6s %10d %8.2f%% %12s' % (name, label, total, percent,
                                                           '-' if ms != ms else '%.1f' % ms))
+            if size == args.window:
+                for name, precision in LOSSY:
+                    errors = lossy_errors(records, precision)
+                    print('  %s largest error per field (all %d msgs): %s' % (name, len(records), ', '.join(
+                        '%s %.3g' % (key, error) for key, error in sorted(errors.items())) or 'none'))
     print()
     print('total %.1f s' % (time.perf_counter() - began))
     return 0

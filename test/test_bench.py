@@ -42,7 +42,16 @@ def test_storage_quick():
     assert out.count('Table 2, ') == 2
     assert 'cc_log json-xz' in out and 'cc_log bag-lz4' in out and 'LZMA-6' in out
     assert 'End to end' in out and 'rosbag --lz4 B' in out and 'BWI 1/100 bz2 B' in out
-    assert len(targets(out)) == 4
+    assert 'cc_log json-xz precision' in out and out.count('largest error per field: ') == 2
+    assert len(targets(out)) == 5
+
+
+def test_format_layouts_quick():
+    out = run('format_layouts.py', '--quick')
+    assert '\nload: ' in out
+    for layout in ('rows', 'columns-v1', 'columns', 'columns-alldiff', 'lossy-4/5', 'lossy-3/4', 'binary-floor'):
+        assert '\n  %s ' % layout in out, layout
+    assert 'lossy-4/5 largest error per field (all 3952 msgs): pose.pose.orientation.w' in out
 
 
 def test_injected_husky_quick():

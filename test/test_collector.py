@@ -177,3 +177,19 @@ def test_learn_refuses_overlapping_sets(husky_path, tmp_path, capsys):
     assert learn_main.main(['--train', str(tmp_path / 'missing'), '--validate', str(tmp_path / 'copy'),
                             '--model', model]) == 1
     assert not os.path.exists(model)
+
+
+def test_json_xz_precision_rounds_collected_windows(husky, tmp_path):
+    """format_options (the configuration's json_xz.precision) reach every collected window."""
+    from cc_log.formats import json_xz
+    precision = {'linear_acceleration.*': 1e-3, 'pose.pose.position.*': 1e-4}
+    collector = Collector(str(tmp_path), 'json-xz', '500', driving_topic=ODOM, side_topics=[IMU], window='20',
+                          stride=10, format_options={'precision': precision})
+    run(collector, husky)
+    files = files_of(str(tmp_path))
+    assert files and all(metadata['precision'] == precision for _, metadata, _ in files)
+    kept = [r for _, _, records in files for r in records]
+    errors = json_xz.max_errors(sorted(husky, key=lambda r: r.stamp), kept)
+    assert 0 < errors[IMU]['linear_acceleration.x'] <= 0.5e-3 * 1.001
+    assert 0 < errors[ODOM]['pose.pose.position.x'] <= 0.5e-4 * 1.001
+    assert errors[IMU]['angular_velocity.x'] == errors[ODOM]['twist.twist.linear.x'] == 0.0

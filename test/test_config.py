@@ -89,6 +89,11 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
     ('triggers: [{name: r, kind: rule, topic: odom, arrival: true}, {name: r, kind: manual}]',
      "triggers[1]: name 'r' is used twice"),
     ('format: zip', "format: 'zip' is not one of: json-xz, bag-lz4"),
+    ("json_xz: {precision: {'pose.*': 0}}", "json_xz.precision: pose.*: step 0 is not a number > 0"),
+    ("json_xz: {precision: [1e-4]}", "json_xz.precision: a mapping of field patterns to steps"),
+    ("json_xz: {level: 3}", "json_xz: unknown key 'level'"),
+    ("format: bag-lz4\njson_xz: {precision: {'pose.*': 1e-4}}", "json_xz.precision: rounds json-xz windows only"),
+    ("json_xz: {precision: 'pose.*: 1e-4'}", "json_xz.precision: 'pose.*: 1e-4' is not \"pattern=step"),
     ('limits: {max_disk_mb: -1}', 'limits.max_disk_mb: -1 must be a number of MB >= 0'),
     ('collect: {label: "../x"}', "label: '../x' must be letters"),
     ('windows: {pre: soon}', "windows.pre: 'soon' is not a message count"),
@@ -249,3 +254,53 @@ def test_collect_mode_live_writes_the_same_vectors_of_every_classifier_as_cclog_
         live = sorted(os.listdir(str(tmp_path / 'live' / 'features' / name / 'nominal')))
         assert live and live == sorted(os.listdir(offline['sets'][name][1])), name
     assert collector.stats()['vectors_written'] == sum(count for count, _ in offline['sets'].values())
+
+
+def test_json_xz_precision_from_the_file_and_from_cclog_replay(tmp_path, model_path, real_bag_path):
+    """json_xz.precision (opt-in lossy) reaches the written windows: recorded in their metadata, every
+    matching field within half a step of the bag's value; --precision overrides the file."""
+    text = EXAMPLE.replace('MODEL', model_path).replace('format: bag-lz4', 'format: json-xz')
+    text = text.replace('  - {name: motors, kind: rule, level: ERROR, status: \'motor*\'}\n', '')
+    text += "json_xz: {precision: {'pose.pose.position.*': 1e-4}}\n"
+    path = write(tmp_path, text)
+    assert Config.from_dict(config.load_file(path)).format_options() == \
+        {'precision': {'pose.pose.position.*': 1e-4}}
+    bag = {}
+    with __import__('rosbag').Bag(real_bag_path) as reader:
+        for _, msg, _ in reader.read_messages(topics=[HUSKY_ODOM]):
+            bag[msg.header.seq] = msg
+    for extra, step in (((), 1e-4), (('--precision', 'pose.pose.position.*=1e-3, twist.twist.*=1e-5'), 1e-3)):
+        out = tmp_path / ('logs%s' % step)
+        result = cclog('replay', real_bag_path, '--config', path, '--out', out, '--json', *extra)
+        assert result.returncode == 0, result.stderr
+        windows = json.loads(result.stdout)['windows']
+        assert windows
+        for window in windows:
+            metadata, records = log_format.read_window(window['path'])
+            assert metadata['precision']['pose.pose.position.*'] == step
+            for record in records:
+                if record.topic != HUSKY_ODOM:
+                    continue
+                original = bag[record.msg.header.seq]
+                for axis in 'xyz':
+                    value = getattr(record.msg.pose.pose.position, axis)
+                    assert abs(value - getattr(original.pose.pose.position, axis)) <= step / 2 * (1 + 1e-9)
+                    assert abs(value / step - round(value / step)) < 1e-6
+                if extra:
+                    assert abs(record.msg.twist.twist.linear.x - original.twist.twist.linear.x) <= 0.5e-5 * 1.001
+                else:
+                    assert record.msg.twist.twist.linear.x == original.twist.twist.linear.x  # not rounded
+
+
+def test_a_node_precision_parameter_overrides_the_file(tmp_path, model_path):
+    pytest.importorskip('rospy')
+    from cc_log.node_common import ConfigError, Params, node_config
+    text = EXAMPLE.replace('MODEL', model_path).replace('format: bag-lz4', 'format: json-xz')
+    path = write(tmp_path, text + "json_xz: {precision: {'pose.pose.position.*': 1e-4}}\n")
+    params = Params(get={'config': path}.get, log=lambda *args: None)
+    assert node_config(params, {'precision': None}).precision == {'pose.pose.position.*': 1e-4}
+    cfg = node_config(params, {'precision': 'pose.pose.position.*=1e-3, twist.twist.*=1e-5'})
+    assert cfg.logger_options([])['format_options'] == {'precision': {'pose.pose.position.*': 1e-3,
+                                                                      'twist.twist.*': 1e-5}}
+    with pytest.raises(ConfigError, match=r'json_xz.precision: pose.pose.position.\*: step -1.0 is not a number > 0'):
+        node_config(params, {'precision': {'pose.pose.position.*': -1.0}})

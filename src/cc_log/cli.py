@@ -547,7 +547,8 @@ def cmd_replay(args):
         raise CommandError('replay: --model needs --topic (the topic the model reads)')
     cfg = _configuration(args, {
         'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
-        'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
+        'precision': args.precision, 'driving_topic': args.topic,
+        'side_topics': [t for t in args.side_topic if t != args.topic],
         'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
                        'classify_every': args.classify_every, 'retrigger': args.retrigger}})
     triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
@@ -1084,6 +1085,9 @@ def build_parser():
     p.add_argument('--post', type=_span('post'), metavar='N|Ns',
                    help='messages or seconds kept after the last anomaly (default: 100)')
     p.add_argument('--format', choices=formats.names(), help='window file format (default: %s)' % formats.DEFAULT)
+    p.add_argument('--precision', metavar='FIELD=STEP,...',
+                   help="json-xz, lossy (opt-in): round fields to a step, e.g. 'pose.pose.position.*=1e-4,"
+                        "twist.twist.*=1e-5' (recorded in each window's metadata; default: lossless)")
     p.add_argument('--side-topic', action='append', default=[], metavar='T',
                    help='another topic to save inside the windows (repeatable)')
     p.add_argument('--classify-every', type=_span('classify-every'), metavar='N|Ns',

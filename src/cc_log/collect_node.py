@@ -17,6 +17,7 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): window files go here, vectors into
   ``<directory>/features/<label>/``; a fallback is a WARN on /diagnostics naming the directory in use.
   ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
+  ``~precision`` (dict or string, default: none = lossless): json-xz rounding, as the smart node's.
   ``~rotate`` (string, default: 60s): a new file after this many messages (``6000``), seconds (``60s``) or
   raw row-JSON bytes (``20MB``).
   ``~topics`` (list or space-separated string, default: none): other topics to log.
@@ -78,6 +79,7 @@ class CollectNode(object):
 
         cfg = node_config(params, {
             'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
+            'precision': given(params.value, 'precision', None),
             'rotate': given(params.scalar, 'rotate', DEFAULT_ROTATE), 'topics': given(params.topics, 'topics'),
             'label': given(params.scalar, 'label', DEFAULT_LABEL),
             'stride': given(params.number, 'stride', DEFAULT_STRIDE, 1, True),
@@ -92,7 +94,7 @@ class CollectNode(object):
                    'close_retry': CLOSE_RETRY,
                    'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,
                    'max_buffer_mb': cfg.max_buffer_mb, 'max_disk_mb': cfg.max_disk_mb,
-                   'min_free_mb': cfg.min_free_mb}
+                   'min_free_mb': cfg.min_free_mb, 'format_options': cfg.format_options()}
         try:
             specs = cfg.feature_specs(AnomalyModel.load, rospy.resolve_name)
         except ValueError as error:

@@ -142,7 +142,8 @@ class Collector(object):
     vector every ``stride`` messages of a set's first input; label: the vectors' label; background: write
     on a writer thread; max_buffer_mb: memory budget of the file being collected and the one being written
     (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period, max_held_messages,
-    close_retry: the writer's (see ``window_writer.WindowWriter``).
+    close_retry: the writer's (see ``window_writer.WindowWriter``); format_options: keys added to every
+    window's metadata that the format reads (json-xz: ``precision``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
@@ -152,9 +153,11 @@ class Collector(object):
                  window=DEFAULT_WINDOW, feature_set=DEFAULT_FEATURE_SET, stride=DEFAULT_STRIDE,
                  label=DEFAULT_LABEL, background=True, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, max_disk_mb=0,
                  min_free_mb=0, retry_period=window_writer.DEFAULT_RETRY_PERIOD,
-                 max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES, close_retry=0.0, feature_specs=None):
+                 max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES, close_retry=0.0, feature_specs=None,
+                 format_options=None):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
+        self.format_options = dict(format_options or {})  # e.g. json-xz precision: in every window's metadata
         self.rotate = Rotation.parse(rotate)
         self.stride = parse_stride(stride)
         self.label = check_label(label)
@@ -298,6 +301,7 @@ class Collector(object):
         self._chunk_span = None
         metadata = {'reason': 'collect', 'part': window.part, 'driving_topic': self.driving_topic,
                     'rotate': str(self.rotate)}
+        metadata.update(self.format_options)
         self.writer.submit(window_writer.Job(window, metadata))
 
     def _written(self, event):

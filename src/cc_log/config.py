@@ -7,6 +7,7 @@ configuration tuned offline on bags behaves the same on the robot::
     topics: [imu/data, scan]          # other topics to keep in the windows; also '*', 're:/camera/.*', '!/tf'
     driving_topic: odom               # counts pre and post (default: the first trigger's first topic)
     format: json-xz
+    json_xz: {precision: {'pose.pose.position.*': 1e-4, 'twist.twist.*': 1e-5}}   # lossy, opt-in
     windows: {pre: 2s, post: 2s, max: 100000}
     limits: {max_disk_mb: 500, min_free_mb: 100, max_buffer_mb: 256}
     collect: {rotate: 60s, label: nominal, stride: 25}
@@ -31,6 +32,7 @@ import os
 
 from . import features
 from . import log_format
+from .formats import json_xz
 from . import safe_input
 from .spans import Span
 from .triggers import get as trigger_kind
@@ -38,7 +40,8 @@ from .triggers.base import Context, check_name
 from .triggers.classifier import default_topics
 from .topic_select import TopicSelection
 
-KEYS = ('topics', 'driving_topic', 'format', 'windows', 'limits', 'collect', 'triggers')
+KEYS = ('topics', 'driving_topic', 'format', 'json_xz', 'windows', 'limits', 'collect', 'triggers')
+JSON_XZ_KEYS = ('precision',)
 WINDOW_KEYS = ('pre', 'post', 'max')
 LIMIT_KEYS = ('max_disk_mb', 'min_free_mb', 'max_buffer_mb')
 COLLECT_KEYS = ('rotate', 'label', 'stride')
@@ -51,7 +54,7 @@ FLAT = {'pre': ('windows', 'pre'), 'post': ('windows', 'post'), 'max_window': ('
         'max_disk_mb': ('limits', 'max_disk_mb'), 'min_free_mb': ('limits', 'min_free_mb'),
         'max_buffer_mb': ('limits', 'max_buffer_mb'), 'rotate': ('collect', 'rotate'),
         'label': ('collect', 'label'), 'stride': ('collect', 'stride'), 'format': ('format',),
-        'topics': ('topics',), 'driving_topic': ('driving_topic',)}
+        'topics': ('topics',), 'driving_topic': ('driving_topic',), 'precision': ('json_xz', 'precision')}
 
 
 def load_file(path):
@@ -147,7 +150,8 @@ def global_name(topic):
 class Config(object):
     """A checked configuration (see the module docstring); build it with ``from_dict``.
 
-    Attributes: topics, driving_topic (None: the first trigger's first topic), format, pre, post,
+    Attributes: topics, driving_topic (None: the first trigger's first topic), format, precision (json-xz
+    rounding, ``{}``: lossless), pre, post,
     max_window (Spans), max_disk_mb, min_free_mb, max_buffer_mb, rotate, label, stride (None: the
     collector's defaults), triggers (checked trigger entries, dicts with ``name`` and ``kind``), source.
     """
@@ -177,6 +181,10 @@ class Config(object):
             raise ValueError('driving_topic: %r is not a topic name' % (driving,))
         self.driving_topic = driving.strip() if driving else None
         self.format = log_format.Format.check(data.get('format', log_format.Format.JSON_XZ))
+        options = _mapping(data.get('json_xz'), 'json_xz', JSON_XZ_KEYS)
+        self.precision = json_xz.check_precision(options.get('precision'), 'json_xz.precision')
+        if self.precision and self.format != log_format.Format.JSON_XZ:
+            raise ValueError('json_xz.precision: rounds json-xz windows only (format is %s)' % self.format)
         windows = _mapping(data.get('windows'), 'windows', WINDOW_KEYS)
         self.pre = Span.parse(windows.get('pre', '100'), 'windows.pre')
         self.post = Span.parse(windows.get('post', '100'), 'windows.post')
@@ -263,7 +271,11 @@ class Config(object):
                 'driving_topic': resolve(driving),
                 'side_topics': None if self.selection.dynamic else [resolve(t) for t in self.topics],
                 'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb,
-                'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers}
+                'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers, 'format_options': self.format_options()}
+
+    def format_options(self):
+        """What the window format is told in each window's metadata: ``{'precision': ...}`` when set."""
+        return {'precision': self.precision} if self.precision else {}
 
 
 def _known(data, keys, where):

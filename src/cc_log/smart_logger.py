@@ -101,7 +101,8 @@ class SmartLogger(object):
     dropped and counted as lost); give_up_after, close_retry: see ``window_writer.WindowWriter`` (offline use:
     lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
-    half of it (see ``WindowBuffer``).
+    half of it (see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
+    reads (json-xz: ``precision``).
 
     Thread-safe: ``on_message``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be
     called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -112,7 +113,7 @@ class SmartLogger(object):
                  enabled=True, background=True, retrigger=DEFAULT_RETRIGGER, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
-                 close_retry=0.0, triggers=(), input_topics=None):
+                 close_retry=0.0, triggers=(), input_topics=None, format_options=None):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -136,6 +137,7 @@ class SmartLogger(object):
         self.retrigger = primary.retrigger if primary else retrigger
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
+        self.format_options = dict(format_options or {})  # e.g. json-xz precision: in every window's metadata
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
         self.max_window = Span.parse(max_window, 'max_window')
@@ -406,6 +408,7 @@ class SmartLogger(object):
         }
         if self.config is not None:
             meta['model'] = self.config.to_dict()
+        meta.update(self.format_options)
         return meta
 
     # -- writer events --------------------------------------------------------------------------------

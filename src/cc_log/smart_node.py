@@ -27,6 +27,9 @@ Parameters (defaults below as module constants; each resolved value is logged on
   classifier named ``classifier`` (its feature window is used).
   ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): where window files go.
   ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
+  ``~precision`` (dict or string, default: none = lossless): json-xz only, opt-in lossy: round fields to a
+  step, ``{'pose.pose.position.*': 1e-4}`` or ``'pose.pose.position.*=1e-4, twist.twist.*=1e-5'``
+  (configuration key ``json_xz.precision``; recorded in each window's metadata; docs/FORMAT.md).
   ``~window`` (string, default: the model's): only checked against the model; a mismatch is an error.
   ``~pre``, ``~post`` (string, default: 100): messages (``100``) or seconds (``2s``) before / after.
   ``~max_window`` (string, default: 100000): longer windows are written in parts.
@@ -296,6 +299,7 @@ class SmartNode(object):
             'pre': given(params.span, 'pre', DEFAULT_PRE), 'post': given(params.span, 'post', DEFAULT_POST),
             'max_window': given(params.span, 'max_window', DEFAULT_MAX_WINDOW),
             'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
+            'precision': given(params.value, 'precision', None),
             'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
             'max_disk_mb': given(params.number, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
             'min_free_mb': given(params.number, 'min_free_mb', DEFAULT_MIN_FREE_MB),

@@ -1,14 +1,16 @@
 """The ``json-xz`` window file: one self-contained, xz-compressed JSON document per window.
 
 ``xz -dc FILE | jq .`` shows it; docs/FORMAT.md describes the layout and the measurements behind it.
-The document (layout 1)::
+The document (layout 2)::
 
-    {"metadata": {... window metadata, "layout": 1 ...},
+    {"metadata": {... window metadata, "layout": 2 ...},
      "topics": [
        {"topic": "/odom", "type": "nav_msgs/Odometry", "md5sum": "...", "count": 300,
         "stamps": "header.stamp",             # or a list of float seconds, one per message
         "constant": {"header.frame_id": "odom", "pose.covariance": [...], ...},
-        "columns": {"header.seq": [...], "header.stamp.secs": [...], "pose.pose.position.x": [...], ...},
+        "columns": {"header.seq": [855, 1, ...], "pose.pose.position.x": [8.251562792367952, 0.02311227020083, ...],
+                    "twist.twist.linear.x": [...], ...},
+        "delta": ["header.seq", "pose.pose.position.x", ...],   # columns written as differences
         "definition": "<full message definition, comments left out>"}, ...],
      "order": [0, 1, 0, ...]}                  # only when records are not in (stamp, section) order
 
@@ -19,10 +21,25 @@ ranges) are one value: a column of lists. Values follow ``msg_codec`` (base64 by
 strings; float32 fields as the shortest decimal of their float32 value). ``stamps`` is
 ``"header.stamp"`` when every record's stamp equals ``header.stamp.to_sec()``.
 
+A column named in ``delta`` (layout 2) holds its first value, then each value's exact difference from the
+one before: integers as integers, floats as the exact decimal difference of their shortest texts (a reader
+adds them up in decimal and gets every float back bit for bit; ``jq`` adds them as doubles). The writer
+delta-codes an integer column when that makes its text shorter, and a column of finite floats when the
+differences need at most ``DELTA_GAIN`` of the significant digits and few values repeat an earlier,
+non-adjacent one (LZMA finds those repeats in the plain column, not in its differences): ``differences``.
+Layout 1 (no ``delta``) is still read.
+
+``precision`` (optional, lossy): ``{field pattern: step}`` rounds every float of a field matching the
+pattern (``fnmatch`` on the dotted name, e.g. ``pose.pose.position.*``) to a multiple of its step before
+writing; the map is kept in the metadata (``precision``), and a reader reads what was written.
+
 Pure: no rospy, no rosbag.
 """
+import decimal
+import fnmatch
 import json
 import lzma
+import math
 import os
 
 from .. import msg_codec, safe_input
@@ -30,7 +47,9 @@ from ..window_buffer import Record
 
 CODEC = 'json-xz'
 EXTENSION = '.json.xz'
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
+#: Layouts this module reads.
+LAYOUTS = (1, 2)
 MAGIC = b'\xfd7zXZ\x00'
 
 #: LZMA2 preset used when writing. 6 is xz's default; on windows of a few hundred messages presets 6..9
@@ -38,6 +57,22 @@ MAGIC = b'\xfd7zXZ\x00'
 DEFAULT_PRESET = 6
 
 HEADER_STAMP = 'header.stamp'
+
+#: A float column is delta-coded when its differences have at most this share of its values' significant
+#: digits, and at most REPEATS_SHARE of its values repeat an earlier value that is not the one just before.
+#: Measured on the Husky odometry (docs/FORMAT.md): positions (0.80 of the digits) compress 25% smaller,
+#: angular velocity (0.87) 3.5%, linear velocity (0.84) 1% larger; orientations (0.53, but a third of their
+#: values recur) 15% larger.
+DELTA_GAIN = 0.87
+REPEATS_SHARE = 0.1
+#: Float columns longer than twice SAMPLE are first tried on their first SAMPLE values: beyond SAMPLE_GAIN of
+#: the digits there, the column stays plain (the Husky positions: 0.88-0.91 on their first 50 values).
+SAMPLE = 50
+SAMPLE_GAIN = 0.97
+#: Decimal arithmetic for differences: exact for any double's shortest text (at most 17 digits, exponents
+#: -324..308) and any difference of two; a document needing more is refused (decimal.Inexact).
+_EXACT = decimal.Context(prec=400, Emin=-999, Emax=999,
+                         traps=[decimal.Inexact, decimal.Overflow, decimal.InvalidOperation])
 
 #: Largest document (decompressed bytes) and file read. A window holds at most ``max_window`` (100,000)
 #: driving messages: about 200 bytes each in the column layout (Husky odometry + IMU), at most ~2 kB when
@@ -97,10 +132,166 @@ def _header_stamp(msg):
     return stamp.to_sec() if stamp is not None and hasattr(stamp, 'to_sec') else None
 
 
-def document(records, metadata):
-    """The JSON document (a dict) of a window's records and its metadata."""
+# -- differences ----------------------------------------------------------------------------------------
+
+def _is_int(value):
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_plain_float(value):
+    """A finite float that is not -0.0 (whose sign a sum of differences does not keep)."""
+    return isinstance(value, float) and math.isfinite(value) and not (value == 0.0 and math.copysign(1.0, value) < 0)
+
+
+def decimal_text(value):
+    """The JSON text of a Decimal: ``0``, else the shorter of plain and scientific notation, no trailing
+    zeros."""
+    if not value:
+        return '0'
+    value = value.normalize(_EXACT)
+    plain, scientific = format(value, 'f'), str(value)
+    return plain if len(plain) <= len(scientific) else scientific
+
+
+def differences(values, choose=True):
+    """``values`` as their first value and differences (ints, or Decimals for floats), or None when they
+    are not all integers or all finite floats (no -0.0), or (``choose``) when the plain column is likely
+    smaller (integers: not shorter as text; floats: see DELTA_GAIN, REPEATS_SHARE and SAMPLE)."""
+    if len(values) < 3:
+        return None
+    if all(_is_int(value) for value in values):
+        deltas = values[:1] + [b - a for a, b in zip(values, values[1:])]
+        return deltas if not choose or len(str(deltas)) < len(str(values)) else None
+    if not all(_is_plain_float(value) for value in values):
+        return None
+    if choose and len(values) > 2 * SAMPLE and _digit_share(values[:SAMPLE])[0] > SAMPLE_GAIN:
+        return None  # decided on a sample: noisy columns (IMU axes) are not worth the decimal arithmetic
+    share, deltas = _digit_share(values)
+    if choose and share > DELTA_GAIN:
+        return None
+    texts = [repr(value) for value in values]
+    adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
+    if choose and len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
+        return None
+    return deltas
+
+
+def _digit_share(values):
+    """(significant digits of the differences / of the values, the differences); (inf, None) when they
+    cannot be computed exactly."""
+    texts = [repr(value) for value in values]
+    exact = [decimal.Decimal(text) for text in texts]
+    try:
+        deltas = [exact[0]] + [_EXACT.subtract(b, a) for a, b in zip(exact, exact[1:])]
+    except decimal.DecimalException:
+        return math.inf, None
+    return sum(_digits(decimal_text(delta)) for delta in deltas) / max(1, sum(_digits(text) for text in texts)), \
+        deltas
+
+
+def _digits(text):
+    """Significant digits of a number's text (what LZMA pays for: leading zeros and the exponent are cheap)."""
+    return len(text.lower().split('e')[0].lstrip('-').replace('.', '').lstrip('0'))
+
+
+def _sums(values, key):
+    """The values of a delta column (first value, then differences) added up; floats exact in decimal."""
+    if not values or not all(_is_int(value) or isinstance(value, decimal.Decimal) for value in values):
+        raise ValueError('delta column %s: holds something other than numbers' % key)
+    total = values[0]
+    out = [total]
+    try:
+        for delta in values[1:]:
+            exact = isinstance(total, decimal.Decimal) or isinstance(delta, decimal.Decimal)
+            total = _EXACT.add(total, delta) if exact else total + delta
+            out.append(total)
+    except decimal.DecimalException:
+        raise ValueError('delta column %s: differences do not add up exactly' % key)
+    return out
+
+
+# -- precision (lossy) ----------------------------------------------------------------------------------
+
+_ROUNDING = decimal.Context(prec=60, rounding=decimal.ROUND_HALF_EVEN)
+
+
+def check_precision(precision, name='precision'):
+    """``{field pattern: step}`` with every step a finite number > 0, else ValueError('<name>: ...').
+    ``precision`` is such a mapping, None (no rounding) or text ``'pattern=step, pattern=step'`` (a node
+    parameter, a command-line option)."""
+    if precision is None:
+        return {}
+    if isinstance(precision, str):
+        items = [item.strip() for item in precision.split(',') if item.strip()]
+        if not all(item.count('=') == 1 for item in items):
+            raise ValueError('%s: %r is not "pattern=step, pattern=step, ..."' % (name, precision))
+        precision = dict((pattern.strip(), step.strip()) for pattern, step in (item.split('=') for item in items))
+    if not isinstance(precision, dict):
+        raise ValueError('%s: a mapping of field patterns to steps (e.g. {"pose.pose.position.*": 1e-4}), '
+                         'not %r' % (name, precision))
+    checked = {}
+    for pattern, step in precision.items():
+        if not isinstance(pattern, str) or not pattern:
+            raise ValueError('%s: %r is not a field pattern' % (name, pattern))
+        if isinstance(step, str):
+            try:
+                step = float(step)
+            except ValueError:
+                pass
+        if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0 < step < float('inf'):
+            raise ValueError('%s: %s: step %r is not a number > 0' % (name, pattern, step))
+        checked[pattern] = float(step)
+    return checked
+
+
+def _rounder(precision):
+    """A function ``(key, value) -> value`` rounding the floats of fields matching ``precision``."""
+    steps = [(pattern, decimal.Decimal(repr(step))) for pattern, step in check_precision(precision).items()]
+    chosen = {}
+
+    def round_value(value, step):
+        if isinstance(value, list):
+            return [round_value(item, step) for item in value]
+        if not isinstance(value, float) or not math.isfinite(value):
+            return value
+        count = _ROUNDING.divide(decimal.Decimal(repr(value)), step).to_integral_value(decimal.ROUND_HALF_EVEN)
+        return float(_ROUNDING.multiply(count, step)) + 0.0  # + 0.0: no -0.0
+
+    def rounded(key, value):
+        if key not in chosen:
+            chosen[key] = next((step for pattern, step in steps if fnmatch.fnmatchcase(key, pattern)), None)
+        step = chosen[key]
+        return value if step is None else round_value(value, step)
+    return rounded
+
+
+def max_errors(records, back):
+    """``{topic: {field: largest absolute difference}}`` of every float field (array elements included)
+    between ``records`` and ``back`` (the same messages read back, e.g. after rounding); non-finite values
+    must stay the same (else the error is ``inf``)."""
+    errors = {}
+    for a, b in zip(records, back):
+        topic = errors.setdefault(a.topic, {})
+        flat_b = _flatten(msg_codec.to_dict(b.msg), '', {})
+        for key, value in _flatten(msg_codec.to_dict(a.msg), '', {}).items():
+            pairs = zip(value, flat_b[key]) if isinstance(value, list) else [(value, flat_b[key])]
+            for old, new in pairs:
+                if isinstance(old, float) or isinstance(new, float):
+                    error = abs(new - old) if math.isfinite(old) else (0.0 if repr(old) == repr(new) else math.inf)
+                    topic[key] = max(topic.get(key, 0.0), error)
+    return errors
+
+
+def document(records, metadata, delta=differences):
+    """The JSON document (a dict) of a window's records and its metadata; ``metadata['precision']`` (if any)
+    rounds fields (module docstring). Delta columns of floats hold Decimals: write it with ``dumps``.
+    ``delta(values)``: a column's differences, or None to write it plain (bench/format_layouts.py compares
+    choices)."""
     if not records:
         raise ValueError('window: has no records')
+    meta = dict(metadata or {})
+    precision = check_precision(meta.get('precision'), 'precision')
+    rounded = _rounder(precision) if precision else None
     sections = []
     index = {}
     order = []
@@ -120,22 +311,63 @@ def document(records, metadata):
     for section in sections:
         recs = section.pop('records')
         rows = [_flatten(msg_codec.to_dict(record.msg, short_float32=True), '', {}) for record in recs]
+        if rounded is not None:
+            rows = [dict((key, rounded(key, value)) for key, value in row.items()) for row in rows]
         constant, columns = _columns(rows)
+        delta_keys = []
+        for key, values in columns.items():
+            deltas = delta(values)
+            if deltas is not None:
+                columns[key] = deltas
+                delta_keys.append(key)
         stamps = [record.stamp for record in recs]
         if all(_header_stamp(record.msg) == record.stamp for record in recs):
             stamps = HEADER_STAMP
         else:
             stamps = [msg_codec.encode_float(float(stamp)) for stamp in stamps]
-        topics.append({'topic': section['topic'], 'type': section['type'], 'md5sum': section['md5sum'],
-                       'count': len(recs), 'stamps': stamps, 'constant': constant, 'columns': columns,
-                       'definition': section['definition']})
-    meta = dict(metadata or {})
+        topic = {'topic': section['topic'], 'type': section['type'], 'md5sum': section['md5sum'],
+                 'count': len(recs), 'stamps': stamps, 'constant': constant, 'columns': columns}
+        if delta_keys:
+            topic['delta'] = delta_keys
+        topic['definition'] = section['definition']
+        topics.append(topic)
     meta.setdefault('codec', CODEC)
+    if precision:
+        meta['precision'] = precision
     meta['layout'] = LAYOUT_VERSION
     doc = {'metadata': meta, 'topics': topics}
     if not _merges_back(records, order):
         doc['order'] = order
     return doc
+
+
+def _json(value):
+    return json.dumps(value, separators=(',', ':'), allow_nan=False)
+
+
+def dumps(doc):
+    """The compact JSON text of a ``document`` (Decimals of delta columns written exactly)."""
+    sections = []
+    for section in doc['topics']:
+        parts = []
+        for key, value in section.items():
+            if key == 'columns':
+                value = '{%s}' % ','.join('%s:%s' % (_json(name), _column_text(values))
+                                          for name, values in value.items())
+            else:
+                value = _json(value)
+            parts.append('%s:%s' % (_json(key), value))
+        sections.append('{%s}' % ','.join(parts))
+    text = '{"metadata":%s,"topics":[%s]' % (_json(doc['metadata']), ','.join(sections))
+    if 'order' in doc:
+        text += ',"order":%s' % _json(doc['order'])
+    return text + '}'
+
+
+def _column_text(values):
+    if values and isinstance(values[0], decimal.Decimal):  # the first as written (8.0, not 8), then differences
+        return '[%s]' % ','.join([str(values[0])] + [decimal_text(value) for value in values[1:]])
+    return _json(values)
 
 
 def _merges_back(records, order):
@@ -152,8 +384,7 @@ def _merges_back(records, order):
 
 def encode(records, metadata, preset=DEFAULT_PRESET):
     """The ``.json.xz`` bytes of a window: compact JSON, one xz stream (CRC64)."""
-    text = json.dumps(document(records, metadata), separators=(',', ':'), allow_nan=False)
-    data = text.encode('utf-8')
+    data = dumps(document(records, metadata)).encode('utf-8')
     return compress(data, preset)
 
 
@@ -236,7 +467,7 @@ def decode(data, name='<bytes>'):
         raise ValueError('%s: not an xz file' % name)
     text = decompress(data, name)
     try:
-        doc = safe_input.json_loads(text)
+        doc = safe_input.json_loads(text, parse_float=_parse_decimal)
     except ValueError as error:
         raise ValueError('%s: not a JSON document (%s)' % (name, error))
     try:
@@ -254,16 +485,37 @@ def read(path, stream=None):
         return decode(stream.read(), path)
 
 
+def _parse_decimal(text):
+    """A JSON number with a fraction or exponent, exactly; ValueError (not decimal's own exception) for an
+    exponent beyond what Decimal holds."""
+    try:
+        return decimal.Decimal(text)
+    except decimal.DecimalException:
+        raise ValueError('number %s... is out of range' % text[:20])
+
+
+def _floats(value):
+    """``value`` (parsed JSON) with every Decimal turned into the float its text reads as."""
+    if isinstance(value, decimal.Decimal):
+        return float(value)
+    if isinstance(value, list):
+        return [_floats(item) for item in value]
+    if isinstance(value, dict):
+        return dict((key, _floats(item)) for key, item in value.items())
+    return value
+
+
 def from_document(doc):
-    """``(metadata, records)`` of a decoded JSON document; ValueError saying what does not fit."""
+    """``(metadata, records)`` of a JSON document parsed with ``parse_float=decimal.Decimal`` (as ``decode``
+    does: delta columns are added up exactly); ValueError saying what does not fit."""
     if not isinstance(doc, dict) or not isinstance(doc.get('metadata'), dict) \
             or not isinstance(doc.get('topics'), list):
         raise ValueError('not a cc_log json-xz window (needs "metadata" and "topics")')
-    metadata = doc['metadata']
+    metadata = _floats(doc['metadata'])
     layout = metadata.get('layout')
-    if layout != LAYOUT_VERSION:
-        raise ValueError('json-xz layout %r is not supported (this cc_log reads layout %d)'
-                         % (layout, LAYOUT_VERSION))
+    if layout not in LAYOUTS:
+        raise ValueError('json-xz layout %r is not supported (this cc_log reads layouts %s)'
+                         % (layout, ', '.join(str(number) for number in LAYOUTS)))
     per_topic = []
     for number, section in enumerate(doc['topics']):
         try:
@@ -295,16 +547,22 @@ def from_document(doc):
 def _section_records(section):
     topic, msg_type, definition = section['topic'], section['type'], section['definition']
     count = section['count']
-    constant, columns = section['constant'], section['columns']
+    constant, columns = _floats(section['constant']), dict(section['columns'])
     if not isinstance(count, int) or count < 1:
         raise ValueError('count %r is not a positive integer' % (count,))
+    delta = section.get('delta', [])
+    if not isinstance(delta, list) or any(key not in columns for key in delta):
+        raise ValueError('"delta" names a column that is not there')
     for key, values in columns.items():
         if not isinstance(values, list) or len(values) != count:
             raise ValueError('column %s does not hold %d values' % (key, count))
+        if key in delta:
+            values = _sums(values, key)
+        columns[key] = _floats(values)
     cls = msg_codec.message_class(msg_type, definition)
     if section.get('md5sum') not in (None, cls._md5sum):
         raise ValueError('md5sum %s does not match the definition (%s)' % (section['md5sum'], cls._md5sum))
-    stamps = section['stamps']
+    stamps = _floats(section['stamps'])
     if stamps != HEADER_STAMP:
         if not isinstance(stamps, list) or len(stamps) != count:
             raise ValueError('stamps do not hold %d values' % count)
