@@ -424,37 +424,17 @@ def _training_text(info):
 def cmd_learn(args):
     """Train a model (``--train``), validate it (``--test``); or evaluate an existing one (``--test`` only)."""
     from . import learn_main, learning
-    from .model import AnomalyModel
     if args.train is None and args.test is None:
         raise CommandError('train: give --train DIR (train a model), --test DIR (evaluate --model), or both')
-    for name, folder in (('train', args.train), ('test', args.test)):
-        if folder is not None and not os.path.isdir(folder):
-            raise CommandError('%s: %s: no such directory of feature vectors' % (name, folder))
+    if args.train is not None:
+        _parent_exists(args.model, 'model')
     summary = collections.OrderedDict([('model', args.model), ('train', args.train), ('test', args.test)])
     with _bar(args, 'learn').busy():
-        if args.train is None:
-            model = AnomalyModel.load(args.model)
-            vectors, config = learning.load_vectors(args.test)
-            model.check_config(config)
-            nominal, anomalous = learn_main.split_labels(vectors)
-            report = learning.evaluate(model, nominal, anomalous)
-            info = {}
-        elif args.test is not None:
+        try:
             model, report, info = learn_main.learn(args.train, args.test, args.model, args.nu, args.gamma,
                                                    args.method)
-        else:
-            _parent_exists(args.model, 'model')
-            vectors, config = learning.load_vectors(args.train)
-            nominal, anomalous = learn_main.split_labels(vectors)
-            if nominal is None:
-                raise CommandError('train: %s has no %s/ vectors' % (args.train, learn_main.NOMINAL))
-            model, info = learning.train(nominal, anomalous, config, nu=args.nu, gamma=args.gamma,
-                                         method=args.method)
-            try:
-                model.save(args.model)
-            except OSError as error:
-                raise CommandError('model: cannot write %s: %s' % (args.model, error.strerror or error))
-            report = None
+        except ValueError as error:
+            raise CommandError(str(error).replace('validate:', 'test:', 1))
     summary['trained'] = args.train is not None
     summary['config'] = model.config.to_dict()
     summary['threshold'] = model.threshold

@@ -49,31 +49,46 @@ def check_disjoint(train_dir, validate_dir, train_vectors, validate_vectors):
         raise ValueError('validate: %d vector(s) of %s are also in %s' % (shared, validate_dir, train_dir))
 
 
-def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAULT_METHOD):
-    """Train, validate, save. Returns ``(model, report, info)``; raises ValueError('<what>: ...')."""
-    if not model_path:
-        raise ValueError('model: the output path is required')
-    folder = os.path.dirname(os.path.abspath(model_path))
-    if not os.path.isdir(folder):
-        raise ValueError('model: directory %s does not exist' % folder)
-    train_vectors, config = learning.load_vectors(train_dir)
-    validate_vectors, validate_config = learning.load_vectors(validate_dir)
-    if validate_config != config:
-        raise ValueError('validate: vectors of %s were computed with %s, the training ones with %s'
-                         % (validate_dir, validate_config.to_dict(), config.to_dict()))
-    check_disjoint(train_dir, validate_dir, train_vectors, validate_vectors)
-    nominal, anomalous = split_labels(train_vectors)
-    if nominal is None:
-        raise ValueError('train: %s has no %s/ vectors' % (train_dir, NOMINAL))
-    model, info = learning.train(nominal, anomalous, config, nu=nu, gamma=gamma, method=method)
-    check_nominal, check_anomalous = split_labels(validate_vectors)
-    report = learning.evaluate(model, check_nominal, check_anomalous)
+def _save(model, model_path):
     try:
         model.save(model_path)
     except OSError as error:
         raise ValueError('model: cannot write %s: %s' % (model_path, error.strerror or error))
-    info = dict(info, model=model_path, train=train_dir, validate=validate_dir)
-    return model, report, info
+
+
+def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAULT_METHOD):
+    """Train on ``train_dir`` and save to ``model_path``, validate on ``validate_dir``; either may be None
+    (train only; or evaluate the model at ``model_path``). Returns ``(model, report or None, info)``; raises
+    ValueError('<what>: ...')."""
+    from .model import AnomalyModel
+    if train_dir is None and validate_dir is None:
+        raise ValueError('train: give a directory to train on, one to validate on, or both')
+    if not model_path:
+        raise ValueError('model: the output path is required')
+    for name, directory in (('train', train_dir), ('validate', validate_dir)):
+        if directory is not None and not os.path.isdir(directory):
+            raise ValueError('%s: %s: no such directory of feature vectors' % (name, directory))
+    validate_vectors, validate_config = learning.load_vectors(validate_dir) if validate_dir else (None, None)
+    if train_dir is None:
+        model = AnomalyModel.load(model_path)
+        model.check_config(validate_config)
+        return model, learning.evaluate(model, *split_labels(validate_vectors)), {}
+    folder = os.path.dirname(os.path.abspath(model_path))
+    if not os.path.isdir(folder):
+        raise ValueError('model: directory %s does not exist' % folder)
+    train_vectors, config = learning.load_vectors(train_dir)
+    if validate_dir is not None:
+        if validate_config != config:
+            raise ValueError('validate: vectors of %s were computed with %s, the training ones with %s'
+                             % (validate_dir, validate_config.to_dict(), config.to_dict()))
+        check_disjoint(train_dir, validate_dir, train_vectors, validate_vectors)
+    nominal, anomalous = split_labels(train_vectors)
+    if nominal is None:
+        raise ValueError('train: %s has no %s/ vectors' % (train_dir, NOMINAL))
+    model, info = learning.train(nominal, anomalous, config, nu=nu, gamma=gamma, method=method)
+    report = learning.evaluate(model, *split_labels(validate_vectors)) if validate_dir is not None else None
+    _save(model, model_path)
+    return model, report, dict(info, model=model_path, train=train_dir, validate=validate_dir)
 
 
 def format_result(model, report, info):
