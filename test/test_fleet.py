@@ -90,17 +90,40 @@ def test_learn_on_the_cluster_gives_the_same_model(collected, cluster):
     assert model_arrays(str(root / 'one.json')) == model_arrays(str(root / 'dask.json'))
 
 
-def test_replay_on_the_cluster_writes_the_same_windows(collected, cluster):
+@pytest.fixture(scope='module')
+def replayed(collected, cluster):
     root = collected[0]
     ok_json('learn', '--train', root / 'one', '--model', root / 'model.json', '--workers', 0)
     args = (root / 'bags', '--topic', '/odom', '--model', root / 'model.json')
     one = ok_json('replay', *args, '--out', root / 'logs-one', '--workers', 0)
     dask = ok_json('replay', *args, '--out', root / 'logs-dask', '--scheduler', cluster)
+    return root, one, dask
+
+
+def test_replay_on_the_cluster_writes_the_same_windows(replayed):
+    root, one, dask = replayed
     names = same_tree(str(root / 'logs-one'), str(root / 'logs-dask'))
     assert one['windows'] == dask['windows'] == len(names) > 0
     assert [len(row['windows']) for row in dask['bags']] == [len(row['windows']) for row in one['bags']]
     assert dask['bags'][2]['windows'], 'the run with anomalies has windows'
     assert dask['messages'] == one['messages'] == 18000
+
+
+def test_sweep_reads_each_bag_once_for_every_configuration(replayed, cluster):
+    root = replayed[0]
+    with open(str(root / 'model.json')) as stream:
+        threshold = repr(json.load(stream)['threshold'])
+    document = ok_json('replay', root / 'bags', '--topic', '/odom', '--model', root / 'model.json', '--out',
+                       root / 'sweep', '--scheduler', cluster, '--sweep', 'threshold=%s,-1e9' % threshold)
+    same, never = document['configurations']
+    assert same['label'] == 'threshold=%s' % threshold
+    # the model's own threshold: the windows of the plain replay, file for file
+    for robot in ('robot1', 'robot2', 'robot3'):
+        same_tree(str(root / 'logs-one' / robot), str(root / 'sweep' / robot / same['label']))
+    assert same['windows'] == replayed[1]['windows'] > 0
+    assert same['recall'] == 1.0 and same['false_per_hour'] >= 0
+    assert never['windows'] == never['kept'] == 0 and never['recall'] == 0.0
+    assert same['messages'] == never['messages'] == 18000
 
 
 def test_streamed_learning_holds_one_partition_at_a_time_and_flags_few_held_out(collected, cluster):

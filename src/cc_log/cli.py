@@ -20,6 +20,7 @@ what it uses (rosbag for bags, matplotlib for ``plot``).
 """
 import argparse
 import collections
+import copy
 import inspect
 import json
 import math
@@ -449,6 +450,58 @@ def _vector_dir(path):
     return fleet.holds_vectors(path)
 
 
+def _sweep(args, flat, many):
+    """``replay --sweep``: every combination of the --sweep values over one reading of each bag; a table."""
+    from . import fleet
+    from .triggers import RETRIGGER_MODES
+    sweeps = []
+    for combination in fleet.parse_sweep(args.sweep):
+        options = copy.deepcopy(flat)
+        for key, value in combination.items():
+            if key in ('pre', 'post'):
+                options[key] = _span(key)(value)
+            elif key == 'classify_every':
+                options['classifier'][key] = _span('classify-every')(value)
+            elif key == 'retrigger':
+                if value not in RETRIGGER_MODES:
+                    raise CommandError('sweep: retrigger: %r is not one of %s' % (value, ', '.join(RETRIGGER_MODES)))
+                options['classifier'][key] = value
+        threshold = combination.get('threshold')
+        if threshold is not None:
+            threshold = _number('sweep: threshold', threshold)
+        cfg = _configuration(args, options)
+        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
+        sweeps.append(fleet.Sweep(fleet.sweep_label(combination), cfg, threshold))
+    bags = fleet.expand_bags(args.bag) if many else [args.bag]
+    _writable_dir(args.out, 'out')
+    if not many:
+        args.workers = 0
+    outcomes, summary = _run_fleet(args, 'replay', lambda engine, progress: fleet.sweep_many(
+        engine, bags, args.out, sweeps, progress=progress))
+    rows = _fleet_rows(outcomes, ('seconds', 'anomalies', 'rows'))
+    table = fleet.sweep_table([outcome.value for outcome in outcomes if outcome.ok])
+    summary['configurations'] = table
+    width = max([len('configuration')] + [len(line['label']) for line in table])
+    text = ['%-*s %8s %10s %6s %10s %7s %9s' % (width, 'configuration', 'windows', 'kept', 'kept%', 'stored',
+                                                'recall', 'false/h')]
+    for line in table:
+        text.append('%-*s %8d %10d %5.1f%% %10s %7s %9s' % (
+            width, line['label'], line['windows'], line['kept'], 100.0 * line['kept'] / max(line['messages'], 1),
+            human_bytes(line['stored_bytes']), '-' if line['recall'] is None else '%.2f' % line['recall'],
+            '-' if line['false_per_hour'] is None else '%.1f' % line['false_per_hour']))
+    return _fleet_end(args, summary, rows, text)
+
+
+def _number(name, value):
+    try:
+        number = float(value)
+    except ValueError:
+        number = float('nan')
+    if not math.isfinite(number):
+        raise CommandError('%s: %r is not a number' % (name, value))
+    return number
+
+
 def _learn_many(args):
     """Train over every vector directory of --train (partitions) on the engine: ``(model, info)``."""
     from . import fleet, learn_main, learning
@@ -635,11 +688,13 @@ def cmd_replay(args):
         _existing_file(args.model, 'model file')
     if args.model is not None and args.topic is None:
         raise CommandError('replay: --model needs --topic (the topic the model reads)')
-    cfg = _configuration(args, {
-        'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
-        'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
-        'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
-                       'classify_every': args.classify_every, 'retrigger': args.retrigger}})
+    flat = {'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
+            'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
+            'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
+                           'classify_every': args.classify_every, 'retrigger': args.retrigger}}
+    cfg = _configuration(args, copy.deepcopy(flat))
+    if args.sweep:
+        return _sweep(args, flat, many)
     if many:
         fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
         return _replay_many(args, cfg)
@@ -1269,6 +1324,11 @@ def build_parser():
     p.add_argument('--max-buffer-mb', type=_positive_float('max-buffer-mb', zero=True),
                    metavar='MB', help='memory budget of every message buffered (estimated); a window reaching it '
                    'is written in parts; 0: none (default: %g)' % _max_buffer_mb())
+    p.add_argument('--sweep', action='append', default=[], metavar='KEY=V1,V2',
+                   help='evaluate every combination of these values (keys: threshold, pre, post, classify_every, '
+                   'retrigger; repeatable) over one reading of each bag: a table of windows, messages kept, bytes '
+                   'stored and, with <bag>.truth.json files, recall and false windows per hour; windows go to '
+                   'OUT/<bag name>/<configuration>/')
     _fleet_options(p)
     _common(p)
     p.set_defaults(run=cmd_replay)
