@@ -7,9 +7,10 @@ is one line naming its bag, and the others' results are kept. Each bag writes in
 output directory (``output_names``), so results do not depend on where or in which order tasks ran.
 
 Learning reads vector directories as partitions: ``gather_vectors`` brings them into this process (the
-exact model, identical to the one-process path); ``train_streamed`` never holds more than one partition here:
-the scaler from per-partition moments, Nystroem components from an even sample of every partition, then
-``SGDOneClassSVM.partial_fit`` over the partitions, and the threshold from each partition's held-out blocks.
+exact model, identical to the one-process path); ``train_streamed`` never holds more than one batch here: the
+scaler from per-partition moments, Nystroem components from an even sample of every partition, then
+``SGDOneClassSVM.partial_fit`` on batches drawn from every partition, and the threshold from held-out
+partitions (or blocks).
 """
 import collections
 import glob
@@ -25,6 +26,8 @@ DASK_MISSING = ('Dask is not installed (the fleet commands run on it): apt-get i
                 'python3-distributed, or ./dev.sh setup')
 STREAM_EPOCHS = 5          # passes of partial_fit over every partition
 STREAM_METHOD = 'stream'   # learn --method of train_streamed
+STREAM_BATCH_ROWS = 20000  # vectors of one partial_fit batch: what this process holds at a time
+HELD_PARTITIONS_FROM = 5   # from this many partitions on, whole partitions are held out for the threshold
 
 Outcome = collections.namedtuple('Outcome', 'item ok value')
 Outcome.__doc__ = 'What one task gave: ``value`` is its result when ``ok``, else the one-line error naming ``item``.'
@@ -544,11 +547,33 @@ def gather_vectors(engine, directories, progress=None):
     return vectors, config, max(o.value['peak_rss_mb'] for o in outcomes)
 
 
+def _load_with_role(job):
+    load, item, role = job
+    partition = load(item)
+    partition['role'] = role
+    return partition
+
+
+def partition_roles(count, holdout):
+    """``'held'`` for about ``holdout`` of ``count`` partitions spread over them (the threshold then sees runs
+    the model never saw), ``'train'`` for the others; with fewer than HELD_PARTITIONS_FROM partitions every one
+    is ``'split'`` into time blocks as ``learning.split_blocks`` cuts one."""
+    if count < HELD_PARTITIONS_FROM:
+        return ['split'] * count
+    held = set(min(count - 1, int((k + 0.5) * count / max(1, int(round(holdout * count)))))
+               for k in range(max(1, int(round(holdout * count)))))
+    return ['held' if index in held else 'train' for index in range(count)]
+
+
 def _nominal_split(partition, holdout, blocks):
     from . import learning
     X = partition['vectors'].get('nominal')
+    role = partition.get('role', 'split')
     if X is None or len(X) < 4:
         return np.empty((0, 0)), np.empty((0, 0))
+    if role != 'split':
+        empty = X[:0]
+        return (X, empty) if role == 'train' else (empty, X)
     train_index, held_index = learning.split_blocks(len(X), holdout, blocks)
     return X[train_index], X[held_index]
 
@@ -570,8 +595,10 @@ def _held_scores(partition, holdout, blocks, model):
     return model.scores(held) if len(held) else np.empty(0)
 
 
-def _train_rows(partition, holdout, blocks):
-    return _nominal_split(partition, holdout, blocks)[0]
+def _batch_rows(partition, holdout, blocks, seed, index, batches):
+    """Batch ``index`` of ``batches`` of a partition's training rows, shuffled with ``seed``."""
+    X = _nominal_split(partition, holdout, blocks)[0]
+    return X[np.random.RandomState(seed).permutation(len(X))[index::batches]] if len(X) else X
 
 
 def _partition_rss(partition):
@@ -579,15 +606,16 @@ def _partition_rss(partition):
 
 
 def train_streamed(engine, load, items, nu=None, gamma=None, components=None, epochs=STREAM_EPOCHS, seed=0,
-                   holdout=None, blocks=None, progress=None):
+                   holdout=None, blocks=None, batch_rows=STREAM_BATCH_ROWS, progress=None):
     """Train a ``nystroem-sgd`` model over partitions without holding them all in one process.
 
     ``load(item)`` makes one partition (``load_partition``'s dict) where it runs; it stays there. The scaler
     comes from the partitions' moments, the Nystroem components from an even sample of every partition's
-    training blocks, the linear one-class SVM from ``SGDOneClassSVM.partial_fit`` over the partitions one
-    at a time (``epochs`` passes), the threshold from the scores of every partition's held-out blocks (as
-    ``learning.train``). Returns ``(AnomalyModel, info)``; ``info['peak_rss_mb']`` is this process's,
-    ``info['worker_peak_rss_mb']`` the largest of the partitions' processes.
+    training blocks, the linear one-class SVM from ``SGDOneClassSVM.partial_fit`` on batches of about
+    ``batch_rows`` vectors, each a shuffled share of every partition (``epochs`` passes), the threshold
+    (``learning.nominal_threshold``) from the scores of held-out vectors: whole partitions (``partition_roles``),
+    or with few partitions every partition's held-out blocks. Returns ``(AnomalyModel, info)``;
+    ``info['peak_rss_mb']`` is this process's, ``info['worker_peak_rss_mb']`` the largest of the partitions' processes.
     """
     from sklearn.kernel_approximation import Nystroem
     from sklearn.linear_model import SGDOneClassSVM
@@ -598,7 +626,8 @@ def train_streamed(engine, load, items, nu=None, gamma=None, components=None, ep
     holdout = learning.DEFAULT_HOLDOUT if holdout is None else holdout
     blocks = learning.DEFAULT_BLOCKS if blocks is None else blocks
     components = learning.NYSTROEM_COMPONENTS if components is None else components
-    handles = engine.place(load, items)
+    handles = engine.place(_load_with_role, [(load, item, role)
+                                             for item, role in zip(items, partition_roles(len(items), holdout))])
     configs = engine.each(_partition_config, handles)
     config = _check_configs([Outcome(item, True, {'config': c}) for item, c in zip(items, configs)])
     moments = engine.each(_moments, handles, holdout, blocks)
@@ -619,15 +648,17 @@ def train_streamed(engine, load, items, nu=None, gamma=None, components=None, ep
     chosen = sample[np.random.RandomState(seed).permutation(len(sample))[:components]]
     nystroem = Nystroem(kernel='rbf', gamma=gamma, n_components=len(chosen), random_state=seed).fit(chosen)
     sgd = SGDOneClassSVM(nu=nu, random_state=seed, learning_rate='optimal')
-    order = np.random.RandomState(seed)
+    # every batch takes a share of every partition (one run after another would pull the model to the last)
+    batches = max(1, int(np.ceil(count / float(batch_rows))))
     for epoch in range(epochs):
-        for done, index in enumerate(order.permutation(len(handles)), 1):
-            rows = engine.each(_train_rows, [handles[index]], holdout, blocks)[0]
-            if len(rows):
-                features = nystroem.transform((rows - mean) / scale)
-                sgd.partial_fit(features[order.permutation(len(features))])
+        for index in range(batches):
+            parts = [rows for rows in engine.each(_batch_rows, handles, holdout, blocks, seed + epoch, index, batches)
+                     if len(rows)]
+            if parts:
+                rows = np.concatenate(parts)
+                sgd.partial_fit(nystroem.transform((rows - mean) / scale))
             if progress is not None:
-                progress(epoch * len(handles) + done, epochs * len(handles), None)
+                progress(epoch * batches + index + 1, epochs * batches, None)
     names = vector_names(config)
     kernel = {'components': nystroem.components_, 'normalization': nystroem.normalization_,
               'coef': sgd.coef_.ravel(), 'offset': float(np.ravel(sgd.offset_)[0]), 'gamma': gamma}
@@ -638,7 +669,7 @@ def train_streamed(engine, load, items, nu=None, gamma=None, components=None, ep
     info = {'method': 'nystroem-sgd-streamed', 'requested_method': STREAM_METHOD, 'partitions': len(handles),
             'vectors_train': int(count), 'vectors_held_out': int(len(held)), 'vectors_nominal': int(count + len(held)),
             'vectors_anomalous': 0, 'features': dimension, 'config': config.to_dict(), 'nu': nu, 'gamma': gamma,
-            'components': int(len(chosen)), 'epochs': epochs, 'threshold': float(threshold),
+            'components': int(len(chosen)), 'epochs': epochs, 'batches': batches, 'threshold': float(threshold),
             'threshold_rule': 'held-out nominal: q%g - %g * (median - q%g)' % (
                 learning.DEFAULT_QUANTILE, learning.DEFAULT_MARGIN, learning.DEFAULT_QUANTILE),
             'held_out_flagged': int(np.sum(held < threshold)),
@@ -654,16 +685,7 @@ def _partition_config(partition):
     return partition['config']
 
 
-def vectors_of_bag(job):
-    """A partition computed from a bag instead of read from files: ``job`` is ``(bag, topics, FeatureConfig,
-    stride)``; every vector is labelled nominal."""
-    from . import bagio
-    bag_path, topics, config, stride = job
-    _, X = bagio.feature_vectors(bag_path, topics, config, stride)
-    return {'vectors': {'nominal': X}, 'config': config, 'messages': len(X), 'peak_rss_mb': peak_rss_mb()}
-
-
 __all__ = ['Engine', 'Outcome', 'Meter', 'expand_bags', 'expand_vector_dirs', 'output_names', 'collect_one',
            'collect_many', 'replay_one', 'replay_many', 'replay_setup', 'parse_sweep', 'sweep_one', 'sweep_many',
            'sweep_table', 'Sweep', 'gather_vectors', 'train_streamed',
-           'load_partition', 'vectors_of_bag', 'failures']
+           'load_partition', 'failures']
