@@ -8,9 +8,10 @@ workers; streamed learning over partitions vs the exact SVM on a subsample.
     python3 bench/fleet.py --quick                # 4 runs of 1 min (tests)
 
 Pipeline: the real ``cclog`` in a subprocess, as users run it, over the directory of runs: ``collect``
-(motion features, window 500, stride 25), ``learn`` (auto: the exact OneClassSVM), ``replay`` (the model on
-/odom), each with ``--workers 0`` (the one-process path), ``--workers 1`` and ``--workers 2`` (a local Dask
-cluster, started by the command: its start-up is in the wall time). Messages/s are odometry messages read per
+(motion features, window 500, stride 25) of every run, ``learn`` (auto: the exact OneClassSVM) on the vectors
+of the even runs (no anomalies), ``replay`` (the model on /odom) of every run (the odd ones have anomalies),
+each with ``--workers 0`` (the one-process path), ``--workers 1`` and ``--workers 2`` (a local Dask cluster,
+started by the command: its start-up is in the wall time). Messages/s are odometry messages read per
 wall second. The outputs of the three engines are compared file for file (vector files, windows) and the models
 array for array.
 
@@ -57,9 +58,9 @@ def cclog(*args):
 
 
 def simulate(job):
-    """One simulated run (odometry at ``rate``) with anomalies and its truth file."""
+    """One simulated run (odometry at ``rate``) and its truth file: ``anomalous*`` runs with anomalies."""
     path, minutes, seed, rate = job
-    anomalies = max(1, min(6, int(minutes * 60 // 30) - 1))
+    anomalies = max(1, min(6, int(minutes * 60 // 30) - 1)) if 'anomalous' in os.path.basename(path) else 0
     sim.simulate_to_bag(path, sim.SimConfig(rate=rate, seed=seed, minutes=minutes, anomalies=anomalies))
     return {'messages': int(minutes * 60 * rate)}
 
@@ -83,7 +84,8 @@ def pipeline(bags_dir, work, workers):
     engine = ['--workers', workers]
     collected, collect_wall = cclog('collect', bags_dir, '--topic', '/odom', '--out', out + '/vectors', '--window',
                                     WINDOW, '--stride', STRIDE, *engine)
-    learned, learn_wall = cclog('learn', '--train', out + '/vectors', '--model', out + '/model.json', *engine)
+    learned, learn_wall = cclog('learn', '--train', out + '/vectors/nominal*', '--model', out + '/model.json',
+                                *engine)
     replayed, replay_wall = cclog('replay', bags_dir, '--topic', '/odom', '--model', out + '/model.json', '--out',
                                   out + '/windows', *engine)
     messages = collected['messages']
@@ -165,8 +167,9 @@ def main():
     work = args.work or tempfile.mkdtemp(prefix='cc_log_fleet_')
     bags_dir = os.path.join(work, 'runs')
     os.makedirs(bags_dir, exist_ok=True)
-    jobs = [(os.path.join(bags_dir, 'robot%02d.bag' % i), args.minutes, 100 + i, args.rate) for i in range(args.runs)]
-    with fleet.Engine(2) as engine:
+    jobs = [(os.path.join(bags_dir, '%s%02d.bag' % ('anomalous' if i % 2 else 'nominal', i)), args.minutes, 100 + i,
+             args.rate) for i in range(args.runs)]
+    with fleet.Engine(2) as engine:  # the runs: made once, kept in --work
         missing = [job for job in jobs if not os.path.exists(sim.truth_path(job[0]))]
         bad = fleet.failures(engine.run(simulate, missing))
         if bad:
@@ -174,8 +177,9 @@ def main():
     full = 40 * 10 * 60 * 100.0 * 2  # the target: 40 runs of 10 min, odometry and IMU at 100 Hz
     messages = args.runs * args.minutes * 60 * args.rate
     common.header('Fleet scale on Dask: collect + learn + replay over %d runs' % args.runs, [
-        'data: %d simulated BWIBot runs (cc_log.sim, seeds 100..%d) of %g min at %g Hz, odometry only: %d messages '
-        '(%.3f of the target\'s ~4.8 M messages of 40 runs x 10 min, odometry + IMU) in %s'
+        'data: %d simulated BWIBot runs (cc_log.sim, seeds 100..%d; odd ones with anomalies) of %g min at %g Hz, '
+        'odometry only: %d messages (%.3f of the target\'s ~4.8 M messages of 40 runs x 10 min, odometry + IMU) '
+        'in %s'
         % (args.runs, 99 + args.runs, args.minutes, args.rate, messages, messages / full, bags_dir)])
 
     rows = [pipeline(bags_dir, work, workers) for workers in (0, 1, 2)]

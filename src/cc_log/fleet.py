@@ -547,10 +547,13 @@ def gather_vectors(engine, directories, progress=None):
     return vectors, config, max(o.value['peak_rss_mb'] for o in outcomes)
 
 
+class _Load(collections.namedtuple('_Load', 'load item role')):
+    """One partition to make (a named tuple: Dask would take a plain ``(function, ...)`` tuple for a task)."""
+
+
 def _load_with_role(job):
-    load, item, role = job
-    partition = load(item)
-    partition['role'] = role
+    partition = job.load(job.item)
+    partition['role'] = job.role
     return partition
 
 
@@ -626,7 +629,7 @@ def train_streamed(engine, load, items, nu=None, gamma=None, components=None, ep
     holdout = learning.DEFAULT_HOLDOUT if holdout is None else holdout
     blocks = learning.DEFAULT_BLOCKS if blocks is None else blocks
     components = learning.NYSTROEM_COMPONENTS if components is None else components
-    handles = engine.place(_load_with_role, [(load, item, role)
+    handles = engine.place(_load_with_role, [_Load(load, item, role)
                                              for item, role in zip(items, partition_roles(len(items), holdout))])
     configs = engine.each(_partition_config, handles)
     config = _check_configs([Outcome(item, True, {'config': c}) for item, c in zip(items, configs)])
