@@ -453,15 +453,15 @@ def _vector_dir(path):
 def _sweep(args, flat, many):
     """``replay --sweep``: every combination of the --sweep values over one reading of each bag; a table."""
     from . import fleet
+    from .spans import Span
     from .triggers import RETRIGGER_MODES
     sweeps = []
     for combination in fleet.parse_sweep(args.sweep):
         options = copy.deepcopy(flat)
         for key, value in combination.items():
-            if key in ('pre', 'post'):
-                options[key] = _span(key)(value)
-            elif key == 'classify_every':
-                options['classifier'][key] = _span('classify-every')(value)
+            if key in ('pre', 'post', 'classify_every'):
+                Span.parse(value, 'sweep: ' + key)
+                (options if key != 'classify_every' else options['classifier'])[key] = value
             elif key == 'retrigger':
                 if value not in RETRIGGER_MODES:
                     raise CommandError('sweep: retrigger: %r is not one of %s' % (value, ', '.join(RETRIGGER_MODES)))
