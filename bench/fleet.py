@@ -27,6 +27,7 @@ import filecmp
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -45,16 +46,21 @@ WINDOW = '500'
 STRIDE = 25
 
 
+def children_cpu():
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def cclog(*args):
-    """``cclog ARGS --json`` in a subprocess: (document, wall seconds)."""
+    """``cclog ARGS --json`` in a subprocess: (document, wall seconds, CPU seconds of it and its worker processes)."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [common.SRC, os.environ.get('PYTHONPATH')])))
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), children_cpu()
     result = subprocess.run([sys.executable, CCLOG] + [str(a) for a in args] + ['--json'], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, universal_newlines=True, env=env)
-    wall = time.perf_counter() - started
+    wall, cpu = time.perf_counter() - started, children_cpu() - cpu
     if result.returncode != 0:
         raise SystemExit('cclog %s failed: %s' % (' '.join(map(str, args)), result.stderr))
-    return json.loads(result.stdout), wall
+    return json.loads(result.stdout), wall, cpu
 
 
 def simulate(job):
@@ -82,17 +88,18 @@ def pipeline(bags_dir, work, workers):
     """collect, learn, replay with ``--workers workers``: rows and output paths."""
     out = os.path.join(work, 'w%d' % workers)
     engine = ['--workers', workers]
-    collected, collect_wall = cclog('collect', bags_dir, '--topic', '/odom', '--out', out + '/vectors', '--window',
-                                    WINDOW, '--stride', STRIDE, *engine)
-    learned, learn_wall = cclog('learn', '--train', out + '/vectors/nominal*', '--model', out + '/model.json',
-                                *engine)
-    replayed, replay_wall = cclog('replay', bags_dir, '--topic', '/odom', '--model', out + '/model.json', '--out',
-                                  out + '/windows', *engine)
+    collected, collect_wall, collect_cpu = cclog('collect', bags_dir, '--topic', '/odom', '--out', out + '/vectors',
+                                                 '--window', WINDOW, '--stride', STRIDE, *engine)
+    learned, learn_wall, learn_cpu = cclog('learn', '--train', out + '/vectors/nominal*', '--model',
+                                           out + '/model.json', *engine)
+    replayed, replay_wall, replay_cpu = cclog('replay', bags_dir, '--topic', '/odom', '--model', out + '/model.json',
+                                              '--out', out + '/windows', *engine)
     messages = collected['messages']
     return {'workers': workers, 'out': out, 'messages': messages, 'vectors': collected['vectors'],
             'windows': replayed['windows'], 'collect': collect_wall, 'learn': learn_wall, 'replay': replay_wall,
-            'learn_train_seconds': learned['info']['train_seconds'],
-            'total': collect_wall + learn_wall + replay_wall}
+            'collect_cpu': collect_cpu, 'learn_cpu': learn_cpu, 'replay_cpu': replay_cpu,
+            'learn_vectors': learned['info']['vectors_nominal'], 'total': collect_wall + learn_wall + replay_wall,
+            'total_cpu': collect_cpu + learn_cpu + replay_cpu}
 
 
 def partition_of_run(job):
@@ -192,6 +199,10 @@ def main():
                       row['messages'] / row['total'], base['total'] / row['total']])
     common.table(['engine', 'messages', 'vectors', 'windows', 'collect msg/s', 'learn s', 'replay msg/s', 'total s',
                   'end-to-end msg/s', 'speedup'], table, title='End to end (wall seconds, cluster start-up included)')
+    common.table(['engine', 'collect CPU s', 'learn CPU s', 'replay CPU s', 'total CPU s'],
+                 [[r['workers'], r['collect_cpu'], r['learn_cpu'], r['replay_cpu'], r['total_cpu']] for r in rows],
+                 title='CPU seconds of the commands and their worker processes (the machine is shared: wall seconds '
+                 'include waiting for a core)')
     for row in rows[1:]:
         same = (same_files(base['out'] + '/vectors', row['out'] + '/vectors')
                 and same_files(base['out'] + '/windows', row['out'] + '/windows')
@@ -199,9 +210,11 @@ def main():
         print('identical to the one-process outputs with %d worker(s) (vector files, model, window files): %s'
               % (row['workers'], 'yes' if same else 'NO'))
     print()
-    print('per-message wall cost, one process: collect %.0f us, replay %.0f us; learn (exact, %d vectors) %.1f s'
-          % (1e6 * base['collect'] / base['messages'], 1e6 * base['replay'] / base['messages'], base['vectors'],
-             base['learn']))
+    print('per-message cost, one process: collect %.0f us wall, %.0f us CPU; replay %.0f us wall, %.0f us CPU; '
+          'learn (exact, %d vectors) %.1f s wall, %.1f s CPU'
+          % (1e6 * base['collect'] / base['messages'], 1e6 * base['collect_cpu'] / base['messages'],
+             1e6 * base['replay'] / base['messages'], 1e6 * base['replay_cpu'] / base['messages'],
+             base['learn_vectors'], base['learn'], base['learn_cpu']))
     overhead = scheduler_overhead(2)
     print('scheduler overhead per task (empty task, local cluster of 2): %.1f ms' % (1e3 * overhead))
     print()
