@@ -137,7 +137,7 @@ def learning_rows(bags, stride, workers_list):
             exact, info = learning.train(X, None, FeatureConfig('motion', WINDOW), method='auto')
         fp = false_positive_rate(exact, held_X)
         name = 'exact OCSVM on a %d subsample (one process, all %d vectors in it)' % (info['vectors_train'], len(X))
-        rows.append([name, '-', len(X), timer.wall, '%.0f (this process)' % common.peak_rss_mb(),
+        rows.append([name, '-', len(X), timer.wall, '%.0f (this process)' % fleet.peak_rss_mb(),
                      '%d/%d = %.4f +- %.4f' % (fp[0], len(held_X), fp[1], fp[2])])
     del X
     for workers in workers_list:
@@ -146,7 +146,7 @@ def learning_rows(bags, stride, workers_list):
         fp = false_positive_rate(model, held_X)
         rows.append(['streamed Nystroem + SGD partial_fit (%d partitions)' % info['partitions'], workers,
                      info['vectors_train'] + info['vectors_held_out'], timer.wall,
-                     '%.0f per worker, %.0f here' % (info['worker_peak_rss_mb'], info['peak_rss_mb']),
+                     '%.0f per worker' % info['worker_peak_rss_mb'],
                      '%d/%d = %.4f +- %.4f' % (fp[0], len(held_X), fp[1], fp[2])])
     return rows, compute, len(held_X)
 
@@ -168,6 +168,7 @@ def main():
     parser.add_argument('--learn-stride', type=int, default=5, help='a learning vector every N messages')
     parser.add_argument('--work', help='directory for bags and outputs (default: a temporary one)')
     parser.add_argument('--quick', action='store_true', help='4 runs of 1 min')
+    parser.add_argument('--learning-only', action='store_true', help='only the learning rows')
     args = parser.parse_args()
     if args.quick:
         args.runs, args.minutes = 4, 1.0
@@ -189,6 +190,16 @@ def main():
         'in %s'
         % (args.runs, 99 + args.runs, args.minutes, args.rate, messages, messages / full, bags_dir)])
 
+    rows = [] if args.learning_only else pipeline_rows(bags_dir, work)
+    learn_table, compute, held = learning_rows([job[0] for job in jobs], args.learn_stride, (1, 2))
+    common.table(['model', 'workers', 'vectors', 'train wall s', 'peak RSS MB', 'held-out FP (95% bound)'],
+                 learn_table, title='Learning at fleet scale (vectors every %d messages; %d held-out nominal vectors '
+                 'of 20%% of the runs; %.0f s to compute the vectors)' % (args.learn_stride, held, compute))
+    print('total %.0f s' % sum(row['total'] for row in rows))
+
+
+def pipeline_rows(bags_dir, work):
+    """The end-to-end tables (one process, 1 and 2 workers) and the per-message costs; the rows."""
     rows = [pipeline(bags_dir, work, workers) for workers in (0, 1, 2)]
     base = rows[0]
     table = []
@@ -218,12 +229,7 @@ def main():
     overhead = scheduler_overhead(2)
     print('scheduler overhead per task (empty task, local cluster of 2): %.1f ms' % (1e3 * overhead))
     print()
-
-    learn_table, compute, held = learning_rows([job[0] for job in jobs], args.learn_stride, (1, 2))
-    common.table(['model', 'workers', 'vectors', 'train wall s', 'peak RSS MB', 'held-out FP (95% bound)'],
-                 learn_table, title='Learning at fleet scale (vectors every %d messages; %d held-out nominal vectors '
-                 'of the last 20%% of runs; %.0f s to compute the vectors)' % (args.learn_stride, held, compute))
-    print('total %.0f s' % sum(row['total'] for row in rows))
+    return rows
 
 
 if __name__ == '__main__':

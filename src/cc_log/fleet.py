@@ -136,7 +136,14 @@ def _guarded(function, item):
 
 
 def peak_rss_mb():
-    """Peak resident memory of this process (MB)."""
+    """Peak resident memory of this process (MB): VmHWM (ru_maxrss of a spawned process may include its parent's)."""
+    try:
+        with open('/proc/self/status') as stream:
+            for line in stream:
+                if line.startswith('VmHWM:'):
+                    return int(line.split()[1]) / 1024.0
+    except (IOError, OSError, ValueError, IndexError):
+        pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
