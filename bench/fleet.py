@@ -136,7 +136,8 @@ def learning_rows(bags, stride, workers_list):
         with common.Timer() as timer:
             exact, info = learning.train(X, None, FeatureConfig('motion', WINDOW), method='auto')
         fp = false_positive_rate(exact, held_X)
-        name = 'exact OCSVM on a %d subsample (one process, all %d vectors in it)' % (info['vectors_train'], len(X))
+        name = 'exact OCSVM on %d training vectors%s (one process, all %d vectors in it)' % (
+            info['vectors_train'], ', an even subsample' if info['subsampled'] else '', len(X))
         rows.append([name, '-', len(X), timer.wall, '%.0f (this process)' % fleet.peak_rss_mb(),
                      '%d/%d = %.4f +- %.4f' % (fp[0], len(held_X), fp[1], fp[2])])
     del X
