@@ -4,7 +4,7 @@
 #   ./dev.sh demo     install what is missing, build, run the demo
 #   ./dev.sh test     install what is missing, build, run every test (unit tests and rostests)
 #   ./dev.sh setup    install what is missing and build only
-#   ./dev.sh packages the Debian packages setup installs when missing (package.xml's keys and the toolchain)
+#   ./dev.sh packages the Debian packages setup installs when missing (package.xml's keys, the toolchain, Dask)
 #
 # Setup installs the Debian packages cc_log needs when they are missing (quick when they are present) and
 # builds a catkin workspace in .catkin_ws/ whose src/cc_log points at this repository (entry by entry). Afterwards
@@ -18,6 +18,9 @@ export PATH="/usr/bin:/bin:$PATH"
 
 # What building needs besides package.xml's keys: catkin_make configures a C/C++ project and runs make.
 BUILD_TOOLCHAIN=(g++ make cmake)
+# An optional extra without a rosdep key (ros/rosdistro's rosdep/python.yaml has no dask key): Dask, which the
+# fleet commands (cclog collect / learn / replay over many bags) run on; they ask for it in one line when missing.
+OPTIONAL_EXTRAS=(python3-dask python3-distributed)
 
 log() { printf '[dev.sh] %s\n' "$*" >&2; }
 
@@ -46,7 +49,7 @@ debian_packages_of() {
 
 debian_packages() {
   local key packages unknown=()
-  printf '%s\n' "${BUILD_TOOLCHAIN[@]}"
+  printf '%s\n' "${BUILD_TOOLCHAIN[@]}" "${OPTIONAL_EXTRAS[@]}"
   for key in $(package_keys); do
     if packages=$(debian_packages_of "$key"); then printf '%s\n' $packages; else unknown+=("$key"); fi
   done

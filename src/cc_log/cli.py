@@ -21,6 +21,7 @@ what it uses (rosbag for bags, matplotlib for ``plot``).
 """
 import argparse
 import collections
+import copy
 import inspect
 import json
 import math
@@ -349,14 +350,182 @@ def _window_summary(path, metadata, records):
     ])
 
 
+# -- many bags (fleet) ------------------------------------------------------------------------------------
+
+def _fleet_wanted(args, paths, single_dir=None):
+    """True for the fleet path: several inputs, a directory (unless ``single_dir(path)`` says it is one input)
+    or a glob, or --workers / --scheduler given."""
+    import glob
+    return (len(paths) > 1 or glob.has_magic(paths[0]) or args.workers is not None or args.scheduler is not None
+            or (os.path.isdir(paths[0]) and not (single_dir and single_dir(paths[0]))))
+
+
+def _engine(args):
+    from . import fleet
+    return fleet.Engine(args.workers, args.scheduler)
+
+
+def _run_fleet(args, label, work):
+    """``work(engine, progress)`` -> Outcomes on the engine of --workers / --scheduler with a bar of bags;
+    returns ``(outcomes, summary)``; each failed bag is one line on stderr."""
+    from . import fleet
+    with _engine(args) as engine, _bar(args, label) as bar:
+        meter = fleet.Meter(lambda done, total, text: (setattr(bar, 'label', '%s (%s)' % (label, text)),
+                                                       bar.set(done, total)))
+        outcomes = work(engine, meter.update)
+        summary = meter.summary(engine)
+    for line in fleet.failures(outcomes):
+        sys.stderr.write('%s %s: error: %s\n' % (PROG, label, line))
+    return outcomes, summary
+
+
+def _fleet_rows(outcomes, fields):
+    """Per bag: ``{'bag', 'directory', <fields of its result>}`` or ``{'bag', 'error'}``."""
+    rows = []
+    for outcome in outcomes:
+        row = collections.OrderedDict([('bag', outcome.item.path), ('directory', outcome.item.out)])
+        if outcome.ok:
+            row.update((field, outcome.value[field]) for field in fields)
+        else:
+            row['error'] = outcome.value
+        rows.append(row)
+    return rows
+
+
+def _fleet_end(args, summary, rows, text):
+    """Print the JSON document or the text lines of a fleet run; exit status 1 when a bag failed."""
+    failed = sum('error' in row for row in rows)
+    summary['bags'] = rows
+    summary['failed'] = failed
+    if args.json:
+        _print_json(summary)
+    else:
+        print('\n'.join(text))
+        print('%d bags (%d failed), %d messages in %.1f s: %.0f messages/s (%s)' % (
+            len(rows), failed, summary['messages'], summary['seconds'], summary['messages_per_second'],
+            summary['engine']))
+    return EXIT_BAD_INPUT if failed else EXIT_OK
+
+
+def _collect_many(args, specs, label, stride):
+    from . import fleet
+    bags = fleet.expand_bags(args.bag)
+    outcomes, summary = _run_fleet(args, 'collect', lambda engine, progress: fleet.collect_many(
+        engine, bags, args.out, specs, label, stride, single=not args.config, progress=progress))
+    rows = _fleet_rows(outcomes, ('vectors', 'messages'))
+    summary['vectors'] = sum(row.get('vectors', 0) for row in rows)
+    lines = ['%s: %d feature vectors -> %s' % (row['bag'], row['vectors'], row['directory'])
+             for row in rows if 'error' not in row]
+    return _fleet_end(args, summary, rows, lines)
+
+
+def _replay_many(args, cfg):
+    from . import fleet
+    bags = fleet.expand_bags(args.bag)
+    _writable_dir(args.out, 'out')
+    outcomes, summary = _run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
+        engine, bags, args.out, cfg, progress=progress))
+    rows = _fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows'))
+    for row in rows:
+        row['windows'] = [collections.OrderedDict((key, w[key]) for key in ('start', 'end', 'messages', 'path'))
+                          for w in row.get('windows', ())]
+    good = [row for row in rows if 'error' not in row]
+    summary['windows'] = sum(len(row['windows']) for row in good)
+    summary['saved_messages'] = sum(w['messages'] for row in good for w in row['windows'])
+    summary['stored_bytes'] = sum(row['stored_bytes'] for row in good)
+    return _fleet_end(args, summary, rows, ['%s: %d messages in, %d saved in %d window(s) (%s) -> %s' % (
+        row['bag'], row['input_messages'], sum(w['messages'] for w in row['windows']), len(row['windows']),
+        human_bytes(row['stored_bytes']), row['directory']) for row in good])
+
+
+def _vector_dir(path):
+    from . import fleet
+    return fleet.holds_vectors(path)
+
+
+def _sweep(args, flat, many):
+    """``replay --sweep``: every combination of the --sweep values over one reading of each bag; a table."""
+    from . import fleet
+    from .spans import Span
+    from .triggers import RETRIGGER_MODES
+    sweeps = []
+    for combination in fleet.parse_sweep(args.sweep):
+        options = copy.deepcopy(flat)
+        for key, value in combination.items():
+            if key in ('pre', 'post', 'classify_every'):
+                Span.parse(value, 'sweep: ' + key)
+                (options if key != 'classify_every' else options['classifier'])[key] = value
+            elif key == 'retrigger':
+                if value not in RETRIGGER_MODES:
+                    raise CommandError('sweep: retrigger: %r is not one of %s' % (value, ', '.join(RETRIGGER_MODES)))
+                options['classifier'][key] = value
+        threshold = combination.get('threshold')
+        if threshold is not None:
+            threshold = _number('sweep: threshold', threshold)
+        cfg = _configuration(args, options)
+        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
+        sweeps.append(fleet.Sweep(fleet.sweep_label(combination), cfg, threshold))
+    bags = fleet.expand_bags(args.bag) if many else [args.bag]
+    _writable_dir(args.out, 'out')
+    if not many:
+        args.workers = 0
+    outcomes, summary = _run_fleet(args, 'replay', lambda engine, progress: fleet.sweep_many(
+        engine, bags, args.out, sweeps, progress=progress))
+    rows = _fleet_rows(outcomes, ('seconds', 'anomalies', 'rows'))
+    table = fleet.sweep_table([outcome.value for outcome in outcomes if outcome.ok])
+    summary['configurations'] = table
+    width = max([len('configuration')] + [len(line['label']) for line in table])
+    text = ['%-*s %8s %10s %6s %10s %7s %9s' % (width, 'configuration', 'windows', 'kept', 'kept%', 'stored',
+                                                'recall', 'false/h')]
+    for line in table:
+        text.append('%-*s %8d %10d %5.1f%% %10s %7s %9s' % (
+            width, line['label'], line['windows'], line['kept'], 100.0 * line['kept'] / max(line['messages'], 1),
+            human_bytes(line['stored_bytes']), '-' if line['recall'] is None else '%.2f' % line['recall'],
+            '-' if line['false_per_hour'] is None else '%.1f' % line['false_per_hour']))
+    return _fleet_end(args, summary, rows, text)
+
+
+def _number(name, value):
+    try:
+        number = float(value)
+    except ValueError:
+        number = float('nan')
+    if not math.isfinite(number):
+        raise CommandError('%s: %r is not a number' % (name, value))
+    return number
+
+
+def _learn_many(args):
+    """Train over every vector directory of --train (partitions) on the engine: ``(model, info)``."""
+    from . import fleet, learn_main, learning
+    directories = fleet.expand_vector_dirs(args.train)
+    with _engine(args) as engine:
+        if args.method == fleet.STREAM_METHOD:
+            model, info = fleet.train_streamed(engine, fleet.load_partition, directories, nu=args.nu,
+                                               gamma=args.gamma)
+        else:
+            vectors, config, worker_rss = fleet.gather_vectors(engine, directories)
+            nominal, anomalous = learn_main.split_labels(vectors)
+            if nominal is None:
+                raise CommandError('train: %s have no %s/ vectors' % (' '.join(args.train), learn_main.NOMINAL))
+            model, info = learning.train(nominal, anomalous, config, nu=args.nu, gamma=args.gamma,
+                                         method=args.method)
+            info['worker_peak_rss_mb'] = worker_rss
+        info['partitions'] = len(directories)
+        info['engine'] = engine.describe()
+    return model, info
+
+
 # -- commands ---------------------------------------------------------------------------------------------
 
 def cmd_collect(args):
     """Feature vectors of a bag's driving topic into ``OUT/<label>/``, as collect mode writes them; with
     ``--config``, of every classifier's feature set into ``OUT/<name>/<label>/``."""
-    from . import collector
+    from . import collector, fleet
     from .model import AnomalyModel
-    _existing_file(args.bag, 'bag file')
+    many = _fleet_wanted(args, args.bag)
+    if not many:
+        args.bag = _existing_file(args.bag[0], 'bag file')
     if not args.config and args.topic is None:
         raise CommandError('collect: give --topic, or --config (a configuration with classifiers)')
     single = {}
@@ -369,14 +538,10 @@ def cmd_collect(args):
     specs = cfg.feature_specs(AnomalyModel.load)
     if not specs:
         raise CommandError('collect: %s has no classifier: nothing to compute' % args.config)
+    if many:
+        return _collect_many(args, specs, label, stride)
     with _bar(args, 'collect') as bar:
-        if args.config:
-            result = _call(collector.collect_bag, bar, args.bag, None, args.out, label=label, stride=stride,
-                           feature_specs=specs)
-        else:
-            name, config, topics = specs[0]
-            result = _call(collector.collect_bag, bar, args.bag, topics, args.out, label=label,
-                           window=config.window, stride=stride, feature_set=config.feature_set)
+        result = _call(fleet.collect_one, bar, args.bag, args.out, specs, label, stride, single=not args.config)
     first = specs[0][1]
     summary = collections.OrderedDict([
         ('bag', args.bag), ('topic', specs[0][2][0]), ('label', label), ('window', first.window),
@@ -421,19 +586,36 @@ def _training_text(info):
     return '\n'.join(lines)
 
 
+def _save_model(model, path):
+    try:
+        model.save(path)
+    except OSError as error:
+        raise CommandError('model: cannot write %s: %s' % (path, error.strerror or error))
+
+
 def cmd_learn(args):
     """Train a model (``--train``), validate it (``--test``); or evaluate an existing one (``--test`` only)."""
     from . import learn_main, learning
     if args.train is None and args.test is None:
         raise CommandError('train: give --train DIR (train a model), --test DIR (evaluate --model), or both')
+    many = args.train is not None and (args.method == 'stream' or _fleet_wanted(args, args.train, _vector_dir))
+    if args.train is not None and not many:
+        args.train = args.train[0]
     if args.train is not None:
         _parent_exists(args.model, 'model')
     summary = collections.OrderedDict([('model', args.model), ('train', args.train), ('test', args.test)])
     with _bar(args, 'learn').busy():
         try:
-            model, report, info = learn_main.learn(args.train, args.test, args.model, args.nu, args.gamma,
-                                                   args.method)
+            if many:
+                model, info = _learn_many(args)
+                _save_model(model, args.model)
+                report = learn_main.learn(None, args.test, args.model)[1] if args.test is not None else None
+            else:
+                model, report, info = learn_main.learn(args.train, args.test, args.model, args.nu, args.gamma,
+                                                       args.method)
         except ValueError as error:
+            if isinstance(error, CommandError):
+                raise
             raise CommandError(str(error).replace('validate:', 'test:', 1))
     summary['trained'] = args.train is not None
     summary['config'] = model.config.to_dict()
@@ -455,12 +637,12 @@ def cmd_learn(args):
 
 def cmd_tune(args):
     """Set a model's threshold to a false-window budget on nominal bags (``tuning.tune``); write it to --out."""
-    from . import bagio, tuning
+    from . import bagio, fleet, tuning
     from .model import AnomalyModel
     model = AnomalyModel.load(_existing_file(args.model, 'model file'))
     for bag in args.bag:
         _existing_file(bag, 'bag file')
-        _check_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
+        fleet.check_bag_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
     _parent_exists(args.out, 'out')
     with _bar(args, 'tune').busy():
         runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]
@@ -484,19 +666,6 @@ def cmd_tune(args):
     return EXIT_OK
 
 
-def _check_topics(bag_path, topics, types=None):
-    """One clear line before any work: a readable bag holding ``topics``, each of the type ``types`` says
-    (``{topic: type}``; others any); returns how many messages they have."""
-    from . import bagio
-    bag = bagio.open_bag(bag_path)
-    try:
-        for topic in topics:
-            bagio.check_topic(bag, topic, (types or {}).get(topic))
-        return bag.get_message_count(list(topics))
-    finally:
-        bag.close()
-
-
 def _configuration(args, flat):
     """The Config of ``--config`` (if given) with the options of ``flat`` (None: not given) and the single
     classifier of ``--model``/``--topic`` over it."""
@@ -515,41 +684,29 @@ def _configuration(args, flat):
 def cmd_replay(args):
     """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read, with the
     triggers of ``--config`` and/or the classifier of ``--model`` on ``--topic``."""
-    from . import config as config_mod
-    from . import smart_logger, window_writer
-    from .model import AnomalyModel
-    _existing_file(args.bag, 'bag file')
+    from . import fleet
+    many = _fleet_wanted(args, args.bag)
+    if not many:
+        args.bag = _existing_file(args.bag[0], 'bag file')
     if not args.config and (args.topic is None or args.model is None):
         raise CommandError('replay: give --topic and --model, or --config (a configuration with triggers)')
     if args.model is not None:
         _existing_file(args.model, 'model file')
     if args.model is not None and args.topic is None:
         raise CommandError('replay: --model needs --topic (the topic the model reads)')
-    cfg = _configuration(args, {
-        'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
-        'precision': args.precision, 'driving_topic': args.topic,
-        'side_topics': [t for t in args.side_topic if t != args.topic],
-        'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
-                       'classify_every': args.classify_every, 'retrigger': args.retrigger}})
-    triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
-    options = cfg.logger_options(triggers)
-    if options['side_topics'] is None:  # topic patterns (*, re:, !): the bag's topics they select
-        from . import bagio
-        bag = bagio.open_bag(args.bag)
-        try:
-            options['side_topics'] = cfg.selection.select(sorted(bagio.topics_of(bag)))
-        finally:
-            bag.close()
-    logger_types = smart_logger.topic_types(triggers)
-    topics = [options['driving_topic']] + [t for t in sorted(set(options['side_topics']).union(logger_types))
-                                           if t != options['driving_topic']]
-    total = _check_topics(args.bag, topics, logger_types)
-    _writable_dir(args.out, 'out')
-    retry = window_writer.OFFLINE_RETRY_SECONDS
-    logger = smart_logger.SmartLogger(None, args.out, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
-                                      give_up_after=retry, close_retry=retry, **options)
-    with _bar(args, 'replay', total) as bar:
-        summary = _call(smart_logger.replay_into, bar, logger, args.bag)
+    flat = {'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
+            'precision': args.precision, 'driving_topic': args.topic,
+            'side_topics': [t for t in args.side_topic if t != args.topic],
+            'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
+                           'classify_every': args.classify_every, 'retrigger': args.retrigger}}
+    cfg = _configuration(args, copy.deepcopy(flat))
+    if args.sweep:
+        return _sweep(args, flat, many)
+    if many:
+        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
+        return _replay_many(args, cfg)
+    with _bar(args, 'replay') as bar:
+        summary = fleet.replay_one(args.bag, args.out, cfg, bar.set, lambda path: _writable_dir(path, 'out'))
     result = collections.OrderedDict([
         ('input_messages', summary['input_messages']),
         ('raw_json_bytes', summary['raw_json_bytes']),
@@ -564,7 +721,7 @@ def cmd_replay(args):
     windows = result['windows']
     saved = sum(window['messages'] for window in windows)
     print('%s %s: %d messages in, %d saved in %d window(s) (%s files in %s)'
-          % (args.bag, options['driving_topic'], result['input_messages'], saved, len(windows), cfg.format, args.out))
+          % (args.bag, summary['driving_topic'], result['input_messages'], saved, len(windows), cfg.format, args.out))
     ratio = _ratio(result['raw_json_bytes'], result['stored_bytes'])
     print('  raw row-per-message JSON %s, stored %s%s' % (
         human_bytes(result['raw_json_bytes']), human_bytes(result['stored_bytes']),
@@ -930,6 +1087,16 @@ def _common(parser, json_help=True):
                        help='no progress bar, even on a terminal')
 
 
+def _fleet_options(parser):
+    """--workers and --scheduler of the commands that take many bags."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument('--workers', type=_non_negative_int('workers'), metavar='N',
+                       help='many bags: a local Dask cluster of N worker processes (default: the cores); 0: run '
+                       'every bag in this process')
+    group.add_argument('--scheduler', metavar='ADDRESS',
+                       help='many bags: the Dask cluster of this scheduler (tcp://host:8786) instead')
+
+
 def build_parser():
     """The ``cclog`` argument parser (one sub-parser per command)."""
     parser = _Parser(prog=PROG, **_help(
@@ -965,7 +1132,8 @@ def build_parser():
           cclog collect crash.bag --topic /odom --out test --label crash --window 5s --stride 5
           cclog collect run.bag --topic /odom --out train --window 200 --json
         """))
-    p.add_argument('bag', metavar='BAG', help='input bag (indexed, rosbag 2.0)')
+    p.add_argument('bag', nargs='+', metavar='BAG', help='input bag (indexed, rosbag 2.0); several, a directory '
+                   '(its *.bag) or a glob: one Dask task each, vectors into DIR/<bag name>/<label>/')
     p.add_argument('--config', metavar='YAML', help='configuration: vectors of every classifier (its feature set '
                    'and window, else its model\'s) into DIR/<name>/<label>/; collect.label and collect.stride too')
     p.add_argument('--topic', metavar='T', help="driving topic: the feature set's first input "
@@ -982,6 +1150,7 @@ def build_parser():
                    help='feature set (default: %s)' % _feature_sets()[0])
     p.add_argument('--input-topic', action='append', default=[], metavar='T',
                    help="a topic of the feature set's other inputs, in its order (command: the cmd_vel topic)")
+    _fleet_options(p)
     _common(p)
     p.set_defaults(run=cmd_collect)
 
@@ -999,13 +1168,16 @@ def build_parser():
           cclog learn --train train --test test --model model.json --json
           cclog learn --test test --model model.json          # evaluate an existing model
         """))
-    p.add_argument('--train', metavar='DIR', help='training vectors (DIR/nominal/ at least)')
+    p.add_argument('--train', nargs='+', metavar='DIR', help='training vectors (DIR/nominal/ at least); several '
+                   'directories, a glob, or the DIR of `cclog collect` over many bags: one Dask task each')
     p.add_argument('--test', metavar='DIR', help='test vectors, disjoint from --train')
     p.add_argument('--model', required=True, metavar='PATH', help='model file to write (or to evaluate)')
     p.add_argument('--nu', type=_positive_float('nu'), help='one-class SVM nu (default: learning default or grid)')
     p.add_argument('--gamma', type=_positive_float('gamma'), help='RBF gamma (default: learning default or grid)')
-    p.add_argument('--method', default='auto', choices=('auto', 'exact', 'nystroem'),
-                   help='exact OneClassSVM, Nystroem + SGD, or auto (default: %(default)s)')
+    p.add_argument('--method', default='auto', choices=('auto', 'exact', 'nystroem', 'stream'),
+                   help='exact OneClassSVM, Nystroem + SGD, auto, or stream: Nystroem + SGD partial_fit over the '
+                   'directories, never all vectors in one process (default: %(default)s)')
+    _fleet_options(p)
     _common(p)
     p.set_defaults(run=cmd_learn)
 
@@ -1053,7 +1225,8 @@ def build_parser():
           cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
           cclog replay run.bag --config robot.yaml --out logs --classify-every 1 --retrigger onset
         """))
-    p.add_argument('bag', metavar='BAG', help='input bag')
+    p.add_argument('bag', nargs='+', metavar='BAG', help='input bag; several, a directory (its *.bag) or a glob: '
+                   'one Dask task each, windows into OUT/<bag name>/')
     p.add_argument('--config', metavar='YAML', help='configuration (topics, triggers, windows, format, limits): '
                    'the file smart_logger.py reads; the options below override it')
     p.add_argument('--topic', metavar='T', help="driving topic (the model's message type); needed without --config")
@@ -1077,6 +1250,12 @@ def build_parser():
     p.add_argument('--max-buffer-mb', type=_positive_float('max-buffer-mb', zero=True),
                    metavar='MB', help='memory budget of every message buffered (estimated); a window reaching it '
                    'is written in parts; 0: none (default: %g)' % _max_buffer_mb())
+    p.add_argument('--sweep', action='append', default=[], metavar='KEY=V1,V2',
+                   help='evaluate every combination of these values (keys: threshold, pre, post, classify_every, '
+                   'retrigger; repeatable) over one reading of each bag: a table of windows, messages kept, bytes '
+                   'stored and, with <bag>.truth.json files, recall and false windows per hour; windows go to '
+                   'OUT/<bag name>/<configuration>/')
+    _fleet_options(p)
     _common(p)
     p.set_defaults(run=cmd_replay)
 
