@@ -46,11 +46,11 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from . import collector
 from . import features
 from . import log_format
-from . import config
 from .model import AnomalyModel
 from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
                           recover_leftovers, resolve_directory, writer_status)
-from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, Intake
+from .intake import Intake
+from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB
 
 NODE_NAME = 'collect_logger'
 DEFAULT_FORMAT = 'json-xz'
@@ -109,12 +109,9 @@ class CollectNode(object):
         except ValueError as error:
             raise ConfigError('~%s' % error)
         label = self.collector.label
-        types = dict((spec.topic, spec.config.topic_type) for spec in self.collector.specs)
-        driving_class = config.installed_class(types[self.collector.driving_topic]) \
-            if self.collector.driving_topic in types else None
         topics = sorted(self.collector.side_topics)
         self.collector.on_event(self._on_event)
-        self.intake = Intake(self.collector, self.collector.driving_topic, driving_class, topics)
+        self.intake = Intake(self.collector, self.collector.driving_topic, topics)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
