@@ -43,7 +43,7 @@ from .triggers import (DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODE
 from .window_buffer import (DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, MemoryCost,
                             Record, WindowBuffer)
 
-__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into',
+__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into', 'replay_records',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
            'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
@@ -52,6 +52,7 @@ DEFAULT_DRIVING_TOPIC = 'odom'
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
 JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to measure its row-JSON bytes
+LOST_CHECK_EVERY = 64   # replay: messages between looks at whether the writer lost a window
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
 
 OPENED = 'opened'
@@ -193,6 +194,7 @@ class SmartLogger(object):
             for topic in trigger.topics:
                 self._by_topic[topic].append(trigger)
         self._timed = [trigger for trigger in self.triggers if trigger.watches_time]
+        self._decode = {}  # (topic, id(connection)) -> (connection, whether a trigger of the topic reads fields)
         self._lock = threading.RLock()
         self._stats = _Stats()
         self._raw = msg_codec.RowJsonCounter()
@@ -270,6 +272,14 @@ class SmartLogger(object):
             stamp = raw_message.stamp(raw, connection, time.time() if stamp is None else stamp)
             self._take(Record(stamp, topic, None, 0, raw, connection))
 
+    def _needs_message(self, record, triggers):
+        """Whether a trigger reads fields of ``record``'s messages (memoised per topic and connection)."""
+        key = (record.topic, id(record.connection))
+        known = self._decode.get(key)
+        if known is None or known[0] is not record.connection:
+            known = self._decode[key] = (record.connection, any(t.needs_message(record) for t in triggers))
+        return known[1]
+
     def _check_open(self, name):
         if self._closed:
             raise ValueError('%s: the logger is closed' % name)
@@ -279,7 +289,7 @@ class SmartLogger(object):
         topic = record.topic
         triggers = self._by_topic.get(topic, ())
         view = record
-        if record.msg is None and any(trigger.needs_message(record) for trigger in triggers):
+        if record.msg is None and triggers and self._needs_message(record, triggers):
             view = raw_message.decoded(record)  # before buffering: a message that cannot be decoded is not kept
         if not record.cost:
             record = record._replace(cost=self._cost.of(record))  # the buffer keeps this very record
@@ -582,14 +592,6 @@ def replay_into(logger, bag_path, progress=None):
     trigger topics; every topic when its side topics are None) to it as serialized bytes (``on_raw``, the
     path of the live node), close it, and return ``replay``'s summary; the same errors."""
     from . import bagio  # rosbag: imported here so the module stays pure
-    out_dir = logger.directory
-    windows = []
-
-    def collect(event):
-        if event.kind == WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
-                            'path': event.path})
-    logger.on_event(collect)
     if logger.side_topics is None:
         bag = bagio.open_bag(bag_path)
         try:
@@ -598,17 +600,35 @@ def replay_into(logger, bag_path, progress=None):
             bag.close()
     else:
         topics = [logger.driving_topic] + sorted(logger.side_topics)
+    return replay_records(logger, bagio.read_raw(bag_path, topics), progress, bag_path)
+
+
+def replay_records(logger, records, progress=None, source='the records'):
+    """``replay_into`` of an iterable of ``window_buffer.Record``s (serialized ones go to ``on_raw``, decoded
+    ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
+    benchmarks."""
+    out_dir = logger.directory
+    windows = []
+
+    def collect(event):
+        if event.kind == WRITTEN:
+            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
+                            'path': event.path})
+    logger.on_event(collect)
     count, stopped = 0, False
     try:
-        for record in bagio.read_raw(bag_path, topics):
+        for record in records:
             try:
-                logger.on_raw(record.topic, record.raw, record.connection, record.stamp)
+                if record.msg is None:
+                    logger.on_raw(record.topic, record.raw, record.connection, record.stamp)
+                else:
+                    logger.on_message(record.topic, record.msg, record.stamp)
             except raw_message.DECODE_ERRORS as error:
-                raise ValueError('%s: a message of %s cannot be decoded (%s)' % (bag_path, record.topic, error))
+                raise ValueError('%s: a message of %s cannot be decoded (%s)' % (source, record.topic, error))
             count += 1
             if progress is not None and count % PROGRESS_EVERY == 0:
                 progress(count)
-            if logger.writer.lost:
+            if count % LOST_CHECK_EVERY == 0 and logger.writer.lost:
                 stopped = True  # a window is lost: stop reading, say so below
                 break
         if progress is not None:
@@ -619,7 +639,7 @@ def replay_into(logger, bag_path, progress=None):
     if stats['messages_lost']:
         raise OSError('%s: %d window(s) (%d messages) not written: %s; %d window(s) written%s' % (
             out_dir, stats['windows_lost'], stats['messages_lost'], stats['last_error'], stats['windows_saved'],
-            '; replay stopped after %d messages of %s' % (count, bag_path) if stopped else ''))
+            '; replay stopped after %d messages of %s' % (count, source) if stopped else ''))
     return {
         'input_messages': stats['messages_seen'],
         'raw_json_bytes': stats['raw_json_bytes'],
