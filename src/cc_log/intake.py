@@ -20,7 +20,7 @@ from . import raw_message
 
 DEFAULT_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
 DEFAULT_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
-FEED_BATCH_DELAY = 0.01       # seconds the feeder lets messages gather before draining them in a batch
+FEED_BATCH_DELAY = 0.05       # seconds the feeder lets messages gather before draining them in a batch
 
 
 class IntakeQueue(object):

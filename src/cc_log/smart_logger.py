@@ -51,7 +51,8 @@ DEFAULT_FORMAT = 'json-xz'
 DEFAULT_DRIVING_TOPIC = 'odom'
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
-JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to measure its row-JSON bytes
+JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to measure its row-JSON bytes ...
+JSON_SAMPLE_FIRST = 256  # ... after the first this many of each type, which all are
 LOST_CHECK_EVERY = 64   # replay: messages between looks at whether the writer lost a window
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
 
@@ -95,11 +96,12 @@ class _Stats(object):
 
 class RawJsonEstimate(object):
     """Row-JSON bytes of serialized messages without decoding them all: per message type, the row-JSON
-    bytes per serialized byte of every ``every``-th message (the first included), times the serialized bytes
-    of them all. Exact for types of fixed size and digits; not thread-safe."""
+    bytes per serialized byte of the first ``first`` messages and of every ``every``-th one after them, times
+    the serialized bytes of them all (exact up to ``first`` messages of a type); not thread-safe."""
 
-    def __init__(self, every=JSON_SAMPLE_EVERY):
+    def __init__(self, every=JSON_SAMPLE_EVERY, first=JSON_SAMPLE_FIRST):
         self.every = int(every)
+        self.first = int(first)
         self._counter = msg_codec.RowJsonCounter()
         self._types = {}  # type -> [messages, serialized bytes, sampled serialized bytes, sampled JSON bytes]
 
@@ -108,7 +110,7 @@ class RawJsonEstimate(object):
         entry = self._types.get(connection['type'])
         if entry is None:
             entry = self._types[connection['type']] = [0, 0, 0, 0]
-        if entry[0] % self.every == 0:
+        if entry[0] < self.first or entry[0] % self.every == 0:
             try:
                 json_bytes = self._counter.count(raw_message.decode(raw, connection))
             except raw_message.DECODE_ERRORS:
