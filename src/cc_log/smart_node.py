@@ -6,7 +6,8 @@ Subscribed topics
   ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it); the topics of
   the model's other inputs by their role names (``cmd_vel`` for a command model; ``imu`` is the driving
   topic of an imu model), or those of the configuration's triggers.
-  every topic in ``~topics`` (any type): saved in the windows whose time span holds them.
+  every topic in ``~topics`` (any type): saved in the windows whose time span holds them; of a latched topic
+  (``/tf_static``, a map) the newest message before a window's start is also written at the start of it.
 
 Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
