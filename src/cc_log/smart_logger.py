@@ -54,6 +54,8 @@ PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
 JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to measure its row-JSON bytes ...
 JSON_SAMPLE_FIRST = 256  # ... after the first this many of each type, which all are
 LOST_CHECK_EVERY = 64   # replay: messages between looks at whether the writer lost a window
+DECODED_PART_FACTOR = 8.0  # memory the json-xz writer needs per serialized byte of a part: decoded messages and
+#                            JSON rows (nav_msgs/Odometry: 0.7 KB serialized, 3.5 KB decoded, ~2 KB of row dict)
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
 
 OPENED = 'opened'
@@ -148,7 +150,7 @@ class SmartLogger(object):
     dropped and counted as lost); give_up_after, close_retry: see ``window_writer.WindowWriter`` (offline use:
     lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
-    half of it (see ``WindowBuffer``).
+    half of it, divided by DECODED_PART_FACTOR for json-xz, whose writer decodes the part (see ``WindowBuffer``).
 
     Thread-safe: ``on_message``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be
     called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -440,8 +442,10 @@ class SmartLogger(object):
         return False
 
     def _new_buffer(self):
+        raw_format = getattr(log_format.formats.get(self.format), 'RAW_RECORDS', False)
         buffer = WindowBuffer(pre=self.pre, post=self.post, max_window=self.max_window,
-                              max_buffer_mb=self.max_buffer_mb, cost=self._cost)
+                              max_buffer_mb=self.max_buffer_mb, cost=self._cost,
+                              part_factor=1.0 if raw_format else DECODED_PART_FACTOR)
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed

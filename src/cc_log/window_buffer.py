@@ -188,11 +188,14 @@ class WindowBuffer(object):
     stream. ``add``, ``add_side``, ``trigger`` and ``flush`` return the windows completed by that call (a
     list of LogWindow); a window is complete once ``pre`` further messages have shown that the next window
     does not touch it, or when it reaches ``max_window`` or the memory budget ``max_buffer_mb`` (written in
-    parts). ``cost``: the MemoryCost estimating records that carry no cost.
+    parts). ``cost``: the MemoryCost estimating records that carry no cost. ``part_factor``: the memory the writer
+    needs for a part per byte of it (>= 1; a format that decodes serialized messages needs several times
+    their size): parts are handed on at half the budget divided by it.
     """
 
     def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
-                 jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None):
+                 jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None,
+                 part_factor=1.0):
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
         self.max_window = Span.parse(max_window, 'max_window')
@@ -203,6 +206,7 @@ class WindowBuffer(object):
             raise ValueError('pre: %s is larger than the buffer can hold (max_window %s)' % (self.pre, self.max_window))
         self.jump_back_tolerance = jump_back_tolerance
         self.max_buffer_bytes = budget_bytes(max_buffer_mb)
+        self._part_bytes = int(part_bytes(self.max_buffer_bytes) / max(1.0, float(part_factor)))
         self._cost = cost if cost is not None else MemoryCost()
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
@@ -352,7 +356,7 @@ class WindowBuffer(object):
     def _enforce_budget(self):
         """Stay within max_buffer_mb (see the module docstring); return the windows completed doing so."""
         done = []
-        if not self.max_buffer_bytes or self._bytes <= part_bytes(self.max_buffer_bytes):
+        if not self.max_buffer_bytes or self._bytes <= self._part_bytes:
             return done
         if self._open is not None and (self._open.records or self._side):
             # Written in parts, as max_window splits: what the window holds now, with every side record held.
