@@ -43,6 +43,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 LOOP_SECONDS = 20.0
+STAGES = ('classifier CPU s', 'feeder CPU s', 'writer CPU s')  # the node's thread CPU times on /diagnostics
 
 
 # -- the publisher child -------------------------------------------------------------------------------
@@ -58,7 +59,7 @@ def publisher(args):
     messages = [msg for topic, _, msg in generated if topic == sim.ODOM_TOPIC]
     imu = [msg for topic, _, msg in generated if topic == sim.IMU_TOPIC]
     rospy.init_node('cc_log_bench_publisher', disable_signals=True)
-    state = {'seen': None, 'intake_max': 0, 'windows': None}
+    state = {'seen': None, 'intake_max': 0, 'windows': None, 'stages': {}}
 
     def on_diagnostics(array):
         for status in array.status:
@@ -66,6 +67,7 @@ def publisher(args):
             if 'messages seen' in values:
                 state['seen'] = int(values['messages seen'])
                 state['intake_max'] = max(state['intake_max'], int(values.get('intake queue', 0)))
+                state['stages'] = {key: float(values.get(key, 'nan')) for key in STAGES}
                 state['windows'] = int(values.get('windows saved', 0))
     rospy.Subscriber('/diagnostics', DiagnosticArray, on_diagnostics)
     pub = rospy.Publisher('/odom', Odometry, queue_size=10000)
@@ -100,7 +102,7 @@ def publisher(args):
     time.sleep(1.2)  # one more diagnostics period
     sent *= 2  # odometry and IMU
     print(json.dumps({'sent': sent, 'publish_seconds': publish_seconds, 'seen': state['seen'],
-                      'intake_max': state['intake_max'], 'windows': state['windows']}))
+                      'intake_max': state['intake_max'], 'windows': state['windows'], 'stages': state['stages']}))
     rospy.signal_shutdown('done')
     return 0
 
@@ -300,6 +302,18 @@ def main(argv=None):
                   'rosbag record CPU %', 'node / record', 'node peak RSS MB', 'record peak RSS MB', 'windows',
                   'kept up'], rows, 'Smart node and rosbag record of the same topics in the same run '
                  '(process CPU time / publishing seconds, % of one core):')
+    rows = []
+    for r in results:
+        stages = r.get('stages') or {}
+        classifier, feeder, writer = (stages.get(key, float('nan')) for key in STAGES)
+        total = r['node_cpu']
+        rest = total - feeder - writer
+        shares = ['%.2f s (%.0f%%)' % (value, 100 * value / total)
+                  for value in (rest, feeder - classifier, classifier, writer)]
+        rows.append(['%d + %d' % (r['rate'], r['rate'])] + shares + ['%.2f s' % total])
+    common.table(['Hz odom + imu', 'intake (rospy receive, queue; main thread, timers)',
+                  'feeder: decoding, buffer, triggers', 'features + classifier', 'writer thread', 'node total'], rows,
+                 'Where the node\'s CPU goes (thread CPU times the node reports on /diagnostics at the end):')
     for r in results:
         ratio = r['node_cpu'] / r['record_cpu']
         print('target node CPU <= rosbag record CPU at %d + %d Hz: %.2fx -> %s' % (

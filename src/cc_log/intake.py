@@ -121,6 +121,7 @@ class Intake(object):
         self.sink = sink
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
+        self.cpu_seconds = 0.0       # CPU time of the feeder thread handing messages to the sink
         self.batch_delay = float(batch_delay)
         self.decoder = MessageDecoder()
         self._raw = hasattr(sink, 'on_raw')
@@ -168,10 +169,14 @@ class Intake(object):
     def _feed(self):
         while True:
             batch = self.queue.take_all()
-            for item in batch:
-                if item is None:
-                    return
-                self._feed_one(*item)
+            started = time.thread_time()
+            try:
+                for item in batch:
+                    if item is None:
+                        return
+                    self._feed_one(*item)
+            finally:
+                self.cpu_seconds += time.thread_time() - started
             if self.batch_delay > 0:
                 time.sleep(self.batch_delay)  # let messages gather: one wake-up per batch, not per message
 
