@@ -15,8 +15,8 @@ What it starts (each in its own session, all stopped at the end by their process
   500-message window);
 - ``rosbag record -O <tmp>/record.bag /odom /imu`` (no compression, its default) beside it, in every run;
 - a publisher (this script with --publisher): 20 s of simulated BWIBot odometry and IMU (cc_log.sim seed 3,
-  nominal) published in a loop on /odom and /imu, each at the given rate, with header stamps of the current
-  time; it also listens to /diagnostics and reports the node's last "messages seen" and the largest "intake
+  nominal, simulated at the rate it is published) published in a loop on /odom and /imu, each at the given
+  rate, with header stamps of the current time; it also listens to /diagnostics and reports the node's last "messages seen" and the largest "intake
   queue" it saw.
 
 CPU % of one core = process CPU time (user + system, psutil, children included for rosbag record, which runs
@@ -54,7 +54,8 @@ def publisher(args):
     from nav_msgs.msg import Odometry
     from cc_log import sim
     from sensor_msgs.msg import Imu
-    simulator = sim.Simulator(sim.SimConfig(rate=100.0, seed=3, minutes=LOOP_SECONDS / 60.0, anomalies=0, imu=True))
+    simulator = sim.Simulator(sim.SimConfig(rate=args.rate, seed=3, minutes=LOOP_SECONDS / 60.0, anomalies=0,
+                                            imu=True))  # simulated at the rate published: physically the same run
     generated = list(simulator.messages())
     messages = [msg for topic, _, msg in generated if topic == sim.ODOM_TOPIC]
     imu = [msg for topic, _, msg in generated if topic == sim.IMU_TOPIC]
