@@ -16,8 +16,8 @@ What it starts (each in its own session, all stopped at the end by their process
 - ``rosbag record -O <tmp>/record.bag /odom /imu`` (no compression, its default) beside it, in every run;
 - a publisher (this script with --publisher): 20 s of simulated BWIBot odometry and IMU (cc_log.sim seed 3,
   nominal, simulated at the rate it is published) published in a loop on /odom and /imu, each at the given
-  rate, with header stamps of the current time; it also listens to /diagnostics and reports the node's last "messages seen" and the largest "intake
-  queue" it saw.
+  rate, with header stamps of the current time; it also listens to /diagnostics and reports the node's last
+  "messages seen", the largest "intake queue" it saw and the node's thread CPU times.
 
 CPU % of one core = process CPU time (user + system, psutil, children included for rosbag record, which runs
 the C++ `record` under a Python wrapper) from just before the publisher starts to just after it ends (1 s
