@@ -55,7 +55,7 @@ def publisher(args):
     from cc_log import sim
     from sensor_msgs.msg import Imu
     simulator = sim.Simulator(sim.SimConfig(rate=args.rate, seed=3, minutes=LOOP_SECONDS / 60.0, anomalies=0,
-                                            imu=True))  # simulated at the rate published: physically the same run
+                                            imu=True, jitter=0.05 / args.rate))  # simulated at the rate published
     generated = list(simulator.messages())
     messages = [msg for topic, _, msg in generated if topic == sim.ODOM_TOPIC]
     imu = [msg for topic, _, msg in generated if topic == sim.IMU_TOPIC]
