@@ -309,11 +309,12 @@ def main(argv=None):
         classifier, feeder, writer = (stages.get(key, float('nan')) for key in STAGES)
         total = r['node_cpu']
         rest = total - feeder - writer
-        shares = ['%.2f s (%.0f%%)' % (value, 100 * value / total)
-                  for value in (rest, feeder - classifier, classifier, writer)]
-        rows.append(['%d + %d' % (r['rate'], r['rate'])] + shares + ['%.2f s' % total])
+        rows.append(['%d + %d' % (r['rate'], r['rate'])] + ['%.2f s (%.0f%%)' % (value, 100 * value / total)
+                                                            for value in (rest, feeder, writer)]
+                    + ['%.2f s' % classifier, '%.2f s' % total])
     common.table(['Hz odom + imu', 'intake (rospy receive, queue; main thread, timers)',
-                  'feeder: decoding, buffer, triggers', 'features + classifier', 'writer thread', 'node total'], rows,
+                  'feeder thread (buffer, triggers, features, classifier)', 'writer thread',
+                  'features + classifier (wall clock, in the feeder)', 'node total'], rows,
                  'Where the node\'s CPU goes (thread CPU times the node reports on /diagnostics at the end):')
     for r in results:
         ratio = r['node_cpu'] / r['record_cpu']
