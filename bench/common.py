@@ -183,26 +183,18 @@ def window_vectors(records, topic, config, stride=1):
 
 def smart_replay(model, records, driving_topic, directory, side_topics=(), fmt='json-xz', pre='100',
                  post='100', retrigger='every'):
-    """Feed records to a SmartLogger (as ``cclog replay`` does, without the bag); return a dict:
-    stats (SmartLogger.stats()), windows [{start, end, messages, path, bytes, triggers: [stamps]}]."""
+    """Feed records (decoded or serialized) to a SmartLogger through ``smart_logger.replay_records``, the
+    replay of ``cclog replay``; return a dict: stats (SmartLogger.stats()), windows [{start, end, messages,
+    path, bytes, triggers: [stamps]}]."""
     from cc_log import log_format
-    from cc_log.smart_logger import SmartLogger, WRITTEN
+    from cc_log.smart_logger import SmartLogger, replay_records
     logger = SmartLogger(model, directory, fmt, pre, post, driving_topic=driving_topic,
                          side_topics=tuple(side_topics), retrigger=retrigger)
-    windows = []
-
-    def collect(event):
-        if event.kind == WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
-                            'path': event.path, 'bytes': event.bytes})
-    logger.on_event(collect)
-    for record in records:
-        logger.on_message(record.topic, record.msg, record.stamp)
-    logger.close()
+    windows = replay_records(logger, records)['windows']
     for window in windows:
+        window['bytes'] = os.path.getsize(window['path'])
         meta, _ = log_format.read_window(window['path'])
         window['triggers'] = [t['stamp'] for t in meta.get('triggers', [])]
-    windows.sort(key=lambda w: w['start'])
     return {'stats': logger.stats(), 'windows': windows}
 
 

@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
-"""Memory of the live smart node with a logging window open the whole time: RSS while odometry at 1 kHz plus
-IMU at 1 kHz stream in for 60 s, with the default ``~max_buffer_mb`` and without a budget (0).
+"""Memory of the live smart node with a logging window open the whole time: RSS while odometry plus IMU
+stream in for 60 s at each rate (default 100 + 100 Hz and 1 kHz + 1 kHz), for each ``~max_buffer_mb``, and
+the bytes held per buffered message.
 
     cd <tree> && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
-    python3 bench/memory_live.py                     # 60 s with ~max_buffer_mb 256 (the default), then 0 (none)
-    python3 bench/memory_live.py --budgets 64 --seconds 30
+    python3 bench/memory_live.py                     # 60 s at 100 and 1000 Hz with ~max_buffer_mb 64
+    python3 bench/memory_live.py --budgets 256,0 --rates 1000 --seconds 30
     python3 bench/memory_live.py --quick             # 4 s with a 16 MB budget (tests)
 
 What it starts (cost_live.roscore_session: own sessions, a roscore on a free port, all stopped by their ids):
@@ -15,7 +16,9 @@ What it starts (cost_live.roscore_session: own sessions, a roscore on a free por
   at --rate Hz paced in wall time, header stamps of now; it also listens to /diagnostics and reports the
   node's last counters and the largest ``buffered bytes (estimated)`` and ``writer queue`` it saw.
 
-RSS = VmRSS of the node from /proc every second (peak = VmHWM at the end).
+RSS = VmRSS of the node from /proc every second (peak = VmHWM at the end). Bytes per buffered message: the
+node's own estimate (``buffered bytes (estimated)`` / ``messages buffered`` on /diagnostics, at the largest
+estimate seen) and, measured, the RSS growth over the run / the messages buffered then.
 """
 import argparse
 import json
@@ -29,7 +32,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 from cost_live import memory_mb, roscore_session, wait_subscribers  # noqa: E402
 
-DEFAULT_BUDGETS = '256,0'
+DEFAULT_BUDGETS = '64'
+DEFAULT_RATES = '100,1000'
 CHECKPOINTS = (10, 30, 60)
 
 
@@ -41,14 +45,17 @@ def publisher(args):
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Imu
     rospy.init_node('cc_log_bench_memory_publisher', disable_signals=True)
-    state = {'intake_max': 0, 'buffered_max': 0, 'writer_queue_max': 0, 'values': {}}
+    state = {'intake_max': 0, 'buffered_max': 0, 'buffered_messages': 0, 'writer_queue_max': 0, 'values': {}}
 
     def on_diagnostics(array):
         for status in array.status:
             values = {kv.key: kv.value for kv in status.values}
             if 'messages seen' in values:
                 state['values'] = values
-                state['buffered_max'] = max(state['buffered_max'], int(values.get('buffered bytes (estimated)', 0)))
+                buffered = int(values.get('buffered bytes (estimated)', 0))
+                if buffered > state['buffered_max']:
+                    state['buffered_max'] = buffered
+                    state['buffered_messages'] = int(values.get('messages buffered', 0))
                 state['writer_queue_max'] = max(state['writer_queue_max'], int(values.get('writer queue', 0)))
                 state['intake_max'] = max(state['intake_max'], int(values.get('intake queue', 0)))
     rospy.Subscriber('/diagnostics', DiagnosticArray, on_diagnostics)
@@ -84,7 +91,8 @@ def publisher(args):
     values = state['values']
     print(json.dumps({'sent': sent, 'publish_seconds': publish_seconds, 'seen': int(values.get('messages seen', 0)),
                       'lost': int(values.get('messages lost', 0)), 'windows': int(values.get('windows saved', 0)),
-                      'buffered_max': state['buffered_max'], 'writer_queue_max': state['writer_queue_max'],
+                      'buffered_max': state['buffered_max'], 'buffered_messages': state['buffered_messages'],
+                      'writer_queue_max': state['writer_queue_max'],
                       'intake_max': state['intake_max']}))
     rospy.signal_shutdown('done')
     return 0
@@ -103,15 +111,15 @@ def always_anomalous_model(path):
     return model.save(path)
 
 
-def run(procs, tmp, model, budget, args):
-    """One run of the node with ``~max_buffer_mb`` = budget; returns the figures."""
-    out_dir = os.path.join(tmp, 'windows_%g' % budget)
-    node = procs.start('smart_node_%g' % budget, [
+def run(procs, tmp, model, budget, rate, args):
+    """One run of the node with ``~max_buffer_mb`` = budget at ``rate`` Hz per topic; returns the figures."""
+    out_dir = os.path.join(tmp, 'windows_%g_%g' % (budget, rate))
+    node = procs.start('smart_node_%g_%g' % (budget, rate), [
         'rosrun', 'cc_log', 'smart_logger.py', '_model:=' + model, '_directory:=' + out_dir, 'odom:=/odom',
         '_topics:=/imu', '_pre:=2s', '_post:=2s', '_max_buffer_mb:=%g' % budget, '_diagnostic_period:=0.5'])
     wait_subscribers('/odom', 1)
     wait_subscribers('/imu', 1)
-    child = subprocess.Popen([sys.executable, os.path.abspath(__file__), '--publisher', '--rate', str(args.rate),
+    child = subprocess.Popen([sys.executable, os.path.abspath(__file__), '--publisher', '--rate', str(rate),
                               '--seconds', str(args.seconds)], env=procs.env, stdout=subprocess.PIPE,
                              universal_newlines=True)
     samples = []
@@ -125,6 +133,7 @@ def run(procs, tmp, model, budget, args):
     result['peak'] = memory_mb(node.pid)
     result['samples'] = samples
     result['budget'] = budget
+    result['rate'] = rate
     procs.stop(node)
     return result
 
@@ -135,13 +144,14 @@ def at(samples, second):
     return near[-1] if near and samples[-1][0] >= second - 1 else None
 
 
-QUICK = {'seconds': 4.0, 'budgets': '16'}  # --quick
+QUICK = {'seconds': 4.0, 'budgets': '16', 'rates': '1000'}  # --quick
 
 
 def parse(argv):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--seconds', type=float, default=60.0)
-    parser.add_argument('--rate', type=float, default=1000.0, help='messages per second on each topic')
+    parser.add_argument('--rates', default=DEFAULT_RATES, help='messages per second on each topic, one run each')
+    parser.add_argument('--rate', type=float, default=1000.0, help=argparse.SUPPRESS)  # the publisher's
     parser.add_argument('--budgets', default=DEFAULT_BUDGETS, help='~max_buffer_mb values, one run each (0: none)')
     parser.add_argument('--quick', dest='preset', action='store_const', const=QUICK, default={},
                         help='a 4 s run with a 16 MB budget')
@@ -157,25 +167,35 @@ def main(argv=None):
     if args.publisher:
         return publisher(args)
     budgets = [float(b) for b in args.budgets.split(',') if b]
+    rates = [float(r) for r in args.rates.split(',') if r]
     common.header('Memory of the live smart node with a window open all the time', [
-        'data: synthetic nav_msgs/Odometry and sensor_msgs/Imu, %g Hz each for %g s, header stamps of now; model: '
-        'motion 20-message window with a threshold that calls every message anomalous; json-xz, pre/post 2 s'
-        % (args.rate, args.seconds),
-        'runs: ~max_buffer_mb %s' % ', '.join('%g' % b for b in budgets)])
+        'data: synthetic nav_msgs/Odometry and sensor_msgs/Imu, each at every rate for %g s, header stamps of now; '
+        'model: motion 20-message window with a threshold that calls every message anomalous; json-xz, pre/post 2 s'
+        % args.seconds,
+        'runs: ~max_buffer_mb %s at %s Hz per topic' % (', '.join('%g' % b for b in budgets),
+                                                        ', '.join('%g' % r for r in rates))])
     results = []
     with roscore_session('cc_log_bench_memory_') as (procs, tmp):
         model = always_anomalous_model(os.path.join(tmp, 'model.json'))
         for budget in budgets:
-            results.append(run(procs, tmp, model, budget, args))
+            for rate in rates:
+                results.append(run(procs, tmp, model, budget, rate, args))
     rows = []
     for r in results:
         rss = [at(r['samples'], second) for second in CHECKPOINTS]
-        rows.append(['%g' % r['budget'] if r['budget'] else 'none (0)', r['sent'], r['seen'], r['lost'], r['windows']]
+        held = r['buffered_messages']
+        grown = (r['samples'][-1][1] - r['samples'][0][1]) * 1e6 if len(r['samples']) > 1 else float('nan')
+        rows.append(['%g' % r['budget'] if r['budget'] else 'none (0)', '%g' % r['rate'], r['sent'], r['seen'],
+                     r['lost'], r['windows']]
                     + ['%.0f' % value if value is not None else '-' for value in rss]
-                    + ['%.0f' % r['peak'], '%.0f' % (r['buffered_max'] / 1e6), r['writer_queue_max'], r['intake_max']])
-    common.table(['~max_buffer_mb', 'published per topic', 'seen', 'lost', 'windows']
+                    + ['%.0f' % r['peak'], '%.0f' % (r['buffered_max'] / 1e6), held,
+                       '%.0f' % (r['buffered_max'] / held) if held else '-',
+                       '%.0f' % (grown / held) if held else '-', r['writer_queue_max'], r['intake_max']])
+    common.table(['~max_buffer_mb', 'Hz per topic', 'published per topic', 'seen', 'lost', 'windows']
                  + ['RSS MB at %d s' % second for second in CHECKPOINTS]
-                 + ['peak RSS MB', 'max buffered MB (estimate)', 'max writer queue', 'max intake queue'], rows,
+                 + ['peak RSS MB', 'max buffered MB (estimate)', 'messages buffered then',
+                    'bytes per buffered message (estimate)', 'RSS growth per buffered message', 'max writer queue',
+                    'max intake queue'], rows,
                  'The smart node, one window open throughout (RSS sampled every second from the first message):')
     for r in results:
         if r['budget']:

@@ -189,7 +189,9 @@ def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows']
     records = bag_messages(bag, ['/odom', '/scan'])
     assert summary['input_messages'] == len(records) == 542
-    assert summary['raw_json_bytes'] == sum(msg_codec.row_json_bytes(msg) for _, _, msg in records)
+    # estimated from a sample of the messages (replay does not decode them all)
+    assert summary['raw_json_bytes'] == pytest.approx(sum(msg_codec.row_json_bytes(msg) for _, _, msg in records),
+                                                      rel=0.01)
     windows = summary['windows']
     assert windows, 'jerky driving should open at least one window'
     files = log_format.window_files(str(replayed['out']))

@@ -360,7 +360,7 @@ def test_a_crafted_leftover_is_kept_unrecovered_and_never_runs(fmt, marker, tmp_
 
 def test_a_side_topic_publisher_with_a_crafted_definition_is_refused_counted_and_warned_once(marker, caplog):
     import rospy
-    from cc_log.smart_node import MessageDecoder
+    from cc_log.intake import MessageDecoder
     from std_msgs.msg import String
 
     def any_msg(msg_type, definition, data):

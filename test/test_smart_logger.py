@@ -402,7 +402,8 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
     summary = replay(bag, ODOM, path, str(tmp_path / 'out'), PRE, POST, 'json-xz')
     assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows'}
     assert summary['input_messages'] == len(run)
-    assert summary['raw_json_bytes'] == sum(msg_codec.row_json_bytes(r.msg) for r in run)
+    # estimated from a sample of the messages (replay does not decode them all)
+    assert summary['raw_json_bytes'] == pytest.approx(sum(msg_codec.row_json_bytes(r.msg) for r in run), rel=0.01)
     window, = summary['windows']
     lo, hi = min(flagged) - PRE, max(flagged) + POST
     assert (window['start'], window['end'], window['messages']) == (run[lo].stamp, run[hi].stamp, hi - lo + 1)

@@ -99,6 +99,39 @@ def read_messages(path, topics, expected_types=None):
         bag.close()
 
 
+def _text_header(header):
+    """A bag connection header (bytes values) as a dict of str."""
+    return {_text(key): _text(value) for key, value in header.items()}
+
+
+def _text(value):
+    return value.decode('utf-8', 'replace') if isinstance(value, bytes) else str(value)
+
+
+def read_raw(path, topics):
+    """Yield Record(bag time, topic, None, 0, serialized bytes, connection header) of ``topics`` in bag order,
+    without decoding (``raw_message.stamp`` finds the header stamp; ``raw_message.decoded`` the message). The
+    connection header (a dict of str) is one object per connection. Errors as ``read_messages``."""
+    if isinstance(topics, str):
+        topics = [topics]
+    bag = open_bag(path)
+    headers = {}  # id of rosbag's header dict -> (that dict, its text form)
+    try:
+        for topic in topics:
+            check_topic(bag, topic)
+        try:
+            for topic, msg, t, header in bag.read_messages(topics=list(topics), raw=True,
+                                                           return_connection_header=True):
+                known = headers.get(id(header))
+                if known is None or known[0] is not header:
+                    known = headers[id(header)] = (header, _text_header(header))
+                yield Record(t.to_sec(), topic, None, 0, msg[1], known[1])
+        except (rosbag.ROSBagException, struct.error, EOFError) as error:
+            raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
+    finally:
+        bag.close()
+
+
 def feature_vectors(path, topic, config, stride=1, max_dt=None):
     """Run the features over ``topic`` of a bag: return ``(stamps, X)`` (1-D array, 2-D array).
 
@@ -130,4 +163,4 @@ def feature_vectors(path, topic, config, stride=1, max_dt=None):
     return np.array(stamps, dtype=float), np.array(vectors, dtype=float).reshape(len(vectors), width)
 
 
-__all__ = ['open_bag', 'check_topic', 'topics_of', 'read_messages', 'feature_vectors']
+__all__ = ['open_bag', 'check_topic', 'topics_of', 'read_messages', 'read_raw', 'feature_vectors']

@@ -47,12 +47,12 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from . import collector
 from . import features
 from . import log_format
-from . import config
 from .model import AnomalyModel
 from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
                           recover_leftovers, resolve_directory, writer_status)
+from .intake import Intake
 from .node_extras import NodeExtras
-from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, Intake
+from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB
 
 NODE_NAME = 'collect_logger'
 DEFAULT_FORMAT = 'json-xz'
@@ -115,12 +115,10 @@ class CollectNode(object):
             raise ConfigError('~%s' % error)
         label = self.collector.label
         types = dict((spec.topic, spec.config.topic_type) for spec in self.collector.specs)
-        driving_class = config.installed_class(types[self.collector.driving_topic]) \
-            if self.collector.driving_topic in types else None
         topics = sorted(self.collector.side_topics or [rospy.resolve_name(t) for t in cfg.topics])
         self.collector.on_event(self._on_event)
         self.extras = NodeExtras(params, self.collector.writer, self.directory, self.collector.driving_topic)
-        self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic, driving_class,
+        self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic,
                              sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)

@@ -30,7 +30,8 @@ import re
 import threading
 
 from . import features as features_mod
-from . import log_format, safe_files, window_writer
+from . import log_format, raw_message, safe_files, window_writer
+from .formats import bag_lz4
 from .window_buffer import Record
 
 __all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PREFIX', 'DEFAULT_TOPICS',
@@ -105,18 +106,7 @@ class _OpenBag(object):
         self.messages = 0
 
     def write(self, record, time):
-        if record.raw is not None and record.connection:
-            header = dict(record.connection)
-            kind = header.get('type') or record.msg._type
-            md5 = header.get('md5sum') or record.msg._md5sum
-            header.setdefault('topic', record.topic)
-            header.setdefault('type', kind)
-            header.setdefault('md5sum', md5)
-            header.setdefault('message_definition', getattr(type(record.msg), '_full_text', ''))
-            self.bag.write(record.topic, (kind, bytes(record.raw), md5, type(record.msg)), time, raw=True,
-                           connection_header=header)
-        else:
-            self.bag.write(record.topic, record.msg, time)
+        bag_lz4.write_record(self.bag, record, time)
         self.messages += 1
 
     def finish(self):
@@ -181,6 +171,13 @@ class ContextTrack(object):
             return False
         stamp = features_mod.stamp_of(msg, 0.0 if stamp is None else stamp)
         return self.add(Record(stamp, topic, msg, 0, raw, connection))
+
+    def on_raw(self, topic, raw, connection, stamp=None):
+        """The intake's sink interface for serialized messages (``SmartLogger.on_raw``'s): written as bytes."""
+        if topic not in self.rates:
+            return False
+        stamp = raw_message.stamp(raw, connection, 0.0 if stamp is None else stamp)
+        return self.add(Record(stamp, topic, None, 0, raw, connection))
 
     def add(self, record):
         """Write ``record`` when the track wants it; True when written."""
@@ -255,16 +252,34 @@ class Tee(object):
     def __init__(self, *sinks):
         self.sinks = [sink for sink in sinks if sink is not None]
 
-    def on_message(self, topic, msg, stamp=None, size=None):
-        """Feed the message to every sink; the first exception is raised after all were fed."""
+    def _each(self, name, *arguments):
+        """Call ``name`` on every sink; the first exception is raised after all were fed."""
         failure = None
         for sink in self.sinks:
             try:
-                sink.on_message(topic, msg, stamp, size)
+                getattr(sink, name)(*arguments)
             except Exception as error:
                 failure = failure or error
         if failure is not None:
             raise failure
+
+    def on_message(self, topic, msg, stamp=None, size=None):
+        """Feed the message to every sink."""
+        self._each('on_message', topic, msg, stamp, size)
+
+
+class RawTee(Tee):
+    """A Tee of sinks that all take serialized messages (``on_raw``): the intake hands them bytes."""
+
+    def on_raw(self, topic, raw, connection, stamp=None):
+        """Feed the serialized message to every sink."""
+        self._each('on_raw', topic, raw, connection, stamp)
+
+
+def tee(*sinks):
+    """A RawTee when every sink takes serialized messages, else a Tee."""
+    sinks = [sink for sink in sinks if sink is not None]
+    return (RawTee if all(hasattr(sink, 'on_raw') for sink in sinks) else Tee)(*sinks)
 
 
 def recover(directory):

@@ -22,6 +22,7 @@ import re
 from . import __version__
 from . import formats
 from . import msg_codec
+from . import raw_message
 from . import safe_files, safe_input
 
 PREFIX = 'cc_log_'
@@ -64,7 +65,7 @@ def window_metadata(window, codec, extra=None):
     """
     types, counts = {}, {}
     for record in window.records:
-        types.setdefault(record.topic, record.msg._type)
+        types.setdefault(record.topic, raw_message.type_of(record))
         counts[record.topic] = counts.get(record.topic, 0) + 1
     triggers = []
     for trigger in window.triggers:
@@ -202,17 +203,26 @@ def write_window(window, directory, fmt, metadata=None, base=None):
 
     ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
 
-    ``metadata`` (JSON-able dict) is added to ``window_metadata``. Raises ValueError for a bad format or
+    ``metadata`` (JSON-able dict) is added to ``window_metadata``. Records held as serialized bytes are
+    decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``); one that cannot be
+    decoded is left out and counted in the metadata's ``undecodable``. Raises ValueError for a bad format or
     an empty window, OSError when the file cannot be written (the temporary file is removed).
     """
     module = formats.get(fmt)
     if not window.records:
         raise ValueError('window: has no records')
     ensure_directory(directory)
+    records, undecodable = window.records, 0
+    if not getattr(module, 'RAW_RECORDS', False):
+        records, undecodable = raw_message.decoded_records(records)
+        if not records:
+            raise ValueError('window: none of its %d records can be decoded' % undecodable)
     meta = window_metadata(window, fmt, metadata)
+    if undecodable:
+        meta['undecodable'] = undecodable
     base = base or base_name(window)
     extension = module.EXTENSION
-    write = module.encoder(window.records, meta)  # a format may encode now, before the temporary file exists
+    write = module.encoder(records, meta)  # a format may encode now, before the temporary file exists
     target = safe_files.AtomicFile(os.path.join(directory, base + extension),
                                    names=final_names(directory, base, extension))
     with target as stream:

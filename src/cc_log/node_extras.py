@@ -83,7 +83,7 @@ class NodeExtras(object):
 
     def sink(self, main):
         """The intake's sink: ``main`` and the context track."""
-        return context_track.Tee(main, self.track) if self.track is not None else main
+        return context_track.tee(main, self.track) if self.track is not None else main
 
     def _context_event(self, event):
         if event.kind == window_writer.WRITTEN:

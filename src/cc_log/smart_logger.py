@@ -8,7 +8,15 @@ triggers (``triggers``: classifiers, rules, the manual trigger) over the records
   newest message of the driving topic (the topic whose messages count ``pre`` and ``post``, by default the
   first classifier's), or its own span; windows that touch or overlap merge into one file naming every
   trigger;
-- other topics are buffered by time and saved in the windows whose time span holds them.
+- other topics are buffered by time and saved in the windows whose time span holds them;
+- the last message of each latched topic (connection header ``latching: '1'``: ``/tf_static``, maps) is
+  written at the start of every window, as ``rosbag record`` keeps them.
+
+Messages come decoded (``on_message``) or as their serialized bytes with their connection header
+(``on_raw``, what the live intake and ``replay`` hand over): those are buffered as bytes and decoded only
+when a trigger reads a field (a feature set reads its fixed layouts straight from the bytes) and, for
+json-xz, in the writer thread, only for the messages kept. The row-JSON bytes of messages not decoded
+are estimated from a sample (``RawJsonEstimate``).
 
 Completed windows go to the ``window_writer.WindowWriter`` (shared with collect mode), whose background
 thread calls ``log_format.write_window``, so compression and disk writes never run on the message path and
@@ -27,6 +35,7 @@ import time
 from . import features as features_mod
 from . import log_format
 from . import msg_codec
+from . import raw_message
 from . import window_writer
 from .spans import Span
 from .triggers import (DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger,
@@ -34,7 +43,7 @@ from .triggers import (DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODE
 from .window_buffer import (DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, MemoryCost,
                             Record, WindowBuffer)
 
-__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into',
+__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into', 'replay_records',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
            'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
@@ -42,6 +51,12 @@ DEFAULT_FORMAT = 'json-xz'
 DEFAULT_DRIVING_TOPIC = 'odom'
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
+JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to measure its row-JSON bytes ...
+JSON_SAMPLE_FIRST = 256  # ... after the first this many of each type, which all are
+LOST_CHECK_EVERY = 64   # replay: messages between looks at whether the writer lost a window
+DECODED_PART_FACTOR = 8.0  # memory the json-xz writer needs per serialized byte of a part: decoded messages and
+#                            JSON rows (nav_msgs/Odometry: 0.7 KB serialized, 3.5 KB decoded, ~2 KB of row dict)
+LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
 
 OPENED = 'opened'
 WRITTEN = 'written'
@@ -81,6 +96,40 @@ class _Stats(object):
         self.last_refused = ''
 
 
+class RawJsonEstimate(object):
+    """Row-JSON bytes of serialized messages without decoding them all: per message type, the row-JSON
+    bytes per serialized byte of the first ``first`` messages and of every ``every``-th one after them, times
+    the serialized bytes of them all (exact up to ``first`` messages of a type); not thread-safe."""
+
+    def __init__(self, every=JSON_SAMPLE_EVERY, first=JSON_SAMPLE_FIRST):
+        self.every = int(every)
+        self.first = int(first)
+        self._counter = msg_codec.RowJsonCounter()
+        self._types = {}  # type -> [messages, serialized bytes, sampled serialized bytes, sampled JSON bytes]
+
+    def count(self, raw, connection):
+        """Note one message (its bytes and connection header)."""
+        entry = self._types.get(connection['type'])
+        if entry is None:
+            entry = self._types[connection['type']] = [0, 0, 0, 0]
+        if entry[0] < self.first or entry[0] % self.every == 0:
+            try:
+                json_bytes = self._counter.count(raw_message.decode(raw, connection))
+            except raw_message.DECODE_ERRORS:
+                json_bytes = None
+            if json_bytes is not None:
+                entry[2] += len(raw)
+                entry[3] += json_bytes
+        entry[0] += 1
+        entry[1] += len(raw)
+
+    @property
+    def total(self):
+        """Estimated row-JSON bytes of every message noted."""
+        return int(round(sum(json_bytes * size / sampled for _, size, sampled, json_bytes in self._types.values()
+                             if sampled)))
+
+
 class SmartLogger(object):
     """Triggered logging of a driving topic plus side topics.
 
@@ -101,8 +150,8 @@ class SmartLogger(object):
     dropped and counted as lost); give_up_after, close_retry: see ``window_writer.WindowWriter`` (offline use:
     lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
-    half of it (see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
-    reads (json-xz: ``precision``).
+    half of it, divided by DECODED_PART_FACTOR for json-xz, whose writer decodes the part (see ``WindowBuffer``).
+    format_options: keys added to every window's metadata that the format reads (json-xz: ``precision``).
 
     Thread-safe: ``on_message``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be
     called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -151,9 +200,12 @@ class SmartLogger(object):
             for topic in trigger.topics:
                 self._by_topic[topic].append(trigger)
         self._timed = [trigger for trigger in self.triggers if trigger.watches_time]
+        self._decode = {}  # (topic, id(connection)) -> (connection, whether a trigger of the topic reads fields)
         self._lock = threading.RLock()
         self._stats = _Stats()
         self._raw = msg_codec.RowJsonCounter()
+        self._raw_estimate = RawJsonEstimate()
+        self._latched = {}  # latched topic -> the last LATCHED_KEPT records of it
         self._cost = MemoryCost()
         self._callbacks = []
         self._enabled = bool(enabled)
@@ -188,33 +240,75 @@ class SmartLogger(object):
         """True while messages are buffered and classified."""
         return self._enabled
 
+    def wants(self, topic):
+        """Whether messages of ``topic`` are kept or watched (the others are ignored)."""
+        return topic == self.driving_topic or self.side_topics is None or topic in self.side_topics
+
     def on_message(self, topic, msg, stamp=None, size=None):
         """Feed one message of ``topic``; ``stamp`` (float s or a rospy/genpy Time) is its receipt or bag
         time, used when the message has no non-zero header stamp (the current time when None too); ``size``:
         its serialized length when known (it scales the memory estimate of messages of varying size)."""
-        if topic != self.driving_topic and self.side_topics is not None and topic not in self.side_topics:
+        if not self.wants(topic):
             return
         with self._lock:
-            if self._closed:
-                raise ValueError('on_message: the logger is closed')
+            self._check_open('on_message')
             raw = self._raw.count(msg)  # == msg_codec.row_json_bytes(msg); its memo is not thread-safe
             with self._stats.lock:
                 self._stats.messages_seen += 1
                 self._stats.raw_json_bytes += raw
-            if not self._enabled:
-                return
-            if not self._type_ok(topic, msg):
+            if not self._enabled or not self._type_ok(topic, getattr(msg, '_type', type(msg).__name__)):
                 return
             stamp = features_mod.stamp_of(msg, time.time() if stamp is None else stamp)
-            record = Record(stamp, topic, msg, self._cost(msg, size))
-            if topic == self.driving_topic:
-                self._add_driving(record)
-            else:
-                self._complete(self._buffer.add_side(record))
-            for trigger in self._by_topic.get(topic, ()):
-                self._fire(trigger.on_record(record))
-            for trigger in self._timed:
-                self._fire(trigger.on_time(stamp))
+            self._take(Record(stamp, topic, msg, self._cost(msg, size)))
+
+    def on_raw(self, topic, raw, connection, stamp=None):
+        """Feed one message of ``topic`` as its serialized bytes ``raw`` with its ``connection`` header (a
+        dict with at least ``type``, ``md5sum`` and ``message_definition``); ``stamp`` as ``on_message``'s. It is
+        buffered as bytes and decoded only when a trigger reads its fields; ValueError (and the errors of
+        ``raw_message.decode``) when a trigger needs it decoded and it cannot be."""
+        if not self.wants(topic):
+            return
+        with self._lock:
+            self._check_open('on_raw')
+            self._raw_estimate.count(raw, connection)
+            with self._stats.lock:
+                self._stats.messages_seen += 1
+            if not self._enabled or not self._type_ok(topic, connection['type']):
+                return
+            stamp = raw_message.stamp(raw, connection, time.time() if stamp is None else stamp)
+            self._take(Record(stamp, topic, None, 0, raw, connection))
+
+    def _needs_message(self, record, triggers):
+        """Whether a trigger reads fields of ``record``'s messages (memoised per topic and connection)."""
+        key = (record.topic, id(record.connection))
+        known = self._decode.get(key)
+        if known is None or known[0] is not record.connection:
+            known = self._decode[key] = (record.connection, any(t.needs_message(record) for t in triggers))
+        return known[1]
+
+    def _check_open(self, name):
+        if self._closed:
+            raise ValueError('%s: the logger is closed' % name)
+
+    def _take(self, record):
+        """Buffer a record and run the triggers of its topic (those that read fields get it decoded)."""
+        topic = record.topic
+        triggers = self._by_topic.get(topic, ())
+        view = record
+        if record.msg is None and triggers and self._needs_message(record, triggers):
+            view = raw_message.decoded(record)  # before buffering: a message that cannot be decoded is not kept
+        if not record.cost:
+            record = record._replace(cost=self._cost.of(record))  # the buffer keeps this very record
+        if raw_message.is_latched(record.connection):
+            self._latched.setdefault(topic, collections.deque(maxlen=LATCHED_KEPT)).append(record)
+        if topic == self.driving_topic:
+            self._add_driving(record)
+        else:
+            self._complete(self._buffer.add_side(record))
+        for trigger in triggers:
+            self._fire(trigger.on_record(view))
+        for trigger in self._timed:
+            self._fire(trigger.on_time(record.stamp))
 
     def tick(self, stamp):
         """Message time has reached ``stamp`` (float s) although no message came: lets the triggers that watch
@@ -285,6 +379,7 @@ class SmartLogger(object):
             buffered_bytes = self._buffer.buffered_bytes
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
+            raw_estimate = self._raw_estimate.total
         written = self.writer.stats()
         triggers = {trigger.name: trigger.stats() for trigger in self.triggers}
         classified = [triggers[trigger.name] for trigger in self.classifiers]
@@ -300,7 +395,7 @@ class SmartLogger(object):
                 'buffered_bytes': buffered_bytes,
                 'buffer_trimmed': trimmed,
                 'messages_lost': written['messages_lost'],
-                'raw_json_bytes': s.raw_json_bytes,
+                'raw_json_bytes': s.raw_json_bytes + raw_estimate,
                 'stored_bytes': written['stored_bytes'],
                 'windows_opened': s.windows_opened,
                 'windows_saved': written['windows_saved'],
@@ -334,10 +429,10 @@ class SmartLogger(object):
 
     # -- message path ---------------------------------------------------------------------------------
 
-    def _type_ok(self, topic, msg):
-        """Whether ``msg`` has the type of its topic (the one its triggers read, else the first type seen
-        there); other messages are counted as refused (one window file holds one type per topic)."""
-        msg_type = getattr(msg, '_type', type(msg).__name__)
+    def _type_ok(self, topic, msg_type):
+        """Whether a message of ``msg_type`` has the type of its topic (the one its triggers read, else the
+        first type seen there); other messages are counted as refused (one window file holds one type per
+        topic)."""
         expected = self._expected.get(topic)
         if expected is None:
             expected = self._types.setdefault(topic, msg_type)
@@ -349,8 +444,10 @@ class SmartLogger(object):
         return False
 
     def _new_buffer(self):
+        raw_format = getattr(log_format.formats.get(self.format), 'RAW_RECORDS', False)
         buffer = WindowBuffer(pre=self.pre, post=self.post, max_window=self.max_window,
-                              max_buffer_mb=self.max_buffer_mb, cost=self._cost)
+                              max_buffer_mb=self.max_buffer_mb, cost=self._cost,
+                              part_factor=1.0 if raw_format else DECODED_PART_FACTOR)
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed
@@ -389,9 +486,25 @@ class SmartLogger(object):
         return self.threshold
 
     def _complete(self, windows):
-        """Hand completed windows to the writer."""
+        """Hand completed windows to the writer, each with the latched messages at its start."""
         for window in windows:
-            self.writer.submit(window_writer.Job(window, self._metadata(window)))
+            self.writer.submit(window_writer.Job(self._with_latched(window), self._metadata(window)))
+
+    def _with_latched(self, window):
+        """``window`` with, first, the newest message of each latched topic from before its start (not one it
+        holds), restamped at its start, as ``rosbag record`` writes latched messages when it subscribes."""
+        if not self._latched:
+            return window
+        held = set(id(record) for record in window.records)
+        start = window.start
+        first = []
+        for topic in sorted(self._latched):
+            before = [record for record in self._latched[topic] if record.stamp <= start and id(record) not in held]
+            if before:
+                first.append(before[-1]._replace(stamp=start))
+        if first:
+            window.records[:0] = first
+        return window
 
     def _metadata(self, window):
         """Smart-mode metadata added to log_format's (which already holds triggers, names, part, counts)."""
@@ -485,17 +598,9 @@ def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_P
 
 def replay_into(logger, bag_path, progress=None):
     """Feed every message of the bag that ``logger`` keeps or watches (its driving topic, side topics and
-    trigger topics; every topic when its side topics are None) to it, close it, and return ``replay``'s
-    summary; the same errors."""
+    trigger topics; every topic when its side topics are None) to it as serialized bytes (``on_raw``, the
+    path of the live node), close it, and return ``replay``'s summary; the same errors."""
     from . import bagio  # rosbag: imported here so the module stays pure
-    out_dir = logger.directory
-    windows = []
-
-    def collect(event):
-        if event.kind == WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
-                            'path': event.path})
-    logger.on_event(collect)
     if logger.side_topics is None:
         bag = bagio.open_bag(bag_path)
         try:
@@ -504,14 +609,35 @@ def replay_into(logger, bag_path, progress=None):
             bag.close()
     else:
         topics = [logger.driving_topic] + sorted(logger.side_topics)
+    return replay_records(logger, bagio.read_raw(bag_path, topics), progress, bag_path)
+
+
+def replay_records(logger, records, progress=None, source='the records'):
+    """``replay_into`` of an iterable of ``window_buffer.Record``s (serialized ones go to ``on_raw``, decoded
+    ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
+    benchmarks."""
+    out_dir = logger.directory
+    windows = []
+
+    def collect(event):
+        if event.kind == WRITTEN:
+            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
+                            'path': event.path})
+    logger.on_event(collect)
     count, stopped = 0, False
     try:
-        for record in bagio.read_messages(bag_path, topics):
-            logger.on_message(record.topic, record.msg, record.stamp)
+        for record in records:
+            try:
+                if record.msg is None:
+                    logger.on_raw(record.topic, record.raw, record.connection, record.stamp)
+                else:
+                    logger.on_message(record.topic, record.msg, record.stamp)
+            except raw_message.DECODE_ERRORS as error:
+                raise ValueError('%s: a message of %s cannot be decoded (%s)' % (source, record.topic, error))
             count += 1
             if progress is not None and count % PROGRESS_EVERY == 0:
                 progress(count)
-            if logger.writer.lost:
+            if count % LOST_CHECK_EVERY == 0 and logger.writer.lost:
                 stopped = True  # a window is lost: stop reading, say so below
                 break
         if progress is not None:
@@ -522,7 +648,7 @@ def replay_into(logger, bag_path, progress=None):
     if stats['messages_lost']:
         raise OSError('%s: %d window(s) (%d messages) not written: %s; %d window(s) written%s' % (
             out_dir, stats['windows_lost'], stats['messages_lost'], stats['last_error'], stats['windows_saved'],
-            '; replay stopped after %d messages of %s' % (count, bag_path) if stopped else ''))
+            '; replay stopped after %d messages of %s' % (count, source) if stopped else ''))
     return {
         'input_messages': stats['messages_seen'],
         'raw_json_bytes': stats['raw_json_bytes'],

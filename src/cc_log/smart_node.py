@@ -6,7 +6,8 @@ Subscribed topics
   ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it); the topics of
   the model's other inputs by their role names (``cmd_vel`` for a command model; ``imu`` is the driving
   topic of an imu model), or those of the configuration's triggers.
-  every topic in ``~topics`` (any type): saved in the windows whose time span holds them.
+  every topic in ``~topics`` (any type): saved in the windows whose time span holds them; of a latched topic
+  (``/tf_static``, a map) the newest message before a window's start is also written at the start of it.
 
 Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
@@ -61,26 +62,22 @@ that fails (disk full, directory not writable) is reported (ERROR on /diagnostic
 window is kept in memory and retried every few seconds (``window_writer``); when space is short the quota
 makes room first. At shutdown held windows are retried for ``CLOSE_RETRY`` seconds.
 
-Subscriber callbacks only put the message on an intake queue; one feeder thread runs the classifier and
-the window buffer (``SmartLogger``), whose writer thread compresses and writes. Stamps are header stamps
+Subscriber callbacks only put the message on an intake queue (``intake``); one feeder thread hands each
+message, as its serialized bytes and connection header, to the triggers and the window buffer
+(``SmartLogger.on_raw``: decoded only where a field is read), whose writer thread decodes (json-xz),
+compresses and writes. Stamps are header stamps
 (receipt time for messages without one), so ``use_sim_time`` and ``rosbag play --clock`` work, and time
 jumping backwards (a bag played again) restarts the buffer instead of failing.
 """
-import collections
 import math
 import sys
-import threading
-import time
 
-import genpy
-import roslib.message
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
+from . import intake
 from . import log_format
-from . import msg_codec
-from . import safe_input
 from . import smart_logger
 from . import config
 from .model import AnomalyModel
@@ -104,173 +101,9 @@ DEFAULT_MAX_BUFFER_MB = smart_logger.DEFAULT_MAX_BUFFER_MB
 CLOSE_TIMEOUT = 60.0                 # seconds to wait at shutdown for the last windows to be written
 CLOSE_RETRY = 5.0                    # seconds held windows are retried at shutdown before they count as lost
 DEFAULT_CLASSIFY_EVERY = smart_logger.DEFAULT_CLASSIFY_EVERY
-DEFAULT_INTAKE_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
-DEFAULT_INTAKE_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
-FEED_BATCH_DELAY = 0.01              # seconds the feeder lets messages gather before draining them in a batch
+DEFAULT_INTAKE_MAX_MESSAGES = intake.DEFAULT_MAX_MESSAGES  # intake queue bound (messages); beyond, dropped
+DEFAULT_INTAKE_MAX_MB = intake.DEFAULT_MAX_MB                # intake queue bound (MB of serialized messages)
 TICK_PERIOD = 0.5                    # seconds (ROS time) between ticks for the triggers that watch for silence
-
-
-# -- message intake (shared with collect_node) ----------------------------------------------------------
-
-class IntakeQueue(object):
-    """The bounded intake queue: at most ``max_messages`` messages and ``max_bytes`` serialized bytes.
-
-    ``put`` returns False (and counts ``overflowed``) when the message does not fit; ``take_all`` waits for
-    messages and returns every queued item at once (oldest first). ``qsize()`` as queue.Queue's.
-    """
-
-    def __init__(self, max_messages, max_bytes):
-        self.max_messages = int(max_messages)
-        self.max_bytes = int(max_bytes)
-        self.overflowed = 0
-        self.bytes = 0
-        self._items = collections.deque()
-        self._ready = threading.Condition(threading.Lock())
-
-    def qsize(self):
-        return len(self._items)
-
-    def put(self, item, size=0, force=False):
-        with self._ready:
-            if not force and (len(self._items) >= self.max_messages or self.bytes + size > self.max_bytes):
-                self.overflowed += 1
-                return False
-            self._items.append((item, size))
-            self.bytes += size
-            if len(self._items) == 1:
-                self._ready.notify()
-            return True
-
-    def take_all(self):
-        with self._ready:
-            while not self._items:
-                self._ready.wait()
-            items, self._items = self._items, collections.deque()
-            self.bytes = 0
-        return [item for item, _ in items]
-
-
-class MessageDecoder(object):
-    """Deserializes what the intake receives as rospy.AnyMsg: with the installed class of the publisher's
-    type, else with a class built from the publisher's message definition, which must pass
-    ``safe_input.check_definition`` first (genpy runs the code it generates). A definition that does not is
-    refused for good: the topic is warned about once, and its messages are counted in ``refused``."""
-
-    MAX_REFUSALS = 256  # (type, definition) pairs remembered as refused
-
-    def __init__(self, classes):
-        self.classes = dict(classes)  # type name -> class
-        self.refused = 0
-        self._refusals = set()
-
-    def decode(self, msg, topic):
-        """The deserialized message, or None when its definition is refused."""
-        if not isinstance(msg, rospy.AnyMsg):
-            return msg
-        header = msg._connection_header
-        msg_type = header.get('type', '')
-        cls = self.classes.get(msg_type)
-        if cls is None:
-            definition = header.get('message_definition', '')
-            if (msg_type, definition) in self._refusals:
-                self.refused += 1
-                return None
-            try:
-                safe_input.check_type_name(msg_type)  # before anything imports <package>.msg
-                cls = roslib.message.get_message_class(msg_type) or msg_codec.message_class(msg_type, definition)
-            except ValueError as error:
-                if len(self._refusals) >= self.MAX_REFUSALS:
-                    self._refusals.clear()
-                self._refusals.add((msg_type, definition))
-                self.refused += 1
-                rospy.logwarn('topic %s: messages refused, never decoded: %s', topic, error)
-                return None
-            self.classes[msg_type] = cls
-        decoded = cls()
-        decoded.deserialize(msg._buff)
-        return decoded
-
-
-class Intake(object):
-    """Subscribers that only enqueue; one feeder thread hands messages to ``sink.on_message`` in arrival
-    order, draining the queue in batches. Every topic (the driving one too) arrives as rospy.AnyMsg, i.e.
-    serialized bytes, and is deserialized on the feeder thread (its class from the publisher's type, or
-    built from its message definition). The queue is bounded (``max_messages``, ``max_bytes``): a message
-    arriving when it is full is dropped and counted in ``overflowed`` (and in ``dropped``, which also counts
-    messages that could not be decoded or handled, and those of a refused message definition:
-    ``decoder.refused``)."""
-
-    def __init__(self, sink, driving_topic, driving_class, side_topics, max_messages=DEFAULT_INTAKE_MAX_MESSAGES,
-                 max_bytes=int(DEFAULT_INTAKE_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY):
-        self.sink = sink
-        self.queue = IntakeQueue(max_messages, max_bytes)
-        self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
-        self.batch_delay = float(batch_delay)
-        self.decoder = MessageDecoder({driving_class._type: driving_class} if driving_class is not None else {})
-        self.driving_topic = rospy.resolve_name(driving_topic)
-        self.subscribers = [rospy.Subscriber(self.driving_topic, rospy.AnyMsg, self._enqueue, self.driving_topic,
-                                             queue_size=None)]
-        self.side_topics = []
-        for topic in side_topics:
-            resolved = rospy.resolve_name(topic)
-            if resolved == self.driving_topic:
-                rospy.logwarn('~topics: %s is the driving topic; it is logged anyway', topic)
-                continue
-            if resolved in self.side_topics:
-                continue
-            self.subscribers.append(rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
-                                                     queue_size=None))
-            self.side_topics.append(resolved)
-        self._thread = threading.Thread(target=self._feed, name='cc_log feeder')
-        self._thread.daemon = True
-        self._thread.start()
-
-    @property
-    def overflowed(self):
-        """Messages dropped because the intake queue was full."""
-        return self.queue.overflowed
-
-    def _enqueue(self, msg, topic):
-        # Cheap: note the receipt time and queue the serialized message; decoding happens on the feeder thread.
-        if not self.queue.put((topic, msg, rospy.get_rostime()), len(getattr(msg, '_buff', b'') or b'')):
-            self.dropped += 1
-            rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'
-                                   % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
-
-    def _feed(self):
-        while True:
-            batch = self.queue.take_all()
-            for item in batch:
-                if item is None:
-                    return
-                self._feed_one(*item)
-            if self.batch_delay > 0:
-                time.sleep(self.batch_delay)  # let messages gather: one wake-up per batch, not per message
-
-    def _feed_one(self, topic, msg, receipt):
-        try:
-            decoded = self.decoder.decode(msg, topic)
-        except (genpy.DeserializationError, ValueError, TypeError) as error:
-            self.dropped += 1
-            rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
-            return
-        if decoded is None:  # refused (warned once by the decoder)
-            self.dropped += 1
-            return
-        try:
-            self.sink.on_message(topic, decoded, receipt.secs + 1e-9 * receipt.nsecs,
-                                 len(getattr(msg, '_buff', b'') or b''))
-        except Exception as error:  # a bad message must not stop the feeder (and so all logging)
-            self.dropped += 1
-            rospy.logerr_throttle(10.0, 'message of %s not handled: %s: %s'
-                                  % (topic, type(error).__name__, error))
-
-    def stop(self):
-        """Stop listening, feed what is queued, and wait for the feeder."""
-        for subscriber in self.subscribers:
-            subscriber.unregister()
-        self.queue.put(None, force=True)
-        self._thread.join()
 
 
 def time_of(stamp):
@@ -336,18 +169,16 @@ class SmartNode(object):
         except ValueError as error:
             raise ConfigError('~%s' % error)
         types = smart_logger.topic_types(triggers)
-        driving_class = config.installed_class(types[self.logger.driving_topic]) \
-            if self.logger.driving_topic in types else None
-        if self.logger.driving_topic in types and driving_class is None:
+        if self.logger.driving_topic in types and config.installed_class(types[self.logger.driving_topic]) is None:
             raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
         self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
-        self.intake = Intake(self.extras.sink(self.logger), self.logger.driving_topic, driving_class,
-                             sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
-                                    {self.logger.driving_topic}),
-                             max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
+        self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
+                                    sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
+                                           {self.logger.driving_topic}),
+                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
@@ -435,6 +266,9 @@ class SmartNode(object):
             ('stored / raw', '%.4f' % (float(stored) / raw) if raw else 'n/a'),
             ('classifier mean us', '%.1f' % stats['classifier_mean_us']),
             ('classifier max us', '%.1f' % stats['classifier_max_us']),
+            ('classifier CPU s', '%.3f' % (stats['classifier_mean_us'] * stats['classifier_calls'] * 1e-6)),
+            ('feeder CPU s', '%.3f' % self.intake.cpu_seconds),
+            ('writer CPU s', '%.3f' % self.logger.writer.cpu_seconds),
             ('anomalous messages', stats['anomalous_messages']),
             ('writer queue', stats['queue_depth']),
             ('intake queue', self.intake.queue.qsize()),

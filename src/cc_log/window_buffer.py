@@ -7,7 +7,8 @@ is skipped. Messages of other topics are buffered by time and saved in the windo
 them. (The feature window the classifiers score is ``features.FeatureWindow``.)
 
 Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
-window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``). An open window is
+window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``: a message held as its
+serialized bytes costs their length plus ``RAW_RECORD_OVERHEAD``). An open window is
 handed on in parts (as ``max_window`` splits it, with every message of other topics held) whenever the
 buffer reaches half the budget, so that the buffer and the part being compressed and written stay within
 the budget together. At the full budget a window waiting to be completed is completed, then messages
@@ -23,8 +24,9 @@ from .spans import Span
 
 Record = collections.namedtuple('Record', 'stamp topic msg cost raw connection', defaults=(0, None, None))
 Record.__doc__ = """One message: its stamp (float seconds), topic, message object and estimated memory in
-bytes (``cost``; 0: not known, WindowBuffer estimates it); ``raw`` and ``connection`` may carry its serialized
-bytes and connection header (dict) alongside or instead of the decoded ``msg`` (None when not kept)."""
+bytes (``cost``; 0: not known, WindowBuffer estimates it); ``raw`` and ``connection``: its serialized bytes and
+connection header (a dict: type, md5sum, message_definition, and live also callerid and latching), alongside
+or instead of the decoded ``msg`` (None until something reads a field: ``raw_message.decoded``)."""
 
 Trigger = collections.namedtuple('Trigger', 'stamp reason score name', defaults=(None,))
 Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
@@ -38,6 +40,8 @@ DEFAULT_MAX_BUFFER_MB = 256.0      # memory budget of everything buffered (MB = 
 MB = 1000 ** 2
 RECORD_OVERHEAD = 130              # bytes of a Record around its message: the tuple, stamp, cost, a deque slot
 ALLOCATOR_FACTOR = 1.15            # measured RSS per buffered nav_msgs/Odometry / its deep sys.getsizeof
+RAW_RECORD_OVERHEAD = 200          # bytes of a Record of serialized bytes besides their length: the tuple, stamp,
+#                                    cost, the bytes object's header, a deque slot (193 measured by tracemalloc)
 
 
 def deep_size(obj):
@@ -77,6 +81,13 @@ class MemoryCost(object):
 
     def __init__(self):
         self._memo = {}
+
+    def of(self, record):
+        """Bytes ``record`` takes: its serialized length plus RAW_RECORD_OVERHEAD when it holds only its
+        bytes, else the estimate of its message."""
+        if record.msg is None and record.raw is not None:
+            return len(record.raw) + RAW_RECORD_OVERHEAD
+        return self(record.msg, len(record.raw) if record.raw is not None else None)
 
     def __call__(self, msg, size=None):
         """Bytes ``msg`` takes in memory, estimated (``size``: its serialized length, or None)."""
@@ -177,11 +188,14 @@ class WindowBuffer(object):
     stream. ``add``, ``add_side``, ``trigger`` and ``flush`` return the windows completed by that call (a
     list of LogWindow); a window is complete once ``pre`` further messages have shown that the next window
     does not touch it, or when it reaches ``max_window`` or the memory budget ``max_buffer_mb`` (written in
-    parts). ``cost``: the MemoryCost estimating records that carry no cost.
+    parts). ``cost``: the MemoryCost estimating records that carry no cost. ``part_factor``: the memory the writer
+    needs for a part per byte of it (>= 1; a format that decodes serialized messages needs several times
+    their size): parts are handed on at half the budget divided by it.
     """
 
     def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
-                 jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None):
+                 jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None,
+                 part_factor=1.0):
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
         self.max_window = Span.parse(max_window, 'max_window')
@@ -192,6 +206,7 @@ class WindowBuffer(object):
             raise ValueError('pre: %s is larger than the buffer can hold (max_window %s)' % (self.pre, self.max_window))
         self.jump_back_tolerance = jump_back_tolerance
         self.max_buffer_bytes = budget_bytes(max_buffer_mb)
+        self._part_bytes = int(part_bytes(self.max_buffer_bytes) / max(1.0, float(part_factor)))
         self._cost = cost if cost is not None else MemoryCost()
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
@@ -333,7 +348,7 @@ class WindowBuffer(object):
     def _costed(self, record):
         if record.cost:
             return record
-        return record._replace(cost=self._cost(record.msg))
+        return record._replace(cost=self._cost.of(record))
 
     def _over_budget(self):
         return self.max_buffer_bytes and self._bytes > self.max_buffer_bytes
@@ -341,7 +356,7 @@ class WindowBuffer(object):
     def _enforce_budget(self):
         """Stay within max_buffer_mb (see the module docstring); return the windows completed doing so."""
         done = []
-        if not self.max_buffer_bytes or self._bytes <= part_bytes(self.max_buffer_bytes):
+        if not self.max_buffer_bytes or self._bytes <= self._part_bytes:
             return done
         if self._open is not None and (self._open.records or self._side):
             # Written in parts, as max_window splits: what the window holds now, with every side record held.

@@ -109,6 +109,7 @@ class WindowWriter(object):
         self.last_error = ''
         self.last_deleted = ''
         self._closed = False
+        self.cpu_seconds = 0.0            # CPU time of the writer thread writing (decoding, compressing, disk)
         self._queue = queue.Queue()
         self._thread = None
         if background:
@@ -183,12 +184,14 @@ class WindowWriter(object):
             except queue.Empty:
                 self._retry_held()
                 continue
+            started = time.thread_time()
             try:
                 if job is None:
                     self._finish()
                     return
                 self._write(job)
             finally:
+                self.cpu_seconds += time.thread_time() - started
                 self._queue.task_done()
 
     def _write(self, job):

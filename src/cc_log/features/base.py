@@ -9,6 +9,10 @@ into one fixed-length *vector* the model scores. It declares:
 - ``columns``: the names of the row's entries; ``vector_names(span)`` those of the vector;
 - ``read(msg)``: the numbers it takes from a message of the first input (a tuple of floats) and
   ``make_row(stamp, values)``: the row (a tuple of floats; None rejects the message);
+- optionally ``read_raw(buff)``: the same numbers straight from the serialized bytes, and ``observe_raw``
+  for the other inputs, for the message layouts whose md5sums are in ``raw_md5sums`` (fixed offsets, read
+  with ``struct.unpack_from``); ``reads_raw(connection)`` says whether a connection's messages can be read
+  so, otherwise they are decoded first;
 - ``vector(array, span)``: the vector of a window (a 2-D array of rows, oldest first); by default the
   mean, std, min and max of every column (``ordered = False``: the order of the rows does not matter).
 
@@ -23,6 +27,7 @@ Pure Python plus numpy: no rospy. Messages are read by attribute, so any object 
 """
 import collections
 import math
+import struct
 
 import numpy as np
 
@@ -152,6 +157,19 @@ def statistics(array):
     return np.concatenate((mean, std, array.min(axis=0), array.max(axis=0)))
 
 
+_UINT32 = struct.Struct('<I')
+
+
+def after_header(buff):
+    """Offset of the first byte after the std_msgs/Header (seq, stamp, frame_id) a message's bytes start with."""
+    return 16 + _UINT32.unpack_from(buff, 12)[0]
+
+
+def after_string(buff, offset):
+    """Offset of the first byte after the string (uint32 length, then its bytes) at ``offset``."""
+    return offset + 4 + _UINT32.unpack_from(buff, offset)[0]
+
+
 def xyz(vector):
     """``(x, y, z)`` of a geometry_msgs/Vector3 or Point as floats."""
     return (float(vector.x), float(vector.y), float(vector.z))
@@ -171,6 +189,7 @@ class FeatureSet(object):
     columns = ()
     ordered = False      # True when the window vector depends on the order of the rows
     count_window = False  # True when the window must be a message count
+    raw_md5sums = frozenset()  # md5sums of the input layouts read_raw / observe_raw read from bytes
 
     def __init__(self, config=None, max_dt=DEFAULT_MAX_DT, min_dt=DEFAULT_MIN_DT):
         self.config = config if config is not None else FeatureConfig(self.name)
@@ -191,6 +210,19 @@ class FeatureSet(object):
     def read(self, msg):
         """The floats this set takes from a message of its first input (AttributeError etc. when missing)."""
         raise NotImplementedError
+
+    def read_raw(self, buff):
+        """``read`` of the serialized bytes of a message of the first input (a layout of ``raw_md5sums``)."""
+        raise NotImplementedError
+
+    def observe_raw(self, role, buff, stamp):
+        """``observe`` of the serialized bytes of a message of another input (a layout of ``raw_md5sums``)."""
+        raise NotImplementedError
+
+    @classmethod
+    def reads_raw(cls, connection):
+        """Whether messages of ``connection`` (a connection header dict, or None) are read from their bytes."""
+        return connection is not None and connection.get('md5sum') in cls.raw_md5sums
 
     def make_row(self, stamp, values):
         """The row of ``values`` (from ``read``) at ``stamp``, or None to reject the message."""
@@ -233,11 +265,18 @@ class FeatureSet(object):
 
     def row_values(self, msg, stamp):
         """``row(msg, stamp)`` as a tuple of plain floats (no numpy)."""
+        return self._row_of(self.read, msg, stamp)
+
+    def row_values_raw(self, buff, stamp):
+        """``row_values`` of a message's serialized bytes (see ``read_raw``)."""
+        return self._row_of(self.read_raw, buff, stamp)
+
+    def _row_of(self, read, msg, stamp):
         try:
-            values = self.read(msg)
+            values = read(msg)
             stamp = float(stamp)
             ok = finite(values + (stamp,))
-        except (AttributeError, TypeError, ValueError, OverflowError):
+        except (AttributeError, TypeError, ValueError, OverflowError, struct.error):
             ok = False
         row = self.make_row(stamp, values) if ok else None
         if row is None:

@@ -8,13 +8,18 @@ stuck) and goes beyond it (``over_v``, ``over_w``: overshooting, running away), 
 minus the speed the pose actually moved at (``slip_v``: wheels turning on the spot) and the age of the
 command. A window becomes the mean, std, min and max of every column.
 """
+import struct
+
 from .base import REPEAT, RESTART, register
-from .motion import OdometrySet, to_body
+from .motion import ODOMETRY_MD5, OdometrySet, to_body
 
 COMMAND_COLUMNS = ('cmd_v', 'cmd_w', 'v', 'w', 'v_err', 'w_err', 'lag_v', 'lag_w', 'over_v', 'over_w', 'slip_v',
                    'cmd_age')
 COMMAND_TIMEOUT = 0.5  # seconds after which a command no longer holds
 MAX_AGE = 10.0         # seconds: cmd_age is capped here (also before the first command)
+TWIST_MD5 = '9f195f881246fdfa2798d1d3eebca84a'  # the geometry_msgs/Twist layout observe_raw reads
+_DOUBLE = struct.Struct('<d')
+_ANGULAR_Z = 5 * 8     # linear x, y, z, angular x, y before it
 
 
 @register
@@ -24,6 +29,7 @@ class CommandFeatures(OdometrySet):
     name = 'command'
     inputs = OdometrySet.inputs + (('cmd_vel', 'geometry_msgs/Twist'),)
     columns = COMMAND_COLUMNS
+    raw_md5sums = frozenset([ODOMETRY_MD5, TWIST_MD5])
 
     def reset_state(self):
         self._command = None  # (stamp, v, w) of the newest command
@@ -35,8 +41,25 @@ class CommandFeatures(OdometrySet):
             return
         try:
             v, w = float(msg.linear.x), float(msg.angular.z)
-            stamp = float(stamp)
         except (AttributeError, TypeError, ValueError, OverflowError):
+            self.rejected += 1
+            return
+        self._command_at(stamp, v, w)
+
+    def observe_raw(self, role, buff, stamp):
+        if role != 'cmd_vel':
+            return
+        try:
+            v, w = _DOUBLE.unpack_from(buff, 0)[0], _DOUBLE.unpack_from(buff, _ANGULAR_Z)[0]
+        except struct.error:
+            self.rejected += 1
+            return
+        self._command_at(stamp, v, w)
+
+    def _command_at(self, stamp, v, w):
+        try:
+            stamp = float(stamp)
+        except (TypeError, ValueError, OverflowError):
             self.rejected += 1
             return
         if (v + w + stamp) * 0.0 != 0.0:

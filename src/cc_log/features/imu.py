@@ -6,11 +6,16 @@ used (it holds the heading). A window becomes the mean, std, min and max of ever
 accelerations is the vibration, the max jerk the hardest shock.
 """
 import math
+import struct
 
-from .base import REPEAT, RESTART, FeatureSet, register, xyz
+from .base import REPEAT, RESTART, FeatureSet, after_header, register, xyz
 
 IMU_COLUMNS = ('acc_x', 'acc_y', 'acc_z', 'acc_norm', 'gyro_x', 'gyro_y', 'gyro_z', 'gyro_norm', 'jerk',
                'gyro_change')
+IMU_MD5 = '6a62c6daae103f4ff57a132d6f95cec2'  # the sensor_msgs/Imu layout read_raw reads
+_VECTOR3 = struct.Struct('<3d')
+_GYRO_AFTER_HEADER = 4 * 8 + 9 * 8                # orientation, its covariance
+_ACC_AFTER_HEADER = _GYRO_AFTER_HEADER + 3 * 8 + 9 * 8  # angular velocity, its covariance
 
 
 def _norm(v):
@@ -33,8 +38,15 @@ class ImuFeatures(FeatureSet):
         self._prev = None    # (acceleration, angular velocity) of the reference message
         self._deriv = (0.0, 0.0)
 
+    raw_md5sums = frozenset([IMU_MD5])
+
     def read(self, msg):
         return xyz(msg.linear_acceleration) + xyz(msg.angular_velocity)
+
+    def read_raw(self, buff):
+        offset = after_header(buff)
+        return _VECTOR3.unpack_from(buff, offset + _ACC_AFTER_HEADER) + \
+            _VECTOR3.unpack_from(buff, offset + _GYRO_AFTER_HEADER)
 
     def make_row(self, stamp, values):
         acc, gyro = values[0:3], values[3:6]

@@ -9,8 +9,9 @@ hitting a wall). A window of rows becomes a fixed-length vector of per-channel s
 std, min, max), whatever the number of rows.
 """
 import math
+import struct
 
-from .base import REPEAT, RESTART, FeatureSet, register, xyz
+from .base import REPEAT, RESTART, FeatureSet, after_header, after_string, register, xyz
 
 MOTION_COLUMNS = (
     'vx', 'vy', 'vz',                      # reported linear twist (body frame by the ROS convention)
@@ -28,6 +29,10 @@ MOTION_COLUMNS = (
 # the angular twist at half the odometry rate): docs/DETECTION.md has the figures.
 GRAVITY = 9.81
 ODOMETRY = 'nav_msgs/Odometry'
+ODOMETRY_MD5 = 'cd5e73d190d741a2f92e81eda573aca7'  # the layout read_odometry_raw reads
+_POSE = struct.Struct('<7d')    # geometry_msgs/Pose: position, orientation
+_TWIST = struct.Struct('<6d')   # geometry_msgs/Twist: linear, angular
+_TWIST_AFTER_POSE = 7 * 8 + 36 * 8  # the pose, then its covariance
 
 
 def read_odometry(msg):
@@ -37,6 +42,13 @@ def read_odometry(msg):
     orientation = pose.orientation
     return xyz(pose.position) + (float(orientation.x), float(orientation.y), float(orientation.z),
                                  float(orientation.w)) + xyz(twist.linear) + xyz(twist.angular)
+
+
+def read_odometry_raw(buff):
+    """``read_odometry`` of a serialized nav_msgs/Odometry: after the header's and child_frame_id's variable
+    strings, the pose and the twist lie at fixed offsets."""
+    offset = after_string(buff, after_header(buff))
+    return _POSE.unpack_from(buff, offset) + _TWIST.unpack_from(buff, offset + _TWIST_AFTER_POSE)
 
 
 def unit_quaternion(q):
@@ -53,9 +65,13 @@ class OdometrySet(FeatureSet):
     message with a broken field is rejected by every such set alike); ``pose_of(values)`` splits it."""
 
     inputs = (('odom', ODOMETRY),)
+    raw_md5sums = frozenset([ODOMETRY_MD5])
 
     def read(self, msg):
         return read_odometry(msg)
+
+    def read_raw(self, buff):
+        return read_odometry_raw(buff)
 
     @staticmethod
     def pose_of(values):

@@ -187,9 +187,28 @@ class FeatureStream(object):
         """A message of another input of the set."""
         self.features.observe(role, msg, stamp)
 
+    def observe_raw(self, role, buff, stamp):
+        """``observe`` of a message's serialized bytes (the set ``reads_raw`` its connection)."""
+        self.features.observe_raw(role, buff, stamp)
+
     def add(self, msg, stamp):
         """A message of the first input at ``stamp`` (float s); returns the vector when one is due."""
         return self.add_row(self.features.row_values(msg, stamp), stamp)
+
+    def add_raw(self, buff, stamp):
+        """``add`` of a message's serialized bytes (the set ``reads_raw`` its connection)."""
+        return self.add_row(self.features.row_values_raw(buff, stamp), stamp)
+
+    def add_record(self, record, role=None):
+        """A ``window_buffer.Record`` of the first input (``role`` None) or of the input ``role``: read from
+        its bytes when it has no decoded message, else from the message."""
+        if record.msg is None:
+            if role is not None:
+                return self.observe_raw(role, record.raw, record.stamp)
+            return self.add_raw(record.raw, record.stamp)
+        if role is not None:
+            return self.observe(role, record.msg, record.stamp)
+        return self.add(record.msg, record.stamp)
 
     def add_row(self, row, stamp):
         """As ``add``, for a row already made by ``self.features``."""

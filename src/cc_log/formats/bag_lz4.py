@@ -1,7 +1,9 @@
 """The ``bag-lz4`` window file: one LZ4-compressed rosbag (format 2.0) per window.
 
 ``rosbag info``, ``rosbag play`` and rqt_bag open it. Records are written on their own topics with their
-stamp as the bag time. The window metadata is a JSON object in one ``std_msgs/String`` message on
+stamp as the bag time; a record held as serialized bytes is written as they are, with its original
+connection header (``callerid``, ``latching``, the publisher's definition), without decoding it. The
+window metadata is a JSON object in one ``std_msgs/String`` message on
 ``/cc_log/metadata``, written first at the time of the first record (``rostopic echo -b FILE
 /cc_log/metadata`` shows it; ``rosbag play FILE --topics ...`` can leave it out). The JSON also holds a
 ``"bag"`` object that ``read`` uses and removes:
@@ -18,10 +20,11 @@ import json
 import math
 import os
 
-from .. import msg_codec, safe_files, safe_input
+from .. import msg_codec, raw_message, safe_files, safe_input
 from ..window_buffer import Record
 
 CODEC = 'bag-lz4'
+RAW_RECORDS = True  # write_window hands records over as they are: serialized bytes are written as bytes
 EXTENSION = '.bag'
 LAYOUT_VERSION = 1
 MAGIC = b'#ROSBAG V2.0\n'
@@ -73,8 +76,20 @@ def write(target, records, metadata):
     bag = rosbag.Bag(target, 'w', compression=rosbag.Compression.LZ4)
     bag.write(METADATA_TOPIC, string_class(data=text), min(times))
     for record, time in zip(records, times):
-        bag.write(record.topic, record.msg, time)
+        write_record(bag, record, time)
     bag.close()  # on an error the owner of ``target`` closes it (a failed rosbag close would leave it open)
+
+
+def write_record(bag, record, time):
+    """Write one Record into an open rosbag at ``time``: its serialized bytes with the publisher's connection
+    header when it has them (latching and callerid kept), else the decoded message."""
+    if record.raw is not None and record.connection:
+        header = dict(record.connection, topic=record.topic)
+        bag.write(record.topic, (header['type'], record.raw, header['md5sum'],
+                                 raw_message.message_class(record.connection)), time, raw=True,
+                  connection_header=header)
+    else:
+        bag.write(record.topic, record.msg, time)
 
 
 def encoder(records, metadata):

@@ -78,6 +78,11 @@ class Trigger(object):
         """The Fires a record of one of ``topics`` causes (a list, often empty)."""
         return []
 
+    def needs_message(self, record):
+        """Whether ``on_record`` reads the decoded message of ``record`` (a record of serialized bytes is
+        then decoded first); False when it reads the bytes (or nothing)."""
+        return True
+
     def on_time(self, stamp):
         """The Fires of message time reaching ``stamp`` (only called when ``watches_time``)."""
         return []

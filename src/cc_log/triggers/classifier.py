@@ -119,14 +119,17 @@ class ClassifierTrigger(Trigger):
     def topic_types(self):
         return dict(self._types)
 
+    def needs_message(self, record):
+        return not self.config.feature.reads_raw(record.connection)
+
     def on_record(self, record):
         if record.topic in self._roles:
-            self.stream.observe(self._roles[record.topic], record.msg, record.stamp)
+            self.stream.add_record(record, self._roles[record.topic])
             return []
         stream = self.stream
         resets = stream.resets
         started = time.perf_counter()
-        vector = stream.add(record.msg, record.stamp)
+        vector = stream.add_record(record)
         feature_seconds = time.perf_counter() - started
         if not stream.whole or stream.resets != resets:
             self._armed = True  # not scored (start, after a gap or a jump back): the next anomalous score is an onset

@@ -228,6 +228,9 @@ class RuleTrigger(Trigger):
 
     # -- message conditions ---------------------------------------------------------------------------
 
+    def needs_message(self, record):
+        return not (self.watches_time or self.what == 'arrival')  # these read the stamp only
+
     def on_record(self, record):
         if self.watches_time:
             self._seen(record.stamp)

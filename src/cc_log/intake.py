@@ -1,0 +1,212 @@
+"""The message intake of the nodes (smart_logger and collect_logger): subscribers that only enqueue.
+
+Every topic arrives as ``rospy.AnyMsg``: the serialized bytes and the publisher's connection header
+(type, md5sum, message_definition, callerid, latching). The subscriber callback only puts them on a bounded
+queue (``IntakeQueue``); one feeder thread hands them to the sink in arrival order, draining the queue in
+batches: to ``sink.on_raw(topic, bytes, connection, receipt)`` when the sink takes serialized messages
+(``SmartLogger``), else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
+message definition ``safe_input.check_definition`` refuses is never decoded (``MessageDecoder``).
+``Intake.subscribe(topic)`` adds a topic at any time.
+
+Edge module: rospy.
+"""
+import collections
+import threading
+import time
+
+import rospy
+
+from . import raw_message
+
+DEFAULT_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
+DEFAULT_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
+FEED_BATCH_DELAY = 0.05       # seconds the feeder lets messages gather before draining them in a batch
+
+
+class IntakeQueue(object):
+    """The bounded intake queue: at most ``max_messages`` messages and ``max_bytes`` serialized bytes.
+
+    ``put`` returns False (and counts ``overflowed``) when the message does not fit; ``take_all`` waits for
+    messages and returns every queued item at once (oldest first). ``qsize()`` as queue.Queue's.
+    """
+
+    def __init__(self, max_messages, max_bytes):
+        self.max_messages = int(max_messages)
+        self.max_bytes = int(max_bytes)
+        self.overflowed = 0
+        self.bytes = 0
+        self._items = collections.deque()
+        self._ready = threading.Condition(threading.Lock())
+
+    def qsize(self):
+        return len(self._items)
+
+    def put(self, item, size=0, force=False):
+        with self._ready:
+            if not force and (len(self._items) >= self.max_messages or self.bytes + size > self.max_bytes):
+                self.overflowed += 1
+                return False
+            self._items.append((item, size))
+            self.bytes += size
+            if len(self._items) == 1:
+                self._ready.notify()
+            return True
+
+    def take_all(self):
+        with self._ready:
+            while not self._items:
+                self._ready.wait()
+            items, self._items = self._items, collections.deque()
+            self.bytes = 0
+        return [item for item, _ in items]
+
+
+class MessageDecoder(object):
+    """Decodes what the intake receives as rospy.AnyMsg (``raw_message.message_class``: the installed class
+    of the publisher's type, else one built from the publisher's message definition, which must pass
+    ``safe_input.check_definition`` first: genpy runs the code it generates). A definition that does not is
+    refused for good: the topic is warned about once, and its messages are counted in ``refused``."""
+
+    MAX_REFUSALS = 256  # (type, definition) pairs remembered as refused
+
+    def __init__(self, classes=()):
+        self.classes = dict(classes)  # type name -> class used before any other
+        self.refused = 0
+        self._refusals = set()
+
+    def accepts(self, connection, topic):
+        """Whether messages of ``connection`` (a header dict) can be decoded; a refusal is counted."""
+        msg_type = connection.get('type', '')
+        if msg_type in self.classes:
+            return True
+        definition = connection.get('message_definition', '')
+        if (msg_type, definition) in self._refusals:
+            self.refused += 1
+            return False
+        try:
+            raw_message.message_class(connection)
+        except ValueError as error:
+            if len(self._refusals) >= self.MAX_REFUSALS:
+                self._refusals.clear()
+            self._refusals.add((msg_type, definition))
+            self.refused += 1
+            rospy.logwarn('topic %s: messages refused, never decoded: %s', topic, error)
+            return False
+        return True
+
+    def decode(self, msg, topic):
+        """The deserialized message, or None when its definition is refused."""
+        if not isinstance(msg, rospy.AnyMsg):
+            return msg
+        header = msg._connection_header
+        if not self.accepts(header, topic):
+            return None
+        cls = self.classes.get(header.get('type', '')) or raw_message.message_class(header)
+        decoded = cls()
+        decoded.deserialize(msg._buff)
+        return decoded
+
+
+class Intake(object):
+    """Subscribers that only enqueue, one feeder thread (see the module docstring).
+
+    ``driving_topic`` and ``side_topics`` are subscribed at once (resolved names; ``side_topics`` lists those
+    subscribed besides the driving one), ``subscribe`` adds more. The queue is bounded (``max_messages``,
+    ``max_bytes``): a message arriving when it is full is dropped and counted in ``overflowed`` (and in
+    ``dropped``, which also counts messages that could not be decoded or handled, and those of a refused
+    message definition: ``decoder.refused``)."""
+
+    def __init__(self, sink, driving_topic, side_topics=(), max_messages=DEFAULT_MAX_MESSAGES,
+                 max_bytes=int(DEFAULT_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY):
+        self.sink = sink
+        self.queue = IntakeQueue(max_messages, max_bytes)
+        self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
+        self.cpu_seconds = 0.0       # CPU time of the feeder thread handing messages to the sink
+        self.batch_delay = float(batch_delay)
+        self.decoder = MessageDecoder()
+        self._raw = hasattr(sink, 'on_raw')
+        self._lock = threading.Lock()
+        self.driving_topic = rospy.resolve_name(driving_topic)
+        self.subscribers = {}
+        self.side_topics = []
+        self._subscribe(self.driving_topic)
+        for topic in side_topics:
+            if rospy.resolve_name(topic) == self.driving_topic:
+                rospy.logwarn('~topics: %s is the driving topic; it is logged anyway', topic)
+                continue
+            self.subscribe(topic)
+        self._thread = threading.Thread(target=self._feed, name='cc_log feeder')
+        self._thread.daemon = True
+        self._thread.start()
+
+    def subscribe(self, topic):
+        """Subscribe ``topic`` (any type, as rospy.AnyMsg) now; return its resolved name, or None when it was
+        subscribed already. Thread-safe."""
+        resolved = rospy.resolve_name(topic)
+        with self._lock:
+            if resolved in self.subscribers:
+                return None
+            self.side_topics.append(resolved)
+            return self._subscribe(resolved)
+
+    def _subscribe(self, resolved):
+        self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
+                                                      queue_size=None)
+        return resolved
+
+    @property
+    def overflowed(self):
+        """Messages dropped because the intake queue was full."""
+        return self.queue.overflowed
+
+    def _enqueue(self, msg, topic):
+        # Cheap: note the receipt time and queue the serialized message; the feeder thread does the rest.
+        if not self.queue.put((topic, msg, rospy.get_rostime()), len(getattr(msg, '_buff', b'') or b'')):
+            self.dropped += 1
+            rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'
+                                   % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
+
+    def _feed(self):
+        while True:
+            batch = self.queue.take_all()
+            started = time.thread_time()
+            try:
+                for item in batch:
+                    if item is None:
+                        return
+                    self._feed_one(*item)
+            finally:
+                self.cpu_seconds += time.thread_time() - started
+            if self.batch_delay > 0:
+                time.sleep(self.batch_delay)  # let messages gather: one wake-up per batch, not per message
+
+    def _feed_one(self, topic, msg, receipt):
+        try:
+            if self._raw and isinstance(msg, rospy.AnyMsg):
+                if not self.decoder.accepts(msg._connection_header, topic):
+                    self.dropped += 1  # refused (warned once by the decoder)
+                    return
+                self.sink.on_raw(topic, msg._buff, msg._connection_header, receipt.secs + 1e-9 * receipt.nsecs)
+                return
+            decoded = self.decoder.decode(msg, topic)
+            if decoded is None:  # refused (warned once by the decoder)
+                self.dropped += 1
+                return
+            self.sink.on_message(topic, decoded, receipt.secs + 1e-9 * receipt.nsecs,
+                                 len(getattr(msg, '_buff', b'') or b''))
+        except raw_message.DECODE_ERRORS as error:
+            self.dropped += 1
+            rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))
+        except Exception as error:  # a bad message must not stop the feeder (and so all logging)
+            self.dropped += 1
+            rospy.logerr_throttle(10.0, 'message of %s not handled: %s: %s'
+                                  % (topic, type(error).__name__, error))
+
+    def stop(self):
+        """Stop listening, feed what is queued, and wait for the feeder."""
+        with self._lock:
+            subscribers = list(self.subscribers.values())
+        for subscriber in subscribers:
+            subscriber.unregister()
+        self.queue.put(None, force=True)
+        self._thread.join()
