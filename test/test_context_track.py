@@ -131,6 +131,35 @@ def test_tee_feeds_every_sink_and_raises_the_first_failure(tmp_path):
     assert seen == ['a', 'a']
 
 
+def test_serialized_messages_reach_the_track_as_bytes_through_a_raw_tee(tmp_path):
+    import io
+    msg = odom(7.0)
+    buffer = io.BytesIO()
+    msg.serialize(buffer)
+    connection = {'topic': '/odom', 'type': Odometry._type, 'md5sum': Odometry._md5sum,
+                  'message_definition': Odometry._full_text, 'callerid': '/base', 'latching': '0'}
+    seen = []
+
+    class RawSink(object):
+        def on_message(self, topic, msg, stamp=None, size=None):
+            seen.append(('message', topic))
+
+        def on_raw(self, topic, raw, connection, stamp=None):
+            seen.append(('raw', topic))
+    track = ContextTrack(tmp_path, {'/odom': None})
+    assert not hasattr(context_track.tee(object(), track), 'on_raw')  # a sink that takes only messages: decoded
+    sink = context_track.tee(RawSink(), track)
+    sink.on_raw('/odom', buffer.getvalue(), connection, 99.0)
+    track.close()
+    [path] = files(tmp_path)
+    with rosbag.Bag(path) as bag:
+        [(_, got, when)] = list(bag.read_messages())
+        [info] = bag._connections.values()
+    assert seen == [('raw', '/odom')]
+    assert got.pose.pose.position.x == 7.0 and when.to_sec() == 7.0  # stamped by its header, not the receipt
+    assert info.header['callerid'] == b'/base'
+
+
 def test_recover_reindexes_a_crashed_file(tmp_path):
     track = ContextTrack(tmp_path, {'odom': None})
     for i in range(5):
