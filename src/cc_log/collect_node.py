@@ -48,11 +48,11 @@ from . import collector
 from . import features
 from . import log_format
 from .model import AnomalyModel
-from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
-                          recover_leftovers, resolve_directory, writer_status)
+from .node_common import (CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, ConfigError,
+                          Diagnostics, Params, fail, init_node, node_config, node_name, recover_leftovers,
+                          resolve_directory, writer_status)
 from .intake import Intake
 from .node_extras import NodeExtras
-from .smart_node import CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB
 
 NODE_NAME = 'collect_logger'
 DEFAULT_FORMAT = 'json-xz'

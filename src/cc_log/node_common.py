@@ -25,11 +25,16 @@ from . import config
 from . import log_format
 from . import recovery
 from .directory import LoggingDirectory
+from . import window_buffer
 from .spans import Span
 
 EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
 XMLRPC_INT = 2 ** 31               # XML-RPC integers are 32-bit signed
+DEFAULT_DIAGNOSTIC_PERIOD = 1.0    # seconds between diagnostics (``~diagnostic_period``)
+DEFAULT_MAX_BUFFER_MB = window_buffer.DEFAULT_MAX_BUFFER_MB
+CLOSE_TIMEOUT = 60.0               # seconds to wait at shutdown for the last windows to be written
+CLOSE_RETRY = 5.0                  # seconds held windows are retried at shutdown before they count as lost
 
 
 class ConfigError(ValueError):

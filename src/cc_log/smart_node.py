@@ -81,8 +81,9 @@ from . import log_format
 from . import smart_logger
 from . import config
 from .model import AnomalyModel
-from .node_common import (ConfigError, Diagnostics, Params, fail, init_node, node_config, node_name,
-                          recover_leftovers, resolve_directory, writer_status)
+from .node_common import (CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, ConfigError,
+                          Diagnostics, Params, fail, init_node, node_config, node_name, recover_leftovers,
+                          resolve_directory, writer_status)
 from .node_extras import NodeExtras
 from .triggers import ClassifierTrigger
 
@@ -94,12 +95,8 @@ DEFAULT_MAX_WINDOW = str(smart_logger.DEFAULT_MAX_WINDOW)
 DEFAULT_RETRIGGER = smart_logger.DEFAULT_RETRIGGER
 DEFAULT_TOPICS = ()
 DEFAULT_ENABLED = True
-DEFAULT_DIAGNOSTIC_PERIOD = 1.0
 DEFAULT_MAX_DISK_MB = 0.0
 DEFAULT_MIN_FREE_MB = 0.0
-DEFAULT_MAX_BUFFER_MB = smart_logger.DEFAULT_MAX_BUFFER_MB
-CLOSE_TIMEOUT = 60.0                 # seconds to wait at shutdown for the last windows to be written
-CLOSE_RETRY = 5.0                    # seconds held windows are retried at shutdown before they count as lost
 DEFAULT_CLASSIFY_EVERY = smart_logger.DEFAULT_CLASSIFY_EVERY
 DEFAULT_INTAKE_MAX_MESSAGES = intake.DEFAULT_MAX_MESSAGES  # intake queue bound (messages); beyond, dropped
 DEFAULT_INTAKE_MAX_MB = intake.DEFAULT_MAX_MB                # intake queue bound (MB of serialized messages)
