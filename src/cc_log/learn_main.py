@@ -68,11 +68,12 @@ def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAU
     for name, directory in (('train', train_dir), ('validate', validate_dir)):
         if directory is not None and not os.path.isdir(directory):
             raise ValueError('%s: %s: no such directory of feature vectors' % (name, directory))
-    validate_vectors, validate_config = learning.load_vectors(validate_dir) if validate_dir else (None, None)
     if train_dir is None:
-        model = AnomalyModel.load(model_path)
+        model = AnomalyModel.load(model_path)  # a bad model file is named before any vector is read
+        validate_vectors, validate_config = learning.load_vectors(validate_dir)
         model.check_config(validate_config)
         return model, learning.evaluate(model, *split_labels(validate_vectors)), {}
+    validate_vectors, validate_config = learning.load_vectors(validate_dir) if validate_dir else (None, None)
     folder = os.path.dirname(os.path.abspath(model_path))
     if not os.path.isdir(folder):
         raise ValueError('model: directory %s does not exist' % folder)
