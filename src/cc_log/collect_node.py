@@ -83,9 +83,9 @@ class CollectNode(object):
             'rotate': given(params.scalar, 'rotate', DEFAULT_ROTATE), 'topics': given(params.topics, 'topics'),
             'label': given(params.scalar, 'label', DEFAULT_LABEL),
             'stride': given(params.number, 'stride', DEFAULT_STRIDE, 1, True),
-            'max_buffer_mb': given(params.number, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB),
-            'max_disk_mb': given(params.number, 'max_disk_mb', 0.0),
-            'min_free_mb': given(params.number, 'min_free_mb', 0.0)})
+            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB),
+            'max_disk_mb': given(params.megabytes, 'max_disk_mb', 0.0),
+            'min_free_mb': given(params.megabytes, 'min_free_mb', 0.0)})
         window = given(params.scalar, 'window', DEFAULT_WINDOW) or DEFAULT_WINDOW
         feature_set = given(params.choice, 'feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS) or \
             DEFAULT_FEATURE_SET

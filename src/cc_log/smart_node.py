@@ -131,9 +131,9 @@ class SmartNode(object):
             'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
             'precision': given(params.value, 'precision', None),
             'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
-            'max_disk_mb': given(params.number, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
-            'min_free_mb': given(params.number, 'min_free_mb', DEFAULT_MIN_FREE_MB),
-            'max_buffer_mb': given(params.number, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
+            'max_disk_mb': given(params.megabytes, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
+            'min_free_mb': given(params.megabytes, 'min_free_mb', DEFAULT_MIN_FREE_MB),
+            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
             {'model': model_path,
              'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES),
              'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY)})
@@ -159,7 +159,7 @@ class SmartNode(object):
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
         intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES,
                                             minimum=1, integer=True)
-        intake_max_mb = params.number('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
+        intake_max_mb = params.megabytes('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
         try:
             self.logger = smart_logger.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
                                                    **options)
