@@ -1,4 +1,4 @@
-"""Window sizes given as a message count (``500``) or a duration (``5s``, ``250ms``); byte sizes in MB or with a unit."""
+"""Window sizes as a message count (``500``) or a duration (``5s``, ``250ms``); byte sizes in MB or with a unit."""
 import collections
 import math
 
