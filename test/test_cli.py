@@ -369,7 +369,6 @@ def test_progress_only_on_stderr_and_only_when_asked(replayed, trained):
     assert '\rinfo [' in info.stderr and '100%' in info.stderr and json.loads(info.stdout)['windows']
 
 
-
 def test_progress_bar_counts_sets_totals_relabels_and_spins():
     from cc_log.progress import Progress, SPINNER
     stream = io.StringIO()
@@ -395,6 +394,7 @@ def test_progress_bar_counts_sets_totals_relabels_and_spins():
         bar.update()
         bar.set(2, 3)
     assert quiet.getvalue() == ''
+
 
 # -- bad input: one line, non-zero exit -------------------------------------------------------------------------
 
