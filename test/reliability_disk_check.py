@@ -133,7 +133,7 @@ class DiskTest(unittest.TestCase):
         with open(other, 'wb') as stream:
             stream.write(b'n' * 50000)
         quota = 0.25  # MB
-        self.start(directory, '_format:=bag-lz4', '_max_disk_mb:=%g' % quota)
+        self.start(directory, '_format:=bag-lz4', '_max_disk_mb:=%gkB' % (quota * 1000))  # a size with a unit
         self.stream.publish(3.0, 1000.0)
         level, message, values = self.wait_status(
             lambda level, message, values: values.get('intake queue') == '0' and values.get('writer queue') == '0'
@@ -153,7 +153,7 @@ class DiskTest(unittest.TestCase):
         directory = os.path.join(self.disk, 'floor')
         os.makedirs(directory)
         filler = os.path.join(self.disk, 'filler_floor')
-        self.start(directory, '_min_free_mb:=0.6')
+        self.start(directory, '_min_free_mb:=600kB')
         fill(filler, 300000)  # 0.3 MB left, under the 0.6 MB floor
         self.stream.publish(1.5, 500.0)
         level, message, values = self.wait_status(

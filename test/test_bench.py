@@ -99,3 +99,8 @@ def test_memory_live_quick():
 def test_context_track_quick():
     out = run('context_track.py', '--quick')
     assert '| sensor noise ' in out and 'cclog stats m' in out and out.count('%') >= 2
+
+
+def test_progress_bars_quick():
+    out = run('progress_bars.py', '--quick')
+    assert 'microseconds per update()' in out and '| disabled ' in out and '| enabled, drawn ' in out

@@ -5,6 +5,7 @@ No roscore: every run gets ROS_MASTER_URI pointing at a closed port, so a comman
 would hang or fail. Checked: exit codes, the one-line error for every kind of bad input, the ``--json``
 fields (against what the bags and the written files really hold), and that progress bars stay on stderr.
 """
+import io
 import json
 import os
 import shutil
@@ -366,6 +367,33 @@ def test_progress_only_on_stderr_and_only_when_asked(replayed, trained):
     assert json.loads(loud.stdout)['input_messages'] == 271 and '\r' not in loud.stdout
     info = run('info', replayed['out'], '--progress', '--json')
     assert '\rinfo [' in info.stderr and '100%' in info.stderr and json.loads(info.stdout)['windows']
+
+
+def test_progress_bar_counts_sets_totals_relabels_and_spins():
+    from cc_log.progress import Progress, SPINNER
+    stream = io.StringIO()
+    with Progress('read', 4, enabled=True, stream=stream) as bar:
+        for _ in range(4):
+            bar.update()
+    assert stream.getvalue().startswith('\rread [') and stream.getvalue().endswith('] 100%  4/4  00:00\n')
+    stream = io.StringIO()
+    with Progress('replay', enabled=True, stream=stream) as bar:
+        bar.set(5)
+        bar.label = 'replay (1/2 bags)'
+        bar.set(10, 10)
+    assert '\rreplay  ' in stream.getvalue() and '\rreplay (1/2 bags) [' in stream.getvalue()
+    assert stream.getvalue().endswith(' 100%  10/10  00:00\n')
+    stream = io.StringIO()
+    with Progress('learn', enabled=True, stream=stream, interval=0.01).busy():
+        deadline = time.time() + 30
+        while not any('learn %s ' % c in stream.getvalue() for c in SPINNER) and time.time() < deadline:
+            time.sleep(0.01)
+    assert any('learn %s ' % c in stream.getvalue() for c in SPINNER) and stream.getvalue().endswith('\n')
+    quiet = io.StringIO()
+    with Progress('read', 3, enabled=False, stream=quiet).busy() as bar:
+        bar.update()
+        bar.set(2, 3)
+    assert quiet.getvalue() == ''
 
 
 # -- bad input: one line, non-zero exit -------------------------------------------------------------------------

@@ -94,7 +94,8 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
     ("json_xz: {level: 3}", "json_xz: unknown key 'level'"),
     ("format: bag-lz4\njson_xz: {precision: {'pose.*': 1e-4}}", "json_xz.precision: rounds json-xz windows only"),
     ("json_xz: {precision: 'pose.*: 1e-4'}", "json_xz.precision: 'pose.*: 1e-4' is not \"pattern=step"),
-    ('limits: {max_disk_mb: -1}', 'limits.max_disk_mb: -1 must be a number of MB >= 0'),
+    ('limits: {max_disk_mb: -1}', 'limits.max_disk_mb: -1 is not a size >= 0'),
+    ('limits: {max_buffer_mb: 2XB}', "limits.max_buffer_mb: '2XB' is not a size >= 0 (MB as a number, or 64MB"),
     ('collect: {label: "../x"}', "label: '../x' must be letters"),
     ('windows: {pre: soon}', "windows.pre: 'soon' is not a message count"),
     ('[1, 2]', 'a configuration is a mapping of topics'),
@@ -304,3 +305,12 @@ def test_a_node_precision_parameter_overrides_the_file(tmp_path, model_path):
                                                                       'twist.twist.*': 1e-5}}
     with pytest.raises(ConfigError, match=r'json_xz.precision: pose.pose.position.\*: step -1.0 is not a number > 0'):
         node_config(params, {'precision': {'pose.pose.position.*': -1.0}})
+
+
+def test_limits_take_a_number_of_mb_or_a_size_with_a_unit(tmp_path):
+    path = write(tmp_path, 'limits: {max_disk_mb: 2GB, min_free_mb: 500kB, max_buffer_mb: 1.5GiB}')
+    cfg = Config.from_dict(config.load_file(path), path)
+    assert (cfg.max_disk_mb, cfg.min_free_mb) == (2000.0, 0.5)
+    assert cfg.max_buffer_mb == pytest.approx(1.5 * 1024 ** 3 / 1e6)
+    plain = Config.from_dict(config.load_file(write(tmp_path, 'limits: {max_disk_mb: 64}')), path)
+    assert plain.max_disk_mb == 64.0

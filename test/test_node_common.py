@@ -49,6 +49,12 @@ def test_values_of_the_right_type_are_read_and_logged_once():
     ('max_disk_mb', 'lots', lambda p: p.number('max_disk_mb', 0.0), "~max_disk_mb: 'lots' must be a number"),
     ('max_disk_mb', -1, lambda p: p.number('max_disk_mb', 0.0), '~max_disk_mb: -1 must be a number >= 0'),
     ('max_disk_mb', float('nan'), lambda p: p.number('max_disk_mb', 0.0), '~max_disk_mb:'),
+    ('max_disk_mb', 'lots', lambda p: p.megabytes('max_disk_mb', 0.0), "~max_disk_mb: 'lots' is not a size >= 0"),
+    ('max_disk_mb', '-2GB', lambda p: p.megabytes('max_disk_mb', 0.0), "~max_disk_mb: '-2GB' is not a size"),
+    ('max_buffer_mb', '64 furlongs', lambda p: p.megabytes('max_buffer_mb', 256), "~max_buffer_mb: '64 furlongs'"),
+    ('intake_max_mb', '10B', lambda p: p.megabytes('intake_max_mb', 64, minimum=0.001),
+     '~intake_max_mb: 1e-05MB is below the minimum of 0.001MB'),
+    ('min_free_mb', True, lambda p: p.megabytes('min_free_mb', 0.0), '~min_free_mb: True is not a size'),
     ('diagnostic_period', True, lambda p: p.number('diagnostic_period', 1.0), '~diagnostic_period: True'),
     ('intake_max_messages', 2.5, lambda p: p.number('intake_max_messages', 1, 1, integer=True),
      '~intake_max_messages: 2.5 is not a whole number'),
@@ -98,3 +104,13 @@ def test_a_read_only_directory_falls_back_with_a_warning(small_tmpfs, tmp_path, 
     monkeypatch.setenv('HOME', str(tmp_path / 'home'))
     path, warning = node_common.resolve_directory(disk)
     assert path != disk and 'Read-only file system' in warning and path in warning
+
+
+@pytest.mark.parametrize('value, megabytes', [
+    (64, 64.0), ('64', 64.0), (0.5, 0.5), ('64MB', 64.0), ('2GB', 2000.0), ('500kB', 0.5), ('500 KB', 0.5),
+    ('1.5GiB', 1.5 * 1024 ** 3 / 1e6), ('512MiB', 512 * 1024 ** 2 / 1e6), ('100B', 1e-4), ('0', 0.0),
+])
+def test_a_size_is_a_number_of_mb_or_has_a_unit(value, megabytes):
+    p, logged = params(max_disk_mb=value)
+    assert p.megabytes('max_disk_mb', 0.0) == pytest.approx(megabytes)
+    assert logged == ['~max_disk_mb: %s' % (value,)]

@@ -22,17 +22,16 @@ what it uses (rosbag for bags, matplotlib for ``plot``).
 import argparse
 import collections
 import copy
-import inspect
 import json
 import math
 import os
 import sys
 import tempfile
 import textwrap
-import threading
 import time
 
 from . import export, formats
+from .progress import bar as _bar, call as _call
 
 PROG = 'cclog'
 EXIT_OK = 0
@@ -45,135 +44,6 @@ EXPORT_TARGETS = ('bag', 'csv', 'jsonl')
 
 class CommandError(ValueError):
     """Bad input found by a command itself (the message is the one line printed)."""
-
-
-# -- progress ---------------------------------------------------------------------------------------------
-
-class Progress(object):
-    """A tiny dependency-free progress bar on stderr: ``label [#####.....]  50%  1976/3952  1.2s``.
-
-    Without a total it shows a count (or, with ``busy()``, a spinner) and the elapsed time. Disabled bars
-    cost nothing. Redraws at most every ``interval`` seconds; ``close()`` ends the line.
-    """
-
-    WIDTH = 28
-    SPINNER = '|/-\\'
-
-    def __init__(self, label, total=None, enabled=False, stream=None, interval=0.1):
-        self.label = label
-        self.total = total
-        self.enabled = bool(enabled)
-        self.stream = stream if stream is not None else sys.stderr
-        self.interval = interval
-        self.done = 0
-        self.started = time.time()
-        self._drawn = 0.0
-        self._ticks = 0
-        self._width = 0
-        self._lock = threading.Lock()
-        self._stop = None
-        self._thread = None
-        self._closed = False
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-        return False
-
-    def update(self, amount=1):
-        """Count ``amount`` more items done."""
-        self.done += amount
-        if self.enabled:
-            self._draw()
-
-    def set(self, done, total=None):
-        """Set the count (and the total) directly; usable as a ``progress(done, total)`` callback."""
-        self.done = done
-        if total is not None:
-            self.total = total
-        if self.enabled:
-            self._draw()
-
-    def busy(self):
-        """Animate a spinner from a background thread until ``close()`` (work without a progress hook)."""
-        if self.enabled and self._thread is None:
-            self._stop = threading.Event()
-            self._thread = threading.Thread(target=self._spin, name='cclog progress')
-            self._thread.daemon = True
-            self._thread.start()
-        return self
-
-    def _spin(self):
-        while not self._stop.wait(self.interval):
-            self._draw(force=True)
-
-    def text(self):
-        """The bar as text (no carriage return)."""
-        elapsed = time.time() - self.started
-        if self._thread is not None:
-            return '%s %s%s  %.1fs' % (self.label, self.SPINNER[self._ticks % len(self.SPINNER)],
-                                       '  (%d items)' % self.total if self.total else '', elapsed)
-        if self.total:
-            fraction = min(1.0, max(0.0, float(self.done) / self.total))
-            filled = int(round(fraction * self.WIDTH))
-            bar = '#' * filled + '.' * (self.WIDTH - filled)
-            return '%s [%s] %3d%%  %d/%d  %.1fs' % (self.label, bar, int(fraction * 100), self.done, self.total,
-                                                    elapsed)
-        return '%s  %d  %.1fs' % (self.label, self.done, elapsed)
-
-    def _draw(self, force=False, final=False):
-        now = time.time()
-        with self._lock:
-            if self._closed or not (force or final or now - self._drawn >= self.interval):
-                return
-            self._drawn = now
-            self._ticks += 1
-            text = self.text()
-            pad = max(0, self._width - len(text))
-            self._width = len(text)
-            try:
-                self.stream.write('\r' + text + ' ' * pad + ('\n' if final else ''))
-                self.stream.flush()
-            except (OSError, ValueError):
-                self.enabled = False
-
-    def close(self):
-        """Stop the spinner, draw the final state and end the line (once)."""
-        if self._thread is not None:
-            self._stop.set()
-            self._thread.join()
-        if self.enabled and not self._closed:
-            self._draw(final=True)
-        self._closed = True
-
-
-def _progress_wanted(args):
-    """``--progress`` / ``--no-progress``, else only when stderr is a terminal."""
-    if getattr(args, 'progress', None) is not None:
-        return args.progress
-    try:
-        return sys.stderr.isatty()
-    except (AttributeError, ValueError):
-        return False
-
-
-def _bar(args, label, total=None):
-    return Progress(label, total, enabled=_progress_wanted(args))
-
-
-def _call(function, progress, *positional, **keywords):
-    """Call a library function, passing ``progress=<callback(done, total)>`` when it takes one; else spin."""
-    try:
-        takes = 'progress' in inspect.signature(function).parameters
-    except (TypeError, ValueError):
-        takes = False
-    if takes:
-        keywords['progress'] = progress.set
-    else:
-        progress.busy()
-    return function(*positional, **keywords)
 
 
 # -- output helpers ---------------------------------------------------------------------------------------

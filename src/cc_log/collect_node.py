@@ -28,9 +28,9 @@ Parameters (defaults below as module constants; each resolved value is logged on
   its other inputs are subscribed under their role names (``cmd_vel`` for the command set): remap them.
   ``~stride`` (int, default: 25): a vector every this many odometry messages.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
-  ``~max_buffer_mb`` (double, default: 256; 0 = no budget): memory budget of the file being collected; a new
+  ``~max_buffer_mb`` (size, default: 256; 0 = no budget): memory budget of the file being collected; a new
   file starts when it is reached.
-  ``~max_disk_mb`` (double, default: 0 = no quota), ``~min_free_mb`` (double, default: 0 = off): the disk
+  ``~max_disk_mb`` (size, default: 0 = no quota), ``~min_free_mb`` (size, default: 0 = off): the disk
   limits of the smart node, for the window files.
 
 Every parameter is type-checked (one line ``/collect_logger: ~<name>: ...``, exit 1). On start, crash
@@ -83,9 +83,9 @@ class CollectNode(object):
             'rotate': given(params.scalar, 'rotate', DEFAULT_ROTATE), 'topics': given(params.topics, 'topics'),
             'label': given(params.scalar, 'label', DEFAULT_LABEL),
             'stride': given(params.number, 'stride', DEFAULT_STRIDE, 1, True),
-            'max_buffer_mb': given(params.number, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB),
-            'max_disk_mb': given(params.number, 'max_disk_mb', 0.0),
-            'min_free_mb': given(params.number, 'min_free_mb', 0.0)})
+            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB),
+            'max_disk_mb': given(params.megabytes, 'max_disk_mb', 0.0),
+            'min_free_mb': given(params.megabytes, 'min_free_mb', 0.0)})
         window = given(params.scalar, 'window', DEFAULT_WINDOW) or DEFAULT_WINDOW
         feature_set = given(params.choice, 'feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS) or \
             DEFAULT_FEATURE_SET

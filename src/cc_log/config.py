@@ -34,7 +34,7 @@ from . import features
 from . import log_format
 from .formats import json_xz
 from . import safe_input
-from .spans import Span
+from .spans import Span, megabytes
 from .triggers import get as trigger_kind
 from .triggers.base import Context, check_name
 from .triggers.classifier import default_topics
@@ -190,9 +190,9 @@ class Config(object):
         self.post = Span.parse(windows.get('post', '100'), 'windows.post')
         self.max_window = Span.parse(windows.get('max', '100000'), 'windows.max')
         limits = _mapping(data.get('limits'), 'limits', LIMIT_KEYS)
-        self.max_disk_mb = _megabytes(limits.get('max_disk_mb', 0), 'limits.max_disk_mb')
-        self.min_free_mb = _megabytes(limits.get('min_free_mb', 0), 'limits.min_free_mb')
-        self.max_buffer_mb = _megabytes(limits.get('max_buffer_mb', 256.0), 'limits.max_buffer_mb')
+        self.max_disk_mb = megabytes(limits.get('max_disk_mb', 0), 'limits.max_disk_mb')
+        self.min_free_mb = megabytes(limits.get('min_free_mb', 0), 'limits.min_free_mb')
+        self.max_buffer_mb = megabytes(limits.get('max_buffer_mb', 256.0), 'limits.max_buffer_mb')
         collect = _mapping(data.get('collect'), 'collect', COLLECT_KEYS)
         rotate = collect.get('rotate')
         self.rotate = None if rotate is None else str(Rotation.parse(rotate, 'collect.rotate'))
@@ -308,12 +308,6 @@ def topic_list(value, name):
         if item.strip() not in out:
             out.append(item.strip())
     return out
-
-
-def _megabytes(value, name):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0 or value == float('inf'):
-        raise ValueError('%s: %r must be a number of MB >= 0' % (name, value))
-    return float(value)
 
 
 def _trigger_entry(entry, index):

@@ -26,7 +26,7 @@ from . import log_format
 from . import recovery
 from .directory import LoggingDirectory
 from . import window_buffer
-from .spans import Span
+from .spans import Span, megabytes
 
 EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
@@ -124,6 +124,17 @@ class Params(object):
         if not math.isfinite(number) or number < minimum:
             raise ConfigError('~%s: %r must be a number >= %g' % (name, value, minimum))
         return int(number) if integer else number
+
+    def megabytes(self, name, default, minimum=0.0):
+        """A byte size in MB >= ``minimum``: a number of MB (``64``) or a size with a unit (``64MB``, ``2GB``,
+        ``500kB``, ``1.5GiB``)."""
+        try:
+            size = megabytes(self.value(name, default), '~' + name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+        if size < minimum:
+            raise ConfigError('~%s: %gMB is below the minimum of %gMB' % (name, size, minimum))
+        return size
 
     def span(self, name, default):
         """A message count (``100``) or a duration (``2s``) as a Span."""

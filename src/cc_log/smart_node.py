@@ -39,19 +39,20 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~topics`` (list or space-separated string, default: none): other topics to keep.
   ``~enabled`` (bool, default: true): start logging, or start paused.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
-  ``~max_disk_mb`` (double, default: 0 = no quota): cc_log window files in ``~directory`` are kept within this
+  ``~max_disk_mb`` (size, default: 0 = no quota): cc_log window files in ``~directory`` are kept within this
   many MB (10^6 bytes) by deleting the oldest ones (only cc_log window files); each deletion is logged and
   counted on /diagnostics.
-  ``~min_free_mb`` (double, default: 0 = off): below this much free space writing stops (ERROR on
+  ``~min_free_mb`` (size, default: 0 = off): below this much free space writing stops (ERROR on
   /diagnostics), windows wait in memory (bounded) and are written when space returns.
   ``~classify_every`` (string, default: 50ms): score the feature window on every message (``1``), every N-th
   (``N``) or at most once per duration (``50ms``: ~20 decisions/s); see smart_logger.DEFAULT_CLASSIFY_EVERY.
-  ``~intake_max_messages`` (int, default: 20000), ``~intake_max_mb`` (double, default: 64): bounds of the
+  ``~intake_max_messages`` (int, default: 20000), ``~intake_max_mb`` (size, default: 64): bounds of the
   intake queue; a message arriving when it is full is dropped and counted (``intake dropped (queue full)``
   and ``messages lost`` on /diagnostics, WARN): never silently.
-  ``~max_buffer_mb`` (double, default: 256; 0 = no budget): memory budget of every buffered message (all
+  ``~max_buffer_mb`` (size, default: 256; 0 = no budget): memory budget of every buffered message (all
   topics, estimated): an open window is written in parts at half of it (the other half is for the part being
   written), never dropped.
+  A size is a number of MB (10^6 bytes) or a string with a unit: ``64MB``, ``2GB``, ``500kB``, ``1.5GiB``.
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
@@ -131,9 +132,9 @@ class SmartNode(object):
             'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
             'precision': given(params.value, 'precision', None),
             'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
-            'max_disk_mb': given(params.number, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
-            'min_free_mb': given(params.number, 'min_free_mb', DEFAULT_MIN_FREE_MB),
-            'max_buffer_mb': given(params.number, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
+            'max_disk_mb': given(params.megabytes, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
+            'min_free_mb': given(params.megabytes, 'min_free_mb', DEFAULT_MIN_FREE_MB),
+            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
             {'model': model_path,
              'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES),
              'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY)})
@@ -159,7 +160,7 @@ class SmartNode(object):
         period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
         intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES,
                                             minimum=1, integer=True)
-        intake_max_mb = params.number('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
+        intake_max_mb = params.megabytes('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
         try:
             self.logger = smart_logger.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
                                                    **options)

@@ -1,4 +1,4 @@
-"""Window sizes given as a message count (``500``) or a duration (``5s``, ``250ms``)."""
+"""Window sizes as a message count (``500``) or a duration (``5s``, ``250ms``); byte sizes in MB or with a unit."""
 import collections
 import math
 
@@ -53,3 +53,25 @@ class Span(collections.namedtuple('Span', 'count seconds')):
         if self.is_duration:
             return '%gs' % self.seconds
         return str(self.count)
+
+
+# Byte sizes: a bare number is MB (10^6 bytes), as the ``*_mb`` parameters always took.
+_BYTE_UNITS = {'b': 1e-6, 'kb': 1e-3, 'mb': 1.0, 'gb': 1e3, 'tb': 1e6,
+               'kib': 1024 / 1e6, 'mib': 1024 ** 2 / 1e6, 'gib': 1024 ** 3 / 1e6, 'tib': 1024 ** 4 / 1e6}
+
+
+def megabytes(value, name='size'):
+    """MB (10^6 bytes) of a number of MB (``64``, ``'64'``) or a size with a unit (``'64MB'``, ``'2GB'``,
+    ``'500kB'``, ``'1.5GiB'``, ``'100B'``; units case-insensitive). ValueError naming ``name`` otherwise."""
+    number = float('nan')
+    if not isinstance(value, bool) and isinstance(value, (int, float, str)):
+        text = str(value).strip().lower().replace(' ', '')
+        digits = text.rstrip('abcdefghijklmnopqrstuvwxyz')
+        factor = _BYTE_UNITS.get(text[len(digits):], None) if digits != text else 1.0
+        try:
+            number = float(digits) * factor if factor is not None else number
+        except (ValueError, OverflowError):
+            pass
+    if not number >= 0 or not math.isfinite(number):
+        raise ValueError('%s: %r is not a size >= 0 (MB as a number, or 64MB, 2GB, 500kB, 1.5GiB)' % (name, value))
+    return number
