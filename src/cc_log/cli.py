@@ -26,9 +26,7 @@ import json
 import math
 import os
 import sys
-import tempfile
 import textwrap
-import time
 
 from . import export, formats
 from .progress import bar as _bar, call as _call
@@ -723,46 +721,6 @@ def cmd_export(args):
     return EXIT_OK
 
 
-def _own_format_rows(records, raw_bytes):
-    """cc_log's own window formats on the same records, as ``codecs.codec_table`` rows (size, ratio in %
-    of the raw JSON, MB/s of raw JSON through ``log_format.write_window``, file write and fsync included)."""
-    from . import log_format
-    from .window_buffer import LogWindow, Trigger
-    rows = []
-    window = LogWindow(records, [Trigger(records[0].stamp, 'codecs', None)])
-    folder = tempfile.mkdtemp(prefix='cclog-codecs-')
-    try:
-        for fmt in log_format.Format.ALL:
-            started = time.perf_counter()
-            path, size = log_format.write_window(window, folder, fmt, {})
-            seconds = time.perf_counter() - started
-            os.unlink(path)
-            rows.append({'codec': 'cc_log %s' % fmt, 'available': True, 'size': size,
-                         'ratio': 100.0 * size / raw_bytes if raw_bytes else 0.0,
-                         'mb_s': raw_bytes / 1e6 / seconds if seconds > 0 else None,
-                         'note': 'window file, one write'})
-    finally:
-        for name in os.listdir(folder):
-            os.unlink(os.path.join(folder, name))
-        os.rmdir(folder)
-    return rows
-
-
-def format_codec_table(rows):
-    """``codec_table`` rows (plus cc_log's own) as a text table, the codec column as wide as its names."""
-    width = max([len('codec')] + [len(row['codec']) for row in rows])
-    lines = ['%-*s %12s %8s %10s' % (width, 'codec', 'bytes', 'ratio', 'MB/s')]
-    for row in rows:
-        if row['available']:
-            speed = row['mb_s']
-            lines.append('%-*s %12d %7.2f%% %10s  %s' % (
-                width, row['codec'], row['size'], row['ratio'],
-                '%.1f' % speed if speed is not None and math.isfinite(speed) else '-', row.get('note') or ''))
-        else:
-            lines.append('%-*s %12s %8s %10s  %s' % (width, row['codec'], '-', '-', '-', row.get('note') or ''))
-    return '\n'.join(line.rstrip() for line in lines)
-
-
 def cmd_codecs(args):
     """The paper's Table 2 on the row-per-message JSON of a bag topic or of window files."""
     from . import codecs, msg_codec
@@ -797,7 +755,7 @@ def cmd_codecs(args):
     data = b''.join(msg_codec.row_json(record.msg).encode('utf-8') + b'\n' for record in records)
     with _bar(args, 'codecs').busy():
         rows = list(codecs.codec_table(data))
-        rows.extend(_own_format_rows(records, len(data)))
+        rows.extend(codecs.window_format_rows(records, len(data)))
     result = collections.OrderedDict([('source', source), ('messages', len(records)), ('raw_json_bytes', len(data)),
                                       ('rows', rows)])
     if args.json:
@@ -805,7 +763,7 @@ def cmd_codecs(args):
         return EXIT_OK
     print('%d messages, %s of row-per-message JSON (%s)' % (
         len(records), human_bytes(len(data)), ', '.join(source['topics'])))
-    print(format_codec_table(rows))
+    print(codecs.format_table(rows))
     print('ratio: compressed size in % of the raw JSON; MB/s: raw JSON compressed per second')
     return EXIT_OK
 

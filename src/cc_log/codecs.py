@@ -10,6 +10,9 @@ import bz2
 import gzip
 import io
 import lzma
+import math
+import os
+import tempfile
 import time
 import zipfile
 
@@ -97,12 +100,41 @@ def codec_table(data, codecs=None):
     return rows
 
 
+def window_format_rows(records, raw_bytes):
+    """cc_log's own window formats on the same records, as ``codec_table`` rows (size, ratio in %
+    of the raw JSON, MB/s of raw JSON through ``log_format.write_window``, file write and fsync included)."""
+    from . import log_format
+    from .window_buffer import LogWindow, Trigger
+    rows = []
+    window = LogWindow(records, [Trigger(records[0].stamp, 'codecs', None)])
+    folder = tempfile.mkdtemp(prefix='cclog-codecs-')
+    try:
+        for fmt in log_format.Format.ALL:
+            started = time.perf_counter()
+            path, size = log_format.write_window(window, folder, fmt, {})
+            seconds = time.perf_counter() - started
+            os.unlink(path)
+            rows.append({'codec': 'cc_log %s' % fmt, 'available': True, 'size': size,
+                         'ratio': 100.0 * size / raw_bytes if raw_bytes else 0.0,
+                         'mb_s': raw_bytes / 1e6 / seconds if seconds > 0 else None,
+                         'note': 'window file, one write'})
+    finally:
+        for name in os.listdir(folder):
+            os.unlink(os.path.join(folder, name))
+        os.rmdir(folder)
+    return rows
+
+
 def format_table(rows):
-    """The rows of ``codec_table`` as a plain-text table."""
-    lines = ['%-8s %12s %8s %10s' % ('codec', 'bytes', 'ratio', 'MB/s')]
+    """``codec_table`` rows (plus ``window_format_rows``) as a text table, the codec column as wide as its names."""
+    width = max([len('codec')] + [len(row['codec']) for row in rows])
+    lines = ['%-*s %12s %8s %10s' % (width, 'codec', 'bytes', 'ratio', 'MB/s')]
     for row in rows:
         if row['available']:
-            lines.append('%-8s %12d %7.2f%% %10.1f' % (row['codec'], row['size'], row['ratio'], row['mb_s']))
+            speed = row['mb_s']
+            lines.append('%-*s %12d %7.2f%% %10s  %s' % (
+                width, row['codec'], row['size'], row['ratio'],
+                '%.1f' % speed if speed is not None and math.isfinite(speed) else '-', row.get('note') or ''))
         else:
-            lines.append('%-8s %12s %8s %10s  %s' % (row['codec'], '-', '-', '-', row['note']))
-    return '\n'.join(lines)
+            lines.append('%-*s %12s %8s %10s  %s' % (width, row['codec'], '-', '-', '-', row.get('note') or ''))
+    return '\n'.join(line.rstrip() for line in lines)
