@@ -181,7 +181,8 @@ class SmartNode(object):
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
         self._ticker = rospy.Timer(rospy.Duration(TICK_PERIOD), self._tick)
-        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
+        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
+                                       self.intake.counts)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
                       'enabled' if enabled else 'disabled until ~enable')
