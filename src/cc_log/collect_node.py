@@ -8,7 +8,8 @@ Subscribed topics
 
 Published topics
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
-  bytes, queues, free disk, write errors and held files, every ``~diagnostic_period`` seconds (wall time).
+  bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
+  ``~diagnostic_period`` seconds (wall time).
 
 Parameters (defaults below as module constants; each resolved value is logged once)
   ``~config`` (string, default: none): the configuration file (``cc_log.config``); with classifiers, the

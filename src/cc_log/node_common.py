@@ -285,7 +285,7 @@ class TopicRates(object):
         """The rate pairs for ``counts`` (see the class)."""
         now = self._clock()
         elapsed = now - self._last
-        pairs = [('rate %s Hz' % topic, '%.2f' % ((count - self._counts.get(topic, 0)) / elapsed if elapsed > 0 else 0.0))
+        pairs = [('rate %s Hz' % topic, '%.2f' % ((count - self._counts.get(topic, 0)) / elapsed if elapsed else 0.0))
                  for topic, count in sorted(counts.items())]
         self._last, self._counts = now, dict(counts)
         return pairs

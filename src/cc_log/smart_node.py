@@ -12,7 +12,8 @@ Subscribed topics
 Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/dropped, raw vs stored
-  bytes, classifier latency, queues, free disk, every ``~diagnostic_period`` seconds (wall time).
+  bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``), every
+  ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
