@@ -111,7 +111,7 @@ def test_topic_rates_are_messages_per_second_of_wall_time_between_calls():
     assert rates.values({'/odom': 110}) == [('rate /odom Hz', '0.00')]  # no time passed: no division by zero
 
 
-def test_the_status_has_the_nodes_name_level_message_values_and_topic_rates():
+def test_the_status_has_the_nodes_level_message_values_and_topic_rates():
     from diagnostic_msgs.msg import DiagnosticStatus
     from diagnostic_updater import DiagnosticStatusWrapper
     counts = {'/odom': 0}
