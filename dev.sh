@@ -40,6 +40,7 @@ debian_packages_of() {
     message_generation|message_runtime) echo "ros-$name" ;;
     genpy|roslib|rospy|rosbag|roslz4|rosgraph|roslaunch|rostest|rosnode|rostopic|rosparam|rosservice|rosmsg)
       echo "python3-$name" ;;
+    diagnostic_updater) echo python3-diagnostic-updater ;;
     *_msgs|*_srvs) echo "ros-$name python3-$name" ;;     # message definitions and their Python classes
     python3-catkin-lint) echo catkin-lint ;;
     python3-*|xz-utils|jq) echo "$key" ;;                 # rosdep's Debian rule: the same name

@@ -123,6 +123,22 @@ class SmartWindowTest(unittest.TestCase):
         self.assertIn('~stride: [5] must be a number', err)
         self.assertEqual(os.listdir(cwd), [])
 
+    def test_0_a_paused_simulated_clock_does_not_stop_diagnostics(self):
+        # /use_sim_time and no /clock: rospy time stays 0, diagnostics still come every period of wall time
+        name = 'collect_logger_paused_clock'
+        rospy.set_param('/use_sim_time', True)  # read by the node when it starts: kept until it publishes
+        node = fx.start('collect_logger.py', '__name:=' + name, '_directory:=' + os.path.join(self.tmp, name),
+                        '_diagnostic_period:=0.2')
+        try:
+            def stamps():
+                return [array.header.stamp for array in self.diagnostics for item in array.status
+                        if item.name == 'cc_log: ' + name]
+            fx.wait_for(lambda: len(stamps()) >= 5, 30, 'five diagnostics of ' + name)
+            self.assertEqual({stamp.to_sec() for stamp in stamps()}, {0.0})  # the node's clock never moved
+        finally:
+            rospy.set_param('/use_sim_time', False)
+            fx.stop(node)
+
     def test_0_unusable_directory_is_a_warning_naming_the_directory_in_use(self):
         blocker = os.path.join(self.tmp, 'a_file')
         with open(blocker, 'w') as stream:
@@ -235,6 +251,15 @@ class SmartWindowTest(unittest.TestCase):
         self.assertEqual(status['write errors'], '0')
         self.assertGreater(int(status['raw JSON bytes']), int(status['stored bytes']) > 0)
         self.assertGreater(int(status['free disk bytes']), 0)
+        # each subscribed topic's rate (wall time): a number in every status, above 0 while it was published
+        rates = [{key: float(value) for key, value in item.items() if key.startswith('rate ')}
+                 for item in (dict((kv.key, kv.value) for kv in status.values)
+                              for array in self.diagnostics for status in array.status
+                              if status.name == 'cc_log: %s' % NODE)]
+        self.assertEqual(set(rates[-1]), {'rate /husky_odom Hz', 'rate /imu Hz'})
+        for key in rates[-1]:
+            self.assertTrue(all(item[key] >= 0 for item in rates), key)
+            self.assertGreater(max(item[key] for item in rates), 0, key)
         self.assertTrue(rospy.ServiceProxy('/%s/enable' % NODE, SetBool)(True).success)
 
 

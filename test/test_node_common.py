@@ -114,3 +114,31 @@ def test_a_size_is_a_number_of_mb_or_has_a_unit(value, megabytes):
     p, logged = params(max_disk_mb=value)
     assert p.megabytes('max_disk_mb', 0.0) == pytest.approx(megabytes)
     assert logged == ['~max_disk_mb: %s' % (value,)]
+
+
+def test_topic_rates_are_messages_per_second_of_wall_time_between_calls():
+    now = [100.0]
+    rates = node_common.TopicRates(clock=lambda: now[0])
+    now[0] = 102.0
+    assert rates.values({'/odom': 100, '/imu': 0}) == [('rate /imu Hz', '0.00'), ('rate /odom Hz', '50.00')]
+    now[0] = 102.5  # a topic subscribed since: counted from 0
+    assert rates.values({'/odom': 105, '/imu': 0, '/scan': 1}) == [
+        ('rate /imu Hz', '0.00'), ('rate /odom Hz', '10.00'), ('rate /scan Hz', '2.00')]
+    assert rates.values({'/odom': 110}) == [('rate /odom Hz', '0.00')]  # no time passed: no division by zero
+
+
+def test_the_status_has_the_nodes_level_message_values_and_topic_rates():
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from diagnostic_updater import DiagnosticStatusWrapper
+    counts = {'/odom': 0}
+    diagnostics = node_common.Diagnostics('cc_log: smart_logger', 0, lambda: (
+        DiagnosticStatus.WARN, 'low disk space', [('windows saved', 3), ('enabled', True)]), lambda: dict(counts))
+    assert diagnostics.updater is None  # period 0: off
+    counts['/odom'] = 40
+    stat = diagnostics._run(DiagnosticStatusWrapper())
+    assert (stat.level, stat.message) == (DiagnosticStatus.WARN, 'low disk space')
+    values = [(kv.key, kv.value) for kv in stat.values]
+    assert values[:2] == [('windows saved', '3'), ('enabled', 'True')]
+    assert [key for key, _ in values[2:]] == ['rate /odom Hz'] and float(values[2][1]) > 0
+    diagnostics.publish()  # off: nothing, no error
+    diagnostics.stop()

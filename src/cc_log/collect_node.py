@@ -8,7 +8,8 @@ Subscribed topics
 
 Published topics
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
-  bytes, queues, free disk, write errors and held files, every ``~diagnostic_period`` seconds (wall time).
+  bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
+  ``~diagnostic_period`` seconds (wall time).
 
 Parameters (defaults below as module constants; each resolved value is logged once)
   ``~config`` (string, default: none): the configuration file (``cc_log.config``); with classifiers, the
@@ -121,7 +122,8 @@ class CollectNode(object):
         self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic,
                              sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
-        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
+        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
+                                       self.intake.counts)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
                       self.collector.features_directory, label)

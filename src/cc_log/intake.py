@@ -126,6 +126,8 @@ class Intake(object):
         self.decoder = MessageDecoder()
         self._raw = hasattr(sink, 'on_raw')
         self._lock = threading.Lock()
+        self.received = {}           # messages received per topic (resolved name), dropped ones too
+        self._count_lock = threading.Lock()
         self.driving_topic = rospy.resolve_name(driving_topic)
         self.subscribers = {}
         self.side_topics = []
@@ -150,6 +152,8 @@ class Intake(object):
             return self._subscribe(resolved)
 
     def _subscribe(self, resolved):
+        with self._count_lock:
+            self.received[resolved] = 0
         self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
                                                       queue_size=None)
         return resolved
@@ -159,8 +163,15 @@ class Intake(object):
         """Messages dropped because the intake queue was full."""
         return self.queue.overflowed
 
+    def counts(self):
+        """``{topic: messages received so far}`` (a copy; the rates on /diagnostics)."""
+        with self._count_lock:
+            return dict(self.received)
+
     def _enqueue(self, msg, topic):
-        # Cheap: note the receipt time and queue the serialized message; the feeder thread does the rest.
+        # Cheap: count, note the receipt time and queue the serialized message; the feeder thread does the rest.
+        with self._count_lock:
+            self.received[topic] += 1
         if not self.queue.put((topic, msg, rospy.get_rostime()), len(getattr(msg, '_buff', b'') or b'')):
             self.dropped += 1
             rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'

@@ -8,7 +8,8 @@ diagnostics and the writer's part of their status.
 - ``resolve_directory``: ``~directory``, else ``~/.ros/cc_log``, else ``/tmp/cc_log``; a fallback is
   returned as a warning the node keeps on /diagnostics (WARN, with the directory in use).
 - ``recover_leftovers``: crash leftovers recovered or reported at start (``recovery``), each logged.
-- ``Diagnostics``: one DiagnosticStatus every period of wall time; ``writer_status``: the status of the
+- ``Diagnostics``: one DiagnosticStatus every period of wall time through diagnostic_updater, with each
+  subscribed topic's message rate (``TopicRates``); ``writer_status``: the status of the
   window writer and the disk (write errors, held windows, paused writing, quota, leftovers, fallback).
 
 ROS edge (rospy).
@@ -17,9 +18,11 @@ import math
 import os
 import sys
 import threading
+import time
 
+import diagnostic_updater
 import rospy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
 from . import config
 from . import log_format
@@ -277,38 +280,90 @@ def free_disk(path):
     return status.f_bavail * status.f_frsize
 
 
-class Diagnostics(object):
-    """Publish one DiagnosticStatus on /diagnostics every ``period`` seconds of wall time (so a paused or
-    jumping simulated clock never stops it)."""
+class TopicRates(object):
+    """Messages per second of wall time of each topic since the previous ``values`` call (pure).
 
-    def __init__(self, name, period, status_fn):
+    ``clock``: seconds of wall time (default ``time.monotonic``). ``values(counts)`` takes ``{topic: messages
+    received so far}`` and returns the /diagnostics pairs ``('rate <topic> Hz', '12.50')``, sorted by topic; a
+    topic first seen counts from 0, so its first rate is taken over the whole interval."""
+
+    def __init__(self, clock=time.monotonic):
+        self._clock = clock
+        self._last = clock()
+        self._counts = {}
+
+    def values(self, counts):
+        """The rate pairs for ``counts`` (see the class)."""
+        now = self._clock()
+        elapsed = now - self._last
+        pairs = [('rate %s Hz' % topic, '%.2f' % ((count - self._counts.get(topic, 0)) / elapsed if elapsed else 0.0))
+                 for topic, count in sorted(counts.items())]
+        self._last, self._counts = now, dict(counts)
+        return pairs
+
+
+class _Updater(diagnostic_updater.Updater):
+    """diagnostic_updater's Updater that publishes each status under the task's own name (the library
+    prefixes the node's name) and publishes nothing when a task is added (no "Node starting up" status
+    without the node's values)."""
+
+    def publish(self, msg):
+        array = DiagnosticArray(status=msg if isinstance(msg, list) else [msg])
+        array.header.stamp = rospy.get_rostime()
+        self.publisher.publish(array)
+
+    def addedTaskCallback(self, task):
+        pass
+
+
+class Diagnostics(object):
+    """The node's DiagnosticStatus ``name`` on /diagnostics through a ``diagnostic_updater.Updater``, every
+    ``period`` seconds of wall time (0: none), so a paused or jumping simulated clock never stops it: the
+    updater's own ``update()`` schedules on rospy time, so a wall-time thread calls ``force_update()``.
+
+    ``status_fn()`` returns ``(level, message, [(key, value), ...])``; ``counts()`` (optional) returns
+    ``{topic: messages received so far}`` (``Intake.counts``), shown as ``rate <topic> Hz`` entries (see
+    ``TopicRates``) after the node's values."""
+
+    def __init__(self, name, period, status_fn, counts=None):
         self.name = name
         self.period = period
         self.status_fn = status_fn
-        self.publisher = rospy.Publisher('/diagnostics', DiagnosticArray, queue_size=10)
+        self.counts = counts
+        self.rates = TopicRates()
+        self.updater = None
         self._stop = threading.Event()
         self._thread = None
         if period > 0:
+            self.updater = _Updater()
+            self.updater.setHardwareID(rospy.get_name())
+            self.updater.add(name, self._run)
             self._thread = threading.Thread(target=self._loop, name='cc_log diagnostics')
             self._thread.daemon = True
             self._thread.start()
+
+    def _run(self, stat):
+        level, message, values = self.status_fn()
+        stat.summary(level, message)
+        for key, value in list(values) + (self.rates.values(self.counts()) if self.counts else []):
+            stat.add(key, value)
+        return stat
 
     def _loop(self):
         while not self._stop.wait(self.period) and not rospy.is_shutdown():
             self.publish()
 
     def publish(self):
-        level, message, values = self.status_fn()
-        status = DiagnosticStatus(level=level, name=self.name, message=message, hardware_id=rospy.get_name())
-        status.values = [KeyValue(key=key, value=str(value)) for key, value in values]
-        array = DiagnosticArray(status=[status])
+        """Publish the status now (nothing when diagnostics are off)."""
+        if self.updater is None:
+            return
         try:
-            array.header.stamp = rospy.get_rostime()
-            self.publisher.publish(array)
+            self.updater.force_update()
         except rospy.ROSException:  # shutting down (rospy.ROSTimeMovedBackwardsException is one too)
             pass
 
     def stop(self):
+        """Stop publishing (waits for the thread)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()

@@ -12,7 +12,8 @@ Subscribed topics
 Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/dropped, raw vs stored
-  bytes, classifier latency, queues, free disk, every ``~diagnostic_period`` seconds (wall time).
+  bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``), every
+  ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
@@ -182,7 +183,8 @@ class SmartNode(object):
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
         self._ticker = rospy.Timer(rospy.Duration(TICK_PERIOD), self._tick)
-        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status)
+        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
+                                       self.intake.counts)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
                       'enabled' if enabled else 'disabled until ~enable')
