@@ -19,6 +19,17 @@ def odom(stamp):
     return msg
 
 
+def serialized_odom(stamp, callerid, latching):
+    """(message, its serialized bytes, a publisher's connection header) of an odometry message."""
+    import io
+    msg = odom(stamp)
+    buffer = io.BytesIO()
+    msg.serialize(buffer)
+    return msg, buffer.getvalue(), {'topic': '/odom', 'type': Odometry._type, 'md5sum': Odometry._md5sum,
+                                    'message_definition': Odometry._full_text, 'callerid': callerid,
+                                    'latching': latching}
+
+
 def files(directory):
     folder = os.path.join(str(directory), context_track.SUBDIRECTORY)
     return sorted(os.path.join(folder, name) for name in os.listdir(folder))
@@ -71,14 +82,9 @@ def test_rotates_by_stamps_and_on_a_jump_back(tmp_path):
 
 
 def test_raw_records_keep_bytes_and_connection_header(tmp_path):
-    import io
-    msg = odom(5.0)
-    buffer = io.BytesIO()
-    msg.serialize(buffer)
-    connection = {'topic': '/odom', 'type': Odometry._type, 'md5sum': Odometry._md5sum,
-                  'message_definition': Odometry._full_text, 'callerid': '/sim', 'latching': '1'}
+    msg, raw, connection = serialized_odom(5.0, '/sim', '1')
     track = ContextTrack(tmp_path, {'/odom': None})
-    assert track.add(Record(5.0, '/odom', msg, 0, buffer.getvalue(), connection))
+    assert track.add(Record(5.0, '/odom', msg, 0, raw, connection))
     track.close()
     [path] = files(tmp_path)
     with rosbag.Bag(path) as bag:
@@ -132,12 +138,7 @@ def test_tee_feeds_every_sink_and_raises_the_first_failure(tmp_path):
 
 
 def test_serialized_messages_reach_the_track_as_bytes_through_a_raw_tee(tmp_path):
-    import io
-    msg = odom(7.0)
-    buffer = io.BytesIO()
-    msg.serialize(buffer)
-    connection = {'topic': '/odom', 'type': Odometry._type, 'md5sum': Odometry._md5sum,
-                  'message_definition': Odometry._full_text, 'callerid': '/base', 'latching': '0'}
+    _, raw, connection = serialized_odom(7.0, '/base', '0')
     seen = []
 
     class RawSink(object):
@@ -149,7 +150,7 @@ def test_serialized_messages_reach_the_track_as_bytes_through_a_raw_tee(tmp_path
     track = ContextTrack(tmp_path, {'/odom': None})
     assert not hasattr(context_track.tee(object(), track), 'on_raw')  # a sink that takes only messages: decoded
     sink = context_track.tee(RawSink(), track)
-    sink.on_raw('/odom', buffer.getvalue(), connection, 99.0)
+    sink.on_raw('/odom', raw, connection, 99.0)
     track.close()
     [path] = files(tmp_path)
     with rosbag.Bag(path) as bag:
