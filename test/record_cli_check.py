@@ -24,8 +24,11 @@ PKG = 'cc_log'
 
 class RecordCliTest(unittest.TestCase):
 
-    def test_record(self):
+    @classmethod
+    def setUpClass(cls):
         rospy.init_node('record_cli_check')
+
+    def test_record(self):
         directory = rospy.get_param('~directory')
         statuses = []
         rospy.Subscriber('/diagnostics', DiagnosticArray, lambda msg: statuses.extend(msg.status))
@@ -46,6 +49,14 @@ class RecordCliTest(unittest.TestCase):
         self.assertIn('context topics', values)
         self.assertEqual(values['min free bytes'], str(1 << 20))  # -L 1M
         self.assertIn('no model yet', mine[-1].message)
+
+    def test_record_all_but_excluded(self):
+        directory = os.path.join(rospy.get_param('~directory'), 'all')
+        [path] = wait_for(lambda: log_format.window_files(directory)[:1], 60, 'a file of record -a')
+        with rosbag.Bag(path) as bag:
+            topics = set(bag.get_type_and_topic_info().topics)
+        self.assertIn('/odom', topics)  # subscribed at start or by the watcher when it appeared
+        self.assertFalse([topic for topic in topics if topic.startswith('/imu')], topics)  # -x '/imu.*'
 
 
 if __name__ == '__main__':
