@@ -27,7 +27,8 @@ class IntakeQueue(object):
     """The bounded intake queue: at most ``max_messages`` messages and ``max_bytes`` serialized bytes.
 
     ``put`` returns False (and counts ``overflowed``) when the message does not fit; ``take_all`` waits for
-    messages and returns every queued item at once (oldest first). ``qsize()`` as queue.Queue's.
+    messages and returns every queued item at once (oldest first). ``qsize()`` as queue.Queue's. ``received``:
+    items put per ``topic`` given to ``put`` (those that did not fit too), counted under the queue's own lock.
     """
 
     def __init__(self, max_messages, max_bytes):
@@ -35,14 +36,27 @@ class IntakeQueue(object):
         self.max_bytes = int(max_bytes)
         self.overflowed = 0
         self.bytes = 0
+        self.received = collections.Counter()
         self._items = collections.deque()
         self._ready = threading.Condition(threading.Lock())
 
     def qsize(self):
         return len(self._items)
 
-    def put(self, item, size=0, force=False):
+    def listen(self, topic):
+        """List ``topic`` in ``received`` (0) before its first item."""
         with self._ready:
+            self.received[topic] += 0
+
+    def received_counts(self):
+        """A copy of ``received``."""
+        with self._ready:
+            return dict(self.received)
+
+    def put(self, item, size=0, force=False, topic=None):
+        with self._ready:
+            if topic is not None:
+                self.received[topic] += 1
             if not force and (len(self._items) >= self.max_messages or self.bytes + size > self.max_bytes):
                 self.overflowed += 1
                 return False
@@ -126,8 +140,6 @@ class Intake(object):
         self.decoder = MessageDecoder()
         self._raw = hasattr(sink, 'on_raw')
         self._lock = threading.Lock()
-        self.received = {}           # messages received per topic (resolved name), dropped ones too
-        self._count_lock = threading.Lock()
         self.driving_topic = rospy.resolve_name(driving_topic)
         self.subscribers = {}
         self.side_topics = []
@@ -152,8 +164,7 @@ class Intake(object):
             return self._subscribe(resolved)
 
     def _subscribe(self, resolved):
-        with self._count_lock:
-            self.received[resolved] = 0
+        self.queue.listen(resolved)  # its rate is 0 until its first message
         self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
                                                       queue_size=None)
         return resolved
@@ -165,14 +176,11 @@ class Intake(object):
 
     def counts(self):
         """``{topic: messages received so far}`` (a copy; the rates on /diagnostics)."""
-        with self._count_lock:
-            return dict(self.received)
+        return self.queue.received_counts()
 
     def _enqueue(self, msg, topic):
         # Cheap: count, note the receipt time and queue the serialized message; the feeder thread does the rest.
-        with self._count_lock:
-            self.received[topic] += 1
-        if not self.queue.put((topic, msg, rospy.get_rostime()), len(getattr(msg, '_buff', b'') or b'')):
+        if not self.queue.put((topic, msg, rospy.get_rostime()), len(getattr(msg, '_buff', b'') or b''), topic=topic):
             self.dropped += 1
             rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'
                                    % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
