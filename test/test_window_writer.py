@@ -75,6 +75,26 @@ def test_quota_orders_windows_by_time_written_not_by_their_stamps(tmp_path):
     assert [path for path, _ in guard.window_files()] == early
 
 
+def test_quota_counts_the_bytes_a_partial_recovery_kept_oldest_first(tmp_path):
+    """``*.unrecovered-<pid>`` files hold bytes of a crashed write: counted in the quota and deleted by age like a
+    window, never a ``*.tmp-<pid>`` leftover that is still to be recovered."""
+    directory = str(tmp_path)
+    windows = [write_window(window(300, start=1000 * k), directory, Format.JSON_XZ)[0] for k in range(2)]
+    size = os.path.getsize(windows[0])
+    kept = os.path.join(directory, os.path.basename(windows[0]) + '.0' + log_format.KEPT_MARK + '4242')
+    pending = os.path.join(directory, os.path.basename(windows[0]) + '.1' + log_format.TMP_MARK + '4243')
+    for path in (kept, pending):
+        with open(path, 'wb') as stream:
+            stream.write(b'\0' * size)
+    for age, path in enumerate([windows[1], windows[0], kept]):  # the kept leftover is the oldest
+        os.utime(path, ns=(time.time_ns() - age * 10 ** 9,) * 2)
+    guard = DiskGuard(directory, max_disk_mb=(sum(map(os.path.getsize, windows)) + 1) / 1e6)
+    assert guard.usage() == sum(map(os.path.getsize, windows + [kept]))
+    assert log_format.kept_leftovers(directory) == [kept]
+    assert guard.enforce_quota(keep=windows[1]) == [kept]
+    assert os.path.exists(pending) and log_format.window_files(directory) == windows
+
+
 # -- collect mode: the same writer ------------------------------------------------------------------------
 
 def test_collect_mode_on_a_full_disk_holds_everything_leaves_no_leftover_and_writes_it_later(small_tmpfs):
@@ -95,8 +115,9 @@ def test_collect_mode_on_a_full_disk_holds_everything_leaves_no_leftover_and_wri
     assert 'No space left on device' in stats['last_error']
     assert failures and all(detail['kept'] for detail in failures)
     assert leftovers(disk) == []  # no empty *.tmp-<pid> window or vector file
-    time.sleep(0.2)  # retries go on while the disk stays full: still nothing left behind
-    assert leftovers(disk) == [] and collector.stats()['write_retries'] >= 1
+    retries = collector.stats()['write_retries']
+    wait_until(lambda: collector.stats()['write_retries'] > retries)  # retries go on while the disk stays full
+    assert leftovers(disk) == []  # still nothing left behind
     os.unlink(filler)  # space returns
     assert collector.close(60)
     stats = collector.stats()

@@ -86,10 +86,12 @@ class DiskGuard(object):
         return status.f_bavail * status.f_frsize
 
     def window_files(self):
-        """``(path, bytes)`` of the cc_log window files in the directory (final names only), oldest written
-        first (``st_mtime_ns``, ties by name)."""
+        """``(path, bytes)`` of the files the quota counts, oldest written first (``st_mtime_ns``, ties by name):
+        the cc_log window files (final names only) and the leftovers a partial recovery kept
+        (``*.unrecovered-<pid>``), which are as old as the crash that left them."""
         files = []
-        for path in (path for directory in self.directories for path in log_format.window_files(directory)):
+        for path in (path for directory in self.directories
+                     for path in log_format.window_files(directory) + log_format.kept_leftovers(directory)):
             try:
                 status = os.stat(path)
             except OSError:
@@ -99,7 +101,7 @@ class DiskGuard(object):
         return [(path, size) for _, path, size in files]
 
     def usage(self):
-        """Bytes of the cc_log window files in the directory (final names only)."""
+        """Bytes of the files the quota counts (``window_files``)."""
         return sum(size for _, size in self.window_files())
 
     def check(self):

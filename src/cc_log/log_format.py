@@ -27,6 +27,7 @@ from . import safe_files, safe_input
 
 PREFIX = 'cc_log_'
 TMP_MARK = safe_files.TMP_MARK
+KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
 FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
 DIR_MODE = safe_files.DIR_MODE
 
@@ -171,6 +172,17 @@ def window_files(directory):
         return []
     return [os.path.join(directory, name) for name in sorted(names)
             if name.startswith(PREFIX) and TMP_MARK not in name and _extension(name)]
+
+
+def kept_leftovers(directory):
+    """Leftovers kept after a partial recovery (``cc_log_*.unrecovered-<pid>``), sorted: bytes no reader
+    could decode, left for a person to look at."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    return [os.path.join(directory, name) for name in sorted(names)
+            if name.startswith(PREFIX) and KEPT_MARK in name and TMP_MARK not in name]
 
 
 def temporary_files(directory):

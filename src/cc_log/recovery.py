@@ -48,7 +48,7 @@ EMPTY = 'empty'
 UNRECOVERABLE = 'unrecoverable'
 BUSY = 'busy'
 RECOVERED_SUFFIX = '_recovered'
-KEPT_MARK = '.unrecovered-'
+KEPT_MARK = log_format.KEPT_MARK
 BUSY_SECONDS = 300.0
 
 Outcome = collections.namedtuple('Outcome', 'leftover status path messages detail lost_bytes kept',
