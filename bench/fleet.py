@@ -255,7 +255,7 @@ def main():
                 results['%s/w%d' % (stage, workers)] = run_stage(stage, bags_dir, os.path.join(work, 'w%d' % workers),
                                                                  workers, args.imu)
                 save_results(work, results)
-        pipeline_tables(work, results, messages)
+        pipeline_tables(work, results, messages, overhead=args.stage == 'none' or len(engines) > 1)
     if args.learning_only or (args.learning and args.stage == 'all'):
         learn_table, compute, held = learning_rows(bags, args.learn_stride, (1, 2))
         common.table(['model', 'workers', 'vectors', 'train wall s', 'peak RSS MB (VmHWM)', 'held-out FP (95% bound)'],
@@ -263,7 +263,7 @@ def main():
                      'vectors of 20%% of the runs; %.0f s to compute the vectors)' % (args.learn_stride, held, compute))
 
 
-def pipeline_tables(work, results, bag_messages):
+def pipeline_tables(work, results, bag_messages, overhead=True):
     """The end-to-end tables of the engines whose three steps are in ``results``, the comparison of their
     outputs and the per-message costs (one process)."""
     rows = []
@@ -305,8 +305,8 @@ def pipeline_tables(work, results, bag_messages):
           % (base['workers'], 1e6 * collect['wall'] / collect['messages'], 1e6 * collect['cpu'] / collect['messages'],
              1e6 * replay['wall'] / replay['messages'], 1e6 * replay['cpu'] / replay['messages'], learn['count'],
              learn['wall'], learn['cpu']))
-    overhead = scheduler_overhead(2)
-    print('scheduler overhead per task (empty task, local cluster of 2): %.1f ms' % (1e3 * overhead))
+    if overhead:
+        print('scheduler overhead per task (empty task, local cluster of 2): %.1f ms' % (1e3 * scheduler_overhead(2)))
     print()
 
 

@@ -1382,10 +1382,10 @@ def main(argv=None):
             status = _run(args, prog)
     except KeyboardInterrupt:  # the second one, while the first was being reported
         status = EXIT_INTERRUPTED
-    if status == EXIT_INTERRUPTED and argv is None:
-        # the program itself (not a call from Python): skip the interpreter's teardown, which takes seconds to
-        # free what an interrupted command held (a replay's open window of 100,000s of messages); nothing is
-        # left to write
+    if status == EXIT_INTERRUPTED and argv is None and args.interrupt.grace is not None:
+        # the program itself (not a call from Python), no Dask cluster (whose processes the teardown ends): skip
+        # the interpreter's teardown, which takes seconds to free what an interrupted command held (a replay's
+        # open window of 100,000s of messages); nothing is left to write
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()
