@@ -4,12 +4,14 @@ one-process path (``--workers 0``); a damaged bag is one line naming it and the 
 import filecmp
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
-from cc_log import fleet
+from cc_log import fleet, learning, log_format
 
 distributed = pytest.importorskip('distributed')
 
@@ -18,11 +20,15 @@ CCLOG = os.path.join(ROOT, 'scripts', 'cclog')
 WINDOW = ('--topic', '/odom', '--window', '100', '--stride', '5')
 
 
-def cclog(*args):
+def environment():
     env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:1')
     env['PYTHONPATH'] = os.pathsep.join(filter(None, [os.path.join(ROOT, 'src'), env.get('PYTHONPATH')]))
+    return env
+
+
+def cclog(*args):
     return subprocess.run([sys.executable, CCLOG] + [str(a) for a in args], stdout=subprocess.PIPE,
-                          stderr=subprocess.PIPE, universal_newlines=True, env=env, timeout=300)
+                          stderr=subprocess.PIPE, universal_newlines=True, env=environment(), timeout=300)
 
 
 def ok_json(*args):
@@ -33,7 +39,8 @@ def ok_json(*args):
 
 @pytest.fixture(scope='module')
 def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=':0',
+                                  scheduler_kwargs={'dashboard': False}) as c:
         yield c.scheduler_address
 
 
@@ -190,3 +197,100 @@ def test_whole_partitions_are_held_out_from_five_on():
     assert fleet.partition_roles(4, 0.2) == ['split'] * 4
     roles = fleet.partition_roles(40, 0.2)
     assert roles.count('held') == 8 and roles[0] == 'train' and roles[-1] == 'train'
+
+
+def test_paths_that_would_share_an_output_name_get_distinct_ones():
+    names = fleet.output_names(['/d/a/b/run.bag', '/d/a__b/run.bag', '/d/a/run', '/d/a/run.bag', '/d/c/x.bag'])
+    assert len(set(names)) == 5
+    assert names[0].startswith('a__b__run-') and names[1].startswith('a__b__run-') and names[4] == 'c__x'
+    assert names[2].startswith('a__run-') and names[3].startswith('a__run-')
+    # a name does not depend on the other inputs' order
+    assert fleet.output_names(['/d/a__b/run.bag', '/d/a/b/run.bag'])[::-1] == names[:2]
+
+
+def started(*args):
+    """``cclog ARGS`` running in its own process group (as from a terminal, whose Ctrl-C reaches every process)."""
+    return subprocess.Popen([sys.executable, CCLOG] + [str(a) for a in args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, universal_newlines=True, env=environment(),
+                            start_new_session=True)
+
+
+def wait_for(condition, process, what, timeout=120):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert process.poll() is None, 'cclog ended before %s: %s' % (what, process.communicate())
+        assert time.monotonic() < deadline, 'no %s within %d s' % (what, timeout)
+        time.sleep(0.02)
+
+
+def ended_pid():
+    child = subprocess.Popen(['true'])
+    child.wait()
+    return child.pid
+
+
+def test_a_cancelled_collect_leaves_no_half_written_vector_file(collected):
+    """Ctrl-C of a collect on a local cluster: the vector files a worker left half written (``*.tmp-<pid>`` of
+    an ended process; one planted, as a killed worker leaves it) are removed, a running process's are kept,
+    and every vector file left is whole; learning never counts a leftover."""
+    root = collected[0]
+    out = root / 'cancelled'
+    bags = [root / 'bags' / robot / 'run.bag' for robot in ('robot1', 'robot2', 'robot3')]
+    folder = out / 'robot3__run' / 'nominal'
+    os.makedirs(str(folder))
+    dead = folder / ('1600000000.000000.json%s%d' % (log_format.TMP_MARK, ended_pid()))
+    live = folder / ('1600000000.010000.json%s%d.1' % (log_format.TMP_MARK, os.getpid()))
+    for leftover in (dead, live):
+        leftover.write_text('{"stamp": 1600000000.0, "feat')
+    assert not fleet.holds_vectors(str(folder.parent))  # a leftover alone is no vector directory
+    process = started('collect', *bags, '--out', out, '--workers', 1, '--topic', '/odom', '--window', '100',
+                      '--stride', '1')
+    wait_for(lambda: any(name.endswith('.json') for _, _, names in os.walk(str(out)) for name in names),
+             process, 'vector file')
+    os.killpg(process.pid, signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130 and 'cclog collect: interrupted' in stderr, stderr
+    leftovers = [name for _, _, names in os.walk(str(out)) for name in names if log_format.TMP_MARK in name]
+    assert leftovers == [live.name]
+    for directory in fleet.expand_vector_dirs([str(out)]):
+        vectors, _ = learning.load_vectors(directory)  # every file whole (a partial one is a ValueError)
+        assert sum(len(v) for v in vectors.values()) == len(os.listdir(os.path.join(directory, 'nominal'))) - (
+            1 if directory.endswith('robot3__run') else 0)
+
+
+def test_ctrl_c_stops_a_replay_in_this_process_within_a_second(tmp_path):
+    """``cclog replay --workers 0`` with a window open over the whole run (a model that flags everything):
+    Ctrl-C stops it within about a second (it took 18 s: the open window was written first, then the
+    interpreter freed the buffer), and what is under a final name is a whole window."""
+    bag = tmp_path / 'run.bag'
+    result = cclog('simulate', '--minutes', 3, '--anomalies', 0, '--seed', 5, '--imu', bag)
+    assert result.returncode == 0, result.stderr
+    assert cclog('collect', bag, '--out', tmp_path / 'vectors', *WINDOW).returncode == 0
+    assert cclog('learn', '--train', tmp_path / 'vectors', '--model', tmp_path / 'model.json').returncode == 0
+    with open(str(tmp_path / 'model.json')) as stream:
+        model = json.load(stream)
+    model['threshold'] = 1e9  # every classification triggers: one window, open to the end
+    (tmp_path / 'hot.json').write_text(json.dumps(model))
+    out = tmp_path / 'windows'
+    process = started('replay', bag, '--topic', '/odom', '--side-topic', '/imu/data', '--model',
+                      tmp_path / 'hot.json', '--out', out, '--workers', 0)
+    # well into the run: the process has spent 4 s of CPU since its output directory appeared
+    wait_for(lambda: os.path.isdir(str(out / 'run')), process, 'output directory')
+    begun = cpu_seconds(process.pid)
+    wait_for(lambda: cpu_seconds(process.pid) > begun + 4, process, '4 CPU seconds of replay')
+    interrupted = time.monotonic()
+    os.killpg(process.pid, signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    seconds = time.monotonic() - interrupted
+    assert process.returncode == 130 and stderr.strip().endswith('cclog replay: interrupted'), stderr
+    assert seconds < 3.0, 'Ctrl-C took %.1f s' % seconds
+    for name in os.listdir(str(out / 'run')):
+        if log_format.TMP_MARK not in name:
+            log_format.read_window(str(out / 'run' / name))
+
+
+def cpu_seconds(pid):
+    """User + system CPU seconds of a running process (/proc/<pid>/stat)."""
+    with open('/proc/%d/stat' % pid) as stream:
+        fields = stream.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / float(os.sysconf('SC_CLK_TCK'))

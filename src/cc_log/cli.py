@@ -21,6 +21,7 @@ what it uses (rosbag for bags, matplotlib for ``plot``).
 """
 import argparse
 import collections
+import contextlib
 import copy
 import json
 import math
@@ -36,6 +37,7 @@ EXIT_OK = 0
 EXIT_BAD_INPUT = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+INTERRUPT_GRACE = 0.5  # seconds Ctrl-C leaves a command to finish what it is writing before it stops anyway
 
 EXPORT_TARGETS = ('bag', 'csv', 'jsonl')
 
@@ -237,7 +239,11 @@ def _run_fleet(args, label, work):
     """``work(engine, progress)`` -> Outcomes on the engine of --workers / --scheduler with a bar of bags;
     returns ``(outcomes, summary)``; each failed bag is one line on stderr."""
     from . import fleet
-    with _engine(args) as engine, _bar(args, label) as bar:
+    engine = _engine(args)
+    interrupt = getattr(args, 'interrupt', None)
+    if interrupt is not None and not engine.local:
+        interrupt.grace = None  # Ctrl-C: let the cluster close (its workers end) however long it takes
+    with engine, _bar(args, label) as bar:
         meter = fleet.Meter(lambda done, total, text: (setattr(bar, 'label', '%s (%s)' % (label, text)),
                                                        bar.set(done, total)))
         outcomes = work(engine, meter.update)
@@ -275,11 +281,38 @@ def _fleet_end(args, summary, rows, text):
     return EXIT_BAD_INPUT if failed else EXIT_OK
 
 
+@contextlib.contextmanager
+def _leftovers_removed(directories):
+    """On the way out (Ctrl-C, a worker lost), remove the half-written vector files of ended processes."""
+    from . import collector
+    try:
+        yield
+    finally:
+        for directory in directories:
+            collector.remove_vector_leftovers(directory)
+
+
+@contextlib.contextmanager
+def _cut_off_reported(directory):
+    """On Ctrl-C, one line per window file whose writing it cut off (a ``*.tmp-<pid>`` leftover below
+    ``directory``, kept for ``cclog recover``); the windows written before are whole under their final names."""
+    from . import recovery
+    try:
+        yield
+    except KeyboardInterrupt:
+        for root, _, _ in os.walk(directory):
+            for path in recovery.scan(root):
+                sys.stderr.write('%s replay: interrupted while writing %s (cclog recover makes it a window file)\n'
+                                 % (PROG, path))
+        raise
+
+
 def _collect_many(args, specs, label, stride):
     from . import fleet
     bags = fleet.expand_bags(args.bag)
-    outcomes, summary = _run_fleet(args, 'collect', lambda engine, progress: fleet.collect_many(
-        engine, bags, args.out, specs, label, stride, single=not args.config, progress=progress))
+    with _leftovers_removed([os.path.join(args.out, name) for name in fleet.output_names(bags)]):
+        outcomes, summary = _run_fleet(args, 'collect', lambda engine, progress: fleet.collect_many(
+            engine, bags, args.out, specs, label, stride, single=not args.config, progress=progress))
     rows = _fleet_rows(outcomes, ('vectors', 'messages'))
     summary['vectors'] = sum(row.get('vectors', 0) for row in rows)
     lines = ['%s: %d feature vectors -> %s' % (row['bag'], row['vectors'], row['directory'])
@@ -408,7 +441,7 @@ def cmd_collect(args):
         raise CommandError('collect: %s has no classifier: nothing to compute' % args.config)
     if many:
         return _collect_many(args, specs, label, stride)
-    with _bar(args, 'collect') as bar:
+    with _leftovers_removed([args.out]), _bar(args, 'collect') as bar:
         result = _call(fleet.collect_one, bar, args.bag, args.out, specs, label, stride, single=not args.config)
     first = specs[0][1]
     summary = collections.OrderedDict([
@@ -572,8 +605,9 @@ def cmd_replay(args):
         return _sweep(args, flat, many)
     if many:
         fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
-        return _replay_many(args, cfg)
-    with _bar(args, 'replay') as bar:
+        with _cut_off_reported(args.out):
+            return _replay_many(args, cfg)
+    with _cut_off_reported(args.out), _bar(args, 'replay') as bar:
         summary = fleet.replay_one(args.bag, args.out, cfg, bar.set, lambda path: _writable_dir(path, 'out'))
     result = collections.OrderedDict([
         ('input_messages', summary['input_messages']),
@@ -1291,11 +1325,78 @@ def _one_line(error):
     return text or type(error).__name__
 
 
+class Interrupt(object):
+    """Ctrl-C (SIGINT) while a command runs: KeyboardInterrupt, as Python's own handler raises it. What the
+    command then finishes (the window writer writing the window that was open) may take ``grace`` seconds at
+    most: then a second KeyboardInterrupt stops that wait too, so the command ends within about a second.
+    Files are written under a temporary name and renamed whole, so a window cut off this way leaves no
+    partial file under a final name. ``grace`` None: no second interrupt (set while a Dask cluster runs: its
+    workers must end before their leftovers are removed)."""
+
+    def __init__(self, grace=INTERRUPT_GRACE):
+        import threading
+        self.grace = grace
+        self.done = False
+        self._timer = None
+        self._previous = None
+        self._main = threading.current_thread() is threading.main_thread()
+
+    def __enter__(self):
+        import signal
+        if self._main:  # signal handlers can only be set there
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+        self.done = True
+        if self._timer is not None:
+            self._timer.cancel()
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return False
+
+    def _handle(self, signum, frame):
+        import threading
+        if self.done:
+            return
+        if self._timer is None and self.grace is not None:
+            self._timer = threading.Timer(self.grace, self._again, (threading.main_thread().ident, signum))
+            self._timer.daemon = True
+            self._timer.start()
+        raise KeyboardInterrupt
+
+    def _again(self, thread, signum):
+        import signal
+        if self.grace is not None and not self.done:
+            signal.pthread_kill(thread, signum)  # wakes the main thread out of a join
+
+
 def main(argv=None):
     """Run ``cclog``; return the exit status."""
     parser = build_parser()
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     prog = '%s %s' % (PROG, args.command)
+    try:
+        with Interrupt() as args.interrupt:
+            status = _run(args, prog)
+    except KeyboardInterrupt:  # the second one, while the first was being reported
+        status = EXIT_INTERRUPTED
+    if status == EXIT_INTERRUPTED and argv is None and args.interrupt.grace is not None:
+        # the program itself (not a call from Python), no Dask cluster (whose processes the teardown ends): skip
+        # the interpreter's teardown, which takes seconds to free what an interrupted command held (a replay's
+        # open window of 100,000s of messages); nothing is left to write
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(status)
+    return status
+
+
+def _run(args, prog):
+    """``args.run(args)`` with its errors as one line and an exit status."""
     try:
         return args.run(args)
     except ValueError as error:  # CommandError, ModelError and every '<what>: <problem>' of the library

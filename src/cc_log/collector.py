@@ -25,6 +25,7 @@ from . import features as features_mod
 from . import learning
 from . import log_format
 from . import msg_codec
+from . import safe_files
 from . import window_writer
 from .spans import Span
 from .window_buffer import DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, budget_bytes, part_bytes
@@ -396,3 +397,26 @@ def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WI
     result.update(vectors=first[0], directory=first[1],
                   stride=result['strides'][computed[0][0]] if computed else stride)
     return result
+
+
+_VECTOR_LEFTOVER = re.compile(r'^.+\.json%s(\d+)(\.\d+)?$' % re.escape(safe_files.TMP_MARK))
+
+
+def remove_vector_leftovers(directory):
+    """Remove the feature-vector files a cancelled collect left half written (``<stamp>.json.tmp-<pid>[.<n>]``
+    anywhere below ``directory``) by this process or by processes that have ended (the workers of a cancelled
+    cluster); a running process's are kept. A vector is recomputed from its bag, so nothing saved is lost.
+    Returns the paths removed."""
+    from .recovery import _alive
+    removed = []
+    for root, _, names in os.walk(directory):
+        for name in names:
+            match = _VECTOR_LEFTOVER.match(name)
+            if match and not _alive(int(match.group(1))):
+                path = os.path.join(root, name)
+                try:
+                    os.unlink(path)
+                except FileNotFoundError:
+                    continue
+                removed.append(path)
+    return sorted(removed)

@@ -96,17 +96,19 @@ def _unique(paths):
 
 
 def output_names(paths):
-    """One subdirectory name per input: its path below the inputs' common directory, ``.bag`` dropped and
-    ``/`` as ``__`` (``robot1/run.bag`` -> ``robot1__run``), so two robots' ``run.bag`` do not meet."""
+    """One distinct subdirectory name per input: its path below the inputs' common directory, ``.bag`` dropped
+    and ``/`` as ``__`` (``robot1/run.bag`` -> ``robot1__run``), so two robots' ``run.bag`` do not meet. Paths
+    that would still share a name (``robot1/run.bag`` and ``robot1__run.bag``; ``run`` and ``run.bag``) each get
+    ``-`` and 8 hex digits of their path's hash: the same name whatever the other inputs' order."""
+    import hashlib
     absolute = [os.path.abspath(path) for path in paths]
     common = os.path.commonpath([os.path.dirname(path) for path in absolute]) if absolute else ''
-    names = []
-    for path in absolute:
-        name = os.path.relpath(path, common)
-        if name.endswith(BAG_SUFFIX):
-            name = name[:-len(BAG_SUFFIX)]
-        names.append(name.replace(os.sep, '__'))
-    return names
+    relative = [os.path.relpath(path, common) for path in absolute]
+    names = [(name[:-len(BAG_SUFFIX)] if name.endswith(BAG_SUFFIX) else name).replace(os.sep, '__')
+             for name in relative]
+    counts = collections.Counter(names)
+    return [name if counts[name] == 1 else '%s-%s' % (name, hashlib.sha256(rel.encode('utf-8')).hexdigest()[:8])
+            for name, rel in zip(names, relative)]
 
 
 # -- the engine -----------------------------------------------------------------------------------------
@@ -194,8 +196,10 @@ class Engine(object):
                 raise ValueError('scheduler: cannot reach %s (%s)' % (self.scheduler, _one_line(error)))
         else:
             count = self.workers or os.cpu_count() or 1
+            # no dashboard; its HTTP server (health routes) on a free port: a busy 8787 warned on stderr
             self._cluster = distributed.LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
-                                                     dashboard_address=None, silence_logs=logging.ERROR)
+                                                     dashboard_address=':0', scheduler_kwargs={'dashboard': False},
+                                                     silence_logs=logging.ERROR)
             self.client = distributed.Client(self._cluster, set_as_default=False)
         return self
 
