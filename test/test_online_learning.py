@@ -107,9 +107,10 @@ def flagged_windows(model, messages, merge=2.0):
 
 def test_a_refit_learns_new_manoeuvres_and_still_catches_anomalies(tmp_path):
     """A model trained on a slow robot (0.5 m/s, 0.5 rad/s) flags the full-speed robot's nominal driving over
-    and over; learning online on 6 minutes of it (through the classifier trigger) refits the model, which then
-    flags far fewer windows of another nominal full-speed run, and still catches a collision and a sudden
-    acceleration injected after the refit."""
+    and over; learning online on 10 minutes of it (through the classifier trigger) refits the model, which then
+    flags a quarter or less of the windows it flagged in another nominal full-speed run (it learns only from
+    what it did not flag, so it widens its nominal step by step: 24 windows before, 1-3 after), and still catches
+    a collision and a sudden acceleration injected after the refit."""
     rate = 20.0
     slow, _ = odometry(sim.SimConfig(rate=rate, seed=21, minutes=6, anomalies=0), SLOW)
     stream, vectors = FeatureStream(FEATURE, every='100ms'), []
@@ -121,19 +122,19 @@ def test_a_refit_learns_new_manoeuvres_and_still_catches_anomalies(tmp_path):
     path = str(tmp_path / 'slow.json')
     model.save(path)
 
-    learner = OnlineLearner(model, online_learning.online_path(path), every=1500, keep=3000, guard='3s',
+    learner = OnlineLearner(model, online_learning.online_path(path), every=1000, keep=3000, guard='3s',
                             background=False)
     trigger = ClassifierTrigger('classifier', model, '/odom', classify_every='100ms', learner=learner)
-    learning_run, _ = odometry(sim.SimConfig(rate=rate, seed=22, minutes=6, anomalies=0))
+    learning_run, _ = odometry(sim.SimConfig(rate=rate, seed=22, minutes=10, anomalies=0))
     for stamp, msg in learning_run:
         trigger.on_record(Record(stamp, '/odom', msg))
     stats = learner.stats()
-    assert stats['refits'] >= 1 and stats['vectors_refused'] > 0 and stats['last_error'] is None
+    assert stats['refits'] >= 1 and stats['vectors_refused'] > 0 and stats['last_error'] is None, str(stats)
     assert trigger.model is not model and trigger.threshold == trigger.model.threshold
 
     held_back, _ = odometry(sim.SimConfig(rate=rate, seed=23, minutes=4, anomalies=0))
     before, after = flagged_windows(model, held_back), flagged_windows(trigger.model, held_back)
-    assert len(after) <= len(before) / 3.0, (len(before), len(after))
+    assert len(before) >= 10 and len(after) <= len(before) / 4.0, (len(before), len(after))
 
     anomalies, truth = odometry(sim.SimConfig(rate=rate, seed=24, minutes=2, anomalies=2, gap=15.0,
                                               anomaly_types=('collision', 'sudden_acceleration')))
