@@ -1,6 +1,7 @@
 """Online learning of nominal (cc_log.online_learning through the classifier trigger; no roscore)."""
 import json
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -12,8 +13,8 @@ from cc_log.online_learning import OnlineLearner
 from cc_log.triggers import ClassifierTrigger
 from cc_log.window_buffer import Record
 
-FEATURE = FeatureConfig('motion', '1s')
-SLOW = sim.Limits(max_speed=0.5, max_accel=0.8, max_decel=1.0, max_yaw_rate=0.5, max_yaw_accel=2.0)
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bench'))
+from learn_online import FEATURE, SLOW, flag_starts, odometry  # noqa: E402  (the bench's runs and counting)
 
 
 def small_model(dimension=13, seed=0):
@@ -87,24 +88,6 @@ def test_a_configuration_turns_online_learning_on(tmp_path):
     assert trigger.learner is None and 'online' not in trigger.stats()
 
 
-def odometry(run, limits=sim.BWIBOT_LIMITS):
-    """(stamp, message) of the odometry of a simulated run."""
-    simulator = sim.Simulator(run, limits=limits)
-    return [(stamp, msg) for topic, stamp, msg in simulator.messages() if topic == sim.ODOM_TOPIC], simulator.truth
-
-
-def flagged_windows(model, messages, merge=2.0):
-    """Stamps where runs of anomalous scores start (scores 10 per second; runs closer than ``merge`` s merge)."""
-    stream, starts, last = FeatureStream(FEATURE, every='100ms'), [], None
-    for stamp, msg in messages:
-        vector = stream.add(msg, stamp)
-        if vector is not None and model.is_anomalous(vector)[0]:
-            if last is None or stamp - last > merge:
-                starts.append(stamp)
-            last = stamp
-    return starts
-
-
 def test_a_refit_learns_new_manoeuvres_and_still_catches_anomalies(tmp_path):
     """A model trained on a slow robot (0.5 m/s, 0.5 rad/s) flags the full-speed robot's nominal driving over
     and over; learning online on 10 minutes of it (through the classifier trigger) refits the model, which then
@@ -133,12 +116,12 @@ def test_a_refit_learns_new_manoeuvres_and_still_catches_anomalies(tmp_path):
     assert trigger.model is not model and trigger.threshold == trigger.model.threshold
 
     held_back, _ = odometry(sim.SimConfig(rate=rate, seed=23, minutes=4, anomalies=0))
-    before, after = flagged_windows(model, held_back), flagged_windows(trigger.model, held_back)
+    before, after = flag_starts(model, held_back), flag_starts(trigger.model, held_back)
     assert len(before) >= 10 and len(after) <= len(before) / 4.0, (len(before), len(after))
 
     anomalies, truth = odometry(sim.SimConfig(rate=rate, seed=24, minutes=2, anomalies=2, gap=15.0,
                                               anomaly_types=('collision', 'sudden_acceleration')))
-    starts = flagged_windows(trigger.model, anomalies)
+    starts = flag_starts(trigger.model, anomalies)
     for entry in truth:
         assert any(entry['start'] <= s <= entry['end'] + 1.0 for s in starts), (entry, starts)
     saved = json.loads(open(online_learning.online_path(path)).read())
