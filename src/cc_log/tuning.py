@@ -6,22 +6,29 @@ its fires into logging windows of [fire - pre, fire + post] as ``WindowBuffer`` 
 (to just below the score of a nominal classification) until the windows per hour of nominal driving are
 within the budget. It then injects one anomaly of every simulator type (``sim.inject_anomalies``) into the
 first run and reports which the tuned threshold still catches (a fire between onset and end + feature
-window). The result goes into ``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out
-nominal runs give the honest rate. Pure: no rospy.
+window; the latency is the first such fire's delay after onset). The result goes into
+``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out nominal runs give the honest rate.
+
+``choose(model, runs, topic, max_false_per_hour, windows, rates)`` also picks the feature window and the
+classify rate: for every window of a small grid (a model of another window than the given one is trained on
+the nominal runs with ``learning.train``'s defaults, so its figures are in-sample twice over) and every
+classify rate, it tunes the threshold as above, then keeps the setting that meets the budget and catches the
+most injected types, with the smallest mean latency among those (then the fewest false windows). Pure: no rospy.
 """
 import collections
 import copy
 
 import numpy as np
 
-from . import sim
-from .features import FeatureStream
+from . import learning, sim
+from .features import FeatureConfig, FeatureStream
 from .spans import Span
 from .triggers import ClassifierTrigger
 
 DEFAULT_PRE = DEFAULT_POST = '2s'
 DEFAULT_RETRIGGER = 'event'
 DEFAULT_CLASSIFY_EVERY = '50ms'
+TRAIN_EVERY = '100ms'   # one training vector per this much of the nominal runs (a model of another window)
 
 
 def _seconds(span, rate, name):
@@ -97,32 +104,91 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
             np.nextafter(candidates[0], -np.inf) if len(candidates) else before)
         count = false_windows(threshold)
     model.threshold = threshold
-    caught, missed = catches(model, runs[0], topic, classify_every, retrigger)
+    found = detections(model, runs[0], topic, classify_every, retrigger)
+    caught = [kind for kind, delay in found.items() if delay is not None]
+    latencies = [found[kind] for kind in caught]
     record = collections.OrderedDict([
         ('max_false_per_hour', float(max_false_per_hour)), ('hours', hours), ('bags', list(sources or [])),
         ('topic', topic), ('pre', str(Span.parse(pre, 'pre'))), ('post', str(Span.parse(post, 'post'))),
         ('classify_every', str(Span.parse(classify_every, 'classify_every'))), ('retrigger', retrigger),
         ('threshold_before', before), ('false_windows_before', start), ('threshold', threshold),
         ('false_windows', count), ('false_per_hour', count / hours if hours else 0.0),
-        ('catches', caught), ('misses', missed)])
+        ('catches', caught), ('misses', [kind for kind, delay in found.items() if delay is None]),
+        ('latencies', dict((kind, found[kind]) for kind in caught)),
+        ('mean_latency', float(np.mean(latencies)) if latencies else None)])
     model.info = dict(model.info, tuned=record)
     return record
 
 
-def catches(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
-    """``(caught types, missed types)``: one anomaly of every simulator type injected into ``run`` at a time
-    (types that do not fit into the run are missed, marked ``'<type> (no room)'``)."""
+def detections(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
+    """``{type: seconds from onset to the first fire within [onset, end + feature window], or None}``: one
+    anomaly of every simulator type injected into ``run`` at a time (a type that does not fit into the run is
+    None under the key ``'<type> (no room)'``)."""
     span = model.config.span
     reach = span.seconds if span.is_duration else span.count / _rate(run)
-    caught, missed = [], []
+    found = collections.OrderedDict()
     for kind in sim.ANOMALY_TYPES:
         try:
             injected, truth = sim.inject_anomalies(run, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
         except ValueError:
-            missed.append('%s (no room)' % kind)
+            found['%s (no room)' % kind] = None
             continue
         entry = truth[0]
-        stamps = fires(model, injected, topic, model.threshold, classify_every, retrigger)
-        hit = any(entry['start'] <= t <= entry['end'] + reach for t in stamps)
-        (caught if hit else missed).append(kind)
-    return caught, missed
+        hits = [t for t in fires(model, injected, topic, model.threshold, classify_every, retrigger)
+                if entry['start'] <= t <= entry['end'] + reach]
+        found[kind] = hits[0] - entry['start'] if hits else None
+    return found
+
+
+def catches(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
+    """``(caught types, missed types)`` of ``detections``."""
+    found = detections(model, run, topic, classify_every, retrigger, seed)
+    return ([kind for kind, delay in found.items() if delay is not None],
+            [kind for kind, delay in found.items() if delay is None])
+
+
+def model_for(model, runs, topic, window, every=TRAIN_EVERY):
+    """``model`` when its feature window is ``window``, else a model of its feature set with that window
+    trained with ``learning.train``'s defaults on the vectors of ``runs`` (one per ``every``)."""
+    config = FeatureConfig(model.config.feature_set, window, model.config.topic_type)
+    if config == model.config:
+        return copy.deepcopy(model)
+    vectors = []
+    for run in runs:
+        stream = FeatureStream(config, every=every)
+        vectors += [v for v in (stream.add(r.msg, r.stamp) for r in run if r.topic == topic) if v is not None]
+    try:
+        trained, _ = learning.train(np.array(vectors), config=config)
+    except ValueError as error:
+        raise ValueError('windows: %s: %s' % (config.window, error))
+    return trained
+
+
+def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_CLASSIFY_EVERY,), pre=DEFAULT_PRE,
+           post=DEFAULT_POST, retrigger=DEFAULT_RETRIGGER, sources=None):
+    """Tune every feature window in ``windows`` (default: the model's) with every classify rate in ``rates``;
+    return ``(model, record)`` of the chosen setting (see the module docstring). ``record`` is ``tune``'s with
+    ``window``, ``chosen_by`` and ``grid`` (a summary of every setting) added; it is the model's
+    ``info['tuned']``."""
+    windows = [model.config.window] if not windows else list(windows)
+    grid, best = [], None
+    for window in windows:
+        base = model_for(model, runs, topic, window)
+        for rate in rates:
+            candidate = copy.deepcopy(base)
+            record = tune(candidate, runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources)
+            meets = record['false_per_hour'] <= max_false_per_hour + 1e-9
+            key = (meets, len(record['catches']), -(record['mean_latency'] if record['catches'] else float('inf')),
+                   -record['false_windows'])
+            grid.append(collections.OrderedDict([
+                ('window', candidate.config.window), ('classify_every', record['classify_every']),
+                ('trained', candidate.config != model.config), ('threshold', record['threshold']),
+                ('false_windows', record['false_windows']), ('false_per_hour', record['false_per_hour']),
+                ('meets_budget', meets), ('catches', record['catches']), ('mean_latency', record['mean_latency'])]))
+            if best is None or key > best[0]:
+                best = (key, candidate, record)
+    _, chosen, record = best
+    record = collections.OrderedDict(record, window=chosen.config.window, grid=grid,
+                                     chosen_by='meets the budget, most types caught, smallest mean latency')
+    chosen.info = dict(chosen.info, tuned=record)
+    return chosen, record
