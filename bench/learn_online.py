@@ -3,7 +3,7 @@
 
     cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
     python3 bench/learn_online.py            # about a minute
-    python3 bench/learn_online.py --minutes 4 --every 500
+    python3 bench/learn_online.py --quick    # tiny run (tests)
 
 A motion model (window 1s) is trained on a slow simulated BWIBot (0.5 m/s, 0.5 rad/s: the manoeuvres of the
 full-speed robot are new to it). The full-speed robot's nominal driving (seed 22) is then fed message by
@@ -57,7 +57,10 @@ def main(argv=None):
     parser.add_argument('--every', type=int, default=1000, help='new vectors per refit')
     parser.add_argument('--report', type=float, default=2.5, help='minutes between reports')
     parser.add_argument('--rate', type=float, default=20.0, help='odometry Hz')
+    parser.add_argument('--quick', action='store_true', help='tiny run: 3 minutes, a refit every 500 vectors')
     args = parser.parse_args(argv)
+    if args.quick:
+        args.minutes, args.every, args.report = 3.0, 500, 1.5
     begun = time.time()
     common.header('Online learning of nominal on the simulator',
                   ['data: cc_log.sim; trained on a slow BWIBot (seed 21, 6 min, 0.5 m/s, 0.5 rad/s), learning from '

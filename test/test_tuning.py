@@ -38,10 +38,11 @@ def test_choose_tries_every_window_and_rate_and_keeps_the_fastest_within_the_bud
     chosen, record = tuning.choose(model, [records], sim.ODOM_TOPIC, 20.0, windows=['1s', '2s'],
                                    rates=['100ms', '200ms'])
     grid = record['grid']
-    assert [(g['window'], g['classify_every']) for g in grid] == [('1s', '100ms'), ('1s', '200ms'),
-                                                                  ('2s', '100ms'), ('2s', '200ms')]
+    assert [(g['window'], g['classify_every']) for g in grid] == [('1s', '0.1s'), ('1s', '0.2s'),
+                                                                  ('2s', '0.1s'), ('2s', '0.2s')]
     assert [g['trained'] for g in grid] == [True, True, False, False]
-    assert all(g['meets_budget'] == (g['false_per_hour'] <= 20.0) for g in grid)
+    # a threshold below every nominal score gives no window, so every setting can be tuned into the budget
+    assert all(g['meets_budget'] and g['false_per_hour'] <= 20.0 for g in grid)
     # the chosen setting meets the budget and no setting within it catches more types, or as many sooner
     assert record['false_per_hour'] <= 20.0 and chosen.config.window == record['window']
     within = [g for g in grid if g['meets_budget']]
@@ -60,7 +61,7 @@ def test_cclog_tune_chooses_the_window_and_rate_and_refuses_bad_ones(simulated, 
                      '--windows', '1s,2s', '--classify-every', '100ms,200ms', '--out', out)
     saved = json.loads(out.read_text())
     assert saved['config']['window'] == result['window'] and len(result['grid']) == 4
-    assert saved['info']['tuned']['classify_every'] == result['classify_every'] in ('100ms', '200ms')
+    assert saved['info']['tuned']['classify_every'] == result['classify_every'] in ('0.1s', '0.2s')
     line = fails('tune', '--model', path, '--bag', bag, '--topic', sim.ODOM_TOPIC, '--max-false-per-hour', '1',
                  '--windows', '1s,fast', '--out', tmp_path / 'x.json', status=2)
     assert 'windows' in line and 'fast' in line

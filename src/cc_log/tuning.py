@@ -42,6 +42,12 @@ def _rate(records):
     return 1.0 / float(np.median(steps)) if len(steps) else 1.0
 
 
+def _below(score):
+    """A threshold just below ``score``: below it by more than the rounding between the batch scores
+    (``model.scores``) and the trigger's one-vector ``model.score``."""
+    return float(score - 1e-9 * max(1.0, abs(score)))
+
+
 def windows_of(stamps, pre, post):
     """Merged ``[fire - pre, fire + post]`` intervals of sorted fire stamps (seconds)."""
     out = []
@@ -96,13 +102,18 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
         lo, hi = 0, len(candidates)   # threshold just below candidates[i]; i = 0: below every nominal score
         while lo < hi:
             middle = (lo + hi) // 2
-            if false_windows(np.nextafter(candidates[middle], -np.inf)) <= allowed:
+            if false_windows(_below(candidates[middle])) <= allowed:
                 lo = middle + 1
             else:
                 hi = middle
-        threshold = float(np.nextafter(candidates[lo - 1], -np.inf)) if lo else float(
-            np.nextafter(candidates[0], -np.inf) if len(candidates) else before)
-        count = false_windows(threshold)
+        while True:
+            threshold = _below(candidates[lo - 1]) if lo else (_below(candidates[0]) if len(candidates) else before)
+            count = false_windows(threshold)
+            # Fewer fires can split a window in two (and 'event' fires where a lower threshold re-arms it), so
+            # the count is not monotonic in the threshold: the search may end on a setting it only inferred.
+            if count <= allowed or lo == 0:
+                break
+            lo -= 1
     model.threshold = threshold
     found = detections(model, runs[0], topic, classify_every, retrigger)
     caught = [kind for kind, delay in found.items() if delay is not None]
