@@ -51,12 +51,21 @@ def flag_starts(model, messages, merge=2.0):
     return starts
 
 
+def slow_model(rate):
+    """The motion model of 6 minutes of the slow BWIBot (seed 21) at ``rate`` Hz."""
+    slow, _ = odometry(sim.SimConfig(rate=rate, seed=21, minutes=6, anomalies=0), SLOW)
+    stream = FeatureStream(FEATURE, every='100ms')
+    vectors = [v for v in (stream.add(msg, stamp) for stamp, msg in slow) if v is not None]
+    return learning.train(np.array(vectors), config=FEATURE)[0]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--minutes', type=float, default=15.0, help='minutes of nominal driving to learn from')
-    parser.add_argument('--every', type=int, default=1000, help='new vectors per refit')
-    parser.add_argument('--report', type=float, default=2.5, help='minutes between reports')
-    parser.add_argument('--rate', type=float, default=20.0, help='odometry Hz')
+    for flag, kind, default, text in (('--minutes', float, 15.0, 'minutes of nominal driving to learn from'),
+                                      ('--every', int, 1000, 'new vectors per refit'),
+                                      ('--report', float, 2.5, 'minutes between reports'),
+                                      ('--rate', float, 20.0, 'odometry Hz')):
+        parser.add_argument(flag, type=kind, default=default, help=text)
     parser.add_argument('--quick', action='store_true', help='tiny run: 3 minutes, a refit every 500 vectors')
     args = parser.parse_args(argv)
     if args.quick:
@@ -67,13 +76,7 @@ def main(argv=None):
                    'the full-speed robot (seed 22, %g min), scored on seed 23 (4 min nominal) and seed 24 (one '
                    'anomaly of each of %d types); %g Hz odometry, motion 1s, every %d vectors'
                    % (args.minutes, len(TYPES), args.rate, args.every)])
-    slow, _ = odometry(sim.SimConfig(rate=args.rate, seed=21, minutes=6, anomalies=0), SLOW)
-    stream, vectors = FeatureStream(FEATURE, every='100ms'), []
-    for stamp, msg in slow:
-        vector = stream.add(msg, stamp)
-        if vector is not None:
-            vectors.append(vector)
-    model, _ = learning.train(np.array(vectors), config=FEATURE)
+    model = slow_model(args.rate)
     held_back, _ = odometry(sim.SimConfig(rate=args.rate, seed=23, minutes=4, anomalies=0))
     anomalies, truth = odometry(sim.SimConfig(rate=args.rate, seed=24, minutes=3, anomalies=len(TYPES), gap=15.0,
                                               anomaly_types=TYPES))

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 from cc_log import config, learning, online_learning, sim
-from cc_log.features import FeatureConfig, FeatureStream
+from cc_log.features import FeatureConfig
 from cc_log.model import AnomalyModel
 from cc_log.online_learning import OnlineLearner
 from cc_log.triggers import ClassifierTrigger
 from cc_log.window_buffer import Record
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bench'))
-from learn_online import FEATURE, SLOW, flag_starts, odometry  # noqa: E402  (the bench's runs and counting)
+from learn_online import flag_starts, odometry, slow_model  # noqa: E402  (the bench's runs and counting)
 
 
 def small_model(dimension=13, seed=0):
@@ -95,13 +95,7 @@ def test_a_refit_learns_new_manoeuvres_and_still_catches_anomalies(tmp_path):
     what it did not flag, so it widens its nominal step by step: 24 windows before, 1-3 after), and still catches
     a collision and a sudden acceleration injected after the refit."""
     rate = 20.0
-    slow, _ = odometry(sim.SimConfig(rate=rate, seed=21, minutes=6, anomalies=0), SLOW)
-    stream, vectors = FeatureStream(FEATURE, every='100ms'), []
-    for stamp, msg in slow:
-        vector = stream.add(msg, stamp)
-        if vector is not None:
-            vectors.append(vector)
-    model, _ = learning.train(np.array(vectors), config=FEATURE)
+    model = slow_model(rate)
     path = str(tmp_path / 'slow.json')
     model.save(path)
 
