@@ -6,10 +6,10 @@
     python3 bench/tune_choice.py --quick         # tiny run
 
 A motion model (window 2s) is trained on a nominal simulated run (seed 41); ``tuning.choose`` then tunes every
-window of ``--windows`` (the others trained on the tuning run) with every classify rate of ``--rates`` on
-another nominal run (seed 42) for ``--budget`` false windows per hour, injecting one anomaly of every
-simulator type, and the chosen setting is checked on a third nominal run (seed 43, held out: false windows
-per hour that the tuning did not see).
+window of ``--windows`` with every classify rate of ``--rates`` on another nominal run (seed 42) for ``--budget``
+false windows per hour, injecting one anomaly of every simulator type (the other windows' models are trained
+on the first half of that run, and every setting is tuned on its second half), and the chosen setting is
+checked on a third nominal run (seed 43, held out: false windows per hour that the tuning did not see).
 """
 import argparse
 import os
@@ -59,12 +59,12 @@ def main(argv=None):
         rows.append([g['window'] + (' (trained)' if g['trained'] else ''), g['classify_every'], '%.4g' % g['threshold'],
                      '%.1f' % g['false_per_hour'], 'yes' if g['meets_budget'] else 'no', len(g['catches']),
                      '%.2f' % g['mean_latency'] if g['mean_latency'] is not None else '-'])
-    common.table(['window', 'classify every', 'threshold', 'false/h (tuning run)', 'within budget', 'types caught',
-                  'mean latency s'], rows, 'Every setting tried (in-sample on the tuning run):')
+    common.table(['window', 'classify every', 'threshold', 'false/h (tuned on)', 'within budget', 'types caught',
+                  'mean latency s'], rows, 'Every setting tried (tuned on the %s):' % record['tuned_on'])
     hours = (held[-1].stamp - held[0].stamp) / 3600.0
     held_windows = tuning.windows_of(tuning.fires(chosen, held, sim.ODOM_TOPIC, chosen.threshold,
                                                   record['classify_every'], record['retrigger']), 2.0, 2.0)
-    print('chosen: window %s, classify every %s: %.1f false/h on the tuning run, %.1f/h on the held-out run '
+    print('chosen: window %s, classify every %s: %.1f false/h where tuned, %.1f/h on the held-out run '
           '(%d windows in %.2f h); caught %s (latency %s); missed %s' % (
               record['window'], record['classify_every'], record['false_per_hour'], len(held_windows) / hours,
               len(held_windows), hours, ', '.join(record['catches']),

@@ -10,10 +10,12 @@ window; the latency is the first such fire's delay after onset). The result goes
 ``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out nominal runs give the honest rate.
 
 ``choose(model, runs, topic, max_false_per_hour, windows, rates)`` also picks the feature window and the
-classify rate: for every window of a small grid (a model of another window than the given one is trained on
-the nominal runs with ``learning.train``'s defaults, so its figures are in-sample twice over) and every
-classify rate, it tunes the threshold as above, then keeps the setting that meets the budget and catches the
-most injected types, with the smallest mean latency among those (then the fewest false windows). Pure: no rospy.
+classify rate: for every window of a small grid and every classify rate it tunes the threshold as above, then
+keeps the setting that meets the budget and catches the most injected types, with the smallest mean latency
+among those (then the fewest false windows). When a window other than the model's is tried, a model of it is
+trained (``learning.train``'s defaults) on the first half of every run by time, and every setting, the given
+model's too, is tuned and judged on the second halves: no setting is judged on the data it was trained on.
+Pure: no rospy.
 """
 import collections
 import copy
@@ -158,6 +160,15 @@ def catches(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=
             [kind for kind, delay in found.items() if delay is None])
 
 
+def _halves(run):
+    """``run`` cut in two at the middle of its time span."""
+    if not run:
+        return [], []
+    middle = (run[0].stamp + run[-1].stamp) / 2.0
+    index = next(i for i, r in enumerate(run) if r.stamp >= middle)
+    return run[:index], run[index:]
+
+
 def model_for(model, runs, topic, window, every=TRAIN_EVERY):
     """``model`` when its feature window is ``window``, else a model of its feature set with that window
     trained with ``learning.train``'s defaults on the vectors of ``runs`` (one per ``every``)."""
@@ -182,12 +193,17 @@ def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_
     ``window``, ``chosen_by`` and ``grid`` (a summary of every setting) added; it is the model's
     ``info['tuned']``."""
     windows = [model.config.window] if not windows else list(windows)
+    configs = [FeatureConfig(model.config.feature_set, window, model.config.topic_type) for window in windows]
+    train_runs = tune_runs = runs
+    if any(config != model.config for config in configs):
+        halves = [_halves([r for r in run if r.topic == topic]) for run in runs]
+        train_runs, tune_runs = [first for first, _ in halves], [second for _, second in halves]
     grid, best = [], None
-    for window in windows:
-        base = model_for(model, runs, topic, window)
+    for config in configs:
+        base = model_for(model, train_runs, topic, config.window)
         for rate in rates:
             candidate = copy.deepcopy(base)
-            record = tune(candidate, runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources)
+            record = tune(candidate, tune_runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources)
             meets = record['false_per_hour'] <= max_false_per_hour + 1e-9
             key = (meets, len(record['catches']), -(record['mean_latency'] if record['catches'] else float('inf')),
                    -record['false_windows'])
@@ -200,6 +216,8 @@ def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_
                 best = (key, candidate, record)
     _, chosen, record = best
     record = collections.OrderedDict(record, window=chosen.config.window, grid=grid,
-                                     chosen_by='meets the budget, most types caught, smallest mean latency')
+                                     chosen_by='meets the budget, most types caught, smallest mean latency',
+                                     tuned_on='whole runs' if tune_runs is runs else
+                                     'second halves (the first halves trained the other windows)')
     chosen.info = dict(chosen.info, tuned=record)
     return chosen, record
