@@ -91,6 +91,14 @@ class SmartWindowTest(unittest.TestCase):
     def files(self):
         return log_format.window_files(self.out)
 
+    def status_of(self, node):
+        """The newest /diagnostics values of ``node`` (a dict; empty before the first)."""
+        for array in reversed(self.diagnostics):
+            for status in array.status:
+                if status.name == 'cc_log: %s' % node:
+                    return {kv.key: kv.value for kv in status.values}
+        return {}
+
     def written(self):
         return [e for e in self.events if e.event == AnomalyEvent.WRITTEN]
 
@@ -145,11 +153,7 @@ class SmartWindowTest(unittest.TestCase):
                 time.sleep(1.0 / RATE)
 
             def values():
-                for array in reversed(self.diagnostics):
-                    for status in array.status:
-                        if status.name == 'cc_log: %s' % name:
-                            return {kv.key: kv.value for kv in status.values}
-                return {}
+                return self.status_of(name)
             fx.wait_for(lambda: int(values().get('classifier: online refits', 0)) >= 1, 30, 'a refit on /diagnostics')
             status = values()
             self.assertGreater(int(status['classifier: online vectors learned']), 20)
@@ -279,11 +283,7 @@ class SmartWindowTest(unittest.TestCase):
         total += (TRIGGER.stop - TRIGGER.start) + (DISABLED.stop - DISABLED.start)
 
         def values():
-            for array in reversed(self.diagnostics):
-                for status in array.status:
-                    if status.name == 'cc_log: %s' % NODE:
-                        return {kv.key: kv.value for kv in status.values}
-            return {}
+            return self.status_of(NODE)
         fx.wait_for(lambda: values().get('messages seen') == str(total), 5, 'diagnostics with every message')
         status = values()
         self.assertEqual(status['enabled'], 'False')
