@@ -48,6 +48,7 @@ class SmartWindowTest(unittest.TestCase):
         cls.tmp = tempfile.mkdtemp(prefix='cc_log_smart_window_')
         cls.out = os.path.join(cls.tmp, 'windows')
         odom, cls.imu = fx.husky()
+        cls.odom = odom
         cls.model = fx.train_model(odom)
         cls.model_path = os.path.join(cls.tmp, 'model.json')
         cls.model.save(cls.model_path)
@@ -90,6 +91,14 @@ class SmartWindowTest(unittest.TestCase):
     def files(self):
         return log_format.window_files(self.out)
 
+    def status_of(self, node):
+        """The newest /diagnostics values of ``node`` (a dict; empty before the first)."""
+        for array in reversed(self.diagnostics):
+            for status in array.status:
+                if status.name == 'cc_log: %s' % node:
+                    return {kv.key: kv.value for kv in status.values}
+        return {}
+
     def written(self):
         return [e for e in self.events if e.event == AnomalyEvent.WRITTEN]
 
@@ -122,6 +131,41 @@ class SmartWindowTest(unittest.TestCase):
         self.assertEqual((code, err.strip().count('\n')), (1, 0), err)
         self.assertIn('~stride: [5] must be a number', err)
         self.assertEqual(os.listdir(cwd), [])
+
+    def test_0_online_learning_refits_beside_the_model_and_reports_it(self):
+        # a second node on its own topic, with online learning on and a short refit period (configuration)
+        model_path = os.path.join(self.tmp, 'learn.json')
+        self.model.save(model_path)
+        with open(model_path, 'rb') as stream:
+            original = stream.read()
+        config = os.path.join(self.tmp, 'learn.yaml')
+        with open(config, 'w') as stream:
+            stream.write('triggers:\n  - {name: classifier, kind: classifier, model: %s, topics: [learn_odom], '
+                         'learn_online: true, learn_every: 20, learn_guard: 1s}\n' % model_path)
+        name = 'smart_logger_learning'
+        node = fx.start('smart_logger.py', '__name:=' + name, '_config:=' + config,
+                        '_directory:=' + os.path.join(self.tmp, 'learn_windows'), '_diagnostic_period:=0.2')
+        try:
+            publisher = rospy.Publisher('learn_odom', Odometry, queue_size=10000)
+            fx.wait_for(lambda: publisher.get_num_connections(), 30, 'the learning node to subscribe')
+            for record in self.odom[:400]:
+                publisher.publish(record.msg)
+                time.sleep(1.0 / RATE)
+
+            def values():
+                return self.status_of(name)
+            fx.wait_for(lambda: int(values().get('classifier: online refits', 0)) >= 1, 30, 'a refit on /diagnostics')
+            status = values()
+            self.assertGreater(int(status['classifier: online vectors learned']), 20)
+            self.assertEqual(status['classifier: online last error'], 'none')
+            self.assertNotEqual(status['classifier: online last refit'], 'never')
+            refitted = os.path.join(self.tmp, 'learn.online.json')
+            self.assertTrue(os.path.exists(refitted))
+            with open(model_path, 'rb') as stream:
+                self.assertEqual(stream.read(), original)  # the original model is never written
+        finally:
+            code, _, err = fx.stop(node)
+        self.assertEqual(code, 0, err[-2000:])
 
     def test_0_a_paused_simulated_clock_does_not_stop_diagnostics(self):
         # /use_sim_time and no /clock: rospy time stays 0, diagnostics still come every period of wall time
@@ -239,11 +283,7 @@ class SmartWindowTest(unittest.TestCase):
         total += (TRIGGER.stop - TRIGGER.start) + (DISABLED.stop - DISABLED.start)
 
         def values():
-            for array in reversed(self.diagnostics):
-                for status in array.status:
-                    if status.name == 'cc_log: %s' % NODE:
-                        return {kv.key: kv.value for kv in status.values}
-            return {}
+            return self.status_of(NODE)
         fx.wait_for(lambda: values().get('messages seen') == str(total), 5, 'diagnostics with every message')
         status = values()
         self.assertEqual(status['enabled'], 'False')

@@ -37,6 +37,13 @@ def test_detection_sim_quick():
     assert len(targets(out)) == 2
 
 
+def test_learn_online_and_tune_choice_quick():
+    out = run('learn_online.py', '--quick')
+    assert 'false windows (4 min)' in out and 'refits' in out
+    out = run('tune_choice.py', '--quick')
+    assert 'Every setting tried' in out and '\nchosen: window ' in out
+
+
 def test_storage_quick():
     out = run('storage.py', '--quick')
     assert out.count('Table 2, ') == 2

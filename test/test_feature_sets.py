@@ -203,10 +203,54 @@ def test_progress_separates_oscillation_from_driving_on_simulator_data():
 
 def test_progress_vector_does_not_depend_on_where_the_robot_is():
     config = FeatureConfig('progress', '50')
-    rows = [np.array([0.1 * i, 0.02 * i * i, 0.5, 0.2 * (-1) ** (i // 10), 0.02]) for i in range(50)]
-    shifted = [row + np.array([1000.0, -300.0, 0.0, 0.0, 0.0]) for row in rows]
+    rows = [np.array([0.1 * i, 0.02 * i * i, 0.5, 0.2 * (-1) ** (i // 10), 0.02, 0.0]) for i in range(50)]
+    shifted = [row + np.array([1000.0, -300.0, 0.0, 0.0, 0.0, 0.0]) for row in rows]
     assert np.allclose(window_vector(rows, config), window_vector(shifted, config))
     assert window_vector(rows, config)[vector_names(config).index('yaw_reversals')] == 4
+
+
+def turn_beyond_half(steps, window='1s', rate=20.0):
+    """The largest ``turn_beyond_half`` of a progress stream over planar moves ``steps`` [(v, w, seconds)]."""
+    config = FeatureConfig('progress', window)
+    stream, x, y, yaw, t, out = FeatureStream(config, every=1), 0.0, 0.0, 0.0, 0.0, [0.0]
+    index = vector_names(config).index('turn_beyond_half')
+    for v, w, seconds in steps:
+        for _ in range(int(round(seconds * rate))):
+            t, yaw = t + 1.0 / rate, yaw + w / rate
+            x, y = x + v * math.cos(yaw) / rate, y + v * math.sin(yaw) / rate
+            vector = stream.add(odom(x, y, yaw, v, w), t)
+            if vector is not None:
+                out.append(vector[index])
+    return max(out)
+
+
+def test_progress_tells_a_spin_from_a_half_turn_over_a_longer_horizon_than_the_window():
+    """A half turn in place towards a goal (pi, at the simulator's 1 rad/s) and then driving stays at 0, even
+    twice in a row with driving between; a spin of 1.5 turns at 0.7 rad/s does not, although a 1 s window never
+    holds more than 0.7 rad of it (the row's still_yaw runs across windows); driving in circles is progress."""
+    drive = (0.5, 0.0, 2.0)
+    assert turn_beyond_half([drive, (0.0, 1.0, math.pi), drive, (0.0, -1.0, math.pi), drive]) == 0.0
+    assert turn_beyond_half([(0.5, 0.5, 30.0)]) == 0.0
+    spin = turn_beyond_half([drive, (0.0, 0.7, 3 * math.pi / 0.7), drive])
+    assert spin == pytest.approx((3 * math.pi - math.pi - 0.2) / 0.01, rel=0.02)
+
+
+def test_progress_flags_no_nominal_turn_and_every_spin_past_a_half_turn_on_the_simulator():
+    """Simulated planning failures: spins in place go beyond a half turn within them; in the nominal driving
+    around them (turns towards goals, dwells, corners) no window does. After a spin the value stays up until the
+    robot has turned back towards its goal and driven off (STILL_RADIUS), then for the feature window: a tail of
+    up to about 12 s after a 6 rad spin."""
+    config = sim.SimConfig(minutes=6, anomalies=6, anomaly_types=('planning_failure',), seed=3)
+    simulator = sim.Simulator(config)
+    feature = FeatureConfig('progress', '5s')
+    stream = FeatureStream(feature, every=10)
+    index = vector_names(feature).index('turn_beyond_half')
+    out = [(stamp, stream.add(msg, stamp)) for topic, stamp, msg in simulator.messages() if topic == sim.ODOM_TOPIC]
+    out = [(stamp, vector[index]) for stamp, vector in out if vector is not None]
+    nominal = [value for s, value in out if not any(e['start'] <= s <= e['end'] + 12.0 for e in simulator.truth)]
+    assert len(nominal) > 1000 and max(nominal) == 0.0
+    beyond = [max(value for s, value in out if e['start'] <= s <= e['end']) for e in simulator.truth]
+    assert sum(value > 0 for value in beyond) >= 2, beyond
 
 
 def test_command_catches_collisions_and_slipping_wheels_on_the_simulator_with_its_cmd_vel():

@@ -112,6 +112,16 @@ def _span(name):
     return parse
 
 
+def _spans(name):
+    """argparse type for a comma-separated list of counts or durations (``1s,2s,5s``), each checked by Span.parse."""
+    single = _span(name)
+
+    def parse(value):
+        return [single(item.strip()) for item in value.split(',')]
+    parse.__name__ = name
+    return parse
+
+
 def _positive_float(name, zero=False):
     """argparse type for a finite number > 0 (>= 0 with ``zero``)."""
     def parse(value):
@@ -537,7 +547,8 @@ def cmd_learn(args):
 
 
 def cmd_tune(args):
-    """Set a model's threshold to a false-window budget on nominal bags (``tuning.tune``); write it to --out."""
+    """Set a model's threshold, and with several --windows / --classify-every its feature window and classify
+    rate, to a false-window budget on nominal bags (``tuning.choose``); write it to --out."""
     from . import bagio, fleet, tuning
     from .model import AnomalyModel
     model = AnomalyModel.load(_existing_file(args.model, 'model file'))
@@ -547,8 +558,11 @@ def cmd_tune(args):
     _parent_exists(args.out, 'out')
     with _bar(args, 'tune').busy():
         runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]
-        record = tuning.tune(model, runs, args.topic, args.max_false_per_hour, args.pre, args.post,
-                             args.classify_every, args.retrigger, sources=args.bag)
+        try:
+            model, record = tuning.choose(model, runs, args.topic, args.max_false_per_hour, args.windows,
+                                          args.classify_every, args.pre, args.post, args.retrigger, sources=args.bag)
+        except ValueError as error:
+            raise CommandError(str(error))
     try:
         model.save(args.out)
     except OSError as error:
@@ -556,6 +570,14 @@ def cmd_tune(args):
     if args.json:
         _print_json(dict(record, out=args.out))
         return EXIT_OK
+    if len(record['grid']) > 1:
+        for g in record['grid']:
+            print('window %-6s classify every %-6s threshold %-10.4g %6.1f false/h  %d caught, mean latency %s%s' % (
+                g['window'], g['classify_every'], g['threshold'], g['false_per_hour'], len(g['catches']),
+                '%.2f s' % g['mean_latency'] if g['mean_latency'] is not None else '-',
+                ' (trained on the bags)' if g['trained'] else ''))
+        print('chosen: window %s, classify every %s (%s)' % (
+            record['window'], record['classify_every'], record['chosen_by']))
     print('%.3f h of nominal driving: %d false window(s) at threshold %.4g (%.1f/h), %d at %.4g (%.1f/h; budget '
           '%g/h, measured on the tuning bags)' % (
               record['hours'], record['false_windows_before'], record['threshold_before'],
@@ -1063,8 +1085,11 @@ def build_parser():
     p.add_argument('--out', required=True, metavar='PATH', help='the tuned model file to write')
     p.add_argument('--pre', type=_span('pre'), default='2s', metavar='N|Ns', help='(default: %(default)s)')
     p.add_argument('--post', type=_span('post'), default='2s', metavar='N|Ns', help='(default: %(default)s)')
-    p.add_argument('--classify-every', type=_span('classify_every'), default='50ms', metavar='N|Ns',
-                   help='(default: %(default)s)')
+    p.add_argument('--classify-every', type=_spans('classify_every'), default=['50ms'], metavar='N|Ns[,...]',
+                   help='classify rate, or several to choose from (default: 50ms)')
+    p.add_argument('--windows', type=_spans('windows'), default=None, metavar='W[,...]',
+                   help='feature windows to choose from, e.g. 1s,2s,5s (another window than the model\'s is trained '
+                        'on the bags; default: the model\'s)')
     p.add_argument('--retrigger', choices=_retrigger_modes(), default='event', help='(default: %(default)s)')
     _common(p)
     p.set_defaults(run=cmd_tune)

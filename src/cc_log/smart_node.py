@@ -45,6 +45,10 @@ Parameters (defaults below as module constants; each resolved value is logged on
   counted on /diagnostics.
   ``~min_free_mb`` (size, default: 0 = off): below this much free space writing stops (ERROR on
   /diagnostics), windows wait in memory (bounded) and are written when space returns.
+  ``~learn_online`` (bool, default: false): every classifier learns nominal online from the spans no trigger
+  flagged and refits its model in the background, saving it beside the model file (``model.online.json``;
+  configuration keys ``learn_online``, ``learn_every``, ``learn_keep``, ``learn_guard``: cc_log.online_learning);
+  /diagnostics shows the vectors seen, learned and refused, the refits and the last refit's time.
   ``~classify_every`` (string, default: 50ms): score the feature window on every message (``1``), every N-th
   (``N``) or at most once per duration (``50ms``: ~20 decisions/s); see smart_logger.DEFAULT_CLASSIFY_EVERY.
   ``~intake_max_messages`` (int, default: 20000), ``~intake_max_mb`` (size, default: 64): bounds of the
@@ -73,6 +77,7 @@ jumping backwards (a bag played again) restarts the buffer instead of failing.
 """
 import math
 import sys
+import time
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -138,7 +143,8 @@ class SmartNode(object):
             'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
             {'model': model_path,
              'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES),
-             'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY)})
+             'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY),
+             'learn_online': given(params.boolean, 'learn_online', False)})
         if not cfg.triggers:
             raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
         try:
@@ -173,6 +179,9 @@ class SmartNode(object):
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
+        self.learners = [(t.name, t.learner) for t in classifiers if t.learner is not None]
+        if self.learners:
+            self.logger.on_event(self._flag_learners)
         self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
@@ -209,6 +218,12 @@ class SmartNode(object):
             self.events.publish(msg)
         except rospy.ROSException:  # shutting down
             pass
+
+    def _flag_learners(self, event):
+        """Online learning: nothing from around a window any trigger opened is learned."""
+        if event.kind == smart_logger.OPENED:
+            for _, learner in self.learners:
+                learner.flag(event.stamp)
 
     def _trigger(self, request):
         ok, message = self.logger.trigger_now('manual')
@@ -280,8 +295,23 @@ class SmartNode(object):
             ('time resets', stats['time_resets']),
             ('messages refused', stats['messages_refused']),
             ('messages refused (unsafe definition)', self.intake.decoder.refused),
-        ] + extra + disk
+        ] + extra + disk + self._online_status(stats)
         return level, message, values
+
+    def _online_status(self, stats):
+        """Diagnostics of online learning: per classifier that learns, what it has seen and refitted."""
+        values = []
+        for name, _ in self.learners:
+            online = stats['triggers'][name]['online']
+            last = online['last_refit']
+            values += [('%s: online vectors seen' % name, online['vectors_seen']),
+                       ('%s: online vectors learned' % name, online['vectors_learned']),
+                       ('%s: online vectors refused (near a flag)' % name, online['vectors_refused']),
+                       ('%s: online refits' % name, online['refits']),
+                       ('%s: online last refit' % name, time.strftime('%Y-%m-%d %H:%M:%S', time.localtime(last))
+                        if last else 'never'),
+                       ('%s: online last error' % name, online['last_error'] or 'none')]
+        return values
 
     def shutdown(self):
         """Feed what is queued, write the last windows, stop diagnostics."""
@@ -290,6 +320,8 @@ class SmartNode(object):
         if not self.logger.close(CLOSE_TIMEOUT):
             rospy.logerr('windows still unwritten after %g s', CLOSE_TIMEOUT)
         self.extras.close()
+        for _, learner in self.learners:  # a refit being saved finishes (the save is atomic either way)
+            learner.wait(CLOSE_TIMEOUT)
         self.diagnostics.stop()
 
 

@@ -6,22 +6,31 @@ its fires into logging windows of [fire - pre, fire + post] as ``WindowBuffer`` 
 (to just below the score of a nominal classification) until the windows per hour of nominal driving are
 within the budget. It then injects one anomaly of every simulator type (``sim.inject_anomalies``) into the
 first run and reports which the tuned threshold still catches (a fire between onset and end + feature
-window). The result goes into ``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out
-nominal runs give the honest rate. Pure: no rospy.
+window; the latency is the first such fire's delay after onset). The result goes into
+``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out nominal runs give the honest rate.
+
+``choose(model, runs, topic, max_false_per_hour, windows, rates)`` also picks the feature window and the
+classify rate: for every window of a small grid and every classify rate it tunes the threshold as above, then
+keeps the setting that meets the budget and catches the most injected types, with the smallest mean latency
+among those (then the fewest false windows). When a window other than the model's is tried, a model of it is
+trained (``learning.train``'s defaults) on the first half of every run by time, and every setting, the given
+model's too, is tuned and judged on the second halves: no setting is judged on the data it was trained on.
+Pure: no rospy.
 """
 import collections
 import copy
 
 import numpy as np
 
-from . import sim
-from .features import FeatureStream
+from . import learning, sim
+from .features import FeatureConfig, FeatureStream
 from .spans import Span
 from .triggers import ClassifierTrigger
 
 DEFAULT_PRE = DEFAULT_POST = '2s'
 DEFAULT_RETRIGGER = 'event'
 DEFAULT_CLASSIFY_EVERY = '50ms'
+TRAIN_EVERY = '100ms'   # one training vector per this much of the nominal runs (a model of another window)
 
 
 def _seconds(span, rate, name):
@@ -33,6 +42,12 @@ def _rate(records):
     steps = np.diff([r.stamp for r in records])
     steps = steps[steps > 0]
     return 1.0 / float(np.median(steps)) if len(steps) else 1.0
+
+
+def _below(score):
+    """A threshold just below ``score``: below it by more than the rounding between the batch scores
+    (``model.scores``) and the trigger's one-vector ``model.score``."""
+    return float(score - 1e-9 * max(1.0, abs(score)))
 
 
 def windows_of(stamps, pre, post):
@@ -89,40 +104,120 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
         lo, hi = 0, len(candidates)   # threshold just below candidates[i]; i = 0: below every nominal score
         while lo < hi:
             middle = (lo + hi) // 2
-            if false_windows(np.nextafter(candidates[middle], -np.inf)) <= allowed:
+            if false_windows(_below(candidates[middle])) <= allowed:
                 lo = middle + 1
             else:
                 hi = middle
-        threshold = float(np.nextafter(candidates[lo - 1], -np.inf)) if lo else float(
-            np.nextafter(candidates[0], -np.inf) if len(candidates) else before)
-        count = false_windows(threshold)
+        while True:
+            threshold = _below(candidates[lo - 1]) if lo else (_below(candidates[0]) if len(candidates) else before)
+            count = false_windows(threshold)
+            # Fewer fires can split a window in two (and 'event' fires where a lower threshold re-arms it), so
+            # the count is not monotonic in the threshold: the search may end on a setting it only inferred.
+            if count <= allowed or lo == 0:
+                break
+            lo -= 1
     model.threshold = threshold
-    caught, missed = catches(model, runs[0], topic, classify_every, retrigger)
+    found = detections(model, runs[0], topic, classify_every, retrigger)
+    caught = [kind for kind, delay in found.items() if delay is not None]
+    latencies = [found[kind] for kind in caught]
     record = collections.OrderedDict([
         ('max_false_per_hour', float(max_false_per_hour)), ('hours', hours), ('bags', list(sources or [])),
         ('topic', topic), ('pre', str(Span.parse(pre, 'pre'))), ('post', str(Span.parse(post, 'post'))),
         ('classify_every', str(Span.parse(classify_every, 'classify_every'))), ('retrigger', retrigger),
         ('threshold_before', before), ('false_windows_before', start), ('threshold', threshold),
         ('false_windows', count), ('false_per_hour', count / hours if hours else 0.0),
-        ('catches', caught), ('misses', missed)])
+        ('catches', caught), ('misses', [kind for kind, delay in found.items() if delay is None]),
+        ('latencies', dict((kind, found[kind]) for kind in caught)),
+        ('mean_latency', float(np.mean(latencies)) if latencies else None)])
     model.info = dict(model.info, tuned=record)
     return record
 
 
-def catches(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
-    """``(caught types, missed types)``: one anomaly of every simulator type injected into ``run`` at a time
-    (types that do not fit into the run are missed, marked ``'<type> (no room)'``)."""
+def detections(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
+    """``{type: seconds from onset to the first fire within [onset, end + feature window], or None}``: one
+    anomaly of every simulator type injected into ``run`` at a time (a type that does not fit into the run is
+    None under the key ``'<type> (no room)'``)."""
     span = model.config.span
     reach = span.seconds if span.is_duration else span.count / _rate(run)
-    caught, missed = [], []
+    found = collections.OrderedDict()
     for kind in sim.ANOMALY_TYPES:
         try:
             injected, truth = sim.inject_anomalies(run, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
         except ValueError:
-            missed.append('%s (no room)' % kind)
+            found['%s (no room)' % kind] = None
             continue
         entry = truth[0]
-        stamps = fires(model, injected, topic, model.threshold, classify_every, retrigger)
-        hit = any(entry['start'] <= t <= entry['end'] + reach for t in stamps)
-        (caught if hit else missed).append(kind)
-    return caught, missed
+        hits = [t for t in fires(model, injected, topic, model.threshold, classify_every, retrigger)
+                if entry['start'] <= t <= entry['end'] + reach]
+        found[kind] = hits[0] - entry['start'] if hits else None
+    return found
+
+
+def catches(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
+    """``(caught types, missed types)`` of ``detections``."""
+    found = detections(model, run, topic, classify_every, retrigger, seed)
+    return ([kind for kind, delay in found.items() if delay is not None],
+            [kind for kind, delay in found.items() if delay is None])
+
+
+def _halves(run):
+    """``run`` cut in two at the middle of its time span."""
+    if not run:
+        return [], []
+    middle = (run[0].stamp + run[-1].stamp) / 2.0
+    index = next(i for i, r in enumerate(run) if r.stamp >= middle)
+    return run[:index], run[index:]
+
+
+def model_for(model, runs, topic, window, every=TRAIN_EVERY):
+    """``model`` when its feature window is ``window``, else a model of its feature set with that window
+    trained with ``learning.train``'s defaults on the vectors of ``runs`` (one per ``every``)."""
+    config = FeatureConfig(model.config.feature_set, window, model.config.topic_type)
+    if config == model.config:
+        return copy.deepcopy(model)
+    vectors = []
+    for run in runs:
+        stream = FeatureStream(config, every=every)
+        vectors += [v for v in (stream.add(r.msg, r.stamp) for r in run if r.topic == topic) if v is not None]
+    try:
+        trained, _ = learning.train(np.array(vectors), config=config)
+    except ValueError as error:
+        raise ValueError('windows: %s: %s' % (config.window, error))
+    return trained
+
+
+def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_CLASSIFY_EVERY,), pre=DEFAULT_PRE,
+           post=DEFAULT_POST, retrigger=DEFAULT_RETRIGGER, sources=None):
+    """Tune every feature window in ``windows`` (default: the model's) with every classify rate in ``rates``;
+    return ``(model, record)`` of the chosen setting (see the module docstring). ``record`` is ``tune``'s with
+    ``window``, ``chosen_by`` and ``grid`` (a summary of every setting) added; it is the model's
+    ``info['tuned']``."""
+    windows = [model.config.window] if not windows else list(windows)
+    configs = [FeatureConfig(model.config.feature_set, window, model.config.topic_type) for window in windows]
+    train_runs = tune_runs = runs
+    if any(config != model.config for config in configs):
+        halves = [_halves([r for r in run if r.topic == topic]) for run in runs]
+        train_runs, tune_runs = [first for first, _ in halves], [second for _, second in halves]
+    grid, best = [], None
+    for config in configs:
+        base = model_for(model, train_runs, topic, config.window)
+        for rate in rates:
+            candidate = copy.deepcopy(base)
+            record = tune(candidate, tune_runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources)
+            meets = record['false_per_hour'] <= max_false_per_hour + 1e-9
+            key = (meets, len(record['catches']), -(record['mean_latency'] if record['catches'] else float('inf')),
+                   -record['false_windows'])
+            grid.append(collections.OrderedDict([
+                ('window', candidate.config.window), ('classify_every', record['classify_every']),
+                ('trained', candidate.config != model.config), ('threshold', record['threshold']),
+                ('false_windows', record['false_windows']), ('false_per_hour', record['false_per_hour']),
+                ('meets_budget', meets), ('catches', record['catches']), ('mean_latency', record['mean_latency'])]))
+            if best is None or key > best[0]:
+                best = (key, candidate, record)
+    _, chosen, record = best
+    record = collections.OrderedDict(record, window=chosen.config.window, grid=grid,
+                                     chosen_by='meets the budget, most types caught, smallest mean latency',
+                                     tuned_on='whole runs' if tune_runs is runs else
+                                     'second halves (the first halves trained the other windows)')
+    chosen.info = dict(chosen.info, tuned=record)
+    return chosen, record

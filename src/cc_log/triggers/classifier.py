@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .. import features
+from .. import features, online_learning
 from ..features import FeatureStream
 from ..spans import Span
 from .base import Trigger, register
@@ -59,7 +59,8 @@ class ClassifierTrigger(Trigger):
     """
 
     kind = 'classifier'
-    config_keys = ('model', 'topics', 'feature_set', 'window', 'classify_every', 'retrigger', 'recent')
+    config_keys = ('model', 'topics', 'feature_set', 'window', 'classify_every', 'retrigger', 'recent',
+                   'learn_online', 'learn_every', 'learn_keep', 'learn_guard')
 
     @classmethod
     def from_config(cls, name, options, context):
@@ -80,10 +81,11 @@ class ClassifierTrigger(Trigger):
                 raise ValueError('%s: %s does not match the model\'s %s (it is part of the model; leave it out)'
                                  % (key, value, getattr(model.config, key)))
         topics = default_topics(options.pop('topics', None), model.config.feature_set, context.resolve)
-        return cls(name, model, topics, **options)
+        learner = online_learning.from_options(model, os.path.expanduser(path), options)
+        return cls(name, model, topics, learner=learner, **options)
 
     def __init__(self, name, model, topics, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER,
-                 pre=None, post=None, recent=None):
+                 pre=None, post=None, recent=None, learner=None):
         super(ClassifierTrigger, self).__init__(name, pre, post)
         if retrigger not in RETRIGGER_MODES:
             raise ValueError('retrigger: %r is not one of %s' % (retrigger, ', '.join(RETRIGGER_MODES)))
@@ -105,6 +107,7 @@ class ClassifierTrigger(Trigger):
         if self.classify_every.count == 0:
             raise ValueError('classify_every: 0 messages; use 1 to classify every message')
         self.recent = recent_span(self.config.span, recent, name)
+        self.learner = learner  # an online_learning.OnlineLearner, or None (no online learning)
         self.calls = 0
         self.seconds = 0.0
         self.max_seconds = 0.0
@@ -135,6 +138,8 @@ class ClassifierTrigger(Trigger):
             self._armed = True  # not scored (start, after a gap or a jump back): the next anomalous score is an onset
         if vector is None:
             return []
+        if self.learner is not None:
+            self._take_learned()
         started = time.perf_counter()
         anomalous, score = self.model.is_anomalous(vector)
         elapsed = feature_seconds + time.perf_counter() - started
@@ -142,6 +147,8 @@ class ClassifierTrigger(Trigger):
         self.seconds += elapsed
         self.max_seconds = max(self.max_seconds, elapsed)
         fires = []
+        if self.learner is not None:
+            self.learner.flag(record.stamp) if anomalous else self.learner.offer(record.stamp, vector)
         if anomalous:
             self.anomalous += 1
             if not self._armed and self.retrigger == 'event':
@@ -166,10 +173,18 @@ class ClassifierTrigger(Trigger):
             rows = np.concatenate((self._nominal_rows[len(recent):], recent))
         return self.model.is_anomalous(self.config.feature.vector(rows, self.config.span))
 
+    def _take_learned(self):
+        """Online learning: take a refitted model when one is ready."""
+        model = self.learner.take()
+        if model is not None:
+            self.model, self.threshold = model, float(model.threshold)
+
     def stats(self):
         result = super(ClassifierTrigger, self).stats()
         result.update(classifier_calls=self.calls, classifier_seconds=self.seconds,
                       classifier_max_seconds=self.max_seconds, anomalous_messages=self.anomalous)
+        if self.learner is not None:
+            result['online'] = self.learner.stats()
         return result
 
     def describe(self):

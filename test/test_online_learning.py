@@ -1,0 +1,122 @@
+"""Online learning of nominal (cc_log.online_learning through the classifier trigger; no roscore)."""
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from cc_log import config, learning, online_learning, sim
+from cc_log.features import FeatureConfig
+from cc_log.model import AnomalyModel
+from cc_log.online_learning import OnlineLearner
+from cc_log.triggers import ClassifierTrigger
+from cc_log.window_buffer import Record
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bench'))
+from learn_online import flag_starts, odometry, slow_model  # noqa: E402  (the bench's runs and counting)
+
+
+def small_model(dimension=13, seed=0):
+    rng = np.random.RandomState(seed)
+    model, _ = learning.train(rng.normal(size=(200, dimension)), config=FeatureConfig('progress', '1s'))
+    return model
+
+
+def test_nothing_from_around_a_flag_is_learned():
+    """Vectors within guard (2 s) of a flag, before or after it, never reach the reservoir; the others all do."""
+    model = small_model()
+    learner = OnlineLearner(model, every=10 ** 6, keep=1000, guard='2s')
+    flags = (10.0, 30.0, 30.5)
+    for step in range(600):
+        stamp = 0.1 * step
+        if any(abs(stamp - flag) < 1e-9 for flag in flags):
+            learner.flag(stamp)
+        else:
+            learner.offer(stamp, np.full(13, stamp))
+    learned = sorted(vector[0] for _, vector in learner._reservoir)
+    assert learned and all(min(abs(s - f) for f in flags) > 2.0 for s in learned)
+    near = [0.1 * i for i in range(600) if 0 < min(abs(0.1 * i - f) for f in flags) <= 2.0]
+    stats = learner.stats()
+    assert stats['vectors_refused'] == len(near)
+    assert stats['vectors_learned'] + stats['vectors_refused'] + len(learner._pending) == 600 - len(flags)
+    assert stats['refits'] == 0 and stats['last_refit'] is None
+
+
+def test_the_reservoir_is_bounded_and_a_refit_is_saved_beside_the_model(tmp_path):
+    """keep bounds the reservoir; every ``every`` vectors a refit is saved to model.online.json (atomically:
+    no temporary file left), the original model file is untouched, and the classifier takes the new model."""
+    path = tmp_path / 'model.json'
+    model = small_model()
+    model.save(str(path))
+    before = path.read_bytes()
+    learner = OnlineLearner(AnomalyModel.load(str(path)), online_learning.online_path(str(path)), every=150,
+                            keep=100, guard='1s', background=False)
+    rng = np.random.RandomState(1)
+    for step in range(400):
+        learner.offer(0.1 * step, rng.normal(size=13))
+    stats = learner.stats()
+    assert stats['reservoir'] == 100 and stats['refits'] == 2 and stats['last_error'] is None
+    assert path.read_bytes() == before
+    saved = AnomalyModel.load(str(tmp_path / 'model.online.json'))
+    assert saved.info['online']['refit'] == 2 and saved.info['online']['reservoir'] == 100
+    assert sorted(os.listdir(str(tmp_path))) == ['model.json', 'model.online.json']
+    assert learner.take() is not None and learner.take() is None
+
+
+def test_bad_learning_options_are_named():
+    model = small_model()
+    for key, value, text in (('learn_online', 'yes', 'learn_online: '), ('learn_every', 0, 'learn_every: '),
+                             ('learn_keep', 3, 'learn_keep: '), ('learn_guard', '100', 'learn_guard: ')):
+        options = {'learn_online': True, key: value}
+        with pytest.raises(ValueError, match='^' + text):
+            online_learning.from_options(model, 'm.json', options)
+    assert online_learning.from_options(model, 'm.json', {'learn_every': 5}) is None
+
+
+def test_a_configuration_turns_online_learning_on(tmp_path):
+    path = tmp_path / 'm.json'
+    small_model().save(str(path))
+    entry = {'name': 'progress', 'kind': 'classifier', 'model': str(path), 'topics': ['/odom'],
+             'learn_online': True, 'learn_every': 500, 'learn_guard': '5s'}
+    trigger, = config.Config.from_dict({'triggers': [entry]}).build_triggers(AnomalyModel.load, lambda t: None)
+    assert trigger.learner.every == 500 and trigger.learner.guard == 5.0
+    assert trigger.learner.save_path == str(tmp_path / 'm.online.json')
+    assert trigger.stats()['online']['vectors_seen'] == 0
+    entry['learn_online'] = False
+    trigger, = config.Config.from_dict({'triggers': [entry]}).build_triggers(AnomalyModel.load, lambda t: None)
+    assert trigger.learner is None and 'online' not in trigger.stats()
+
+
+def test_a_refit_learns_new_manoeuvres_and_still_catches_anomalies(tmp_path):
+    """A model trained on a slow robot (0.5 m/s, 0.5 rad/s) flags the full-speed robot's nominal driving over
+    and over; learning online on 10 minutes of it (through the classifier trigger) refits the model, which then
+    flags a quarter or less of the windows it flagged in another nominal full-speed run (it learns only from
+    what it did not flag, so it widens its nominal step by step: 24 windows before, 1-3 after), and still catches
+    a collision and a sudden acceleration injected after the refit."""
+    rate = 20.0
+    model = slow_model(rate)
+    path = str(tmp_path / 'slow.json')
+    model.save(path)
+
+    learner = OnlineLearner(model, online_learning.online_path(path), every=1000, keep=3000, guard='3s',
+                            background=False)
+    trigger = ClassifierTrigger('classifier', model, '/odom', classify_every='100ms', learner=learner)
+    learning_run, _ = odometry(sim.SimConfig(rate=rate, seed=22, minutes=10, anomalies=0))
+    for stamp, msg in learning_run:
+        trigger.on_record(Record(stamp, '/odom', msg))
+    stats = learner.stats()
+    assert stats['refits'] >= 1 and stats['vectors_refused'] > 0 and stats['last_error'] is None, str(stats)
+    assert trigger.model is not model and trigger.threshold == trigger.model.threshold
+
+    held_back, _ = odometry(sim.SimConfig(rate=rate, seed=23, minutes=4, anomalies=0))
+    before, after = flag_starts(model, held_back), flag_starts(trigger.model, held_back)
+    assert len(before) >= 10 and len(after) <= len(before) / 4.0, (len(before), len(after))
+
+    anomalies, truth = odometry(sim.SimConfig(rate=rate, seed=24, minutes=2, anomalies=2, gap=15.0,
+                                              anomaly_types=('collision', 'sudden_acceleration')))
+    starts = flag_starts(trigger.model, anomalies)
+    for entry in truth:
+        assert any(entry['start'] <= s <= entry['end'] + 1.0 for s in starts), (entry, starts)
+    saved = json.loads(open(online_learning.online_path(path)).read())
+    assert saved['info']['online']['refit'] == stats['refits']
