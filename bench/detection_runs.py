@@ -54,6 +54,7 @@ PRE = POST = 2.0
 CLASSIFY_EVERY = '50ms'
 LATENCY = 0.5
 SETTINGS = collections.OrderedDict([
+    ('dynamics', ('dynamics', 'event', {})),
     ('ours', ('motion', 'event', {})),
     ('every', ('motion', 'every', {})),
     ('paper', ('raw', 'every', {'nu': 0.5})),
