@@ -84,7 +84,7 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
     ('triggers: [{name: x, kind: alarm}]', "triggers[0] (x): kind: 'alarm' is not one of classifier, rule, "
                                            'manual'),
     ('triggers: [{kind: classifier, feature_set: pixels}]', "triggers[0] (classifier): feature_set: 'pixels' is "
-                                                            'not one of motion, raw, imu, command, progress'),
+                                                            'not one of motion, raw, imu, command, progress, dynamics'),
     ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]', "triggers[0] (r): unknown key 'whenn'"),
     ('triggers: [{name: r, kind: rule, topic: odom, arrival: true}, {name: r, kind: manual}]',
      "triggers[1]: name 'r' is used twice"),
