@@ -165,6 +165,37 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     return result
 
 
+def scored(model, records, topic):
+    """(stamps, scores) of every classification of the whole feature window (CLASSIFY_EVERY)."""
+    stream = FeatureStream(model.config, every=CLASSIFY_EVERY)
+    pairs = [(r.stamp, v) for r in records if r.topic == topic for v in [stream.add(r.msg, r.stamp)] if v is not None]
+    return np.array([t for t, _ in pairs]), model.scores(np.array([v for _, v in pairs]))
+
+
+def separability(name, topic, stop, setting, seeds, fraction):
+    """Could any threshold separate this run? Scores as depth below the held-out median in units of
+    (median - threshold), so 1 is the trained threshold: the deepest nominal classification of the replayed
+    part against, per injected anomaly, the deepest one within LATENCY of its onset (the shallowest of those)."""
+    feature_set, _, options = SETTINGS[setting]
+    records = load(name, topic, stop)
+    first, rest = split(records, fraction)
+    model, _ = train(first, config_of(feature_set, rate_of(records)), options)
+    median = model.info['held_out_score_median']
+    depth = lambda scores: (median - scores) / (median - model.threshold)  # noqa: E731
+    _, nominal = scored(model, rest, topic)
+    anomalies = []
+    for kind in sim.ANOMALY_TYPES:
+        for seed in seeds:
+            try:
+                injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+            except ValueError:
+                continue
+            stamps, scores = scored(model, injected, topic)
+            near = (stamps >= truth[0]['start']) & (stamps <= truth[0]['start'] + LATENCY)
+            anomalies.append((float(depth(scores[near]).max()) if near.any() else float('-inf'), kind))
+    return float(depth(nominal).max()), min(anomalies)
+
+
 def pct(a, b):
     return '-' if not b else '%d/%d' % (a, b)
 
@@ -177,6 +208,8 @@ def main(argv=None):
     parser.add_argument('--train', type=float, default=0.5, help='fraction of each run that trains (default 0.5)')
     parser.add_argument('--margin', type=float, default=learning.DEFAULT_MARGIN,
                         help='threshold margin of learning.train (default %g)' % learning.DEFAULT_MARGIN)
+    parser.add_argument('--separability', action='store_true',
+                        help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
@@ -187,6 +220,18 @@ def main(argv=None):
                   ['training: first %g of each run; injection: one anomaly per type and seed %s into the rest; '
                    'window %s, pre/post %gs/%gs, classify_every %s, threshold margin %g' % (
                        args.train, seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin)])
+    if args.separability:
+        for setting in settings:
+            rows = []
+            for name, topic, stop in runs:
+                nominal, (anomaly, kind) = separability(name, topic, stop, setting, seeds, args.train)
+                rows.append([name, '%.2f' % nominal, '%.2f (%s)' % (anomaly, kind),
+                             'yes' if anomaly > nominal else 'no'])
+            common.table(['run', 'deepest nominal', 'shallowest anomaly within %gs' % LATENCY,
+                          'a threshold separates'], rows,
+                         'setting %s: depth below the held-out median, 1 = the trained threshold' % setting)
+        print('total %.1f s' % (time.time() - started))
+        return 0
     for setting in settings:
         rows, totals = [], collections.Counter()
         by_type = collections.defaultdict(collections.Counter)
