@@ -53,6 +53,7 @@ WINDOW = '2s'
 PRE = POST = 2.0
 CLASSIFY_EVERY = '50ms'
 LATENCY = 0.5
+PERSISTENCE = 5     # classifications: 'k of the last n' needs k within LATENCY (5 at 10 Hz, 10 at 50ms steps)
 SETTINGS = collections.OrderedDict([
     ('dynamics', ('dynamics', 'event', {})),
     ('ours', ('motion', 'event', {})),
@@ -131,13 +132,16 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     seconds = rest[-1].stamp - rest[0].stamp
     nominal_fires = fires(model, rest, topic, rule)
     nominal_windows = windows_of(nominal_fires)
+    every = nominal_fires if rule == 'every' else fires(model, rest, topic, 'every')
+    persistence = [sum(1 for t in every if a <= t <= b) for a, b in windows_of(every)]
     result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': first[-1].stamp - first[0].stamp,
               'vectors': vectors,
               'replay_s': seconds, 'false_nominal': len(nominal_windows), 'nominal_windows': nominal_windows,
               'caught': collections.Counter(), 'total': collections.Counter(), 'late': collections.Counter(),
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
               'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window,
-              'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest))}
+              'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest)),
+              'persistence': persistence}
     for kind in sim.ANOMALY_TYPES:
         for seed in seeds:
             try:
@@ -236,7 +240,7 @@ def main(argv=None):
         rows, totals = [], collections.Counter()
         by_type = collections.defaultdict(collections.Counter)
         latencies = collections.defaultdict(list)
-        oddities = []
+        oddities, persistence = [], []
         for name, topic, stop in runs:
             try:
                 r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin)
@@ -254,6 +258,7 @@ def main(argv=None):
                            'total': total, 'late': late, 'kept': r['kept'], 'needed': r['needed'],
                            'false_injected': r['false_injected']})
             totals['injected_s'] += r['injected_s']
+            persistence += r['persistence']
             for kind in sim.ANOMALY_TYPES:
                 by_type[kind].update({'caught': r['caught'][kind], 'total': r['total'][kind],
                                       'late': r['late'][kind], 'no_room': r['no_room'][kind]})
@@ -279,6 +284,11 @@ def main(argv=None):
                   totals['false'] / hours if hours else 0.0, totals['false_injected'], totals['injected_s'] / 3600.0,
                   totals['false_injected'] / (totals['injected_s'] / 3600.0) if totals['injected_s'] else 0.0,
                   totals['kept'] / float(totals['needed']) if totals['needed'] else float('nan')))
+        if persistence:
+            print('anomalous classifications per false window without injection (retrigger every): median %d, '
+                  'fewer than %d (what a %g s persistence rule could remove): %d of %d windows' % (
+                      np.median(persistence), PERSISTENCE, LATENCY,
+                      sum(1 for n in persistence if n < PERSISTENCE), len(persistence)))
         for line in oddities:
             print('real oddity: ' + line)
         print()
