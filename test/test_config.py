@@ -147,7 +147,8 @@ def test_parameters_override_the_file_and_the_single_classifier_joins_it(tmp_pat
     triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
     assert [t.name for t in triggers] == ['classifier', 'motion', 'too_fast', 'motors']
     assert triggers[0].topic == '/odom'  # the motion set's role name, resolved as a global name
-    assert [(str(t.classify_every), t.retrigger, str(t.recent)) for t in triggers[:2]] == [('0.1s', 'every', '0.3s')] * 2
+    assert [(str(t.classify_every), t.retrigger, str(t.recent)) for t in triggers[:2]] == \
+        [('0.1s', 'every', '0.3s')] * 2
     resolved = cfg.build_triggers(AnomalyModel.load, installed_class, resolve=lambda t: '/robot1/' + t.lstrip('/'))
     assert resolved[1].topic == '/robot1/husky_velocity_controller/odom'
 
