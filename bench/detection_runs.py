@@ -19,7 +19,12 @@ caught when a fire falls in [onset, end + feature window]; latency = first such 
 part's messages inside windows. Types that do not fit into a short replay are
 counted as 'no room'.
 
-Settings: ``ours`` = motion features, 2 s window, retrigger 'event'; ``every`` = the same with retrigger
+``--separability``: per run, no windows: the deepest nominal score of the replayed part against the
+shallowest injected anomaly onset (within LATENCY), as depth in units of the trained threshold; whether any
+threshold could separate them.
+
+Settings: ``ours`` = motion features, 2 s window, retrigger 'event' (the default); ``dynamics`` = the level-free
+dynamics features, the same otherwise; ``every`` = motion with retrigger
 'every' (the paper's rule); ``paper`` = raw features over a count window of about 2 s, nu 0.5, threshold 0
 (OneClassSVM.predict), retrigger 'every'. Sequor is left out (trials of a few frames hours apart: no
 continuous driving to inject into; bench/detection_real.py scores it by trial); ALFA is used up to its
@@ -53,8 +58,10 @@ WINDOW = '2s'
 PRE = POST = 2.0
 CLASSIFY_EVERY = '50ms'
 LATENCY = 0.5
+PERSISTENCE = 5     # classifications: 'k of the last n' needs k within LATENCY (5 at 10 Hz, 10 at 50ms steps)
 SETTINGS = collections.OrderedDict([
     ('ours', ('motion', 'event', {})),
+    ('dynamics', ('dynamics', 'event', {})),
     ('every', ('motion', 'every', {})),
     ('paper', ('raw', 'every', {'nu': 0.5})),
 ])
@@ -130,13 +137,16 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     seconds = rest[-1].stamp - rest[0].stamp
     nominal_fires = fires(model, rest, topic, rule)
     nominal_windows = windows_of(nominal_fires)
+    every = nominal_fires if rule == 'every' else fires(model, rest, topic, 'every')
+    persistence = [sum(1 for t in every if a <= t <= b) for a, b in windows_of(every)]
     result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': first[-1].stamp - first[0].stamp,
               'vectors': vectors,
               'replay_s': seconds, 'false_nominal': len(nominal_windows), 'nominal_windows': nominal_windows,
               'caught': collections.Counter(), 'total': collections.Counter(), 'late': collections.Counter(),
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
               'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window,
-              'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest))}
+              'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest)),
+              'persistence': persistence}
     for kind in sim.ANOMALY_TYPES:
         for seed in seeds:
             try:
@@ -164,6 +174,37 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     return result
 
 
+def scored(model, records, topic):
+    """(stamps, scores) of every classification of the whole feature window (CLASSIFY_EVERY)."""
+    stream = FeatureStream(model.config, every=CLASSIFY_EVERY)
+    pairs = [(r.stamp, v) for r in records if r.topic == topic for v in [stream.add(r.msg, r.stamp)] if v is not None]
+    return np.array([t for t, _ in pairs]), model.scores(np.array([v for _, v in pairs]))
+
+
+def separability(name, topic, stop, setting, seeds, fraction):
+    """Could any threshold separate this run? Scores as depth below the held-out median in units of
+    (median - threshold), so 1 is the trained threshold: the deepest nominal classification of the replayed
+    part against, per injected anomaly, the deepest one within LATENCY of its onset (the shallowest of those)."""
+    feature_set, _, options = SETTINGS[setting]
+    records = load(name, topic, stop)
+    first, rest = split(records, fraction)
+    model, _ = train(first, config_of(feature_set, rate_of(records)), options)
+    median = model.info['held_out_score_median']
+    depth = lambda scores: (median - scores) / (median - model.threshold)  # noqa: E731
+    _, nominal = scored(model, rest, topic)
+    anomalies = []
+    for kind in sim.ANOMALY_TYPES:
+        for seed in seeds:
+            try:
+                injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+            except ValueError:
+                continue
+            stamps, scores = scored(model, injected, topic)
+            near = (stamps >= truth[0]['start']) & (stamps <= truth[0]['start'] + LATENCY)
+            anomalies.append((float(depth(scores[near]).max()) if near.any() else float('-inf'), kind))
+    return float(depth(nominal).max()), min(anomalies)
+
+
 def pct(a, b):
     return '-' if not b else '%d/%d' % (a, b)
 
@@ -172,10 +213,13 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--runs', help='comma-separated run names (default: all of RUNS)')
     parser.add_argument('--seeds', default='0,1,2')
-    parser.add_argument('--settings', default=','.join(SETTINGS), help='comma-separated: ours, every, paper')
+    parser.add_argument('--settings', default=','.join(SETTINGS),
+                        help='comma-separated: ours, dynamics, every, paper')
     parser.add_argument('--train', type=float, default=0.5, help='fraction of each run that trains (default 0.5)')
     parser.add_argument('--margin', type=float, default=learning.DEFAULT_MARGIN,
                         help='threshold margin of learning.train (default %g)' % learning.DEFAULT_MARGIN)
+    parser.add_argument('--separability', action='store_true',
+                        help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
@@ -186,11 +230,23 @@ def main(argv=None):
                   ['training: first %g of each run; injection: one anomaly per type and seed %s into the rest; '
                    'window %s, pre/post %gs/%gs, classify_every %s, threshold margin %g' % (
                        args.train, seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin)])
+    if args.separability:
+        for setting in settings:
+            rows = []
+            for name, topic, stop in runs:
+                nominal, (anomaly, kind) = separability(name, topic, stop, setting, seeds, args.train)
+                rows.append([name, '%.2f' % nominal, '%.2f (%s)' % (anomaly, kind),
+                             'yes' if anomaly > nominal else 'no'])
+            common.table(['run', 'deepest nominal', 'shallowest anomaly within %gs' % LATENCY,
+                          'a threshold separates'], rows,
+                         'setting %s: depth below the held-out median, 1 = the trained threshold' % setting)
+        print('total %.1f s' % (time.time() - started))
+        return 0
     for setting in settings:
         rows, totals = [], collections.Counter()
         by_type = collections.defaultdict(collections.Counter)
         latencies = collections.defaultdict(list)
-        oddities = []
+        oddities, persistence = [], []
         for name, topic, stop in runs:
             try:
                 r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin)
@@ -208,6 +264,7 @@ def main(argv=None):
                            'total': total, 'late': late, 'kept': r['kept'], 'needed': r['needed'],
                            'false_injected': r['false_injected']})
             totals['injected_s'] += r['injected_s']
+            persistence += r['persistence']
             for kind in sim.ANOMALY_TYPES:
                 by_type[kind].update({'caught': r['caught'][kind], 'total': r['total'][kind],
                                       'late': r['late'][kind], 'no_room': r['no_room'][kind]})
@@ -233,6 +290,11 @@ def main(argv=None):
                   totals['false'] / hours if hours else 0.0, totals['false_injected'], totals['injected_s'] / 3600.0,
                   totals['false_injected'] / (totals['injected_s'] / 3600.0) if totals['injected_s'] else 0.0,
                   totals['kept'] / float(totals['needed']) if totals['needed'] else float('nan')))
+        if persistence:
+            print('anomalous classifications per false window without injection (retrigger every): median %d, '
+                  'fewer than %d (what a %g s persistence rule could remove): %d of %d windows' % (
+                      np.median(persistence), PERSISTENCE, LATENCY,
+                      sum(1 for n in persistence if n < PERSISTENCE), len(persistence)))
         for line in oddities:
             print('real oddity: ' + line)
         print()

@@ -112,7 +112,7 @@ class CollectLearnSmartTest(unittest.TestCase):
         model = AnomalyModel.load(self.model_path)
         flags = fx.flagged(model, self.anomalous_run)
         self.assertTrue(flags and 100 <= min(flags) and max(flags) <= 100 + fx.BURST + 1 + 19, flags)
-        expected = fx.expected_windows(flags, len(self.anomalous_run), PRE, POST)
+        expected = fx.expected_windows(fx.fired(model, self.anomalous_run), len(self.anomalous_run), PRE, POST)
         out_dir = os.path.join(self.tmp, 'smart')
         events = []
         rospy.Subscriber('/smart_logger/anomalies', AnomalyEvent, events.append, queue_size=None)

@@ -65,6 +65,14 @@ def flagged(model, records):
     return [i for i, v in vectors(records) if model.is_anomalous(v)[0]]
 
 
+def fired(model, records):
+    """Indices of the odometry records at which the smart node's classifier trigger fires (its defaults:
+    retrigger 'event', classify_every 50ms; the offline twin of the live node)."""
+    from cc_log.triggers import ClassifierTrigger
+    trigger = ClassifierTrigger('classifier', model, records[0].topic)
+    return [i for i, r in enumerate(records) if trigger.on_record(r)]
+
+
 def expected_windows(flags, n, pre, post):
     """[(first, last)] index ranges the logger must save: [i-pre, i+post] merged when they touch."""
     runs = []

@@ -58,6 +58,7 @@ class SmartWindowTest(unittest.TestCase):
         stream = fx.inject(stream, DISABLED.start - RUN.start + 100)
         cls.stream = stream
         cls.flags = fx.flagged(cls.model, stream)
+        cls.fires = fx.fired(cls.model, stream)
         cls.events, cls.diagnostics = [], []
         rospy.Subscriber('/%s/anomalies' % NODE, AnomalyEvent, cls.events.append, queue_size=None)
         rospy.Subscriber('/diagnostics', DiagnosticArray, cls.diagnostics.append, queue_size=None)
@@ -121,7 +122,9 @@ class SmartWindowTest(unittest.TestCase):
                 (('_model:=[1]',), '~model: [1] is not a string'),
                 (('_model:=' + self.model_path, '_post:=99999999999999999999'), '~post: 99999999999999999999 is'),
                 (('_model:=' + self.model_path, '_directory:=[1,2]'), '~directory: [1, 2] is not a string'),
-                (('_model:=' + self.model_path, '_max_buffer_mb:=-5'), '~max_buffer_mb: -5 is not a size >= 0'))):
+                (('_model:=' + self.model_path, '_max_buffer_mb:=-5'), '~max_buffer_mb: -5 is not a size >= 0'),
+                (('_model:=' + self.model_path, '_recent:=30'),
+                 'triggers[0] (classifier): recent: 30 is longer than the feature window 20'))):
             code, out, err = fx.finish(fx.start('smart_logger.py', '__name:=smart_logger_bad_%d' % number, *args,
                                                 cwd=cwd))
             self.assertEqual((code, err.strip().count('\n')), (1, 0), err)
@@ -214,7 +217,10 @@ class SmartWindowTest(unittest.TestCase):
         run_flags = [i for i in self.flags if i < RUN.stop - RUN.start]
         self.assertTrue(run_flags and 100 <= min(run_flags) and max(run_flags) <= 100 + fx.BURST + 1 + 19,
                         run_flags)
-        (lo, hi), = fx.expected_windows(run_flags, RUN.stop - RUN.start, PRE, POST)
+        # the node fires at the burst's onset, then while the newest rows see it (retrigger 'event')
+        run_fires = [i for i in self.fires if i < RUN.stop - RUN.start]
+        self.assertTrue(run_fires[0] == min(run_flags) and run_fires[-1] <= max(run_flags), (run_fires, run_flags))
+        (lo, hi), = fx.expected_windows(run_fires, RUN.stop - RUN.start, PRE, POST)
         odom, imu = self.publish(RUN)
         fx.wait_for(lambda: self.written(), 20, 'the window to be written')
         time.sleep(0.5)

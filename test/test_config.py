@@ -84,7 +84,7 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
     ('triggers: [{name: x, kind: alarm}]', "triggers[0] (x): kind: 'alarm' is not one of classifier, rule, "
                                            'manual'),
     ('triggers: [{kind: classifier, feature_set: pixels}]', "triggers[0] (classifier): feature_set: 'pixels' is "
-                                                            'not one of motion, raw, imu, command, progress'),
+                                                            'not one of motion, raw, imu, command, progress, dynamics'),
     ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]', "triggers[0] (r): unknown key 'whenn'"),
     ('triggers: [{name: r, kind: rule, topic: odom, arrival: true}, {name: r, kind: manual}]',
      "triggers[1]: name 'r' is used twice"),
@@ -122,6 +122,11 @@ def test_a_bad_configuration_fails_at_start_with_one_line_naming_what(tmp_path, 
     ('{name: c, kind: classifier, model: MODEL, window: "3s"}', "triggers[0] (c): window: 3s does not match"),
     ('{name: c, kind: classifier, model: MODEL, topics: [a, b]}', 'triggers[0] (c): topics: the motion feature '
                                                                   'set reads 1 topic(s)'),
+    ('{name: c, kind: classifier, model: MODEL, recent: 5}', 'triggers[0] (c): recent: 5 must be a positive '
+                                                             'duration like the feature window 2s'),
+    ('{name: c, kind: classifier, model: MODEL, recent: 3s}', 'triggers[0] (c): recent: 3s is longer than the '
+                                                              'feature window 2s'),
+    ('{name: c, kind: classifier, model: MODEL, recent: soon}', 'triggers[0] (c): recent: '),
 ])
 def test_triggers_that_cannot_be_built_fail_naming_the_trigger(tmp_path, model_path, trigger, message):
     cfg = Config.from_dict(config.load_file(write(tmp_path, 'triggers: [%s]' % trigger.replace('MODEL', model_path))),
@@ -135,14 +140,15 @@ def test_parameters_override_the_file_and_the_single_classifier_joins_it(tmp_pat
     data = config.load_file(write(tmp_path, EXAMPLE.replace('MODEL', model_path)))
     data = config.merge(data, {'windows': {'post': '5s'}, 'topics': ['scan']})  # `rosparam load`-ed keys
     data = config.with_flat(data, {'pre': '300', 'format': None, 'max_buffer_mb': 0.0})
-    data = config.with_classifier(data, model=model_path, classify_every='100ms', retrigger='every')
+    data = config.with_classifier(data, model=model_path, classify_every='100ms', retrigger='every', recent='0.3s')
     cfg = Config.from_dict(data)
     assert (str(cfg.pre), str(cfg.post), cfg.format, cfg.max_buffer_mb, cfg.topics) == \
         ('300', '5s', 'bag-lz4', 0.0, ['scan'])
     triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
     assert [t.name for t in triggers] == ['classifier', 'motion', 'too_fast', 'motors']
     assert triggers[0].topic == '/odom'  # the motion set's role name, resolved as a global name
-    assert [(str(t.classify_every), t.retrigger) for t in triggers[:2]] == [('0.1s', 'every')] * 2
+    assert [(str(t.classify_every), t.retrigger, str(t.recent)) for t in triggers[:2]] == \
+        [('0.1s', 'every', '0.3s')] * 2
     resolved = cfg.build_triggers(AnomalyModel.load, installed_class, resolve=lambda t: '/robot1/' + t.lstrip('/'))
     assert resolved[1].topic == '/robot1/husky_velocity_controller/odom'
 

@@ -1,4 +1,4 @@
-"""The feature-set registry and the sets beyond odometry motion: imu, command, progress (no roscore)."""
+"""The feature-set registry and the sets beyond odometry motion: imu, command, progress, dynamics (no roscore)."""
 import math
 from types import SimpleNamespace as NS
 
@@ -29,7 +29,7 @@ def imu(acc, gyro):
 
 
 def test_registry_names_every_set_and_refuses_unknown_ones():
-    assert FEATURE_SETS == ('motion', 'raw', 'imu', 'command', 'progress')
+    assert FEATURE_SETS == ('motion', 'raw', 'imu', 'command', 'progress', 'dynamics')
     for name in FEATURE_SETS:
         feature = features.get(name)
         assert feature.name == name and feature.inputs and feature.columns
@@ -37,7 +37,8 @@ def test_registry_names_every_set_and_refuses_unknown_ones():
         assert config.topic_type == feature.inputs[0][1]
         assert len(vector_names(config)) == vector_length(config)
     assert features.get('command').inputs == (('odom', 'nav_msgs/Odometry'), ('cmd_vel', 'geometry_msgs/Twist'))
-    with pytest.raises(ValueError, match="^feature_set: 'pixels' is not one of motion, raw, imu, command, progress$"):
+    with pytest.raises(ValueError,
+                       match="^feature_set: 'pixels' is not one of motion, raw, imu, command, progress, dynamics$"):
         FeatureConfig('pixels', '10')
     with pytest.raises(ValueError, match='^topic_type: '):
         FeatureConfig('imu', '1s', 'nav_msgs/Odometry')
@@ -282,3 +283,32 @@ def test_command_catches_collisions_and_slipping_wheels_on_the_simulator_with_it
     for entry in truth.truth:
         inside = np.array([v for s, v in out if entry['start'] <= s <= entry['end']])
         assert (model.scores(inside) < model.threshold).mean() > 0.9, entry['type']  # measured 0.97 at least
+
+
+def dynamics_rows(turn=0.0, shift=(0.0, 0.0), speed=1.0, jump_at=None):
+    """Rows of the dynamics set for a robot driving a circle of yaw rate 0.2 at ``speed``, the whole
+    trajectory turned by ``turn`` and shifted by ``shift``; at message ``jump_at`` the pose jumps 1 m and
+    0.3 rad and stays there."""
+    feature = features.get('dynamics')(FeatureConfig('dynamics', '20'))
+    x = y = 0.0
+    yaw = turn
+    rows = []
+    for i in range(100):
+        dx, dy, dyaw = (0.0, 0.0, 0.0) if jump_at is None or i < jump_at else (1.0, 0.0, 0.3)
+        rows.append(feature.row(odom(x + shift[0] + dx, y + shift[1] + dy, yaw + dyaw, speed, 0.2), 10.0 + 0.1 * i))
+        x, y, yaw = x + 0.1 * speed * math.cos(yaw), y + 0.1 * speed * math.sin(yaw), yaw + 0.02
+    return np.array(rows)
+
+
+def test_dynamics_does_not_see_where_the_robot_is_or_how_fast_it_drives_but_sees_a_pose_jump():
+    names = features.get('dynamics').columns
+    steady = dynamics_rows()
+    assert np.allclose(steady, dynamics_rows(turn=2.0, shift=(1000.0, -300.0)), atol=1e-6)
+    # steady driving at another speed: the same (near-zero) rows, where motion's speed channels would differ
+    assert np.abs(steady[2:]).max() < 0.02 and np.abs(dynamics_rows(speed=3.0)[2:]).max() < 0.06
+    jumped = dynamics_rows(jump_at=50)
+    assert np.hypot(jumped[50, names.index('pose_vx_err')], jumped[50, names.index('pose_vy_err')]) > 5.0
+    assert jumped[50, names.index('yaw_err')] > 2.5
+    # after the jump the heading rate agrees again; the 0.3 rad heading offset stays as sideways pose motion
+    assert np.abs(jumped[52:, names.index('yaw_err')]).max() < 1e-6
+    assert jumped[52:, names.index('pose_vy_err')] == pytest.approx(-math.sin(0.3), abs=0.02)

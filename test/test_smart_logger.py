@@ -11,6 +11,7 @@ from cc_log import learning, log_format, msg_codec, smart_logger
 from cc_log.collector import VectorStream
 from cc_log.features import FeatureConfig, vector_length
 from cc_log.smart_logger import FAILED, OPENED, WRITTEN, SmartLogger, replay
+from cc_log.triggers import ClassifierTrigger
 from cc_log.window_buffer import Record, WindowBuffer
 
 bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
@@ -287,8 +288,8 @@ def test_manual_trigger_saves_pre_and_post(husky, tmp_path):
 
 def test_onset_retrigger_keeps_only_the_onsets(husky, tmp_path):
     """retrigger='onset': a run of anomalous scores triggers once, at its first message; a new run after a
-    nominal score triggers again (hysteresis at the threshold). The default ('every') extends the window
-    with every anomalous score."""
+    nominal score triggers again (hysteresis at the threshold); 'every' extends the window with every
+    anomalous score."""
     odom = [r for r in husky if r.topic == ODOM]
     flags = set(range(100, 140)) | {150} | set(range(300, 330))  # 150: a new onset after 140..149 nominal
     windows = {}
@@ -405,9 +406,18 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
     # estimated from a sample of the messages (replay does not decode them all)
     assert summary['raw_json_bytes'] == pytest.approx(sum(msg_codec.row_json_bytes(r.msg) for r in run), rel=0.01)
     window, = summary['windows']
-    lo, hi = min(flagged) - PRE, max(flagged) + POST
+    # the default rule ('event') fires at the onset, then while the newest quarter of the 20-row feature
+    # window (5 rows) sees the burst: the window ends 5 rows after the burst's last row (107) + post, not a
+    # whole feature window later as with 'every'
+    trigger = ClassifierTrigger('classifier', model, ODOM, classify_every='1')
+    fired = [i for i, r in enumerate(run) if trigger.on_record(r)]
+    assert trigger.retrigger == 'event' and fired[0] == min(flagged) and 105 <= fired[-1] <= 107 + 5
+    lo, hi = fired[0] - PRE, fired[-1] + POST
+    assert hi < max(flagged) + POST
     assert (window['start'], window['end'], window['messages']) == (run[lo].stamp, run[hi].stamp, hi - lo + 1)
     assert summary['stored_bytes'] == os.path.getsize(window['path'])
     _, records = log_format.read_window(window['path'])
     assert all(same(a, b) for a, b in zip(records, run[lo:hi + 1]))
+    every = replay(bag, ODOM, path, str(tmp_path / 'every'), PRE, POST, 'json-xz', retrigger='every')['windows']
+    assert [(w['start'], w['end']) for w in every] == [(run[lo].stamp, run[max(flagged) + POST].stamp)]
     assert smart_logger.DEFAULT_FORMAT == 'json-xz'

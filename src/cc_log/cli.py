@@ -1133,7 +1133,8 @@ def build_parser():
     p.add_argument('--classify-every', type=_span('classify-every'), metavar='N|Ns',
                    help='score every N-th message or at most once per duration (default: 50ms)')
     p.add_argument('--retrigger', choices=_retrigger_modes(),
-                   help='every anomalous score extends a window, or only the onset of an anomaly (default: every)')
+                   help='event: the onset opens a window, extended while the newest rows are anomalous; every: '
+                   'every anomalous score extends a window; onset: only the onset (default: event)')
     p.add_argument('--max-buffer-mb', type=_positive_float('max-buffer-mb', zero=True),
                    metavar='MB', help='memory budget of every message buffered (estimated); a window reaching it '
                    'is written in parts; 0: none (default: %g)' % _max_buffer_mb())

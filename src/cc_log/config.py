@@ -13,7 +13,7 @@ configuration tuned offline on bags behaves the same on the robot::
     collect: {rotate: 60s, label: nominal, stride: 25}
     triggers:
       - {name: motion, kind: classifier, model: ~/.ros/cc_log/motion.json, topics: [odom],
-         classify_every: 50ms, retrigger: every, learn_online: false}   # learn_*: cc_log.online_learning
+         classify_every: 50ms, retrigger: event, recent: 0.5s, learn_online: false}   # learn_*: cc_log.online_learning
       - {name: shock, kind: classifier, model: ~/.ros/cc_log/imu.json, topics: [imu/data]}
       - {name: motors, kind: rule, topic: /diagnostics, level: ERROR, status: 'motor*', hold_off: 5s}
       - {name: too_fast, kind: rule, topic: odom, type: nav_msgs/Odometry, when: 'twist.twist.linear.x > 2.0'}
@@ -111,7 +111,7 @@ def with_classifier(data, **values):
     """``data`` with the single-classifier parameters of the nodes and ``cclog`` (None: not given):
     ``model``, ``topics``, ``feature_set`` and ``window`` go to the trigger named ``classifier`` (added first
     when there is none; without ``topics``, on its feature set's default topics); ``classify_every``,
-    ``retrigger`` and ``learn_online`` to every classifier."""
+    ``retrigger``, ``recent`` and ``learn_online`` to every classifier."""
     data = copy.deepcopy(data)
     triggers = data.get('triggers', [])
     if not isinstance(triggers, list):
@@ -125,7 +125,7 @@ def with_classifier(data, **values):
             named = [{'name': 'classifier', 'kind': 'classifier'}]
             triggers.insert(0, named[0])
         named[0].update(own)
-    for key in ('classify_every', 'retrigger', 'learn_online'):
+    for key in ('classify_every', 'retrigger', 'recent', 'learn_online'):
         if values.get(key) is not None:
             for entry in triggers:
                 if isinstance(entry, dict) and entry.get('kind') == 'classifier':

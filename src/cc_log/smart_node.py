@@ -35,8 +35,13 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~window`` (string, default: the model's): only checked against the model; a mismatch is an error.
   ``~pre``, ``~post`` (string, default: 100): messages (``100``) or seconds (``2s``) before / after.
   ``~max_window`` (string, default: 100000): longer windows are written in parts.
-  ``~retrigger`` (string, default: every): ``every`` anomalous score opens or extends a window, or only
-  the ``onset`` of an anomaly (the score must come back above the threshold before it triggers again).
+  ``~retrigger`` (string, default: event): ``event``: the onset of an anomaly opens a window, which is then
+  extended only while the newest ``~recent`` rows of the feature window are anomalous (it ends at the
+  anomaly's end + recent + post); ``every`` anomalous score opens or extends a window (the paper's rule); or
+  only the ``onset`` of an anomaly (the score must come back above the threshold before it triggers again).
+  ``~recent`` (string, default: a quarter of the feature window): ``event`` only: the newest rows that decide
+  whether an open anomaly goes on, a count (``5``) or duration (``0.5s``) of the feature window's kind, at
+  most the window; every classifier of the configuration.
   ``~topics`` (list or space-separated string, default: none): other topics to keep.
   ``~enabled`` (bool, default: true): start logging, or start paused.
   ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
@@ -144,6 +149,7 @@ class SmartNode(object):
             {'model': model_path,
              'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart_logger.RETRIGGER_MODES),
              'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY),
+             'recent': given(params.scalar, 'recent', ''),
              'learn_online': given(params.boolean, 'learn_online', False)})
         if not cfg.triggers:
             raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')

@@ -25,6 +25,7 @@ from . import raw  # noqa: F401
 from . import imu  # noqa: F401
 from . import command  # noqa: F401
 from . import progress  # noqa: F401
+from . import dynamics  # noqa: F401
 from .base import (CLIP, DEFAULT_MAX_DT, DEFAULT_MIN_DT, STATISTICS, FeatureConfig, FeatureSet, get, names,
                    register, stamp_of)
 from .motion import MOTION_COLUMNS

@@ -97,6 +97,7 @@ class MotionFeatures(OdometrySet):
             return None
         p, q, v, w = pose
         kind, dt = self._step(stamp)
+        self._kind, self._dt = kind, dt   # the step of this message (sets built on motion read it)
         prev = self._prev
         if kind == RESTART:
             # First message, time going backwards, or a gap: derivatives restart.

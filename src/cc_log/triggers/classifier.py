@@ -30,7 +30,7 @@ from .base import Trigger, register
 #   window is nominal again, so the logging window ends at the anomaly's end + recent + post instead of
 #   end + feature window + post (the anomalous rows still in the feature window no longer extend it).
 RETRIGGER_MODES = ('every', 'onset', 'event')
-DEFAULT_RETRIGGER = 'every'
+DEFAULT_RETRIGGER = 'event'
 RECENT_FRACTION = 0.25  # default ``recent``: this fraction of the feature window
 
 # How often the classifier scores the feature window (a Span): '1' = every message of the first input (the
