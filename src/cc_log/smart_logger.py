@@ -600,7 +600,7 @@ def replay_into(logger, bag_path, progress=None):
     """Feed every message of the bag that ``logger`` keeps or watches (its driving topic, side topics and
     trigger topics; every topic when its side topics are None) to it as serialized bytes (``on_raw``, the
     path of the live node), close it, and return ``replay``'s summary; the same errors."""
-    from . import bagio  # rosbag: imported here so the module stays pure
+    from . import bag_reader, bagio  # rosbag: imported here so the module stays pure
     if logger.side_topics is None:
         bag = bagio.open_bag(bag_path)
         try:
@@ -609,7 +609,7 @@ def replay_into(logger, bag_path, progress=None):
             bag.close()
     else:
         topics = [logger.driving_topic] + sorted(logger.side_topics)
-    return replay_records(logger, bagio.read_raw(bag_path, topics), progress, bag_path)
+    return replay_records(logger, bag_reader.read_raw(bag_path, topics), progress, bag_path)
 
 
 def replay_records(logger, records, progress=None, source='the records'):
