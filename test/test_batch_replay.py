@@ -208,3 +208,33 @@ def test_a_record_that_cannot_be_decoded_stops_a_batch_after_the_records_before_
     assert caught.value.index == 20 and caught.value.topic == sim.ODOM_TOPIC
     assert logger.stats()['messages_buffered'] == 20
     logger.close()
+
+
+def test_the_intake_feeds_a_drained_batch_at_once_and_drops_only_a_message_that_cannot_be_decoded(sim_case,
+                                                                                                  tmp_path):
+    rospy = pytest.importorskip('rospy')
+    from cc_log.intake import Intake, MessageDecoder
+    bags, _ = sim_case
+    records = [r for r in bagio.read_raw(bags['anomalies'], [sim.ODOM_TOPIC])][:30]
+    rule = RuleTrigger('fast', topic=sim.ODOM_TOPIC, when='twist.twist.linear.x > 100')  # reads the fields
+    logger = SmartLogger(None, str(tmp_path), driving_topic=sim.ODOM_TOPIC, background=False, triggers=[rule])
+    calls = []
+    feed = logger.on_records
+    logger.on_records = lambda batch: (calls.append(len(batch)), feed(batch))
+    intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers, no thread
+    intake.sink, intake.decoder, intake.dropped = logger, MessageDecoder(), 0
+    batch = []
+    for k, record in enumerate(records):
+        msg = rospy.AnyMsg()
+        msg._buff = record.raw[:30] if k == 10 else record.raw
+        msg._connection_header = record.connection
+        batch.append((record.topic, msg, rospy.Time.from_sec(record.stamp)))
+    initialized = rospy.rostime.is_rostime_initialized()
+    rospy.rostime.set_rostime_initialized(True)  # wall-clock time for rospy's throttled warning, as a node has
+    try:
+        assert intake._feed_records(batch + [None]) is False  # the end mark
+    finally:
+        rospy.rostime.set_rostime_initialized(initialized)
+    assert calls == [30, 19] and intake.dropped == 1
+    assert logger.stats()['messages_buffered'] == 29
+    logger.close()
