@@ -28,6 +28,7 @@ opens, is written or fails to be written, and when the quota deletes an old wind
 Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
 """
 import collections
+import itertools
 import math
 import threading
 import time
@@ -670,15 +671,16 @@ def replay_into(logger, bag_path, progress=None):
 
 def _batches(records, size=None):
     """Lists of up to ``size`` (REPLAY_BATCH) consecutive records, each all serialized or all decoded."""
-    size = size or REPLAY_BATCH
-    batch = []
-    for record in records:
-        if batch and (len(batch) >= size or (record.msg is None) != (batch[0].msg is None)):
+    stream = iter(records)
+    while True:
+        batch = list(itertools.islice(stream, size or REPLAY_BATCH))
+        if not batch:
+            return
+        if all(record.msg is None for record in batch) or all(record.msg is not None for record in batch):
             yield batch
-            batch = []
-        batch.append(record)
-    if batch:
-        yield batch
+            continue
+        for _, run in itertools.groupby(batch, key=lambda record: record.msg is None):
+            yield list(run)
 
 
 def replay_records(logger, records, progress=None, source='the records'):
