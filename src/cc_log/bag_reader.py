@@ -237,10 +237,8 @@ def _u32_at(buf, positions):
 
 def _bytes_at(buf, positions, text):
     """Whether ``text`` is at each of ``positions`` (int64 array, each within ``buf`` with ``text``)."""
-    ok = np.ones(len(positions), bool)
-    for j, byte in enumerate(text):
-        ok &= buf[positions + j] == byte
-    return ok
+    pattern = np.frombuffer(text, np.uint8)
+    return (buf[positions[:, None] + np.arange(len(pattern))] == pattern).all(axis=1)
 
 
 def _merge_order(nsec, conns):
