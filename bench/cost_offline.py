@@ -162,7 +162,7 @@ def main(argv=None):
         print()
         common.table(['bag', 'messages', 'read msg/CPU s', 'replay msg/CPU s', 'replay/read (CPU)',
                       'read msg/s wall', 'replay msg/s wall', 'replay/read (wall)', 'windows'], rows,
-                     'Offline throughput (replay = bag read + features + classifier + json-xz windows):')
+                     'Offline throughput (replay = bag read + features + classifier + %s windows):' % args.format)
         if args.profile:
             name, path, topics, model_path = cases[-1]
             profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile)
