@@ -39,23 +39,12 @@ def sim_case(tmp_path_factory):
 
 
 @pytest.fixture(scope='module')
-def husky_model(tmp_path_factory, real_bag_path):
+def husky_model(tmp_path_factory):
+    from conftest import REAL_DATA
     config = FeatureConfig('motion', '2s')
-    _, X = bagio.feature_vectors(real_bag_path(HUSKY), HUSKY_ODOM, config)
+    _, X = bagio.feature_vectors(os.path.join(REAL_DATA, HUSKY), HUSKY_ODOM, config)
     model, _ = learning.train(X[:len(X) // 2], config=config)
     return model.save(str(tmp_path_factory.mktemp('husky') / 'husky.model.json'))
-
-
-@pytest.fixture(scope='module')
-def real_bag_path():
-    from conftest import REAL_DATA
-
-    def find(name):
-        path = os.path.join(REAL_DATA, name)
-        if not os.path.exists(path):
-            pytest.fail('real data missing: %s (tests read ../shared/data/real/)' % path)
-        return path
-    return find
 
 
 def rosbag_records(path, topics):
@@ -64,8 +53,8 @@ def rosbag_records(path, topics):
 
 @pytest.mark.parametrize('name', [HUSKY, 'alfa_carbonZ_engine_failure.bag', 'socspioneer_trace0.bag',
                                   'f1tenth_DS2.bag'])
-def test_the_chunk_reader_yields_rosbags_records_in_rosbags_order(real_bag_path, name):
-    path = real_bag_path(name)
+def test_the_chunk_reader_yields_rosbags_records_in_rosbags_order(real_bag, name):
+    path = real_bag(name)
     bag = bagio.open_bag(path)
     topics = sorted(bagio.topics_of(bag))
     bag.close()
@@ -179,9 +168,9 @@ def test_batched_replay_writes_the_same_windows_as_record_by_record_on_simulated
 
 
 @pytest.mark.parametrize('fmt, rule', [('json-xz', None), ('bag-lz4', '1.0')])
-def test_batched_replay_writes_the_same_windows_as_record_by_record_on_the_husky_bag(real_bag_path, husky_model,
+def test_batched_replay_writes_the_same_windows_as_record_by_record_on_the_husky_bag(real_bag, husky_model,
                                                                                      tmp_path, fmt, rule):
-    batched, single = replay_both(tmp_path, real_bag_path(HUSKY), HUSKY_ODOM, HUSKY_IMU, husky_model, fmt, rule)
+    batched, single = replay_both(tmp_path, real_bag(HUSKY), HUSKY_ODOM, HUSKY_IMU, husky_model, fmt, rule)
     assert batched and [name for name, _, _ in batched] == [name for name, _, _ in single]
     for (name, meta_b, records_b), (_, meta_s, records_s) in zip(batched, single):
         assert meta_b == meta_s, name

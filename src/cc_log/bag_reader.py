@@ -12,14 +12,12 @@ headers are parsed with ``formats.bag_salvage``'s parser. A damaged bag is a Val
 import bz2
 import collections
 import heapq
-import mmap
-import os
 
 import numpy as np
 
 from . import bagio
 from .formats.bag_salvage import (_OP_CONNECTION, _OP_INDEX_DATA, _OP_MSG_DATA, MAX_CHUNK_BYTES, _lz4, _record,
-                                  _u32)
+                                  _u32, map_file)
 from .window_buffer import Record
 
 __all__ = ['read_raw', 'MAX_CHUNK_BYTES']
@@ -77,12 +75,7 @@ class _Reader(object):
 
     def records(self):
         """Yield the records (see ``read_raw``)."""
-        fd = os.open(self.path, os.O_RDONLY | os.O_CLOEXEC)
-        try:
-            size = os.fstat(fd).st_size
-            data = mmap.mmap(fd, size, access=mmap.ACCESS_READ) if size else b''
-        finally:
-            os.close(fd)
+        data, size = map_file(self.path)
         try:
             try:
                 index = self._index(data)
@@ -162,8 +155,8 @@ class _Reader(object):
         if stop > len(data):
             raise self._damaged('chunk at byte %d runs past the end of the file' % info.pos)
         if declared > MAX_CHUNK_BYTES:
-            raise self._damaged('chunk at byte %d declares %d bytes, more than %d' % (info.pos, declared,
-                                                                                   MAX_CHUNK_BYTES))
+            raise self._damaged('chunk at byte %d declares %d bytes, more than %d'
+                                % (info.pos, declared, MAX_CHUNK_BYTES))
         payload = data[start:stop]
         if header.compression == 'none':
             chunk, whole = payload, True

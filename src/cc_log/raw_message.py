@@ -23,7 +23,6 @@ _STAMP = struct.Struct('<II')  # secs, nsecs after the header's seq
 DECODE_ERRORS = (genpy.DeserializationError, ValueError, TypeError, struct.error, IndexError, KeyError)
 
 
-
 class UndecodableRecord(ValueError):
     """A record of a batch that a trigger must read but cannot be decoded: ``index`` (its place in the batch;
     the records before it were taken), ``topic``, ``error`` (the decoding error)."""
