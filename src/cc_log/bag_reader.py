@@ -23,6 +23,7 @@ from .window_buffer import Record
 __all__ = ['read_raw', 'MAX_CHUNK_BYTES']
 
 CACHED_CHUNKS = 4  # decompressed chunks kept (bags whose connections were written into interleaved chunks)
+RECORDS_BLOCK = 65536  # index entries turned into Python objects at a time
 
 _OP_FIELD = b'\x04\x00\x00\x00op=%c' % _OP_MSG_DATA
 _MSG_HEADER_LEN = 38      # op, conn and time fields with their lengths
@@ -129,23 +130,25 @@ class _Reader(object):
         conns, chunks, stamps, offsets = index
         topics = [c.topic for c in self.connections]
         headers = self.headers
+        by_chunk = np.argsort(chunks, kind='stable')  # the messages of chunk k: by_chunk[bounds[k]:bounds[k + 1]]
+        bounds = np.searchsorted(chunks[by_chunk], np.arange(len(self.chunks) + 1))
         current, chunk, starts, ends = -1, b'', {}, {}
         cache = collections.OrderedDict()  # chunk number -> (data, starts, ends), the CACHED_CHUNKS last used
-        conns_l, chunks_l, stamps_l, offsets_l = conns.tolist(), chunks.tolist(), stamps.tolist(), offsets.tolist()
-        for i in range(len(conns_l)):
-            k = chunks_l[i]
-            if k != current:
-                if k not in cache:
-                    data_k = self._chunk(data, k)
-                    cache[k] = (data_k,) + self._extents(data_k, k, np.unique(offsets[chunks == k]))
-                    if len(cache) > CACHED_CHUNKS:
-                        cache.popitem(last=False)
-                cache.move_to_end(k)
-                chunk, starts, ends = cache[k]
-                current = k
-            offset = offsets_l[i]
-            number = conns_l[i]
-            yield Record(stamps_l[i], topics[number], None, 0, chunk[starts[offset]:ends[offset]], headers[number])
+        for block in range(0, len(conns), RECORDS_BLOCK):  # Python lists of a block at a time, not of the bag
+            part = slice(block, block + RECORDS_BLOCK)
+            for number, k, stamp, offset in zip(conns[part].tolist(), chunks[part].tolist(), stamps[part].tolist(),
+                                                offsets[part].tolist()):
+                if k != current:
+                    if k not in cache:
+                        data_k = self._chunk(data, k)
+                        mine = np.unique(offsets[by_chunk[bounds[k]:bounds[k + 1]]])
+                        cache[k] = (data_k,) + self._extents(data_k, k, mine)
+                        if len(cache) > CACHED_CHUNKS:
+                            cache.popitem(last=False)
+                    cache.move_to_end(k)
+                    chunk, starts, ends = cache[k]
+                    current = k
+                yield Record(stamp, topics[number], None, 0, chunk[starts[offset]:ends[offset]], headers[number])
 
     def _chunk(self, data, k):
         """The decompressed data of chunk ``k``."""
