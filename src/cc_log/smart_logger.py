@@ -13,7 +13,9 @@ triggers (``triggers``: classifiers, rules, the manual trigger) over the records
   written at the start of every window, as ``rosbag record`` keeps them.
 
 Messages come decoded (``on_message``) or as their serialized bytes with their connection header
-(``on_raw``, what the live intake and ``replay`` hand over): those are buffered as bytes and decoded only
+(``on_records``, a batch of them, what the live intake and ``replay`` hand over; ``on_raw``, one): the
+classifiers take a batch at once (rows, vectors, one scoring call), then the window logic runs record by
+record with their Fires known. Serialized messages are buffered as bytes and decoded only
 when a trigger reads a field (a feature set reads its fixed layouts straight from the bytes) and, for
 json-xz, in the writer thread, only for the messages kept. The row-JSON bytes of messages not decoded
 are estimated from a sample (``RawJsonEstimate``).
@@ -155,8 +157,8 @@ class SmartLogger(object):
     half of it, divided by DECODED_PART_FACTOR for json-xz, whose writer decodes the part (see ``WindowBuffer``).
     format_options: keys added to every window's metadata that the format reads (json-xz: ``precision``).
 
-    Thread-safe: ``on_message``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats`` and ``close`` may be
-    called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
+    Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
+    and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
 
     def __init__(self, model, directory, fmt=DEFAULT_FORMAT, pre=DEFAULT_PRE, post=DEFAULT_POST,
@@ -272,7 +274,7 @@ class SmartLogger(object):
         try:
             self.on_records([Record(time.time() if stamp is None else stamp, topic, None, 0, raw, connection)])
         except raw_message.UndecodableRecord as error:
-            raise error.error
+            raise error.error from None
 
     def on_records(self, records):
         """Feed a batch of serialized messages, ``Record(stamp, topic, None, 0, raw, connection)`` in the order
