@@ -11,8 +11,8 @@ What it starts (each in its own session, all stopped at the end by their process
 - ``roscore -p <free port>`` with ROS_MASTER_URI, ROS_HOME and ROS_LOG_DIR pointing at it and a temporary
   directory for every child;
 - the smart node: ``rosrun cc_log smart_logger.py _model:=<model> _directory:=<tmp> _topics:=/imu
-  odom:=/odom``; the model is trained here on a nominal simulated run (cc_log.sim seed 2, 100 Hz, motion
-  500-message window);
+  odom:=/odom``; the model is trained here, for each rate, on a nominal simulated run at that rate (cc_log.sim
+  seed 2, 5 min, 1 with --quick, motion 500-message window, a vector every 0.1 s): the nominal case at every rate;
 - ``rosbag record -O <tmp>/record.bag /odom /imu`` (no compression, its default) beside it, in every run;
 - a publisher (this script with --publisher): 20 s of simulated BWIBot odometry and IMU (cc_log.sim seed 3,
   nominal, simulated at the rate it is published) published in a loop on /odom and /imu, each at the given
@@ -229,12 +229,14 @@ def roscore_session(prefix):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def train_model(path):
+def train_model(path, rate, minutes=5.0):
+    """A motion model (500-message window) trained on a nominal simulated run (seed 2, ``minutes``) at ``rate``
+    Hz, the rate the publisher streams: the nominal case at every rate (one vector per 0.1 s of data)."""
     from cc_log import learning, sim
     from cc_log.features import FeatureConfig
-    records, _ = common.sim_records(sim.SimConfig(seed=2, minutes=5, anomalies=0))
+    records, _ = common.sim_records(sim.SimConfig(rate=rate, seed=2, minutes=minutes, anomalies=0, jitter=0.05 / rate))
     config = FeatureConfig('motion', '500')
-    _, X = common.window_vectors(records, sim.ODOM_TOPIC, config, stride=10)
+    _, X = common.window_vectors(records, sim.ODOM_TOPIC, config, stride=max(1, int(round(rate / 10.0))))
     model, _ = learning.train(X, config=config)
     return model.save(path)
 
@@ -282,15 +284,17 @@ def main(argv=None):
         args.seconds = 3.0
     rates = [int(r) for r in args.rates.split(',') if r]
     started = time.time()
+    train_minutes = 1.0 if args.quick else 5.0
     common.header('Live cost of the smart node', [
         'data: cc_log.sim BWIBot odometry and IMU (seed 3, nominal, 20 s looped, restamped) published on /odom '
-        'and /imu; model: motion 500-message window trained on a nominal simulated run (seed 2, 5 min)',
+        'and /imu; model: motion 500-message window trained on a nominal simulated run (seed 2, %g min) at the rate '
+        'streamed' % train_minutes,
         'runs: %s Hz on each topic for %g s each, rosbag record of both topics beside the node in the same run'
         % (', '.join(map(str, rates)), args.seconds)])
     results = []
     with roscore_session('cc_log_bench_live_') as (procs, tmp):
-        model = train_model(os.path.join(tmp, 'model.json'))
         for rate in rates:
+            model = train_model(os.path.join(tmp, 'model_%d.json' % rate), rate, train_minutes)
             results.append(run(procs, tmp, model, rate, args.seconds, True))
     rows = []
     for r in results:

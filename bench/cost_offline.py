@@ -9,8 +9,9 @@ For each bag, in the same process and alternating (read, replay, read, replay, .
 machine load:
 - read: ``rosbag.Bag.read_messages`` of the topics, touching each message (the baseline: what any Python
   tool pays to get the messages);
-- replay: ``smart_logger.replay`` (what ``cclog replay`` runs: bag read + features + classifier + windows
-  written as json-xz by the background writer, waiting for every window to be written).
+- replay: ``smart_logger.replay`` (what ``cclog replay`` runs: ``bag_reader`` + features + classifier in
+  batches + windows written as json-xz, or ``--format bag-lz4``, by the background writer, waiting for every
+  window to be written).
 Throughput is messages / process CPU seconds (user + system, all threads) and messages / wall seconds;
 the best round of each is kept. The ratio read-time / replay-time is "smart logger speed as % of read
 speed" (target >= 100%: replay costs no more CPU than a plain deserializing read; replay reads the bag
@@ -47,6 +48,7 @@ def plain_read(path, topics):
 
 
 STAGES = (  # (stage, substrings of the file names whose functions' own time counts for it), first match wins
+    ('bag read', ('/cc_log/bag_reader.py', '/cc_log/bagio.py')),
     ('features', ('/cc_log/features/',)),
     ('classifier', ('/cc_log/model.py', '/cc_log/triggers/classifier.py', '/sklearn/', '/numpy/', '/scipy/')),
     ('window buffer, triggers', ('/cc_log/window_buffer.py', '/cc_log/smart_logger.py', '/cc_log/triggers/')),
@@ -93,7 +95,7 @@ def profile(path, topics, model_path, out, name, top):
                   for (f, line, fn), (_, calls, own, _, _) in rows], 'Costliest functions:')
 
 
-def measure(path, topics, model_path, rounds, tmp):
+def measure(path, topics, model_path, rounds, tmp, fmt='json-xz'):
     reads, replays = [], []
     summary = None
     for k in range(rounds):
@@ -102,7 +104,7 @@ def measure(path, topics, model_path, rounds, tmp):
         reads.append((timer.cpu, timer.wall, n))
         out = os.path.join(tmp, 'replay_%d' % k)
         with common.Timer() as timer:
-            summary = replay(path, topics[0], model_path, out, side_topics=topics[1:])
+            summary = replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt=fmt)
         replays.append((timer.cpu, timer.wall, summary['input_messages']))
         shutil.rmtree(out, ignore_errors=True)
     read_cpu, read_wall = min(r[0] for r in reads), min(r[1] for r in reads)
@@ -115,6 +117,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rounds', type=int, default=3)
     parser.add_argument('--quick', action='store_true')
+    parser.add_argument('--format', default='json-xz', choices=('json-xz', 'bag-lz4'), help='of the replay\'s windows')
     parser.add_argument('--profile', type=int, default=0, metavar='N',
                         help='then profile one replay of the last bag (cProfile) and print its N costliest functions')
     args = parser.parse_args(argv)
@@ -142,10 +145,11 @@ def main(argv=None):
             data.append('data: cc_log.sim BWIBot 10 min, 100 Hz odometry + IMU, 6 anomalies, seed 1, '
                         'lz4 bag (%d bytes)' % os.path.getsize(sim_bag))
         rounds = 1 if args.quick else args.rounds
-        common.header('Offline replay cost', data + ['rounds: %d, alternating read / replay; best of each' % rounds])
+        common.header('Offline replay cost', data + ['rounds: %d, alternating read / replay; best of each; windows: %s'
+                                                     % (rounds, args.format)])
         rows = []
         for name, path, topics, model_path in cases:
-            r = measure(path, topics, model_path, rounds, tmp)
+            r = measure(path, topics, model_path, rounds, tmp, args.format)
             ratio_cpu = r['read_cpu'] / r['replay_cpu']
             ratio_wall = r['read_wall'] / r['replay_wall']
             rows.append([name, r['messages'], '%.0f' % (r['messages'] / r['read_cpu']),
@@ -158,7 +162,7 @@ def main(argv=None):
         print()
         common.table(['bag', 'messages', 'read msg/CPU s', 'replay msg/CPU s', 'replay/read (CPU)',
                       'read msg/s wall', 'replay msg/s wall', 'replay/read (wall)', 'windows'], rows,
-                     'Offline throughput (replay = bag read + features + classifier + json-xz windows):')
+                     'Offline throughput (replay = bag read + features + classifier + %s windows):' % args.format)
         if args.profile:
             name, path, topics, model_path = cases[-1]
             profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile)

@@ -15,10 +15,11 @@ from .features import FeatureStream, stamp_of
 from .window_buffer import Record
 
 
-def open_bag(path):
+def open_bag(path, skip_index=False):
     """Open a bag for reading; raise ValueError('<path>: <what is wrong>') when it cannot be read, is not a
     regular file, or a connection's message definition is unsafe (checked before any message is read:
-    rosbag generates a class from each definition)."""
+    rosbag generates a class from each definition). ``skip_index``: do not read the per-message index
+    (``bag_reader`` reads it itself)."""
     if not os.path.exists(path):
         raise ValueError('%s: no such bag file' % path)
     if os.path.isdir(path):
@@ -34,7 +35,7 @@ def open_bag(path):
         raise ValueError('%s: unsupported bag version %s (cc_log reads 2.0)'
                          % (path, magic[9:12].decode('ascii', 'replace')))
     try:
-        bag = rosbag.Bag(path, 'r', allow_unindexed=False)
+        bag = rosbag.Bag(path, 'r', allow_unindexed=False, skip_index=skip_index)
     except rosbag.ROSBagUnindexedException:
         raise ValueError('%s: bag is unindexed or truncated (try `rosbag reindex` on a copy)' % path)
     except (rosbag.ROSBagException, rosbag.ROSBagFormatException, struct.error, EOFError, ValueError,
@@ -99,7 +100,7 @@ def read_messages(path, topics, expected_types=None):
         bag.close()
 
 
-def _text_header(header):
+def text_header(header):
     """A bag connection header (bytes values) as a dict of str."""
     return {_text(key): _text(value) for key, value in header.items()}
 
@@ -124,7 +125,7 @@ def read_raw(path, topics):
                                                            return_connection_header=True):
                 known = headers.get(id(header))
                 if known is None or known[0] is not header:
-                    known = headers[id(header)] = (header, _text_header(header))
+                    known = headers[id(header)] = (header, text_header(header))
                 yield Record(t.to_sec(), topic, None, 0, msg[1], known[1])
         except (rosbag.ROSBagException, struct.error, EOFError) as error:
             raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))

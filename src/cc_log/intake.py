@@ -3,8 +3,9 @@
 Every topic arrives as ``rospy.AnyMsg``: the serialized bytes and the publisher's connection header
 (type, md5sum, message_definition, callerid, latching). The subscriber callback only puts them on a bounded
 queue (``IntakeQueue``); one feeder thread hands them to the sink in arrival order, draining the queue in
-batches: to ``sink.on_raw(topic, bytes, connection, receipt)`` when the sink takes serialized messages
-(``SmartLogger``), else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
+batches: the whole batch to ``sink.on_records`` as ``window_buffer.Record``s of serialized bytes when the sink
+takes batches (``SmartLogger``), else each to ``sink.on_raw(topic, bytes, connection, receipt)`` when it takes
+serialized messages, else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
 message definition ``safe_input.check_definition`` refuses is never decoded (``MessageDecoder``).
 ``Intake.subscribe(topic)`` adds a topic at any time.
 
@@ -17,6 +18,7 @@ import time
 import rospy
 
 from . import raw_message
+from .window_buffer import Record
 
 DEFAULT_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
 DEFAULT_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
@@ -186,18 +188,60 @@ class Intake(object):
                                    % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
 
     def _feed(self):
+        batched = hasattr(self.sink, 'on_records')
         while True:
             batch = self.queue.take_all()
             started = time.thread_time()
             try:
-                for item in batch:
-                    if item is None:
+                if batched:
+                    if not self._feed_records(batch):
                         return
-                    self._feed_one(*item)
+                else:
+                    for item in batch:
+                        if item is None:
+                            return
+                        self._feed_one(*item)
             finally:
                 self.cpu_seconds += time.thread_time() - started
             if self.batch_delay > 0:
                 time.sleep(self.batch_delay)  # let messages gather: one wake-up per batch, not per message
+
+    def _feed_records(self, batch):
+        """Hand a drained batch to ``sink.on_records`` as serialized records (a decoded message, as a test may
+        queue, goes through ``_feed_one``); False once the end mark (None) is reached."""
+        records = []
+        for item in batch:
+            if item is None:
+                self._feed_batch(records)
+                return False
+            topic, msg, receipt = item
+            if not isinstance(msg, rospy.AnyMsg):
+                self._feed_batch(records)
+                records = []
+                self._feed_one(topic, msg, receipt)
+            elif not self.decoder.accepts(msg._connection_header, topic):
+                self.dropped += 1  # refused (warned once by the decoder)
+            else:
+                records.append(Record(receipt.secs + 1e-9 * receipt.nsecs, topic, None, 0, msg._buff,
+                                      msg._connection_header))
+        self._feed_batch(records)
+        return True
+
+    def _feed_batch(self, records):
+        """``sink.on_records(records)``; a record that cannot be decoded is dropped (and counted), the rest fed."""
+        while records:
+            try:
+                self.sink.on_records(records)
+                return
+            except raw_message.UndecodableRecord as error:
+                self.dropped += 1
+                rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (error.topic, error.error))
+                records = records[error.index + 1:]
+            except Exception as error:  # a bad message must not stop the feeder (and so all logging)
+                self.dropped += len(records)
+                rospy.logerr_throttle(10.0, '%d messages not handled: %s: %s'
+                                      % (len(records), type(error).__name__, error))
+                return
 
     def _feed_one(self, topic, msg, receipt):
         try:

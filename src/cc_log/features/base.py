@@ -151,10 +151,12 @@ def finite(values):
 
 def statistics(array):
     """mean, std, min, max of every column of a 2-D array, concatenated."""
-    mean = array.mean(axis=0)
+    # the ufuncs' reductions themselves: what array.mean / min / max compute, without their Python wrappers
+    count = array.shape[0]
+    mean = np.add.reduce(array, axis=0) / count
     centred = array - mean
-    std = np.sqrt(np.einsum('ij,ij->j', centred, centred) / array.shape[0])
-    return np.concatenate((mean, std, array.min(axis=0), array.max(axis=0)))
+    std = np.sqrt(np.einsum('ij,ij->j', centred, centred) / count)
+    return np.concatenate((mean, std, np.minimum.reduce(array, axis=0), np.maximum.reduce(array, axis=0)))
 
 
 _UINT32 = struct.Struct('<I')

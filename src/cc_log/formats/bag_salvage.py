@@ -26,12 +26,7 @@ decoded (the first few reasons); headers_only: it holds no message, nothing but 
 
 def salvage(path):
     """A ``Salvaged`` of the bag at ``path`` (never through a link); ValueError when it is no rosbag."""
-    fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
-    try:
-        size = os.fstat(fd).st_size
-        data = mmap.mmap(fd, size, access=mmap.ACCESS_READ) if size else b''
-    finally:
-        os.close(fd)
+    data, size = map_file(path, follow=False)
     try:
         found = _Salvage(data).run()
     finally:
@@ -41,6 +36,17 @@ def salvage(path):
     headers_only = not records and not found.undecoded and (
         found.decoded == size or found.header_end is None and size <= _BAG_HEADER_END)
     return Salvaged(metadata, records, found.decoded, found.undecoded, found.cut, found.problems, headers_only)
+
+
+def map_file(path, follow=True):
+    """``(a read-only map of the file at path, its size)`` (``b''`` for an empty file; close the map when done);
+    ``follow``: through a symbolic link too."""
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC | (0 if follow else os.O_NOFOLLOW))
+    try:
+        size = os.fstat(fd).st_size
+        return (mmap.mmap(fd, size, access=mmap.ACCESS_READ) if size else b''), size
+    finally:
+        os.close(fd)
 
 
 # -- reading a rosbag 2.0 file cut off mid-write ------------------------------------------------------------

@@ -55,6 +55,7 @@ class Trigger(object):
 
     kind = None
     watches_time = False
+    batched = False   # True when ``on_records`` does better than ``on_record`` of each record
     config_keys = ()  # the keys of its configuration entry besides name, kind, pre and post
 
     @classmethod
@@ -77,6 +78,11 @@ class Trigger(object):
     def on_record(self, record):
         """The Fires a record of one of ``topics`` causes (a list, often empty)."""
         return []
+
+    def on_records(self, records):
+        """The Fires of each of a batch of records of ``topics`` (a list of lists, one per record, in order): the
+        same as ``on_record`` of each in turn."""
+        return [self.on_record(record) for record in records]
 
     def needs_message(self, record):
         """Whether ``on_record`` reads the decoded message of ``record`` (a record of serialized bytes is

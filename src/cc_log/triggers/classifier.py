@@ -125,50 +125,78 @@ class ClassifierTrigger(Trigger):
     def needs_message(self, record):
         return not self.config.feature.reads_raw(record.connection)
 
+    batched = True
+
     def on_record(self, record):
-        if record.topic in self._roles:
-            self.stream.add_record(record, self._roles[record.topic])
-            return []
+        return self.on_records([record])[0]
+
+    def on_records(self, records):
+        """Feature rows of every record, the window vectors where they are due, every vector of the batch scored
+        in one call (``scores``), then the retrigger rule over the scores in order."""
         stream = self.stream
-        resets = stream.resets
-        started = time.perf_counter()
-        vector = stream.add_record(record)
-        feature_seconds = time.perf_counter() - started
-        if not stream.whole or stream.resets != resets:
-            self._armed = True  # not scored (start, after a gap or a jump back): the next anomalous score is an onset
-        if vector is None:
-            return []
+        roles = self._roles
+        event = self.retrigger == 'event'
+        steps, vectors, snapshots = [], [], []
         if self.learner is not None:
             self._take_learned()
         started = time.perf_counter()
-        anomalous, score = self.model.is_anomalous(vector)
-        elapsed = feature_seconds + time.perf_counter() - started
-        self.calls += 1
-        self.seconds += elapsed
-        self.max_seconds = max(self.max_seconds, elapsed)
+        for record in records:
+            if record.topic in roles:
+                stream.add_record(record, roles[record.topic])
+                steps.append(None)
+                continue
+            resets = stream.resets
+            vector = stream.add_record(record)
+            # not scored (start, after a gap or a jump back): the next anomalous score is an onset
+            restart = not stream.whole or stream.resets != resets
+            if vector is None:
+                steps.append(_RESTART if restart else None)
+                continue
+            steps.append((restart, len(vectors)))
+            vectors.append(vector)
+            if event:
+                snapshots.append((stream.window.rows(), stream.window.newest(self.recent)))
+        scores = scores_of(self.model, vectors) if vectors else ()
+        if vectors:
+            elapsed = time.perf_counter() - started
+            self.calls += len(vectors)
+            self.seconds += elapsed
+            self.max_seconds = max(self.max_seconds, elapsed / len(vectors))
+        return [self._decide(record, step, vectors, scores, snapshots) for record, step in zip(records, steps)]
+
+    def _decide(self, record, step, vectors, scores, snapshots):
+        """The Fires of one record's step: None (no vector), _RESTART (not scored), or (restart, vector number)."""
+        if step is None:
+            return []
+        if step is _RESTART:
+            self._armed = True
+            return []
+        restart, k = step
+        if restart:
+            self._armed = True
+        score = scores[k]
+        anomalous = score < self.threshold
         fires = []
         if self.learner is not None:
-            self.learner.flag(record.stamp) if anomalous else self.learner.offer(record.stamp, vector)
+            self.learner.flag(record.stamp) if anomalous else self.learner.offer(record.stamp, vectors[k])
         if anomalous:
             self.anomalous += 1
             if not self._armed and self.retrigger == 'event':
-                anomalous, score = self._score_recent()
+                anomalous, score = self._score_recent(*snapshots[k])
             if anomalous and (self._armed or self.retrigger != 'onset'):
                 fires.append(self.fire('classifier', float(score)))
             self._armed = False
         else:
             self._armed = True
             if self.retrigger == 'event':
-                self._nominal_rows = stream.window.rows()
+                self._nominal_rows = snapshots[k][0]
         return fires
 
-    def _score_recent(self):
+    def _score_recent(self, window_rows, recent):
         """``(anomalous, score)`` of the newest ``recent`` rows in place of the newest rows of the last window
-        scored nominal (of the whole feature window when there is none)."""
-        window = self.stream.window
-        recent = window.newest(self.recent)
+        scored nominal (of the whole feature window ``window_rows`` when there is none)."""
         if self._nominal_rows is None or len(recent) >= len(self._nominal_rows):
-            rows = window.rows() if self._nominal_rows is None else recent
+            rows = window_rows if self._nominal_rows is None else recent
         else:
             rows = np.concatenate((self._nominal_rows[len(recent):], recent))
         return self.model.is_anomalous(self.config.feature.vector(rows, self.config.span))
@@ -194,6 +222,18 @@ class ClassifierTrigger(Trigger):
         if self.retrigger == 'event':
             result['recent'] = str(self.recent)
         return result
+
+
+_RESTART = 'restart'  # a record of the first input not scored because the window is not whole
+
+
+def scores_of(model, vectors):
+    """The scores of ``vectors`` (a list of 1-D arrays), each exactly what the model gives one vector:
+    ``AnomalyModel.score_each``, or one ``is_anomalous`` call at a time for another model."""
+    score_each = getattr(model, 'score_each', None)
+    if score_each is None:
+        return [model.is_anomalous(vector)[1] for vector in vectors]
+    return score_each(vectors)
 
 
 def recent_span(window, recent, name='classifier'):

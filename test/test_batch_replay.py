@@ -1,0 +1,232 @@
+"""Offline replay in batches: ``bag_reader`` yields rosbag's records in rosbag's order, and a replay fed in
+batches (``SmartLogger.on_records``, one scoring call per batch) writes the same windows as one fed record by
+record (``on_raw``) from rosbag's own raw read: real and simulated bags, json-xz and bag-lz4, with and without
+anomalies, with a rule trigger, and every retrigger rule."""
+import os
+import struct
+
+import numpy as np
+import pytest
+
+from cc_log import learning, log_format, raw_message, sim
+from cc_log.features import FeatureConfig
+from cc_log.smart_logger import SmartLogger, replay_into
+from cc_log.triggers.classifier import scores_of
+from cc_log.triggers.rule import RuleTrigger
+
+bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+bag_reader = pytest.importorskip('cc_log.bag_reader')
+
+HUSKY = 'husky_outdoor_2015.bag'
+HUSKY_ODOM = '/husky_velocity_controller/odom'
+HUSKY_IMU = '/imu/data'
+
+
+@pytest.fixture(scope='module')
+def sim_case(tmp_path_factory):
+    """A 2-minute simulated bag (100 Hz odometry + IMU) with 2 anomalies, a nominal one, and a model."""
+    tmp = tmp_path_factory.mktemp('sim')
+    bags = {}
+    for name, anomalies, seed in (('anomalies', 2, 1), ('nominal', 0, 3)):
+        bags[name] = str(tmp / ('%s.bag' % name))
+        sim.simulate_to_bag(bags[name], sim.SimConfig(seed=seed, minutes=2, anomalies=anomalies, imu=True))
+    train = str(tmp / 'train.bag')
+    sim.simulate_to_bag(train, sim.SimConfig(seed=2, minutes=3, anomalies=0))
+    config = FeatureConfig('motion', '300')
+    _, X = bagio.feature_vectors(train, sim.ODOM_TOPIC, config, stride=10)
+    model, _ = learning.train(X, config=config)
+    return bags, model.save(str(tmp / 'sim.model.json'))
+
+
+@pytest.fixture(scope='module')
+def husky_model(tmp_path_factory):
+    from conftest import REAL_DATA
+    config = FeatureConfig('motion', '2s')
+    _, X = bagio.feature_vectors(os.path.join(REAL_DATA, HUSKY), HUSKY_ODOM, config)
+    model, _ = learning.train(X[:len(X) // 2], config=config)
+    return model.save(str(tmp_path_factory.mktemp('husky') / 'husky.model.json'))
+
+
+def rosbag_records(path, topics):
+    return list(bagio.read_raw(path, topics))
+
+
+@pytest.mark.parametrize('name', [HUSKY, 'alfa_carbonZ_engine_failure.bag', 'socspioneer_trace0.bag',
+                                  'f1tenth_DS2.bag'])
+def test_the_chunk_reader_yields_rosbags_records_in_rosbags_order(real_bag, name):
+    path = real_bag(name)
+    bag = bagio.open_bag(path)
+    topics = sorted(bagio.topics_of(bag))
+    bag.close()
+    expected = rosbag_records(path, topics)
+    got = list(bag_reader.read_raw(path, topics))
+    assert len(got) == len(expected) > 1000
+    assert got == expected  # stamp, topic, bytes and connection header of every message, in the same order
+
+
+def test_the_chunk_reader_reads_lz4_chunks_and_says_what_is_missing(sim_case, monkeypatch):
+    bags, _ = sim_case
+    topics = [sim.ODOM_TOPIC, sim.IMU_TOPIC]
+    expected = rosbag_records(bags['anomalies'], topics)
+    assert list(bag_reader.read_raw(bags['anomalies'], topics)) == expected
+    monkeypatch.setattr(bag_reader, 'RECORDS_BLOCK', 997)  # many blocks of the index
+    assert list(bag_reader.read_raw(bags['anomalies'], topics)) == expected
+    with pytest.raises(ValueError, match=r'anomalies\.bag: topic /nothing is not in the bag; its topics: '):
+        list(bag_reader.read_raw(bags['anomalies'], ['/nothing']))
+
+
+def _damaged_copy(source, target, change):
+    """A copy of the bag at ``source`` with ``change(bag, data)`` applied to its bytes (a bytearray)."""
+    bag = bagio.open_bag(source)
+    data = bytearray(open(source, 'rb').read())
+    change(bag, data)
+    bag.close()
+    with open(target, 'wb') as stream:
+        stream.write(bytes(data))
+    return target
+
+
+def _chunk_size_field(bag, data):
+    """Where the first chunk record's ``size`` (uncompressed bytes) field value is."""
+    pos = bag._chunks[0].pos
+    header_len = struct.unpack_from('<I', data, pos)[0]
+    at = bytes(data[pos + 4:pos + 4 + header_len]).index(b'size=')
+    return pos + 4 + at + 5
+
+
+@pytest.mark.parametrize('damage, message', [
+    ('huge', r'declares 4294967295 bytes, more than'),
+    ('wrong size', r'does not decompress to its'),
+    ('index', r'index of the chunk at byte \d+ points past its end|message record at'),
+])
+def test_a_damaged_bag_is_one_clear_line(sim_case, tmp_path, damage, message):
+    bags, _ = sim_case
+
+    def change(bag, data):
+        if damage == 'huge':
+            struct.pack_into('<I', data, _chunk_size_field(bag, data), 0xffffffff)
+        elif damage == 'wrong size':
+            at = _chunk_size_field(bag, data)
+            struct.pack_into('<I', data, at, struct.unpack_from('<I', data, at)[0] - 1)
+        else:  # the first index entry of the first chunk points far past the chunk's end
+            header = bag._chunk_headers[bag._chunks[0].pos]
+            pos = header.data_pos + header.compressed_size
+            header_len = struct.unpack_from('<I', data, pos)[0]
+            struct.pack_into('<I', data, pos + 4 + header_len + 4 + 8, 0x7fffffff)
+    path = _damaged_copy(bags['anomalies'], str(tmp_path / 'damaged.bag'), change)
+    with pytest.raises(ValueError, match=r'damaged\.bag: bag is truncated or damaged \(.*(%s)' % message):
+        list(bag_reader.read_raw(path, [sim.ODOM_TOPIC, sim.IMU_TOPIC]))
+
+
+def windows_of(directory):
+    """Every window file's messages (stamp, topic, message) and metadata, in file-name order."""
+    found = []
+    for path in log_format.window_files(directory):
+        metadata, records = log_format.read_window(path)
+        found.append((os.path.basename(path), metadata,
+                      [(r.stamp, r.topic, raw_message.decoded(r).msg) for r in records]))
+    return sorted(found, key=lambda window: window[0])
+
+
+def replay_both(tmp_path, path, topic, side, model_path, fmt, rule=None, **options):
+    """The windows of a batched replay (``replay_into``: chunk reader, ``on_records``) and of one fed record by
+    record (``on_raw``) from rosbag's raw read."""
+    from cc_log.model import AnomalyModel
+    results = []
+    for how in ('batched', 'one by one'):
+        out = str(tmp_path / ('%s %s' % (fmt, how)))
+        triggers = [RuleTrigger('fast', topic=topic, when='twist.twist.linear.x > %s' % rule)] if rule else []
+        logger = SmartLogger(AnomalyModel.load(model_path), out, fmt, driving_topic=topic, side_topics=(side,),
+                             background=False, triggers=triggers, **options)
+        if how == 'batched':
+            replay_into(logger, path)
+        else:
+            for record in bagio.read_raw(path, [topic, side]):
+                logger.on_raw(record.topic, record.raw, record.connection, record.stamp)
+            logger.close()
+        results.append(windows_of(out))
+    return results
+
+
+@pytest.mark.parametrize('bag, fmt, rule, retrigger', [
+    ('anomalies', 'json-xz', None, 'every'),
+    ('anomalies', 'bag-lz4', None, 'every'),
+    ('anomalies', 'json-xz', '0.5', 'every'),
+    ('anomalies', 'bag-lz4', None, 'onset'),
+    ('anomalies', 'json-xz', None, 'event'),
+    ('nominal', 'json-xz', None, 'every'),
+    ('nominal', 'bag-lz4', '0.5', 'every'),
+])
+def test_batched_replay_writes_the_same_windows_as_record_by_record_on_simulated_bags(sim_case, tmp_path, bag, fmt,
+                                                                                      rule, retrigger):
+    bags, model_path = sim_case
+    batched, single = replay_both(tmp_path, bags[bag], sim.ODOM_TOPIC, sim.IMU_TOPIC, model_path, fmt, rule,
+                                  retrigger=retrigger)
+    if bag == 'anomalies' or rule:
+        assert batched, 'no window: the comparison would prove nothing'
+    assert [name for name, _, _ in batched] == [name for name, _, _ in single]
+    for (name, meta_b, records_b), (_, meta_s, records_s) in zip(batched, single):
+        assert meta_b == meta_s, name
+        assert records_b == records_s, name
+
+
+@pytest.mark.parametrize('fmt, rule', [('json-xz', None), ('bag-lz4', '1.0')])
+def test_batched_replay_writes_the_same_windows_as_record_by_record_on_the_husky_bag(real_bag, husky_model,
+                                                                                     tmp_path, fmt, rule):
+    batched, single = replay_both(tmp_path, real_bag(HUSKY), HUSKY_ODOM, HUSKY_IMU, husky_model, fmt, rule)
+    assert batched and [name for name, _, _ in batched] == [name for name, _, _ in single]
+    for (name, meta_b, records_b), (_, meta_s, records_s) in zip(batched, single):
+        assert meta_b == meta_s, name
+        assert records_b == records_s, name
+
+
+def test_scoring_a_batch_gives_each_vectors_own_score_exactly(sim_case):
+    from cc_log.model import AnomalyModel
+    model = AnomalyModel.load(sim_case[1])
+    rng = np.random.default_rng(5)
+    vectors = [model.mean + model.scale * rng.normal(size=model.mean.shape) * spread
+               for spread in np.linspace(0.1, 4.0, 100)]
+    assert scores_of(model, vectors) == [model.score(vector) for vector in vectors]
+
+
+def test_a_record_that_cannot_be_decoded_stops_a_batch_after_the_records_before_it(sim_case, tmp_path):
+    bags, model_path = sim_case
+    records = [r for r in bagio.read_raw(bags['anomalies'], [sim.ODOM_TOPIC])][:50]
+    rule = RuleTrigger('fast', topic=sim.ODOM_TOPIC, when='twist.twist.linear.x > 100')  # reads the fields
+    logger = SmartLogger(None, str(tmp_path), driving_topic=sim.ODOM_TOPIC, background=False, triggers=[rule])
+    broken = records[:20] + [records[20]._replace(raw=records[20].raw[:30])] + records[21:]
+    with pytest.raises(raw_message.UndecodableRecord) as caught:
+        logger.on_records(broken)
+    assert caught.value.index == 20 and caught.value.topic == sim.ODOM_TOPIC
+    assert logger.stats()['messages_buffered'] == 20
+    logger.close()
+
+
+def test_the_intake_feeds_a_drained_batch_at_once_and_drops_only_a_message_that_cannot_be_decoded(sim_case,
+                                                                                                  tmp_path):
+    rospy = pytest.importorskip('rospy')
+    from cc_log.intake import Intake, MessageDecoder
+    bags, _ = sim_case
+    records = [r for r in bagio.read_raw(bags['anomalies'], [sim.ODOM_TOPIC])][:30]
+    rule = RuleTrigger('fast', topic=sim.ODOM_TOPIC, when='twist.twist.linear.x > 100')  # reads the fields
+    logger = SmartLogger(None, str(tmp_path), driving_topic=sim.ODOM_TOPIC, background=False, triggers=[rule])
+    calls = []
+    feed = logger.on_records
+    logger.on_records = lambda batch: (calls.append(len(batch)), feed(batch))
+    intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers, no thread
+    intake.sink, intake.decoder, intake.dropped = logger, MessageDecoder(), 0
+    batch = []
+    for k, record in enumerate(records):
+        msg = rospy.AnyMsg()
+        msg._buff = record.raw[:30] if k == 10 else record.raw
+        msg._connection_header = record.connection
+        batch.append((record.topic, msg, rospy.Time.from_sec(record.stamp)))
+    initialized = rospy.rostime.is_rostime_initialized()
+    rospy.rostime.set_rostime_initialized(True)  # wall-clock time for rospy's throttled warning, as a node has
+    try:
+        assert intake._feed_records(batch + [None]) is False  # the end mark
+    finally:
+        rospy.rostime.set_rostime_initialized(initialized)
+    assert calls == [30, 19] and intake.dropped == 1
+    assert logger.stats()['messages_buffered'] == 29
+    logger.close()
