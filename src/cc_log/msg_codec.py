@@ -112,7 +112,8 @@ def _resolve(base, parent_type):
 
 # -- message -> data ------------------------------------------------------------------------------------
 
-def _encode_value(value, slot_type, short):
+def encode_value(value, slot_type, short):
+    """One field's value as ``to_dict`` writes it (``short``: short_float32)."""
     base, is_array, _ = split_type(slot_type)
     if is_array:
         if base in BYTES_TYPES:
@@ -144,7 +145,7 @@ def to_dict(msg, short_float32=False):
 
     ``short_float32``: write float32 fields as the shortest decimal of their float32 value (json-xz).
     """
-    return {name: _encode_value(getattr(msg, name), slot_type, short_float32)
+    return {name: encode_value(getattr(msg, name), slot_type, short_float32)
             for name, slot_type in zip(msg.__slots__, msg._slot_types)}
 
 

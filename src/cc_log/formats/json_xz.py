@@ -37,9 +37,11 @@ Pure: no rospy, no rosbag.
 """
 import decimal
 import fnmatch
+import functools
 import json
 import lzma
 import math
+import operator
 import os
 
 from .. import msg_codec, safe_input
@@ -55,6 +57,11 @@ MAGIC = b'\xfd7zXZ\x00'
 #: LZMA2 preset used when writing. 6 is xz's default; on windows of a few hundred messages presets 6..9
 #: and "extreme" give the same size within 1% (see docs/FORMAT.md), so the cheap one is used.
 DEFAULT_PRESET = 6
+#: LZMA2 options on top of the preset when writing (``compress``): a shorter match search (``nice_len`` 32,
+#: ``depth`` 4 instead of the preset's 273/0) and ``lc=1, pb=0`` (text: one literal context bit, no position
+#: bits). Measured on Husky windows (bench/storage.py, docs/RESULTS.md "Storage"): odometry 3.98% of row JSON
+#: instead of 3.94%, odometry + IMU 0.2% larger, and 40-45% less CPU. Any xz decoder reads the result.
+FILTER_OPTIONS = {'nice_len': 32, 'depth': 4, 'lc': 1, 'pb': 0}
 
 HEADER_STAMP = 'header.stamp'
 
@@ -105,6 +112,65 @@ def _unflatten(flat):
             node = node.setdefault(part, {})
         node[parts[-1]] = value
     return row
+
+
+_ROW_MAKERS = {}  # message class -> function(msg) -> flat row
+
+
+def flat_row(msg):
+    """``_flatten(msg_codec.to_dict(msg, short_float32=True))``, the same dict (keys, order, values) made by
+    a function compiled once per message class: one getter and one encoder per leaf field."""
+    cls = type(msg)
+    make = _ROW_MAKERS.get(cls)
+    if make is None:
+        fields = _leaf_fields(msg, '', [])
+        make = _ROW_MAKERS[cls] = lambda message: {key: encode(get(message)) for key, get, encode in fields}
+    return make(msg)
+
+
+def _same_value(value):
+    return value
+
+
+def _float(value):
+    return msg_codec.encode_float(float(value))
+
+
+def _float64s(values):
+    values = list(map(float, values))
+    return values if all(map(math.isfinite, values)) else [msg_codec.encode_float(value) for value in values]
+
+
+def _float32(value):
+    return msg_codec.encode_float(msg_codec.short_float32(float(value)))
+
+
+def _leaf_fields(msg, prefix, out):
+    """``(dotted key, attribute getter, encoder)`` of every leaf of ``msg`` as ``_flatten(to_dict(msg))``
+    lists them; arrays and empty messages are leaves (as in ``to_dict``)."""
+    for name, slot_type in zip(msg.__slots__, msg._slot_types):
+        key = prefix + name
+        base, is_array, _ = msg_codec.split_type(slot_type)
+        value = getattr(msg, name)
+        if is_array and base == 'float64':
+            encode = _float64s
+        elif is_array:
+            encode = functools.partial(msg_codec.encode_value, slot_type=slot_type, short=True)
+        elif base in msg_codec.TIME_TYPES:
+            out.append((key + '.secs', operator.attrgetter(key + '.secs'), int))
+            out.append((key + '.nsecs', operator.attrgetter(key + '.nsecs'), int))
+            continue
+        elif base in msg_codec.FLOAT_TYPES:
+            encode = _float32 if base == 'float32' else _float
+        elif base in msg_codec.PRIMITIVE_TYPES:
+            encode = _same_value
+        elif getattr(value, '__slots__', None):
+            _leaf_fields(value, key + '.', out)
+            continue
+        else:
+            encode = functools.partial(msg_codec.to_dict, short_float32=True)
+        out.append((key, operator.attrgetter(key), encode))
+    return out
 
 
 def _same(value, first, first_repr):
@@ -310,7 +376,7 @@ def document(records, metadata, delta=differences):
     topics = []
     for section in sections:
         recs = section.pop('records')
-        rows = [_flatten(msg_codec.to_dict(record.msg, short_float32=True), '', {}) for record in recs]
+        rows = [flat_row(record.msg) for record in recs]
         if rounded is not None:
             rows = [dict((key, rounded(key, value)) for key, value in row.items()) for row in rows]
         constant, columns = _columns(rows)
@@ -395,13 +461,14 @@ def encoder(records, metadata):
     return lambda stream: stream.write(data)
 
 
-def compress(data, preset=DEFAULT_PRESET):
-    """xz-compress with LZMA2 at ``preset`` and a dictionary no larger than the data needs (the output is
-    the same as with the preset's own dictionary; memory stays small on the robot)."""
+def compress(data, preset=DEFAULT_PRESET, options=FILTER_OPTIONS):
+    """xz-compress with LZMA2 at ``preset`` with ``options`` (FILTER_OPTIONS; ``{}``: the preset alone) and a
+    dictionary no larger than the data needs (the output is the same as with the preset's own dictionary;
+    memory stays small on the robot)."""
     dict_size = 1 << 16
     while dict_size < len(data) and dict_size < (1 << 26):
         dict_size <<= 1
-    filters = [{'id': lzma.FILTER_LZMA2, 'preset': preset, 'dict_size': dict_size}]
+    filters = [dict(options, id=lzma.FILTER_LZMA2, preset=preset, dict_size=dict_size)]
     return lzma.compress(data, format=lzma.FORMAT_XZ, check=lzma.CHECK_CRC64, filters=filters)
 
 
