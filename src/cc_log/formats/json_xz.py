@@ -57,11 +57,11 @@ MAGIC = b'\xfd7zXZ\x00'
 #: LZMA2 preset used when writing. 6 is xz's default; on windows of a few hundred messages presets 6..9
 #: and "extreme" give the same size within 1% (see docs/FORMAT.md), so the cheap one is used.
 DEFAULT_PRESET = 6
-#: LZMA2 options on top of the preset when writing (``compress``): a shorter match search (``nice_len`` 32,
-#: ``depth`` 4 instead of the preset's 273/0) and ``lc=1, pb=0`` (text: one literal context bit, no position
-#: bits). Measured on Husky windows (bench/storage.py, docs/RESULTS.md "Storage"): odometry 3.98% of row JSON
-#: instead of 3.94%, odometry + IMU 0.2% larger, and 40-45% less CPU. Any xz decoder reads the result.
-FILTER_OPTIONS = {'nice_len': 32, 'depth': 4, 'lc': 1, 'pb': 0}
+#: LZMA2 options on top of the preset when writing (``compress``): a shorter match search (``nice_len`` 48,
+#: ``depth`` 4 instead of the preset's 273 and automatic) and ``lc=1, pb=0`` (text: one literal context bit,
+#: no position bits). Measured on Husky windows (docs/FORMAT.md, "Preset"): odometry 3.97% of row JSON
+#: instead of 3.94%, odometry + IMU 0.5% larger, and about 40% less CPU. Any xz decoder reads the result.
+FILTER_OPTIONS = {'nice_len': 48, 'depth': 4, 'lc': 1, 'pb': 0}
 
 HEADER_STAMP = 'header.stamp'
 
