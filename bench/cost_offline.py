@@ -16,7 +16,10 @@ Throughput is messages / process CPU seconds (user + system, all threads) and me
 the best round of each is kept. The ratio read-time / replay-time is "smart logger speed as % of read
 speed" (target >= 100%: replay costs no more CPU than a plain deserializing read; replay reads the bag
 with ``raw=True`` and decodes only what its triggers read and what it keeps). ``--profile N`` adds a
-cProfile of one replay.
+cProfile of one replay. ``--writer`` adds the json-xz writer alone on the windows the replay kept: the
+document + JSON + xz of each window (messages already decoded) as written now, against the earlier writer
+(rows through ``msg_codec.to_dict``, LZMA2 preset 6 without ``json_xz.FILTER_OPTIONS``: the same text, the
+preset's own match search), alternating in the same process.
 
 Bags: ../shared/data/real/husky_outdoor_2015.bag (odometry driving + IMU side topic; model trained on the
 first half, motion 2 s window) and a 10-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz odometry +
@@ -95,6 +98,51 @@ def profile(path, topics, model_path, out, name, top):
                   for (f, line, fn), (_, calls, own, _, _) in rows], 'Costliest functions:')
 
 
+def genpy_row(msg):
+    """The json-xz row as the writer made it before ``json_xz.flat_row``."""
+    from cc_log.formats import json_xz
+    return json_xz._flatten(json_xz.msg_codec.to_dict(msg, short_float32=True), '', {})
+
+
+def writer_cost(windows, rounds):
+    """``(CPU s now, CPU s earlier writer, lossless bytes now, bytes earlier)``: best of ``rounds`` alternating
+    encodings of every window in ``windows`` (``[(metadata, records)]``)."""
+    from cc_log.formats import json_xz
+    options = dict(json_xz.FILTER_OPTIONS)
+    now, before, size_now, size_before = [], [], 0, 0
+    for _ in range(rounds):
+        for earlier in (False, True):
+            json_xz.FILTER_OPTIONS.clear()
+            json_xz.FILTER_OPTIONS.update({} if earlier else options)
+            flat_row = json_xz.flat_row
+            if earlier:
+                json_xz.flat_row = genpy_row
+            try:
+                with common.Timer() as timer:
+                    size = sum(len(json_xz.encode(records, metadata)) for metadata, records in windows)
+            finally:
+                json_xz.flat_row = flat_row
+                json_xz.FILTER_OPTIONS.clear()
+                json_xz.FILTER_OPTIONS.update(options)
+            (before if earlier else now).append(timer.cpu)
+            if earlier:
+                size_before = size
+            else:
+                size_now = size
+    return min(now), min(before), size_now, size_before
+
+
+def kept_windows(path, topics, model_path, tmp):
+    """``[(metadata, records)]`` of the json-xz windows a replay of ``path`` writes, read back."""
+    from cc_log import log_format
+    out = os.path.join(tmp, 'kept')
+    replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt='json-xz')
+    windows = [log_format.read_window(os.path.join(out, name)) for name in sorted(os.listdir(out))
+               if name.endswith('.json.xz')]
+    shutil.rmtree(out, ignore_errors=True)
+    return windows
+
+
 def measure(path, topics, model_path, rounds, tmp, fmt='json-xz'):
     reads, replays = [], []
     summary = None
@@ -120,6 +168,8 @@ def main(argv=None):
     parser.add_argument('--format', default='json-xz', choices=('json-xz', 'bag-lz4'), help='of the replay\'s windows')
     parser.add_argument('--profile', type=int, default=0, metavar='N',
                         help='then profile one replay of the last bag (cProfile) and print its N costliest functions')
+    parser.add_argument('--writer', action='store_true',
+                        help='then time the json-xz writer alone on the kept windows, now against the earlier writer')
     args = parser.parse_args(argv)
     started = time.time()
     with tempfile.TemporaryDirectory(prefix='cc_log_bench_') as tmp:
@@ -163,6 +213,18 @@ def main(argv=None):
         common.table(['bag', 'messages', 'read msg/CPU s', 'replay msg/CPU s', 'replay/read (CPU)',
                       'read msg/s wall', 'replay msg/s wall', 'replay/read (wall)', 'windows'], rows,
                      'Offline throughput (replay = bag read + features + classifier + %s windows):' % args.format)
+        if args.writer:
+            rows = []
+            for name, path, topics, model_path in cases:
+                windows = kept_windows(path, topics, model_path, tmp)
+                kept = sum(len(records) for _, records in windows)
+                now, before, size_now, size_before = writer_cost(windows, max(rounds, 3))
+                rows.append([name, len(windows), kept, '%.3f' % before, '%.3f' % now, '%.0f' % (1e6 * before / kept),
+                             '%.0f' % (1e6 * now / kept), '%.2f' % (before / now), size_before, size_now])
+            print()
+            common.table(['bag', 'windows', 'kept msgs', 'earlier CPU s', 'now CPU s', 'earlier us/msg', 'now us/msg',
+                          'speed-up', 'earlier bytes', 'now bytes'], rows,
+                         'json-xz writer alone (document + JSON + xz of decoded messages; best of alternating rounds):')
         if args.profile:
             name, path, topics, model_path = cases[-1]
             profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile)

@@ -74,9 +74,11 @@ def test_detection_runs_quick():
 
 
 def test_cost_offline_quick():
-    out = run('cost_offline.py', '--quick')
+    out = run('cost_offline.py', '--quick', '--writer')
     assert 'replay/read (CPU)' in out and 'husky_outdoor_2015' in out
     assert len(targets(out)) == 1
+    writer = out.split('json-xz writer alone')[1].splitlines()[3].split('|')
+    assert int(writer[3]) > 0 and float(writer[8]) > 0  # kept messages were encoded both ways
 
 
 def test_training_quick():
