@@ -142,6 +142,7 @@ def inside(stamps, intervals):
 def calibrate(model, records, topic, rule, margin):
     """Set ``model.threshold`` on held-out nominal ``records`` with ``tuning.tune`` (no false window), from
     above every score of theirs, then lower it by ``margin`` x (held-out median - threshold)."""
+    model.info = dict(model.info, trained_threshold=model.threshold)
     model.threshold = float(np.max(tuning.step_scores(model, records, topic, CLASSIFY_EVERY))) + 1.0
     tuning.tune(model, [records], topic, 0.0, '%gs' % PRE, '%gs' % POST, CLASSIFY_EVERY, rule)
     model.threshold -= margin * max(model.info['held_out_score_median'] - model.threshold, 0.0)
@@ -167,6 +168,19 @@ def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN
         envelope = sim.nominal_envelope(first, topic)
         inject.update(scale=envelope, limits=envelope)
     return records, first, rest, model, vectors, inject
+
+
+def describe_threshold(name, model):
+    """One line: a calibrated threshold and the model's score floor (no support vector near) as depth below
+    the held-out median in units of the trained threshold's (1 = trained, as ``--separability``)."""
+    if 'trained_threshold' not in model.info:
+        return None
+    median = model.info['held_out_score_median']
+    floor = float(model.scores(np.full((1, model.dimension), 1e9))[0])
+    unit = median - model.info['trained_threshold']
+    return '%s calibrated threshold at depth %.2f, score floor at %.2f%s' % (
+        name, (median - model.threshold) / unit, (median - floor) / unit,
+        ': below the floor, nothing can fire' if model.threshold < floor else '')
 
 
 def describe_scale(name, inject):
@@ -196,7 +210,8 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
               'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window,
               'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest)),
-              'persistence': persistence, 'threshold': model.threshold, 'scale': describe_scale(name, inject)}
+              'persistence': persistence, 'threshold': model.threshold, 'scale': describe_scale(name, inject),
+              'calibrated': describe_threshold(name, model)}
     for kind in sim.ANOMALY_TYPES:
         for seed in seeds:
             try:
@@ -333,8 +348,7 @@ def main(argv=None):
                 by_type[kind].update({'caught': r['caught'][kind], 'total': r['total'][kind],
                                       'late': r['late'][kind], 'no_room': r['no_room'][kind]})
                 latencies[kind].extend(r['latency'][kind])
-            if r['scale']:
-                oddities.append(r['scale'])
+            oddities += [line for line in (r['scale'], r['calibrated']) if line]
             if name in ('f1tenth_DS2', 'f1tenth_DS5'):
                 oddities.append('%s: windows without injection from %s s after the run start (replay from %.0f s)'
                                 % (name, ', '.join('%.1f-%.1f' % (a - r['start'], b - r['start'])
@@ -362,7 +376,7 @@ def main(argv=None):
                       np.median(persistence), PERSISTENCE, LATENCY,
                       sum(1 for n in persistence if n < PERSISTENCE), len(persistence)))
         for line in oddities:
-            print(line if 'envelope' in line else 'real oddity: ' + line)
+            print(line if 'envelope' in line or 'calibrated' in line else 'real oddity: ' + line)
         print()
     print('total %.1f s' % (time.time() - started))
     return 0
