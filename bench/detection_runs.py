@@ -190,9 +190,10 @@ def describe_scale(name, inject):
         name, ', '.join('%s %.2f' % item for item in scale._asdict().items()))
 
 
-def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DEFAULT_MARGIN, **how):
-    """One run, one setting (``how``: injection, threshold, calibration, calibration_margin of ``prepare``):
-    a dict of the figures."""
+def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DEFAULT_MARGIN,
+                 types=sim.ANOMALY_TYPES, **how):
+    """One run, one setting, anomalies of ``types`` (``how``: injection, threshold, calibration,
+    calibration_margin of ``prepare``): a dict of the figures."""
     rule = SETTINGS[setting][1]
     records, first, rest, model, vectors, inject = prepare(name, topic, stop, setting, fraction, margin, **how)
     rate = rate_of(records)
@@ -212,7 +213,7 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
               'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest)),
               'persistence': persistence, 'threshold': model.threshold, 'scale': describe_scale(name, inject),
               'calibrated': describe_threshold(name, model)}
-    for kind in sim.ANOMALY_TYPES:
+    for kind in types:
         for seed in seeds:
             try:
                 injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, **inject)
@@ -246,7 +247,7 @@ def scored(model, records, topic):
     return np.array([t for t, _ in pairs]), model.scores(np.array([v for _, v in pairs]))
 
 
-def separability(name, topic, stop, setting, seeds, fraction, **how):
+def separability(name, topic, stop, setting, seeds, fraction, types=sim.ANOMALY_TYPES, **how):
     """Could any threshold separate this run? Scores as depth below the held-out median in units of
     (median - threshold), so 1 is the model's threshold (``how``: as ``evaluate_run``): the deepest nominal
     classification of the replayed part against, per injected anomaly, the deepest one within LATENCY of its
@@ -256,7 +257,7 @@ def separability(name, topic, stop, setting, seeds, fraction, **how):
     depth = lambda scores: (median - scores) / (median - model.threshold)  # noqa: E731
     _, nominal = scored(model, rest, topic)
     anomalies = []
-    for kind in sim.ANOMALY_TYPES:
+    for kind in types:
         for seed in seeds:
             try:
                 injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, **inject)
@@ -281,6 +282,7 @@ def main(argv=None):
     parser.add_argument('--train', type=float, default=0.5, help='fraction of each run that trains (default 0.5)')
     parser.add_argument('--margin', type=float, default=learning.DEFAULT_MARGIN,
                         help='threshold margin of learning.train (default %g)' % learning.DEFAULT_MARGIN)
+    parser.add_argument('--types', default='all', help='anomaly types to inject, comma-separated (default all)')
     parser.add_argument('--injection', default='bwibot', choices=INJECTIONS,
                         help="bwibot: the simulator's magnitudes; robot: at each run's own nominal envelope")
     parser.add_argument('--threshold', default='trained', choices=THRESHOLDS,
@@ -293,16 +295,17 @@ def main(argv=None):
                         help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
-    how = dict(injection=args.injection, threshold=args.threshold, calibration=args.calibration,
+    types = sim.parse_anomaly_types(args.types, 'types')
+    how = dict(types=types, injection=args.injection, threshold=args.threshold, calibration=args.calibration,
                calibration_margin=args.calibration_margin)
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
     settings = args.settings.split(',')
     started = time.time()
     common.header('Every real run with odometry: trained on its first part, replayed with injected anomalies',
                   [common.describe_data(bag_path(name)) for name, _, _ in runs] +
-                  ['training: first %g of each run; injection: one anomaly per type and seed %s into the rest; '
+                  ['training: first %g of each run; injection: one anomaly per type (%s) and seed %s into the rest; '
                    'window %s, pre/post %gs/%gs, classify_every %s, threshold margin %g' % (
-                       args.train, seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin),
+                       args.train, ', '.join(types), seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin),
                    'injection: %s (%s); threshold: %s%s' % (
                        args.injection, "the simulator's BWIBot magnitudes" if args.injection == 'bwibot' else
                        "each run's own nominal envelope (sim.nominal_envelope of its training part)",
@@ -344,7 +347,7 @@ def main(argv=None):
                            'false_injected': r['false_injected']})
             totals['injected_s'] += r['injected_s']
             persistence += r['persistence']
-            for kind in sim.ANOMALY_TYPES:
+            for kind in types:
                 by_type[kind].update({'caught': r['caught'][kind], 'total': r['total'][kind],
                                       'late': r['late'][kind], 'no_room': r['no_room'][kind]})
                 latencies[kind].extend(r['latency'][kind])
