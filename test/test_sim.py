@@ -487,6 +487,9 @@ def test_nominal_envelope_of_husky(husky_records):
     with pytest.raises(ValueError) as error:
         sim.nominal_envelope(husky_records[:5], HUSKY_ODOM)
     assert str(error.value).startswith('topic: ')
+    with pytest.raises(ValueError) as error:
+        sim.inject_anomalies(husky_records, ['collision'], topic=HUSKY_ODOM, scale=envelope._replace(max_decel=0.0))
+    assert str(error.value).startswith('scale: ')
 
 
 def deviation(records, out, truth, field):

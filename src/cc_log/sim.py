@@ -394,7 +394,7 @@ def _draw_plan(kind, rng, v0, scale=None):
         plan['stop_time'] = rng.uniform(0.03, 0.06)                     # v0 -> 0 in tens of ms
         if scale is not None:   # the deceleration of that stop from the BWIBot's top speed, in the robot's ratio
             decel = BWIBOT_LIMITS.max_speed / plan['stop_time'] * ratio('max_decel')
-            plan['stop_time'] = max(v0, 0.0) / decel
+            plan['stop_time'] = max(max(v0, 0.0) / decel, 1e-3)
         plan['duration'] = rng.uniform(3.0, 6.0)
     elif kind == 'sudden_acceleration':
         plan['accel'] = rng.uniform(3.0, 5.0) * ratio('max_accel')
@@ -1029,6 +1029,8 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
     when the anomalies do not fit into the stream.
     """
     types = parse_anomaly_types(types, 'types')
+    if scale is not None and not all(float(value) > 0.0 for value in scale):
+        raise ValueError('scale: %r must be positive in every field' % (tuple(scale),))
     records = list(records)
     if topic is None:
         topic = next((r.topic for r in records if getattr(r.msg, '_type', '') == 'nav_msgs/Odometry'), None)
@@ -1105,7 +1107,8 @@ def nominal_envelope(records, topic=None, floor=0.1):
     robot that stood still). ``inject_anomalies(..., scale=)`` takes it."""
     odom = [r for r in records if (r.topic == topic if topic else getattr(r.msg, '_type', '') == 'nav_msgs/Odometry')]
     if len(odom) < 10:
-        raise ValueError('topic: %d odometry messages on %s, too few for an envelope' % (len(odom), topic))
+        raise ValueError('topic: %d odometry messages on %s, too few for an envelope'
+                         % (len(odom), topic or 'nav_msgs/Odometry'))
     t = [r.stamp for r in odom]
     steps = sorted(b - a for a, b in zip(t, t[1:]) if b > a)
     if not steps:
