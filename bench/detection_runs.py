@@ -6,6 +6,7 @@ simulator anomalies; recall by type and latency, false windows per hour, kept me
     python3 bench/detection_runs.py                       # all runs, seeds 0 1 2, ours and the paper's
     python3 bench/detection_runs.py --runs f1tenth_DS1 --seeds 0 --settings ours   # one run, quick
     python3 bench/detection_real.py --only runs           # the same, from the detection bench
+    python3 bench/detection_runs.py --settings ours --injection robot --threshold calibrated  # second round
 
 For each run of RUNS (../shared/data/real/, SOURCES.md there): the odometry up to ``--train`` of its duration
 (default 0.5) trains a model (``learning.train`` defaults, nominal only); the rest is replayed through the
@@ -32,8 +33,8 @@ largest yaw rate, a localization jump moves 0.6-2 s of its top speed (the BWIBot
 same trigger and windows), then lowers it by ``--calibration-margin`` x (held-out median - threshold).
 
 ``--separability``: per run, no windows: the deepest nominal score of the replayed part against the
-shallowest injected anomaly onset (within LATENCY), as depth in units of the trained threshold; whether any
-threshold could separate them.
+shallowest injected anomaly onset (within LATENCY), as depth in units of the model's threshold; whether any
+threshold could separate them. ``--types``: inject only these simulator types.
 
 Settings: ``ours`` = motion features, 2 s window, retrigger 'event' (the default); ``dynamics`` = the level-free
 dynamics features, the same otherwise; ``every`` = motion with retrigger
