@@ -6,6 +6,7 @@ simulator anomalies; recall by type and latency, false windows per hour, kept me
     python3 bench/detection_runs.py                       # all runs, seeds 0 1 2, ours and the paper's
     python3 bench/detection_runs.py --runs f1tenth_DS1 --seeds 0 --settings ours   # one run, quick
     python3 bench/detection_real.py --only runs           # the same, from the detection bench
+    python3 bench/detection_runs.py --settings ours --injection robot --threshold calibrated  # second round
 
 For each run of RUNS (../shared/data/real/, SOURCES.md there): the odometry up to ``--train`` of its duration
 (default 0.5) trains a model (``learning.train`` defaults, nominal only); the rest is replayed through the
@@ -19,9 +20,21 @@ caught when a fire falls in [onset, end + feature window]; latency = first such 
 part's messages inside windows. Types that do not fit into a short replay are
 counted as 'no room'.
 
+``--injection``: ``bwibot`` injects the simulator's magnitudes (m/s, rad/s of the BWIBot, the same on every
+robot); ``robot`` injects them at each run's own scale: ``sim.nominal_envelope`` of its training part (largest
+speed, acceleration, deceleration, yaw rate, yaw acceleration) is ``scale`` and ``limits`` of
+``sim.inject_anomalies``, so a collision decelerates ~20x harder than the run's hardest braking, a surge
+accelerates 4-6x harder than its hardest acceleration up to 2.2x its top speed, twisting adds 1.5-2.2x its
+largest yaw rate, a localization jump moves 0.6-2 s of its top speed (the BWIBot's ratios to its limits).
+
+``--threshold``: ``trained`` is ``learning.train``'s (held-out blocks of the training vectors, ``--margin``);
+``calibrated`` trains on the first (1 - ``--calibration``) of the training part and sets the threshold with
+``tuning.tune`` (``cclog tune``, budget 0 false windows/h) on the rest of it (held-out nominal driving, the
+same trigger and windows), then lowers it by ``--calibration-margin`` x (held-out median - threshold).
+
 ``--separability``: per run, no windows: the deepest nominal score of the replayed part against the
-shallowest injected anomaly onset (within LATENCY), as depth in units of the trained threshold; whether any
-threshold could separate them.
+shallowest injected anomaly onset (within LATENCY), as depth in units of the model's threshold; whether any
+threshold could separate them. ``--types``: inject only these simulator types.
 
 Settings: ``ours`` = motion features, 2 s window, retrigger 'event' (the default); ``dynamics`` = the level-free
 dynamics features, the same otherwise; ``every`` = motion with retrigger
@@ -59,6 +72,8 @@ PRE = POST = 2.0
 CLASSIFY_EVERY = '50ms'
 LATENCY = 0.5
 PERSISTENCE = 5     # classifications: 'k of the last n' needs k within LATENCY (5 at 10 Hz, 10 at 50ms steps)
+INJECTIONS = ('bwibot', 'robot')
+THRESHOLDS = ('trained', 'calibrated')
 SETTINGS = collections.OrderedDict([
     ('ours', ('motion', 'event', {})),
     ('dynamics', ('dynamics', 'event', {})),
@@ -125,15 +140,66 @@ def inside(stamps, intervals):
     return sum(1 for t in stamps if any(a <= t <= b for a, b in intervals))
 
 
-def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DEFAULT_MARGIN):
-    """One run, one setting: a dict of the figures."""
+def calibrate(model, records, topic, rule, margin):
+    """Set ``model.threshold`` on held-out nominal ``records`` with ``tuning.tune`` (no false window), from
+    above every score of theirs, then lower it by ``margin`` x (held-out median - threshold)."""
+    model.info = dict(model.info, trained_threshold=model.threshold)
+    model.threshold = float(np.max(tuning.step_scores(model, records, topic, CLASSIFY_EVERY))) + 1.0
+    tuning.tune(model, [records], topic, 0.0, '%gs' % PRE, '%gs' % POST, CLASSIFY_EVERY, rule)
+    model.threshold -= margin * max(model.info['held_out_score_median'] - model.threshold, 0.0)
+    return model
+
+
+def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN, injection='bwibot',
+            threshold='trained', calibration=0.25, calibration_margin=learning.DEFAULT_MARGIN):
+    """A run's records, its replayed part, the model (threshold per ``threshold``) and the keyword arguments
+    of ``sim.inject_anomalies`` for ``injection``."""
     feature_set, rule, options = SETTINGS[setting]
     records = load(name, topic, stop)
     first, rest = split(records, fraction)
+    config = config_of(feature_set, rate_of(records))
+    if threshold == 'calibrated':
+        fit, held = split(first, 1.0 - calibration)
+        model, vectors = train(fit, config, options, margin)
+        calibrate(model, held, topic, rule, calibration_margin)
+    else:
+        model, vectors = train(first, config, options, margin)
+    inject = dict(topic=topic, warmup=3.0, gap=2.0)
+    if injection == 'robot':
+        envelope = sim.nominal_envelope(first, topic)
+        inject.update(scale=envelope, limits=envelope)
+    return records, first, rest, model, vectors, inject
+
+
+def describe_threshold(name, model):
+    """One line: a calibrated threshold and the model's score floor (no support vector near) as depth below
+    the held-out median in units of the trained threshold's (1 = trained, as ``--separability``)."""
+    if 'trained_threshold' not in model.info:
+        return None
+    median = model.info['held_out_score_median']
+    floor = float(model.scores(np.full((1, model.dimension), 1e9))[0])
+    unit = median - model.info['trained_threshold']
+    return '%s calibrated threshold at depth %.2f, score floor at %.2f%s' % (
+        name, (median - model.threshold) / unit, (median - floor) / unit,
+        ': below the floor, nothing can fire' if model.threshold < floor else '')
+
+
+def describe_scale(name, inject):
+    """One line: the run's envelope when anomalies are injected at its scale."""
+    scale = inject.get('scale')
+    return None if scale is None else '%s envelope: %s' % (
+        name, ', '.join('%s %.2f' % item for item in scale._asdict().items()))
+
+
+def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DEFAULT_MARGIN,
+                 types=sim.ANOMALY_TYPES, **how):
+    """One run, one setting, anomalies of ``types`` (``how``: injection, threshold, calibration,
+    calibration_margin of ``prepare``): a dict of the figures."""
+    rule = SETTINGS[setting][1]
+    records, first, rest, model, vectors, inject = prepare(name, topic, stop, setting, fraction, margin, **how)
     rate = rate_of(records)
-    config = config_of(feature_set, rate)
+    config = model.config
     reach = config.span.seconds if config.span.is_duration else config.span.count / rate
-    model, vectors = train(first, config, options, margin)
     seconds = rest[-1].stamp - rest[0].stamp
     nominal_fires = fires(model, rest, topic, rule)
     nominal_windows = windows_of(nominal_fires)
@@ -146,11 +212,12 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
               'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window,
               'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest)),
-              'persistence': persistence}
-    for kind in sim.ANOMALY_TYPES:
+              'persistence': persistence, 'threshold': model.threshold, 'scale': describe_scale(name, inject),
+              'calibrated': describe_threshold(name, model)}
+    for kind in types:
         for seed in seeds:
             try:
-                injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+                injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, **inject)
             except ValueError:
                 result['no_room'][kind] += 1
                 continue
@@ -181,22 +248,20 @@ def scored(model, records, topic):
     return np.array([t for t, _ in pairs]), model.scores(np.array([v for _, v in pairs]))
 
 
-def separability(name, topic, stop, setting, seeds, fraction):
+def separability(name, topic, stop, setting, seeds, fraction, types=sim.ANOMALY_TYPES, **how):
     """Could any threshold separate this run? Scores as depth below the held-out median in units of
-    (median - threshold), so 1 is the trained threshold: the deepest nominal classification of the replayed
-    part against, per injected anomaly, the deepest one within LATENCY of its onset (the shallowest of those)."""
-    feature_set, _, options = SETTINGS[setting]
-    records = load(name, topic, stop)
-    first, rest = split(records, fraction)
-    model, _ = train(first, config_of(feature_set, rate_of(records)), options)
+    (median - threshold), so 1 is the model's threshold (``how``: as ``evaluate_run``): the deepest nominal
+    classification of the replayed part against, per injected anomaly, the deepest one within LATENCY of its
+    onset (the shallowest of those)."""
+    _, _, rest, model, _, inject = prepare(name, topic, stop, setting, fraction, **how)
     median = model.info['held_out_score_median']
     depth = lambda scores: (median - scores) / (median - model.threshold)  # noqa: E731
     _, nominal = scored(model, rest, topic)
     anomalies = []
-    for kind in sim.ANOMALY_TYPES:
+    for kind in types:
         for seed in seeds:
             try:
-                injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+                injected, truth = sim.inject_anomalies(rest, [kind], seed=seed, **inject)
             except ValueError:
                 continue
             stamps, scores = scored(model, injected, topic)
@@ -218,28 +283,46 @@ def main(argv=None):
     parser.add_argument('--train', type=float, default=0.5, help='fraction of each run that trains (default 0.5)')
     parser.add_argument('--margin', type=float, default=learning.DEFAULT_MARGIN,
                         help='threshold margin of learning.train (default %g)' % learning.DEFAULT_MARGIN)
+    parser.add_argument('--types', default='all', help='anomaly types to inject, comma-separated (default all)')
+    parser.add_argument('--injection', default='bwibot', choices=INJECTIONS,
+                        help="bwibot: the simulator's magnitudes; robot: at each run's own nominal envelope")
+    parser.add_argument('--threshold', default='trained', choices=THRESHOLDS,
+                        help="trained: learning.train's; calibrated: tuning.tune on held-out nominal driving")
+    parser.add_argument('--calibration', type=float, default=0.25,
+                        help='with --threshold calibrated: the last part of the training part that calibrates')
+    parser.add_argument('--calibration-margin', type=float, default=learning.DEFAULT_MARGIN,
+                        help='with --threshold calibrated: lower by this x (held-out median - threshold)')
     parser.add_argument('--separability', action='store_true',
                         help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
+    types = sim.parse_anomaly_types(args.types, 'types')
+    how = dict(types=types, injection=args.injection, threshold=args.threshold, calibration=args.calibration,
+               calibration_margin=args.calibration_margin)
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
     settings = args.settings.split(',')
     started = time.time()
     common.header('Every real run with odometry: trained on its first part, replayed with injected anomalies',
                   [common.describe_data(bag_path(name)) for name, _, _ in runs] +
-                  ['training: first %g of each run; injection: one anomaly per type and seed %s into the rest; '
+                  ['training: first %g of each run; injection: one anomaly per type (%s) and seed %s into the rest; '
                    'window %s, pre/post %gs/%gs, classify_every %s, threshold margin %g' % (
-                       args.train, seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin)])
+                       args.train, ', '.join(types), seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin),
+                   'injection: %s (%s); threshold: %s%s' % (
+                       args.injection, "the simulator's BWIBot magnitudes" if args.injection == 'bwibot' else
+                       "each run's own nominal envelope (sim.nominal_envelope of its training part)",
+                       args.threshold, '' if args.threshold == 'trained' else
+                       ' on the last %g of the training part (tuning.tune, 0 false windows), margin %g' % (
+                           args.calibration, args.calibration_margin))])
     if args.separability:
         for setting in settings:
             rows = []
             for name, topic, stop in runs:
-                nominal, (anomaly, kind) = separability(name, topic, stop, setting, seeds, args.train)
+                nominal, (anomaly, kind) = separability(name, topic, stop, setting, seeds, args.train, **how)
                 rows.append([name, '%.2f' % nominal, '%.2f (%s)' % (anomaly, kind),
                              'yes' if anomaly > nominal else 'no'])
             common.table(['run', 'deepest nominal', 'shallowest anomaly within %gs' % LATENCY,
                           'a threshold separates'], rows,
-                         'setting %s: depth below the held-out median, 1 = the trained threshold' % setting)
+                         'setting %s: depth below the held-out median, 1 = the model\'s threshold' % setting)
         print('total %.1f s' % (time.time() - started))
         return 0
     for setting in settings:
@@ -249,7 +332,7 @@ def main(argv=None):
         oddities, persistence = [], []
         for name, topic, stop in runs:
             try:
-                r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin)
+                r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin, **how)
             except ValueError as error:
                 rows.append([name, '-', '-', '-', '-', '-', '-', 'not run: %s' % error, '-', '-'])
                 continue
@@ -265,10 +348,11 @@ def main(argv=None):
                            'false_injected': r['false_injected']})
             totals['injected_s'] += r['injected_s']
             persistence += r['persistence']
-            for kind in sim.ANOMALY_TYPES:
+            for kind in types:
                 by_type[kind].update({'caught': r['caught'][kind], 'total': r['total'][kind],
                                       'late': r['late'][kind], 'no_room': r['no_room'][kind]})
                 latencies[kind].extend(r['latency'][kind])
+            oddities += [line for line in (r['scale'], r['calibrated']) if line]
             if name in ('f1tenth_DS2', 'f1tenth_DS5'):
                 oddities.append('%s: windows without injection from %s s after the run start (replay from %.0f s)'
                                 % (name, ', '.join('%.1f-%.1f' % (a - r['start'], b - r['start'])
@@ -296,7 +380,7 @@ def main(argv=None):
                       np.median(persistence), PERSISTENCE, LATENCY,
                       sum(1 for n in persistence if n < PERSISTENCE), len(persistence)))
         for line in oddities:
-            print('real oddity: ' + line)
+            print(line if 'envelope' in line or 'calibrated' in line else 'real oddity: ' + line)
         print()
     print('total %.1f s' % (time.time() - started))
     return 0

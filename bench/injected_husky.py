@@ -41,7 +41,7 @@ def main(argv=None):
     parser.add_argument('--seeds', default='0,1,2')
     parser.add_argument('--window', default=WINDOW, help='motion feature window (default 2s)')
     parser.add_argument('--quick', action='store_true')
-    parser.add_argument('--retrigger', default='every', help='retrigger rules, comma-separated (default every)')
+    parser.add_argument('--retrigger', default='event', help='retrigger rules, comma-separated (default event)')
     parser.add_argument('--pre', default='100', help='pre of the smart logger (default 100 messages)')
     parser.add_argument('--post', default='100', help='post of the smart logger (default 100 messages)')
     args = parser.parse_args(argv)

@@ -73,6 +73,13 @@ def test_detection_runs_quick():
     assert 'all runs: caught ' in out
 
 
+def test_detection_runs_robot_scale_calibrated():
+    out = run('detection_runs.py', '--runs', 'icelab_window_plan', '--seeds', '0', '--settings', 'ours',
+              '--injection', 'robot', '--threshold', 'calibrated')
+    assert 'icelab_window_plan envelope: max_speed ' in out and 'all runs: caught ' in out
+    assert 'icelab_window_plan calibrated threshold at depth ' in out
+
+
 def test_cost_offline_quick():
     out = run('cost_offline.py', '--quick', '--writer')
     assert 'replay/read (CPU)' in out and 'husky_outdoor_2015' in out

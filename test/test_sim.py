@@ -477,3 +477,56 @@ def test_inject_refuses_what_does_not_fit(husky_records):
     with pytest.raises(ValueError) as error:
         sim.inject_anomalies([r for r in short if r.topic == '/imu/data'], ['collision'], seed=0)
     assert str(error.value).startswith('topic: ')
+
+
+def test_nominal_envelope_of_husky(husky_records):
+    envelope = sim.nominal_envelope(husky_records, HUSKY_ODOM)
+    track = odom_track(husky_records, HUSKY_ODOM)
+    assert 0.5 < envelope.max_speed <= max(abs(v) for v in track.v)     # smoothed: below the noisy peak
+    assert all(value >= 0.1 * limit for value, limit in zip(envelope, sim.BWIBOT_LIMITS))
+    with pytest.raises(ValueError) as error:
+        sim.nominal_envelope(husky_records[:5], HUSKY_ODOM)
+    assert str(error.value).startswith('topic: ')
+    with pytest.raises(ValueError) as error:
+        sim.inject_anomalies(husky_records, ['collision'], topic=HUSKY_ODOM, scale=envelope._replace(max_decel=0.0))
+    assert str(error.value).startswith('scale: ')
+
+
+def deviation(records, out, truth, field):
+    """The largest |injected - recorded| of ``field`` ('v' or 'w') inside the one anomaly of ``truth``."""
+    entry = truth[0]
+    pairs = [(o.msg.twist.twist, r.msg.twist.twist) for o, r in zip(records, out)
+             if r.topic == HUSKY_ODOM and entry['start'] <= r.stamp < entry['end']]
+    pick = (lambda twist: twist.linear.x) if field == 'v' else (lambda twist: twist.angular.z)
+    return max(abs(pick(a) - pick(b)) for a, b in pairs)
+
+
+@pytest.mark.parametrize('kind, field, quantity', [('excessive_twisting', 'w', 'max_yaw_rate'),
+                                                   ('sudden_acceleration', 'v', 'max_speed')])
+def test_inject_at_the_robot_scale(husky_records, kind, field, quantity):
+    """A scale twice the BWIBot's in one quantity doubles the anomaly's magnitude in it; None is the BWIBot's."""
+    base = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM)
+    same = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=None)
+    assert [serialize(r.msg) for r in base[0]] == [serialize(r.msg) for r in same[0]]
+    doubled = sim.BWIBOT_LIMITS._replace(**{quantity: 2.0 * getattr(sim.BWIBOT_LIMITS, quantity)})
+    unlimited = sim.Limits(*(10.0 * x for x in sim.BWIBOT_LIMITS))   # the return to the recording is not the test
+    one = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=sim.BWIBOT_LIMITS,
+                               limits=unlimited)
+    two = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=doubled, limits=unlimited)
+    assert one[1][0]['start'] == two[1][0]['start']
+    ratio = deviation(husky_records, two[0], two[1], field) / deviation(husky_records, one[0], one[1], field)
+    assert 1.7 < ratio < 2.3
+
+
+def test_collision_at_the_robot_scale_brakes_by_its_deceleration(husky_records):
+    """Robot scale: the collision's deceleration is a multiple of the envelope's, whatever the speed."""
+    def stop_seconds(scale):
+        out, truth = sim.inject_anomalies(husky_records, ['collision'], seed=1, topic=HUSKY_ODOM, scale=scale)
+        track = odom_track(out, HUSKY_ODOM)
+        start = track.t.index(truth[0]['start'])
+        still = next(i for i in range(start, len(track.t)) if abs(track.v[i]) < 0.1 * abs(track.v[start - 1]))
+        return track.t[still] - track.t[start - 1], abs(track.v[start - 1])
+    soft, speed = stop_seconds(sim.BWIBOT_LIMITS._replace(max_decel=0.05))
+    hard, _ = stop_seconds(sim.BWIBOT_LIMITS._replace(max_decel=5.0))
+    assert speed > 0.3
+    assert soft > 0.5 and hard < 0.2       # 0.05 m/s^2 x ~20: ~1 m/s^2; 5 m/s^2 x ~20: ~100 m/s^2

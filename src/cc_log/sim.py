@@ -372,31 +372,39 @@ _NEEDS_MOTION = ('collision', 'sudden_acceleration', 'excessive_twisting', 'whee
 _MOVES_BASE = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting')
 
 
-def _draw_plan(kind, rng, v0):
+def _draw_plan(kind, rng, v0, scale=None):
     """Draw the parameters of one anomaly of ``kind`` (durations in seconds, so any rate works).
 
-    ``v0`` is the speed at the start. Returns a dict with at least 'type' and 'duration'.
+    ``v0`` is the speed at the start. ``scale``: a robot's nominal envelope (``Limits``); the magnitudes are
+    then the BWIBot's multiplied by the envelope's ratio to ``BWIBOT_LIMITS`` (None: the BWIBot's, unchanged).
+    Returns a dict with at least 'type' and 'duration'.
     """
+    def ratio(field):
+        return 1.0 if scale is None else float(getattr(scale, field)) / getattr(BWIBOT_LIMITS, field)
+
     plan = {'type': kind}
     if kind == 'planning_failure':
         plan['variant'] = rng.choice(('spin', 'oscillate'))
         plan['duration'] = rng.uniform(5.0, 9.0)
         plan['direction'] = rng.choice((-1.0, 1.0))
-        plan['yaw_rate'] = rng.uniform(0.7, 0.95)                       # within the limit
-        plan['speed'] = rng.uniform(0.2, 0.3)                           # oscillation amplitude
+        plan['yaw_rate'] = rng.uniform(0.7, 0.95) * ratio('max_yaw_rate')   # within the limit
+        plan['speed'] = rng.uniform(0.2, 0.3) * ratio('max_speed')          # oscillation amplitude
         plan['period'] = rng.uniform(1.6, 2.4)
     elif kind == 'collision':
         plan['stop_time'] = rng.uniform(0.03, 0.06)                     # v0 -> 0 in tens of ms
+        if scale is not None:   # the deceleration of that stop from the BWIBot's top speed, in the robot's ratio
+            decel = BWIBOT_LIMITS.max_speed / plan['stop_time'] * ratio('max_decel')
+            plan['stop_time'] = max(max(v0, 0.0) / decel, 1e-3)
         plan['duration'] = rng.uniform(3.0, 6.0)
     elif kind == 'sudden_acceleration':
-        plan['accel'] = rng.uniform(3.0, 5.0)
-        plan['peak'] = min(max(v0, 0.0) + rng.uniform(0.9, 1.3), 2.2)
+        plan['accel'] = rng.uniform(3.0, 5.0) * ratio('max_accel')
+        plan['peak'] = min(max(v0, 0.0) + rng.uniform(0.9, 1.3) * ratio('max_speed'), 2.2 * ratio('max_speed'))
         plan['rise'] = (plan['peak'] - max(v0, 0.0)) / plan['accel']
         plan['hold'] = rng.uniform(0.5, 1.0)
-        plan['brake'] = rng.uniform(2.0, 3.0)
+        plan['brake'] = rng.uniform(2.0, 3.0) * ratio('max_decel')
         plan['duration'] = plan['rise'] + plan['hold'] + plan['peak'] / plan['brake'] + 0.2
     elif kind == 'excessive_twisting':
-        plan['amplitude'] = rng.uniform(1.5, 2.2)                       # rad/s on top of the nominal rate
+        plan['amplitude'] = rng.uniform(1.5, 2.2) * ratio('max_yaw_rate')   # rad/s on top of the nominal rate
         plan['frequency'] = rng.uniform(1.0, 1.5)
         plan['duration'] = rng.randint(4, 7) / plan['frequency']        # whole cycles
     elif kind == 'localization_jump':
@@ -404,9 +412,9 @@ def _draw_plan(kind, rng, v0):
         jumps = rng.randint(1, 2)
         offsets = []
         for index in range(jumps):
-            distance = rng.uniform(0.6, 2.0)
+            distance = rng.uniform(0.6, 2.0) * ratio('max_speed')   # 0.6-2 s of top speed
             bearing = rng.uniform(-math.pi, math.pi)
-            yaw = rng.choice((-1.0, 1.0)) * rng.uniform(0.1, 0.45)
+            yaw = rng.choice((-1.0, 1.0)) * min(rng.uniform(0.1, 0.45) * ratio('max_yaw_rate'), 0.5 * math.pi)
             offsets.append((index * plan['duration'] / jumps,
                             (distance * math.cos(bearing), distance * math.sin(bearing), yaw)))
         plan['offsets'] = offsets
@@ -997,7 +1005,7 @@ def _smoothstep_parts(u):
 
 
 def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20.0, gap=20.0,
-                     limits=BWIBOT_LIMITS):
+                     limits=BWIBOT_LIMITS, scale=None):
     """Put the simulator's anomaly models into a recorded odometry stream.
 
     ``records``: Record(stamp, topic, msg) in time order (other topics pass through untouched); ``topic``:
@@ -1011,10 +1019,18 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
     pose blends smoothly back onto the recorded track (at most ~0.8 m/s faster or slower than recorded),
     so every message from ``end`` on is the recorded one. Modified messages are copies; the input is not changed.
 
+    ``scale``: the recorded robot's nominal envelope (a ``Limits``, e.g. ``nominal_envelope`` of its nominal
+    driving) to inject anomalies at its own scale: every magnitude (deceleration of a collision, acceleration
+    and extra speed of a surge, twisting amplitude, jump distance and turn, a planning failure's rates) is the
+    BWIBot's times the envelope's ratio to ``BWIBOT_LIMITS``; slipping holds the pose whatever the scale. None
+    (default): the BWIBot's magnitudes in m/s and rad/s. ``limits`` still bounds the return to the recording.
+
     Returns ``(records, truth)``: a new list of records and [{'type', 'start', 'end'}]. Raises ValueError
     when the anomalies do not fit into the stream.
     """
     types = parse_anomaly_types(types, 'types')
+    if scale is not None and not all(float(value) > 0.0 for value in scale):
+        raise ValueError('scale: %r must be positive in every field' % (tuple(scale),))
     records = list(records)
     if topic is None:
         topic = next((r.topic for r in records if getattr(r.msg, '_type', '') == 'nav_msgs/Odometry'), None)
@@ -1059,7 +1075,7 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
             moving = [i for i in range(max(lo, 1), max(hi, lo + 1)) if i < n and v_s[i] >= _MOVING]
             i0 = moving[0] if moving else max(range(lo, max(hi, lo + 1)), key=lambda i: v_s[min(i, n - 1)])
         i0 = max(i0, 1)
-        plan = _draw_plan(kind, rng, v_s[i0])
+        plan = _draw_plan(kind, rng, v_s[i0], scale)
         modified, end = _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits)
         if end >= n:
             raise ValueError('types: %s at %.1f s does not end before the odometry does'
@@ -1082,6 +1098,29 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
         msg.twist.twist.angular.z = nw
         out[positions[i]] = type(record)(record.stamp, record.topic, msg)
     return out, truth
+
+
+def nominal_envelope(records, topic=None, floor=0.1):
+    """The largest speed, acceleration, deceleration, yaw rate and yaw acceleration (a ``Limits``) that the
+    odometry on ``topic`` of nominal ``records`` shows, each of the twist's 0.5 s moving average (the smoothing
+    ``inject_anomalies`` uses) and its slope over that span; at least ``floor`` times the BWIBot's limit (a
+    robot that stood still). ``inject_anomalies(..., scale=)`` takes it."""
+    odom = [r for r in records if (r.topic == topic if topic else getattr(r.msg, '_type', '') == 'nav_msgs/Odometry')]
+    if len(odom) < 10:
+        raise ValueError('topic: %d odometry messages on %s, too few for an envelope'
+                         % (len(odom), topic or 'nav_msgs/Odometry'))
+    t = [r.stamp for r in odom]
+    steps = sorted(b - a for a, b in zip(t, t[1:]) if b > a)
+    if not steps:
+        raise ValueError('records: odometry stamps do not advance')
+    half = max(1, int(round(0.25 / steps[len(steps) // 2])))
+    v = _moving_average([r.msg.twist.twist.linear.x for r in odom], half)
+    w = _moving_average([r.msg.twist.twist.angular.z for r in odom], half)
+    pairs = [(i - half, i + half) for i in range(half, len(odom) - half) if t[i + half] > t[i - half]]
+    dv = [(v[b] - v[a]) / (t[b] - t[a]) for a, b in pairs] or [0.0]
+    dw = [abs(w[b] - w[a]) / (t[b] - t[a]) for a, b in pairs] or [0.0]
+    found = Limits(max(abs(x) for x in v), max(dv), -min(dv), max(abs(x) for x in w), max(dw))
+    return Limits(*(max(value, floor * limit) for value, limit in zip(found, BWIBOT_LIMITS)))
 
 
 def _with_noise(cv, cw, v, w, v_s, w_s):
