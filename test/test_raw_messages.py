@@ -72,6 +72,27 @@ def test_feature_sets_read_the_same_numbers_from_the_bytes_as_from_the_messages(
         assert from_msgs.features.rejected == from_bytes.features.rejected == 0
 
 
+def test_a_row_block_is_the_rows_message_by_message_and_leaves_the_same_state(husky_raw):
+    odometry = [r for r in husky_raw if r.topic == ODOM]
+    stamps = [raw_message.stamp(r.raw, r.connection, r.stamp) for r in odometry]
+    stamps[100:110] = [stamps[99]] * 10  # repeated stamps
+    stamps[200] = stamps[199] + 5.0      # a gap: the derivatives restart
+    for name in ('motion', 'progress', 'dynamics', 'raw'):
+        config = FeatureConfig(name, '20')
+        one, block = features.get(name)(config), features.get(name)(config)
+        rows, covered = [], []
+        for record, stamp in zip(odometry, stamps):
+            rows.append(one.row_values_raw(record.raw, stamp))
+            covered.append(one.covers(config.span, stamp))
+        got, got_covered = block.row_block([r.raw for r in odometry[:150]], stamps[:150], True, config.span)
+        more, more_covered = block.row_block([r.raw for r in odometry[150:]], stamps[150:], True, config.span)
+        assert got.tolist() + more.tolist() == [list(row) for row in rows]  # the very same floats
+        assert got_covered.tolist() + more_covered.tolist() == covered
+        assert (block.segment_start, block.segment_rows, block.restarts) == (
+            one.segment_start, one.segment_rows, one.restarts)
+        assert False in covered and covered[-1]
+
+
 def test_byte_readers_follow_the_variable_frame_ids_and_reject_cut_messages():
     odom = Odometry()
     odom.header.frame_id = 'odom_with_a_long_frame_name'

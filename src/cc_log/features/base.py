@@ -273,6 +273,20 @@ class FeatureSet(object):
         """``row_values`` of a message's serialized bytes (see ``read_raw``)."""
         return self._row_of(self.read_raw, buff, stamp)
 
+    def row_block(self, items, stamps, raw, span):
+        """Rows of consecutive messages of the first input: ``items`` are serialized bytes when ``raw``, else
+        messages, at ``stamps`` (floats). Returns ``(rows, covered)``: an (n, width) float array equal to
+        ``row_values(_raw)`` called on each in turn, and an (n,) bool array, ``covers(span, stamp)`` right
+        after each row; the set's state afterwards is as after those calls. A set may compute a block at once
+        (numpy) where it gives the same floats; this default goes message by message."""
+        row_of = self.row_values_raw if raw else self.row_values
+        rows = np.empty((len(items), len(self.columns)))
+        covered = np.empty(len(items), dtype=bool)
+        for i, (item, stamp) in enumerate(zip(items, stamps)):
+            rows[i] = row_of(item, stamp)
+            covered[i] = self.covers(span, stamp)
+        return rows, covered
+
     def _row_of(self, read, msg, stamp):
         try:
             values = read(msg)
