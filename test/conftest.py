@@ -10,7 +10,10 @@ REAL_DATA = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real'))
 try:
     import cc_log  # noqa: F401  (a sourced workspace also provides the generated cc_log.msg)
 except ImportError:
+    # without a sourced workspace: this tree's package, here and in the commands tests run (cclog)
     sys.path.insert(0, os.path.join(ROOT, 'src'))
+    os.environ['PYTHONPATH'] = os.pathsep.join(
+        [os.path.join(ROOT, 'src')] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p])
 
 
 @pytest.fixture
