@@ -7,7 +7,8 @@ definitions are checked before any message is read); the index data records afte
 numpy (time, offset per message), the order is rosbag's (a stable merge of the connections' indexes by time);
 a chunk is decompressed once (none, lz4, bz2; its declared size is capped at ``MAX_CHUNK_BYTES`` and must be
 what it decompresses to) and the offsets and lengths of all its message data records are found in bulk. Record
-headers are parsed with ``formats.bag_salvage``'s parser. A damaged bag is a ValueError naming the file.
+headers are parsed with ``formats.bag_salvage``'s parser (``read_record``, ``field_u32``). A damaged bag is a
+ValueError naming the file.
 """
 import bz2
 import collections
@@ -17,8 +18,8 @@ import itertools
 import numpy as np
 
 from . import bagio
-from .formats.bag_salvage import (_OP_CONNECTION, _OP_INDEX_DATA, _OP_MSG_DATA, MAX_CHUNK_BYTES, _lz4, _record,
-                                  _u32, map_file)
+from .formats.bag_salvage import (MAX_CHUNK_BYTES, OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA, field_u32,
+                                  lz4_decompress, map_file, read_record)
 from .window_buffer import records_of
 
 __all__ = ['read_raw', 'read_runs', 'MAX_CHUNK_BYTES']
@@ -26,7 +27,7 @@ __all__ = ['read_raw', 'read_runs', 'MAX_CHUNK_BYTES']
 CACHED_CHUNKS = 4  # decompressed chunks kept (bags whose connections were written into interleaved chunks)
 RECORDS_BLOCK = 65536  # index entries turned into Python objects at a time
 
-_OP_FIELD = b'\x04\x00\x00\x00op=%c' % _OP_MSG_DATA
+_OP_FIELD = b'\x04\x00\x00\x00op=%c' % OP_MSG_DATA
 _MSG_HEADER_LEN = 38      # op, conn and time fields with their lengths
 _OP_AT = (0, 13, 17, 30)  # where the op field starts in a message data header, for each order of its fields
 _INDEX_ENTRY = np.dtype([('secs', '<u4'), ('nsecs', '<u4'), ('offset', '<u4')])
@@ -100,12 +101,12 @@ class _Reader(object):
         for k, (info, header) in enumerate(self.chunks):
             pos = header.data_pos + header.compressed_size
             for _ in range(len(info.connection_counts)):
-                found = _record(data, pos, len(data))
-                if found is None or found[1] != _OP_INDEX_DATA or found[2] + found[3] > len(data):
+                found = read_record(data, pos, len(data))
+                if found is None or found[1] != OP_INDEX_DATA or found[2] + found[3] > len(data):
                     raise _Damaged('index of the chunk at byte %d' % info.pos)
                 fields, _, start, length = found
                 try:
-                    conn, count, version = _u32(fields, 'conn'), _u32(fields, 'count'), _u32(fields, 'ver')
+                    conn, count, version = (field_u32(fields, name) for name in ('conn', 'count', 'ver'))
                 except ValueError as error:
                     raise _Damaged('index of the chunk at byte %d: %s' % (info.pos, error))
                 if version != 1 or count * _INDEX_ENTRY.itemsize > length:
@@ -174,7 +175,7 @@ class _Reader(object):
         if header.compression == 'none':
             chunk, whole = payload, True
         elif header.compression == 'lz4':
-            chunk, whole = _lz4(payload, declared)
+            chunk, whole = lz4_decompress(payload, declared)
         elif header.compression == 'bz2':
             decompressor = bz2.BZ2Decompressor()
             try:
@@ -223,13 +224,13 @@ class _Reader(object):
         connection records (as rosbag reads it)."""
         pos = offset
         while True:
-            found = _record(chunk, pos, len(chunk))
+            found = read_record(chunk, pos, len(chunk))
             if found is None or found[2] + found[3] > len(chunk):
                 raise self._damaged('message record at %d of the chunk at byte %d' % (pos, self.chunks[k][0].pos))
             _, op, start, length = found
-            if op == _OP_MSG_DATA:
+            if op == OP_MSG_DATA:
                 return start, start + length
-            if op != _OP_CONNECTION:
+            if op != OP_CONNECTION:
                 raise self._damaged('expected a message data record at %d of the chunk at byte %d, got op %r'
                                     % (pos, self.chunks[k][0].pos, op))
             pos = start + length

@@ -61,8 +61,7 @@ REPLAY_BATCH = 256      # replay: records fed to the logger at a time (``on_reco
 #                         looked at after each batch
 DECODED_PART_FACTOR = 8.0  # memory the json-xz writer needs per serialized byte of a part: decoded messages and
 #                            JSON rows (nav_msgs/Odometry: 0.7 KB serialized, 3.5 KB decoded, ~2 KB of row dict)
-_TOPIC, _RAW, _CONNECTION, _STAMP, _MSG = (operator.attrgetter(name) for name in ('topic', 'raw', 'connection', 'stamp',
-                                                                                 'msg'))
+_TOPIC, _RAW, _CONNECTION, _STAMP, _MSG = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp', 'msg'))
 _TYPE = operator.itemgetter('type')
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
 
@@ -428,7 +427,8 @@ class SmartLogger(object):
     @staticmethod
     def _latched_of(connections):
         """Whether any of ``connections`` latches."""
-        return any(raw_message.is_latched(connection) for connection in dict(zip(map(id, connections), connections)).values())
+        distinct = dict(zip(map(id, connections), connections)).values()
+        return any(raw_message.is_latched(connection) for connection in distinct)
 
     def _views(self, records, topics, connections):
         """``(the records as the triggers see them: decoded where a trigger of the topic reads fields, the
