@@ -386,17 +386,16 @@ class SmartLogger(object):
         if error is not None:
             error = raw_message.UndecodableRecord(len(views), records[len(views)].topic, error)
             records = records[:len(views)]
-            topics = topics[:len(views)]
+            topics, connections = topics[:len(views)], connections[:len(views)]
         present = set(topics)
         ahead = {}  # batched trigger -> its Fires of each of its records, in order
         for trigger in self._batched:
             if present <= trigger.topics:
                 mine = views
-            elif present & trigger.topics:
-                mine = list(itertools.compress(views, map(trigger.topics.__contains__, topics)))
             else:
-                continue
-            ahead[trigger] = iter(trigger.on_records(mine))
+                mine = list(itertools.compress(views, map(trigger.topics.__contains__, topics)))
+            if mine:
+                ahead[trigger] = iter(trigger.on_records(mine))
         driving = self.driving_topic
         by_topic = self._by_topic
         timed, latched, fire = self._timed, self._latched_of(connections), self._fire
