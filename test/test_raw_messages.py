@@ -270,3 +270,36 @@ def test_replay_reads_serialized_messages_and_a_truncated_one_is_one_line(tmp_pa
     from cc_log.smart_logger import replay_into
     with pytest.raises(ValueError, match=r'cut\.bag: a message of /odom cannot be decoded'):
         replay_into(logger, bag)
+
+
+def test_stamps_of_a_batch_are_each_message_s_stamp_with_and_without_headers(husky_raw):
+    records = husky_raw[:300]
+    odom = records[0]
+    zero, short = Odometry(), String(data='x')
+    zero_raw = serialized(zero)  # a header stamp of zero: the fallback
+    batch = [(r.raw, r.connection, r.stamp) for r in records] + [(zero_raw, odom.connection, 12.5)]
+    raws, connections, fallbacks = zip(*batch)
+    expected = [raw_message.stamp(raw, c, f) for raw, c, f in batch]
+    assert raw_message.stamps(raws, connections, fallbacks) == expected
+    assert expected[-1] == 12.5 and expected[0] != records[0].stamp  # the header stamp, not the bag time
+    # a message shorter than a header, and a type without one, mixed in: each its own stamp
+    no_header = connection_of(String)
+    mixed = batch[:5] + [(serialized(short), no_header, 3.0), (b'\x00' * 8, odom.connection, 4.0)]
+    raws, connections, fallbacks = zip(*mixed)
+    assert raw_message.stamps(raws, connections, fallbacks) == [raw_message.stamp(*item) for item in mixed]
+    assert raw_message.stamps([b'\x00' * 8], [odom.connection], [4.0]) == [4.0]
+    assert raw_message.stamps([serialized(short)], [no_header], [3.0]) == [3.0]
+
+
+def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_raw):
+    from cc_log.smart_logger import RawJsonEstimate
+    one, batched = RawJsonEstimate(every=7, first=20), RawJsonEstimate(every=7, first=20)
+    records = husky_raw[:400]
+    for record in records:
+        one.count(record.raw, record.connection)
+    for start in range(0, len(records), 33):  # batches of both types mixed, across the first/every bounds
+        part = records[start:start + 33]
+        batched.count_all([r.raw for r in part], [r.connection for r in part])
+    assert batched._types == one._types and batched.total == one.total > 0
+    sampled = one._types[records[0].connection['type']]
+    assert 0 < sampled[2] < sampled[1]  # sampled after the first 20, not every message

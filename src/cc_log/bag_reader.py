@@ -7,25 +7,27 @@ definitions are checked before any message is read); the index data records afte
 numpy (time, offset per message), the order is rosbag's (a stable merge of the connections' indexes by time);
 a chunk is decompressed once (none, lz4, bz2; its declared size is capped at ``MAX_CHUNK_BYTES`` and must be
 what it decompresses to) and the offsets and lengths of all its message data records are found in bulk. Record
-headers are parsed with ``formats.bag_salvage``'s parser. A damaged bag is a ValueError naming the file.
+headers are parsed with ``formats.bag_salvage``'s parser (``read_record``, ``field_u32``). A damaged bag is a
+ValueError naming the file.
 """
 import bz2
 import collections
 import heapq
+import itertools
 
 import numpy as np
 
 from . import bagio
-from .formats.bag_salvage import (_OP_CONNECTION, _OP_INDEX_DATA, _OP_MSG_DATA, MAX_CHUNK_BYTES, _lz4, _record,
-                                  _u32, map_file)
-from .window_buffer import Record
+from .formats.bag_salvage import (MAX_CHUNK_BYTES, OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA, field_u32,
+                                  lz4_decompress, map_file, read_record)
+from .window_buffer import records_of
 
-__all__ = ['read_raw', 'MAX_CHUNK_BYTES']
+__all__ = ['read_raw', 'read_runs', 'MAX_CHUNK_BYTES']
 
 CACHED_CHUNKS = 4  # decompressed chunks kept (bags whose connections were written into interleaved chunks)
 RECORDS_BLOCK = 65536  # index entries turned into Python objects at a time
 
-_OP_FIELD = b'\x04\x00\x00\x00op=%c' % _OP_MSG_DATA
+_OP_FIELD = b'\x04\x00\x00\x00op=%c' % OP_MSG_DATA
 _MSG_HEADER_LEN = 38      # op, conn and time fields with their lengths
 _OP_AT = (0, 13, 17, 30)  # where the op field starts in a message data header, for each order of its fields
 _INDEX_ENTRY = np.dtype([('secs', '<u4'), ('nsecs', '<u4'), ('offset', '<u4')])
@@ -37,6 +39,11 @@ class _Damaged(Exception):
 
 def read_raw(path, topics):
     """``bagio.read_raw`` (same records, same order, same errors) read by walking the chunks."""
+    yield from itertools.chain.from_iterable(read_runs(path, topics))
+
+
+def read_runs(path, topics):
+    """``read_raw``'s records as lists of consecutive records (those of one chunk, at most RECORDS_BLOCK)."""
     if isinstance(topics, str):
         topics = [topics]
     bag = bagio.open_bag(path, skip_index=True)
@@ -50,7 +57,7 @@ def read_raw(path, topics):
     finally:
         bag.close()
     if reader is None:  # an encrypted bag: rosbag decrypts it
-        yield from bagio.read_raw(path, topics)
+        yield list(bagio.read_raw(path, topics))
         return
     yield from reader.records()
 
@@ -75,7 +82,7 @@ class _Reader(object):
         return ValueError('%s: bag is truncated or damaged (%s)' % (self.path, what))
 
     def records(self):
-        """Yield the records (see ``read_raw``)."""
+        """Yield lists of the records (see ``read_raw``), a run of one chunk's at a time."""
         data, size = map_file(self.path)
         try:
             try:
@@ -94,12 +101,12 @@ class _Reader(object):
         for k, (info, header) in enumerate(self.chunks):
             pos = header.data_pos + header.compressed_size
             for _ in range(len(info.connection_counts)):
-                found = _record(data, pos, len(data))
-                if found is None or found[1] != _OP_INDEX_DATA or found[2] + found[3] > len(data):
+                found = read_record(data, pos, len(data))
+                if found is None or found[1] != OP_INDEX_DATA or found[2] + found[3] > len(data):
                     raise _Damaged('index of the chunk at byte %d' % info.pos)
                 fields, _, start, length = found
                 try:
-                    conn, count, version = _u32(fields, 'conn'), _u32(fields, 'count'), _u32(fields, 'ver')
+                    conn, count, version = (field_u32(fields, name) for name in ('conn', 'count', 'ver'))
                 except ValueError as error:
                     raise _Damaged('index of the chunk at byte %d: %s' % (info.pos, error))
                 if version != 1 or count * _INDEX_ENTRY.itemsize > length:
@@ -127,28 +134,32 @@ class _Reader(object):
         return conns[order], chunks[order], stamps[order], offsets[order]
 
     def _records(self, data, index):
+        """Lists of records: the consecutive ones of one chunk, at most RECORDS_BLOCK at a time, built without
+        a Python call per record."""
         conns, chunks, stamps, offsets = index
         topics = [c.topic for c in self.connections]
         headers = self.headers
         by_chunk = np.argsort(chunks, kind='stable')  # the messages of chunk k: by_chunk[bounds[k]:bounds[k + 1]]
         bounds = np.searchsorted(chunks[by_chunk], np.arange(len(self.chunks) + 1))
-        current, chunk, starts, ends = -1, b'', {}, {}
         cache = collections.OrderedDict()  # chunk number -> (data, starts, ends), the CACHED_CHUNKS last used
         for block in range(0, len(conns), RECORDS_BLOCK):  # Python lists of a block at a time, not of the bag
             part = slice(block, block + RECORDS_BLOCK)
-            for number, k, stamp, offset in zip(conns[part].tolist(), chunks[part].tolist(), stamps[part].tolist(),
-                                                offsets[part].tolist()):
-                if k != current:
-                    if k not in cache:
-                        data_k = self._chunk(data, k)
-                        mine = np.unique(offsets[by_chunk[bounds[k]:bounds[k + 1]]])
-                        cache[k] = (data_k,) + self._extents(data_k, k, mine)
-                        if len(cache) > CACHED_CHUNKS:
-                            cache.popitem(last=False)
-                    cache.move_to_end(k)
-                    chunk, starts, ends = cache[k]
-                    current = k
-                yield Record(stamp, topics[number], None, 0, chunk[starts[offset]:ends[offset]], headers[number])
+            in_chunks = chunks[part]
+            edges = [0] + (np.flatnonzero(in_chunks[1:] != in_chunks[:-1]) + 1).tolist() + [len(in_chunks)]
+            numbers, times, places = conns[part].tolist(), stamps[part].tolist(), offsets[part].tolist()
+            for first, stop, k in zip(edges[:-1], edges[1:], in_chunks[edges[:-1]].tolist()):
+                if k not in cache:
+                    data_k = self._chunk(data, k)
+                    mine = np.unique(offsets[by_chunk[bounds[k]:bounds[k + 1]]])
+                    cache[k] = (data_k,) + self._extents(data_k, k, mine)
+                    if len(cache) > CACHED_CHUNKS:
+                        cache.popitem(last=False)
+                cache.move_to_end(k)
+                chunk, starts, ends = cache[k]
+                run, kinds = places[first:stop], numbers[first:stop]
+                raws = map(chunk.__getitem__, map(slice, map(starts.__getitem__, run), map(ends.__getitem__, run)))
+                yield records_of(times[first:stop], map(topics.__getitem__, kinds), itertools.repeat(None),
+                                 itertools.repeat(0), raws, map(headers.__getitem__, kinds))
 
     def _chunk(self, data, k):
         """The decompressed data of chunk ``k``."""
@@ -164,7 +175,7 @@ class _Reader(object):
         if header.compression == 'none':
             chunk, whole = payload, True
         elif header.compression == 'lz4':
-            chunk, whole = _lz4(payload, declared)
+            chunk, whole = lz4_decompress(payload, declared)
         elif header.compression == 'bz2':
             decompressor = bz2.BZ2Decompressor()
             try:
@@ -213,13 +224,13 @@ class _Reader(object):
         connection records (as rosbag reads it)."""
         pos = offset
         while True:
-            found = _record(chunk, pos, len(chunk))
+            found = read_record(chunk, pos, len(chunk))
             if found is None or found[2] + found[3] > len(chunk):
                 raise self._damaged('message record at %d of the chunk at byte %d' % (pos, self.chunks[k][0].pos))
             _, op, start, length = found
-            if op == _OP_MSG_DATA:
+            if op == OP_MSG_DATA:
                 return start, start + length
-            if op != _OP_CONNECTION:
+            if op != OP_CONNECTION:
                 raise self._damaged('expected a message data record at %d of the chunk at byte %d, got op %r'
                                     % (pos, self.chunks[k][0].pos, op))
             pos = start + length

@@ -11,6 +11,7 @@ bytes of a type whose first field is a ``std_msgs/Header``.
 
 Pure: roslib and genpy, no rospy.
 """
+import functools
 import struct
 
 import genpy
@@ -20,6 +21,7 @@ from . import safe_input
 
 HEADER_TYPES = frozenset(['Header', 'std_msgs/Header', 'roslib/Header'])
 _STAMP = struct.Struct('<II')  # secs, nsecs after the header's seq
+_HEADER_STAMP = functools.partial(_STAMP.unpack_from, offset=4)
 DECODE_ERRORS = (genpy.DeserializationError, ValueError, TypeError, struct.error, IndexError, KeyError)
 
 
@@ -115,7 +117,27 @@ def stamp(raw, connection, fallback):
         secs, nsecs = _STAMP.unpack_from(raw, 4)
         if secs or nsecs:
             return secs + nsecs * 1e-9
-    return fallback.to_sec() if hasattr(fallback, 'to_sec') else float(fallback)
+    return _seconds(fallback)
+
+
+def stamps(raws, connections, fallbacks):
+    """``stamp`` of each of ``raws`` (with its connection and fallback), the header's bytes read in bulk."""
+    distinct = dict(zip(map(id, connections), connections)).values()
+    headers = [has_header(connection) for connection in distinct]
+    if all(headers):
+        try:
+            return [secs + nsecs * 1e-9 if secs or nsecs else _seconds(fallback)
+                    for (secs, nsecs), fallback in zip(map(_HEADER_STAMP, raws), fallbacks)]
+        except struct.error:  # a message shorter than a header: its fallback
+            pass
+    elif not any(headers):
+        return list(map(_seconds, fallbacks))
+    return list(map(stamp, raws, connections, fallbacks))
+
+
+def _seconds(stamp):
+    """Float seconds of a float or anything with ``to_sec``."""
+    return stamp.to_sec() if hasattr(stamp, 'to_sec') else float(stamp)
 
 
 def is_latched(connection):

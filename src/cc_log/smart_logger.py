@@ -32,6 +32,7 @@ Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
 import collections
 import itertools
 import math
+import operator
 import threading
 import time
 
@@ -44,7 +45,7 @@ from .spans import Span
 from .triggers import (DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger,
                        ManualTrigger)
 from .window_buffer import (DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE,
-                            RAW_RECORD_OVERHEAD, MemoryCost, Record, WindowBuffer)
+                            RAW_RECORD_OVERHEAD, MemoryCost, Record, WindowBuffer, records_of)
 
 __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into', 'replay_records',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
@@ -60,6 +61,8 @@ REPLAY_BATCH = 256      # replay: records fed to the logger at a time (``on_reco
 #                         looked at after each batch
 DECODED_PART_FACTOR = 8.0  # memory the json-xz writer needs per serialized byte of a part: decoded messages and
 #                            JSON rows (nav_msgs/Odometry: 0.7 KB serialized, 3.5 KB decoded, ~2 KB of row dict)
+_TOPIC, _RAW, _CONNECTION, _STAMP, _MSG = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp', 'msg'))
+_TYPE = operator.itemgetter('type')
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
 
 OPENED = 'opened'
@@ -126,6 +129,33 @@ class RawJsonEstimate(object):
                 entry[3] += json_bytes
         entry[0] += 1
         entry[1] += len(raw)
+
+    def count_all(self, raws, connections):
+        """``count`` of each message in turn (``raws`` and their ``connections``), looking each type up once."""
+        types = list(map(_TYPE, connections))
+        for msg_type in dict.fromkeys(types):
+            if types.count(msg_type) == len(types):
+                places = range(len(raws))
+            else:
+                places = list(itertools.compress(range(len(raws)), map(msg_type.__eq__, types)))
+            entry = self._types.get(msg_type)
+            if entry is None:
+                entry = self._types[msg_type] = [0, 0, 0, 0]
+            seen = entry[0]
+            first = range(min(max(self.first - seen, 0), len(places)))  # the first of the type: all sampled
+            start = max(seen, self.first)
+            every = range(start + (-start) % self.every - seen, len(places), self.every)  # then every every-th
+            for k in itertools.chain(first, every):
+                raw = raws[places[k]]
+                try:
+                    json_bytes = self._counter.count(raw_message.decode(raw, connections[places[k]]))
+                except raw_message.DECODE_ERRORS:
+                    json_bytes = None
+                if json_bytes is not None:
+                    entry[2] += len(raw)
+                    entry[3] += json_bytes
+            entry[0] += len(places)
+            entry[1] += sum(map(len, map(raws.__getitem__, places)))
 
     @property
     def total(self):
@@ -206,6 +236,7 @@ class SmartLogger(object):
         self._timed = [trigger for trigger in self.triggers if trigger.watches_time]
         self._batched = [trigger for trigger in self.triggers if trigger.batched and not trigger.watches_time]
         self._decode = {}  # (topic, id(connection)) -> (connection, whether a trigger of the topic reads fields)
+        self._accepted = {}  # (id(connection), topic) -> connection: its messages are wanted and of the topic's type
         self._lock = threading.RLock()
         self._stats = _Stats()
         self._raw = msg_codec.RowJsonCounter()
@@ -284,6 +315,17 @@ class SmartLogger(object):
         ``raw_message.UndecodableRecord`` (its ``index`` in ``records``: those before it were taken)."""
         with self._lock:
             self._check_open('on_records')
+            topics = list(map(_TOPIC, records))
+            connections = list(map(_CONNECTION, records))
+            pairs = set(zip(map(id, connections), topics))
+            accepted = self._accepted
+            if all(pair in accepted for pair in pairs):  # every record wanted and of its topic's type
+                self._raw_estimate.count_all(list(map(_RAW, records)), connections)
+                with self._stats.lock:
+                    self._stats.messages_seen += len(records)
+                if self._enabled:
+                    self._take_raw(records, topics, connections, range(len(records)))
+                return
             count = self._raw_estimate.count
             wanted = []
             for index, record in enumerate(records):
@@ -294,18 +336,26 @@ class SmartLogger(object):
                 self._stats.messages_seen += len(wanted)
             if not self._enabled:
                 return
-            stamp = raw_message.stamp
-            taken, places = [], []
+            places = []
             for index in wanted:
                 record = records[index]
                 if self._type_ok(record.topic, record.connection['type']):
-                    taken.append(Record(stamp(record.raw, record.connection, record.stamp), record.topic, None,
-                                        len(record.raw) + RAW_RECORD_OVERHEAD, record.raw, record.connection))
+                    accepted.setdefault((id(record.connection), record.topic), record.connection)
                     places.append(index)
-            try:
-                self._take_all(taken)
-            except raw_message.UndecodableRecord as error:
-                raise raw_message.UndecodableRecord(places[error.index], error.topic, error.error)
+            self._take_raw([records[index] for index in places], [topics[index] for index in places],
+                           [connections[index] for index in places], places)
+
+    def _take_raw(self, records, topics, connections, places):
+        """``_take_all`` of serialized records, restamped with their header stamps and costed by their length;
+        ``places``: where each is in the batch fed (said by an ``UndecodableRecord``)."""
+        raws = list(map(_RAW, records))
+        stamps = raw_message.stamps(raws, connections, list(map(_STAMP, records)))
+        costs = list(map(RAW_RECORD_OVERHEAD.__add__, map(len, raws)))
+        taken = records_of(stamps, topics, itertools.repeat(None), costs, raws, connections)
+        try:
+            self._take_all(taken, topics, connections)
+        except raw_message.UndecodableRecord as error:
+            raise raw_message.UndecodableRecord(places[error.index], error.topic, error.error)
 
     def _needs_message(self, record, triggers):
         """Whether a trigger reads fields of ``record``'s messages (memoised per topic and connection)."""
@@ -325,43 +375,71 @@ class SmartLogger(object):
             record = record._replace(cost=self._cost.of(record))  # the buffer keeps this very record
         self._take_all([record])
 
-    def _take_all(self, records):
+    def _take_all(self, records, topics=None, connections=None):
         """Buffer records (each with its cost) and run the triggers of their topics: first every trigger that
         reads a batch (``batched``) over its records of the batch, then, record by record, the buffer and the
-        Fires of every trigger in order (those that read fields get the record decoded)."""
-        views, error = self._views(records)
+        Fires of every trigger in order (those that read fields get the record decoded). ``topics``,
+        ``connections``: of the records, when known."""
+        topics = list(map(_TOPIC, records)) if topics is None else topics
+        connections = list(map(_CONNECTION, records)) if connections is None else connections
+        views, error = self._views(records, topics, connections)
         if error is not None:
             error = raw_message.UndecodableRecord(len(views), records[len(views)].topic, error)
             records = records[:len(views)]
+            topics, connections = topics[:len(views)], connections[:len(views)]
+        present = set(topics)
         ahead = {}  # batched trigger -> its Fires of each of its records, in order
         for trigger in self._batched:
-            mine = [view for view in views if view.topic in trigger.topics]
+            if present <= trigger.topics:
+                mine = views
+            else:
+                mine = list(itertools.compress(views, map(trigger.topics.__contains__, topics)))
             if mine:
                 ahead[trigger] = iter(trigger.on_records(mine))
         driving = self.driving_topic
         by_topic = self._by_topic
-        for record, view in zip(records, views):
-            topic = record.topic
-            if raw_message.is_latched(record.connection):
+        timed, latched, fire = self._timed, self._latched_of(connections), self._fire
+        for record, view, topic in zip(records, views, topics):
+            if latched and raw_message.is_latched(record.connection):
                 self._latched.setdefault(topic, collections.deque(maxlen=LATCHED_KEPT)).append(record)
             if topic == driving:
-                self._add_driving(record)
+                done = self._buffer.add(record)
+                if done:
+                    self._complete(done)
+                self._last_stamp = record.stamp
             else:
-                self._complete(self._buffer.add_side(record))
+                done = self._buffer.add_side(record)
+                if done:
+                    self._complete(done)
             for trigger in by_topic.get(topic, ()):
                 fires = ahead.get(trigger)
-                self._fire(next(fires) if fires is not None else trigger.on_record(view))
-            for trigger in self._timed:
-                self._fire(trigger.on_time(record.stamp))
+                fires = next(fires) if fires is not None else trigger.on_record(view)
+                if fires:
+                    fire(fires)
+            for trigger in timed:
+                fires = trigger.on_time(record.stamp)
+                if fires:
+                    fire(fires)
         if error is not None:
             raise error
 
-    def _views(self, records):
+    @staticmethod
+    def _latched_of(connections):
+        """Whether any of ``connections`` latches."""
+        distinct = dict(zip(map(id, connections), connections)).values()
+        return any(raw_message.is_latched(connection) for connection in distinct)
+
+    def _views(self, records, topics, connections):
         """``(the records as the triggers see them: decoded where a trigger of the topic reads fields, the
         error decoding one)``; the views stop before a record that cannot be decoded."""
+        by_topic = self._by_topic
+        firsts = dict(zip(zip(map(id, connections), topics), records))  # one record of each connection and topic
+        if not any(record.msg is None and topic in by_topic and self._needs_message(record, by_topic[topic])
+                   for (_, topic), record in firsts.items()):
+            return records, None
         views = list(records)
         for k, record in enumerate(records):
-            triggers = self._by_topic.get(record.topic)
+            triggers = by_topic.get(record.topic)
             if record.msg is None and triggers and self._needs_message(record, triggers):
                 try:
                     views[k] = raw_message.decoded(record)  # before buffering: one that cannot be decoded is not kept
@@ -517,10 +595,6 @@ class SmartLogger(object):
             trigger.reset()
         self._last_stamp = None
 
-    def _add_driving(self, record):
-        self._complete(self._buffer.add(record))
-        self._last_stamp = record.stamp
-
     def _fire(self, fires):
         """Open or extend windows for the Fires of a trigger."""
         for fire in fires:
@@ -668,7 +742,8 @@ def replay_into(logger, bag_path, progress=None):
             bag.close()
     else:
         topics = [logger.driving_topic] + sorted(logger.side_topics)
-    return replay_records(logger, bag_reader.read_raw(bag_path, topics), progress, bag_path)
+    records = itertools.chain.from_iterable(bag_reader.read_runs(bag_path, topics))  # no Python call per record
+    return replay_records(logger, records, progress, bag_path)
 
 
 def _batches(records, size=None):
@@ -678,7 +753,7 @@ def _batches(records, size=None):
         batch = list(itertools.islice(stream, size or REPLAY_BATCH))
         if not batch:
             return
-        if all(record.msg is None for record in batch) or all(record.msg is not None for record in batch):
+        if list(map(_MSG, batch)).count(None) in (0, len(batch)):
             yield batch
             continue
         for _, run in itertools.groupby(batch, key=lambda record: record.msg is None):

@@ -18,6 +18,7 @@ window is ever dropped.
 Everything is pure Python: records carry any message object, stamps are float seconds.
 """
 import collections
+import itertools
 import sys
 
 from .spans import Span
@@ -27,6 +28,13 @@ Record.__doc__ = """One message: its stamp (float seconds), topic, message objec
 bytes (``cost``; 0: not known, WindowBuffer estimates it); ``raw`` and ``connection``: its serialized bytes and
 connection header (a dict: type, md5sum, message_definition, and live also callerid and latching), alongside
 or instead of the decoded ``msg`` (None until something reads a field: ``raw_message.decoded``)."""
+
+
+def records_of(stamps, topics, msgs, costs, raws, connections):
+    """The list of ``Record``s of these columns (iterables, one item per record), built without a Python call per
+    record."""
+    return list(map(tuple.__new__, itertools.repeat(Record), zip(stamps, topics, msgs, costs, raws, connections)))
+
 
 Trigger = collections.namedtuple('Trigger', 'stamp reason score name', defaults=(None,))
 Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
@@ -208,6 +216,8 @@ class WindowBuffer(object):
         self.max_buffer_bytes = budget_bytes(max_buffer_mb)
         self._part_bytes = int(part_bytes(self.max_buffer_bytes) / max(1.0, float(part_factor)))
         self._cost = cost if cost is not None else MemoryCost()
+        self._pre_count = None if self.pre.is_duration else self.pre.count  # (None: a duration)
+        self._max_count = None if self.max_window.is_duration else self.max_window.count
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
@@ -240,38 +250,52 @@ class WindowBuffer(object):
 
     def add(self, record):
         """Add a driving record; return the windows this completes."""
-        record = self._costed(record)
+        if not record.cost:
+            record = self._costed(record)
         done = []
-        if self._clock is not None and record.stamp < self._clock - self.jump_back_tolerance:
+        stamp, clock = record.stamp, self._clock
+        if clock is not None and stamp < clock - self.jump_back_tolerance:
             done.extend(self.flush())
             self._reset()
-        self._clock = record.stamp if self._clock is None else max(self._clock, record.stamp)
-        if self._open is not None:
-            if self._open.takes(self._clock):
-                self._open.take(record)
+            clock = None
+        if clock is None or stamp > clock:
+            self._clock = clock = stamp
+        window = self._open
+        if window is not None:
+            if window.remaining > 0 or (window.until is not None and clock <= window.until):  # window.takes(clock)
+                window.take(record)
                 self._bytes += record.cost
-                done.extend(self._split(self._open))
-                done.extend(self._enforce_budget())
+                if self._max_count is None or len(window.records) >= self._max_count:
+                    done.extend(self._split(window))
+                if self._bytes > self._part_bytes and self.max_buffer_bytes:
+                    done.extend(self._enforce_budget())
                 return done
             # Pending even when a split left it empty: a touching window continues its parts.
-            self._pending, self._open = self._open, None
-        self._ring.append(record)
+            self._pending, self._open = window, None
+        ring = self._ring
+        ring.append(record)
         self._bytes += record.cost
-        if self._trim_ring(self.pre) and self._pending is not None:
-            if self._pending.records:
-                done.append(self._emit(self._pending))
-            self._pending = None
-        self._prune_side()
-        done.extend(self._enforce_budget())
+        if self._pre_count is None or len(ring) > self._pre_count + 1:  # else nothing to trim
+            if self._trim_ring(self.pre) and self._pending is not None:
+                if self._pending.records:
+                    done.append(self._emit(self._pending))
+                self._pending = None
+        if self._side:
+            self._prune_side()
+        if self._bytes > self._part_bytes and self.max_buffer_bytes:
+            done.extend(self._enforce_budget())
         return done
 
     def add_side(self, record):
         """Add a record of another topic; it is saved in the window whose time span holds it. Returns the
         windows this completes (parts written because the memory budget was reached)."""
-        record = self._costed(record)
+        if not record.cost:
+            record = self._costed(record)
         self._side.append(record)
         self._bytes += record.cost
-        return self._enforce_budget()
+        if self._bytes > self._part_bytes and self.max_buffer_bytes:
+            return self._enforce_budget()
+        return []
 
     def trigger(self, reason, score=None, name=None, pre=None, post=None):
         """Mark the last driving record: open a window around it or extend the open one.
@@ -399,15 +423,17 @@ class WindowBuffer(object):
 
     def _prune_side(self):
         """Drop records of other topics older than every driving record still held."""
-        oldest = None
-        for window in (self._pending, self._open):
-            if window is not None and window.records:
-                oldest = window.records[0].stamp
-                break
-        if oldest is None and self._ring:
+        if self._pending is not None and self._pending.records:
+            oldest = self._pending.records[0].stamp
+        elif self._open is not None and self._open.records:
+            oldest = self._open.records[0].stamp
+        elif self._ring:
             oldest = self._ring[0].stamp
-        while self._side and oldest is not None and self._side[0].stamp < oldest:
-            self._bytes -= self._side.popleft().cost
+        else:
+            return
+        side = self._side
+        while side and side[0].stamp < oldest:
+            self._bytes -= side.popleft().cost
 
     def _emit(self, window, records=None, everything=False):
         """Turn a window (or the given first records of it) into a LogWindow with the side records of its

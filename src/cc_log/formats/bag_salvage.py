@@ -51,7 +51,7 @@ def map_file(path, follow=True):
 
 # -- reading a rosbag 2.0 file cut off mid-write ------------------------------------------------------------
 
-_OP_MSG_DATA, _OP_FILE_HEADER, _OP_INDEX_DATA, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONNECTION = 2, 3, 4, 5, 6, 7
+OP_MSG_DATA, OP_FILE_HEADER, OP_INDEX_DATA, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION = 2, 3, 4, 5, 6, 7  # record ops
 _U32 = struct.Struct('<I')
 _LZ4_MAGIC = b'\x04\x22\x4d\x18'
 _LZ4_STEP = 1 << 16  # compressed bytes decompressed at a time (bounds what one step can expand to)
@@ -74,7 +74,7 @@ def _fields(header):
     return fields
 
 
-def _record(data, pos, end):
+def read_record(data, pos, end):
     """(header fields, op, data start, data length) of the record at ``pos``, or None when its header is cut
     off at ``end`` or malformed."""
     if pos + 4 > end:
@@ -90,7 +90,8 @@ def _record(data, pos, end):
     return fields, op[0] if len(op) == 1 else None, header_end + 4, _U32.unpack_from(data, header_end)[0]
 
 
-def _u32(fields, name):
+def field_u32(fields, name):
+    """The little-endian uint32 of header field ``name`` (of ``read_record``'s fields); ValueError when missing."""
     value = fields.get(name, b'')
     if len(value) != 4:
         raise ValueError('header field %s missing' % name)
@@ -115,7 +116,7 @@ def _lz4_extent(data):
     return len(data)
 
 
-def _lz4(data, limit):
+def lz4_decompress(data, limit):
     """(what roslz4 stream ``data`` decompresses to, as far as it goes; True when no error or limit stopped it)."""
     import roslz4
     decompressor = roslz4.LZ4Decompressor()
@@ -163,31 +164,31 @@ class _Salvage(object):
             raise ValueError('not a rosbag 2.0 file')
         pos = len(MAGIC)
         while pos < size:
-            found = _record(data, pos, size)
+            found = read_record(data, pos, size)
             if found is None:
                 claimed = _U32.unpack_from(data, pos)[0] if pos + 4 <= size else 0
                 if claimed <= _MAX_HEADER and size < pos + 8 + claimed:
                     self.decoded += size - pos  # a record header cut off: no message data in it yet
                 break
             fields, op, start, length = found
-            if pos == len(MAGIC) and op != _OP_FILE_HEADER:
+            if pos == len(MAGIC) and op != OP_FILE_HEADER:
                 raise ValueError('not a rosbag 2.0 file (no bag header record)')
             end = start + length
             undecoded = self.undecoded
-            if op == _OP_CHUNK and (not length or end > size):  # being written (its sizes not yet set), cut off
+            if op == OP_CHUNK and (not length or end > size):  # being written (its sizes not yet set), cut off
                 self._cut_chunk(fields, pos, start, end if length else size)
                 break
             if end > size:
-                if op in (_OP_INDEX_DATA, _OP_CHUNK_INFO):
+                if op in (OP_INDEX_DATA, OP_CHUNK_INFO):
                     self.decoded += size - pos  # a cut-off index holds nothing the chunks do not
                 break
-            if op == _OP_CHUNK:
+            if op == OP_CHUNK:
                 done = self._chunk(fields, data[start:end])
-            elif op in (_OP_CONNECTION, _OP_MSG_DATA):  # records outside chunks
+            elif op in (OP_CONNECTION, OP_MSG_DATA):  # records outside chunks
                 done = self._records(data[pos:end]) == end - pos
             else:
-                done = op in (_OP_FILE_HEADER, _OP_INDEX_DATA, _OP_CHUNK_INFO)
-                if op == _OP_FILE_HEADER:
+                done = op in (OP_FILE_HEADER, OP_INDEX_DATA, OP_CHUNK_INFO)
+                if op == OP_FILE_HEADER:
                     self.header_end = end
                     self.decoded += len(MAGIC)
             if done and self.undecoded == undecoded:
@@ -201,13 +202,13 @@ class _Salvage(object):
         if compression == b'none':
             return payload, True
         if compression == b'lz4':
-            return _lz4(payload, limit)
+            return lz4_decompress(payload, limit)
         self._problem('chunk compressed with %r' % compression.decode('ascii', 'replace'))
         return b'', False
 
     def _chunk(self, fields, payload):
         try:
-            size = _u32(fields, 'size')
+            size = field_u32(fields, 'size')
         except ValueError as error:
             self._problem('chunk: %s' % error)
             return False
@@ -236,20 +237,20 @@ class _Salvage(object):
         """Read the connection and message records in ``raw``; return the bytes they take (whole records)."""
         pos = 0
         while pos < len(raw):
-            found = _record(raw, pos, len(raw))
+            found = read_record(raw, pos, len(raw))
             if found is None or found[2] + found[3] > len(raw):
                 break
             fields, op, start, length = found
-            if op == _OP_CONNECTION:
+            if op == OP_CONNECTION:
                 self._connection(fields, raw[start:start + length])
-            elif op == _OP_MSG_DATA:
+            elif op == OP_MSG_DATA:
                 self._message(fields, raw[start:start + length])
             pos = start + length
         return pos
 
     def _connection(self, fields, payload):
         try:
-            conn = _u32(fields, 'conn')
+            conn = field_u32(fields, 'conn')
         except ValueError as error:
             self._problem('connection: %s' % error)
             return
@@ -270,7 +271,7 @@ class _Salvage(object):
 
     def _message(self, fields, payload):
         try:
-            topic, cls = self.connections.get(_u32(fields, 'conn'), (None, None))
+            topic, cls = self.connections.get(field_u32(fields, 'conn'), (None, None))
             secs, nsecs = struct.unpack('<II', fields.get('time', b''))
             if cls is None:
                 raise ValueError('messages of a connection that could not be read')
