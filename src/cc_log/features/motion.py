@@ -143,62 +143,60 @@ class MotionFeatures(OdometrySet):
         except (TypeError, ValueError, OverflowError):
             return FeatureSet.row_block(self, items, stamps, raw, span)
         n = len(items)
-        values = self.read_block(items, raw)
-        q = values[:, 3:7]
-        with np.errstate(all='ignore'):
-            n2 = q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1] + q[:, 2] * q[:, 2] + q[:, 3] * q[:, 3]
-            ok = np.isfinite(values).all(axis=1) & np.isfinite(times) & (n2 > 1e-12) & (n2 < 1e12)
+        with np.errstate(all='ignore'):   # non-finite values are only flagged here; their rows go one by one
+            cols = np.ascontiguousarray(self.read_block(items, raw).T)   # (13, n): one row per read value
+            n2 = cols[3] * cols[3] + cols[4] * cols[4] + cols[5] * cols[5] + cols[6] * cols[6]
+            ok = np.isfinite(cols).all(axis=0) & np.isfinite(times) & (n2 > 1e-12) & (n2 < 1e12)
             dt = times[1:] - times[:-1]
             step = ok[1:] & ok[:-1] & (dt >= self.min_dt) & (dt <= self.max_dt)
-        slow = np.flatnonzero(~step) + 1    # the messages that are no plain step from the one before
-        span = Span.parse(span, 'window')
-        row_of = self.row_values_raw if raw else self.row_values
-        rows = np.empty((n, len(self.columns)))
-        covered = np.empty(n, dtype=bool)
-        i = 0
-        while i < n:
-            rows[i] = row_of(items[i], stamps[i])
-            covered[i] = self.covers(span, stamps[i])
-            end = i + 1
-            if ok[i] and self._kind != REPEAT:   # message i is the reference of the next step
-                later = np.searchsorted(slow, end)
-                end = int(slow[later]) if later < len(slow) else n
-                if end > i + 1:
-                    end = self._steps(values, n2, times, i, end, rows, covered, span)
-            i = end
+            slow = np.flatnonzero(~step) + 1    # the messages that are no plain step from the one before
+            span = Span.parse(span, 'window')
+            row_of = self.row_values_raw if raw else self.row_values
+            rows = np.empty((n, len(self.columns)))
+            covered = np.empty(n, dtype=bool)
+            i = 0
+            while i < n:
+                rows[i] = row_of(items[i], stamps[i])
+                covered[i] = self.covers(span, stamps[i])
+                end = i + 1
+                if ok[i] and self._kind != REPEAT:   # message i is the reference of the next step
+                    later = np.searchsorted(slow, end)
+                    end = int(slow[later]) if later < len(slow) else n
+                    if end > i + 1:
+                        end = self._steps(cols, n2, times, i, end, rows, covered, span)
+                i = end
         return rows, covered
 
-    def _steps(self, values, n2, times, ref, end, rows, covered, span):
+    def _steps(self, cols, n2, times, ref, end, rows, covered, span):
         """Rows ``ref + 1 .. end - 1`` of a run of plain steps (each from the message before, ``ref`` the
         reference in the state) into ``rows`` and ``covered``, the state after the last; stops before a row that
         would not be finite (message by message decides it). Returns the index after the last row made."""
         start = ref + 1
-        with np.errstate(all='ignore'):
-            norm = np.sqrt(n2[ref:end])
-            quat = values[ref:end, 3:7] / norm[:, None]
-            inv = 1.0 / (times[start:end] - times[ref:end - 1])
-            cur, prev = values[start:end].T, values[ref:end - 1].T
-            p, v, w = tuple(cur[0:3]), tuple(cur[7:10]), tuple(cur[10:13])
-            q, q0 = tuple(quat[1:].T), tuple(quat[:-1].T)
-            # jerk needs the acceleration of the step before: the state's for the first, then the block's own
-            accel = self._prev[4]
-            a0 = np.empty((3, end - start))
-            a0[:, 0] = (0.0, 0.0, 0.0) if accel is None else accel
-            a0[:, 1:] = ((cur[7:10] - prev[7:10]) * inv)[:, :-1]
-            deriv = step_channels(tuple(prev[0:3]), q0, tuple(prev[7:10]), tuple(a0), p, q, v, inv, np.sqrt)
-            if accel is None:
-                deriv[3][0] = 0.0
-            block = np.column_stack(motion_row(v, w, q, deriv, np.sqrt))
-            finite = np.isfinite(block).all(axis=1)
+        quat = cols[3:7, ref:end] / np.sqrt(n2[ref:end])
+        inv = 1.0 / (times[start:end] - times[ref:end - 1])
+        cur, prev = cols[:, start:end], cols[:, ref:end - 1]
+        p, v, w = tuple(cur[0:3]), tuple(cur[7:10]), tuple(cur[10:13])
+        q, q0 = tuple(quat[:, 1:]), tuple(quat[:, :-1])
+        # jerk needs the acceleration of the step before: the state's for the first, then the block's own
+        accel = self._prev[4]
+        a0 = np.empty((3, end - start))
+        a0[:, 0] = (0.0, 0.0, 0.0) if accel is None else accel
+        a0[:, 1:] = ((cur[7:10, :-1] - prev[7:10, :-1]) * inv[:-1])
+        deriv = step_channels(tuple(prev[0:3]), q0, tuple(prev[7:10]), tuple(a0), p, q, v, inv, np.sqrt)
+        if accel is None:
+            deriv[3][0] = 0.0
+        block = np.array(motion_row(v, w, q, deriv, np.sqrt)).T
+        finite = np.isfinite(block).all(axis=1)
         if not finite.all():
             end = start + int(np.argmin(finite))
             if end == start:
                 return start
             block, deriv = block[:end - start], tuple(column[:end - start] for column in deriv)
-        np.clip(block, -CLIP, CLIP, out=rows[start:end])
+        np.minimum(np.maximum(block, -CLIP), CLIP, out=rows[start:end])
         last = end - 1 - start
-        self._prev = (tuple(cur[0:3, last].tolist()), tuple(quat[last + 1].tolist()), tuple(cur[7:10, last].tolist()),
-                      tuple(cur[10:13, last].tolist()), tuple(float(column[last]) for column in deriv[:3]))
+        self._prev = (tuple(cur[0:3, last].tolist()), tuple(quat[:, last + 1].tolist()),
+                      tuple(cur[7:10, last].tolist()), tuple(cur[10:13, last].tolist()),
+                      tuple(float(column[last]) for column in deriv[:3]))
         self._deriv = tuple(float(column[last]) for column in deriv)
         self._last_row = tuple(rows[end - 1].tolist())
         self._kind, self._dt = STEP, float(times[end - 1] - times[end - 2])
