@@ -4,7 +4,6 @@ with repeated stamps, gaps, backwards time, non-finite fields, bad quaternions, 
 cut messages and changing frame ids, wherever the blocks are cut."""
 import io
 import math
-import os
 
 import numpy as np
 import pytest
