@@ -134,7 +134,7 @@ def config_of(feature_set, rate):
     return FeatureConfig(feature_set, WINDOW)
 
 
-def train(pieces, config, options, margin=learning.DEFAULT_MARGIN):
+def train(pieces, config, options, margin=learning.DEFAULT_MARGIN, scaling='standard'):
     """A model of the vectors (one per message) of ``pieces``, lists of records each of one continuous run."""
     X = []
     for records in pieces:
@@ -147,7 +147,7 @@ def train(pieces, config, options, margin=learning.DEFAULT_MARGIN):
         model, _ = learning.train(X, config=config, nu=0.5, gamma=1.0 / vector_length(config))
         model.threshold = 0.0
     else:
-        model, _ = learning.train(X, config=config, margin=margin)
+        model, _ = learning.train(X, config=config, margin=margin, scaling=scaling)
     return model, len(X)
 
 
@@ -177,7 +177,8 @@ def calibrate(model, runs, topic, rule, margin):
 
 
 def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN, injection='bwibot',
-            threshold='trained', calibration=0.25, calibration_margin=learning.DEFAULT_MARGIN, train_on='self'):
+            threshold='trained', calibration=0.25, calibration_margin=learning.DEFAULT_MARGIN, train_on='self',
+            scaling='standard'):
     """A run's records, its replayed part, the model (threshold per ``threshold``, trained per ``train_on``:
     the run's first part, or with ``robot`` also every other run of its robot in full) and the keyword
     arguments of ``sim.inject_anomalies`` for ``injection`` (at the scale of the run's own first part)."""
@@ -188,10 +189,10 @@ def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN
     pieces = [first] + ([load(*run) for run in other_runs(name)] if train_on == 'robot' else [])
     if threshold == 'calibrated':
         cuts = [split(piece, 1.0 - calibration) for piece in pieces]
-        model, vectors = train([fit for fit, _ in cuts], config, options, margin)
+        model, vectors = train([fit for fit, _ in cuts], config, options, margin, scaling)
         calibrate(model, [held for _, held in cuts], topic, rule, calibration_margin)
     else:
-        model, vectors = train(pieces, config, options, margin)
+        model, vectors = train(pieces, config, options, margin, scaling)
     model.info = dict(model.info, nominal_seconds=sum(piece[-1].stamp - piece[0].stamp for piece in pieces))
     inject = dict(topic=topic, warmup=3.0, gap=2.0)
     if injection == 'robot':
@@ -357,13 +358,15 @@ def main(argv=None):
                         help='with --threshold calibrated: lower by this x (held-out median - threshold)')
     parser.add_argument('--train-on', default='self', choices=TRAIN_ON,
                         help="self: the run's first part; robot: also every other run of its robot in full")
+    parser.add_argument('--scaling', default='standard', choices=learning.SCALINGS,
+                        help="learning.train's vector scaling: mean / std, or median / interquartile spread")
     parser.add_argument('--separability', action='store_true',
                         help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     types = sim.parse_anomaly_types(args.types, 'types')
     how = dict(types=types, injection=args.injection, threshold=args.threshold, calibration=args.calibration,
-               calibration_margin=args.calibration_margin, train_on=args.train_on)
+               calibration_margin=args.calibration_margin, train_on=args.train_on, scaling=args.scaling)
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
     settings = args.settings.split(',')
     started = time.time()
@@ -378,9 +381,10 @@ def main(argv=None):
                        args.threshold, '' if args.threshold == 'trained' else
                        ' on the last %g of every training piece (tuning.tune, 0 false windows), margin %g' % (
                            args.calibration, args.calibration_margin)),
-                   'training on: %s' % ("each run's first part" if args.train_on == 'self' else
-                                        "each run's first part and every other run of its robot in full (%s)" % (
-                                            '; '.join(', '.join(runs) for runs in ROBOTS.values())))])
+                   'scaling: %s; training on: %s' % (
+                       args.scaling, "each run's first part" if args.train_on == 'self' else
+                       "each run's first part and every other run of its robot in full (%s)" % (
+                           '; '.join(', '.join(runs) for runs in ROBOTS.values())))])
     if args.separability:
         for setting in settings:
             rows = []
