@@ -7,6 +7,7 @@ simulator anomalies; recall by type and latency, false windows per hour, kept me
     python3 bench/detection_runs.py --runs f1tenth_DS1 --seeds 0 --settings ours   # one run, quick
     python3 bench/detection_real.py --only runs           # the same, from the detection bench
     python3 bench/detection_runs.py --settings ours --injection robot --threshold calibrated  # second round
+    python3 bench/detection_runs.py --settings ours --train-on robot --injection robot   # third round
 
 For each run of RUNS (../shared/data/real/, SOURCES.md there): the odometry up to ``--train`` of its duration
 (default 0.5) trains a model (``learning.train`` defaults, nominal only); the rest is replayed through the
@@ -31,6 +32,18 @@ largest yaw rate, a localization jump moves 0.6-2 s of its top speed (the BWIBot
 ``calibrated`` trains on the first (1 - ``--calibration``) of the training part and sets the threshold with
 ``tuning.tune`` (``cclog tune``, budget 0 false windows/h) on the rest of it (held-out nominal driving, the
 same trigger and windows), then lowers it by ``--calibration-margin`` x (held-out median - threshold).
+
+``--train-on``: ``self`` trains on the run's first part alone; ``robot`` also on every other run of the same
+robot (ROBOTS: F1/10 DS1-DS5, the four ICE-lab runs, the two Pioneer traces) in full, each run's vectors
+computed apart (no feature window across two runs), as a lab that trains on the robot's earlier runs would;
+the replayed part and its injections (at the scale of the run's own first part) are the same as with ``self``.
+Husky and ALFA have one run each and keep ``self``. With ``--threshold calibrated`` the last ``--calibration``
+of every training piece (the first part and each other run) is held out and calibrates.
+
+Besides kept/needed over every injection, the bench prints it over the anomalies whose windows hold no false
+fire (the window rule's own fit), and for every catch later than LATENCY what the classifications within
+LATENCY of the onset did (``why_late``): an open window from an earlier fire, no whole-window classification,
+an anomalous score the retrigger rule did not fire on, or every score above the threshold.
 
 ``--separability``: per run, no windows: the deepest nominal score of the replayed part against the
 shallowest injected anomaly onset (within LATENCY), as depth in units of the model's threshold; whether any
@@ -134,7 +147,7 @@ def config_of(feature_set, rate):
     return FeatureConfig(feature_set, WINDOW)
 
 
-def train(pieces, config, options, margin=learning.DEFAULT_MARGIN, scaling='standard'):
+def train(pieces, config, options, margin=learning.DEFAULT_MARGIN):
     """A model of the vectors (one per message) of ``pieces``, lists of records each of one continuous run."""
     X = []
     for records in pieces:
@@ -147,7 +160,7 @@ def train(pieces, config, options, margin=learning.DEFAULT_MARGIN, scaling='stan
         model, _ = learning.train(X, config=config, nu=0.5, gamma=1.0 / vector_length(config))
         model.threshold = 0.0
     else:
-        model, _ = learning.train(X, config=config, margin=margin, scaling=scaling)
+        model, _ = learning.train(X, config=config, margin=margin)
     return model, len(X)
 
 
@@ -177,8 +190,7 @@ def calibrate(model, runs, topic, rule, margin):
 
 
 def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN, injection='bwibot',
-            threshold='trained', calibration=0.25, calibration_margin=learning.DEFAULT_MARGIN, train_on='self',
-            scaling='standard'):
+            threshold='trained', calibration=0.25, calibration_margin=learning.DEFAULT_MARGIN, train_on='self'):
     """A run's records, its replayed part, the model (threshold per ``threshold``, trained per ``train_on``:
     the run's first part, or with ``robot`` also every other run of its robot in full) and the keyword
     arguments of ``sim.inject_anomalies`` for ``injection`` (at the scale of the run's own first part)."""
@@ -189,10 +201,10 @@ def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN
     pieces = [first] + ([load(*run) for run in other_runs(name)] if train_on == 'robot' else [])
     if threshold == 'calibrated':
         cuts = [split(piece, 1.0 - calibration) for piece in pieces]
-        model, vectors = train([fit for fit, _ in cuts], config, options, margin, scaling)
+        model, vectors = train([fit for fit, _ in cuts], config, options, margin)
         calibrate(model, [held for _, held in cuts], topic, rule, calibration_margin)
     else:
-        model, vectors = train(pieces, config, options, margin, scaling)
+        model, vectors = train(pieces, config, options, margin)
     model.info = dict(model.info, nominal_seconds=sum(piece[-1].stamp - piece[0].stamp for piece in pieces))
     inject = dict(topic=topic, warmup=3.0, gap=2.0)
     if injection == 'robot':
@@ -236,7 +248,7 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     every = nominal_fires if rule == 'every' else fires(model, rest, topic, 'every')
     persistence = [sum(1 for t in every if a <= t <= b) for a, b in windows_of(every)]
     result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': model.info['nominal_seconds'],
-              'vectors': vectors,
+              'vectors': vectors, 'replay_from': rest[0].stamp - records[0].stamp,
               'replay_s': seconds, 'false_nominal': len(nominal_windows), 'nominal_windows': nominal_windows,
               'caught': collections.Counter(), 'total': collections.Counter(), 'late': collections.Counter(),
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
@@ -358,15 +370,13 @@ def main(argv=None):
                         help='with --threshold calibrated: lower by this x (held-out median - threshold)')
     parser.add_argument('--train-on', default='self', choices=TRAIN_ON,
                         help="self: the run's first part; robot: also every other run of its robot in full")
-    parser.add_argument('--scaling', default='standard', choices=learning.SCALINGS,
-                        help="learning.train's vector scaling: mean / std, or median / interquartile spread")
     parser.add_argument('--separability', action='store_true',
                         help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     types = sim.parse_anomaly_types(args.types, 'types')
     how = dict(types=types, injection=args.injection, threshold=args.threshold, calibration=args.calibration,
-               calibration_margin=args.calibration_margin, train_on=args.train_on, scaling=args.scaling)
+               calibration_margin=args.calibration_margin, train_on=args.train_on)
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
     settings = args.settings.split(',')
     started = time.time()
@@ -381,8 +391,8 @@ def main(argv=None):
                        args.threshold, '' if args.threshold == 'trained' else
                        ' on the last %g of every training piece (tuning.tune, 0 false windows), margin %g' % (
                            args.calibration, args.calibration_margin)),
-                   'scaling: %s; training on: %s' % (
-                       args.scaling, "each run's first part" if args.train_on == 'self' else
+                   'training on: %s' % (
+                       "each run's first part" if args.train_on == 'self' else
                        "each run's first part and every other run of its robot in full (%s)" % (
                            '; '.join(', '.join(runs) for runs in ROBOTS.values())))])
     if args.separability:
@@ -433,7 +443,7 @@ def main(argv=None):
                 oddities.append('%s: windows without injection from %s s after the run start (replay from %.0f s)'
                                 % (name, ', '.join('%.1f-%.1f' % (a - r['start'], b - r['start'])
                                                    for a, b in r['nominal_windows']) or 'none',
-                                   r['train_s']))
+                                   r['replay_from']))
         print('setting %s: %s features, retrigger %s %s' % (setting, SETTINGS[setting][0], SETTINGS[setting][1],
                                                             SETTINGS[setting][2] or ''))
         common.table(['run', 'Hz', 'train s', 'replay s', 'false windows (no injection)', 'false/h', 'kept',

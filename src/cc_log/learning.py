@@ -38,7 +38,6 @@ NU_GRID = (0.005, 0.02, 0.05, 0.1)
 GAMMA_FACTOR_GRID = (0.1, 0.25, 0.5, 1.0, 2.0)
 MIN_VECTORS = 10               # fewer nominal vectors cannot be split into training and held-out blocks
 METHODS = ('auto', 'exact', 'nystroem')
-SCALINGS = ('standard', 'robust')  # vectors standardised by mean / std, or by median / interquartile spread
 
 Report = collections.namedtuple('Report', 'total tp fp fn tn precision recall')
 Report.__doc__ = 'Counts with positive = anomalous; precision and recall are fractions (nan when undefined).'
@@ -177,22 +176,12 @@ class _Fitted(object):
         return self.model.scores(X)
 
 
-def _center_scale(X, scaling):
-    """Per column: mean and std (``standard``, scikit-learn's StandardScaler: 1.0 for a constant column), or
-    median and interquartile range / 1.349 (``robust``: the std of a normal distribution, so both agree on
-    normal data; StandardScaler's where that range is 0)."""
+def _fit(X, config, nu, gamma, method, names, seed):
     from sklearn.preprocessing import StandardScaler
     scaler = StandardScaler().fit(X)
-    if scaling != 'robust':
-        return scaler.mean_, scaler.scale_
-    low, center, high = np.percentile(X, [25, 50, 75], axis=0)
-    spread = (high - low) / 1.349
-    return center, np.where(spread > 0, spread, scaler.scale_)
-
-
-def _fit(X, config, nu, gamma, method, names, seed, scaling='standard'):
-    mean, scale = _center_scale(X, scaling)
-    Z = (X - mean) / scale
+    Z = scaler.transform(X)
+    mean = scaler.mean_
+    scale = scaler.scale_  # sklearn uses 1.0 for constant columns
     if method == 'nystroem':
         from sklearn.kernel_approximation import Nystroem
         from sklearn.linear_model import SGDOneClassSVM
@@ -202,12 +191,12 @@ def _fit(X, config, nu, gamma, method, names, seed, scaling='standard'):
         sgd = SGDOneClassSVM(nu=nu, random_state=seed, max_iter=50, tol=1e-4).fit(features)
         kernel = {'components': nystroem.components_, 'normalization': nystroem.normalization_,
                   'coef': sgd.coef_.ravel(), 'offset': float(np.ravel(sgd.offset_)[0]), 'gamma': gamma}
-        return _Fitted(config, mean, scale, 'nystroem-sgd', kernel, names), (nystroem, sgd)
+        return _Fitted(config, mean, scale, 'nystroem-sgd', kernel, names), (nystroem, sgd, scaler)
     from sklearn.svm import OneClassSVM
     svm = OneClassSVM(kernel='rbf', nu=nu, gamma=gamma, cache_size=200).fit(Z)
     kernel = {'support_vectors': svm.support_vectors_, 'dual_coef': svm.dual_coef_.ravel(),
               'intercept': float(svm.intercept_[0]), 'gamma': gamma}
-    return _Fitted(config, mean, scale, 'ocsvm', kernel, names), svm
+    return _Fitted(config, mean, scale, 'ocsvm', kernel, names), (svm, scaler)
 
 
 def nominal_threshold(scores, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN):
@@ -220,7 +209,7 @@ def nominal_threshold(scores, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN):
 
 def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='auto',
           holdout=DEFAULT_HOLDOUT, blocks=DEFAULT_BLOCKS, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN,
-          max_exact=DEFAULT_MAX_EXACT, names=None, seed=0, scaling='standard'):
+          max_exact=DEFAULT_MAX_EXACT, names=None, seed=0):
     """Train a one-class SVM; return ``(AnomalyModel, info)``.
 
     ``nominal`` (and ``anomalous``) are 2-D arrays of window vectors in time order. ``config`` is the
@@ -229,14 +218,12 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     grid when anomalous vectors are given and they are None. ``method``: 'exact' (OneClassSVM on all
     training vectors), 'nystroem' (Nystroem + SGDOneClassSVM), 'auto' (exact; above ``max_exact`` training
     vectors, on an even subsample in time). ``info`` holds the figures of the run (sizes, parameters,
-    threshold calibration, training seconds, peak memory). ``scaling``: one of SCALINGS.
+    threshold calibration, training seconds, peak memory).
     """
     started = time.time()
     config = config if config is not None else FeatureConfig()
     if method not in METHODS:
         raise ValueError('method: %r is not one of %s' % (method, ', '.join(METHODS)))
-    if scaling not in SCALINGS:
-        raise ValueError('scaling: %r is not one of %s' % (scaling, ', '.join(SCALINGS)))
     X = np.asarray(nominal, dtype=float)
     if X.ndim != 2:
         raise ValueError('nominal: need a 2-D array of vectors, got shape %s' % (X.shape,))
@@ -275,7 +262,7 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
         gammas = [f / dimension for f in GAMMA_FACTOR_GRID] if gamma is None else (gamma,)
         for candidate_nu in nus:
             for candidate_gamma in gammas:
-                fitted, _ = _fit(X_train, config, candidate_nu, candidate_gamma, fit_method, names, seed, scaling)
+                fitted, _ = _fit(X_train, config, candidate_nu, candidate_gamma, fit_method, names, seed)
                 held_scores = fitted.scores(X_held)
                 anomalous_scores = fitted.scores(A)
                 threshold = _recall_threshold(held_scores, anomalous_scores)
@@ -296,7 +283,7 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
         gamma = DEFAULT_GAMMA_FACTOR / dimension if gamma is None else float(gamma)
         reductions = 0
         while True:
-            fitted, _ = _fit(X_train, config, nu, gamma, fit_method, names, seed, scaling)
+            fitted, _ = _fit(X_train, config, nu, gamma, fit_method, names, seed)
             held_scores = fitted.scores(X_held)
             floor = _score_floor(fitted.model)
             low = float(np.quantile(held_scores, quantile))
