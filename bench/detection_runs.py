@@ -7,6 +7,7 @@ simulator anomalies; recall by type and latency, false windows per hour, kept me
     python3 bench/detection_runs.py --runs f1tenth_DS1 --seeds 0 --settings ours   # one run, quick
     python3 bench/detection_real.py --only runs           # the same, from the detection bench
     python3 bench/detection_runs.py --settings ours --injection robot --threshold calibrated  # second round
+    python3 bench/detection_runs.py --settings ours --train-on robot --injection robot   # third round
 
 For each run of RUNS (../shared/data/real/, SOURCES.md there): the odometry up to ``--train`` of its duration
 (default 0.5) trains a model (``learning.train`` defaults, nominal only); the rest is replayed through the
@@ -32,6 +33,18 @@ largest yaw rate, a localization jump moves 0.6-2 s of its top speed (the BWIBot
 ``tuning.tune`` (``cclog tune``, budget 0 false windows/h) on the rest of it (held-out nominal driving, the
 same trigger and windows), then lowers it by ``--calibration-margin`` x (held-out median - threshold).
 
+``--train-on``: ``self`` trains on the run's first part alone; ``robot`` also on every other run of the same
+robot (ROBOTS: F1/10 DS1-DS5, the four ICE-lab runs, the two Pioneer traces) in full, each run's vectors
+computed apart (no feature window across two runs), as a lab that trains on the robot's earlier runs would;
+the replayed part and its injections (at the scale of the run's own first part) are the same as with ``self``.
+Husky and ALFA have one run each and keep ``self``. With ``--threshold calibrated`` the last ``--calibration``
+of every training piece (the first part and each other run) is held out and calibrates.
+
+Besides kept/needed over every injection, the bench prints it over the anomalies whose windows hold no false
+fire (the window rule's own fit), and for every catch later than LATENCY what the classifications within
+LATENCY of the onset did (``why_late``): an open window from an earlier fire, no whole-window classification,
+an anomalous score the retrigger rule did not fire on, or every score above the threshold.
+
 ``--separability``: per run, no windows: the deepest nominal score of the replayed part against the
 shallowest injected anomaly onset (within LATENCY), as depth in units of the model's threshold; whether any
 threshold could separate them. ``--types``: inject only these simulator types.
@@ -45,6 +58,7 @@ engine failure (+116.25 s).
 """
 import argparse
 import collections
+import functools
 import os
 import sys
 import time
@@ -67,6 +81,16 @@ RUNS = [
     ('socspioneer_trace0', '/odom', None), ('socspioneer_trace1', '/odom', None),
     ('alfa_carbonZ_engine_failure', '/mavros/local_position/odom', 116.25),
 ]
+# The runs of one robot (``--train-on robot``: each run is replayed by a model trained on the others in full plus
+# its own first part); a robot with one run (Husky, ALFA) keeps the run's own first part.
+ROBOTS = collections.OrderedDict([
+    ('husky', ('husky_outdoor_2015',)),
+    ('f1tenth', ('f1tenth_DS1', 'f1tenth_DS2', 'f1tenth_DS3', 'f1tenth_DS4', 'f1tenth_DS5')),
+    ('icelab', ('icelab_normal_plan', 'icelab_normal_plan_1', 'icelab_window_plan', 'icelab_window_plan_1')),
+    ('pioneer', ('socspioneer_trace0', 'socspioneer_trace1')),
+    ('alfa', ('alfa_carbonZ_engine_failure',)),
+])
+TRAIN_ON = ('self', 'robot')
 WINDOW = '2s'
 PRE = POST = 2.0
 CLASSIFY_EVERY = '50ms'
@@ -86,13 +110,24 @@ def bag_path(name):
     return os.path.normpath(os.path.join(os.path.dirname(common.HUSKY_BAG), name + '.bag'))
 
 
-def load(name, topic, stop):
-    """The odometry records of a run (up to ``stop`` seconds after its start when given)."""
+@functools.lru_cache(maxsize=None)
+def _read(name, topic, stop):
     records = list(bagio.read_messages(bag_path(name), [topic]))
     start = records[0].stamp
     if stop is not None:
         records = [r for r in records if r.stamp - start < stop]
-    return records
+    return tuple(records)
+
+
+def load(name, topic, stop):
+    """The odometry records of a run (up to ``stop`` seconds after its start when given)."""
+    return list(_read(name, topic, stop))
+
+
+def other_runs(name):
+    """``(name, topic, stop)`` of every other run of ``name``'s robot (ROBOTS) that is in RUNS."""
+    robot = next((runs for runs in ROBOTS.values() if name in runs), (name,))
+    return [run for run in RUNS if run[0] in robot and run[0] != name]
 
 
 def split(records, fraction):
@@ -112,9 +147,12 @@ def config_of(feature_set, rate):
     return FeatureConfig(feature_set, WINDOW)
 
 
-def train(records, config, options, margin=learning.DEFAULT_MARGIN):
-    stream = FeatureStream(config, every=1)
-    X = [v for v in (stream.add(r.msg, r.stamp) for r in records) if v is not None]
+def train(pieces, config, options, margin=learning.DEFAULT_MARGIN):
+    """A model of the vectors (one per message) of ``pieces``, lists of records each of one continuous run."""
+    X = []
+    for records in pieces:
+        stream = FeatureStream(config, every=1)
+        X += [v for v in (stream.add(r.msg, r.stamp) for r in records) if v is not None]
     if len(X) < learning.MIN_VECTORS:
         raise ValueError('%d training vectors' % len(X))
     X = np.array(X)
@@ -140,30 +178,34 @@ def inside(stamps, intervals):
     return sum(1 for t in stamps if any(a <= t <= b for a, b in intervals))
 
 
-def calibrate(model, records, topic, rule, margin):
-    """Set ``model.threshold`` on held-out nominal ``records`` with ``tuning.tune`` (no false window), from
-    above every score of theirs, then lower it by ``margin`` x (held-out median - threshold)."""
+def calibrate(model, runs, topic, rule, margin):
+    """Set ``model.threshold`` on held-out nominal ``runs`` (lists of records) with ``tuning.tune`` (no false
+    window), from above every score of theirs, then lower it by ``margin`` x (held-out median - threshold)."""
     model.info = dict(model.info, trained_threshold=model.threshold)
-    model.threshold = float(np.max(tuning.step_scores(model, records, topic, CLASSIFY_EVERY))) + 1.0
-    tuning.tune(model, [records], topic, 0.0, '%gs' % PRE, '%gs' % POST, CLASSIFY_EVERY, rule)
+    model.threshold = max(float(np.max(tuning.step_scores(model, records, topic, CLASSIFY_EVERY)))
+                          for records in runs) + 1.0
+    tuning.tune(model, runs, topic, 0.0, '%gs' % PRE, '%gs' % POST, CLASSIFY_EVERY, rule)
     model.threshold -= margin * max(model.info['held_out_score_median'] - model.threshold, 0.0)
     return model
 
 
 def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN, injection='bwibot',
-            threshold='trained', calibration=0.25, calibration_margin=learning.DEFAULT_MARGIN):
-    """A run's records, its replayed part, the model (threshold per ``threshold``) and the keyword arguments
-    of ``sim.inject_anomalies`` for ``injection``."""
+            threshold='trained', calibration=0.25, calibration_margin=learning.DEFAULT_MARGIN, train_on='self'):
+    """A run's records, its replayed part, the model (threshold per ``threshold``, trained per ``train_on``:
+    the run's first part, or with ``robot`` also every other run of its robot in full) and the keyword
+    arguments of ``sim.inject_anomalies`` for ``injection`` (at the scale of the run's own first part)."""
     feature_set, rule, options = SETTINGS[setting]
     records = load(name, topic, stop)
     first, rest = split(records, fraction)
     config = config_of(feature_set, rate_of(records))
+    pieces = [first] + ([load(*run) for run in other_runs(name)] if train_on == 'robot' else [])
     if threshold == 'calibrated':
-        fit, held = split(first, 1.0 - calibration)
-        model, vectors = train(fit, config, options, margin)
-        calibrate(model, held, topic, rule, calibration_margin)
+        cuts = [split(piece, 1.0 - calibration) for piece in pieces]
+        model, vectors = train([fit for fit, _ in cuts], config, options, margin)
+        calibrate(model, [held for _, held in cuts], topic, rule, calibration_margin)
     else:
-        model, vectors = train(first, config, options, margin)
+        model, vectors = train(pieces, config, options, margin)
+    model.info = dict(model.info, nominal_seconds=sum(piece[-1].stamp - piece[0].stamp for piece in pieces))
     inject = dict(topic=topic, warmup=3.0, gap=2.0)
     if injection == 'robot':
         envelope = sim.nominal_envelope(first, topic)
@@ -205,12 +247,13 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     nominal_windows = windows_of(nominal_fires)
     every = nominal_fires if rule == 'every' else fires(model, rest, topic, 'every')
     persistence = [sum(1 for t in every if a <= t <= b) for a, b in windows_of(every)]
-    result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': first[-1].stamp - first[0].stamp,
-              'vectors': vectors,
+    result = {'run': name, 'start': records[0].stamp, 'rate': rate, 'train_s': model.info['nominal_seconds'],
+              'vectors': vectors, 'replay_from': rest[0].stamp - records[0].stamp,
               'replay_s': seconds, 'false_nominal': len(nominal_windows), 'nominal_windows': nominal_windows,
               'caught': collections.Counter(), 'total': collections.Counter(), 'late': collections.Counter(),
               'no_room': collections.Counter(), 'latency': collections.defaultdict(list), 'false_injected': 0,
-              'injected_s': 0.0, 'kept': 0, 'needed': 0, 'window': config.window,
+              'injected_s': 0.0, 'kept': 0, 'needed': 0, 'clean': 0, 'clean_kept': 0, 'clean_needed': 0,
+              'late_cases': [], 'window': config.window,
               'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest)),
               'persistence': persistence, 'threshold': model.threshold, 'scale': describe_scale(name, inject),
               'calibrated': describe_threshold(name, model)}
@@ -231,14 +274,47 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
                 result['latency'][kind].append(near[0] - entry['start'])
                 if near[0] - entry['start'] > LATENCY:
                     result['late'][kind] += 1
+                    result['late_cases'].append(why_late(model, injected, topic, rule, stamps, entry, kind, seed))
             result['false_injected'] += sum(
                 1 for a, b in windows if not any(entry['start'] <= t <= entry['end'] + reach and a <= t <= b
                                                  for t in stamps))
             result['injected_s'] += seconds
             odom = [r.stamp for r in injected]
-            result['kept'] += inside(odom, windows)
-            result['needed'] += inside(odom, [(entry['start'] - PRE, entry['end'] + POST)])
+            kept = inside(odom, windows)
+            needed = inside(odom, [(entry['start'] - PRE, entry['end'] + POST)])
+            result['kept'] += kept
+            result['needed'] += needed
+            own = [(a, b) for a, b in windows if any(a <= t <= b for t in near)]
+            if near and not any(a <= t <= b for a, b in own for t in stamps if t not in near):
+                # the anomaly's windows hold no false fire: the window rule's own fit
+                result['clean'] += 1
+                result['clean_kept'] += inside(odom, own)
+                result['clean_needed'] += needed
     return result
+
+
+def why_late(model, injected, topic, rule, stamps, entry, kind, seed):
+    """A catch later than LATENCY: what the classifications within LATENCY of its onset did. 'open': a fire
+    within POST before the onset (its window already logs the onset); 'not scored': no classification of a
+    whole feature window within LATENCY; 'suppressed': one scored anomalous but the retrigger rule did not fire;
+    'above threshold': every score stayed above the threshold (the model's ranking)."""
+    onset = entry['start']
+    times, scores = scored(model, injected, topic)
+    near = (times >= onset) & (times <= onset + LATENCY)
+    before = [t for t in stamps if onset - POST <= t < onset]
+    if before:
+        cause = 'open'
+    elif not near.any():
+        cause = 'not scored'
+    elif (scores[near] < model.threshold).any():
+        cause = 'suppressed (%s)' % rule
+    else:
+        cause = 'above threshold'
+    median = model.info['held_out_score_median']
+    depth = (median - float(scores[near].min())) / (median - model.threshold) if near.any() else float('nan')
+    first = next(t for t in stamps if t >= onset)
+    return {'kind': kind, 'seed': seed, 'onset': onset, 'latency': first - onset, 'cause': cause,
+            'depth': depth, 'scored': int(near.sum()), 'anomalous': int((scores[near] < model.threshold).sum())}
 
 
 def scored(model, records, topic):
@@ -292,13 +368,15 @@ def main(argv=None):
                         help='with --threshold calibrated: the last part of the training part that calibrates')
     parser.add_argument('--calibration-margin', type=float, default=learning.DEFAULT_MARGIN,
                         help='with --threshold calibrated: lower by this x (held-out median - threshold)')
+    parser.add_argument('--train-on', default='self', choices=TRAIN_ON,
+                        help="self: the run's first part; robot: also every other run of its robot in full")
     parser.add_argument('--separability', action='store_true',
                         help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     types = sim.parse_anomaly_types(args.types, 'types')
     how = dict(types=types, injection=args.injection, threshold=args.threshold, calibration=args.calibration,
-               calibration_margin=args.calibration_margin)
+               calibration_margin=args.calibration_margin, train_on=args.train_on)
     runs = [r for r in RUNS if not args.runs or r[0] in args.runs.split(',')]
     settings = args.settings.split(',')
     started = time.time()
@@ -311,8 +389,12 @@ def main(argv=None):
                        args.injection, "the simulator's BWIBot magnitudes" if args.injection == 'bwibot' else
                        "each run's own nominal envelope (sim.nominal_envelope of its training part)",
                        args.threshold, '' if args.threshold == 'trained' else
-                       ' on the last %g of the training part (tuning.tune, 0 false windows), margin %g' % (
-                           args.calibration, args.calibration_margin))])
+                       ' on the last %g of every training piece (tuning.tune, 0 false windows), margin %g' % (
+                           args.calibration, args.calibration_margin)),
+                   'training on: %s' % (
+                       "each run's first part" if args.train_on == 'self' else
+                       "each run's first part and every other run of its robot in full (%s)" % (
+                           '; '.join(', '.join(runs) for runs in ROBOTS.values())))])
     if args.separability:
         for setting in settings:
             rows = []
@@ -329,12 +411,12 @@ def main(argv=None):
         rows, totals = [], collections.Counter()
         by_type = collections.defaultdict(collections.Counter)
         latencies = collections.defaultdict(list)
-        oddities, persistence = [], []
+        oddities, persistence, late_cases = [], [], []
         for name, topic, stop in runs:
             try:
                 r = evaluate_run(name, topic, stop, setting, seeds, args.train, args.margin, **how)
             except ValueError as error:
-                rows.append([name, '-', '-', '-', '-', '-', '-', 'not run: %s' % error, '-', '-'])
+                rows.append([name, '-', '-', '-', '-', '-', '-', 'not run: %s' % error, '-', '-', '-'])
                 continue
             caught, total = sum(r['caught'].values()), sum(r['total'].values())
             late = sum(r['late'].values())
@@ -342,10 +424,14 @@ def main(argv=None):
                          r['false_nominal'], '%.1f' % (3600.0 * r['false_nominal'] / r['replay_s']),
                          '%.0f%%' % (100.0 * r['nominal_kept']),
                          '%s (%d late, %d no room)' % (pct(caught, total), late, sum(r['no_room'].values())),
-                         r['false_injected'], '%.2fx' % (r['kept'] / float(r['needed'])) if r['needed'] else '-'])
+                         r['false_injected'], '%.2fx' % (r['kept'] / float(r['needed'])) if r['needed'] else '-',
+                         '%.2fx (%d)' % (r['clean_kept'] / float(r['clean_needed']), r['clean'])
+                         if r['clean_needed'] else '-'])
             totals.update({'false': r['false_nominal'], 'replay_s': r['replay_s'], 'caught': caught,
                            'total': total, 'late': late, 'kept': r['kept'], 'needed': r['needed'],
-                           'false_injected': r['false_injected']})
+                           'false_injected': r['false_injected'], 'clean': r['clean'],
+                           'clean_kept': r['clean_kept'], 'clean_needed': r['clean_needed']})
+            late_cases += [dict(case, run=name) for case in r['late_cases']]
             totals['injected_s'] += r['injected_s']
             persistence += r['persistence']
             for kind in types:
@@ -357,11 +443,12 @@ def main(argv=None):
                 oddities.append('%s: windows without injection from %s s after the run start (replay from %.0f s)'
                                 % (name, ', '.join('%.1f-%.1f' % (a - r['start'], b - r['start'])
                                                    for a, b in r['nominal_windows']) or 'none',
-                                   r['train_s']))
+                                   r['replay_from']))
         print('setting %s: %s features, retrigger %s %s' % (setting, SETTINGS[setting][0], SETTINGS[setting][1],
                                                             SETTINGS[setting][2] or ''))
         common.table(['run', 'Hz', 'train s', 'replay s', 'false windows (no injection)', 'false/h', 'kept',
-                      'caught (late > %gs)' % LATENCY, 'false windows (injected)', 'kept/needed'], rows)
+                      'caught (late > %gs)' % LATENCY, 'false windows (injected)', 'kept/needed',
+                      'kept/needed, no false fire in its windows (n)'], rows)
         common.table(['type', 'caught', 'late', 'no room', 'median latency s', 'worst latency s'],
                      [[kind, pct(c['caught'], c['total']), c['late'], c['no_room'],
                        '%.2f' % np.median(latencies[kind]) if latencies[kind] else '-',
@@ -374,6 +461,15 @@ def main(argv=None):
                   totals['false'] / hours if hours else 0.0, totals['false_injected'], totals['injected_s'] / 3600.0,
                   totals['false_injected'] / (totals['injected_s'] / 3600.0) if totals['injected_s'] else 0.0,
                   totals['kept'] / float(totals['needed']) if totals['needed'] else float('nan')))
+        print('kept/needed over the %d anomalies whose windows hold no false fire: %.2fx' % (
+            totals['clean'], totals['clean_kept'] / float(totals['clean_needed']) if totals['clean_needed']
+            else float('nan')))
+        if late_cases:
+            common.table(['run', 'type', 'seed', 'latency s', 'why', 'classifications within %gs' % LATENCY,
+                          'of them anomalous', 'deepest (1 = threshold)'],
+                         [[c['run'], c['kind'], c['seed'], '%.2f' % c['latency'], c['cause'], c['scored'],
+                           c['anomalous'], '%.2f' % c['depth']] for c in late_cases],
+                         'later than %gs:' % LATENCY)
         if persistence:
             print('anomalous classifications per false window without injection (retrigger every): median %d, '
                   'fewer than %d (what a %g s persistence rule could remove): %d of %d windows' % (
