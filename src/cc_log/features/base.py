@@ -159,6 +159,32 @@ def statistics(array):
     return np.concatenate((mean, std, np.minimum.reduce(array, axis=0), np.maximum.reduce(array, axis=0)))
 
 
+WINDOW_BLOCK = 1 << 20  # floats: window_statistics gathers at most about this many at a time
+
+
+def window_statistics(array, starts, ends):
+    """``statistics(array[start:end])`` of every ``(start, end)`` pair (non-empty slices of a 2-D array), as the
+    rows of a 2-D array, computed together: the slices of each length gathered into one 3-D array."""
+    starts, ends = np.asarray(starts, dtype=np.intp), np.asarray(ends, dtype=np.intp)
+    lengths = ends - starts
+    width = array.shape[1]
+    out = np.empty((len(starts), 4 * width))
+    if len(starts) and lengths.min() < 1:
+        raise ValueError('rows: the feature window is empty')
+    for count in np.unique(lengths).tolist():
+        which = np.flatnonzero(lengths == count)
+        step = max(1, WINDOW_BLOCK // (count * width))
+        for first in range(0, len(which), step):
+            part = which[first:first + step]
+            block = array[starts[part, None] + np.arange(count)]  # (slices, rows, columns)
+            mean = np.add.reduce(block, axis=1) / count
+            centred = block - mean[:, None, :]
+            std = np.sqrt(np.einsum('kij,kij->kj', centred, centred) / count)
+            out[part] = np.concatenate((mean, std, np.minimum.reduce(block, axis=1),
+                                        np.maximum.reduce(block, axis=1)), axis=1)
+    return out
+
+
 _UINT32 = struct.Struct('<I')
 
 
