@@ -72,6 +72,7 @@ class FeatureWindow(object):
         self._data = np.zeros((size + 1, self._width))
         self._stamps = np.zeros(size + 1)
         self._hi = 0   # the rows held are _data[_lo:_hi]
+        self._origin = 0  # rows added before the one at _data[0] (window_statistics' blocks count from the first)
         self.clear()
         vector = getattr(self.feature.vector, '__func__', None)
         self._statistics = vector is not None and vector is FeatureSet.vector.__func__
@@ -112,6 +113,7 @@ class FeatureWindow(object):
             data, stamps = self._data, self._stamps
         data[:held] = self._data[self._lo:self._hi]
         stamps[:held] = self._stamps[self._lo:self._hi]
+        self._origin += self._lo
         self._data, self._stamps, self._lo, self._hi = data, stamps, 0, held
 
     def add(self, stamp, row):
@@ -178,7 +180,7 @@ class FeatureWindow(object):
         2-D array: the statistics of all of them at once for a set whose vector is the default one, else
         one ``vector`` each."""
         if self._statistics:
-            return window_statistics(self._data, starts, ends)
+            return window_statistics(self._data, starts, ends, self._origin)
         vectors = [self.feature.vector(self._data[start:end], self.span) for start, end in zip(starts, ends)]
         return np.array(vectors, dtype=float).reshape(len(vectors), self.feature.vector_length(self.span))
 
