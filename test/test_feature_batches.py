@@ -244,8 +244,8 @@ def test_the_window_array_grows_and_moves_without_changing_the_rows_held():
             starts, ends, full = ring.add_block(stamps, rows)
             held += list(zip(stamps, rows[:, 0]))
             assert ring.buffer[ends[-1] - 1, 0] == held[-1][1]
-            assert [r[0] for r in ring.rows()] == [r for s, r in held if
-                                                  (s >= held[-1][0] - 0.5 if window == '0.5s' else True)][-len(ring):]
+            kept = [r for s, r in held if window != '0.5s' or s >= held[-1][0] - 0.5]
+            assert [r[0] for r in ring.rows()] == kept[-len(ring):]
             assert len(full) == size and ends[-1] - starts[-1] == len(ring)
         assert ring.full
 

@@ -211,7 +211,6 @@ class ClassifierTrigger(Trigger):
         return result
 
 
-
 def scores_of(model, vectors):
     """The scores of ``vectors`` (a list of 1-D arrays), each exactly what the model gives one vector:
     ``AnomalyModel.score_each``, or one ``is_anomalous`` call at a time for another model."""
