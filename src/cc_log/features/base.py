@@ -159,6 +159,82 @@ def statistics(array):
     return np.concatenate((mean, std, np.minimum.reduce(array, axis=0), np.maximum.reduce(array, axis=0)))
 
 
+WINDOW_GRID = 32  # rows: window_statistics shares the blocks of this many rows between overlapping slices
+
+
+def _ranges(lows, highs):
+    """The indices of the ranges ``[low, high)`` one after the other (a 1-D int array)."""
+    sizes = highs - lows
+    return np.arange(sizes.sum()) + np.repeat(lows - (np.cumsum(sizes) - sizes), sizes)
+
+
+def _pieces(rows, cuts, sizes):
+    """Sum, mean, squared deviation from the mean, min and max of the pieces ``rows[cut:cut + size]`` (one after
+    the other, none empty), each a row of a 2-D array."""
+    sums = np.add.reduceat(rows, cuts, axis=0)
+    means = sums / sizes[:, None]
+    centred = rows - np.repeat(means, sizes, axis=0)
+    return (sums, means, np.add.reduceat(centred * centred, cuts, axis=0), np.minimum.reduceat(rows, cuts, axis=0),
+            np.maximum.reduceat(rows, cuts, axis=0))
+
+
+def window_statistics(array, starts, ends, origin=0):
+    """``statistics(array[start:end])`` of every ``(start, end)`` pair (non-empty slices of a 2-D array), as the
+    rows of a 2-D array, computed together.
+
+    Overlapping slices share the work: each slice is cut into the whole blocks of WINDOW_GRID rows it holds
+    (row ``origin + i`` of a count kept since the first: a block starts at a multiple of WINDOW_GRID) between a
+    head and a tail of its own; the sum, mean, squared deviation from its mean, min and max of every block and
+    every head and tail are taken once, and a slice's statistics combined from its pieces' in order (its squared
+    deviation as the pieces' own plus size * (piece mean - slice mean)^2 each: no cancellation). The pieces of
+    a slice do not depend on the other slices, so a slice gives the same floats in any batch.
+    """
+    starts, ends = np.asarray(starts, dtype=np.intp), np.asarray(ends, dtype=np.intp)
+    if len(starts) == 0:
+        return np.empty((0, 4 * array.shape[1]))
+    lengths = ends - starts
+    if lengths.min() < 1:
+        raise ValueError('rows: the feature window is empty')
+    grid = WINDOW_GRID
+    blocks_lo = starts + (-(starts + origin)) % grid
+    blocks_hi = ends - (ends + origin) % grid
+    blocks = np.maximum(blocks_hi - blocks_lo, 0) // grid
+    blocks_lo = np.where(blocks > 0, blocks_lo, ends)  # no whole block: the slice is its own head
+    blocks_hi = np.where(blocks > 0, blocks_hi, ends)
+    heads, tails = blocks_lo > starts, ends > blocks_hi
+    tables, first = [], np.zeros(len(starts), dtype=np.intp)
+    if blocks.any():
+        low, high = blocks_lo[blocks > 0].min(), blocks_hi[blocks > 0].max()
+        count = (high - low) // grid
+        tables.append(_pieces(array[low:high], np.arange(0, high - low, grid), np.full(count, grid)))
+        first = (blocks_lo - low) // grid  # the number of each slice's first block
+    else:
+        count = 0
+    own_lo = np.concatenate((starts[heads], blocks_hi[tails]))
+    own_hi = np.concatenate((blocks_lo[heads], ends[tails]))
+    own_sizes = own_hi - own_lo
+    if len(own_sizes):
+        tables.append(_pieces(array[_ranges(own_lo, own_hi)], np.cumsum(own_sizes) - own_sizes, own_sizes))
+    sums, means, squares, lows, highs = (np.concatenate(column) for column in zip(*tables))
+    sizes = np.concatenate((np.full(count, grid), own_sizes))
+    head = count + np.cumsum(heads) - 1
+    tail = count + heads.sum() + np.cumsum(tails) - 1
+    # the pieces of each slice in order (head, blocks, tail), the slices one after the other
+    counts = heads + blocks + tails
+    offsets = np.cumsum(counts) - counts
+    which = np.repeat(np.arange(len(starts)), counts)
+    position = np.arange(counts.sum()) - offsets[which]
+    in_blocks = position - heads[which]
+    piece = np.where(heads[which] & (position == 0), head[which],
+                     np.where(in_blocks < blocks[which], first[which] + in_blocks, tail[which]))
+    length = lengths[:, None]
+    mean = np.add.reduceat(sums[piece], offsets, axis=0) / length
+    deviation = means[piece] - mean[which]
+    spread = np.add.reduceat(squares[piece] + sizes[piece, None] * deviation * deviation, offsets, axis=0)
+    return np.concatenate((mean, np.sqrt(spread / length), np.minimum.reduceat(lows[piece], offsets, axis=0),
+                           np.maximum.reduceat(highs[piece], offsets, axis=0)), axis=1)
+
+
 _UINT32 = struct.Struct('<I')
 
 

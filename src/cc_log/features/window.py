@@ -1,17 +1,19 @@
 """The feature window and the one feature-vector step of every mode.
 
-``FeatureWindow`` holds the rows of the last ``count`` messages or ``seconds`` as a preallocated ring array
-and gives the window vector of the set. ``FeatureStream`` is the step collect mode (live and from bags),
-smart mode's classifiers, learning and the benchmarks all share: message -> row (the feature set) -> feature
-window -> a vector every ``every`` messages or seconds, once the window holds a whole window of continuous
-data (no gap, no backwards time since its rows began).
+``FeatureWindow`` holds the rows of the last ``count`` messages or ``seconds`` contiguous in a preallocated
+array and gives the window vector of the set. ``FeatureStream`` is the step collect mode (live and from
+bags), smart mode's classifiers, learning and the benchmarks all share: message -> row (the feature set) ->
+feature window -> a vector every ``every`` messages or seconds, once the window holds a whole window of
+continuous data (no gap, no backwards time since its rows began). It works a batch at a time: the rows of a
+batch go into the array behind the rows held, each due vector's window is a slice of it, and the vectors of
+all slices are computed together (``base.window_statistics``); one message is a batch of one.
 
 Pure: numpy only.
 """
 import numpy as np
 
 from ..spans import Span
-from .base import get
+from .base import FeatureSet, get, window_statistics
 
 JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream starts over (as WindowBuffer)
 EVERY_SLACK = 1e-5         # seconds: stamps 10 ms apart add up to 50 ms give or take float rounding
@@ -51,12 +53,14 @@ def columns(feature_set):
 
 
 class FeatureWindow(object):
-    """The feature window as a preallocated ring array.
+    """The feature window: the rows held lie contiguous, oldest first, in one preallocated array.
 
     ``add(stamp, row)`` then ``vector()`` gives ``window_vector(rows, config)`` of the rows held (to rounding)
-    without building an array from a list at every message. It keeps the last ``count`` rows, or the rows no
-    older than ``seconds`` before the newest. ``full``: the window spans ``count`` rows, or ``seconds`` since
-    its first row after ``clear`` or after a gap longer than the window.
+    without building an array from a list at every message; ``add_block`` appends many rows at once and says
+    which rows each of them sees, as slices ``[start, end)`` of ``buffer`` (so the vectors of a batch are
+    computed together, ``vectors``). It keeps the last ``count`` rows, or the rows no older than ``seconds``
+    before the newest. ``full``: the window spans ``count`` rows, or ``seconds`` since its first row after
+    ``clear`` or after a gap longer than the window.
     """
 
     def __init__(self, config, capacity=64):
@@ -65,101 +69,154 @@ class FeatureWindow(object):
         self.feature = config.feature
         self._width = len(self.feature.columns)
         size = self.span.count if not self.span.is_duration else max(1, int(capacity))
-        self._data = np.zeros((size, self._width))
-        self._stamps = np.zeros(size)
+        self._data = np.zeros((size + 1, self._width))
+        self._stamps = np.zeros(size + 1)
+        self._hi = 0   # the rows held are _data[_lo:_hi]
+        self._origin = 0  # rows added before the one at _data[0] (window_statistics' blocks count from the first)
         self.clear()
+        vector = getattr(self.feature.vector, '__func__', None)
+        self._statistics = vector is not None and vector is FeatureSet.vector.__func__
 
     def clear(self):
-        """Drop every row."""
-        self._start = 0   # index of the oldest row in the ring
-        self._n = 0
+        """Drop every row (slices of ``buffer`` given out before stay as they are until the next ``reserve``)."""
+        self._lo = self._hi
         self._since = None
 
     def __len__(self):
-        return self._n
+        return self._hi - self._lo
 
-    def _newest(self):
-        return self._stamps[(self._start + self._n - 1) % len(self._stamps)]
+    @property
+    def buffer(self):
+        """The array the rows are held in (``add_block``'s slices index it; valid until the next ``reserve``)."""
+        return self._data
 
     @property
     def full(self):
         """True once the window spans ``count`` rows or ``seconds`` (see the class docstring)."""
-        if self._n == 0:
+        if self._hi == self._lo:
             return False
         if self.span.is_duration:
-            return self._newest() - self._since >= self.span.seconds
-        return self._n >= self.span.count
+            return self._stamps[self._hi - 1] - self._since >= self.span.seconds
+        return self._hi - self._lo >= self.span.count
+
+    def reserve(self, count):
+        """Room for ``count`` more rows after the ones held: moves them to the front of the array (or into a
+        larger one) when needed, which ends the slices given out before."""
+        held = self._hi - self._lo
+        size = len(self._stamps)
+        if self._hi + count <= size:
+            return
+        if 2 * (held + count) > size:
+            size = 2 * (held + count)
+            data, stamps = np.zeros((size, self._width)), np.zeros(size)
+        else:
+            data, stamps = self._data, self._stamps
+        data[:held] = self._data[self._lo:self._hi]
+        stamps[:held] = self._stamps[self._lo:self._hi]
+        self._origin += self._lo
+        self._data, self._stamps, self._lo, self._hi = data, stamps, 0, held
 
     def add(self, stamp, row):
         """Append a row (newest) and drop the rows that left the window."""
-        size = len(self._stamps)
-        if self.span.is_duration:
-            if self._since is None or (self._n and stamp - self._newest() > self.span.seconds):
-                self._since = stamp  # after a gap longer than the window, it fills again from here
-            limit = stamp - self.span.seconds
-            while self._n and self._stamps[self._start] < limit:
-                self._start = (self._start + 1) % size
-                self._n -= 1
-            if self._n == size:
-                self._grow()
-                size = len(self._stamps)
-        elif self._n == size:
-            self._start = (self._start + 1) % size
-            self._n -= 1
-        index = (self._start + self._n) % size
-        self._data[index] = row
-        self._stamps[index] = stamp
-        self._n += 1
+        self.add_block([stamp], [row])
 
-    def _grow(self):
-        order = (self._start + np.arange(self._n)) % len(self._stamps)
-        data = np.zeros((2 * len(self._stamps), self._width))
-        stamps = np.zeros(2 * len(self._stamps))
-        data[:self._n] = self._data[order]
-        stamps[:self._n] = self._stamps[order]
-        self._data, self._stamps, self._start = data, stamps, 0
+    def add_block(self, stamps, rows):
+        """Append rows (a 2-D array or a list of rows) at ``stamps`` (floats, none before the newest held),
+        oldest first. Returns ``(starts, ends, full)``: the window after each row is ``buffer[start:end]``
+        (arrays of ints) and ``full`` (a list of bools) says whether it was full then."""
+        count = len(stamps)
+        if count == 0:
+            return np.zeros(0, dtype=int), np.zeros(0, dtype=int), []
+        self.reserve(count)
+        lo, hi, seconds = self._lo, self._hi, self.span.seconds
+        end = hi + count
+        self._data[hi:end] = rows
+        self._stamps[hi:end] = stamps
+        ends = np.arange(hi + 1, end + 1)
+        if self.span.is_duration:
+            starts = lo + np.searchsorted(self._stamps[lo:end], self._stamps[hi:end] - seconds)
+            full, since = [], self._since
+            prev = None if hi == lo else float(self._stamps[hi - 1])
+            for stamp in stamps:
+                if since is None or (prev is not None and stamp - prev > seconds):
+                    since = stamp  # after a gap longer than the window, it fills again from here
+                full.append(stamp - since >= seconds)
+                prev = stamp
+            self._since = since
+        else:
+            starts = np.maximum(ends - self.span.count, lo)
+            full = (ends - starts >= self.span.count).tolist()
+        self._lo, self._hi = int(starts[-1]), end
+        return starts, ends, full
 
     def rows(self):
         """The rows, oldest first, as a 2-D array (a copy)."""
-        order = (self._start + np.arange(self._n)) % len(self._stamps)
-        return self._data[order]
+        return self._data[self._lo:self._hi].copy()
 
     def newest(self, span):
         """The rows of the newest ``span`` (a Span: that many messages, or no older than that many seconds
         before the newest row; at least one row), oldest first, as a 2-D array (a copy)."""
+        return self.newest_of(self._lo, self._hi, span).copy()
+
+    def newest_of(self, start, end, span):
+        """``newest(span)`` of the window ``buffer[start:end]`` (a slice from ``add_block``) as a view of it."""
         span = Span.parse(span, 'span')
-        if self._n == 0:
-            return self._data[:0].copy()
+        if end == start:
+            return self._data[start:end]
         if span.is_duration:
-            order = (self._start + np.arange(self._n)) % len(self._stamps)
-            count = int(np.count_nonzero(self._stamps[order] >= self._newest() - span.seconds))
+            first = start + int(np.searchsorted(self._stamps[start:end], self._stamps[end - 1] - span.seconds))
         else:
-            count = span.count
-        count = min(self._n, max(1, count))
-        order = (self._start + np.arange(self._n - count, self._n)) % len(self._stamps)
-        return self._data[order]
+            first = end - span.count
+        return self._data[min(end - 1, max(start, first)):end]
 
     def vector(self):
         """The window vector of the rows held (ValueError when empty, or for raw when not full)."""
-        if self._n == 0:
+        if self._hi == self._lo:
             raise ValueError('rows: the feature window is empty')
-        if self.feature.ordered:
-            array = self.rows()
-        else:
-            size = len(self._stamps)
-            if self._start + self._n <= size:
-                array = self._data[self._start:self._start + self._n]
-            else:
-                # the vector does not depend on row order: the ring's rows are the first n, wrapped or not
-                array = self._data if self._n == size else self.rows()
-        return self.feature.vector(array, self.span)
+        return self.feature.vector(self._data[self._lo:self._hi], self.span)
+
+    def vectors(self, starts, ends):
+        """The window vectors of the windows ``buffer[start:end]`` (slices from ``add_block``) as the rows of a
+        2-D array: the statistics of all of them at once for a set whose vector is the default one, else
+        one ``vector`` each."""
+        if self._statistics:
+            return window_statistics(self._data, starts, ends, self._origin)
+        vectors = [self.feature.vector(self._data[start:end], self.span) for start, end in zip(starts, ends)]
+        return np.array(vectors, dtype=float).reshape(len(vectors), self.feature.vector_length(self.span))
+
+
+class WindowBatch(object):
+    """The window vectors of a batch of rows (``FeatureStream.add_rows`` / ``add_records``).
+
+    ``steps``: one per record, None for a record of another input, else ``(reset, whole, k)``: whether time
+    went back at it (the window started over), whether the window was whole after it, and the number of its
+    vector in ``vectors`` (None when none was due). ``rows(k)`` and ``newest(k, span)`` are the window of
+    vector ``k`` and its newest rows, views of the window's array valid until the stream's next row.
+    """
+
+    def __init__(self, window, steps, vectors, starts, ends):
+        self.window = window
+        self.steps = steps
+        self.vectors = vectors
+        self._starts = starts
+        self._ends = ends
+
+    def rows(self, k):
+        """The rows of the window vector ``k`` was computed from, oldest first (a view)."""
+        return self.window.buffer[self._starts[k]:self._ends[k]]
+
+    def newest(self, k, span):
+        """``FeatureWindow.newest(span)`` of the window of vector ``k`` (a view)."""
+        return self.window.newest_of(self._starts[k], self._ends[k], span)
 
 
 class FeatureStream(object):
     """Messages of a feature set's inputs -> rows -> feature window -> a vector every ``every``.
 
     ``add(msg, stamp)`` takes a message of the set's first input and returns its window vector (a numpy
-    array) when one is due, else None; ``observe(role, msg, stamp)`` takes a message of another input.
+    array) when one is due, else None; ``observe(role, msg, stamp)`` takes a message of another input;
+    ``add_records(records, roles)`` takes a batch of both and computes its rows and vectors together (one
+    code path: the others are a batch of one).
     Rows enter the window at the stream's clock (the newest stamp; stamps may jitter backwards a little);
     time going back more than ``jump_back_tolerance`` clears the window (``resets`` counts it). A vector
     needs a full window of continuous data (``whole``: the set's ``covers`` too); then the first one is
@@ -202,29 +259,96 @@ class FeatureStream(object):
     def add_record(self, record, role=None):
         """A ``window_buffer.Record`` of the first input (``role`` None) or of the input ``role``: read from
         its bytes when it has no decoded message, else from the message."""
+        if role is None:
+            return _only_vector(self.add_records([record], {}))
         if record.msg is None:
-            if role is not None:
-                return self.observe_raw(role, record.raw, record.stamp)
-            return self.add_raw(record.raw, record.stamp)
-        if role is not None:
-            return self.observe(role, record.msg, record.stamp)
-        return self.add(record.msg, record.stamp)
+            return self.observe_raw(role, record.raw, record.stamp)
+        return self.observe(role, record.msg, record.stamp)
 
     def add_row(self, row, stamp):
         """As ``add``, for a row already made by ``self.features``."""
-        if self._clock is not None and stamp < self._clock - self.jump_back_tolerance:
-            self.resets += 1
-            self.window.clear()
-            self._clock = None
-        self._clock = stamp if self._clock is None or stamp > self._clock else self._clock
-        self.window.add(self._clock, row)
-        self.whole = self.window.full and self.features.covers(self.span, stamp)
-        if not self.whole:
-            self._since = self._at = None  # a vector as soon as the window is whole again
-            return None
-        if not self._due(stamp):
-            return None
-        return self.window.vector()
+        return _only_vector(self.add_rows([row], [stamp], [self.features.covers(self.span, stamp)]))
+
+    def add_records(self, records, roles):
+        """A batch of ``window_buffer.Record``s in order: those whose topic is in ``roles`` (``{topic: role}``)
+        are ``observe``d, the others are of the first input. Each run of consecutive records of the first input
+        gets its rows from the set's ``row_block``; then the window takes all rows. Returns a ``WindowBatch``
+        (views of the window: use it before the next row)."""
+        rows, stamps, covered, steps = [], [], [], []
+        run = []
+
+        def flush():
+            raw = run[0].msg is None
+            block, covers = self.features.row_block([r.raw if raw else r.msg for r in run], [r.stamp for r in run],
+                                                    raw, self.span)
+            rows.append(block)
+            covered.extend(covers.tolist())
+            del run[:]
+
+        for record in records:
+            role = roles.get(record.topic)
+            if role is not None:
+                if run:
+                    flush()
+                self.add_record(record, role)
+                steps.append(False)
+                continue
+            if run and (run[0].msg is None) != (record.msg is None):
+                flush()
+            run.append(record)
+            stamps.append(record.stamp)
+            steps.append(True)
+        if run:
+            flush()
+        batch = self.add_rows(np.concatenate(rows) if rows else (), stamps, covered)
+        first = iter(batch.steps)
+        batch.steps = [next(first) if mine else None for mine in steps]
+        return batch
+
+    def add_rows(self, rows, stamps, covered):
+        """Rows already made by ``self.features`` (a 2-D array or a list of rows) at ``stamps``, ``covered``:
+        the set's ``covers`` right after each. The window bookkeeping row by row, then the vectors of every
+        row where one is due at once. Returns a ``WindowBatch`` (one step per row)."""
+        window = self.window
+        window.reserve(len(stamps))  # no slice of this batch moves (clear keeps the rows where they are)
+        steps, starts, ends = [], [], []
+        first, clocks, resets = 0, [], []
+        clock = self._clock
+        for i, stamp in enumerate(stamps):
+            if clock is not None and stamp < clock - self.jump_back_tolerance:
+                resets.append(i)
+                clock = None
+            clock = stamp if clock is None or stamp > clock else clock
+            clocks.append(clock)
+        self._clock = clock
+        for last in resets + [len(stamps)]:
+            if last > first:
+                segment = window.add_block(clocks[first:last], rows[first:last])
+                self._bookkeeping(segment, stamps, covered, first, steps, starts, ends)
+            if last < len(stamps):
+                self.resets += 1
+                window.clear()
+                first = last
+        for i in resets:
+            steps[i] = (True,) + steps[i][1:]
+        vectors = window.vectors(starts, ends) if starts else np.zeros((0, vector_length(self.config)))
+        return WindowBatch(window, steps, vectors, starts, ends)
+
+    def _bookkeeping(self, segment, stamps, covered, first, steps, starts, ends):
+        """The steps of the rows ``first``... of a segment without a reset (``add_block``'s slices)."""
+        lows, highs, full = segment
+        for j, full_now in enumerate(full):
+            i = first + j
+            self.whole = full_now and covered[i]
+            if not self.whole:
+                self._since = self._at = None  # a vector as soon as the window is whole again
+                steps.append((False, False, None))
+            elif self._due(stamps[i]):
+                steps.append((False, True, len(starts)))
+                starts.append(int(lows[j]))
+                ends.append(int(highs[j]))
+            else:
+                steps.append((False, True, None))
 
     def _due(self, stamp):
         every = self.every
@@ -238,3 +362,9 @@ class FeatureStream(object):
         self._since = 0
         self._at = stamp
         return True
+
+
+def _only_vector(batch):
+    """The vector of a batch of one row, or None."""
+    k = batch.steps[0][2]
+    return None if k is None else batch.vectors[k]

@@ -131,65 +131,52 @@ class ClassifierTrigger(Trigger):
         return self.on_records([record])[0]
 
     def on_records(self, records):
-        """Feature rows of every record, the window vectors where they are due, every vector of the batch scored
-        in one call (``scores``), then the retrigger rule over the scores in order."""
-        stream = self.stream
-        roles = self._roles
-        event = self.retrigger == 'event'
-        steps, vectors, snapshots = [], [], []
+        """Feature rows and window vectors of the whole batch (``FeatureStream.add_records``), every vector
+        scored in one call (``scores``), then the retrigger rule over the scores in order."""
         if self.learner is not None:
             self._take_learned()
         started = time.perf_counter()
-        for record in records:
-            if record.topic in roles:
-                stream.add_record(record, roles[record.topic])
-                steps.append(None)
-                continue
-            resets = stream.resets
-            vector = stream.add_record(record)
-            # not scored (start, after a gap or a jump back): the next anomalous score is an onset
-            restart = not stream.whole or stream.resets != resets
-            if vector is None:
-                steps.append(_RESTART if restart else None)
-                continue
-            steps.append((restart, len(vectors)))
-            vectors.append(vector)
-            if event:
-                snapshots.append((stream.window.rows(), stream.window.newest(self.recent)))
-        scores = scores_of(self.model, vectors) if vectors else ()
-        if vectors:
+        batch = self.stream.add_records(records, self._roles)
+        vectors = batch.vectors
+        scores = scores_of(self.model, vectors) if len(vectors) else ()
+        if len(vectors):
             elapsed = time.perf_counter() - started
             self.calls += len(vectors)
             self.seconds += elapsed
             self.max_seconds = max(self.max_seconds, elapsed / len(vectors))
-        return [self._decide(record, step, vectors, scores, snapshots) for record, step in zip(records, steps)]
+        nominal = self._nominal_rows
+        fires = [self._decide(record, step, batch, scores) for record, step in zip(records, batch.steps)]
+        if self._nominal_rows is not nominal:
+            self._nominal_rows = self._nominal_rows.copy()  # a view of the feature window until now
+        return fires
 
-    def _decide(self, record, step, vectors, scores, snapshots):
-        """The Fires of one record's step: None (no vector), _RESTART (not scored), or (restart, vector number)."""
+    def _decide(self, record, step, batch, scores):
+        """The Fires of one record's step (``WindowBatch.steps``): None (another input), no vector (not scored
+        when the window is not whole), or a vector's score."""
         if step is None:
             return []
-        if step is _RESTART:
+        reset, whole, k = step
+        # not scored (start, after a gap or a jump back): the next anomalous score is an onset
+        if reset or not whole:
             self._armed = True
+        if k is None:
             return []
-        restart, k = step
-        if restart:
-            self._armed = True
         score = scores[k]
         anomalous = score < self.threshold
         fires = []
         if self.learner is not None:
-            self.learner.flag(record.stamp) if anomalous else self.learner.offer(record.stamp, vectors[k])
+            self.learner.flag(record.stamp) if anomalous else self.learner.offer(record.stamp, batch.vectors[k])
         if anomalous:
             self.anomalous += 1
             if not self._armed and self.retrigger == 'event':
-                anomalous, score = self._score_recent(*snapshots[k])
+                anomalous, score = self._score_recent(batch.rows(k), batch.newest(k, self.recent))
             if anomalous and (self._armed or self.retrigger != 'onset'):
                 fires.append(self.fire('classifier', float(score)))
             self._armed = False
         else:
             self._armed = True
             if self.retrigger == 'event':
-                self._nominal_rows = snapshots[k][0]
+                self._nominal_rows = batch.rows(k)
         return fires
 
     def _score_recent(self, window_rows, recent):
@@ -222,9 +209,6 @@ class ClassifierTrigger(Trigger):
         if self.retrigger == 'event':
             result['recent'] = str(self.recent)
         return result
-
-
-_RESTART = 'restart'  # a record of the first input not scored because the window is not whole
 
 
 def scores_of(model, vectors):
