@@ -189,6 +189,8 @@ def window_statistics(array, starts, ends, origin=0):
     deviation as the pieces' own plus size * (piece mean - slice mean)^2 each: no cancellation). The pieces of
     a slice do not depend on the other slices, so a slice gives the same floats in any batch.
     """
+    if len(starts) == 1:
+        return _one_window_statistics(array, int(starts[0]), int(ends[0]), origin)
     starts, ends = np.asarray(starts, dtype=np.intp), np.asarray(ends, dtype=np.intp)
     if len(starts) == 0:
         return np.empty((0, 4 * array.shape[1]))
@@ -233,6 +235,42 @@ def window_statistics(array, starts, ends, origin=0):
     spread = np.add.reduceat(squares[piece] + sizes[piece, None] * deviation * deviation, offsets, axis=0)
     return np.concatenate((mean, np.sqrt(spread / length), np.minimum.reduceat(lows[piece], offsets, axis=0),
                            np.maximum.reduceat(highs[piece], offsets, axis=0)), axis=1)
+
+
+def _one_window_statistics(array, start, end, origin):
+    """``window_statistics`` of one slice (a live batch's usual case): the same pieces in the same order and the
+    same reductions, so the same floats, with its bookkeeping in plain integers."""
+    if end <= start:
+        raise ValueError('rows: the feature window is empty')
+    grid = WINDOW_GRID
+    low, high = start + (-(start + origin)) % grid, end - (end + origin) % grid
+    count = max(high - low, 0) // grid
+    if not count:
+        low = high = end
+    own = [(a, b) for a, b in ((start, low), (high, end)) if b > a]
+    tables, sizes = [], []
+    if own:
+        own_sizes = np.array([b - a for a, b in own], dtype=np.intp)
+        rows = array[own[0][0]:own[0][1]] if len(own) == 1 else np.concatenate([array[a:b] for a, b in own])
+        own_table = _pieces(rows, np.cumsum(own_sizes) - own_sizes, own_sizes)
+    if start < low:  # the head
+        tables.append([column[:1] for column in own_table])
+        sizes.append(own_sizes[:1])
+    if count:
+        tables.append(_pieces(array[low:high], np.arange(0, high - low, grid), np.full(count, grid)))
+        sizes.append(np.full(count, grid))
+    if high < end:  # the tail
+        tables.append([column[-1:] for column in own_table])
+        sizes.append(own_sizes[-1:])
+    sums, means, squares, lows, highs = (np.concatenate(column) for column in zip(*tables))
+    sizes = np.concatenate(sizes)
+    offsets = np.zeros(1, dtype=np.intp)
+    length = np.array([[end - start]], dtype=np.intp)
+    mean = np.add.reduceat(sums, offsets, axis=0) / length
+    deviation = means - mean
+    spread = np.add.reduceat(squares + sizes[:, None] * deviation * deviation, offsets, axis=0)
+    return np.concatenate((mean, np.sqrt(spread / length), np.minimum.reduceat(lows, offsets, axis=0),
+                           np.maximum.reduceat(highs, offsets, axis=0)), axis=1)
 
 
 _UINT32 = struct.Struct('<I')

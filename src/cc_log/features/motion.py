@@ -36,6 +36,7 @@ ODOMETRY_MD5 = 'cd5e73d190d741a2f92e81eda573aca7'  # the layout read_odometry_ra
 _POSE = struct.Struct('<7d')    # geometry_msgs/Pose: position, orientation
 _TWIST = struct.Struct('<6d')   # geometry_msgs/Twist: linear, angular
 _TWIST_AFTER_POSE = 7 * 8 + 36 * 8  # the pose, then its covariance
+MIN_BLOCK = 16  # messages: a smaller block goes message by message (numpy's fixed cost per block outweighs it)
 
 
 def read_odometry(msg):
@@ -136,7 +137,7 @@ class MotionFeatures(OdometrySet):
         message, so rows, ``covers`` and the state afterwards are exactly those of ``row_values(_raw)``."""
         cls = type(self)
         if cls.make_row is not MotionFeatures.make_row or cls.read is not OdometrySet.read or \
-                cls.read_raw is not OdometrySet.read_raw or len(items) < 3:
+                cls.read_raw is not OdometrySet.read_raw or len(items) < MIN_BLOCK:
             return FeatureSet.row_block(self, items, stamps, raw, span)
         try:
             times = np.array(stamps, dtype=float)

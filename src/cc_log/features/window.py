@@ -16,6 +16,7 @@ from ..spans import Span
 from .base import FeatureSet, get, window_statistics
 
 JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream starts over (as WindowBuffer)
+SMALL_BLOCK = 8            # rows: add_block finds the slices of fewer in plain Python
 EVERY_SLACK = 1e-5         # seconds: stamps 10 ms apart add up to 50 ms give or take float rounding
 
 
@@ -132,6 +133,8 @@ class FeatureWindow(object):
         end = hi + count
         self._data[hi:end] = rows
         self._stamps[hi:end] = stamps
+        if count <= SMALL_BLOCK:
+            return self._add_few(stamps, lo, hi, end)
         ends = np.arange(hi + 1, end + 1)
         if self.span.is_duration:
             starts = lo + np.searchsorted(self._stamps[lo:end], self._stamps[hi:end] - seconds)
@@ -147,6 +150,31 @@ class FeatureWindow(object):
             starts = np.maximum(ends - self.span.count, lo)
             full = (ends - starts >= self.span.count).tolist()
         self._lo, self._hi = int(starts[-1]), end
+        return starts, ends, full
+
+    def _add_few(self, stamps, lo, hi, end):
+        """``add_block``'s slices for a few rows (already stored) in plain Python: the same starts as its
+        ``searchsorted`` (the first row no older than ``seconds`` before each row; stamps never go back)."""
+        ends = list(range(hi + 1, end + 1))
+        if self.span.is_duration:
+            seconds, held, since = self.span.seconds, self._stamps, self._since
+            prev = None if hi == lo else float(held[hi - 1])
+            starts, full, first = [], [], lo
+            for j, stamp in enumerate(stamps):
+                limit = held[hi + j] - seconds
+                while held[first] < limit:
+                    first += 1
+                starts.append(first)
+                if since is None or (prev is not None and stamp - prev > seconds):
+                    since = stamp  # after a gap longer than the window, it fills again from here
+                full.append(stamp - since >= seconds)
+                prev = stamp
+            self._since = since
+        else:
+            count = self.span.count
+            starts = [max(e - count, lo) for e in ends]
+            full = [e - b >= count for b, e in zip(starts, ends)]
+        self._lo, self._hi = starts[-1], end
         return starts, ends, full
 
     def rows(self):
@@ -233,6 +261,7 @@ class FeatureStream(object):
         kwargs = {} if max_dt is None else {'max_dt': max_dt}
         self.features = config.feature(config, **kwargs)
         self.window = FeatureWindow(config)
+        self._no_vectors = np.zeros((0, vector_length(config)))
         self.jump_back_tolerance = float(jump_back_tolerance)
         self.resets = 0
         self.whole = False   # the window held a whole window of continuous data at the last message
@@ -331,7 +360,7 @@ class FeatureStream(object):
                 first = last
         for i in resets:
             steps[i] = (True,) + steps[i][1:]
-        vectors = window.vectors(starts, ends) if starts else np.zeros((0, vector_length(self.config)))
+        vectors = window.vectors(starts, ends) if starts else self._no_vectors
         return WindowBatch(window, steps, vectors, starts, ends)
 
     def _bookkeeping(self, segment, stamps, covered, first, steps, starts, ends):
