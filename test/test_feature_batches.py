@@ -288,3 +288,17 @@ def test_the_classifier_decides_on_a_batch_as_record_by_record(f1tenth_model, re
     assert together.calls == alone.calls and together.anomalous == alone.anomalous > 1000
     fired = sum(map(len, want))
     assert fired < together.anomalous if retrigger != 'every' else fired == together.anomalous
+
+
+def test_one_window_with_its_blocks_cached_gives_the_floats_of_any_batch():
+    from cc_log.features import base
+    rng = np.random.default_rng(1)
+    array = rng.normal(size=(3000, 6)) * rng.uniform(0.001, 100, size=6) + rng.uniform(-50, 50, size=6)
+    for origin in (0, 7, 31):
+        cache, start = base.BlockCache(), 0
+        for _ in range(600):  # windows moving on, sometimes jumping anywhere (a reset), lengths varying
+            start = int(rng.integers(0, 2500)) if rng.random() < 0.03 else min(2500, start + int(rng.integers(0, 12)))
+            end = min(3000, start + int(rng.integers(1, 600)))
+            alone = base.window_statistics(array, [start], [end], origin, cache)
+            batched = base.window_statistics(array, np.array([start, 0]), np.array([end, 5]), origin)[:1]
+            assert alone.tobytes() == batched.tobytes()  # the very same floats

@@ -178,7 +178,7 @@ def _pieces(rows, cuts, sizes):
             np.maximum.reduceat(rows, cuts, axis=0))
 
 
-def window_statistics(array, starts, ends, origin=0):
+def window_statistics(array, starts, ends, origin=0, cache=None):
     """``statistics(array[start:end])`` of every ``(start, end)`` pair (non-empty slices of a 2-D array), as the
     rows of a 2-D array, computed together.
 
@@ -187,10 +187,11 @@ def window_statistics(array, starts, ends, origin=0):
     head and a tail of its own; the sum, mean, squared deviation from its mean, min and max of every block and
     every head and tail are taken once, and a slice's statistics combined from its pieces' in order (its squared
     deviation as the pieces' own plus size * (piece mean - slice mean)^2 each: no cancellation). The pieces of
-    a slice do not depend on the other slices, so a slice gives the same floats in any batch.
+    a slice do not depend on the other slices, so a slice gives the same floats in any batch. ``cache``: a
+    BlockCache of this array, used for a single slice.
     """
     if len(starts) == 1:
-        return _one_window_statistics(array, int(starts[0]), int(ends[0]), origin)
+        return _one_window_statistics(array, int(starts[0]), int(ends[0]), origin, cache)
     starts, ends = np.asarray(starts, dtype=np.intp), np.asarray(ends, dtype=np.intp)
     if len(starts) == 0:
         return np.empty((0, 4 * array.shape[1]))
@@ -237,9 +238,48 @@ def window_statistics(array, starts, ends, origin=0):
                            np.maximum.reduceat(highs[piece], offsets, axis=0)), axis=1)
 
 
-def _one_window_statistics(array, start, end, origin):
+class BlockCache(object):
+    """The pieces (sum, mean, squared deviation, min, max) of the whole blocks of WINDOW_GRID rows of one growing
+    array of rows, by block number, so consecutive windows of a stream compute each block once. A row, once
+    added, never changes (``FeatureWindow`` only appends), so a block's pieces hold for good."""
+
+    def __init__(self):
+        self._first = 0      # number of the block in row 0 of the tables
+        self._count = 0      # blocks held
+        self._tables = None  # five 2-D arrays, a row per block
+
+    def pieces(self, array, low, count, number):
+        """The pieces of the ``count`` blocks from ``array[low]`` on, the first being block ``number``."""
+        first, held = self._first, self._count
+        if not (first <= number <= first + held):
+            first = self._first = number
+            held = self._count = 0
+        if number + count > first + held:  # the blocks not held yet, from the first missing one on
+            start = max(first + held, number)
+            new = number + count - start
+            begin = low + (start - number) * WINDOW_GRID
+            made = _pieces(array[begin:begin + new * WINDOW_GRID], np.arange(0, new * WINDOW_GRID, WINDOW_GRID),
+                           np.full(new, WINDOW_GRID))
+            keep = first + held - number  # held blocks still wanted (older ones are dropped)
+            if self._tables is None or len(self._tables[0]) < keep + new or number > first:
+                old = self._tables
+                size = max(64, 2 * (keep + new))
+                self._tables = [np.empty((size, array.shape[1])) for _ in range(5)]
+                if keep:
+                    for table, before in zip(self._tables, old):
+                        table[:keep] = before[number - first:number - first + keep]
+                first = self._first = number
+                held = keep
+            for table, part in zip(self._tables, made):
+                table[held:held + new] = part
+            self._count = held + new
+        return [table[number - first:number - first + count] for table in self._tables]
+
+
+def _one_window_statistics(array, start, end, origin, cache=None):
     """``window_statistics`` of one slice (a live batch's usual case): the same pieces in the same order and the
-    same reductions, so the same floats, with its bookkeeping in plain integers."""
+    same reductions, so the same floats, with its bookkeeping in plain integers (and its whole blocks from
+    ``cache``, a BlockCache of ``array``, when given)."""
     if end <= start:
         raise ValueError('rows: the feature window is empty')
     grid = WINDOW_GRID
@@ -257,7 +297,10 @@ def _one_window_statistics(array, start, end, origin):
         tables.append([column[:1] for column in own_table])
         sizes.append(own_sizes[:1])
     if count:
-        tables.append(_pieces(array[low:high], np.arange(0, high - low, grid), np.full(count, grid)))
+        if cache is None:
+            tables.append(_pieces(array[low:high], np.arange(0, high - low, grid), np.full(count, grid)))
+        else:
+            tables.append(cache.pieces(array, low, count, (low + origin) // grid))
         sizes.append(np.full(count, grid))
     if high < end:  # the tail
         tables.append([column[-1:] for column in own_table])

@@ -13,7 +13,7 @@ Pure: numpy only.
 import numpy as np
 
 from ..spans import Span
-from .base import FeatureSet, get, window_statistics
+from .base import BlockCache, FeatureSet, get, window_statistics
 
 JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream starts over (as WindowBuffer)
 SMALL_BLOCK = 8            # rows: add_block finds the slices of fewer in plain Python
@@ -77,6 +77,7 @@ class FeatureWindow(object):
         self.clear()
         vector = getattr(self.feature.vector, '__func__', None)
         self._statistics = vector is not None and vector is FeatureSet.vector.__func__
+        self._blocks = BlockCache()  # the statistics of whole blocks of rows, for one window at a time
 
     def clear(self):
         """Drop every row (slices of ``buffer`` given out before stay as they are until the next ``reserve``)."""
@@ -208,7 +209,7 @@ class FeatureWindow(object):
         2-D array: the statistics of all of them at once for a set whose vector is the default one, else
         one ``vector`` each."""
         if self._statistics:
-            return window_statistics(self._data, starts, ends, self._origin)
+            return window_statistics(self._data, starts, ends, self._origin, self._blocks)
         vectors = [self.feature.vector(self._data[start:end], self.span) for start, end in zip(starts, ends)]
         return np.array(vectors, dtype=float).reshape(len(vectors), self.feature.vector_length(self.span))
 
@@ -303,6 +304,8 @@ class FeatureStream(object):
         are ``observe``d, the others are of the first input. Each run of consecutive records of the first input
         gets its rows from the set's ``row_block``; then the window takes all rows. Returns a ``WindowBatch``
         (views of the window: use it before the next row)."""
+        if len(records) <= SMALL_BLOCK:
+            return self._add_few_records(records, roles)
         rows, stamps, covered, steps = [], [], [], []
         run = []
 
@@ -333,6 +336,48 @@ class FeatureStream(object):
         first = iter(batch.steps)
         batch.steps = [next(first) if mine else None for mine in steps]
         return batch
+
+    def _add_few_records(self, records, roles):
+        """``add_records`` of a few records (a live batch) one by one, without the block machinery: the same
+        rows (``row_values(_raw)``), window slices and vectors."""
+        features, span = self.features, self.span
+        self.window.reserve(len(records))  # no slice of this batch moves
+        steps, starts, ends = [], [], []
+        for record in records:
+            role = roles.get(record.topic)
+            if role is not None:
+                self.add_record(record, role)
+                steps.append(None)
+                continue
+            stamp = record.stamp
+            if record.msg is None:
+                row = features.row_values_raw(record.raw, stamp)
+            else:
+                row = features.row_values(record.msg, stamp)
+            steps.append(self._add_one(row, stamp, features.covers(span, stamp), starts, ends))
+        vectors = self.window.vectors(starts, ends) if starts else self._no_vectors
+        return WindowBatch(self.window, steps, vectors, starts, ends)
+
+    def _add_one(self, row, stamp, covered, starts, ends):
+        """One row through the window as ``add_rows`` takes it; its slice appended to ``starts``/``ends`` when
+        a vector is due. Returns its step."""
+        window = self.window
+        reset = self._clock is not None and stamp < self._clock - self.jump_back_tolerance
+        if reset:
+            self.resets += 1
+            window.clear()
+            self._clock = None
+        self._clock = stamp if self._clock is None or stamp > self._clock else self._clock
+        lows, highs, full = window.add_block([self._clock], [row])
+        self.whole = full[0] and covered
+        if not self.whole:
+            self._since = self._at = None  # a vector as soon as the window is whole again
+            return (reset, False, None)
+        if not self._due(stamp):
+            return (reset, True, None)
+        starts.append(lows[0])
+        ends.append(highs[0])
+        return (reset, True, len(starts) - 1)
 
     def add_rows(self, rows, stamps, covered):
         """Rows already made by ``self.features`` (a 2-D array or a list of rows) at ``stamps``, ``covered``:
