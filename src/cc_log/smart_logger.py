@@ -132,6 +132,10 @@ class RawJsonEstimate(object):
 
     def count_all(self, raws, connections):
         """``count`` of each message in turn (``raws`` and their ``connections``), looking each type up once."""
+        if len(raws) <= 4:  # a live batch: the bookkeeping of a batch would cost more than it saves
+            for raw, connection in zip(raws, connections):
+                self.count(raw, connection)
+            return
         types = list(map(_TYPE, connections))
         for msg_type in dict.fromkeys(types):
             if types.count(msg_type) == len(types):
