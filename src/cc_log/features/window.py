@@ -139,38 +139,38 @@ class FeatureWindow(object):
         ends = np.arange(hi + 1, end + 1)
         if self.span.is_duration:
             starts = lo + np.searchsorted(self._stamps[lo:end], self._stamps[hi:end] - seconds)
-            full, since = [], self._since
-            prev = None if hi == lo else float(self._stamps[hi - 1])
-            for stamp in stamps:
-                if since is None or (prev is not None and stamp - prev > seconds):
-                    since = stamp  # after a gap longer than the window, it fills again from here
-                full.append(stamp - since >= seconds)
-                prev = stamp
-            self._since = since
+            full = self._filled(stamps, lo, hi)
         else:
             starts = np.maximum(ends - self.span.count, lo)
             full = (ends - starts >= self.span.count).tolist()
         self._lo, self._hi = int(starts[-1]), end
         return starts, ends, full
 
+    def _filled(self, stamps, lo, hi):
+        """Whether a duration window is full after each of ``stamps`` (rows stored from ``hi`` on)."""
+        seconds, full, since = self.span.seconds, [], self._since
+        prev = None if hi == lo else float(self._stamps[hi - 1])
+        for stamp in stamps:
+            if since is None or (prev is not None and stamp - prev > seconds):
+                since = stamp  # after a gap longer than the window, it fills again from here
+            full.append(stamp - since >= seconds)
+            prev = stamp
+        self._since = since
+        return full
+
     def _add_few(self, stamps, lo, hi, end):
         """``add_block``'s slices for a few rows (already stored) in plain Python: the same starts as its
         ``searchsorted`` (the first row no older than ``seconds`` before each row; stamps never go back)."""
         ends = list(range(hi + 1, end + 1))
         if self.span.is_duration:
-            seconds, held, since = self.span.seconds, self._stamps, self._since
-            prev = None if hi == lo else float(held[hi - 1])
-            starts, full, first = [], [], lo
-            for j, stamp in enumerate(stamps):
+            seconds, held = self.span.seconds, self._stamps
+            starts, first = [], lo
+            for j in range(len(stamps)):
                 limit = held[hi + j] - seconds
                 while held[first] < limit:
                     first += 1
                 starts.append(first)
-                if since is None or (prev is not None and stamp - prev > seconds):
-                    since = stamp  # after a gap longer than the window, it fills again from here
-                full.append(stamp - since >= seconds)
-                prev = stamp
-            self._since = since
+            full = self._filled(stamps, lo, hi)
         else:
             count = self.span.count
             starts = [max(e - count, lo) for e in ends]
