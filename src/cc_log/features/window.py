@@ -361,23 +361,34 @@ class FeatureStream(object):
     def _add_one(self, row, stamp, covered, starts, ends):
         """One row through the window as ``add_rows`` takes it; its slice appended to ``starts``/``ends`` when
         a vector is due. Returns its step."""
-        window = self.window
-        reset = self._clock is not None and stamp < self._clock - self.jump_back_tolerance
+        reset = self._advance_clock(stamp)
         if reset:
             self.resets += 1
-            window.clear()
-            self._clock = None
-        self._clock = stamp if self._clock is None or stamp > self._clock else self._clock
-        lows, highs, full = window.add_block([self._clock], [row])
-        self.whole = full[0] and covered
-        if not self.whole:
+            self.window.clear()
+        lows, highs, full = self.window.add_block([self._clock], [row])
+        step = self._step(full[0] and covered, stamp, lows[0], highs[0], starts, ends)
+        return (True,) + step[1:] if reset else step
+
+    def _advance_clock(self, stamp):
+        """Move the stream's clock to ``stamp`` (never back, but for a jump back beyond the tolerance, when it
+        starts over at ``stamp``); True for such a jump."""
+        reset = self._clock is not None and stamp < self._clock - self.jump_back_tolerance
+        if reset or self._clock is None or stamp > self._clock:
+            self._clock = stamp
+        return reset
+
+    def _step(self, whole, stamp, start, end, starts, ends):
+        """The step ``(False, whole, k)`` of a row after which the window is ``buffer[start:end]`` (``whole``:
+        full and covered); its slice appended to ``starts``/``ends`` when a vector is due."""
+        self.whole = whole
+        if not whole:
             self._since = self._at = None  # a vector as soon as the window is whole again
-            return (reset, False, None)
+            return (False, False, None)
         if not self._due(stamp):
-            return (reset, True, None)
-        starts.append(lows[0])
-        ends.append(highs[0])
-        return (reset, True, len(starts) - 1)
+            return (False, True, None)
+        starts.append(int(start))
+        ends.append(int(end))
+        return (False, True, len(starts) - 1)
 
     def add_rows(self, rows, stamps, covered):
         """Rows already made by ``self.features`` (a 2-D array or a list of rows) at ``stamps``, ``covered``:
@@ -387,14 +398,10 @@ class FeatureStream(object):
         window.reserve(len(stamps))  # no slice of this batch moves (clear keeps the rows where they are)
         steps, starts, ends = [], [], []
         first, clocks, resets = 0, [], []
-        clock = self._clock
         for i, stamp in enumerate(stamps):
-            if clock is not None and stamp < clock - self.jump_back_tolerance:
+            if self._advance_clock(stamp):
                 resets.append(i)
-                clock = None
-            clock = stamp if clock is None or stamp > clock else clock
-            clocks.append(clock)
-        self._clock = clock
+            clocks.append(self._clock)
         for last in resets + [len(stamps)]:
             if last > first:
                 segment = window.add_block(clocks[first:last], rows[first:last])
@@ -413,16 +420,7 @@ class FeatureStream(object):
         lows, highs, full = segment
         for j, full_now in enumerate(full):
             i = first + j
-            self.whole = full_now and covered[i]
-            if not self.whole:
-                self._since = self._at = None  # a vector as soon as the window is whole again
-                steps.append((False, False, None))
-            elif self._due(stamps[i]):
-                steps.append((False, True, len(starts)))
-                starts.append(int(lows[j]))
-                ends.append(int(highs[j]))
-            else:
-                steps.append((False, True, None))
+            steps.append(self._step(full_now and covered[i], stamps[i], lows[j], highs[j], starts, ends))
 
     def _due(self, stamp):
         every = self.every
