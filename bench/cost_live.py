@@ -14,10 +14,12 @@ What it starts (each in its own session, all stopped at the end by their process
   odom:=/odom``; the model is trained here, for each rate, on a nominal simulated run at that rate (cc_log.sim
   seed 2, 5 min, 1 with --quick, motion 500-message window, a vector every 0.1 s): the nominal case at every rate;
 - ``rosbag record -O <tmp>/record.bag /odom /imu`` (no compression, its default) beside it, in every run;
-- a publisher (this script with --publisher): 20 s of simulated BWIBot odometry and IMU (cc_log.sim seed 3,
-  nominal, simulated at the rate it is published) published in a loop on /odom and /imu, each at the given
+- a publisher (this script with --publisher): simulated BWIBot odometry and IMU (cc_log.sim seed 3, nominal,
+  simulated at the rate it is published, as it goes, for the whole run) on /odom and /imu, each at the given
   rate, with header stamps of the current time; it also listens to /diagnostics and reports the node's last
-  "messages seen", the largest "intake queue" it saw and the node's thread CPU times.
+  "messages seen", the largest "intake queue" it saw and the node's thread CPU times. ``--loop-seconds 20``
+  publishes 20 s of it in a loop instead, as the earlier figures did: the robot then jumps back to its start
+  every 20 s, which the node rightly keeps as windows (2 in 60 s), so those runs also cost writing them.
 
 CPU % of one core = process CPU time (user + system, psutil, children included for rosbag record, which runs
 the C++ `record` under a Python wrapper) from just before the publisher starts to just after it ends (1 s
@@ -29,6 +31,7 @@ intake queue and messages seen < published).
 """
 import argparse
 import contextlib
+import itertools
 import json
 import os
 import shutil
@@ -42,7 +45,6 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-LOOP_SECONDS = 20.0
 STAGES = ('classifier CPU s', 'feeder CPU s', 'writer CPU s')  # the node's thread CPU times on /diagnostics
 
 
@@ -54,11 +56,12 @@ def publisher(args):
     from nav_msgs.msg import Odometry
     from cc_log import sim
     from sensor_msgs.msg import Imu
-    simulator = sim.Simulator(sim.SimConfig(rate=args.rate, seed=3, minutes=LOOP_SECONDS / 60.0, anomalies=0,
+    minutes = (args.loop_seconds or args.seconds + 5.0) / 60.0
+    simulator = sim.Simulator(sim.SimConfig(rate=args.rate, seed=3, minutes=minutes, anomalies=0,
                                             imu=True, jitter=0.05 / args.rate))  # simulated at the rate published
-    generated = list(simulator.messages())
-    messages = [msg for topic, _, msg in generated if topic == sim.ODOM_TOPIC]
-    imu = [msg for topic, _, msg in generated if topic == sim.IMU_TOPIC]
+    pairs = _odometry_imu_pairs(simulator.messages())
+    if args.loop_seconds:
+        pairs = itertools.cycle(list(pairs))
     rospy.init_node('cc_log_bench_publisher', disable_signals=True)
     state = {'seen': None, 'intake_max': 0, 'windows': None, 'stages': {}}
 
@@ -86,11 +89,10 @@ def publisher(args):
             break
         due = min(int((now - start) * args.rate) + 1, int(args.seconds * args.rate))
         while sent < due:
-            msg = messages[sent % len(messages)]
+            msg, other = next(pairs)
             msg.header.seq = sent
             msg.header.stamp = rospy.Time.from_sec(start + sent / args.rate)
             pub.publish(msg)
-            other = imu[sent % len(imu)]
             other.header.seq, other.header.stamp = sent, msg.header.stamp
             imu_pub.publish(other)
             sent += 1
@@ -106,6 +108,18 @@ def publisher(args):
                       'intake_max': state['intake_max'], 'windows': state['windows'], 'stages': state['stages']}))
     rospy.signal_shutdown('done')
     return 0
+
+
+def _odometry_imu_pairs(generated):
+    """``(odometry, imu)`` message pairs, in order, from the simulator's ``(topic, stamp, msg)``."""
+    from cc_log import sim
+    odometry = None
+    for topic, _, msg in generated:
+        if topic == sim.ODOM_TOPIC:
+            odometry = msg
+        elif topic == sim.IMU_TOPIC and odometry is not None:
+            yield odometry, msg
+            odometry = None
 
 
 # -- processes -----------------------------------------------------------------------------------------
@@ -241,7 +255,7 @@ def train_model(path, rate, minutes=5.0):
     return model.save(path)
 
 
-def run(procs, tmp, model, rate, seconds, with_record):
+def run(procs, tmp, model, rate, seconds, with_record, loop_seconds=0.0):
     """One run: node (+ rosbag record) + publisher; returns the figures."""
     out_dir = os.path.join(tmp, 'windows_%d' % rate)
     node = procs.start('smart_node_%d' % rate, ['rosrun', 'cc_log', 'smart_logger.py', '_model:=' + model,
@@ -255,7 +269,8 @@ def run(procs, tmp, model, rate, seconds, with_record):
     time.sleep(1.0)
     cpu0 = {'node': cpu_of(node.pid), 'record': cpu_of(record.pid) if record else 0.0}
     output = subprocess.check_output([sys.executable, os.path.abspath(__file__), '--publisher', '--rate', str(rate),
-                                      '--seconds', str(seconds), '--subscribers', '2' if with_record else '1'],
+                                      '--seconds', str(seconds), '--subscribers', '2' if with_record else '1',
+                                      '--loop-seconds', str(loop_seconds)],
                                      env=procs.env, universal_newlines=True)
     result = json.loads(output.strip().splitlines()[-1])
     result['node_cpu'] = cpu_of(node.pid) - cpu0['node']
@@ -277,6 +292,8 @@ def main(argv=None):
     parser.add_argument('--publisher', action='store_true', help=argparse.SUPPRESS)
     parser.add_argument('--rate', type=float, default=100.0, help=argparse.SUPPRESS)
     parser.add_argument('--subscribers', type=int, default=1, help=argparse.SUPPRESS)
+    parser.add_argument('--loop-seconds', type=float, default=0.0,
+                        help='publish this many seconds of the simulation in a loop (default: one continuous run)')
     args = parser.parse_args(argv)
     if args.publisher:
         return publisher(args)
@@ -286,16 +303,17 @@ def main(argv=None):
     started = time.time()
     train_minutes = 1.0 if args.quick else 5.0
     common.header('Live cost of the smart node', [
-        'data: cc_log.sim BWIBot odometry and IMU (seed 3, nominal, 20 s looped, restamped) published on /odom '
+        'data: cc_log.sim BWIBot odometry and IMU (seed 3, nominal, %s, restamped) published on /odom '
         'and /imu; model: motion 500-message window trained on a nominal simulated run (seed 2, %g min) at the rate '
-        'streamed' % train_minutes,
+        'streamed' % ('%g s looped' % args.loop_seconds if args.loop_seconds else 'one continuous run',
+                      train_minutes),
         'runs: %s Hz on each topic for %g s each, rosbag record of both topics beside the node in the same run'
         % (', '.join(map(str, rates)), args.seconds)])
     results = []
     with roscore_session('cc_log_bench_live_') as (procs, tmp):
         for rate in rates:
             model = train_model(os.path.join(tmp, 'model_%d.json' % rate), rate, train_minutes)
-            results.append(run(procs, tmp, model, rate, args.seconds, True))
+            results.append(run(procs, tmp, model, rate, args.seconds, True, args.loop_seconds))
     rows = []
     for r in results:
         node, record = (100 * r[key] / r['publish_seconds'] for key in ('node_cpu', 'record_cpu'))

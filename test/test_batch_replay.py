@@ -230,3 +230,64 @@ def test_the_intake_feeds_a_drained_batch_at_once_and_drops_only_a_message_that_
     assert calls == [30, 19] and intake.dropped == 1
     assert logger.stats()['messages_buffered'] == 29
     logger.close()
+
+
+def _taken_in_thread(queue, delay):
+    """``queue.take_batch(delay)`` run in a thread: ``(thread, result list)``."""
+    import threading
+    result = []
+    thread = threading.Thread(target=lambda: result.append(queue.take_batch(delay)), daemon=True)
+    thread.start()
+    return thread, result
+
+
+def test_the_intake_queue_hands_a_batch_when_it_is_full_by_count_or_bytes_or_marked_long_before_the_delay():
+    pytest.importorskip('rospy')
+    from cc_log.intake import IntakeQueue
+    for fill in ('count', 'bytes', 'force'):
+        queue = IntakeQueue(100, 10000, batch_messages=5, batch_bytes=1000)
+        thread, result = _taken_in_thread(queue, 3600.0)
+        items = {'count': [(k, 1) for k in range(5)], 'bytes': [(0, 400), (1, 400), (2, 400)],
+                 'force': [(0, 1), (1, 1)]}[fill]
+        for k, (item, size) in enumerate(items):
+            assert queue.put(item, size, force=(fill == 'force' and k == len(items) - 1))
+        thread.join(60.0)  # an hour's delay: the batch is due because it is full (or marked)
+        assert not thread.is_alive(), fill
+        assert result == [[item for item, _ in items]] and queue.qsize() == 0 and queue.bytes == 0
+
+
+def test_the_intake_queue_hands_what_arrived_once_the_delay_is_over():
+    pytest.importorskip('rospy')
+    from cc_log.intake import IntakeQueue
+    queue = IntakeQueue(100, 10000, batch_messages=50)
+    thread, result = _taken_in_thread(queue, 0.2)
+    assert queue.put('a', 10) and queue.put('b', 10)
+    thread.join(60.0)
+    assert not thread.is_alive() and result == [['a', 'b']]
+    assert queue.put('c', 10) and queue.take_all() == ['c']  # take_all: no delay
+
+
+def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, tmp_path):
+    # the feeder thread with an hour's batch delay: only the sync mark can make it feed now
+    rospy = pytest.importorskip('rospy')
+    import threading
+    from cc_log.intake import Intake, IntakeQueue, MessageDecoder
+    bags, _ = sim_case
+    records = [r for r in bagio.read_raw(bags['nominal'], [sim.ODOM_TOPIC])][:25]
+    logger = SmartLogger(None, str(tmp_path), driving_topic=sim.ODOM_TOPIC, background=False)
+    intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers
+    intake.sink, intake.decoder, intake.dropped, intake.cpu_seconds = logger, MessageDecoder(), 0, 0.0
+    intake.queue, intake.batch_delay = IntakeQueue(1000, 10 ** 7), 3600.0
+    intake._thread = threading.Thread(target=intake._feed, daemon=True)
+    intake._thread.start()
+    for record in records:
+        msg = rospy.AnyMsg()
+        msg._buff, msg._connection_header = record.raw, record.connection
+        intake.queue.put((record.topic, msg, rospy.Time.from_sec(record.stamp)), len(record.raw))
+    assert intake.sync(timeout=60.0)
+    assert logger.stats()['messages_buffered'] == 25
+    intake.queue.put(None, force=True)  # the end mark: fed at once too
+    intake._thread.join(60.0)
+    assert not intake._thread.is_alive()
+    assert intake.sync(timeout=60.0) is False  # stopped: nothing to wait for
+    logger.close()

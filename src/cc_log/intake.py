@@ -7,7 +7,12 @@ batches: the whole batch to ``sink.on_records`` as ``window_buffer.Record``s of 
 takes batches (``SmartLogger``), else each to ``sink.on_raw(topic, bytes, connection, receipt)`` when it takes
 serialized messages, else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
 message definition ``safe_input.check_definition`` refuses is never decoded (``MessageDecoder``).
-``Intake.subscribe(topic)`` adds a topic at any time.
+``Intake.subscribe(topic)`` adds a topic at any time; ``Intake.sync()`` waits until what was received before
+the call has been handed to the sink (a manual trigger then sees it).
+
+A batch is what arrived during ``batch_delay`` seconds (0.5) since its first message, or less when
+``BATCH_MESSAGES`` messages or an eighth of the queue's byte bound came first: the sink's fixed cost per batch is
+shared by many messages (the logger's windows are in message time, so the delay changes no window).
 
 Edge module: rospy.
 """
@@ -22,25 +27,32 @@ from .window_buffer import Record
 
 DEFAULT_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
 DEFAULT_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
-FEED_BATCH_DELAY = 0.05       # seconds the feeder lets messages gather before draining them in a batch
+FEED_BATCH_DELAY = 0.5        # seconds at most the feeder lets messages gather before draining them in a batch
+BATCH_MESSAGES = 1024         # messages that make a batch before the delay is over
+BATCH_BYTES_SHARE = 8         # ... or this share of the queue's byte bound (an eighth)
 
 
 class IntakeQueue(object):
     """The bounded intake queue: at most ``max_messages`` messages and ``max_bytes`` serialized bytes.
 
     ``put`` returns False (and counts ``overflowed``) when the message does not fit; ``take_all`` waits for
-    messages and returns every queued item at once (oldest first). ``qsize()`` as queue.Queue's. ``received``:
-    items put per ``topic`` given to ``put`` (those that did not fit too), counted under the queue's own lock.
+    messages and returns every queued item at once (oldest first); ``take_batch`` waits for a batch (``delay``
+    seconds since its first item, ``batch_messages`` items, ``batch_bytes`` bytes or a ``force``d item, whichever
+    comes first). ``qsize()`` as queue.Queue's. ``received``: items put per ``topic`` given to ``put`` (those that
+    did not fit too), counted under the queue's own lock.
     """
 
-    def __init__(self, max_messages, max_bytes):
+    def __init__(self, max_messages, max_bytes, batch_messages=BATCH_MESSAGES, batch_bytes=None):
         self.max_messages = int(max_messages)
         self.max_bytes = int(max_bytes)
+        self.batch_messages = max(1, min(int(batch_messages), self.max_messages))
+        self.batch_bytes = max(1, self.max_bytes // BATCH_BYTES_SHARE if batch_bytes is None else int(batch_bytes))
         self.overflowed = 0
         self.bytes = 0
         self.received = collections.Counter()
         self._items = collections.deque()
         self._ready = threading.Condition(threading.Lock())
+        self._urgent = False  # a forced item is queued: the batch is due now
 
     def qsize(self):
         return len(self._items)
@@ -64,16 +76,33 @@ class IntakeQueue(object):
                 return False
             self._items.append((item, size))
             self.bytes += size
-            if len(self._items) == 1:
+            count = len(self._items)
+            if force:
+                self._urgent = True
+            if count == 1 or force or count == self.batch_messages or \
+                    self.batch_bytes <= self.bytes < self.batch_bytes + size:
                 self._ready.notify()
             return True
 
     def take_all(self):
+        return self.take_batch(0.0)
+
+    def take_batch(self, delay):
+        """Every queued item (oldest first) once the batch is due: wait for a first item, then until ``delay``
+        seconds have passed, ``batch_messages`` items or ``batch_bytes`` bytes are queued, or an item was put with
+        ``force`` (an end or sync mark)."""
         with self._ready:
             while not self._items:
                 self._ready.wait()
+            deadline = time.monotonic() + delay
+            while not (self._urgent or len(self._items) >= self.batch_messages or self.bytes >= self.batch_bytes):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self._ready.wait(left)
             items, self._items = self._items, collections.deque()
             self.bytes = 0
+            self._urgent = False
         return [item for item, _ in items]
 
 
@@ -187,24 +216,36 @@ class Intake(object):
             rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'
                                    % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
 
+    def sync(self, timeout=5.0):
+        """Wait until every message received before the call has been handed to the sink; False when that
+        took longer than ``timeout`` seconds (the feeder is behind) or the intake is stopped."""
+        if not self._thread.is_alive():
+            return False
+        done = threading.Event()
+        self.queue.put(done, force=True)
+        return done.wait(timeout)
+
     def _feed(self):
         batched = hasattr(self.sink, 'on_records')
         while True:
-            batch = self.queue.take_all()
+            batch = self.queue.take_batch(self.batch_delay)
             started = time.thread_time()
             try:
-                if batched:
-                    if not self._feed_records(batch):
-                        return
-                else:
-                    for item in batch:
-                        if item is None:
-                            return
-                        self._feed_one(*item)
+                if not (self._feed_records(batch) if batched else self._feed_each(batch)):
+                    return
             finally:
                 self.cpu_seconds += time.thread_time() - started
-            if self.batch_delay > 0:
-                time.sleep(self.batch_delay)  # let messages gather: one wake-up per batch, not per message
+
+    def _feed_each(self, batch):
+        """Hand a drained batch to the sink message by message; False once the end mark (None) is reached."""
+        for item in batch:
+            if item is None:
+                return False
+            if isinstance(item, threading.Event):
+                item.set()  # a sync mark: everything before it was fed
+            else:
+                self._feed_one(*item)
+        return True
 
     def _feed_records(self, batch):
         """Hand a drained batch to ``sink.on_records`` as serialized records (a decoded message, as a test may
@@ -214,6 +255,11 @@ class Intake(object):
             if item is None:
                 self._feed_batch(records)
                 return False
+            if isinstance(item, threading.Event):
+                self._feed_batch(records)
+                records = []
+                item.set()  # a sync mark: everything before it was fed
+                continue
             topic, msg, receipt = item
             if not isinstance(msg, rospy.AnyMsg):
                 self._feed_batch(records)

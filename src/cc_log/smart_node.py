@@ -73,12 +73,12 @@ that fails (disk full, directory not writable) is reported (ERROR on /diagnostic
 window is kept in memory and retried every few seconds (``window_writer``); when space is short the quota
 makes room first. At shutdown held windows are retried for ``CLOSE_RETRY`` seconds.
 
-Subscriber callbacks only put the message on an intake queue (``intake``); one feeder thread hands each
-message, as its serialized bytes and connection header, to the triggers and the window buffer
-(``SmartLogger.on_raw``: decoded only where a field is read), whose writer thread decodes (json-xz),
-compresses and writes. Stamps are header stamps
-(receipt time for messages without one), so ``use_sim_time`` and ``rosbag play --clock`` work, and time
-jumping backwards (a bag played again) restarts the buffer instead of failing.
+Subscriber callbacks only put the message on an intake queue (``intake``); one feeder thread hands the
+messages, as their serialized bytes and connection headers, to the triggers and the window buffer in batches
+of up to half a second (``SmartLogger.on_records``: decoded only where a field is read; a manual trigger first
+waits for the messages received before it), whose writer thread decodes (json-xz), compresses and writes.
+Stamps are header stamps (receipt time for messages without one), so ``use_sim_time`` and ``rosbag play
+--clock`` work, and time jumping backwards (a bag played again) restarts the buffer instead of failing.
 """
 import math
 import sys
@@ -232,11 +232,12 @@ class SmartNode(object):
                 learner.flag(event.stamp)
 
     def _trigger(self, request):
+        self.intake.sync()  # the messages received before the call are fed: the window is around the newest
         ok, message = self.logger.trigger_now('manual')
-        # Messages still in the intake queue came before the call: the trigger applies to the newest fed.
         return TriggerResponse(success=ok, message=message)
 
     def _trigger_window(self, request):
+        self.intake.sync()
         ok, message = self.logger.trigger_now(request.reason, request.before, request.after)
         return ok, message
 
