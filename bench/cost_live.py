@@ -111,15 +111,11 @@ def publisher(args):
 
 
 def _odometry_imu_pairs(generated):
-    """``(odometry, imu)`` message pairs, in order, from the simulator's ``(topic, stamp, msg)``."""
+    """``(odometry, imu)`` message pairs, each topic in its order, from the simulator's ``(topic, stamp, msg)``."""
     from cc_log import sim
-    odometry = None
-    for topic, _, msg in generated:
-        if topic == sim.ODOM_TOPIC:
-            odometry = msg
-        elif topic == sim.IMU_TOPIC and odometry is not None:
-            yield odometry, msg
-            odometry = None
+    mine, other = itertools.tee(generated)
+    return zip((msg for topic, _, msg in mine if topic == sim.ODOM_TOPIC),
+               (msg for topic, _, msg in other if topic == sim.IMU_TOPIC))
 
 
 # -- processes -----------------------------------------------------------------------------------------
