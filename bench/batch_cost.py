@@ -4,8 +4,9 @@
     cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
     python3 bench/batch_cost.py [--sizes 1,2,5,10,50,256] [--rounds 3]
 
-The live node hands the logger what its intake drained (1-2 records at 100 Hz), offline replay 256 records at
-a time; this shows what each batch size costs per message (process CPU, best of ``--rounds``). Data: a
+The live node hands the logger what its intake drained (what arrived in up to 0.5 s: ~100 records at 100 + 100
+Hz; ~10 while it drained every 50 ms), offline replay 256 records at a time; this shows what each batch size
+costs per message (process CPU, best of ``--rounds``). Data: a
 2-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz odometry + IMU, no anomalies) read raw; model: motion
 500-message window trained on a nominal simulated run (seed 2, 3 min); classify every 50 ms, json-xz windows
 written in the calling thread.

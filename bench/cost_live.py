@@ -99,11 +99,11 @@ def publisher(args):
         time.sleep(max(0.0, min(0.001, start + (sent / args.rate) - time.time())))
     publish_seconds = time.time() - start
     # wait (up to 2 s after the last diagnostics update) for the node to catch up
+    sent *= 2  # odometry and IMU
     drain_end = time.time() + 2.5
     while time.time() < drain_end and (state['seen'] is None or state['seen'] < sent):
         time.sleep(0.1)
     time.sleep(1.2)  # one more diagnostics period
-    sent *= 2  # odometry and IMU
     print(json.dumps({'sent': sent, 'publish_seconds': publish_seconds, 'seen': state['seen'],
                       'intake_max': state['intake_max'], 'windows': state['windows'], 'stages': state['stages']}))
     rospy.signal_shutdown('done')
