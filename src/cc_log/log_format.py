@@ -226,7 +226,7 @@ def write_window(window, directory, fmt, metadata=None, base=None):
     ensure_directory(directory)
     records, undecodable = window.records, 0
     if not getattr(module, 'RAW_RECORDS', False):
-        records, undecodable = raw_message.decoded_records(records)
+        records, undecodable = getattr(module, 'decoded_records', raw_message.decoded_records)(records)
         if not records:
             raise ValueError('window: none of its %d records can be decoded' % undecodable)
     meta = window_metadata(window, fmt, metadata)

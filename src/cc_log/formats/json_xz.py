@@ -35,6 +35,7 @@ writing; the map is kept in the metadata (``precision``), and a reader reads wha
 
 Pure: no rospy, no rosbag.
 """
+import base64
 import decimal
 import fnmatch
 import functools
@@ -44,7 +45,9 @@ import math
 import operator
 import os
 
-from .. import msg_codec, safe_input
+import numpy
+
+from .. import msg_codec, raw_message, safe_input
 from ..window_buffer import Record
 
 CODEC = 'json-xz'
@@ -178,17 +181,17 @@ def _same(value, first, first_repr):
     return value == first and repr(value) == first_repr
 
 
-def _columns(rows):
-    """Split flat rows into (constant, columns), keys in the order of the first row."""
+def _columns(values):
+    """Split ``{key: one value per message}`` into (constant, columns), keys in order."""
     constant, columns = {}, {}
-    for key in rows[0]:
-        values = [row[key] for row in rows]
-        first = values[0]
-        first_repr = repr(first)
-        if len(values) > 1 and all(_same(value, first, first_repr) for value in values[1:]):
-            constant[key] = first
-        else:
-            columns[key] = values
+    for key, column in values.items():
+        first = column[0]
+        if len(column) > 1 and column.count(first) == len(column):  # count: a quick no; _same: the text
+            first_repr = repr(first)
+            if all(_same(value, first, first_repr) for value in column[1:]):
+                constant[key] = first
+                continue
+        columns[key] = column
     return constant, columns
 
 
@@ -196,6 +199,117 @@ def _header_stamp(msg):
     header = getattr(msg, 'header', None)
     stamp = getattr(header, 'stamp', None)
     return stamp.to_sec() if stamp is not None and hasattr(stamp, 'to_sec') else None
+
+
+def _all_equal(header_stamps, stamps):
+    """Whether every record's stamp equals its header stamp (``header_stamps``: a list, or an array)."""
+    if isinstance(header_stamps, numpy.ndarray) and all(type(stamp) is float for stamp in stamps):
+        return bool((header_stamps == numpy.array(stamps)).all())
+    return all(header == stamp for header, stamp in zip(list(header_stamps), stamps))
+
+
+def decoded_records(records):
+    """``raw_message.decoded_records`` for this writer: a record of serialized bytes that ``document`` reads
+    in bulk (a ``raw_message.layout`` type whose bytes fit it) stays as it is; the others are decoded (those
+    that cannot be are counted)."""
+    raws = {}  # class -> indices of its records in bytes
+    kept = list(records)
+    bad = set()
+    for index, record in enumerate(kept):
+        if record.msg is None and record.raw is not None:
+            try:
+                cls = raw_message.message_class(record.connection)
+            except raw_message.DECODE_ERRORS:
+                bad.add(index)
+                continue
+            raws.setdefault(cls, []).append(index)
+    for cls, indices in raws.items():
+        fields = raw_message.layout(cls)
+        if fields is not None:
+            indices = [indices[rest] for rest in raw_message.blocks(fields, [kept[i].raw for i in indices])[1]]
+        for index in indices:
+            try:
+                kept[index] = raw_message.decoded(kept[index])
+            except raw_message.DECODE_ERRORS:
+                bad.add(index)
+    return [record for index, record in enumerate(kept) if index not in bad], len(bad)
+
+
+def _section_values(recs):
+    """``({key: one value per record}, header stamps)`` of a section's records, as ``flat_row`` makes them:
+    records of serialized bytes of a ``raw_message.layout`` type read column by column from their bytes
+    (one numpy view per field), the others (and messages genpy reads differently) decoded, row by row."""
+    raw = [index for index, record in enumerate(recs) if record.msg is None]
+    cls = raw_message.message_class(recs[raw[0]].connection) if raw else None
+    fields = raw_message.layout(cls) if cls is not None else None
+    if fields is None or any(raw_message.message_class(recs[index].connection) is not cls for index in raw):
+        recs = [raw_message.decoded(record) for record in recs]
+        raw, fields = [], None
+    rows = {}  # index -> flat row, of the records not read from the bytes
+    blocks = []
+    if fields is not None:
+        blocks, rest = raw_message.blocks(fields, [recs[index].raw for index in raw])
+        positions = numpy.array(raw, dtype=numpy.intp)
+        blocks = [block._replace(rows=positions[block.rows]) for block in blocks]
+        rows.update((raw[index], flat_row(raw_message.decoded(recs[raw[index]]).msg)) for index in rest)
+    rows.update((index, flat_row(record.msg)) for index, record in enumerate(recs) if record.msg is not None)
+    keys = [field.key for field in fields] if fields is not None else list(rows[0])
+    if fields is not None and rows and list(next(iter(rows.values()))) != keys:
+        return _section_values([raw_message.decoded(record) for record in recs])
+    values = {}
+    for block in blocks:
+        try:
+            columns = [_block_values(block, field) for field in fields]
+        except UnicodeDecodeError:  # genpy replaces what is not UTF-8: its row
+            rows.update((index, flat_row(raw_message.decoded(recs[index]).msg)) for index in block.rows.tolist())
+            continue
+        if len(block.rows) == len(recs):
+            values = dict(zip(keys, columns))
+            break
+        for key, column in zip(keys, columns):
+            target = values.setdefault(key, [None] * len(recs))
+            for index, value in zip(block.rows.tolist(), column):
+                target[index] = value
+    if rows and not values:
+        values = dict((key, [None] * len(recs)) for key in keys)
+    for index, row in rows.items():
+        for key in keys:
+            values[key][index] = row[key]
+    if fields is None or 'header.stamp.secs' not in keys or not _is_time(cls, 'header.stamp'):
+        return values, [_header_stamp(record.msg) if record.msg is not None else None for record in recs]
+    secs = numpy.array(values['header.stamp.secs'], dtype=numpy.float64)
+    return values, secs + numpy.array(values['header.stamp.nsecs'], dtype=numpy.float64) / 1e9
+
+
+def _is_time(cls, dotted):
+    """Whether the field ``dotted`` of ``cls`` is a time or a duration (its value has ``to_sec``)."""
+    value = cls()
+    for name in dotted.split('.'):
+        value = getattr(value, name, None)
+    return hasattr(value, 'to_sec')
+
+
+def _block_values(block, field):
+    """The values of ``field`` of the messages of a ``raw_message.Block``, each as ``flat_row`` writes it."""
+    if field.base == 'string':
+        data = block.bytes_column(field)
+        if (data == data[0]).all():
+            return [data[0].tobytes().decode('utf-8')] * len(data)
+        return [row.tobytes().decode('utf-8') for row in data]
+    if field.count and field.base in msg_codec.BYTES_TYPES:
+        return [base64.b64encode(row.tobytes()).decode('ascii') for row in block.bytes_column(field)]
+    array = block.column(field)
+    if field.count is None:
+        array = array[:, 0]
+    if field.base == 'bool':
+        return array.astype(bool).tolist()
+    values = array.tolist()
+    if field.base == 'float32':
+        return [_float32(value) for value in values] if field.count is None else \
+            [[_float32(value) for value in row] for row in values]
+    if field.base == 'float64' and not numpy.isfinite(array).all():
+        return list(map(_float if field.count is None else _float64s, values))
+    return values
 
 
 # -- differences ----------------------------------------------------------------------------------------
@@ -362,7 +476,7 @@ def document(records, metadata, delta=differences):
     index = {}
     order = []
     for record in records:
-        msg = record.msg
+        msg = record.msg if record.msg is not None else raw_message.message_class(record.connection)
         if record.topic not in index:
             index[record.topic] = len(sections)
             sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
@@ -376,10 +490,10 @@ def document(records, metadata, delta=differences):
     topics = []
     for section in sections:
         recs = section.pop('records')
-        rows = [flat_row(record.msg) for record in recs]
+        values, header_stamps = _section_values(recs)
         if rounded is not None:
-            rows = [dict((key, rounded(key, value)) for key, value in row.items()) for row in rows]
-        constant, columns = _columns(rows)
+            values = dict((key, [rounded(key, value) for value in column]) for key, column in values.items())
+        constant, columns = _columns(values)
         delta_keys = []
         for key, values in columns.items():
             deltas = delta(values)
@@ -387,7 +501,7 @@ def document(records, metadata, delta=differences):
                 columns[key] = deltas
                 delta_keys.append(key)
         stamps = [record.stamp for record in recs]
-        if all(_header_stamp(record.msg) == record.stamp for record in recs):
+        if _all_equal(header_stamps, stamps):
             stamps = HEADER_STAMP
         else:
             stamps = [msg_codec.encode_float(float(stamp)) for stamp in stamps]
