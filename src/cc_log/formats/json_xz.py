@@ -181,7 +181,12 @@ def _same(value, first, first_repr):
     return value == first and repr(value) == first_repr
 
 
-def _columns(values):
+def _columns(rows):
+    """Split flat rows into (constant, columns), keys in the order of the first row."""
+    return _split_columns(dict((key, [row[key] for row in rows]) for key in rows[0]))
+
+
+def _split_columns(values):
     """Split ``{key: one value per message}`` into (constant, columns), keys in order."""
     constant, columns = {}, {}
     for key, column in values.items():
@@ -339,39 +344,62 @@ def differences(values, choose=True):
     smaller (integers: not shorter as text; floats: see DELTA_GAIN, REPEATS_SHARE and SAMPLE)."""
     if len(values) < 3:
         return None
-    if all(_is_int(value) for value in values):
+    if set(map(type, values)) == {int} or all(_is_int(value) for value in values):
         deltas = values[:1] + [b - a for a, b in zip(values, values[1:])]
         return deltas if not choose or len(str(deltas)) < len(str(values)) else None
-    if not all(_is_plain_float(value) for value in values):
+    if not _plain_floats(values):
         return None
     if choose and len(values) > 2 * SAMPLE and _digit_share(values[:SAMPLE])[0] > SAMPLE_GAIN:
         return None  # decided on a sample: noisy columns (IMU axes) are not worth the decimal arithmetic
-    share, deltas = _digit_share(values)
+    texts = list(map(repr, values))
+    share, deltas = _digit_share(values, texts)
     if choose and share > DELTA_GAIN:
         return None
-    texts = [repr(value) for value in values]
     adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
     if choose and len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
         return None
     return deltas
 
 
-def _digit_share(values):
+def _plain_floats(values):
+    """``all(_is_plain_float(value) for value in values)``, in bulk for a list of floats."""
+    if set(map(type, values)) != {float}:
+        return all(_is_plain_float(value) for value in values)
+    return all(map(math.isfinite, values)) and (0.0 not in values or all(map(_is_plain_float, values)))
+
+
+def _digit_share(values, texts=None):
     """(significant digits of the differences / of the values, the differences); (inf, None) when they
-    cannot be computed exactly."""
-    texts = [repr(value) for value in values]
-    exact = [decimal.Decimal(text) for text in texts]
+    cannot be computed exactly. ``texts``: ``repr`` of the values, if already made."""
+    texts = list(map(repr, values)) if texts is None else texts
+    exact = list(map(decimal.Decimal, texts))
     try:
-        deltas = [exact[0]] + [_EXACT.subtract(b, a) for a, b in zip(exact, exact[1:])]
+        deltas = exact[:1] + list(map(_EXACT.subtract, exact[1:], exact))
     except decimal.DecimalException:
         return math.inf, None
-    return sum(_digits(decimal_text(delta)) for delta in deltas) / max(1, sum(_digits(text) for text in texts)), \
-        deltas
+    return sum(map(_decimal_digits, deltas)) / max(1, sum(map(_float_digits, texts))), deltas
 
 
 def _digits(text):
     """Significant digits of a number's text (what LZMA pays for: leading zeros and the exponent are cheap)."""
     return len(text.lower().split('e')[0].lstrip('-').replace('.', '').lstrip('0'))
+
+
+def _float_digits(text):
+    """``_digits`` of the ``repr`` of a float (lower case already)."""
+    return len(text.partition('e')[0].lstrip('-').replace('.', '').lstrip('0'))
+
+
+def _decimal_digits(value):
+    """``_digits(decimal_text(value))`` without the text: the digits of the normalized coefficient, and the
+    zeros after them when ``decimal_text`` writes them (plain notation, no longer than the scientific)."""
+    if not value:
+        return 0
+    _, digits, exponent = value.normalize(_EXACT).as_tuple()
+    count = len(digits)
+    if exponent > 0 and exponent <= (count > 1) + 2 + len(str(exponent + count - 1)):
+        return count + exponent
+    return count
 
 
 def _sums(values, key):
@@ -493,7 +521,7 @@ def document(records, metadata, delta=differences):
         values, header_stamps = _section_values(recs)
         if rounded is not None:
             values = dict((key, [rounded(key, value) for value in column]) for key, column in values.items())
-        constant, columns = _columns(values)
+        constant, columns = _split_columns(values)
         delta_keys = []
         for key, values in columns.items():
             deltas = delta(values)
