@@ -186,11 +186,15 @@ def _columns(rows):
     return _split_columns(dict((key, [row[key] for row in rows]) for key in rows[0]))
 
 
-def _split_columns(values):
-    """Split ``{key: one value per message}`` into (constant, columns), keys in order."""
+def _split_columns(values, same=()):
+    """Split ``{key: one value per message}`` into (constant, columns), keys in order; the keys in ``same``
+    are known to hold the same value (its very object) in every message."""
     constant, columns = {}, {}
     for key, column in values.items():
         first = column[0]
+        if len(column) > 1 and key in same:
+            constant[key] = first
+            continue
         if len(column) > 1 and column.count(first) == len(column):  # count: a quick no; _same: the text
             first_repr = repr(first)
             if all(_same(value, first, first_repr) for value in column[1:]):
@@ -220,10 +224,11 @@ def decoded_records(records):
     raws = {}  # class -> indices of its records in bytes
     kept = list(records)
     bad = set()
+    classes = {}
     for index, record in enumerate(kept):
         if record.msg is None and record.raw is not None:
             try:
-                cls = raw_message.message_class(record.connection)
+                cls = _class_of(record, classes)
             except raw_message.DECODE_ERRORS:
                 bad.add(index)
                 continue
@@ -240,14 +245,27 @@ def decoded_records(records):
     return [record for index, record in enumerate(kept) if index not in bad], len(bad)
 
 
+def _class_of(record, classes):
+    """The class of a record's message (``raw_message.message_class`` of its connection when it has no message),
+    ``classes``: a cache by connection object (records of one connection share it)."""
+    if record.msg is not None:
+        return type(record.msg)
+    cls = classes.get(id(record.connection))
+    if cls is None:
+        cls = classes[id(record.connection)] = raw_message.message_class(record.connection)
+    return cls
+
+
 def _section_values(recs):
-    """``({key: one value per record}, header stamps)`` of a section's records, as ``flat_row`` makes them:
-    records of serialized bytes of a ``raw_message.layout`` type read column by column from their bytes
-    (one numpy view per field), the others (and messages genpy reads differently) decoded, row by row."""
+    """``({key: one value per record}, keys holding the same value in every record, header stamps)`` of a
+    section's records, as ``flat_row`` makes them: records of serialized bytes of a ``raw_message.layout`` type
+    read column by column from their bytes (one numpy view per field; a field with the same bytes in every
+    message read once), the others (and messages genpy reads differently) decoded, row by row."""
+    classes = {}
     raw = [index for index, record in enumerate(recs) if record.msg is None]
-    cls = raw_message.message_class(recs[raw[0]].connection) if raw else None
+    cls = _class_of(recs[raw[0]], classes) if raw else None
     fields = raw_message.layout(cls) if cls is not None else None
-    if fields is None or any(raw_message.message_class(recs[index].connection) is not cls for index in raw):
+    if fields is None or any(_class_of(recs[index], classes) is not cls for index in raw):
         recs = [raw_message.decoded(record) for record in recs]
         raw, fields = [], None
     rows = {}  # index -> flat row, of the records not read from the bytes
@@ -261,14 +279,22 @@ def _section_values(recs):
     keys = [field.key for field in fields] if fields is not None else list(rows[0])
     if fields is not None and rows and list(next(iter(rows.values()))) != keys:
         return _section_values([raw_message.decoded(record) for record in recs])
-    values = {}
+    values, same = {}, ()
     for block in blocks:
+        whole = len(block.rows) == len(recs)
         try:
-            columns = [_block_values(block, field) for field in fields]
+            if whole:
+                same = _same_fields(block, fields)
+                first = block._replace(rows=block.rows[:1], table=block.table[:1])
+                columns = [_block_values(first, field) * len(recs) if field.key in same else
+                           _block_values(block, field) for field in fields]
+            else:
+                columns = [_block_values(block, field) for field in fields]
         except UnicodeDecodeError:  # genpy replaces what is not UTF-8: its row
             rows.update((index, flat_row(raw_message.decoded(recs[index]).msg)) for index in block.rows.tolist())
+            same = ()
             continue
-        if len(block.rows) == len(recs):
+        if whole:
             values = dict(zip(keys, columns))
             break
         for key, column in zip(keys, columns):
@@ -281,9 +307,21 @@ def _section_values(recs):
         for key in keys:
             values[key][index] = row[key]
     if fields is None or 'header.stamp.secs' not in keys or not _is_time(cls, 'header.stamp'):
-        return values, [_header_stamp(record.msg) if record.msg is not None else None for record in recs]
+        return values, same, [_header_stamp(record.msg) if record.msg is not None else None for record in recs]
     secs = numpy.array(values['header.stamp.secs'], dtype=numpy.float64)
-    return values, secs + numpy.array(values['header.stamp.nsecs'], dtype=numpy.float64) / 1e9
+    return values, same, secs + numpy.array(values['header.stamp.nsecs'], dtype=numpy.float64) / 1e9
+
+
+def _same_fields(block, fields):
+    """The keys of the fields whose bytes are the same in every message of ``block``."""
+    equal = (block.table == block.table[0]).all(axis=0)
+    same = set()
+    for field in fields:
+        offset = block.offsets[field.key]
+        start, size = (offset[0], offset[1]) if field.base == 'string' else (offset, field.size)
+        if equal[start:start + size].all():
+            same.add(field.key)
+    return same
 
 
 def _is_time(cls, dotted):
@@ -334,7 +372,10 @@ def decimal_text(value):
     if not value:
         return '0'
     value = value.normalize(_EXACT)
-    plain, scientific = format(value, 'f'), str(value)
+    scientific = str(value)
+    if 'E' not in scientific:
+        return scientific  # plain already, as format(value, 'f') writes it
+    plain = format(value, 'f')
     return plain if len(plain) <= len(scientific) else scientific
 
 
@@ -352,13 +393,12 @@ def differences(values, choose=True):
     if choose and len(values) > 2 * SAMPLE and _digit_share(values[:SAMPLE])[0] > SAMPLE_GAIN:
         return None  # decided on a sample: noisy columns (IMU axes) are not worth the decimal arithmetic
     texts = list(map(repr, values))
+    if choose:  # the repeats first: they are cheaper to count than the digits
+        adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
+        if len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
+            return None
     share, deltas = _digit_share(values, texts)
-    if choose and share > DELTA_GAIN:
-        return None
-    adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
-    if choose and len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
-        return None
-    return deltas
+    return None if choose and share > DELTA_GAIN else deltas
 
 
 def _plain_floats(values):
@@ -503,8 +543,9 @@ def document(records, metadata, delta=differences):
     sections = []
     index = {}
     order = []
+    classes = {}
     for record in records:
-        msg = record.msg if record.msg is not None else raw_message.message_class(record.connection)
+        msg = _class_of(record, classes)
         if record.topic not in index:
             index[record.topic] = len(sections)
             sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
@@ -518,10 +559,11 @@ def document(records, metadata, delta=differences):
     topics = []
     for section in sections:
         recs = section.pop('records')
-        values, header_stamps = _section_values(recs)
+        values, same, header_stamps = _section_values(recs)
         if rounded is not None:
-            values = dict((key, [rounded(key, value) for value in column]) for key, column in values.items())
-        constant, columns = _split_columns(values)
+            values = dict((key, [rounded(key, column[0])] * len(column) if key in same else
+                           [rounded(key, value) for value in column]) for key, column in values.items())
+        constant, columns = _split_columns(values, same)
         delta_keys = []
         for key, values in columns.items():
             deltas = delta(values)
