@@ -33,6 +33,13 @@ Layout 1 (no ``delta``) is still read.
 pattern (``fnmatch`` on the dotted name, e.g. ``pose.pose.position.*``) to a multiple of its step before
 writing; the map is kept in the metadata (``precision``), and a reader reads what was written.
 
+Records held as serialized bytes (``raw_message``) are not decoded one by one: ``decoded_records`` (what
+``log_format.write_window`` calls) keeps those of a fixed layout (``raw_message.layout``: numbers, times,
+fixed-size arrays, strings; e.g. Odometry, Imu, Twist) as bytes, and ``document`` reads each field of a section
+for all its messages at once (numpy views at the fields' offsets), writing the same text as from the decoded
+messages. Other types, and messages genpy reads differently (not UTF-8, a time's nanoseconds beyond a second),
+are decoded.
+
 Pure: no rospy, no rosbag.
 """
 import base64
