@@ -417,36 +417,56 @@ def _plain_floats(values):
 
 def _digit_share(values, texts=None):
     """(significant digits of the differences / of the values, the differences); (inf, None) when they
-    cannot be computed exactly. ``texts``: ``repr`` of the values, if already made."""
+    cannot be computed exactly. ``texts``: ``repr`` of the values, if already made. The differences are a
+    ``_Deltas`` list: their texts (``decimal_text``) are kept for ``dumps``."""
     texts = list(map(repr, values)) if texts is None else texts
     exact = list(map(decimal.Decimal, texts))
     try:
-        deltas = exact[:1] + list(map(_EXACT.subtract, exact[1:], exact))
+        deltas = _Deltas(exact[:1] + list(map(_EXACT.subtract, exact[1:], exact)))
     except decimal.DecimalException:
         return math.inf, None
-    return sum(map(_decimal_digits, deltas)) / max(1, sum(map(_float_digits, texts))), deltas
+    deltas.texts = _decimal_texts(deltas)
+    return _digit_sum(deltas.texts) / max(1, _digit_sum(texts)), deltas
+
+
+class _Deltas(list):
+    """Differences (Decimals) with their ``texts``."""
+
+    texts = None
+
+
+_NORMALIZED = operator.methodcaller('normalize', _EXACT)
+
+
+def _decimal_texts(values):
+    """``decimal_text`` of each of the Decimals ``values``, in bulk: ``str`` of the normalized value is that
+    text unless it is scientific (then the shorter of the two notations) or ``-0``."""
+    texts = list(map(str, map(_NORMALIZED, values)))
+    if '-0' in texts or 'E' in ''.join(texts):
+        texts = [decimal_text(value) if 'E' in text or text == '-0' else text for value, text in zip(values, texts)]
+    return texts
+
+
+def _digit_sum(texts):
+    """``sum(map(_digits, texts))``, counted over the joined text when no text has an exponent: every digit,
+    less the zeros that lead a number (``0.00``...) and the texts that are ``0``."""
+    joined = ',' + ',,'.join(texts) + ','  # every text between its own two commas
+    if 'e' in joined or 'E' in joined:
+        return sum(map(_digits, texts))
+    joined = joined.replace(',-', ',')
+    count = len(joined) - joined.count(',') - joined.count('.') - joined.count(',0,')
+    lead = ',0.'
+    leading = joined.count(lead)
+    while leading:
+        count -= leading
+        lead += '0'
+        leading = joined.count(lead)
+    return count
 
 
 def _digits(text):
     """Significant digits of a number's text (what LZMA pays for: leading zeros and the exponent are cheap)."""
     return len(text.lower().split('e')[0].lstrip('-').replace('.', '').lstrip('0'))
-
-
-def _float_digits(text):
-    """``_digits`` of the ``repr`` of a float (lower case already)."""
-    return len(text.partition('e')[0].lstrip('-').replace('.', '').lstrip('0'))
-
-
-def _decimal_digits(value):
-    """``_digits(decimal_text(value))`` without the text: the digits of the normalized coefficient, and the
-    zeros after them when ``decimal_text`` writes them (plain notation, no longer than the scientific)."""
-    if not value:
-        return 0
-    _, digits, exponent = value.normalize(_EXACT).as_tuple()
-    count = len(digits)
-    if exponent > 0 and exponent <= (count > 1) + 2 + len(str(exponent + count - 1)):
-        return count + exponent
-    return count
 
 
 def _sums(values, key):
@@ -623,7 +643,8 @@ def dumps(doc):
 
 def _column_text(values):
     if values and isinstance(values[0], decimal.Decimal):  # the first as written (8.0, not 8), then differences
-        return '[%s]' % ','.join([str(values[0])] + [decimal_text(value) for value in values[1:]])
+        texts = values.texts if isinstance(values, _Deltas) else _decimal_texts(values)
+        return '[%s]' % ','.join([str(values[0])] + texts[1:])
     return _json(values)
 
 
