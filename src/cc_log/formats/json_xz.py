@@ -51,6 +51,7 @@ import lzma
 import math
 import operator
 import os
+import re
 
 import numpy
 
@@ -447,12 +448,15 @@ def _decimal_texts(values):
     return texts
 
 
+_EXPONENT = re.compile('[eE][-+]?[0-9]+')
+
+
 def _digit_sum(texts):
-    """``sum(map(_digits, texts))``, counted over the joined text when no text has an exponent: every digit,
-    less the zeros that lead a number (``0.00``...) and the texts that are ``0``."""
+    """``sum(map(_digits, texts))`` counted over the joined texts, exponents left out: every digit, less the
+    zeros that lead a number (``0.00``...) and the texts that are ``0``."""
     joined = ',' + ',,'.join(texts) + ','  # every text between its own two commas
     if 'e' in joined or 'E' in joined:
-        return sum(map(_digits, texts))
+        joined = _EXPONENT.sub('', joined)  # the mantissa's digits count
     joined = joined.replace(',-', ',')
     count = len(joined) - joined.count(',') - joined.count('.') - joined.count(',0,')
     lead = ',0.'
