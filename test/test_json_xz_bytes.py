@@ -270,3 +270,28 @@ def test_window_file_is_the_text(windows, tmp_path):
     assert [record.stamp for record in back] == [record.stamp for record in records]
     decoded = [raw_message.decoded(record).msg for record in records]
     assert [serialized(record.msg) for record in back] == [serialized(msg) for msg in decoded] == [r.raw for r in records]
+
+
+def test_bulk_digits_and_texts():
+    """The difference choice's bulk helpers give what the per-value definitions give (plain and scientific
+    texts, zeros, negative zero, exponents of both cases)."""
+    import decimal
+    import random
+    rng = random.Random(5)
+    floats = [0.0, 1.0, 100.0, 0.1, 1e-05, 1.5e-07, 1e16, 1.2345678901234567e+20, 5e-324, 1.7976931348623157e308,
+              -0.00012, 12345.678, -3.0]
+    floats += [rng.gauss(0, 1) * 10 ** rng.randint(-9, 18) for _ in range(400)]
+    texts = list(map(repr, floats))
+    decimals = [decimal.Decimal(text) for text in texts]
+    wide = decimal.Context(prec=2000)
+    decimals += [wide.subtract(b, a) for a, b in zip(decimals, decimals[1:])]
+    decimals += [decimal.Decimal(text) for text in ('-0', '0E+5', '-0E-3', '1E+2', '1.2E+5', '12E+10', '9E+1')]
+    decimals = [value for value in decimals if len(value.as_tuple().digits) <= 400]  # what differences holds
+    for start in range(0, len(texts), 7):
+        part = texts[start:start + rng.randint(1, 30)]
+        assert json_xz._digit_sum(part) == sum(map(json_xz._digits, part)), part
+    for start in range(0, len(decimals), 7):
+        part = decimals[start:start + rng.randint(1, 30)]
+        made = json_xz._decimal_texts(part)
+        assert made == list(map(json_xz.decimal_text, part)), part
+        assert json_xz._digit_sum(made) == sum(map(json_xz._digits, made)), made
