@@ -227,8 +227,9 @@ def main(argv=None):
                 kept = sum(len(records) for _, records in windows)
                 cpu, size = writer_cost(windows, max(rounds, 3))
                 per = dict((key, '%.1f' % (1e6 * seconds / kept)) for key, seconds in cpu.items())
-                rows.append([name, len(windows), kept, per['earlier'], per['now'], '%.1f' % (cpu['earlier'] / cpu['now']),
-                             per['lzma'], '%.1f' % (1e6 * (cpu['now'] + cpu['lzma']) / kept), size])
+                rows.append([name, len(windows), kept, per['earlier'], per['now'],
+                             '%.1f' % (cpu['earlier'] / cpu['now']), per['lzma'],
+                             '%.1f' % (1e6 * (cpu['now'] + cpu['lzma']) / kept), size])
             print()
             common.table(['bag', 'windows', 'kept msgs', 'text earlier us/msg', 'text now us/msg', 'speed-up',
                           'LZMA us/msg', 'writer now us/msg', 'bytes'], rows,

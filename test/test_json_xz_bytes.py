@@ -22,7 +22,8 @@ REAL = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)),
 HUSKY = ('husky_outdoor_2015.bag', ('/husky_velocity_controller/odom', '/imu/data', '/fix'))
 BAGS = (HUSKY, ('f1tenth_DS1.bag', ('/odom',)), ('icelab_normal_plan.bag', ('/odom',)),
         ('socspioneer_trace0.bag', ('/base_scan', '/odom', '/tf')),
-        ('alfa_carbonZ_engine_failure.bag', ('/failure_status/engines', '/mavros/imu/data', '/mavros/local_position/odom')))
+        ('alfa_carbonZ_engine_failure.bag',
+         ('/failure_status/engines', '/mavros/imu/data', '/mavros/local_position/odom')))
 WINDOW = 600  # records per window; three windows per bag: its start, middle and end
 PRECISION = {'pose.pose.position.*': 1e-4, 'twist.twist.*': 1e-4, '*orientation*': 1e-5, '*velocity*': 1e-5,
              'range': 0.01, 'values': 0.5}
@@ -269,7 +270,8 @@ def test_window_file_is_the_text(windows, tmp_path):
     meta, back = log_format.read_window(path)
     assert [record.stamp for record in back] == [record.stamp for record in records]
     decoded = [raw_message.decoded(record).msg for record in records]
-    assert [serialized(record.msg) for record in back] == [serialized(msg) for msg in decoded] == [r.raw for r in records]
+    assert [serialized(record.msg) for record in back] == [serialized(msg) for msg in decoded] \
+        == [record.raw for record in records]
 
 
 def test_bulk_digits_and_texts():
