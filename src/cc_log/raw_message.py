@@ -166,6 +166,7 @@ class Field(collections.namedtuple('Field', 'key base dtype count')):
 
     @property
     def size(self):
+        """Bytes of a numeric field (not of a string: its length is in the message)."""
         return numpy.dtype(self.dtype).itemsize * (self.count or 1)
 
 
