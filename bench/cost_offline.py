@@ -16,10 +16,10 @@ Throughput is messages / process CPU seconds (user + system, all threads) and me
 the best round of each is kept. The ratio read-time / replay-time is "smart logger speed as % of read
 speed" (target >= 100%: replay costs no more CPU than a plain deserializing read; replay reads the bag
 with ``raw=True`` and decodes only what its triggers read and what it keeps). ``--profile N`` adds a
-cProfile of one replay. ``--writer`` adds the json-xz writer alone on the windows the replay kept: the
-document + JSON + xz of each window (messages already decoded) as written now, against the earlier writer
-(rows through ``msg_codec.to_dict``, LZMA2 preset 6 without ``json_xz.FILTER_OPTIONS``: the same text, the
-preset's own match search), alternating in the same process.
+cProfile of one replay. ``--writer`` adds the json-xz writer alone on the windows the replay kept, their
+records as serialized bytes (as the replay hands them over): the CPU per kept message of the text (decode +
+document + JSON) read from the bytes now (``json_xz.decoded_records``), against every message decoded by genpy
+and flattened into rows (the writer before), alternating in the same process, and of LZMA on the text.
 
 Bags: ../shared/data/real/husky_outdoor_2015.bag (odometry driving + IMU side topic; model trained on the
 first half, motion 2 s window) and a 10-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz odometry +
@@ -98,38 +98,45 @@ def profile(path, topics, model_path, out, name, top):
                   for (f, line, fn), (_, calls, own, _, _) in rows], 'Costliest functions:')
 
 
-def genpy_row(msg):
-    """The json-xz row as the writer made it before ``json_xz.flat_row``."""
-    from cc_log.formats import json_xz
-    return json_xz._flatten(json_xz.msg_codec.to_dict(msg, short_float32=True), '', {})
+def as_bytes(windows):
+    """``windows`` (``[(metadata, records)]`` of decoded messages) with each record as the replay hands it to
+    the writer: serialized bytes and their connection header, no message."""
+    import io
+    out = []
+    for metadata, records in windows:
+        raw = []
+        for record in records:
+            buff = io.BytesIO()
+            record.msg.serialize(buff)
+            cls = type(record.msg)
+            raw.append(record._replace(msg=None, raw=buff.getvalue(), connection={
+                'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}))
+        out.append((metadata, raw))
+    return out
 
 
 def writer_cost(windows, rounds):
-    """``(CPU s now, CPU s earlier writer, lossless bytes now, bytes earlier)``: best of ``rounds`` alternating
-    encodings of every window in ``windows`` (``[(metadata, records)]``)."""
+    """``{'now': CPU s, 'earlier': CPU s, 'lzma': CPU s, 'bytes': total}``: best of ``rounds`` alternating runs
+    over ``windows`` (``[(metadata, records of serialized bytes)]``) of the json-xz writer's text (decode +
+    document + JSON) now (``json_xz.decoded_records``: fields read from the bytes) and earlier (every message
+    decoded by genpy, ``raw_message.decoded_records``, then rows), and of LZMA on that text. Both texts must be
+    the same."""
+    from cc_log import raw_message
     from cc_log.formats import json_xz
-    options = dict(json_xz.FILTER_OPTIONS)
-    now, before, size_now, size_before = [], [], 0, 0
+    times = {'now': [], 'earlier': [], 'lzma': []}
+    texts = {}
     for _ in range(rounds):
-        for earlier in (False, True):
-            json_xz.FILTER_OPTIONS.clear()
-            json_xz.FILTER_OPTIONS.update({} if earlier else options)
-            flat_row = json_xz.flat_row
-            if earlier:
-                json_xz.flat_row = genpy_row
-            try:
-                with common.Timer() as timer:
-                    size = sum(len(json_xz.encode(records, metadata)) for metadata, records in windows)
-            finally:
-                json_xz.flat_row = flat_row
-                json_xz.FILTER_OPTIONS.clear()
-                json_xz.FILTER_OPTIONS.update(options)
-            (before if earlier else now).append(timer.cpu)
-            if earlier:
-                size_before = size
-            else:
-                size_now = size
-    return min(now), min(before), size_now, size_before
+        for name, decode in (('now', json_xz.decoded_records), ('earlier', raw_message.decoded_records)):
+            with common.Timer() as timer:
+                texts[name] = [json_xz.dumps(json_xz.document(decode(records)[0], metadata)).encode('utf-8')
+                               for metadata, records in windows]
+            times[name].append(timer.cpu)
+        with common.Timer() as timer:
+            size = sum(len(json_xz.compress(text)) for text in texts['now'])
+        times['lzma'].append(timer.cpu)
+    if texts['now'] != texts['earlier']:
+        raise SystemExit('json-xz writer: the text read from the bytes differs from the decoded messages\' text')
+    return dict((name, min(values)) for name, values in times.items()), size
 
 
 def kept_windows(path, topics, model_path, tmp):
@@ -216,15 +223,18 @@ def main(argv=None):
         if args.writer:
             rows = []
             for name, path, topics, model_path in cases:
-                windows = kept_windows(path, topics, model_path, tmp)
+                windows = as_bytes(kept_windows(path, topics, model_path, tmp))
                 kept = sum(len(records) for _, records in windows)
-                now, before, size_now, size_before = writer_cost(windows, max(rounds, 3))
-                rows.append([name, len(windows), kept, '%.3f' % before, '%.3f' % now, '%.0f' % (1e6 * before / kept),
-                             '%.0f' % (1e6 * now / kept), '%.2f' % (before / now), size_before, size_now])
+                cpu, size = writer_cost(windows, max(rounds, 3))
+                per = dict((key, '%.1f' % (1e6 * seconds / kept)) for key, seconds in cpu.items())
+                rows.append([name, len(windows), kept, per['earlier'], per['now'],
+                             '%.1f' % (cpu['earlier'] / cpu['now']), per['lzma'],
+                             '%.1f' % (1e6 * (cpu['now'] + cpu['lzma']) / kept), size])
             print()
-            common.table(['bag', 'windows', 'kept msgs', 'earlier CPU s', 'now CPU s', 'earlier us/msg', 'now us/msg',
-                          'speed-up', 'earlier bytes', 'now bytes'], rows,
-                         'json-xz writer alone (document + JSON + xz of decoded messages; best of alternating rounds):')
+            common.table(['bag', 'windows', 'kept msgs', 'text earlier us/msg', 'text now us/msg', 'speed-up',
+                          'LZMA us/msg', 'writer now us/msg', 'bytes'], rows,
+                         'json-xz writer alone on the kept windows (records as serialized bytes; text = decode + '
+                         'document + JSON; best of alternating rounds; same text checked):')
         if args.profile:
             name, path, topics, model_path = cases[-1]
             profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile)

@@ -263,7 +263,7 @@ def test_ctrl_c_stops_a_replay_in_this_process_within_a_second(tmp_path):
     Ctrl-C stops it within about a second (it took 18 s: the open window was written first, then the
     interpreter freed the buffer), and what is under a final name is a whole window."""
     bag = tmp_path / 'run.bag'
-    result = cclog('simulate', '--minutes', 3, '--anomalies', 0, '--seed', 5, '--imu', bag)
+    result = cclog('simulate', '--minutes', 6, '--anomalies', 0, '--seed', 5, '--imu', bag)
     assert result.returncode == 0, result.stderr
     assert cclog('collect', bag, '--out', tmp_path / 'vectors', *WINDOW).returncode == 0
     assert cclog('learn', '--train', tmp_path / 'vectors', '--model', tmp_path / 'model.json').returncode == 0
@@ -274,10 +274,10 @@ def test_ctrl_c_stops_a_replay_in_this_process_within_a_second(tmp_path):
     out = tmp_path / 'windows'
     process = started('replay', bag, '--topic', '/odom', '--side-topic', '/imu/data', '--model',
                       tmp_path / 'hot.json', '--out', out, '--workers', 0)
-    # well into the run: the process has spent 4 s of CPU since its output directory appeared
+    # well into the run: the process has spent 2 s of CPU since its output directory appeared (of ~5 s)
     wait_for(lambda: os.path.isdir(str(out / 'run')), process, 'output directory')
     begun = cpu_seconds(process.pid)
-    wait_for(lambda: cpu_seconds(process.pid) > begun + 4, process, '4 CPU seconds of replay')
+    wait_for(lambda: cpu_seconds(process.pid) > begun + 2, process, '2 CPU seconds of replay')
     interrupted = time.monotonic()
     os.killpg(process.pid, signal.SIGINT)
     _, stderr = process.communicate(timeout=120)

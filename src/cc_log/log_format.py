@@ -216,7 +216,8 @@ def write_window(window, directory, fmt, metadata=None, base=None):
     ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
 
     ``metadata`` (JSON-able dict) is added to ``window_metadata``. Records held as serialized bytes are
-    decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``); one that cannot be
+    decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``), by the format's own
+    ``decoded_records`` when it has one (json-xz reads fixed layouts from the bytes); one that cannot be
     decoded is left out and counted in the metadata's ``undecodable``. Raises ValueError for a bad format or
     an empty window, OSError when the file cannot be written (the temporary file is removed).
     """
@@ -226,7 +227,7 @@ def write_window(window, directory, fmt, metadata=None, base=None):
     ensure_directory(directory)
     records, undecodable = window.records, 0
     if not getattr(module, 'RAW_RECORDS', False):
-        records, undecodable = raw_message.decoded_records(records)
+        records, undecodable = getattr(module, 'decoded_records', raw_message.decoded_records)(records)
         if not records:
             raise ValueError('window: none of its %d records can be decoded' % undecodable)
     meta = window_metadata(window, fmt, metadata)

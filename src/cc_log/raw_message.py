@@ -9,12 +9,17 @@ the type when its md5sum matches, else one built from the connection's definitio
 ValueError naming the type. ``stamp(raw, connection, fallback)`` reads the header stamp straight from the
 bytes of a type whose first field is a ``std_msgs/Header``.
 
-Pure: roslib and genpy, no rospy.
+``layout(cls)`` and ``blocks(fields, raws)`` find where each field lies in the bytes of many messages at
+once (numpy views instead of a genpy decode per message: the json-xz writer).
+
+Pure: roslib, genpy and numpy, no rospy.
 """
+import collections
 import functools
 import struct
 
 import genpy
+import numpy
 
 from . import msg_codec
 from . import safe_input
@@ -143,3 +148,126 @@ def _seconds(stamp):
 def is_latched(connection):
     """Whether the publisher latches (connection header ``latching: '1'``)."""
     return connection is not None and connection.get('latching') == '1'
+
+
+# -- fields read in bulk from the bytes -----------------------------------------------------------------
+
+_DTYPES = {'float64': '<f8', 'float32': '<f4', 'int8': 'i1', 'byte': 'i1', 'uint8': 'u1', 'char': 'u1',
+           'bool': 'u1', 'int16': '<i2', 'uint16': '<u2', 'int32': '<i4', 'uint32': '<u4', 'int64': '<i8',
+           'uint64': '<u8'}
+_TIME_DTYPES = {'time': '<u4', 'duration': '<i4'}
+_NSECS_PER_SEC = 1000000000
+
+
+class Field(collections.namedtuple('Field', 'key base dtype count')):
+    """A leaf field of a message's bytes: dotted ``key`` (times split into ``.secs``/``.nsecs``), ``base``
+    type (``nsecs`` for a time's nanoseconds, ``string``), numpy ``dtype`` and ``count`` (None: one value, else
+    the length of a fixed-size array)."""
+
+    @property
+    def size(self):
+        """Bytes of a numeric field (not of a string: its length is in the message)."""
+        return numpy.dtype(self.dtype).itemsize * (self.count or 1)
+
+
+_LAYOUTS = {}  # message class -> tuple of Fields in serialization order, or None
+
+
+def layout(cls):
+    """The leaf ``Field``s of ``cls`` in serialization order (numbers, times, fixed-size arrays of numbers,
+    strings), or None when its bytes have anything else (a variable-length or message array, an empty
+    message): then only genpy decodes it. Cached."""
+    if cls not in _LAYOUTS:
+        _LAYOUTS[cls] = _fields(cls(), '', [])
+    return _LAYOUTS[cls]
+
+
+def _fields(msg, prefix, out):
+    for name, slot_type in zip(msg.__slots__, msg._slot_types):
+        key = prefix + name
+        base, is_array, count = msg_codec.split_type(slot_type)
+        value = getattr(msg, name)
+        if base in _TIME_DTYPES and not is_array:
+            out += [Field(key + '.secs', base, _TIME_DTYPES[base], None), Field(key + '.nsecs', 'nsecs',
+                                                                                _TIME_DTYPES[base], None)]
+        elif base == 'string' and not is_array:
+            out.append(Field(key, base, None, None))
+        elif base in _DTYPES and (not is_array or count):
+            out.append(Field(key, base, _DTYPES[base], count))
+        elif not is_array and getattr(value, '__slots__', None):
+            if _fields(value, key + '.', out) is None:
+                return None
+        else:
+            return None
+    return tuple(out)
+
+
+class Block(collections.namedtuple('Block', 'rows table offsets')):
+    """Messages of the same length whose fields lie at the same offsets: ``rows`` (their indices in the
+    list given to ``blocks``), ``table`` (their bytes, a row each: uint8 array) and ``offsets`` (field key ->
+    offset; a string's: of its first byte, its length beside: ``(offset, length)``)."""
+
+    def column(self, field):
+        """The values of a numeric ``field`` (an array: one row per message, a column per array element)."""
+        dtype = numpy.dtype(field.dtype)
+        return numpy.ndarray((len(self.rows), field.count or 1), dtype, self.table, self.offsets[field.key],
+                             (self.table.shape[1], dtype.itemsize))
+
+    def bytes_column(self, field):
+        """The bytes of a string or byte-array ``field``: a uint8 array, one row per message."""
+        offset, length = self.offsets[field.key] if field.base == 'string' else (self.offsets[field.key], field.count)
+        return self.table[:, offset:offset + length]
+
+
+def blocks(fields, raws):
+    """``(Blocks, indices of the others)``: the messages of ``raws`` (serialized, of a class with the
+    ``layout`` ``fields``) split into Blocks, bytes beyond the fields ignored as genpy does; the others
+    (too short, a string longer than the message, a time's nanoseconds outside [0, 1e9): genpy would read
+    them differently or not at all) are left to genpy."""
+    by_size = {}
+    for index, raw in enumerate(raws):
+        by_size.setdefault(len(raw), []).append(index)
+    done, rest = [], []
+    for size, indices in by_size.items():
+        rows = numpy.array(indices, dtype=numpy.intp)
+        table = numpy.frombuffer(b''.join([raws[index] for index in indices]), numpy.uint8).reshape(len(rows), size)
+        _place(fields, 0, rows, table, 0, {}, done, rest)
+    return done, rest
+
+
+def _place(fields, start, rows, table, offset, offsets, done, rest):
+    size = table.shape[1]
+    for number in range(start, len(fields)):
+        field = fields[number]
+        if field.base != 'string':
+            offsets[field.key] = offset
+            offset += field.size
+            if offset > size:
+                rest.extend(rows.tolist())
+                return
+            continue
+        if offset + 4 > size:
+            rest.extend(rows.tolist())
+            return
+        lengths = numpy.ascontiguousarray(table[:, offset:offset + 4]).view('<u4')[:, 0]
+        for length in numpy.unique(lengths).tolist():
+            chosen = lengths == length
+            part = (rows, table) if chosen.all() else (rows[chosen], table[chosen])
+            if offset + 4 + length > size:
+                rest.extend(part[0].tolist())
+                continue
+            placed = dict(offsets)
+            placed[field.key] = (offset + 4, length)
+            _place(fields, number + 1, part[0], part[1], offset + 4 + length, placed, done, rest)
+        return
+    block = Block(rows, table, offsets)
+    bad = numpy.zeros(len(rows), dtype=bool)
+    for field in fields:
+        if field.base == 'nsecs':
+            nsecs = block.column(field)[:, 0]
+            bad |= (nsecs < 0) | (nsecs >= _NSECS_PER_SEC)
+    if bad.any():
+        rest.extend(rows[bad].tolist())
+        block = Block(rows[~bad], numpy.ascontiguousarray(table[~bad]), offsets)
+    if len(block.rows):
+        done.append(block)

@@ -33,8 +33,16 @@ Layout 1 (no ``delta``) is still read.
 pattern (``fnmatch`` on the dotted name, e.g. ``pose.pose.position.*``) to a multiple of its step before
 writing; the map is kept in the metadata (``precision``), and a reader reads what was written.
 
+Records held as serialized bytes (``raw_message``) are not decoded one by one: ``decoded_records`` (what
+``log_format.write_window`` calls) keeps those of a fixed layout (``raw_message.layout``: numbers, times,
+fixed-size arrays, strings; e.g. Odometry, Imu, Twist) as bytes, and ``document`` reads each field of a section
+for all its messages at once (numpy views at the fields' offsets), writing the same text as from the decoded
+messages. Other types, and messages genpy reads differently (not UTF-8, a time's nanoseconds beyond a second),
+are decoded.
+
 Pure: no rospy, no rosbag.
 """
+import base64
 import decimal
 import fnmatch
 import functools
@@ -43,8 +51,11 @@ import lzma
 import math
 import operator
 import os
+import re
 
-from .. import msg_codec, safe_input
+import numpy
+
+from .. import msg_codec, raw_message, safe_input
 from ..window_buffer import Record
 
 CODEC = 'json-xz'
@@ -180,15 +191,24 @@ def _same(value, first, first_repr):
 
 def _columns(rows):
     """Split flat rows into (constant, columns), keys in the order of the first row."""
+    return _split_columns(dict((key, [row[key] for row in rows]) for key in rows[0]))
+
+
+def _split_columns(values, same=()):
+    """Split ``{key: one value per message}`` into (constant, columns), keys in order; the keys in ``same``
+    are known to hold the same value (its very object) in every message."""
     constant, columns = {}, {}
-    for key in rows[0]:
-        values = [row[key] for row in rows]
-        first = values[0]
-        first_repr = repr(first)
-        if len(values) > 1 and all(_same(value, first, first_repr) for value in values[1:]):
+    for key, column in values.items():
+        first = column[0]
+        if len(column) > 1 and key in same:
             constant[key] = first
-        else:
-            columns[key] = values
+            continue
+        if len(column) > 1 and column.count(first) == len(column):  # count: a quick no; _same: the text
+            first_repr = repr(first)
+            if all(_same(value, first, first_repr) for value in column[1:]):
+                constant[key] = first
+                continue
+        columns[key] = column
     return constant, columns
 
 
@@ -196,6 +216,151 @@ def _header_stamp(msg):
     header = getattr(msg, 'header', None)
     stamp = getattr(header, 'stamp', None)
     return stamp.to_sec() if stamp is not None and hasattr(stamp, 'to_sec') else None
+
+
+def _all_equal(header_stamps, stamps):
+    """Whether every record's stamp equals its header stamp (``header_stamps``: a list, or an array)."""
+    if isinstance(header_stamps, numpy.ndarray) and all(type(stamp) is float for stamp in stamps):
+        return bool((header_stamps == numpy.array(stamps)).all())
+    return all(header == stamp for header, stamp in zip(list(header_stamps), stamps))
+
+
+def decoded_records(records):
+    """``raw_message.decoded_records`` for this writer: a record of serialized bytes that ``document`` reads
+    in bulk (a ``raw_message.layout`` type whose bytes fit it) stays as it is; the others are decoded (those
+    that cannot be are counted)."""
+    raws = {}  # class -> indices of its records in bytes
+    kept = list(records)
+    bad = set()
+    classes = {}
+    for index, record in enumerate(kept):
+        if record.msg is None and record.raw is not None:
+            try:
+                cls = _class_of(record, classes)
+            except raw_message.DECODE_ERRORS:
+                bad.add(index)
+                continue
+            raws.setdefault(cls, []).append(index)
+    for cls, indices in raws.items():
+        fields = raw_message.layout(cls)
+        if fields is not None:
+            indices = [indices[rest] for rest in raw_message.blocks(fields, [kept[i].raw for i in indices])[1]]
+        for index in indices:
+            try:
+                kept[index] = raw_message.decoded(kept[index])
+            except raw_message.DECODE_ERRORS:
+                bad.add(index)
+    return [record for index, record in enumerate(kept) if index not in bad], len(bad)
+
+
+def _class_of(record, classes):
+    """The class of a record's message (``raw_message.message_class`` of its connection when it has no message),
+    ``classes``: a cache by connection object (records of one connection share it)."""
+    if record.msg is not None:
+        return type(record.msg)
+    cls = classes.get(id(record.connection))
+    if cls is None:
+        cls = classes[id(record.connection)] = raw_message.message_class(record.connection)
+    return cls
+
+
+def _section_values(recs):
+    """``({key: one value per record}, keys holding the same value in every record, header stamps)`` of a
+    section's records, as ``flat_row`` makes them: records of serialized bytes of a ``raw_message.layout`` type
+    read column by column from their bytes (one numpy view per field; a field with the same bytes in every
+    message read once), the others (and messages genpy reads differently) decoded, row by row."""
+    classes = {}
+    raw = [index for index, record in enumerate(recs) if record.msg is None]
+    cls = _class_of(recs[raw[0]], classes) if raw else None
+    fields = raw_message.layout(cls) if cls is not None else None
+    if fields is None or any(_class_of(recs[index], classes) is not cls for index in raw):
+        recs = [raw_message.decoded(record) for record in recs]
+        raw, fields = [], None
+    rows = {}  # index -> flat row, of the records not read from the bytes
+    blocks = []
+    if fields is not None:
+        blocks, rest = raw_message.blocks(fields, [recs[index].raw for index in raw])
+        positions = numpy.array(raw, dtype=numpy.intp)
+        blocks = [block._replace(rows=positions[block.rows]) for block in blocks]
+        rows.update((raw[index], flat_row(raw_message.decoded(recs[raw[index]]).msg)) for index in rest)
+    rows.update((index, flat_row(record.msg)) for index, record in enumerate(recs) if record.msg is not None)
+    keys = [field.key for field in fields] if fields is not None else list(rows[0])
+    if fields is not None and rows and list(next(iter(rows.values()))) != keys:
+        return _section_values([raw_message.decoded(record) for record in recs])
+    values, same = {}, ()
+    for block in blocks:
+        whole = len(block.rows) == len(recs)
+        try:
+            if whole:
+                same = _same_fields(block, fields)
+                first = block._replace(rows=block.rows[:1], table=block.table[:1])
+                columns = [_block_values(first, field) * len(recs) if field.key in same else
+                           _block_values(block, field) for field in fields]
+            else:
+                columns = [_block_values(block, field) for field in fields]
+        except UnicodeDecodeError:  # genpy replaces what is not UTF-8: its row
+            rows.update((index, flat_row(raw_message.decoded(recs[index]).msg)) for index in block.rows.tolist())
+            same = ()
+            continue
+        if whole:
+            values = dict(zip(keys, columns))
+            break
+        for key, column in zip(keys, columns):
+            target = values.setdefault(key, [None] * len(recs))
+            for index, value in zip(block.rows.tolist(), column):
+                target[index] = value
+    if rows and not values:
+        values = dict((key, [None] * len(recs)) for key in keys)
+    for index, row in rows.items():
+        for key in keys:
+            values[key][index] = row[key]
+    if fields is None or 'header.stamp.secs' not in keys or not _is_time(cls, 'header.stamp'):
+        return values, same, [_header_stamp(record.msg) if record.msg is not None else None for record in recs]
+    secs = numpy.array(values['header.stamp.secs'], dtype=numpy.float64)
+    return values, same, secs + numpy.array(values['header.stamp.nsecs'], dtype=numpy.float64) / 1e9
+
+
+def _same_fields(block, fields):
+    """The keys of the fields whose bytes are the same in every message of ``block``."""
+    equal = (block.table == block.table[0]).all(axis=0)
+    same = set()
+    for field in fields:
+        offset = block.offsets[field.key]
+        start, size = (offset[0], offset[1]) if field.base == 'string' else (offset, field.size)
+        if equal[start:start + size].all():
+            same.add(field.key)
+    return same
+
+
+def _is_time(cls, dotted):
+    """Whether the field ``dotted`` of ``cls`` is a time or a duration (its value has ``to_sec``)."""
+    value = cls()
+    for name in dotted.split('.'):
+        value = getattr(value, name, None)
+    return hasattr(value, 'to_sec')
+
+
+def _block_values(block, field):
+    """The values of ``field`` of the messages of a ``raw_message.Block``, each as ``flat_row`` writes it."""
+    if field.base == 'string':
+        data = block.bytes_column(field)
+        if (data == data[0]).all():
+            return [data[0].tobytes().decode('utf-8')] * len(data)
+        return [row.tobytes().decode('utf-8') for row in data]
+    if field.count and field.base in msg_codec.BYTES_TYPES:
+        return [base64.b64encode(row.tobytes()).decode('ascii') for row in block.bytes_column(field)]
+    array = block.column(field)
+    if field.count is None:
+        array = array[:, 0]
+    if field.base == 'bool':
+        return array.astype(bool).tolist()
+    values = array.tolist()
+    if field.base == 'float32':
+        return [_float32(value) for value in values] if field.count is None else \
+            [[_float32(value) for value in row] for row in values]
+    if field.base == 'float64' and not numpy.isfinite(array).all():
+        return list(map(_float if field.count is None else _float64s, values))
+    return values
 
 
 # -- differences ----------------------------------------------------------------------------------------
@@ -215,7 +380,10 @@ def decimal_text(value):
     if not value:
         return '0'
     value = value.normalize(_EXACT)
-    plain, scientific = format(value, 'f'), str(value)
+    scientific = str(value)
+    if 'E' not in scientific:
+        return scientific  # plain already, as format(value, 'f') writes it
+    plain = format(value, 'f')
     return plain if len(plain) <= len(scientific) else scientific
 
 
@@ -225,34 +393,79 @@ def differences(values, choose=True):
     smaller (integers: not shorter as text; floats: see DELTA_GAIN, REPEATS_SHARE and SAMPLE)."""
     if len(values) < 3:
         return None
-    if all(_is_int(value) for value in values):
+    if set(map(type, values)) == {int} or all(_is_int(value) for value in values):
         deltas = values[:1] + [b - a for a, b in zip(values, values[1:])]
         return deltas if not choose or len(str(deltas)) < len(str(values)) else None
-    if not all(_is_plain_float(value) for value in values):
+    if not _plain_floats(values):
         return None
     if choose and len(values) > 2 * SAMPLE and _digit_share(values[:SAMPLE])[0] > SAMPLE_GAIN:
         return None  # decided on a sample: noisy columns (IMU axes) are not worth the decimal arithmetic
-    share, deltas = _digit_share(values)
-    if choose and share > DELTA_GAIN:
-        return None
-    texts = [repr(value) for value in values]
-    adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
-    if choose and len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
-        return None
-    return deltas
+    texts = list(map(repr, values))
+    if choose:  # the repeats first: they are cheaper to count than the digits
+        adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
+        if len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
+            return None
+    share, deltas = _digit_share(values, texts)
+    return None if choose and share > DELTA_GAIN else deltas
 
 
-def _digit_share(values):
+def _plain_floats(values):
+    """``all(_is_plain_float(value) for value in values)``, in bulk for a list of floats."""
+    if set(map(type, values)) != {float}:
+        return all(_is_plain_float(value) for value in values)
+    return all(map(math.isfinite, values)) and (0.0 not in values or all(map(_is_plain_float, values)))
+
+
+def _digit_share(values, texts=None):
     """(significant digits of the differences / of the values, the differences); (inf, None) when they
-    cannot be computed exactly."""
-    texts = [repr(value) for value in values]
-    exact = [decimal.Decimal(text) for text in texts]
+    cannot be computed exactly. ``texts``: ``repr`` of the values, if already made. The differences are a
+    ``_Deltas`` list: their texts (``decimal_text``) are kept for ``dumps``."""
+    texts = list(map(repr, values)) if texts is None else texts
+    exact = list(map(decimal.Decimal, texts))
     try:
-        deltas = [exact[0]] + [_EXACT.subtract(b, a) for a, b in zip(exact, exact[1:])]
+        deltas = _Deltas(exact[:1] + list(map(_EXACT.subtract, exact[1:], exact)))
     except decimal.DecimalException:
         return math.inf, None
-    return sum(_digits(decimal_text(delta)) for delta in deltas) / max(1, sum(_digits(text) for text in texts)), \
-        deltas
+    deltas.texts = _decimal_texts(deltas)
+    return _digit_sum(deltas.texts) / max(1, _digit_sum(texts)), deltas
+
+
+class _Deltas(list):
+    """Differences (Decimals) with their ``texts``."""
+
+    texts = None
+
+
+_NORMALIZED = operator.methodcaller('normalize', _EXACT)
+
+
+def _decimal_texts(values):
+    """``decimal_text`` of each of the Decimals ``values``, in bulk: ``str`` of the normalized value is that
+    text unless it is scientific (then the shorter of the two notations) or ``-0``."""
+    texts = list(map(str, map(_NORMALIZED, values)))
+    if '-0' in texts or 'E' in ''.join(texts):
+        texts = [decimal_text(value) if 'E' in text or text == '-0' else text for value, text in zip(values, texts)]
+    return texts
+
+
+_EXPONENT = re.compile('[eE][-+]?[0-9]+')
+
+
+def _digit_sum(texts):
+    """``sum(map(_digits, texts))`` counted over the joined texts, exponents left out: every digit, less the
+    zeros that lead a number (``0.00``...) and the texts that are ``0``."""
+    joined = ',' + ',,'.join(texts) + ','  # every text between its own two commas
+    if 'e' in joined or 'E' in joined:
+        joined = _EXPONENT.sub('', joined)  # the mantissa's digits count
+    joined = joined.replace(',-', ',')
+    count = len(joined) - joined.count(',') - joined.count('.') - joined.count(',0,')
+    lead = ',0.'
+    leading = joined.count(lead)
+    while leading:
+        count -= leading
+        lead += '0'
+        leading = joined.count(lead)
+    return count
 
 
 def _digits(text):
@@ -361,8 +574,9 @@ def document(records, metadata, delta=differences):
     sections = []
     index = {}
     order = []
+    classes = {}
     for record in records:
-        msg = record.msg
+        msg = _class_of(record, classes)
         if record.topic not in index:
             index[record.topic] = len(sections)
             sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
@@ -376,10 +590,11 @@ def document(records, metadata, delta=differences):
     topics = []
     for section in sections:
         recs = section.pop('records')
-        rows = [flat_row(record.msg) for record in recs]
+        values, same, header_stamps = _section_values(recs)
         if rounded is not None:
-            rows = [dict((key, rounded(key, value)) for key, value in row.items()) for row in rows]
-        constant, columns = _columns(rows)
+            values = dict((key, [rounded(key, column[0])] * len(column) if key in same else
+                           [rounded(key, value) for value in column]) for key, column in values.items())
+        constant, columns = _split_columns(values, same)
         delta_keys = []
         for key, values in columns.items():
             deltas = delta(values)
@@ -387,7 +602,7 @@ def document(records, metadata, delta=differences):
                 columns[key] = deltas
                 delta_keys.append(key)
         stamps = [record.stamp for record in recs]
-        if all(_header_stamp(record.msg) == record.stamp for record in recs):
+        if _all_equal(header_stamps, stamps):
             stamps = HEADER_STAMP
         else:
             stamps = [msg_codec.encode_float(float(stamp)) for stamp in stamps]
@@ -432,7 +647,8 @@ def dumps(doc):
 
 def _column_text(values):
     if values and isinstance(values[0], decimal.Decimal):  # the first as written (8.0, not 8), then differences
-        return '[%s]' % ','.join([str(values[0])] + [decimal_text(value) for value in values[1:]])
+        texts = values.texts if isinstance(values, _Deltas) else _decimal_texts(values)
+        return '[%s]' % ','.join([str(values[0])] + texts[1:])
     return _json(values)
 
 
