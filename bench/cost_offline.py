@@ -67,15 +67,15 @@ def stage_of(filename):
     return 'other (interpreter, I/O)'
 
 
-def profile(path, topics, model_path, out, name, top):
-    """cProfile of one replay with the writer in the same thread: the share of each stage (own time of
+def profile(path, topics, model_path, out, name, top, fmt='json-xz'):
+    """cProfile of one replay with the writer (``fmt``) in the same thread: the share of each stage (own time of
     functions grouped by file) and the ``top`` functions by own time."""
     import cProfile
     import pstats
     from cc_log.model import AnomalyModel
     from cc_log.smart_logger import SmartLogger, replay_into
-    logger = SmartLogger(AnomalyModel.load(model_path), out, driving_topic=topics[0], side_topics=tuple(topics[1:]),
-                         background=False)
+    logger = SmartLogger(AnomalyModel.load(model_path), out, fmt=fmt, driving_topic=topics[0],
+                         side_topics=tuple(topics[1:]), background=False)
     profiler = cProfile.Profile()
     profiler.enable()
     replay_into(logger, path)
@@ -237,7 +237,7 @@ def main(argv=None):
                          'document + JSON; best of alternating rounds; same text checked):')
         if args.profile:
             name, path, topics, model_path = cases[-1]
-            profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile)
+            profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile, args.format)
     print('total %.1f s' % (time.time() - started))
     return 0
 

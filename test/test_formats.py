@@ -229,6 +229,33 @@ def test_bag_opens_with_rosbag(husky_window, tmp_path):
     assert b'lz4' in result.stdout and b'nav_msgs/Odometry' in result.stdout
 
 
+def test_bag_time_orders_as_genpy_time_and_writes_the_same_bag(husky_window, tmp_path, monkeypatch):
+    # bag-lz4 hands rosbag its own genpy.Time subclass (cheaper comparisons): it must order, compare and hash
+    # like genpy.Time, and the window must be the same bag, byte for byte, as with genpy.Time.
+    import genpy
+    from cc_log.formats import bag_lz4
+    stamps = [0.0, 1.5, 1.5, 1.499999999, 2.000000001, 10.25, 1e9 + 0.5, 3.0]
+    times = [bag_lz4.bag_time(stamp) for stamp in stamps]
+    plain = [genpy.Time(time.secs, time.nsecs) for time in times]
+    assert type(times[0]) is not genpy.Time and isinstance(times[0], genpy.Time)
+    for a, pa in zip(times, plain):
+        assert hash(a) == hash(pa) and a == pa and pa == a
+        for b, pb in zip(times, plain):
+            assert (a < b, a <= b, a > b, a >= b, a == b) == (pa < pb, pa <= pb, pa > pb, pa >= pb, pa == pb)
+            assert (a < pb, pa < b) == (pa < pb, pa < pb)
+    assert sorted(times) == sorted(plain)
+    # out of stamp order, two topics: rosbag's index insertion compares times
+    records = list(reversed(husky_window.records[:400]))
+    window = LogWindow(records, husky_window.triggers)
+    ours, _ = write_window(window, str(tmp_path / 'ours'), Format.BAG_LZ4)
+    monkeypatch.setattr(bag_lz4, '_bag_time_class', lambda: genpy.Time)
+    theirs, _ = write_window(window, str(tmp_path / 'genpy'), Format.BAG_LZ4)
+    with open(ours, 'rb') as a, open(theirs, 'rb') as b:
+        assert a.read() == b.read()
+    _, back = read_window(ours)
+    assert_same_records(records, back)
+
+
 # -- size -------------------------------------------------------------------------------------------------
 
 def test_json_xz_size_on_husky_odometry(real_bag):

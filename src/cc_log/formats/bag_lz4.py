@@ -16,6 +16,7 @@ window metadata is a JSON object in one ``std_msgs/String`` message on
 
 Edge module: rosbag is imported inside the functions only, so importing cc_log.bag_lz4 costs nothing.
 """
+import functools
 import json
 import math
 import os
@@ -33,8 +34,8 @@ _STRING_DEFINITION = 'string data\n'
 
 
 def bag_time(stamp):
-    """Float seconds -> genpy.Time, nanoseconds rounded to nearest; ValueError for negative or not finite."""
-    import genpy
+    """Float seconds -> a genpy.Time (``BagTime``), nanoseconds rounded to nearest; ValueError for negative or
+    not finite."""
     stamp = float(stamp)
     if not math.isfinite(stamp) or stamp < 0:
         raise ValueError('stamp %r cannot be a bag time (must be finite and >= 0)' % stamp)
@@ -42,7 +43,37 @@ def bag_time(stamp):
     nsecs = int(round((stamp - secs) * 1e9))
     if nsecs >= 1000000000:
         secs, nsecs = secs + 1, nsecs - 1000000000
-    return genpy.Time(secs, nsecs)
+    return _bag_time_class()(secs, nsecs)
+
+
+@functools.lru_cache(maxsize=None)
+def _bag_time_class():
+    """``BagTime``: a genpy.Time that compares as the tuple (secs, nsecs). rosbag's writer keeps each
+    connection's index sorted by inserting every message's time with a binary search, and genpy's comparisons
+    go through three Python calls each (a fifth of the writer's CPU on Husky windows); the bag written is the
+    same, byte for byte."""
+    import genpy
+
+    class BagTime(genpy.Time):
+        __slots__ = ()
+        __hash__ = genpy.Time.__hash__
+
+        def __eq__(self, other):
+            return isinstance(other, genpy.Time) and (self.secs, self.nsecs) == (other.secs, other.nsecs)
+
+        def __lt__(self, other):
+            return (self.secs, self.nsecs) < (other.secs, other.nsecs)
+
+        def __le__(self, other):
+            return (self.secs, self.nsecs) <= (other.secs, other.nsecs)
+
+        def __gt__(self, other):
+            return (self.secs, self.nsecs) > (other.secs, other.nsecs)
+
+        def __ge__(self, other):
+            return (self.secs, self.nsecs) >= (other.secs, other.nsecs)
+
+    return BagTime
 
 
 def write(target, records, metadata):
