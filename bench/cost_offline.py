@@ -19,7 +19,9 @@ with ``raw=True`` and decodes only what its triggers read and what it keeps). ``
 cProfile of one replay. ``--writer`` adds the json-xz writer alone on the windows the replay kept, their
 records as serialized bytes (as the replay hands them over): the CPU per kept message of the text (decode +
 document + JSON) read from the bytes now (``json_xz.decoded_records``), against every message decoded by genpy
-and flattened into rows (the writer before), alternating in the same process, and of LZMA on the text.
+and flattened into rows (the writer before), alternating in the same process, and of LZMA on the text; and the
+bag-lz4 writer on the same windows with rosbag handed genpy.Time and ``bag_lz4``'s own time class (cheaper
+comparisons for rosbag's index insertion; the bags must be the same byte for byte).
 
 Bags: ../shared/data/real/husky_outdoor_2015.bag (odometry driving + IMU side topic; model trained on the
 first half, motion 2 s window) and a 10-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz odometry +
@@ -139,6 +141,36 @@ def writer_cost(windows, rounds):
     return dict((name, min(values)) for name, values in times.items()), size
 
 
+def bag_writer_cost(windows, rounds, tmp):
+    """``{'genpy': CPU s, 'bag_time': CPU s}``: best of ``rounds`` alternating runs of ``bag_lz4.write`` over
+    ``windows`` with rosbag handed genpy.Time (as before) and ``bag_lz4``'s own time class; the files must be
+    the same, byte for byte."""
+    import genpy
+    from cc_log.formats import bag_lz4
+    own = bag_lz4._bag_time_class
+    times = {'genpy': [], 'bag_time': []}
+    files = {}
+    for k in range(rounds):
+        for name, time_class in (('genpy', lambda: genpy.Time), ('bag_time', own)):
+            bag_lz4._bag_time_class = time_class
+            paths = [os.path.join(tmp, 'bag_writer_%s_%d_%d.bag' % (name, k, n)) for n in range(len(windows))]
+            try:
+                with common.Timer() as timer:
+                    for target, (metadata, records) in zip(paths, windows):
+                        bag_lz4.write(target, records, metadata)
+            finally:
+                bag_lz4._bag_time_class = own
+            times[name].append(timer.cpu)
+            files[name] = []
+            for target in paths:
+                with open(target, 'rb') as stream:
+                    files[name].append(stream.read())
+                os.remove(target)
+    if files['genpy'] != files['bag_time']:
+        raise SystemExit('bag-lz4 writer: the bags written with the two time classes differ')
+    return dict((name, min(values)) for name, values in times.items())
+
+
 def kept_windows(path, topics, model_path, tmp):
     """``[(metadata, records)]`` of the json-xz windows a replay of ``path`` writes, read back."""
     from cc_log import log_format
@@ -176,7 +208,8 @@ def main(argv=None):
     parser.add_argument('--profile', type=int, default=0, metavar='N',
                         help='then profile one replay of the last bag (cProfile) and print its N costliest functions')
     parser.add_argument('--writer', action='store_true',
-                        help='then time the json-xz writer alone on the kept windows, now against the earlier writer')
+                        help='then time the writers alone on the kept windows: json-xz now against the earlier '
+                        'writer, bag-lz4 with and without its own time class')
     args = parser.parse_args(argv)
     started = time.time()
     with tempfile.TemporaryDirectory(prefix='cc_log_bench_') as tmp:
@@ -226,15 +259,19 @@ def main(argv=None):
                 windows = as_bytes(kept_windows(path, topics, model_path, tmp))
                 kept = sum(len(records) for _, records in windows)
                 cpu, size = writer_cost(windows, max(rounds, 3))
+                cpu.update(bag_writer_cost(windows, max(rounds, 3), tmp))
                 per = dict((key, '%.1f' % (1e6 * seconds / kept)) for key, seconds in cpu.items())
                 rows.append([name, len(windows), kept, per['earlier'], per['now'],
                              '%.1f' % (cpu['earlier'] / cpu['now']), per['lzma'],
-                             '%.1f' % (1e6 * (cpu['now'] + cpu['lzma']) / kept), size])
+                             '%.1f' % (1e6 * (cpu['now'] + cpu['lzma']) / kept), size, per['genpy'],
+                             per['bag_time']])
             print()
             common.table(['bag', 'windows', 'kept msgs', 'text earlier us/msg', 'text now us/msg', 'speed-up',
-                          'LZMA us/msg', 'writer now us/msg', 'bytes'], rows,
-                         'json-xz writer alone on the kept windows (records as serialized bytes; text = decode + '
-                         'document + JSON; best of alternating rounds; same text checked):')
+                          'LZMA us/msg', 'writer now us/msg', 'bytes', 'bag-lz4 genpy.Time us/msg',
+                          'bag-lz4 now us/msg'], rows,
+                         'Writers alone on the kept windows (records as serialized bytes; json-xz text = decode + '
+                         'document + JSON; bag-lz4 with genpy.Time and with bag_lz4\'s time class; best of '
+                         'alternating rounds; same text, same bags checked):')
         if args.profile:
             name, path, topics, model_path = cases[-1]
             profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile, args.format)
