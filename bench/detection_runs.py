@@ -59,6 +59,7 @@ engine failure (+116.25 s).
 import argparse
 import collections
 import functools
+import math
 import os
 import sys
 import time
@@ -98,6 +99,7 @@ LATENCY = 0.5
 PERSISTENCE = 5     # classifications: 'k of the last n' needs k within LATENCY (5 at 10 Hz, 10 at 50ms steps)
 INJECTIONS = ('bwibot', 'robot')
 THRESHOLDS = ('trained', 'calibrated')
+TRAIN_OPTIONS = {}  # --gamma-factor, --nu: passed to learning.train (empty: its defaults)
 SETTINGS = collections.OrderedDict([
     ('ours', ('motion', 'event', {})),
     ('dynamics', ('dynamics', 'event', {})),
@@ -147,12 +149,18 @@ def config_of(feature_set, rate):
     return FeatureConfig(feature_set, WINDOW)
 
 
+def vectors_of(records, config):
+    """``(stamps, vectors)`` of one continuous run's records, a vector per message once the window is whole."""
+    stream = FeatureStream(config, every=1)
+    pairs = [(r.stamp, v) for r, v in ((r, stream.add(r.msg, r.stamp)) for r in records) if v is not None]
+    return np.array([t for t, _ in pairs]), np.array([v for _, v in pairs])
+
+
 def train(pieces, config, options, margin=learning.DEFAULT_MARGIN):
     """A model of the vectors (one per message) of ``pieces``, lists of records each of one continuous run."""
     X = []
     for records in pieces:
-        stream = FeatureStream(config, every=1)
-        X += [v for v in (stream.add(r.msg, r.stamp) for r in records) if v is not None]
+        X += list(vectors_of(records, config)[1])
     if len(X) < learning.MIN_VECTORS:
         raise ValueError('%d training vectors' % len(X))
     X = np.array(X)
@@ -160,7 +168,10 @@ def train(pieces, config, options, margin=learning.DEFAULT_MARGIN):
         model, _ = learning.train(X, config=config, nu=0.5, gamma=1.0 / vector_length(config))
         model.threshold = 0.0
     else:
-        model, _ = learning.train(X, config=config, margin=margin)
+        options = dict(TRAIN_OPTIONS)
+        if 'gamma_factor' in options:
+            options['gamma'] = options.pop('gamma_factor') / vector_length(config)
+        model, _ = learning.train(X, config=config, margin=margin, **options)
     return model, len(X)
 
 
@@ -293,6 +304,44 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
     return result
 
 
+def explain_false(name, topic, stop, setting, fraction, top=4, **how):
+    """The false windows of a run's replayed part without injection, one line each: when, how the robot drove
+    in it (speed and yaw rate against the training part's), and its most anomalous vector's features farthest
+    from the training vectors (z: in training standard deviations; beyond: past the training range, in units of
+    that range)."""
+    how = {key: value for key, value in how.items() if key in ('train_on', 'injection', 'threshold')}
+    records, first, rest, model, _, _ = prepare(name, topic, stop, setting, fraction, **how)
+    rule = SETTINGS[setting][1]
+    config = model.config
+    pieces = [first] + ([load(*run) for run in other_runs(name)] if how.get('train_on') == 'robot' else [])
+    X = np.vstack([vectors_of(piece, config)[1] for piece in pieces])
+    mean, std, low, high = X.mean(0), X.std(0), X.min(0), X.max(0)
+    names = model.names
+    stamps, V = vectors_of(rest, config)
+    scores = model.scores(V)
+
+    def motion(recs):
+        return (np.array([math.hypot(r.msg.twist.twist.linear.x, r.msg.twist.twist.linear.y) for r in recs]),
+                np.array([r.msg.twist.twist.angular.z for r in recs]))
+    train_speed, train_yaw = motion([r for piece in pieces for r in piece])
+    lines = []
+    for a, b in windows_of(fires(model, rest, topic, rule)):
+        inside_window = (stamps >= a) & (stamps <= b)
+        k = int(np.argmin(np.where(inside_window, scores, np.inf)))
+        z = (V[k] - mean) / np.where(std > 0, std, 1.0)
+        beyond = np.maximum(V[k] - high, low - V[k]) / np.where(high > low, high - low, 1.0)
+        speed, yaw = motion([r for r in rest if a <= r.stamp <= b])
+        lines.append('%s %.1f-%.1f s: speed %.2f-%.2f m/s (training 5-95%%: %.2f-%.2f), |yaw rate| up to %.2f rad/s '
+                     '(training 99%%: %.2f); farthest: %s; beyond the training range: %s' % (
+                         name, a - records[0].stamp, b - records[0].stamp, speed.min(), speed.max(),
+                         np.quantile(train_speed, 0.05), np.quantile(train_speed, 0.95), np.abs(yaw).max(),
+                         np.quantile(np.abs(train_yaw), 0.99),
+                         ', '.join('%s z %.1f' % (names[j], z[j]) for j in np.argsort(-np.abs(z))[:top]),
+                         ', '.join('%s %.2f' % (names[j], beyond[j]) for j in np.argsort(-beyond)[:top]
+                                   if beyond[j] > 0) or 'none'))
+    return lines
+
+
 def why_late(model, injected, topic, rule, stamps, entry, kind, seed):
     """A catch later than LATENCY: what the classifications within LATENCY of its onset did. 'open': a fire
     within POST before the onset (its window already logs the onset); 'not scored': no classification of a
@@ -351,6 +400,7 @@ def pct(a, b):
 
 
 def main(argv=None):
+    global WINDOW
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--runs', help='comma-separated run names (default: all of RUNS)')
     parser.add_argument('--seeds', default='0,1,2')
@@ -370,9 +420,22 @@ def main(argv=None):
                         help='with --threshold calibrated: lower by this x (held-out median - threshold)')
     parser.add_argument('--train-on', default='self', choices=TRAIN_ON,
                         help="self: the run's first part; robot: also every other run of its robot in full")
+    parser.add_argument('--window', default=WINDOW, help='feature window of ours/dynamics/every (default %s)' % WINDOW)
+    parser.add_argument('--gamma-factor', type=float,
+                        help='RBF gamma x the vector length (default: learning.DEFAULT_GAMMA_FACTOR, %g)'
+                        % learning.DEFAULT_GAMMA_FACTOR)
+    parser.add_argument('--nu', type=float, help='one-class SVM nu (default: learning.DEFAULT_NU, %g)'
+                        % learning.DEFAULT_NU)
+    parser.add_argument('--explain', action='store_true',
+                        help='per false window without injection: how the robot drove, the features farthest '
+                        'from the training vectors')
     parser.add_argument('--separability', action='store_true',
                         help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
+    WINDOW = args.window
+    TRAIN_OPTIONS.clear()
+    TRAIN_OPTIONS.update((key, value) for key, value in (('gamma_factor', args.gamma_factor), ('nu', args.nu))
+                         if value is not None)
     seeds = [int(s) for s in args.seeds.split(',')]
     types = sim.parse_anomaly_types(args.types, 'types')
     how = dict(types=types, injection=args.injection, threshold=args.threshold, calibration=args.calibration,
@@ -384,7 +447,8 @@ def main(argv=None):
                   [common.describe_data(bag_path(name)) for name, _, _ in runs] +
                   ['training: first %g of each run; injection: one anomaly per type (%s) and seed %s into the rest; '
                    'window %s, pre/post %gs/%gs, classify_every %s, threshold margin %g' % (
-                       args.train, ', '.join(types), seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin),
+                       args.train, ', '.join(types), seeds, WINDOW, PRE, POST, CLASSIFY_EVERY, args.margin)
+                   + ''.join(', %s %g' % item for item in sorted(TRAIN_OPTIONS.items())),
                    'injection: %s (%s); threshold: %s%s' % (
                        args.injection, "the simulator's BWIBot magnitudes" if args.injection == 'bwibot' else
                        "each run's own nominal envelope (sim.nominal_envelope of its training part)",
@@ -395,6 +459,14 @@ def main(argv=None):
                        "each run's first part" if args.train_on == 'self' else
                        "each run's first part and every other run of its robot in full (%s)" % (
                            '; '.join(', '.join(runs) for runs in ROBOTS.values())))])
+    if args.explain:
+        for setting in settings:
+            print('setting %s: false windows without injection' % setting)
+            for name, topic, stop in runs:
+                for line in explain_false(name, topic, stop, setting, args.train, **how):
+                    print(line)
+        print('total %.1f s' % (time.time() - started))
+        return 0
     if args.separability:
         for setting in settings:
             rows = []
