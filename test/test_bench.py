@@ -96,8 +96,9 @@ def test_cost_offline_quick():
     out = run('cost_offline.py', '--quick', '--writer')
     assert 'replay/read (CPU)' in out and 'husky_outdoor_2015' in out
     assert len(targets(out)) == 1
-    writer = out.split('json-xz writer alone')[1].splitlines()[3].split('|')
+    writer = out.split('Writers alone on the kept windows')[1].splitlines()[3].split('|')
     assert int(writer[3]) > 0 and float(writer[8]) > 0  # kept messages were encoded both ways
+    assert float(writer[10]) > 0 and float(writer[11]) > 0  # and written as bags with both time classes
 
 
 def test_training_quick():
