@@ -264,7 +264,7 @@ def test_the_intake_queue_hands_what_arrived_once_the_delay_is_over():
     assert queue.put('a', 10) and queue.put('b', 10)
     thread.join(60.0)
     assert not thread.is_alive() and result == [['a', 'b']]
-    assert queue.put('c', 10) and queue.take_all() == ['c']  # take_all: no delay
+    assert queue.put('c', 10) and queue.take_batch(0.0) == ['c']  # no delay: at once
 
 
 def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, tmp_path):

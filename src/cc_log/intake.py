@@ -35,11 +35,11 @@ BATCH_BYTES_SHARE = 8         # ... or this share of the queue's byte bound (an 
 class IntakeQueue(object):
     """The bounded intake queue: at most ``max_messages`` messages and ``max_bytes`` serialized bytes.
 
-    ``put`` returns False (and counts ``overflowed``) when the message does not fit; ``take_all`` waits for
-    messages and returns every queued item at once (oldest first); ``take_batch`` waits for a batch (``delay``
-    seconds since its first item, ``batch_messages`` items, ``batch_bytes`` bytes or a ``force``d item, whichever
-    comes first). ``qsize()`` as queue.Queue's. ``received``: items put per ``topic`` given to ``put`` (those that
-    did not fit too), counted under the queue's own lock.
+    ``put`` returns False (and counts ``overflowed``) when the message does not fit; ``take_batch`` waits for a
+    batch (``delay`` seconds since its first item, ``batch_messages`` items, ``batch_bytes`` bytes or a ``force``d
+    item, whichever comes first) and returns every queued item at once (oldest first). ``qsize()`` as
+    queue.Queue's. ``received``: items put per ``topic`` given to ``put`` (those that did not fit too), counted
+    under the queue's own lock.
     """
 
     def __init__(self, max_messages, max_bytes, batch_messages=BATCH_MESSAGES, batch_bytes=None):
@@ -83,9 +83,6 @@ class IntakeQueue(object):
                     self.batch_bytes <= self.bytes < self.batch_bytes + size:
                 self._ready.notify()
             return True
-
-    def take_all(self):
-        return self.take_batch(0.0)
 
     def take_batch(self, delay):
         """Every queued item (oldest first) once the batch is due: wait for a first item, then until ``delay``
