@@ -20,8 +20,8 @@ cProfile of one replay. ``--writer`` adds the json-xz writer alone on the window
 records as serialized bytes (as the replay hands them over): the CPU per kept message of the text (decode +
 document + JSON) read from the bytes now (``json_xz.decoded_records``), against every message decoded by genpy
 and flattened into rows (the writer before), alternating in the same process, and of LZMA on the text; and the
-bag-lz4 writer on the same windows with rosbag handed genpy.Time and ``bag_lz4``'s own time class (cheaper
-comparisons for rosbag's index insertion; the bags must be the same byte for byte).
+bag-lz4 writer on the same windows with the bag written by rosbag (before) and by ``formats.bag_writer`` (now,
+without rosbag's Python per message; the bags must be the same byte for byte).
 
 Bags: ../shared/data/real/husky_outdoor_2015.bag (odometry driving + IMU side topic; model trained on the
 first half, motion 2 s window) and a 10-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz odometry +
@@ -141,33 +141,46 @@ def writer_cost(windows, rounds):
     return dict((name, min(values)) for name, values in times.items()), size
 
 
-def bag_writer_cost(windows, rounds, tmp):
-    """``{'genpy': CPU s, 'bag_time': CPU s}``: best of ``rounds`` alternating runs of ``bag_lz4.write`` over
-    ``windows`` with rosbag handed genpy.Time (as before) and ``bag_lz4``'s own time class; the files must be
-    the same, byte for byte."""
-    import genpy
+def rosbag_write(path, messages, headers):
+    """``messages`` and ``headers`` (``bag_lz4.bag_messages``) written by rosbag, as bag-lz4 wrote them before
+    ``formats.bag_writer`` (raw, with the connection headers, ``bag_lz4``'s time class)."""
+    from cc_log import raw_message
     from cc_log.formats import bag_lz4
-    own = bag_lz4._bag_time_class
-    times = {'genpy': [], 'bag_time': []}
+    classes = dict((topic, raw_message.message_class(header)) for topic, header in headers.items())
+    bag = rosbag.Bag(path, 'w', compression=rosbag.Compression.LZ4)
+    for topic, secs, nsecs, data in messages:
+        header = headers[topic]
+        bag.write(topic, (header['type'], data, header['md5sum'], classes[topic]),
+                  bag_lz4._bag_time_class()(secs, nsecs), raw=True, connection_header=header)
+    bag.close()
+
+
+def bag_writer_cost(windows, rounds, tmp):
+    """``{'rosbag': CPU s, 'bag_writer': CPU s}``: best of ``rounds`` alternating runs over ``windows`` of the
+    bag-lz4 writer (``bag_lz4.bag_messages``, then the file) with the bag written by rosbag (as before) and by
+    ``formats.bag_writer`` (now); the files must be the same, byte for byte."""
+    from cc_log.formats import bag_lz4, bag_writer
+    times = {'rosbag': [], 'bag_writer': []}
     files = {}
     for k in range(rounds):
-        for name, time_class in (('genpy', lambda: genpy.Time), ('bag_time', own)):
-            bag_lz4._bag_time_class = time_class
+        for name in ('rosbag', 'bag_writer'):
             paths = [os.path.join(tmp, 'bag_writer_%s_%d_%d.bag' % (name, k, n)) for n in range(len(windows))]
-            try:
-                with common.Timer() as timer:
-                    for target, (metadata, records) in zip(paths, windows):
-                        bag_lz4.write(target, records, metadata)
-            finally:
-                bag_lz4._bag_time_class = own
+            with common.Timer() as timer:
+                for target, (metadata, records) in zip(paths, windows):
+                    messages, headers = bag_lz4.bag_messages(records, metadata)
+                    if name == 'rosbag':
+                        rosbag_write(target, messages, headers)
+                    else:
+                        with open(target, 'wb') as stream:
+                            stream.write(bag_writer.bag_bytes(messages, headers))
             times[name].append(timer.cpu)
             files[name] = []
             for target in paths:
                 with open(target, 'rb') as stream:
                     files[name].append(stream.read())
                 os.remove(target)
-    if files['genpy'] != files['bag_time']:
-        raise SystemExit('bag-lz4 writer: the bags written with the two time classes differ')
+    if files['rosbag'] != files['bag_writer']:
+        raise SystemExit('bag-lz4 writer: the bags written by rosbag and by formats.bag_writer differ')
     return dict((name, min(values)) for name, values in times.items())
 
 
@@ -209,7 +222,7 @@ def main(argv=None):
                         help='then profile one replay of the last bag (cProfile) and print its N costliest functions')
     parser.add_argument('--writer', action='store_true',
                         help='then time the writers alone on the kept windows: json-xz now against the earlier '
-                        'writer, bag-lz4 with and without its own time class')
+                        'writer, bag-lz4 by rosbag and by formats.bag_writer')
     args = parser.parse_args(argv)
     started = time.time()
     with tempfile.TemporaryDirectory(prefix='cc_log_bench_') as tmp:
@@ -263,14 +276,14 @@ def main(argv=None):
                 per = dict((key, '%.1f' % (1e6 * seconds / kept)) for key, seconds in cpu.items())
                 rows.append([name, len(windows), kept, per['earlier'], per['now'],
                              '%.1f' % (cpu['earlier'] / cpu['now']), per['lzma'],
-                             '%.1f' % (1e6 * (cpu['now'] + cpu['lzma']) / kept), size, per['genpy'],
-                             per['bag_time']])
+                             '%.1f' % (1e6 * (cpu['now'] + cpu['lzma']) / kept), size, per['rosbag'],
+                             per['bag_writer']])
             print()
             common.table(['bag', 'windows', 'kept msgs', 'text earlier us/msg', 'text now us/msg', 'speed-up',
-                          'LZMA us/msg', 'writer now us/msg', 'bytes', 'bag-lz4 genpy.Time us/msg',
-                          'bag-lz4 now us/msg'], rows,
+                          'LZMA us/msg', 'writer now us/msg', 'bytes', 'bag-lz4 by rosbag us/msg',
+                          'bag-lz4 by bag_writer us/msg'], rows,
                          'Writers alone on the kept windows (records as serialized bytes; json-xz text = decode + '
-                         'document + JSON; bag-lz4 with genpy.Time and with bag_lz4\'s time class; best of '
+                         'document + JSON; bag-lz4 written by rosbag and by formats.bag_writer; best of '
                          'alternating rounds; same text, same bags checked):')
         if args.profile:
             name, path, topics, model_path = cases[-1]

@@ -98,7 +98,7 @@ def test_cost_offline_quick():
     assert len(targets(out)) == 1
     writer = out.split('Writers alone on the kept windows')[1].splitlines()[3].split('|')
     assert int(writer[3]) > 0 and float(writer[8]) > 0  # kept messages were encoded both ways
-    assert float(writer[10]) > 0 and float(writer[11]) > 0  # and written as bags with both time classes
+    assert float(writer[10]) > 0 and float(writer[11]) > 0  # and written as bags by rosbag and by bag_writer
 
 
 def test_training_quick():

@@ -112,47 +112,63 @@ def test_empty_and_garbled_leftovers_are_reported_and_garbled_kept(tmp_path):
 
 
 CRASHING_WRITER = textwrap.dedent('''
-    import os, signal, sys
+    import os, signal, sys, tempfile
     sys.path.insert(0, {test!r})
     import rosbag
     from test_reliability import window
     from cc_log import log_format
-    defaults = list(rosbag.Bag.__init__.__defaults__)
-    defaults[2] = {chunk_threshold!r}  # chunk_threshold: several complete chunks in one window
-    rosbag.Bag.__init__.__defaults__ = tuple(defaults)
+    from cc_log.formats import bag_lz4, bag_writer
+    bag_writer.CHUNK_THRESHOLD = {chunk_threshold!r}  # several chunks in one window
+    kill_at = {kill_at!r}
+    encode = bag_lz4.encode
 
-    def die(bag):
-        # what rosbag has finished: messages of the chunks it completed (their data all written)
-        print(sum(sum(chunk.connection_counts.values()) for chunk in bag._chunks), flush=True)
-        os.kill(os.getpid(), signal.SIGKILL)
+    def cut_off(records, metadata):
+        # the bag's bytes as far as the disk holds them when the process dies
+        data = encode(records, metadata)
+        whole = tempfile.NamedTemporaryFile(suffix='.bag')
+        whole.write(data)
+        whole.flush()
+        with whole, rosbag.Bag(whole.name) as bag:
+            chunks = [(bag._chunk_headers[info.pos], sum(info.connection_counts.values())) for info in bag._chunks]
+            index_pos = bag._index_data_pos
+        if kill_at == 'close':  # everything but the index
+            cut, done = index_pos, sum(count for _, count in chunks)
+        elif kill_at is not None:  # right after chunk N's data (0: its header only), before its index records
+            header = chunks[max(kill_at - 1, 0)][0]
+            cut = header.data_pos + (header.compressed_size if kill_at else 0)
+            done = sum(count for _, count in chunks[:kill_at])
 
-    if {kill_at!r} is None:  # killed from outside, at whatever moment
-        pass
-    elif {kill_at!r} == 'close':  # the process dies while the bag is still open: no index, an open last chunk
-        rosbag.Bag.close = die
-    else:  # ... or after rosbag wrote chunk N's data, before it wrote that chunk's sizes into its header
-        rewrite = rosbag.Bag._write_chunk_header
-        def write_chunk_header(bag, header):
-            if header.compressed_size and len(bag._chunks) == {kill_at!r}:
-                die(bag)
-            rewrite(bag, header)
-        rosbag.Bag._write_chunk_header = write_chunk_header
+        def write(stream):
+            if kill_at is None:  # killed from outside once {kill_after!r} bytes are on disk, wherever that falls
+                for start in range(0, len(data), 4099):
+                    stream.write(data[start:start + 4099])
+                    stream.flush()
+                    if start >= {kill_after!r}:
+                        sys.stdin.read()  # until killed
+            stream.write(data[:cut])
+            stream.flush()
+            print(done, flush=True)  # the messages (the metadata message too) of the chunks whose data is on disk
+            os.kill(os.getpid(), signal.SIGKILL)
+        return write
+
+    bag_lz4.encoder = cut_off
     log_format.write_window(window({messages!r}), {directory!r}, 'bag-lz4')
 ''')
 
 
 def crashing_writer(directory, messages=6000, kill_at='close', chunk_threshold=768 * 1024, kill_after=None):
     """Run a process that writes a bag-lz4 window of ``messages`` and is SIGKILLed mid-bag; return how many
-    window messages (the metadata message left out) the chunks it completed held.
+    window messages (the metadata message left out) the chunks whose data reached the disk held.
 
-    ``kill_at``: 'close' (when rosbag would close the bag), N (after chunk N's data, before its header got its
-    sizes) or None: SIGKILLed from here once its leftover holds ``kill_after`` bytes (returns None).
+    ``kill_at``: 'close' (the bag's bytes up to its index on disk), N (up to the end of chunk N's data, before
+    its index records; 0: chunk 1's header only) or None: SIGKILLed from here once its leftover holds
+    ``kill_after`` bytes (returns None).
     """
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [os.path.join(ROOT, 'src'),
                                                                     os.environ.get('PYTHONPATH')])))
     script = CRASHING_WRITER.format(test=os.path.join(ROOT, 'test'), directory=directory, messages=messages,
-                                    kill_at=kill_at, chunk_threshold=chunk_threshold)
-    child = subprocess.Popen([sys.executable, '-c', script], env=env, stdout=subprocess.PIPE)
+                                    kill_at=kill_at, chunk_threshold=chunk_threshold, kill_after=kill_after)
+    child = subprocess.Popen([sys.executable, '-c', script], env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
     if kill_at is None:
         deadline = time.time() + 60
         while time.time() < deadline and child.poll() is None and not any(
@@ -167,9 +183,9 @@ def crashing_writer(directory, messages=6000, kill_at='close', chunk_threshold=7
 @pytest.mark.parametrize('kill_at, threshold', [('close', 768 * 1024), ('close', 16 * 1024), (1, 768 * 1024),
                                                 (3, 16 * 1024)])
 def test_bag_cut_off_by_sigkill_keeps_every_message_of_every_complete_chunk(kill_at, threshold, tmp_path):
-    """A writer SIGKILLed while its bag is open (index missing, last chunk open) or after a chunk's data
-    but before its header got its sizes (rosbag reindex drops that chunk; a bag of one chunk was "empty"
-    and deleted): every message of every chunk whose data is on disk is recovered, exactly."""
+    """A writer SIGKILLed before the bag's index reached the disk, or right after a chunk's data (its index
+    records missing; rosbag reindex dropped such a chunk when its header lacked its sizes, and a bag of one
+    chunk was "empty" and deleted): every message of every chunk whose data is on disk is recovered, exactly."""
     directory = str(tmp_path)
     written = crashing_writer(directory, messages=6000 if kill_at == 'close' or threshold < 1e5 else 1000,
                               kill_at=kill_at, chunk_threshold=threshold)
@@ -267,7 +283,7 @@ def test_cclog_recover_reports_what_it_could_not_recover_and_exits_1_once(tmp_pa
 
 def test_bag_killed_before_any_message_data_reached_the_disk_is_removed_with_a_report(tmp_path):
     directory = str(tmp_path)
-    assert crashing_writer(directory, messages=10) == -1  # no chunk completed
+    assert crashing_writer(directory, messages=10, kill_at=0) == -1  # the first chunk's header only
     leftover, = recovery.scan(directory)
     outcome, = recovery.recover_directory(directory)
     assert outcome.status == recovery.EMPTY and 'holds no message' in outcome.detail, outcome
@@ -290,13 +306,14 @@ def _chunks(path):
 @pytest.fixture(scope='module')
 def chunked_bag(tmp_path_factory):
     """A bag-lz4 window of 600 odometry messages in about 30 chunks: its bytes and its chunks."""
+    from cc_log.formats import bag_writer
     directory = str(tmp_path_factory.mktemp('chunked'))
-    defaults = rosbag.Bag.__init__.__defaults__
-    rosbag.Bag.__init__.__defaults__ = defaults[:2] + (16 * 1024,) + defaults[3:]
+    default = bag_writer.CHUNK_THRESHOLD
+    bag_writer.CHUNK_THRESHOLD = 16 * 1024
     try:
         path, _ = write_window(window(600), directory, Format.BAG_LZ4)
     finally:
-        rosbag.Bag.__init__.__defaults__ = defaults
+        bag_writer.CHUNK_THRESHOLD = default
     with open(path, 'rb') as stream:
         data = stream.read()
     chunks = _chunks(path)

@@ -14,9 +14,12 @@ window metadata is a JSON object in one ``std_msgs/String`` message on
 - ``stamps``: only when some record stamp (float seconds) does not survive the trip through bag time
   (secs, nsecs): every record's stamp, in window order.
 
-Edge module: rosbag is imported inside the functions only, so importing cc_log.bag_lz4 costs nothing.
+The file is the bag rosbag would write for the same messages, byte for byte, written without rosbag
+(``formats.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
+(``read``, ``write_record``), so importing cc_log.bag_lz4 costs nothing.
 """
 import functools
+import io
 import json
 import math
 import os
@@ -33,8 +36,8 @@ METADATA_TOPIC = '/cc_log/metadata'
 _STRING_DEFINITION = 'string data\n'
 
 
-def bag_time(stamp):
-    """Float seconds -> a genpy.Time (``BagTime``), nanoseconds rounded to nearest; ValueError for negative or
+def bag_stamp(stamp):
+    """Float seconds -> (secs, nsecs) of a bag time, nanoseconds rounded to nearest; ValueError for negative or
     not finite."""
     stamp = float(stamp)
     if not math.isfinite(stamp) or stamp < 0:
@@ -43,7 +46,12 @@ def bag_time(stamp):
     nsecs = int(round((stamp - secs) * 1e9))
     if nsecs >= 1000000000:
         secs, nsecs = secs + 1, nsecs - 1000000000
-    return _bag_time_class()(secs, nsecs)
+    return secs, nsecs
+
+
+def bag_time(stamp):
+    """``bag_stamp`` as a genpy.Time (``BagTime``) for rosbag."""
+    return _bag_time_class()(*bag_stamp(stamp))
 
 
 @functools.lru_cache(maxsize=None)
@@ -78,25 +86,40 @@ def _bag_time_class():
 
 def write(target, records, metadata):
     """Write ``records`` (window order) and ``metadata`` (a JSON-able dict) as an LZ4 bag into ``target``: a
-    binary file object open for writing (rosbag closes it when done), or the path of a new file (created
-    with ``safe_files.create``: never over a file, never through a link)."""
-    import rosbag
+    binary file object open for writing, or the path of a new file (created with ``safe_files.create``: never
+    over a file, never through a link)."""
+    data = encode(records, metadata)
     if isinstance(target, (str, bytes, os.PathLike)):
-        with os.fdopen(safe_files.create(target), 'w+b') as stream:
-            return write(stream, records, metadata)
+        with os.fdopen(safe_files.create(target), 'wb') as stream:
+            stream.write(data)
+    else:
+        target.write(data)
+
+
+def encode(records, metadata):
+    """The bytes of the LZ4 bag of ``records`` and ``metadata`` (``formats.bag_writer``: the bag rosbag would
+    write for ``bag_messages``). ValueError for no records, the reserved topic, a bad stamp."""
+    from .bag_writer import bag_bytes
+    return bag_bytes(*bag_messages(records, metadata))
+
+
+def bag_messages(records, metadata):
+    """``(messages, headers)`` of the window's bag: (topic, secs, nsecs, serialized bytes) in the order written,
+    the metadata first, and each topic's connection header. A record held as serialized bytes with its
+    connection header is written as it is; a decoded one is serialized, with its class's header."""
     if not records:
         raise ValueError('window: has no records')
     topics = list(dict.fromkeys(record.topic for record in records))
     if METADATA_TOPIC in topics:
         raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
-    times = [bag_time(record.stamp) for record in records]
+    times = [bag_stamp(record.stamp) for record in records]
     rank = {topic: number for number, topic in enumerate(topics)}
     read_order = sorted(range(len(records)), key=lambda i: (times[i], rank[records[i].topic]))
     layout = {'topics': topics}
     if read_order != list(range(len(records))):
         position = {index: place for place, index in enumerate(read_order)}
         layout['order'] = [position[i] for i in range(len(records))]
-    if any(time.to_sec() != record.stamp for time, record in zip(times, records)):
+    if any(secs + nsecs / 1e9 != record.stamp for (secs, nsecs), record in zip(times, records)):
         layout['stamps'] = [msg_codec.encode_float(float(record.stamp)) for record in records]
     meta = dict(metadata or {})
     meta.setdefault('codec', CODEC)
@@ -104,11 +127,26 @@ def write(target, records, metadata):
     meta['bag'] = layout
     string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
     text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
-    bag = rosbag.Bag(target, 'w', compression=rosbag.Compression.LZ4)
-    bag.write(METADATA_TOPIC, string_class(data=text), min(times))
-    for record, time in zip(records, times):
-        write_record(bag, record, time)
-    bag.close()  # on an error the owner of ``target`` closes it (a failed rosbag close would leave it open)
+    headers = {METADATA_TOPIC: _class_header(METADATA_TOPIC, string_class)}
+    messages = [(METADATA_TOPIC,) + min(times) + (_serialized(string_class(data=text)),)]
+    for record, (secs, nsecs) in zip(records, times):
+        raw = record.raw is not None and record.connection
+        if record.topic not in headers:
+            headers[record.topic] = (dict(record.connection, topic=record.topic) if raw
+                                     else _class_header(record.topic, type(record.msg)))
+        messages.append((record.topic, secs, nsecs, record.raw if raw else _serialized(record.msg)))
+    return messages, headers
+
+
+def _class_header(topic, cls):
+    """The connection header rosbag writes for messages of ``cls`` on ``topic``."""
+    return {'topic': topic, 'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}
+
+
+def _serialized(msg):
+    buff = io.BytesIO()
+    msg.serialize(buff)
+    return buff.getvalue()
 
 
 def write_record(bag, record, time):
@@ -124,8 +162,9 @@ def write_record(bag, record, time):
 
 
 def encoder(records, metadata):
-    """A function that writes the window into a stream (rosbag encodes while it writes)."""
-    return lambda stream: write(stream, records, metadata)
+    """A function that writes the window into a stream; the bag is encoded now, before the file exists."""
+    data = encode(records, metadata)
+    return lambda stream: stream.write(data)
 
 
 def salvage(path):

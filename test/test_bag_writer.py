@@ -1,0 +1,85 @@
+"""formats.bag_writer writes the bag rosbag writes for the same messages, byte for byte."""
+import os
+
+import pytest
+from conftest import REAL_DATA
+
+from cc_log import bag_reader, raw_message
+from cc_log.formats import bag_lz4, bag_writer
+
+rosbag = pytest.importorskip('rosbag')
+
+HUSKY = 'husky_outdoor_2015.bag'
+TOPICS = ['/husky_velocity_controller/odom', '/imu/data']
+
+
+def rosbag_bytes(path, messages, headers, chunk_threshold=bag_writer.CHUNK_THRESHOLD):
+    """What rosbag writes for ``messages`` (topic, secs, nsecs, bytes) with the connection ``headers``."""
+    import genpy
+    bag = rosbag.Bag(str(path), 'w', compression=rosbag.Compression.LZ4, chunk_threshold=chunk_threshold)
+    for topic, secs, nsecs, data in messages:
+        header = headers[topic]
+        bag.write(topic, (header['type'], data, header['md5sum'], raw_message.message_class(header)),
+                  genpy.Time(secs, nsecs), raw=True, connection_header=header)
+    bag.close()
+    with open(str(path), 'rb') as stream:
+        return stream.read()
+
+
+@pytest.fixture(scope='module')
+def husky_messages():
+    """Every odometry and IMU message of the Husky bag: (topic, secs, nsecs, bytes), and the headers by topic."""
+    path = os.path.join(REAL_DATA, HUSKY)
+    if not os.path.exists(path):
+        pytest.fail('real data missing: %s (tests read ../shared/data/real/)' % path)
+    messages, headers = [], {}
+    for record in bag_reader.read_raw(path, TOPICS):
+        headers.setdefault(record.topic, dict(record.connection, topic=record.topic))
+        messages.append((record.topic,) + bag_lz4.bag_stamp(record.stamp) + (record.raw,))
+    return messages, headers
+
+
+def test_the_whole_husky_bag_as_rosbag_writes_it(husky_messages, tmp_path):
+    messages, headers = husky_messages
+    assert len(messages) == 15817
+    ours = bag_writer.bag_bytes(messages, headers)
+    assert ours == rosbag_bytes(tmp_path / 'rosbag.bag', messages, headers)
+    with rosbag.Bag(str(tmp_path / 'rosbag.bag')) as bag:
+        assert bag.get_message_count() == len(messages) and len(bag._chunks) > 1  # several chunks
+
+
+@pytest.mark.parametrize('threshold', [0, 3000])
+def test_out_of_order_and_equal_times_in_small_chunks(husky_messages, tmp_path, threshold):
+    # rosbag keeps each chunk's index sorted by time, ties in write order; chunks close past the threshold
+    messages, headers = husky_messages
+    sample = list(reversed(messages[:300])) + messages[300:600]
+    sample += [(topic, 100, 5, data) for topic, _, _, data in messages[600:640]]  # forty at one time
+    sample += [(TOPICS[1], 0, 0, messages[1][3]), (TOPICS[0], 4294967295, 999999999, messages[0][3])]
+    ours = bag_writer.bag_bytes(sample, headers, chunk_threshold=threshold)
+    assert ours == rosbag_bytes(tmp_path / 'rosbag.bag', sample, headers, chunk_threshold=threshold)
+
+
+def test_rosbag_reads_every_message_with_its_connection_header(husky_messages, tmp_path):
+    messages, headers = husky_messages
+    headers = dict(headers)
+    headers[TOPICS[0]] = dict(headers[TOPICS[0]], callerid='/husky_node', latching='1')
+    path = tmp_path / 'ours.bag'
+    path.write_bytes(bag_writer.bag_bytes(messages[:2000], headers, chunk_threshold=50000))
+    with rosbag.Bag(str(path)) as bag:
+        read = [(topic, t.secs, t.nsecs, raw[1], conn) for topic, raw, t, conn in
+                bag.read_messages(raw=True, return_connection_header=True)]
+    expected = sorted(messages[:2000], key=lambda message: (message[1], message[2]))
+    assert [item[:4] for item in read] == [tuple(message) for message in expected]
+    assert all(conn == dict((key, value.encode()) for key, value in headers[topic].items())
+               for topic, _, _, _, conn in read)
+
+
+def test_bad_times_and_no_messages_are_refused(husky_messages):
+    messages, headers = husky_messages
+    topic, _, _, data = messages[0]
+    with pytest.raises(ValueError, match='cannot be a bag time'):
+        bag_writer.bag_bytes([(topic, 1 << 32, 0, data)], headers)
+    with pytest.raises(ValueError, match='cannot be a bag time'):
+        bag_writer.bag_bytes([(topic, 1, -1, data)], headers)
+    with pytest.raises(ValueError, match='at least one message'):
+        bag_writer.bag_bytes([], headers)
