@@ -114,7 +114,8 @@ def bag_messages(records, metadata):
         raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
     times = [bag_stamp(record.stamp) for record in records]
     rank = {topic: number for number, topic in enumerate(topics)}
-    read_order = sorted(range(len(records)), key=lambda i: (times[i], rank[records[i].topic]))
+    keys = [(time, rank[record.topic]) for time, record in zip(times, records)]  # records may be a deque
+    read_order = sorted(range(len(records)), key=keys.__getitem__)
     layout = {'topics': topics}
     if read_order != list(range(len(records))):
         position = {index: place for place, index in enumerate(read_order)}
