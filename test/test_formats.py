@@ -142,7 +142,7 @@ def test_husky_odometry_and_imu_round_trip(fmt, husky_window, tmp_path):
     assert metadata['reasons'] == ['classifier']
     assert [t['score'] for t in metadata['triggers']] == [-0.1234, -0.5]
     assert metadata['triggers'][0]['stamp'] == husky_window.triggers[0].stamp
-    assert metadata['codec'] == fmt and metadata['layout'] == (2 if fmt == Format.JSON_XZ else 1)
+    assert metadata['codec'] == fmt and metadata['layout'] == 2
     assert metadata['cc_log_version'] == __import__('cc_log').__version__
     assert metadata['robot'] == 'husky' and metadata['rate'] == 10
     assert metadata['start_utc'].startswith('2015-05-21T19:')
@@ -645,6 +645,7 @@ def test_row_json_bytes_with_non_finite_and_int_values():
 # -- older layouts ---------------------------------------------------------------------------------------
 
 LAYOUT1_FIXTURE = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'fixtures', 'json_xz_layout1.json.xz')
+BAG_LAYOUT1_FIXTURE = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'fixtures', 'bag_lz4_layout1.bag')
 
 
 def test_json_xz_layout_1_file_still_read(real_bag):
@@ -655,3 +656,33 @@ def test_json_xz_layout_1_file_still_read(real_bag):
     metadata, back = json_xz.read(LAYOUT1_FIXTURE)
     assert metadata['layout'] == 1
     assert_same_records(records, back)
+
+
+def test_bag_lz4_layout_1_file_still_read(real_bag):
+    """A file written by the layout-1 encoder (no crc32; committed before layout 2): the same 40 records with
+    records 3 and 4 swapped; read back bit for bit."""
+    records = read_records(real_bag(HUSKY), [HUSKY_ODOM, '/imu/data'], limit=40)
+    records[3], records[4] = records[4], records[3]
+    metadata, back = read_window(BAG_LAYOUT1_FIXTURE)
+    assert metadata['layout'] == 1 and metadata['codec'] == 'bag-lz4'
+    assert_same_records(records, back)
+
+
+def test_bag_lz4_refuses_records_that_do_not_match_their_crc32(husky_window, tmp_path):
+    # rosbag has no checksum: one bit of a message's bytes flipped after the window was encoded
+    from cc_log.formats import bag_lz4, bag_writer
+    messages, headers = bag_lz4.bag_messages(husky_window.records, {})
+    good = tmp_path / 'good.bag'
+    good.write_bytes(bag_writer.bag_bytes(messages, headers))
+    assert len(read_window(str(good))[1]) == len(husky_window.records)
+    topic, secs, nsecs, data = messages[100]
+    flipped = bytearray(data)
+    flipped[-20] ^= 0x04  # a bit of a covariance or twist value: still a valid message
+    messages[100] = (topic, secs, nsecs, bytes(flipped))
+    bad = tmp_path / 'bad.bag'
+    bad.write_bytes(bag_writer.bag_bytes(messages, headers))
+    with rosbag.Bag(str(bad)) as bag:
+        assert bag.get_message_count() == len(messages)  # rosbag reads it without a complaint
+    with pytest.raises(ValueError, match='do not match their crc32') as error:
+        read_window(str(bad))
+    assert str(bad) in str(error.value)

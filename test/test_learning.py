@@ -1,7 +1,6 @@
 """Learning: vector files, training from nominal data alone or with anomalies, the report."""
 import json
 import os
-import time
 
 import numpy as np
 import pytest

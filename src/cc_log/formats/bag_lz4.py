@@ -12,7 +12,11 @@ window metadata is a JSON object in one ``std_msgs/String`` message on
 - ``order``: only when the records were not in (bag time, topic) order: the index in bag read order of
   each record, in window order;
 - ``stamps``: only when some record stamp (float seconds) does not survive the trip through bag time
-  (secs, nsecs): every record's stamp, in window order.
+  (secs, nsecs): every record's stamp, in window order;
+- ``crc32`` (layout 2): the CRC-32 of the records as ``read`` returns them (``records_crc``: each topic's type,
+  md5sum and definition, each record's topic, stamp and serialized bytes, in window order). rosbag has no
+  checksum of its own: without it a flipped bit in a message reads back as a different value. ``read``
+  refuses a file whose records do not match it (layout 1 files, written before it, are read without it).
 
 The file is the bag rosbag would write for the same messages, byte for byte, written without rosbag
 (``formats.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
@@ -23,6 +27,8 @@ import io
 import json
 import math
 import os
+import struct
+import zlib
 
 from .. import msg_codec, raw_message, safe_files, safe_input
 from ..window_buffer import Record
@@ -30,7 +36,7 @@ from ..window_buffer import Record
 CODEC = 'bag-lz4'
 RAW_RECORDS = True  # write_window hands records over as they are: serialized bytes are written as bytes
 EXTENSION = '.bag'
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2  # 2: the layout holds the records' crc32
 MAGIC = b'#ROSBAG V2.0\n'
 METADATA_TOPIC = '/cc_log/metadata'
 _STRING_DEFINITION = 'string data\n'
@@ -122,21 +128,45 @@ def bag_messages(records, metadata):
         layout['order'] = [position[i] for i in range(len(records))]
     if any(secs + nsecs / 1e9 != record.stamp for (secs, nsecs), record in zip(times, records)):
         layout['stamps'] = [msg_codec.encode_float(float(record.stamp)) for record in records]
-    meta = dict(metadata or {})
-    meta.setdefault('codec', CODEC)
-    meta['layout'] = LAYOUT_VERSION
-    meta['bag'] = layout
     string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
-    text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
     headers = {METADATA_TOPIC: _class_header(METADATA_TOPIC, string_class)}
-    messages = [(METADATA_TOPIC,) + min(times) + (_serialized(string_class(data=text)),)]
+    messages = [None]  # the metadata, once the records' checksum is known
     for record, (secs, nsecs) in zip(records, times):
         raw = record.raw is not None and record.connection
         if record.topic not in headers:
             headers[record.topic] = (dict(record.connection, topic=record.topic) if raw
                                      else _class_header(record.topic, type(record.msg)))
         messages.append((record.topic, secs, nsecs, record.raw if raw else _serialized(record.msg)))
+    layout['crc32'] = records_crc(topics, headers, ((record.topic, record.stamp, message[3])
+                                                    for record, message in zip(records, messages[1:])))
+    meta = dict(metadata or {})
+    meta.setdefault('codec', CODEC)
+    meta['layout'] = LAYOUT_VERSION
+    meta['bag'] = layout
+    text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
+    messages[0] = (METADATA_TOPIC,) + min(times) + (_serialized(string_class(data=text)),)
     return messages, headers
+
+
+def records_crc(topics, headers, records):
+    """CRC-32 of a window's records: ``topics`` in order with their connection ``headers`` (topic -> dict;
+    type, md5sum and message_definition count, str or bytes), then ``records`` ((topic, stamp, serialized
+    bytes) in window order)."""
+    crc = 0
+    number = {}
+    for topic in topics:
+        number[topic] = len(number)
+        header = headers[topic]
+        for part in (topic, header['type'], header['md5sum'], header['message_definition']):
+            crc = zlib.crc32(part if isinstance(part, bytes) else part.encode(), crc)
+            crc = zlib.crc32(b'\0', crc)
+    for topic, stamp, data in records:
+        crc = zlib.crc32(_RECORD_HEAD.pack(number[topic], stamp, len(data)), crc)
+        crc = zlib.crc32(data, crc)
+    return crc
+
+
+_RECORD_HEAD = struct.Struct('<IdI')  # topic number, stamp, length of the serialized bytes
 
 
 def _class_header(topic, cls):
@@ -189,7 +219,7 @@ def read(path, stream=None):
         stream.close()
         raise ValueError('%s: not a rosbag 2.0 file' % path)
     metadata = None
-    read_records = []
+    read_records, headers = [], {}
     with stream:
         try:
             bag = rosbag.Bag(stream)
@@ -198,12 +228,13 @@ def read(path, stream=None):
         with bag:
             safe_input.check_bag(bag, path)
             try:
-                for topic, msg, time in bag.read_messages():
+                for topic, raw, time, header in bag.read_messages(raw=True, return_connection_header=True):
                     if topic == METADATA_TOPIC:
                         if metadata is None:
-                            metadata = _metadata(msg.data)
+                            metadata = _metadata(_deserialized(raw).data)
                         continue
-                    read_records.append((time, Record(time.to_sec(), topic, msg)))
+                    headers.setdefault(topic, header)
+                    read_records.append((time, Record(time.to_sec(), topic, raw)))
             except _BadMetadata as error:
                 raise ValueError('%s: bad metadata JSON on %s (%s)' % (path, METADATA_TOPIC, error))
             except Exception as error:
@@ -213,9 +244,22 @@ def read(path, stream=None):
     layout = metadata.pop('bag')
     try:
         records = _restore(read_records, layout)
+        if 'crc32' in layout and layout['crc32'] != records_crc(
+                layout['topics'], headers, ((record.topic, record.stamp, record.msg[1]) for record in records)):
+            raise ValueError('the records do not match their crc32: the file is damaged')
     except (ValueError, TypeError, KeyError, IndexError) as error:
         raise ValueError('%s: metadata does not fit the records (%s)' % (path, error))
-    return metadata, records
+    try:
+        return metadata, [record._replace(msg=_deserialized(record.msg)) for record in records]
+    except Exception as error:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError, ...
+        raise ValueError('%s: corrupt bag (%s: %s)' % (path, type(error).__name__, error))
+
+
+def _deserialized(raw):
+    """The message of rosbag's raw tuple (type, bytes, md5sum, position, class)."""
+    msg = raw[4]()
+    msg.deserialize(raw[1])
+    return msg
 
 
 class _BadMetadata(ValueError):
@@ -242,6 +286,5 @@ def _restore(read_records, layout):
     if stamps is not None:
         if len(stamps) != len(records):
             raise ValueError('%d stamps for %d records' % (len(stamps), len(records)))
-        records = [Record(msg_codec.decode_float(stamp), record.topic, record.msg)
-                   for stamp, record in zip(stamps, records)]
+        records = [record._replace(stamp=msg_codec.decode_float(stamp)) for stamp, record in zip(stamps, records)]
     return records
