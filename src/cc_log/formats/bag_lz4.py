@@ -157,7 +157,7 @@ def records_crc(topics, headers, records):
     for topic in topics:
         number[topic] = len(number)
         header = headers[topic]
-        for part in (topic, header['type'], header['md5sum'], header['message_definition']):
+        for part in (topic, header.get('type', ''), header.get('md5sum', ''), header.get('message_definition', '')):
             crc = zlib.crc32(part if isinstance(part, bytes) else part.encode(), crc)
             crc = zlib.crc32(b'\0', crc)
     for topic, stamp, data in records:
@@ -219,7 +219,7 @@ def read(path, stream=None):
         stream.close()
         raise ValueError('%s: not a rosbag 2.0 file' % path)
     metadata = None
-    read_records, headers = [], {}
+    read_records, headers, classes = [], {}, {}
     with stream:
         try:
             bag = rosbag.Bag(stream)
@@ -229,12 +229,14 @@ def read(path, stream=None):
             safe_input.check_bag(bag, path)
             try:
                 for topic, raw, time, header in bag.read_messages(raw=True, return_connection_header=True):
+                    # raw: (type, serialized bytes, md5sum, position, class)
                     if topic == METADATA_TOPIC:
                         if metadata is None:
-                            metadata = _metadata(_deserialized(raw).data)
+                            metadata = _metadata(_deserialized(raw[4], raw[1]).data)
                         continue
-                    headers.setdefault(topic, header)
-                    read_records.append((time, Record(time.to_sec(), topic, raw)))
+                    if topic not in headers:
+                        headers[topic], classes[topic] = header, raw[4]
+                    read_records.append((time, Record(time.to_sec(), topic, None, 0, raw[1])))
             except _BadMetadata as error:
                 raise ValueError('%s: bad metadata JSON on %s (%s)' % (path, METADATA_TOPIC, error))
             except Exception as error:
@@ -245,20 +247,20 @@ def read(path, stream=None):
     try:
         records = _restore(read_records, layout)
         if 'crc32' in layout and layout['crc32'] != records_crc(
-                layout['topics'], headers, ((record.topic, record.stamp, record.msg[1]) for record in records)):
+                layout['topics'], headers, ((record.topic, record.stamp, record.raw) for record in records)):
             raise ValueError('the records do not match their crc32: the file is damaged')
     except (ValueError, TypeError, KeyError, IndexError) as error:
         raise ValueError('%s: metadata does not fit the records (%s)' % (path, error))
     try:
-        return metadata, [record._replace(msg=_deserialized(record.msg)) for record in records]
+        return metadata, [Record(record.stamp, record.topic, _deserialized(classes[record.topic], record.raw))
+                          for record in records]
     except Exception as error:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError, ...
         raise ValueError('%s: corrupt bag (%s: %s)' % (path, type(error).__name__, error))
 
 
-def _deserialized(raw):
-    """The message of rosbag's raw tuple (type, bytes, md5sum, position, class)."""
-    msg = raw[4]()
-    msg.deserialize(raw[1])
+def _deserialized(cls, data):
+    msg = cls()
+    msg.deserialize(data)
     return msg
 
 
