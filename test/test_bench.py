@@ -3,6 +3,7 @@
 Benchmarks are scripts, not timed tests: nothing here asserts on a time, a rate or a size.
 """
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -71,6 +72,15 @@ def test_detection_runs_quick():
     out = run('detection_runs.py', '--runs', 'icelab_normal_plan', '--seeds', '0', '--settings', 'ours')
     assert 'icelab_normal_plan' in out and 'false/h' in out and 'kept/needed' in out and 'by type:' in out
     assert 'all runs: caught ' in out
+
+
+def test_detection_ranker_quick():
+    out = run('detection_ranker.py', '--runs', 'icelab_normal_plan', '--seeds', '0', '--train-on', 'self')
+    row = next(line for line in out.splitlines() if line.startswith('| icelab_normal_plan '))
+    cells = [cell.strip() for cell in row.split('|')[1:-1]]
+    caught = re.compile(r'^\d+/6 \(\d+\)$')  # one injection of each of the six types
+    assert caught.match(cells[2]) and caught.match(cells[4]), row
+    assert int(cells[5]) > 0 and int(cells[6]) > 0  # the ranker saw nominal and anomalous vectors
 
 
 def test_detection_runs_robot_scale_calibrated():
