@@ -4,7 +4,7 @@ trained on the robot's own training part with anomalies injected into it, gating
 
     cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
     python3 bench/detection_ranker.py                          # all runs, --train-on robot, seeds 0 1 2
-    python3 bench/detection_ranker.py --runs husky_outdoor_2015 --seeds 0
+    python3 bench/detection_ranker.py --runs husky_outdoor_2015 --seeds 0 --explain   # what the ranker does there
 
 The question (issue 13): the one-class model calls driving its training never held anomalous (Husky's stops),
 and no threshold separates such driving from anomaly onsets. Does a ranker that has seen anomalies, injected
@@ -104,12 +104,36 @@ def ranker_of(model, pieces, topic, config, inject, robot_scale):
     return ranker, len(X_neg), len(X_pos)
 
 
+def explain(name, topic, stop, train_on, top=4):
+    """Lines on a run's ranker: its largest weights (standardized features) and, for each false window of the
+    one-class model on the replayed part, the ranker's median and largest probability over the vectors the
+    one-class model flags in it."""
+    records, first, rest, model, _, inject = runs.prepare(name, topic, stop, 'ours', 0.5, train_on=train_on)
+    pieces = [first] + ([runs.load(*run) for run in runs.other_runs(name)] if train_on == 'robot' else [])
+    ranker = ranker_of(model, pieces, topic, model.config, inject, sim.nominal_envelope(first, topic))[0]
+    weights = ranker[-1].coef_[0]
+    lines = ['%s ranker weights: %s' % (name, ', '.join('%s %.1f' % (model.names[i], weights[i])
+                                                        for i in np.argsort(-np.abs(weights))[:top]))]
+    stamps, V = runs.vectors_of(rest, model.config)
+    flagged = np.asarray(model.scores(V)) < model.threshold
+    probability = ranker.predict_proba(V)[:, 1]
+    for a, b in runs.windows_of(runs.fires(model, rest, topic, 'event')):
+        inside = flagged & (stamps >= a) & (stamps <= b)
+        if np.any(inside):
+            lines.append('%s false window %.1f-%.1f s: %d flagged vectors, ranker probability median %.2f, max %.2f'
+                         % (name, a - records[0].stamp, b - records[0].stamp, int(inside.sum()),
+                            float(np.median(probability[inside])), float(np.max(probability[inside]))))
+    return lines
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--runs', help='comma-separated run names (default: all of detection_runs.RUNS)')
     parser.add_argument('--seeds', default='0,1,2')
     parser.add_argument('--train-on', default='robot', choices=runs.TRAIN_ON)
     parser.add_argument('--gate', type=float, default=0.5, help='ranker probability needed to fire (default 0.5)')
+    parser.add_argument('--explain', action='store_true',
+                        help='then, per run, the ranker\'s largest weights and its probabilities in each false window')
     args = parser.parse_args(argv)
     started = time.time()
     seeds = [int(s) for s in args.seeds.split(',')]
@@ -159,6 +183,11 @@ def main(argv=None):
     common.table(['run', 'false windows', 'caught (late)', 'gated: false windows', 'gated: caught (late)',
                   'ranker negatives', 'ranker positives'], rows,
                  'One-class model alone and gated by the ranker (replayed part; false windows without injection):')
+    if args.explain:
+        print()
+        for name, topic, stop in chosen:
+            for line in explain(name, topic, stop, args.train_on):
+                print(line)
     print('total %.1f s' % (time.time() - started))
     return 0
 
