@@ -7,9 +7,10 @@ the bytes held per buffered message.
     python3 bench/memory_live.py                     # 60 s at 100 and 1000 Hz with ~max_buffer_mb 64
     python3 bench/memory_live.py --budgets 256,0 --rates 1000 --seconds 30
     python3 bench/memory_live.py --quick             # 4 s with a 16 MB budget (tests)
+    python3 bench/memory_live.py --format bag-lz4    # windows written as bags (json-xz by default)
 
 What it starts (cost_live.roscore_session: own sessions, a roscore on a free port, all stopped by their ids):
-- the smart node (``rosrun cc_log smart_logger.py``, json-xz, ``odom:=/odom _topics:=/imu``) with a model whose
+- the smart node (``rosrun cc_log smart_logger.py``, ``--format``, ``odom:=/odom _topics:=/imu``) with a model whose
   threshold calls every message anomalous, so one window stays open from the first second to the last and is
   written in parts (``~max_window`` 100000 messages would split it only after 100 s);
 - a publisher (this script with --publisher): nav_msgs/Odometry on /odom and sensor_msgs/Imu on /imu, each
@@ -116,7 +117,8 @@ def run(procs, tmp, model, budget, rate, args):
     out_dir = os.path.join(tmp, 'windows_%g_%g' % (budget, rate))
     node = procs.start('smart_node_%g_%g' % (budget, rate), [
         'rosrun', 'cc_log', 'smart_logger.py', '_model:=' + model, '_directory:=' + out_dir, 'odom:=/odom',
-        '_topics:=/imu', '_pre:=2s', '_post:=2s', '_max_buffer_mb:=%g' % budget, '_diagnostic_period:=0.5'])
+        '_topics:=/imu', '_pre:=2s', '_post:=2s', '_max_buffer_mb:=%g' % budget, '_diagnostic_period:=0.5',
+        '_format:=' + args.format])
     wait_subscribers('/odom', 1)
     wait_subscribers('/imu', 1)
     child = subprocess.Popen([sys.executable, os.path.abspath(__file__), '--publisher', '--rate', str(rate),
@@ -153,6 +155,7 @@ def parse(argv):
     parser.add_argument('--rates', default=DEFAULT_RATES, help='messages per second on each topic, one run each')
     parser.add_argument('--rate', type=float, default=1000.0, help=argparse.SUPPRESS)  # the publisher's
     parser.add_argument('--budgets', default=DEFAULT_BUDGETS, help='~max_buffer_mb values, one run each (0: none)')
+    parser.add_argument('--format', default='json-xz', choices=('json-xz', 'bag-lz4'), help='of the windows')
     parser.add_argument('--quick', dest='preset', action='store_const', const=QUICK, default={},
                         help='a 4 s run with a 16 MB budget')
     parser.add_argument('--publisher', action='store_true', help=argparse.SUPPRESS)
@@ -170,8 +173,8 @@ def main(argv=None):
     rates = [float(r) for r in args.rates.split(',') if r]
     common.header('Memory of the live smart node with a window open all the time', [
         'data: synthetic nav_msgs/Odometry and sensor_msgs/Imu, each at every rate for %g s, header stamps of now; '
-        'model: motion 20-message window with a threshold that calls every message anomalous; json-xz, pre/post 2 s'
-        % args.seconds,
+        'model: motion 20-message window with a threshold that calls every message anomalous; %s, pre/post 2 s'
+        % (args.seconds, args.format),
         'runs: ~max_buffer_mb %s at %s Hz per topic' % (', '.join('%g' % b for b in budgets),
                                                         ', '.join('%g' % r for r in rates))])
     results = []

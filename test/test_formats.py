@@ -672,6 +672,7 @@ def test_bag_lz4_refuses_records_that_do_not_match_their_crc32(husky_window, tmp
     # rosbag has no checksum: one bit of a message's bytes flipped after the window was encoded
     from cc_log.formats import bag_lz4, bag_writer
     messages, headers = bag_lz4.bag_messages(husky_window.records, {})
+    messages = list(messages)
     good = tmp_path / 'good.bag'
     good.write_bytes(bag_writer.bag_bytes(messages, headers))
     assert len(read_window(str(good))[1]) == len(husky_window.records)

@@ -120,38 +120,51 @@ CRASHING_WRITER = textwrap.dedent('''
     from cc_log.formats import bag_lz4, bag_writer
     bag_writer.CHUNK_THRESHOLD = {chunk_threshold!r}  # several chunks in one window
     kill_at = {kill_at!r}
-    encode = bag_lz4.encode
+    write_bag = bag_writer.write_bag
 
-    def cut_off(records, metadata):
-        # the bag's bytes as far as the disk holds them when the process dies
-        data = encode(records, metadata)
-        whole = tempfile.NamedTemporaryFile(suffix='.bag')
-        whole.write(data)
-        whole.flush()
-        with whole, rosbag.Bag(whole.name) as bag:
-            chunks = [(bag._chunk_headers[info.pos], sum(info.connection_counts.values())) for info in bag._chunks]
-            index_pos = bag._index_data_pos
+    def where_to_die(messages, headers):
+        # (bytes on disk when the process dies, messages of the chunks whose data they hold), from the whole bag
+        with tempfile.NamedTemporaryFile(suffix='.bag') as whole:
+            write_bag(whole, messages, headers)
+            whole.flush()
+            with rosbag.Bag(whole.name) as bag:
+                chunks = [(bag._chunk_headers[info.pos], sum(info.connection_counts.values()))
+                          for info in bag._chunks]
+                index_pos = bag._index_data_pos
         if kill_at == 'close':  # everything but the index
-            cut, done = index_pos, sum(count for _, count in chunks)
-        elif kill_at is not None:  # right after chunk N's data (0: its header only), before its index records
-            header = chunks[max(kill_at - 1, 0)][0]
-            cut = header.data_pos + (header.compressed_size if kill_at else 0)
-            done = sum(count for _, count in chunks[:kill_at])
+            return index_pos, sum(count for _, count in chunks)
+        header = chunks[max(kill_at - 1, 0)][0]  # right after chunk N's data (0: its header only)
+        return header.data_pos + (header.compressed_size if kill_at else 0), sum(c for _, c in chunks[:kill_at])
 
-        def write(stream):
+    class Dying(object):
+        # the file as the writer fills it, until the process is killed
+        def __init__(self, stream, cut, done):
+            self.stream, self.cut, self.done = stream, cut, done
+
+        def write(self, data):
             if kill_at is None:  # killed from outside once {kill_after!r} bytes are on disk, wherever that falls
                 for start in range(0, len(data), 4099):
-                    stream.write(data[start:start + 4099])
-                    stream.flush()
-                    if start >= {kill_after!r}:
+                    self.stream.write(data[start:start + 4099])
+                    self.stream.flush()
+                    if self.stream.tell() >= {kill_after!r}:
                         sys.stdin.read()  # until killed
-            stream.write(data[:cut])
-            stream.flush()
-            print(done, flush=True)  # the messages (the metadata message too) of the chunks whose data is on disk
-            os.kill(os.getpid(), signal.SIGKILL)
-        return write
+                return
+            room = self.cut - self.stream.tell()
+            self.stream.write(data[:room])
+            if len(data) >= room:
+                self.stream.flush()
+                print(self.done, flush=True)  # messages (the metadata's too) of the chunks whose data is on disk
+                os.kill(os.getpid(), signal.SIGKILL)
 
-    bag_lz4.encoder = cut_off
+        def __getattr__(self, name):
+            return getattr(self.stream, name)
+
+    def dying_write_bag(stream, messages, headers, chunk_threshold=None):
+        messages = list(messages)
+        cut, done = where_to_die(messages, headers) if kill_at is not None else (None, None)
+        write_bag(Dying(stream, cut, done), messages, headers, chunk_threshold)
+
+    bag_writer.write_bag = dying_write_bag
     log_format.write_window(window({messages!r}), {directory!r}, 'bag-lz4')
 ''')
 

@@ -24,6 +24,7 @@ The file is the bag rosbag would write for the same messages, byte for byte, wri
 """
 import functools
 import io
+import itertools
 import json
 import math
 import os
@@ -92,60 +93,70 @@ def _bag_time_class():
 
 def write(target, records, metadata):
     """Write ``records`` (window order) and ``metadata`` (a JSON-able dict) as an LZ4 bag into ``target``: a
-    binary file object open for writing, or the path of a new file (created with ``safe_files.create``: never
-    over a file, never through a link)."""
-    data = encode(records, metadata)
+    binary, seekable file object open for writing, or the path of a new file (created with
+    ``safe_files.create``: never over a file, never through a link)."""
     if isinstance(target, (str, bytes, os.PathLike)):
-        with os.fdopen(safe_files.create(target), 'wb') as stream:
-            stream.write(data)
-    else:
-        target.write(data)
+        with os.fdopen(safe_files.create(target), 'w+b') as stream:
+            return write(stream, records, metadata)
+    from . import bag_writer
+    bag_writer.write_bag(target, *bag_messages(records, metadata))
 
 
 def encode(records, metadata):
-    """The bytes of the LZ4 bag of ``records`` and ``metadata`` (``formats.bag_writer``: the bag rosbag would
-    write for ``bag_messages``). ValueError for no records, the reserved topic, a bad stamp."""
-    from .bag_writer import bag_bytes
-    return bag_bytes(*bag_messages(records, metadata))
+    """The bytes ``write`` writes."""
+    from . import bag_writer
+    return bag_writer.bag_bytes(*bag_messages(records, metadata))
 
 
 def bag_messages(records, metadata):
-    """``(messages, headers)`` of the window's bag: (topic, secs, nsecs, serialized bytes) in the order written,
-    the metadata first, and each topic's connection header. A record held as serialized bytes with its
-    connection header is written as it is; a decoded one is serialized, with its class's header."""
+    """``(messages, headers)`` of the window's bag: an iterator of (topic, secs, nsecs, serialized bytes) in the
+    order written, the metadata first, and each topic's connection header. A record held as serialized bytes
+    with its connection header is written as it is; a decoded one is serialized, with its class's header.
+    The records are read twice (the metadata holds their order, stamps and checksum), each message is made
+    when it is written: nothing per record is held. ValueError for no records, the reserved topic, a bad
+    stamp."""
     if not records:
         raise ValueError('window: has no records')
-    topics = list(dict.fromkeys(record.topic for record in records))
-    if METADATA_TOPIC in topics:
+    if any(record.topic == METADATA_TOPIC for record in records):
         raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
-    times = [bag_stamp(record.stamp) for record in records]
-    rank = {topic: number for number, topic in enumerate(topics)}
-    keys = [(time, rank[record.topic]) for time, record in zip(times, records)]  # records may be a deque
-    read_order = sorted(range(len(records)), key=keys.__getitem__)
-    layout = {'topics': topics}
-    if read_order != list(range(len(records))):
-        position = {index: place for place, index in enumerate(read_order)}
-        layout['order'] = [position[i] for i in range(len(records))]
-    if any(secs + nsecs / 1e9 != record.stamp for (secs, nsecs), record in zip(times, records)):
-        layout['stamps'] = [msg_codec.encode_float(float(record.stamp)) for record in records]
     string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
     headers = {METADATA_TOPIC: _class_header(METADATA_TOPIC, string_class)}
-    messages = [None]  # the metadata, once the records' checksum is known
-    for record, (secs, nsecs) in zip(records, times):
-        raw = record.raw is not None and record.connection
+    for record in records:
         if record.topic not in headers:
-            headers[record.topic] = (dict(record.connection, topic=record.topic) if raw
+            headers[record.topic] = (dict(record.connection, topic=record.topic) if _held_raw(record)
                                      else _class_header(record.topic, type(record.msg)))
-        messages.append((record.topic, secs, nsecs, record.raw if raw else _serialized(record.msg)))
-    layout['crc32'] = records_crc(topics, headers, ((record.topic, record.stamp, message[3])
-                                                    for record, message in zip(records, messages[1:])))
+    topics = list(headers)[1:]
+    rank = {topic: number for number, topic in enumerate(topics)}
+    keys = [(bag_stamp(record.stamp), rank[record.topic]) for record in records]
+    layout = {'topics': topics}
+    if any(later < earlier for earlier, later in zip(keys, keys[1:])):
+        read_order = sorted(range(len(keys)), key=keys.__getitem__)
+        position = {index: place for place, index in enumerate(read_order)}
+        layout['order'] = [position[i] for i in range(len(keys))]
+    if any(secs + nsecs / 1e9 != record.stamp for ((secs, nsecs), _), record in zip(keys, records)):
+        layout['stamps'] = [msg_codec.encode_float(float(record.stamp)) for record in records]
+    first = min(key[0] for key in keys)
+    del keys
+    layout['crc32'] = records_crc(topics, headers, ((record.topic, record.stamp, _data(record)) for record in records))
     meta = dict(metadata or {})
     meta.setdefault('codec', CODEC)
     meta['layout'] = LAYOUT_VERSION
     meta['bag'] = layout
     text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
-    messages[0] = (METADATA_TOPIC,) + min(times) + (_serialized(string_class(data=text)),)
+    metadata_message = (METADATA_TOPIC,) + first + (_serialized(string_class(data=text)),)
+    messages = itertools.chain([metadata_message], ((record.topic,) + bag_stamp(record.stamp) + (_data(record),)
+                                                    for record in records))
     return messages, headers
+
+
+def _held_raw(record):
+    """Whether the record is written from its serialized bytes with its own connection header."""
+    return record.raw is not None and bool(record.connection)
+
+
+def _data(record):
+    """The serialized bytes of a record (serialized now when it holds a decoded message)."""
+    return record.raw if _held_raw(record) else _serialized(record.msg)
 
 
 def records_crc(topics, headers, records):
@@ -193,9 +204,8 @@ def write_record(bag, record, time):
 
 
 def encoder(records, metadata):
-    """A function that writes the window into a stream; the bag is encoded now, before the file exists."""
-    data = encode(records, metadata)
-    return lambda stream: stream.write(data)
+    """A function that writes the window into a stream (one chunk in memory at a time)."""
+    return lambda stream: write(stream, records, metadata)
 
 
 def salvage(path):

@@ -1,13 +1,16 @@
-"""Writing a whole rosbag 2.0 file of LZ4 chunks at once: how ``bag_lz4`` writes a window.
+"""Writing a rosbag 2.0 file of LZ4 chunks: how ``bag_lz4`` writes a window.
 
-``bag_bytes(messages, headers)`` returns the bytes that rosbag's ``Bag(..., compression=LZ4)`` writes for the
-same messages (``write(topic, raw, time, raw=True, connection_header=...)`` in the same order, then
-``close``), byte for byte (``test/test_formats.py`` compares them), without rosbag's Python per message:
+``write_bag(stream, messages, headers)`` writes the bytes that rosbag's ``Bag(..., compression=LZ4)`` writes
+for the same messages (``write(topic, raw, time, raw=True, connection_header=...)`` in the same order, then
+``close``), byte for byte (``test/test_bag_writer.py`` compares them), without rosbag's Python per message:
 one connection per topic with its first message's header, chunks closed after the message that takes them
 past ``CHUNK_THRESHOLD`` uncompressed bytes, each chunk's index data records (entries in stable time order),
-then the connection and chunk info records and the bag header (padded to 4096 bytes) pointing at them.
-Pure: roslz4 (rosbag's LZ4) is imported only to compress the chunks.
+then the connection and chunk info records, and last the bag header (padded to 4096 bytes) pointing at them.
+As rosbag, it writes that header first with no index (a file cut off before the end is read by
+``bag_salvage``), then one chunk at a time: it holds one chunk in memory, not the bag. Pure: roslz4 (rosbag's
+LZ4) is imported only to compress the chunks.
 """
+import io
 import struct
 
 from .bag_lz4 import MAGIC
@@ -90,16 +93,18 @@ class _Chunk(object):
                 + _U32.pack(8 * len(counts)) + b''.join(_U32.pack(conn) + _U32.pack(n) for conn, n in counts))
 
 
-def bag_bytes(messages, headers, chunk_threshold=None):
-    """The LZ4 bag of ``messages``: (topic, secs, nsecs, serialized bytes) in the order written; ``headers``:
+def write_bag(stream, messages, headers, chunk_threshold=None):
+    """Write the LZ4 bag of ``messages`` into ``stream`` (binary, seekable, positioned at the start of the bag):
+    ``messages``, any iterable of (topic, secs, nsecs, serialized bytes) in the order written; ``headers``:
     topic -> its connection header (a dict of str: topic, type, md5sum, message_definition, ... in the order
     they are written); ``chunk_threshold``: None for CHUNK_THRESHOLD. ValueError for no message or a time
-    outside rosbag's (unsigned 32-bit secs, nsecs)."""
+    outside rosbag's (unsigned 32-bit secs, nsecs); the stream then holds an unfinished bag."""
     chunk_threshold = CHUNK_THRESHOLD if chunk_threshold is None else chunk_threshold
-    out = [MAGIC, None]  # the bag header record comes last: it points at the index
+    start = stream.tell()
+    stream.write(MAGIC + _file_header(0, 0, 0))
     pos = len(MAGIC) + 8 + FILE_HEADER_LENGTH
     connections = {}  # topic -> (conn, prefix of its message data records)
-    chunks = []
+    infos = []  # the chunk info record of each chunk written
     chunk = None
     for topic, secs, nsecs, data in messages:
         if not (0 <= secs < 1 << 32 and 0 <= nsecs < 1 << 32):
@@ -120,25 +125,39 @@ def bag_bytes(messages, headers, chunk_threshold=None):
         chunk.add(prefix + _TIME_AND_LENGTH.pack(secs, nsecs, len(data)))
         chunk.add(data)
         if chunk.size > chunk_threshold:
-            pos = _close(chunk, chunks, out, pos)
+            pos = _close(chunk, infos, stream, pos)
             chunk = None
     if chunk is not None:
-        pos = _close(chunk, chunks, out, pos)
-    if not chunks:
+        pos = _close(chunk, infos, stream, pos)
+    if not infos:
         raise ValueError('a bag needs at least one message')
     index_pos = pos
     for topic, (conn, _) in connections.items():
-        out.append(_connection_record(conn, topic, headers[topic]))
-    out.extend(chunk.info() for chunk in chunks)
+        stream.write(_connection_record(conn, topic, headers[topic]))
+    stream.write(b''.join(infos))
+    end = stream.tell()
+    stream.seek(start + len(MAGIC))
+    stream.write(_file_header(index_pos, len(connections), len(infos)))
+    stream.seek(end)
+
+
+def bag_bytes(messages, headers, chunk_threshold=None):
+    """The bytes ``write_bag`` writes (same arguments)."""
+    stream = io.BytesIO()
+    write_bag(stream, messages, headers, chunk_threshold)
+    return stream.getvalue()
+
+
+def _file_header(index_pos, conn_count, chunk_count):
+    """The bag header record, padded as rosbag pads it."""
     fields = header([('op', bytes((OP_FILE_HEADER,))), ('index_pos', struct.pack('<Q', index_pos)),
-                     ('conn_count', _U32.pack(len(connections))), ('chunk_count', _U32.pack(len(chunks)))])
+                     ('conn_count', _U32.pack(conn_count)), ('chunk_count', _U32.pack(chunk_count))])
     padding = FILE_HEADER_LENGTH - (len(fields) - 4)
-    out[1] = fields + _U32.pack(padding) + b' ' * padding
-    return b''.join(out)
+    return fields + _U32.pack(padding) + b' ' * padding
 
 
-def _close(chunk, chunks, out, pos):
+def _close(chunk, infos, stream, pos):
     record = chunk.record()
-    out.append(record)
-    chunks.append(chunk)
+    stream.write(record)
+    infos.append(chunk.info())
     return pos + len(record)
