@@ -59,8 +59,6 @@ JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to me
 JSON_SAMPLE_FIRST = 256  # ... after the first this many of each type, which all are
 REPLAY_BATCH = 256      # replay: records fed to the logger at a time (``on_records``); the writer's losses are
 #                         looked at after each batch
-DECODED_PART_FACTOR = 8.0  # memory the json-xz writer needs per serialized byte of a part: decoded messages and
-#                            JSON rows (nav_msgs/Odometry: 0.7 KB serialized, 3.5 KB decoded, ~2 KB of row dict)
 _TOPIC, _RAW, _CONNECTION, _STAMP, _MSG = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp', 'msg'))
 _TYPE = operator.itemgetter('type')
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
@@ -188,7 +186,8 @@ class SmartLogger(object):
     dropped and counted as lost); give_up_after, close_retry: see ``window_writer.WindowWriter`` (offline use:
     lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
-    half of it, divided by DECODED_PART_FACTOR for json-xz, whose writer decodes the part (see ``WindowBuffer``).
+    half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
+    byte of a part; see ``WindowBuffer``).
     format_options: keys added to every window's metadata that the format reads (json-xz: ``precision``).
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
@@ -585,10 +584,9 @@ class SmartLogger(object):
         return False
 
     def _new_buffer(self):
-        raw_format = getattr(log_format.formats.get(self.format), 'RAW_RECORDS', False)
         buffer = WindowBuffer(pre=self.pre, post=self.post, max_window=self.max_window,
                               max_buffer_mb=self.max_buffer_mb, cost=self._cost,
-                              part_factor=1.0 if raw_format else DECODED_PART_FACTOR)
+                              part_factor=log_format.formats.get(self.format).PART_FACTOR)
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed

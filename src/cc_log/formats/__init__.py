@@ -3,8 +3,11 @@
 A format module defines ``CODEC`` (its name, e.g. ``'json-xz'``), ``EXTENSION``, ``MAGIC`` (the bytes every
 file of it starts with), ``encoder(records, metadata)`` (a function that writes the window into a binary
 stream; it may encode first, before the file exists), ``read(path, stream)`` -> ``(metadata, records)``
-raising ``ValueError('<path>: ...')``, and optionally ``salvage(path)`` for a file cut off mid-write
-(``recovery``; see ``bag_salvage.Salvaged``). To add a format: its module here and one entry in ``FORMATS``.
+raising ``ValueError('<path>: ...')``, ``PART_FACTOR`` (memory a window part takes while it waits and is
+written, per byte of its estimated size: the smart logger hands an open window on in parts at half its
+memory budget divided by it), optionally ``RAW_RECORDS`` (records are handed over as serialized bytes, not
+decoded) and ``salvage(path)`` for a file cut off mid-write (``recovery``; see ``bag_salvage.Salvaged``). To
+add a format: its module here and one entry in ``FORMATS``.
 
 Pure: a module that needs rosbag imports it inside its functions.
 """

@@ -60,6 +60,9 @@ from ..window_buffer import Record
 
 CODEC = 'json-xz'
 EXTENSION = '.json.xz'
+#: Memory the writer needs per estimated byte of a part (``WindowBuffer``'s part_factor): it decodes the kept
+#: messages' fields and builds the JSON text (nav_msgs/Odometry: 0.7 KB serialized, 3.5 KB decoded).
+PART_FACTOR = 8.0
 LAYOUT_VERSION = 2
 #: Layouts this module reads.
 LAYOUTS = (1, 2)
