@@ -16,15 +16,19 @@ except ImportError:
         [os.path.join(ROOT, 'src')] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p])
 
 
+def real_data(name):
+    """The path of a real bag in ../shared/data/real by file name; fail when it is missing (module-scoped
+    fixtures call it; tests take the ``real_bag`` fixture)."""
+    path = os.path.join(REAL_DATA, name)
+    if not os.path.exists(path):
+        pytest.fail('real data missing: %s (tests read ../shared/data/real/)' % path)
+    return path
+
+
 @pytest.fixture
 def real_bag():
-    """Return the path of a real bag in ../shared/data/real by file name; fail when it is missing."""
-    def find(name):
-        path = os.path.join(REAL_DATA, name)
-        if not os.path.exists(path):
-            pytest.fail('real data missing: %s (tests read ../shared/data/real/)' % path)
-        return path
-    return find
+    """Return ``real_data``: the path of a real bag by file name."""
+    return real_data
 
 
 @pytest.fixture

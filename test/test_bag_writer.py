@@ -1,8 +1,6 @@
 """formats.bag_writer writes the bag rosbag writes for the same messages, byte for byte."""
-import os
-
 import pytest
-from conftest import REAL_DATA
+from conftest import real_data
 
 from cc_log import bag_reader, raw_message
 from cc_log.formats import bag_lz4, bag_writer
@@ -29,11 +27,8 @@ def rosbag_bytes(path, messages, headers, chunk_threshold=bag_writer.CHUNK_THRES
 @pytest.fixture(scope='module')
 def husky_messages():
     """Every odometry and IMU message of the Husky bag: (topic, secs, nsecs, bytes), and the headers by topic."""
-    path = os.path.join(REAL_DATA, HUSKY)
-    if not os.path.exists(path):
-        pytest.fail('real data missing: %s (tests read ../shared/data/real/)' % path)
     messages, headers = [], {}
-    for record in bag_reader.read_raw(path, TOPICS):
+    for record in bag_reader.read_raw(real_data(HUSKY), TOPICS):
         headers.setdefault(record.topic, dict(record.connection, topic=record.topic))
         messages.append((record.topic,) + bag_lz4.bag_stamp(record.stamp) + (record.raw,))
     return messages, headers

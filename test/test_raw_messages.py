@@ -39,12 +39,9 @@ def serialized(msg):
 @pytest.fixture(scope='module')
 def husky_raw():
     """The first 30 s of the Husky bag's odometry and IMU, as serialized records (bagio.read_raw)."""
-    from conftest import REAL_DATA
-    path = os.path.join(REAL_DATA, HUSKY)
-    if not os.path.exists(path):
-        pytest.fail('real data missing: %s' % path)
+    from conftest import real_data
     records = []
-    for record in bagio.read_raw(path, [ODOM, IMU]):
+    for record in bagio.read_raw(real_data(HUSKY), [ODOM, IMU]):
         if records and record.stamp > records[0].stamp + 30.0:
             break
         records.append(record)
