@@ -116,9 +116,9 @@ def bag_messages(records, metadata):
     """``(messages, headers)`` of the window's bag: an iterator of (topic, secs, nsecs, serialized bytes) in the
     order written, the metadata first, and each topic's connection header. A record held as serialized bytes
     with its connection header is written as it is; a decoded one is serialized, with its class's header.
-    The records are read twice (the metadata holds their order, stamps and checksum), each message is made
-    when it is written: nothing per record is held. ValueError for no records, the reserved topic, a bad
-    stamp."""
+    The records are read twice (the metadata holds their order, stamps and checksum); each message is made
+    when it is written, so only the sort keys are held, while the metadata is made. ValueError for no
+    records, the reserved topic, a bad stamp."""
     if not records:
         raise ValueError('window: has no records')
     if any(record.topic == METADATA_TOPIC for record in records):
