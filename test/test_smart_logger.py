@@ -192,6 +192,29 @@ def test_memory_budget_bounds_every_topic_and_writes_an_endless_window_in_parts(
     assert stats['messages_kept'] == unbounded_stats['messages_kept'] == len(kept)
 
 
+@pytest.mark.parametrize('fmt', log_format.Format.ALL)
+def test_an_endless_window_is_handed_on_at_half_the_budget_over_the_formats_part_factor(fmt, husky, tmp_path):
+    """The buffer of an open window reaches half max_buffer_mb divided by its format's PART_FACTOR (the memory its
+    part takes while written), then hands a part on."""
+    from cc_log import formats
+    odom = [r for r in husky if r.topic == ODOM]
+    model = ScriptedModel(set(range(len(odom))))
+    budget = 2.0  # MB
+    logger = SmartLogger(model, str(tmp_path), fmt, PRE, POST, driving_topic=ODOM, side_topics=[IMU],
+                         background=False, max_buffer_mb=budget)
+    limit = budget * 1e6 / 2 / formats.get(fmt).PART_FACTOR
+    peak, index = 0, -1
+    for record in husky:
+        if record.topic == ODOM:
+            index += 1
+            model.index = index
+        logger.on_message(record.topic, record.msg, record.stamp)
+        peak = max(peak, logger.stats()['buffered_bytes'])
+    logger.close()
+    assert 0.9 * limit < peak <= limit + 10000  # at most one message (a decoded Odometry: ~4 kB) beyond it
+    assert logger.stats()['messages_lost'] == 0 and len(read_all(str(tmp_path))) > 2
+
+
 def test_writer_thread_never_blocks_the_message_path(husky, tmp_path, monkeypatch):
     release = threading.Event()
     writing = threading.Event()
