@@ -109,7 +109,7 @@ def explain(name, topic, stop, train_on, top=4):
     one-class model on the replayed part, the ranker's median and largest probability over the vectors the
     one-class model flags in it."""
     records, first, rest, model, _, inject = runs.prepare(name, topic, stop, 'ours', 0.5, train_on=train_on)
-    pieces = [first] + ([runs.load(*run) for run in runs.other_runs(name)] if train_on == 'robot' else [])
+    pieces = runs.training_pieces(name, first, train_on)
     ranker = ranker_of(model, pieces, topic, model.config, inject, sim.nominal_envelope(first, topic))[0]
     weights = ranker[-1].coef_[0]
     lines = ['%s ranker weights: %s' % (name, ', '.join('%s %.1f' % (model.names[i], weights[i])
@@ -151,8 +151,7 @@ def main(argv=None):
         def gated_prepare(*a, **k):
             records, first, rest, model, vectors, inject = prepare(*a, **k)
             if 'ranker' not in built:
-                pieces = [first] + ([runs.load(*run) for run in runs.other_runs(name)]
-                                    if k.get('train_on') == 'robot' else [])
+                pieces = runs.training_pieces(name, first, k.get('train_on'))
                 built['ranker'] = ranker_of(model, pieces, topic, model.config, inject,
                                             sim.nominal_envelope(first, topic))
             return records, first, rest, GatedModel(model, built['ranker'][0], args.gate), vectors, inject

@@ -132,6 +132,11 @@ def other_runs(name):
     return [run for run in RUNS if run[0] in robot and run[0] != name]
 
 
+def training_pieces(name, first, train_on):
+    """What trains a run's model: its first part, with ``train_on`` 'robot' also every other run of its robot."""
+    return [first] + ([load(*run) for run in other_runs(name)] if train_on == 'robot' else [])
+
+
 def split(records, fraction):
     start, end = records[0].stamp, records[-1].stamp
     cut = start + fraction * (end - start)
@@ -209,7 +214,7 @@ def prepare(name, topic, stop, setting, fraction, margin=learning.DEFAULT_MARGIN
     records = load(name, topic, stop)
     first, rest = split(records, fraction)
     config = config_of(feature_set, rate_of(records))
-    pieces = [first] + ([load(*run) for run in other_runs(name)] if train_on == 'robot' else [])
+    pieces = training_pieces(name, first, train_on)
     if threshold == 'calibrated':
         cuts = [split(piece, 1.0 - calibration) for piece in pieces]
         model, vectors = train([fit for fit, _ in cuts], config, options, margin)
@@ -313,7 +318,7 @@ def explain_false(name, topic, stop, setting, fraction, top=4, **how):
     records, first, rest, model, _, _ = prepare(name, topic, stop, setting, fraction, **how)
     rule = SETTINGS[setting][1]
     config = model.config
-    pieces = [first] + ([load(*run) for run in other_runs(name)] if how.get('train_on') == 'robot' else [])
+    pieces = training_pieces(name, first, how.get('train_on'))
     X = np.vstack([vectors_of(piece, config)[1] for piece in pieces])
     mean, std, low, high = X.mean(0), X.std(0), X.min(0), X.max(0)
     names = model.names

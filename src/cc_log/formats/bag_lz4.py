@@ -106,12 +106,6 @@ def write(target, records, metadata):
     bag_writer.write_bag(target, *bag_messages(records, metadata))
 
 
-def encode(records, metadata):
-    """The bytes ``write`` writes."""
-    from . import bag_writer
-    return bag_writer.bag_bytes(*bag_messages(records, metadata))
-
-
 def bag_messages(records, metadata):
     """``(messages, headers)`` of the window's bag: an iterator of (topic, secs, nsecs, serialized bytes) in the
     order written, the metadata first, and each topic's connection header. A record held as serialized bytes

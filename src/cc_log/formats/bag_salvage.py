@@ -10,7 +10,7 @@ import os
 import struct
 
 from .. import msg_codec, safe_input
-from .bag_lz4 import MAGIC, METADATA_TOPIC, bag_time
+from .bag_lz4 import MAGIC, METADATA_TOPIC, bag_stamp
 
 MAX_CHUNK_BYTES = 1 << 28  # a decompressed chunk larger than this is not decoded (rosbag writes ~768 KiB)
 
@@ -304,7 +304,7 @@ def _window_of(salvage):
         # the exact stamps of the records, in window order (= the order they were written in)
         try:
             exact = [msg_codec.decode_float(stamp) for stamp in stamps[:len(records)]]
-            if all(bag_time(stamp) == genpy.Time(secs, nsecs) for stamp, (_, secs, nsecs) in zip(exact, records)):
+            if all(bag_stamp(stamp) == (secs, nsecs) for stamp, (_, secs, nsecs) in zip(exact, records)):
                 return metadata, [record._replace(stamp=stamp) for stamp, (record, _, _) in zip(exact, records)]
         except ValueError:
             pass
