@@ -111,7 +111,8 @@ def bag_messages(records, metadata):
     order written, the metadata first, and each topic's connection header. A record held as serialized bytes
     with its connection header is written as it is; a decoded one is serialized, with its class's header.
     The records are read twice (the metadata holds their order, stamps and checksum); each message is made
-    when it is written, so only the sort keys are held, while the metadata is made. ValueError for no
+    when it is written, so only the sort keys are held, while the metadata is made (a decoded record is
+    serialized in both passes; the nodes and replay hand over bytes). ValueError for no
     records, the reserved topic, a bad stamp."""
     if not records:
         raise ValueError('window: has no records')
