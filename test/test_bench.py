@@ -62,6 +62,12 @@ def test_format_layouts_quick():
     assert 'lossy-4/5 largest error per field (all 3952 msgs): pose.pose.orientation.w' in out
 
 
+def test_lzma_options_quick():
+    out = run('lzma_options.py', '--quick')
+    assert 'Husky odometry, whole: 1 window(s), 3952 messages' in out
+    assert out.count(' (written) ') == 1 and '| preset 6 alone ' in out
+
+
 def test_injected_husky_quick():
     out = run('injected_husky.py', '--quick')
     assert 'Caught by type' in out and 'false windows/h' in out and 'kept/needed' in out

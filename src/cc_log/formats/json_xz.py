@@ -71,11 +71,12 @@ MAGIC = b'\xfd7zXZ\x00'
 #: LZMA2 preset used when writing. 6 is xz's default; on windows of a few hundred messages presets 6..9
 #: and "extreme" give the same size within 1% (see docs/FORMAT.md), so the cheap one is used.
 DEFAULT_PRESET = 6
-#: LZMA2 options on top of the preset when writing (``compress``): a shorter match search (``nice_len`` 48,
-#: ``depth`` 4 instead of the preset's 273 and automatic) and ``lc=1, pb=0`` (text: one literal context bit,
-#: no position bits). Measured on Husky windows (docs/FORMAT.md, "Preset"): odometry 3.97% of row JSON
-#: instead of 3.94%, odometry + IMU 0.5% larger, and about 40% less CPU. Any xz decoder reads the result.
-FILTER_OPTIONS = {'nice_len': 48, 'depth': 4, 'lc': 1, 'pb': 0}
+#: LZMA2 options on top of the preset when writing (``compress``): a shorter match search than the preset's
+#: (hash chains over 3-byte prefixes, ``nice_len`` 48, ``depth`` 8, instead of binary trees, 273 and automatic)
+#: and ``lc=1, pb=0`` (text: one literal context bit, no position bits). Measured on Husky windows
+#: (``bench/lzma_options.py``; docs/FORMAT.md, "Preset"): odometry 3.97% of row JSON as preset 6 alone gives
+#: 3.94%, odometry + IMU in 30 s windows 0.2% smaller, at 28-55% of the preset's CPU. Any xz decoder reads it.
+FILTER_OPTIONS = {'mf': lzma.MF_HC3, 'nice_len': 48, 'depth': 8, 'lc': 1, 'pb': 0}
 
 HEADER_STAMP = 'header.stamp'
 
