@@ -11,10 +11,10 @@ HUSKY = 'husky_outdoor_2015.bag'
 TOPICS = ['/husky_velocity_controller/odom', '/imu/data']
 
 
-def rosbag_bytes(path, messages, headers, chunk_threshold=bag_writer.CHUNK_THRESHOLD):
+def rosbag_bytes(path, messages, headers, chunk_threshold=bag_writer.CHUNK_THRESHOLD, compression='lz4'):
     """What rosbag writes for ``messages`` (topic, secs, nsecs, bytes) with the connection ``headers``."""
     import genpy
-    bag = rosbag.Bag(str(path), 'w', compression=rosbag.Compression.LZ4, chunk_threshold=chunk_threshold)
+    bag = rosbag.Bag(str(path), 'w', compression=compression, chunk_threshold=chunk_threshold)
     for topic, secs, nsecs, data in messages:
         header = headers[topic]
         bag.write(topic, (header['type'], data, header['md5sum'], raw_message.message_class(header)),
@@ -41,6 +41,22 @@ def test_the_whole_husky_bag_as_rosbag_writes_it(husky_messages, tmp_path):
     assert ours == rosbag_bytes(tmp_path / 'rosbag.bag', messages, headers)
     with rosbag.Bag(str(tmp_path / 'rosbag.bag')) as bag:
         assert bag.get_message_count() == len(messages) and len(bag._chunks) > 1  # several chunks
+
+
+@pytest.mark.parametrize('compression', ['bz2', 'none'])
+def test_bz2_and_uncompressed_chunks_as_rosbag_writes_them(husky_messages, tmp_path, compression):
+    messages, headers = husky_messages
+    sample = messages[:3000]
+    ours = bag_writer.bag_bytes(sample, headers, chunk_threshold=200000, compression=compression)
+    assert ours == rosbag_bytes(tmp_path / 'rosbag.bag', sample, headers, 200000, compression)
+    with rosbag.Bag(str(tmp_path / 'rosbag.bag')) as bag:
+        assert len(bag._chunks) > 1 and bag.get_compression_info().compression == compression
+
+
+def test_an_unknown_compression_is_refused(husky_messages):
+    messages, headers = husky_messages
+    with pytest.raises(ValueError, match="compression: 'zstd' is not one of: lz4, bz2, none"):
+        bag_writer.bag_bytes(messages[:10], headers, compression='zstd')
 
 
 @pytest.mark.parametrize('threshold', [0, 3000])

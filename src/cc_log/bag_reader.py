@@ -17,7 +17,7 @@ import itertools
 
 import numpy as np
 
-from . import bagio
+from . import bagio, raw_message
 from .formats.bag_salvage import (MAX_CHUNK_BYTES, OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA, field_u32,
                                   lz4_decompress, map_file, read_record)
 from .window_buffer import records_of
@@ -75,7 +75,7 @@ class _Reader(object):
         wanted = set(topics)
         # rosbag's order of connections (the merge's tie-break) and their text headers, one object each
         self.connections = [c for c in bag._connections.values() if c.topic in wanted]
-        self.headers = [bagio.text_header(c.header) for c in self.connections]
+        self.headers = [raw_message.text_header(c.header) for c in self.connections]
         self.chunks = [(info, bag._chunk_headers[info.pos]) for info in bag._chunks]
 
     def _damaged(self, what):

@@ -10,7 +10,7 @@ import struct
 import numpy as np
 import rosbag
 
-from . import safe_input
+from . import raw_message, safe_input
 from .features import FeatureStream, stamp_of
 from .window_buffer import Record
 
@@ -100,15 +100,6 @@ def read_messages(path, topics, expected_types=None):
         bag.close()
 
 
-def text_header(header):
-    """A bag connection header (bytes values) as a dict of str."""
-    return {_text(key): _text(value) for key, value in header.items()}
-
-
-def _text(value):
-    return value.decode('utf-8', 'replace') if isinstance(value, bytes) else str(value)
-
-
 def read_raw(path, topics):
     """Yield Record(bag time, topic, None, 0, serialized bytes, connection header) of ``topics`` in bag order,
     without decoding (``raw_message.stamp`` finds the header stamp; ``raw_message.decoded`` the message). The
@@ -125,7 +116,7 @@ def read_raw(path, topics):
                                                            return_connection_header=True):
                 known = headers.get(id(header))
                 if known is None or known[0] is not header:
-                    known = headers[id(header)] = (header, text_header(header))
+                    known = headers[id(header)] = (header, raw_message.text_header(header))
                 yield Record(t.to_sec(), topic, None, 0, msg[1], known[1])
         except (rosbag.ROSBagException, struct.error, EOFError) as error:
             raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))

@@ -1,7 +1,7 @@
 """Window records out to other tools: one JSON-lines file, one rosbag, or one CSV per topic (``cclog export``).
 
 Each writer takes records in stamp order and returns the files it wrote; every file is written atomically
-(``safe_files.AtomicFile``). Pure but for ``to_bag`` (rosbag, imported inside it).
+(``safe_files.AtomicFile``). Pure.
 """
 import collections
 import csv
@@ -10,9 +10,10 @@ import math
 import os
 
 from . import msg_codec
+from .formats import bag_lz4, bag_writer
 from .safe_files import AtomicFile
 
-BAG_COMPRESSIONS = ('lz4', 'bz2', 'none')
+BAG_COMPRESSIONS = bag_writer.COMPRESSIONS
 
 
 def plain(value):
@@ -46,17 +47,21 @@ def to_jsonl(records, out):
 
 
 def to_bag(records, out, compression='lz4', progress=None):
-    """The records as one rosbag ``out`` (replaced), each at its stamp; ``progress()`` after each; ``[out]``."""
-    import rosbag
-    from .formats.bag_lz4 import bag_time
-    if compression not in BAG_COMPRESSIONS:
-        raise ValueError('compression: %r is not one of: %s' % (compression, ', '.join(BAG_COMPRESSIONS)))
-    kind = {'lz4': rosbag.Compression.LZ4, 'bz2': rosbag.Compression.BZ2}.get(compression, rosbag.Compression.NONE)
-    with AtomicFile(out, overwrite=True) as stream, rosbag.Bag(stream, 'w', compression=kind) as bag:
+    """The records as one rosbag ``out`` (replaced), each at its stamp, as rosbag writes them
+    (``formats.bag_writer``; chunks lz4, bz2 or none): a record read with its serialized bytes and connection
+    header (from a bag-lz4 window) keeps them, the publisher's ``callerid`` and ``latching`` too, so ``rosbag
+    play`` latches what was latched. ``progress()`` after each record; ``[out]``. ValueError when a topic
+    holds messages of two types (a bag has one connection per topic)."""
+    headers = bag_lz4.connection_headers(records)
+
+    def messages():
         for record in records:
-            bag.write(record.topic, record.msg, bag_time(record.stamp))
+            yield bag_lz4.bag_message(record)
             if progress:
                 progress()
+
+    with AtomicFile(out, overwrite=True) as stream:
+        bag_writer.write_bag(stream, messages(), headers, compression=compression)
     return [out]
 
 

@@ -145,6 +145,15 @@ def _seconds(stamp):
     return stamp.to_sec() if hasattr(stamp, 'to_sec') else float(stamp)
 
 
+def text_header(header):
+    """A bag connection header (bytes values, as rosbag reads it) as a dict of str."""
+    return {_text(key): _text(value) for key, value in header.items()}
+
+
+def _text(value):
+    return value.decode('utf-8', 'replace') if isinstance(value, bytes) else str(value)
+
+
 def is_latched(connection):
     """Whether the publisher latches (connection header ``latching: '1'``)."""
     return connection is not None and connection.get('latching') == '1'

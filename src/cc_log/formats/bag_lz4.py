@@ -120,10 +120,7 @@ def bag_messages(records, metadata):
         raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
     string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
     headers = {METADATA_TOPIC: _class_header(METADATA_TOPIC, string_class)}
-    for record in records:
-        if record.topic not in headers:
-            headers[record.topic] = (dict(record.connection, topic=record.topic) if _held_raw(record)
-                                     else _class_header(record.topic, type(record.msg)))
+    headers.update(connection_headers(records))
     topics = list(headers)[1:]
     rank = {topic: number for number, topic in enumerate(topics)}
     keys = [(bag_stamp(record.stamp), rank[record.topic]) for record in records]
@@ -143,9 +140,32 @@ def bag_messages(records, metadata):
     meta['bag'] = layout
     text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
     metadata_message = (METADATA_TOPIC,) + first + (_serialized(string_class(data=text)),)
-    messages = itertools.chain([metadata_message], ((record.topic,) + bag_stamp(record.stamp) + (_data(record),)
-                                                    for record in records))
-    return messages, headers
+    return itertools.chain([metadata_message], map(bag_message, records)), headers
+
+
+def connection_headers(records):
+    """topic -> the connection header its records are written with: the first record's own (a record held as
+    serialized bytes with its connection header: ``callerid`` and ``latching`` kept), else its message
+    class's. ValueError when a topic's records are of two message types (a bag has one connection per topic,
+    as rosbag writes it)."""
+    headers, sources = {}, {}
+    for record in records:
+        source = record.connection if _held_raw(record) else type(record.msg)
+        key = (record.topic, id(source))
+        if key in sources:
+            continue
+        sources[key] = source  # held, so that its id stays its own
+        header = (dict(source, topic=record.topic) if _held_raw(record) else _class_header(record.topic, source))
+        first = headers.setdefault(record.topic, header)
+        if first.get('md5sum') != header.get('md5sum'):
+            raise ValueError('topic %s: messages of two types (%s and %s); a bag holds one type per topic'
+                             % (record.topic, first.get('type'), header.get('type')))
+    return headers
+
+
+def bag_message(record):
+    """``(topic, secs, nsecs, serialized bytes)`` of a record, as ``bag_writer.write_bag`` takes it."""
+    return (record.topic,) + bag_stamp(record.stamp) + (_data(record),)
 
 
 def _held_raw(record):
@@ -214,7 +234,8 @@ def salvage(path):
 
 
 def read(path, stream=None):
-    """``(metadata, records)`` of a bag-lz4 window file (``stream``: that file, already open);
+    """``(metadata, records)`` of a bag-lz4 window file (``stream``: that file, already open), each record with
+    its message, its serialized bytes and its topic's connection header (a dict of str);
     ValueError('<path>: <what is wrong>') otherwise, also before any message is read when a connection's
     message definition is unsafe (``safe_input.check_bag``)."""
     import rosbag
@@ -260,9 +281,10 @@ def read(path, stream=None):
             raise ValueError('the records do not match their crc32: the file is damaged')
     except (ValueError, TypeError, KeyError, IndexError) as error:
         raise ValueError('%s: metadata does not fit the records (%s)' % (path, error))
+    connections = {topic: raw_message.text_header(header) for topic, header in headers.items()}
     try:
-        return metadata, [Record(record.stamp, record.topic, _deserialized(classes[record.topic], record.raw))
-                          for record in records]
+        return metadata, [Record(record.stamp, record.topic, _deserialized(classes[record.topic], record.raw), 0,
+                                 record.raw, connections[record.topic]) for record in records]
     except Exception as error:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError, ...
         raise ValueError('%s: corrupt bag (%s: %s)' % (path, type(error).__name__, error))
 

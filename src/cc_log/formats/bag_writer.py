@@ -1,15 +1,16 @@
-"""Writing a rosbag 2.0 file of LZ4 chunks: how ``bag_lz4`` writes a window.
+"""Writing a rosbag 2.0 file: how ``bag_lz4`` writes a window (LZ4 chunks) and ``cclog export`` a bag.
 
-``write_bag(stream, messages, headers)`` writes the bytes that rosbag's ``Bag(..., compression=LZ4)`` writes
-for the same messages (``write(topic, raw, time, raw=True, connection_header=...)`` in the same order, then
-``close``), byte for byte (``test/test_bag_writer.py`` compares them), without rosbag's Python per message:
-one connection per topic with its first message's header, chunks closed after the message that takes them
-past ``CHUNK_THRESHOLD`` uncompressed bytes, each chunk's index data records (entries in stable time order),
-then the connection and chunk info records, and last the bag header (padded to 4096 bytes) pointing at them.
-As rosbag, it writes that header first with no index (a file cut off before the end is read by
-``bag_salvage``), then one chunk at a time: it holds one chunk in memory, not the bag. Pure: roslz4 (rosbag's
-LZ4) is imported only to compress the chunks.
+``write_bag(stream, messages, headers, compression)`` writes the bytes that rosbag's ``Bag(...,
+compression=...)`` (LZ4, the default; BZ2 or NONE) writes for the same messages (``write(topic, raw, time,
+raw=True, connection_header=...)`` in the same order, then ``close``), byte for byte (``test/test_bag_writer.py``
+compares them), without rosbag's Python per message: one connection per topic with its first message's header,
+chunks closed after the message that takes them past ``CHUNK_THRESHOLD`` uncompressed bytes, each chunk's index
+data records (entries in stable time order), then the connection and chunk info records, and last the bag
+header (padded to 4096 bytes) pointing at them. As rosbag, it writes that header first with no index (a file
+cut off before the end is read by ``bag_salvage``), then one chunk at a time: it holds one chunk in memory, not
+the bag. Pure: roslz4 (rosbag's LZ4) is imported only to compress LZ4 chunks.
 """
+import bz2
 import io
 import struct
 
@@ -19,6 +20,7 @@ from .bag_salvage import OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_FILE_HEADER,
 CHUNK_THRESHOLD = 768 * 1024  # rosbag's default: a chunk is closed once it holds more uncompressed bytes
 FILE_HEADER_LENGTH = 4096     # rosbag pads the bag header record's header to this many bytes
 INDEX_VERSION = 1             # of index data and chunk info records
+COMPRESSIONS = ('lz4', 'bz2', 'none')  # of the chunks, as rosbag names them
 
 _U32 = struct.Struct('<I')
 _TIME_AND_LENGTH = struct.Struct('<III')  # a message data record's time field and the length of its data
@@ -69,12 +71,15 @@ class _Chunk(object):
         self.parts.append(data)
         self.size += len(data)
 
-    def record(self):
-        """The chunk record (LZ4) and the index data records after it."""
-        import roslz4
+    def record(self, compression):
+        """The chunk record (its data compressed as ``compression`` says) and the index data records after it."""
         data = b''.join(self.parts)
-        compressed = roslz4.compress(data)
-        out = [header([('op', bytes((OP_CHUNK,))), ('compression', 'lz4'), ('size', _U32.pack(len(data)))]),
+        if compression == 'lz4':
+            import roslz4
+            compressed = roslz4.compress(data)
+        else:
+            compressed = bz2.compress(data) if compression == 'bz2' else data
+        out = [header([('op', bytes((OP_CHUNK,))), ('compression', compression), ('size', _U32.pack(len(data)))]),
                _U32.pack(len(compressed)), compressed]
         for conn, entries in self.entries.items():
             entries = sorted(entries)  # by time, ties in write order (offsets grow): rosbag's insort_right
@@ -93,12 +98,15 @@ class _Chunk(object):
                 + _U32.pack(8 * len(counts)) + b''.join(_U32.pack(conn) + _U32.pack(n) for conn, n in counts))
 
 
-def write_bag(stream, messages, headers, chunk_threshold=None):
-    """Write the LZ4 bag of ``messages`` into ``stream`` (binary, seekable, positioned at the start of the bag):
+def write_bag(stream, messages, headers, chunk_threshold=None, compression='lz4'):
+    """Write the bag of ``messages`` into ``stream`` (binary, seekable, positioned at the start of the bag):
     ``messages``, any iterable of (topic, secs, nsecs, serialized bytes) in the order written; ``headers``:
     topic -> its connection header (a dict of str: topic, type, md5sum, message_definition, ... in the order
-    they are written); ``chunk_threshold``: None for CHUNK_THRESHOLD. ValueError for no message or a time
-    outside rosbag's (unsigned 32-bit secs, nsecs); the stream then holds an unfinished bag."""
+    they are written); ``chunk_threshold``: None for CHUNK_THRESHOLD; ``compression`` of the chunks, one of
+    COMPRESSIONS. ValueError for no message or a time outside rosbag's (unsigned 32-bit secs, nsecs); the
+    stream then holds an unfinished bag."""
+    if compression not in COMPRESSIONS:
+        raise ValueError('compression: %r is not one of: %s' % (compression, ', '.join(COMPRESSIONS)))
     chunk_threshold = CHUNK_THRESHOLD if chunk_threshold is None else chunk_threshold
     start = stream.tell()
     stream.write(MAGIC + _file_header(0, 0, 0))
@@ -125,10 +133,10 @@ def write_bag(stream, messages, headers, chunk_threshold=None):
         chunk.add(prefix + _TIME_AND_LENGTH.pack(secs, nsecs, len(data)))
         chunk.add(data)
         if chunk.size > chunk_threshold:
-            pos = _close(chunk, infos, stream, pos)
+            pos = _close(chunk, infos, stream, pos, compression)
             chunk = None
     if chunk is not None:
-        pos = _close(chunk, infos, stream, pos)
+        pos = _close(chunk, infos, stream, pos, compression)
     if not infos:
         raise ValueError('a bag needs at least one message')
     index_pos = pos
@@ -141,10 +149,10 @@ def write_bag(stream, messages, headers, chunk_threshold=None):
     stream.seek(end)
 
 
-def bag_bytes(messages, headers, chunk_threshold=None):
+def bag_bytes(messages, headers, chunk_threshold=None, compression='lz4'):
     """The bytes ``write_bag`` writes (same arguments)."""
     stream = io.BytesIO()
-    write_bag(stream, messages, headers, chunk_threshold)
+    write_bag(stream, messages, headers, chunk_threshold, compression)
     return stream.getvalue()
 
 
@@ -156,8 +164,8 @@ def _file_header(index_pos, conn_count, chunk_count):
     return fields + _U32.pack(padding) + b' ' * padding
 
 
-def _close(chunk, infos, stream, pos):
-    record = chunk.record()
+def _close(chunk, infos, stream, pos, compression):
+    record = chunk.record(compression)
     stream.write(record)
     infos.append(chunk.info())
     return pos + len(record)

@@ -1,0 +1,75 @@
+"""``cclog export --to bag`` (export.to_bag): window records out to one rosbag, as rosbag would write them, with
+the publishers' connection headers where the windows kept them (bag-lz4)."""
+import pytest
+from conftest import real_data
+
+from cc_log import bag_reader, export, log_format
+from cc_log.formats import bag_lz4
+from cc_log.window_buffer import LogWindow
+
+rosbag = pytest.importorskip('rosbag')
+
+HUSKY = 'husky_outdoor_2015.bag'
+ODOM, IMU = '/husky_velocity_controller/odom', '/imu/data'
+
+
+@pytest.fixture(scope='module')
+def husky_records():
+    """Two seconds of the Husky odometry + IMU as serialized records; the IMU's publisher latches."""
+    records = [record for record in bag_reader.read_raw(real_data(HUSKY), [ODOM, IMU])][:300]
+    latched = dict(records[0].connection if records[0].topic == IMU else
+                   next(r for r in records if r.topic == IMU).connection, latching='1', callerid='/imu_node')
+    return [record._replace(connection=latched) if record.topic == IMU else record for record in records]
+
+
+def windows_of(records, directory, fmt):
+    """The records written as two windows of ``fmt`` and read back, in stamp order."""
+    read = []
+    for part in (records[:150], records[150:]):
+        path, _ = log_format.write_window(LogWindow(part, []), str(directory), fmt)
+        read.extend(log_format.read_window(path)[1])
+    return sorted(read, key=lambda record: record.stamp)
+
+
+@pytest.mark.parametrize('compression', ['lz4', 'bz2', 'none'])
+def test_bag_lz4_windows_export_with_their_bytes_and_connection_headers(husky_records, tmp_path, compression):
+    records = windows_of(husky_records, tmp_path / 'logs', 'bag-lz4')
+    out = str(tmp_path / 'all.bag')
+    ticks = []
+    assert export.to_bag(records, out, compression, lambda: ticks.append(1)) == [out]
+    assert len(ticks) == len(husky_records)
+    with rosbag.Bag(out) as bag:
+        assert bag.get_compression_info().compression == compression
+        read = [(topic, raw[1], t.to_sec(), header) for topic, raw, t, header in
+                bag.read_messages(raw=True, return_connection_header=True)]
+    original = sorted(husky_records, key=lambda record: record.stamp)
+    assert [(topic, data) for topic, data, _, _ in read] == [(r.topic, r.raw) for r in original]
+    assert all(abs(t - r.stamp) < 1e-9 for (_, _, t, _), r in zip(read, original))
+    imu = next(header for topic, _, _, header in read if topic == IMU)
+    odom = next(header for topic, _, _, header in read if topic == ODOM)
+    assert imu['latching'] == b'1' and imu['callerid'] == b'/imu_node'  # rosbag play latches it again
+    assert odom.get('latching') != b'1'
+
+
+def test_json_xz_windows_export_as_their_decoded_messages(husky_records, tmp_path):
+    records = windows_of(husky_records, tmp_path / 'logs', 'json-xz')
+    out = str(tmp_path / 'all.bag')
+    export.to_bag(records, out)
+    with rosbag.Bag(out) as bag:
+        read = [(topic, raw[1], raw[0]) for topic, raw, _ in bag.read_messages(raw=True)]
+    original = sorted(husky_records, key=lambda record: record.stamp)
+    assert [(topic, data) for topic, data, _ in read] == [(r.topic, r.raw) for r in original]  # lossless
+    assert {topic: kind for topic, _, kind in read} == {ODOM: 'nav_msgs/Odometry', IMU: 'sensor_msgs/Imu'}
+
+
+def test_a_topic_with_two_message_types_is_refused_and_nothing_is_written(husky_records, tmp_path):
+    records = windows_of(husky_records, tmp_path / 'logs', 'bag-lz4')
+    imu = next(record for record in records if record.topic == IMU)
+    mixed = records + [imu._replace(topic=ODOM, stamp=records[-1].stamp + 1)]  # an Imu on the odometry topic
+    out = tmp_path / 'mixed.bag'
+    with pytest.raises(ValueError, match='topic %s: messages of two types \\(nav_msgs/Odometry and sensor_msgs/Imu\\)'
+                       % ODOM):
+        export.to_bag(mixed, str(out))
+    assert not out.exists() and list(tmp_path.iterdir()) == [tmp_path / 'logs']
+    with pytest.raises(ValueError, match='topic %s: messages of two types' % ODOM):
+        bag_lz4.bag_messages(mixed, {})
