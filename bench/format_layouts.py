@@ -6,7 +6,9 @@ cost of writing.
 
 For each bag's odometry topic (../shared/data/real/), the messages are cut into windows of ``--window``
 messages (the unit cc_log writes) and, separately, taken as one window of the whole topic. Every layout is
-LZMA-compressed (xz container) with each preset; the table gives the summed file bytes and their share of
+LZMA-compressed (xz container) with each preset alone, and with preset 6 and the writer's LZMA2 options
+(``6+opts``: ``json_xz.FILTER_OPTIONS``, what cc_log writes; ``bench/lzma_options.py`` compares option sets);
+the table gives the summed file bytes and their share of
 the uncompressed row-per-message JSON of the same messages (``msg_codec.row_json_bytes``), and the mean
 milliseconds per window (building the document + compressing) on this machine.
 
@@ -54,8 +56,9 @@ BAGS = [
     ('sequor_N3_anomalous_crash_wall.bag', '/odom'),
     ('sequor_N2_anomalous_jerky_driving.bag', '/scan'),  # a side topic: float32 LaserScan, 128 beams
 ]
-PRESETS = [('0', 0), ('1', 1), ('3', 3), ('6', 6), ('9', 9), ('9e', 9 | lzma.PRESET_EXTREME)]
-QUICK_PRESETS = [('1', 1), ('6', 6), ('9e', 9 | lzma.PRESET_EXTREME)]
+WRITTEN = '6+opts'  # preset 6 with json_xz.FILTER_OPTIONS, as the writer compresses
+PRESETS = [('0', 0), ('1', 1), ('3', 3), ('6', 6), (WRITTEN, 6), ('9', 9), ('9e', 9 | lzma.PRESET_EXTREME)]
+QUICK_PRESETS = [('1', 1), ('6', 6), (WRITTEN, 6), ('9e', 9 | lzma.PRESET_EXTREME)]
 METADATA = {'codec': 'json-xz', 'reasons': ['classifier'], 'cc_log_version': cc_log.__version__}
 
 
@@ -83,8 +86,9 @@ def load(bag_name, topic):
     return records
 
 
-def xz(data, preset):
-    return json_xz.compress(data, preset)
+def xz(data, label, preset):
+    """``data`` compressed at ``preset`` alone, or as the writer does for the WRITTEN label."""
+    return json_xz.compress(data, preset, json_xz.FILTER_OPTIONS if label == WRITTEN else {})
 
 
 # -- layouts: each returns the uncompressed bytes of one window ---------------------------------------
@@ -201,7 +205,7 @@ def measure(records, size, presets):
             total, seconds = 0, 0.0
             for chunk in chunks:
                 start = time.perf_counter()
-                total += len(xz(layout(chunk), preset))
+                total += len(xz(layout(chunk), label, preset))
                 seconds += time.perf_counter() - start
             results.append((name, label, total, 100.0 * total / raw, 1000.0 * seconds / len(chunks)))
     start = time.perf_counter()
@@ -216,7 +220,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--window', type=int, default=300, help='messages per window (default 300)')
     parser.add_argument('--quick', action='store_true',
-                        help='a smoke run: presets 1, 6, 9e; Husky and ALFA; windows only')
+                        help='a smoke run: presets 1, 6, 6+opts, 9e; Husky and ALFA; windows only')
     parser.add_argument('--no-whole', action='store_true', help='skip the whole-topic-as-one-window rows')
     args = parser.parse_args(argv)
     presets = QUICK_PRESETS if args.quick else PRESETS

@@ -33,7 +33,7 @@ OPTION_SETS = [  # (name, options on top of preset 6)
     ('hc4 nice_len 48 depth 4', dict(BASE, mf=lzma.MF_HC4, nice_len=48, depth=4)),
     ('hc3 nice_len 48 depth 4', dict(BASE, mf=lzma.MF_HC3, nice_len=48, depth=4)),
     ('hc3 nice_len 48 depth 8', dict(BASE, mf=lzma.MF_HC3, nice_len=48, depth=8)),
-    ('hc3 nice_len 64 depth 8', dict(BASE, mf=lzma.MF_HC3, nice_len=64, depth=8)),
+    ('hc3 nice_len 96 depth 8', dict(BASE, mf=lzma.MF_HC3, nice_len=96, depth=8)),
     ('bt2 nice_len 48 depth 4', dict(BASE, mf=lzma.MF_BT2, nice_len=48, depth=4)),
     ('MODE_FAST hc4 nice_len 32', dict(BASE, mf=lzma.MF_HC4, mode=lzma.MODE_FAST, nice_len=32, depth=4)),
 ]
@@ -90,8 +90,9 @@ def main(argv=None):
         reference = dict((name, (size, cpu)) for name, size, cpu in results)['bt4 nice_len 48 depth 4']
         common.table(
             ['options (preset 6 +)', 'xz bytes', '% of row JSON', 'bytes vs bt4/48/4', 'CPU s', 'CPU vs bt4/48/4'],
-            [[name + (' (written)' if OPTIONS[name] == json_xz.FILTER_OPTIONS else ''), size, '%.3f%%' % (100.0 * size / raw), '%+.2f%%' % (100.0 * (size / reference[0] - 1)),
-              '%.3f' % cpu, '%.0f%%' % (100.0 * cpu / reference[1])] for name, size, cpu in results],
+            [[name + (' (written)' if OPTIONS[name] == json_xz.FILTER_OPTIONS else ''), size,
+              '%.3f%%' % (100.0 * size / raw), '%+.2f%%' % (100.0 * (size / reference[0] - 1)), '%.3f' % cpu,
+              '%.0f%%' % (100.0 * cpu / reference[1])] for name, size, cpu in results],
             title='%s: %d window(s), %d messages, row JSON %d bytes, JSON text %d bytes, best of %d'
                   % (title, len(windows), sum(map(len, windows)), raw, text, rounds))
     print('total %.1f s' % (time.perf_counter() - began))

@@ -60,6 +60,7 @@ def test_format_layouts_quick():
     for layout in ('rows', 'columns-v1', 'columns', 'columns-alldiff', 'lossy-4/5', 'lossy-3/4', 'binary-floor'):
         assert '\n  %s ' % layout in out, layout
     assert 'lossy-4/5 largest error per field (all 3952 msgs): pose.pose.orientation.w' in out
+    assert '\n  columns          6+opts ' in out
 
 
 def test_lzma_options_quick():

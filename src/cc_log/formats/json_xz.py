@@ -73,9 +73,9 @@ MAGIC = b'\xfd7zXZ\x00'
 DEFAULT_PRESET = 6
 #: LZMA2 options on top of the preset when writing (``compress``): a shorter match search than the preset's
 #: (hash chains over 3-byte prefixes, ``nice_len`` 48, ``depth`` 8, instead of binary trees, 273 and automatic)
-#: and ``lc=1, pb=0`` (text: one literal context bit, no position bits). Measured on Husky windows
-#: (``bench/lzma_options.py``; docs/FORMAT.md, "Preset"): odometry 3.97% of row JSON as preset 6 alone gives
-#: 3.94%, odometry + IMU in 30 s windows 0.2% smaller, at 28-55% of the preset's CPU. Any xz decoder reads it.
+#: and ``lc=1, pb=0`` (text: one literal context bit, no position bits). ``bench/lzma_options.py`` on Husky
+#: windows (docs/FORMAT.md, "Preset"): odometry as one window 3.97% of row JSON (preset 6 alone: 3.94%),
+#: odometry + IMU 0.3-0.9% smaller than preset 6 alone, at 25-84% of its CPU. Any xz decoder reads it.
 FILTER_OPTIONS = {'mf': lzma.MF_HC3, 'nice_len': 48, 'depth': 8, 'lc': 1, 'pb': 0}
 
 HEADER_STAMP = 'header.stamp'
