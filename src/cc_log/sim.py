@@ -602,34 +602,6 @@ def _serialized(item):
                      _VECTOR.pack(ax, ay, az), _IMU_ACCEL_COVARIANCE_BYTES))
 
 
-class _BagTime(genpy.Time):
-    """genpy.Time with plain-integer comparisons: rosbag sorts its index with them on every write."""
-    __slots__ = ()
-
-    def _key(self):
-        return self.secs * 1000000000 + self.nsecs
-
-    def __lt__(self, other):
-        return self._key() < other.secs * 1000000000 + other.nsecs
-
-    def __le__(self, other):
-        return self._key() <= other.secs * 1000000000 + other.nsecs
-
-    def __gt__(self, other):
-        return self._key() > other.secs * 1000000000 + other.nsecs
-
-    def __ge__(self, other):
-        return self._key() >= other.secs * 1000000000 + other.nsecs
-
-    def __eq__(self, other):
-        return isinstance(other, genpy.Time) and self._key() == other.secs * 1000000000 + other.nsecs
-
-    def __ne__(self, other):
-        return not self.__eq__(other)
-
-    __hash__ = genpy.Time.__hash__
-
-
 def truth_event(event, entry):
     """The std_msgs/String (JSON) announcing that an anomaly started ('start', end null) or ended ('end')."""
     data = collections.OrderedDict((('event', event), ('type', entry['type']), ('start', entry['start']),
@@ -956,30 +928,33 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progr
     'none') and the sidecar ``truth_file`` (default ``<path>.truth.json``); ``progress(done, total)`` is
     called now and then with simulated ticks. Returns the truth list.
     """
-    import rosbag  # noqa: E402  (not at module level: the core stays free of rospy)
+    from .formats import bag_writer
+    from .safe_files import AtomicFile
     config = (config or SimConfig()).validate()
     if config.minutes <= 0:
         raise ValueError('minutes: a bag needs a finite run (minutes > 0)')
-    if compression not in ('lz4', 'none', 'bz2'):
+    if compression not in bag_writer.COMPRESSIONS:
         raise ValueError('compression: expected lz4, bz2 or none, got %r' % (compression,))
-    from .safe_files import AtomicFile
     simulator = Simulator(config)
+    kinds = {ODOM_TOPIC: Odometry, IMU_TOPIC: Imu, TRUTH_TOPIC: String, CMD_TOPIC: Twist}
+    headers = {}
+
+    def messages():
+        total = simulator.total_ticks
+        every = max(1, int(config.rate * 10))
+        while not simulator.done:
+            for topic, stamp, item in simulator._advance():
+                if topic not in headers:  # filled before write_bag reads it, at the topic's first message
+                    headers[topic] = bag_writer.class_header(topic, kinds.get(topic) or type(item))
+                when = item[1] if isinstance(item, tuple) else _time(stamp)[0]
+                yield topic, when.secs, when.nsecs, _serialized(item)
+            if progress is not None and simulator.tick % every == 0:
+                progress(simulator.tick, total)
+        if progress is not None:
+            progress(total, total)
+
     with AtomicFile(path, overwrite=True) as stream:
-        with rosbag.Bag(stream, 'w', compression=compression, chunk_threshold=1024 * 1024) as bag:
-            write = bag.write
-            total = simulator.total_ticks
-            every = max(1, int(config.rate * 10))
-            kinds = {ODOM_TOPIC: Odometry, IMU_TOPIC: Imu, TRUTH_TOPIC: String, CMD_TOPIC: Twist}
-            while not simulator.done:
-                for topic, stamp, item in simulator._advance():
-                    cls = kinds.get(topic) or type(item)
-                    when = item[1] if isinstance(item, tuple) else _time(stamp)[0]
-                    write(topic, (cls._type, _serialized(item), cls._md5sum, cls), _BagTime(when.secs, when.nsecs),
-                          raw=True)
-                if progress is not None and simulator.tick % every == 0:
-                    progress(simulator.tick, total)
-            if progress is not None:
-                progress(total, total)
+        bag_writer.write_bag(stream, messages(), headers, chunk_threshold=1024 * 1024, compression=compression)
     write_truth(truth_file or truth_path(path), simulator.truth, ODOM_TOPIC, config)
     return simulator.truth
 

@@ -22,7 +22,6 @@ The file is the bag rosbag would write for the same messages, byte for byte, wri
 (``formats.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
 (``read``, ``write_record``), so importing cc_log.bag_lz4 costs nothing.
 """
-import functools
 import io
 import itertools
 import json
@@ -60,41 +59,6 @@ def bag_stamp(stamp):
     return secs, nsecs
 
 
-def bag_time(stamp):
-    """``bag_stamp`` as a genpy.Time (``BagTime``) for rosbag."""
-    return _bag_time_class()(*bag_stamp(stamp))
-
-
-@functools.lru_cache(maxsize=None)
-def _bag_time_class():
-    """``BagTime``: a genpy.Time that compares as the tuple (secs, nsecs). rosbag's writer keeps each
-    connection's index sorted by inserting every message's time with a binary search, and genpy's comparisons
-    go through three Python calls each (a fifth of the writer's CPU on Husky windows); the bag written is the
-    same, byte for byte."""
-    import genpy
-
-    class BagTime(genpy.Time):
-        __slots__ = ()
-        __hash__ = genpy.Time.__hash__
-
-        def __eq__(self, other):
-            return isinstance(other, genpy.Time) and (self.secs, self.nsecs) == (other.secs, other.nsecs)
-
-        def __lt__(self, other):
-            return (self.secs, self.nsecs) < (other.secs, other.nsecs)
-
-        def __le__(self, other):
-            return (self.secs, self.nsecs) <= (other.secs, other.nsecs)
-
-        def __gt__(self, other):
-            return (self.secs, self.nsecs) > (other.secs, other.nsecs)
-
-        def __ge__(self, other):
-            return (self.secs, self.nsecs) >= (other.secs, other.nsecs)
-
-    return BagTime
-
-
 def write(target, records, metadata):
     """Write ``records`` (window order) and ``metadata`` (a JSON-able dict) as an LZ4 bag into ``target``: a
     binary, seekable file object open for writing, or the path of a new file (created with
@@ -118,8 +82,9 @@ def bag_messages(records, metadata):
         raise ValueError('window: has no records')
     if any(record.topic == METADATA_TOPIC for record in records):
         raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
+    from .bag_writer import class_header  # bag_writer imports this module
     string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
-    headers = {METADATA_TOPIC: _class_header(METADATA_TOPIC, string_class)}
+    headers = {METADATA_TOPIC: class_header(METADATA_TOPIC, string_class)}
     headers.update(connection_headers(records))
     topics = list(headers)[1:]
     rank = {topic: number for number, topic in enumerate(topics)}
@@ -148,6 +113,7 @@ def connection_headers(records):
     serialized bytes with its connection header: ``callerid`` and ``latching`` kept), else its message
     class's. ValueError when a topic's records are of two message types (a bag has one connection per topic,
     as rosbag writes it)."""
+    from .bag_writer import class_header  # bag_writer imports this module
     headers, sources = {}, {}
     for record in records:
         source = record.connection if _held_raw(record) else type(record.msg)
@@ -155,7 +121,7 @@ def connection_headers(records):
         if key in sources:
             continue
         sources[key] = source  # held, so that its id stays its own
-        header = (dict(source, topic=record.topic) if _held_raw(record) else _class_header(record.topic, source))
+        header = dict(source, topic=record.topic) if _held_raw(record) else class_header(record.topic, source)
         first = headers.setdefault(record.topic, header)
         if first.get('md5sum') != header.get('md5sum'):
             raise ValueError('topic %s: messages of two types (%s and %s); a bag holds one type per topic'
@@ -197,11 +163,6 @@ def records_crc(topics, headers, records):
 
 
 _RECORD_HEAD = struct.Struct('<IdI')  # topic number, stamp, length of the serialized bytes
-
-
-def _class_header(topic, cls):
-    """The connection header rosbag writes for messages of ``cls`` on ``topic``."""
-    return {'topic': topic, 'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}
 
 
 def _serialized(msg):

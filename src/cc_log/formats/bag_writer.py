@@ -102,9 +102,9 @@ def write_bag(stream, messages, headers, chunk_threshold=None, compression='lz4'
     """Write the bag of ``messages`` into ``stream`` (binary, seekable, positioned at the start of the bag):
     ``messages``, any iterable of (topic, secs, nsecs, serialized bytes) in the order written; ``headers``:
     topic -> its connection header (a dict of str: topic, type, md5sum, message_definition, ... in the order
-    they are written); ``chunk_threshold``: None for CHUNK_THRESHOLD; ``compression`` of the chunks, one of
-    COMPRESSIONS. ValueError for no message or a time outside rosbag's (unsigned 32-bit secs, nsecs); the
-    stream then holds an unfinished bag."""
+    they are written; read when the topic's first message comes); ``chunk_threshold``: None for
+    CHUNK_THRESHOLD; ``compression`` of the chunks, one of COMPRESSIONS. ValueError for no message or a time
+    outside rosbag's (unsigned 32-bit secs, nsecs); the stream then holds an unfinished bag."""
     if compression not in COMPRESSIONS:
         raise ValueError('compression: %r is not one of: %s' % (compression, ', '.join(COMPRESSIONS)))
     chunk_threshold = CHUNK_THRESHOLD if chunk_threshold is None else chunk_threshold
@@ -147,6 +147,11 @@ def write_bag(stream, messages, headers, chunk_threshold=None, compression='lz4'
     stream.seek(start + len(MAGIC))
     stream.write(_file_header(index_pos, len(connections), len(infos)))
     stream.seek(end)
+
+
+def class_header(topic, cls):
+    """The connection header rosbag writes for messages of the genpy class ``cls`` on ``topic``."""
+    return {'topic': topic, 'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}
 
 
 def bag_bytes(messages, headers, chunk_threshold=None, compression='lz4'):
