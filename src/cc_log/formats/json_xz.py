@@ -75,7 +75,7 @@ DEFAULT_PRESET = 6
 #: (hash chains over 3-byte prefixes, ``nice_len`` 48, ``depth`` 8, instead of binary trees, 273 and automatic)
 #: and ``lc=1, pb=0`` (text: one literal context bit, no position bits). ``bench/lzma_options.py`` on Husky
 #: windows (docs/FORMAT.md, "Preset"): odometry as one window 3.97% of row JSON (preset 6 alone: 3.94%),
-#: odometry + IMU 0.3-0.9% smaller than preset 6 alone, at 25-84% of its CPU. Any xz decoder reads it.
+#: odometry + IMU within 0.3% of preset 6 alone's bytes at 28-74% of its CPU. Any xz decoder reads it.
 FILTER_OPTIONS = {'mf': lzma.MF_HC3, 'nice_len': 48, 'depth': 8, 'lc': 1, 'pb': 0}
 
 HEADER_STAMP = 'header.stamp'
