@@ -46,7 +46,7 @@ which puts them into a recorded odometry stream at any rate (e.g. real 10 Hz rob
 message outside the anomalies unchanged.
 
 Everything here is pure and deterministic: the same configuration and seed give identical messages.
-``rospy`` and ``rosbag`` are not imported at module level (``simulate_to_bag`` imports rosbag inside).
+``rospy`` and ``rosbag`` are not imported (``simulate_to_bag`` writes the bag with ``formats.bag_writer``).
 """
 import collections
 import copy
