@@ -45,6 +45,9 @@ fire (the window rule's own fit), and for every catch later than LATENCY what th
 LATENCY of the onset did (``why_late``): an open window from an earlier fire, no whole-window classification,
 an anomalous score the retrigger rule did not fire on, or every score above the threshold.
 
+``--slowed N``: every training piece also trains as N slower copies (``retime.slowed``: stops and slow stretches
+along its own path, at its own acceleration and deceleration, at least ``--braking`` m/s^2 when given).
+
 ``--separability``: per run, no windows: the deepest nominal score of the replayed part against the
 shallowest injected anomaly onset (within LATENCY), as depth in units of the model's threshold; whether any
 threshold could separate them. ``--types``: inject only these simulator types.
@@ -69,6 +72,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
+import retime  # noqa: E402
 from cc_log import bagio, learning, sim, tuning  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream, vector_length  # noqa: E402
 
@@ -100,6 +104,8 @@ PERSISTENCE = 5     # classifications: 'k of the last n' needs k within LATENCY 
 INJECTIONS = ('bwibot', 'robot')
 THRESHOLDS = ('trained', 'calibrated')
 TRAIN_OPTIONS = {}  # --gamma-factor, --nu: passed to learning.train (empty: its defaults)
+BRAKING = [None]
+SLOWED = []  # --slowed N: seeds of the slower copies (retime.slowed) of every training piece that also train
 SETTINGS = collections.OrderedDict([
     ('ours', ('motion', 'event', {})),
     ('dynamics', ('dynamics', 'event', {})),
@@ -166,6 +172,8 @@ def train(pieces, config, options, margin=learning.DEFAULT_MARGIN):
     X = []
     for records in pieces:
         X += list(vectors_of(records, config)[1])
+        for seed in SLOWED:
+            X += list(vectors_of(retime.slowed(records, seed, braking=BRAKING[0]), config)[1])
     if len(X) < learning.MIN_VECTORS:
         raise ValueError('%d training vectors' % len(X))
     X = np.array(X)
@@ -249,6 +257,15 @@ def describe_scale(name, inject):
         name, ', '.join('%s %.2f' % item for item in scale._asdict().items()))
 
 
+def describe_slowed(name, first):
+    """One line, with --slowed: how much the twist of the run's first part lags its pose, and its envelope."""
+    if not SLOWED:
+        return None
+    lag = retime.twist_lag([r.stamp for r in first], [retime.state(r.msg) for r in first])
+    return '%s slowed copies: twist lags the pose by %.2f s; envelope %s' % (
+        name, lag, ', '.join('%s %.2f' % item for item in sim.nominal_envelope(first)._asdict().items()))
+
+
 def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DEFAULT_MARGIN,
                  types=sim.ANOMALY_TYPES, **how):
     """One run, one setting, anomalies of ``types`` (``how``: injection, threshold, calibration,
@@ -272,7 +289,8 @@ def evaluate_run(name, topic, stop, setting, seeds, fraction, margin=learning.DE
               'late_cases': [], 'window': config.window,
               'nominal_kept': inside([r.stamp for r in rest], nominal_windows) / float(len(rest)),
               'persistence': persistence, 'threshold': model.threshold, 'scale': describe_scale(name, inject),
-              'calibrated': describe_threshold(name, model)}
+              'calibrated': describe_threshold(name, model),
+              'slowed': describe_slowed(name, first)}
     for kind in types:
         for seed in seeds:
             try:
@@ -431,6 +449,12 @@ def main(argv=None):
                         % learning.DEFAULT_GAMMA_FACTOR)
     parser.add_argument('--nu', type=float, help='one-class SVM nu (default: learning.DEFAULT_NU, %g)'
                         % learning.DEFAULT_NU)
+    parser.add_argument('--slowed', type=int, default=0, metavar='N',
+                        help='also train on N slower copies of every training piece (retime.slowed: stops and '
+                        'slow stretches at the piece\'s own acceleration and deceleration)')
+    parser.add_argument('--braking', type=float, metavar='M/S2',
+                        help='with --slowed: the copies brake and start at least this hard (default: the piece\'s '
+                        'own envelope)')
     parser.add_argument('--explain', action='store_true',
                         help='per false window without injection: how the robot drove, the features farthest '
                         'from the training vectors')
@@ -438,6 +462,8 @@ def main(argv=None):
                         help='per run: the deepest nominal score against the shallowest anomaly onset (no windows)')
     args = parser.parse_args(argv)
     WINDOW = args.window
+    SLOWED[:] = range(args.slowed)
+    BRAKING[0] = args.braking
     TRAIN_OPTIONS.clear()
     TRAIN_OPTIONS.update((key, value) for key, value in (('gamma_factor', args.gamma_factor), ('nu', args.nu))
                          if value is not None)
@@ -515,7 +541,7 @@ def main(argv=None):
                 by_type[kind].update({'caught': r['caught'][kind], 'total': r['total'][kind],
                                       'late': r['late'][kind], 'no_room': r['no_room'][kind]})
                 latencies[kind].extend(r['latency'][kind])
-            oddities += [line for line in (r['scale'], r['calibrated']) if line]
+            oddities += [line for line in (r['scale'], r['calibrated'], r['slowed']) if line]
             if name in ('f1tenth_DS2', 'f1tenth_DS5'):
                 oddities.append('%s: windows without injection from %s s after the run start (replay from %.0f s)'
                                 % (name, ', '.join('%.1f-%.1f' % (a - r['start'], b - r['start'])

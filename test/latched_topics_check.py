@@ -5,8 +5,9 @@ A latched ``/tf_static`` (tf2_msgs/TFMessage) is published once, before either n
 loggers run as real processes, one writing json-xz windows and one bag-lz4 windows, each keeping
 ``/tf_static``; this node then publishes real Husky odometry (restamped to the current time, as a robot's)
 and asks each node for three windows (``~trigger``) far enough apart to stay separate. Every window of both
-formats must start with the ``/tf_static`` message, once, and every connection of a bag-lz4 window must keep
-the publisher's connection header (callerid, and ``latching: 1`` on ``/tf_static``).
+formats must start with the ``/tf_static`` message, once, and every topic of a window must keep the publisher's
+callerid and latching (``latching: 1`` on ``/tf_static``): a bag-lz4 window in its connection headers, a json-xz
+window in its topic sections.
 """
 import os
 import shutil
@@ -120,10 +121,12 @@ class LatchedTopicsTest(unittest.TestCase):
                     with rosbag.Bag(path) as bag:
                         headers = {c.topic: {text(k): text(v) for k, v in c.header.items()}
                                    for c in bag._connections.values()}
-                    self.assertEqual(headers['/tf_static']['latching'], '1')
-                    self.assertEqual(headers['/odom']['latching'], '0')
-                    for topic in ('/tf_static', '/odom'):
-                        self.assertEqual(headers[topic]['callerid'], rospy.get_name())
+                else:  # json-xz keeps callerid and latching; records read back carry them
+                    headers = {record.topic: record.connection for record in records}
+                self.assertEqual(headers['/tf_static']['latching'], '1')
+                self.assertEqual(headers['/odom']['latching'], '0')
+                for topic in ('/tf_static', '/odom'):
+                    self.assertEqual(headers[topic]['callerid'], rospy.get_name())
 
 
 if __name__ == '__main__':

@@ -81,6 +81,28 @@ def test_detection_runs_quick():
     assert 'all runs: caught ' in out
 
 
+def test_slowed_copies_keep_the_path_and_the_twist_lag():
+    sys.path.insert(0, BENCH)
+    import detection_runs
+    import retime
+    records = detection_runs.load('husky_outdoor_2015', '/husky_velocity_controller/odom', None)
+    first, _ = detection_runs.split(records, 0.5)
+    lag = retime.twist_lag([r.stamp for r in first], [retime.state(r.msg) for r in first])
+    assert 0.4 <= lag <= 0.6  # the Husky's twist lags its pose by ~0.5 s (docs/RESULTS.md "Sixth round")
+    copy = retime.slowed(first, seed=0, braking=1.0)
+    assert len(copy) > len(first)  # the same path, slower
+    speeds = [abs(r.msg.twist.twist.linear.x) for r in copy]
+    assert max(speeds) <= max(abs(r.msg.twist.twist.linear.x) for r in first) + 1e-9
+    assert speeds.count(0.0) > 10  # it stops
+    copy_lag = retime.twist_lag([r.stamp for r in copy], [retime.state(r.msg) for r in copy])
+    assert copy_lag == pytest.approx(lag, abs=0.11)
+    steps = [b.stamp - a.stamp for a, b in zip(copy, copy[1:])]
+    assert max(steps) - min(steps) < 1e-6
+    out = run('detection_runs.py', '--runs', 'socspioneer_trace1', '--seeds', '0', '--settings', 'ours',
+              '--slowed', '1', '--braking', '1')
+    assert 'all runs: caught ' in out
+
+
 def test_detection_ranker_quick():
     out = run('detection_ranker.py', '--runs', 'icelab_normal_plan', '--seeds', '0', '--train-on', 'self')
     row = next(line for line in out.splitlines() if line.startswith('| icelab_normal_plan '))

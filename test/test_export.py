@@ -1,10 +1,13 @@
 """``cclog export --to bag`` (export.to_bag): window records out to one rosbag, as rosbag would write them, with
-the publishers' connection headers where the windows kept them (bag-lz4)."""
+the publishers' connection headers where the windows kept them (bag-lz4: whole; json-xz: callerid and latching)."""
+import decimal
+import json
+
 import pytest
 from conftest import real_data
 
-from cc_log import bag_reader, export, log_format
-from cc_log.formats import bag_lz4
+from cc_log import bag_reader, export, log_format, raw_message
+from cc_log.formats import bag_lz4, json_xz
 from cc_log.window_buffer import LogWindow
 
 rosbag = pytest.importorskip('rosbag')
@@ -51,15 +54,41 @@ def test_bag_lz4_windows_export_with_their_bytes_and_connection_headers(husky_re
     assert odom.get('latching') != b'1'
 
 
-def test_json_xz_windows_export_as_their_decoded_messages(husky_records, tmp_path):
+def test_json_xz_windows_export_as_their_decoded_messages_with_callerid_and_latching(husky_records, tmp_path):
     records = windows_of(husky_records, tmp_path / 'logs', 'json-xz')
     out = str(tmp_path / 'all.bag')
     export.to_bag(records, out)
     with rosbag.Bag(out) as bag:
-        read = [(topic, raw[1], raw[0]) for topic, raw, _ in bag.read_messages(raw=True)]
+        read = [(topic, raw[1], raw[0], header) for topic, raw, _, header in
+                bag.read_messages(raw=True, return_connection_header=True)]
     original = sorted(husky_records, key=lambda record: record.stamp)
-    assert [(topic, data) for topic, data, _ in read] == [(r.topic, r.raw) for r in original]  # lossless
-    assert {topic: kind for topic, _, kind in read} == {ODOM: 'nav_msgs/Odometry', IMU: 'sensor_msgs/Imu'}
+    assert [(topic, data) for topic, data, _, _ in read] == [(r.topic, r.raw) for r in original]  # lossless
+    assert {topic: kind for topic, _, kind, _ in read} == {ODOM: 'nav_msgs/Odometry', IMU: 'sensor_msgs/Imu'}
+    imu = next(header for topic, _, _, header in read if topic == IMU)
+    odom = next(header for topic, _, _, header in read if topic == ODOM)
+    assert imu['latching'] == b'1' and imu['callerid'] == b'/imu_node'  # rosbag play latches it again
+    assert odom.get('latching') != b'1'
+    for topic, header in ((IMU, imu), (ODOM, odom)):  # what the recording said of its publishers, no more
+        first = next(record for record in husky_records if record.topic == topic)
+        assert raw_message.publisher_keys(raw_message.text_header(header)) == raw_message.publisher_keys(
+            first.connection)
+
+
+def test_json_xz_keeps_the_publisher_keys_only_when_the_records_had_a_connection(husky_records, tmp_path):
+    decoded = [raw_message.decoded(record)._replace(raw=None, connection=None) for record in husky_records[:20]]
+    doc = json_xz.document(decoded, {})
+    assert all('connection' not in section for section in doc['topics'])
+    doc = json_xz.document(husky_records[:20], {})
+    imu = next(section for section in doc['topics'] if section['topic'] == IMU)
+    assert imu['connection'] == {'callerid': '/imu_node', 'latching': '1'}
+
+
+@pytest.mark.parametrize('bad', [['/imu_node'], {'callerid': 1}, {'message_definition': 'int8 x'}])
+def test_json_xz_refuses_a_connection_that_is_not_callerid_and_latching_text(husky_records, bad):
+    doc = json_xz.document(husky_records[:20], {})
+    next(section for section in doc['topics'] if section['topic'] == IMU)['connection'] = bad
+    with pytest.raises(ValueError, match='topic %s: "connection" must map callerid and latching to text' % IMU):
+        json_xz.from_document(json.loads(json_xz.dumps(doc), parse_float=decimal.Decimal))
 
 
 def test_a_topic_with_two_message_types_is_refused_and_nothing_is_written(husky_records, tmp_path):

@@ -31,12 +31,16 @@ META = {'trigger': 'test', 'start': 0.0}
 
 
 def window_text(module, records, metadata):
-    """The document text ``log_format.write_window`` has ``module`` write of ``records`` (decoded as it does)."""
+    """The document text ``log_format.write_window`` has ``module`` write of ``records`` (decoded as it does),
+    without the topic sections' ``connection`` (the publishers' callerid and latching, added after 2fe8544)."""
     records, undecodable = getattr(module, 'decoded_records', raw_message.decoded_records)(records)
     meta = dict(metadata)
     if undecodable:
         meta['undecodable'] = undecodable
-    return module.dumps(module.document(records, meta))
+    doc = module.document(records, meta)
+    for section in doc['topics']:
+        section.pop('connection', None)
+    return module.dumps(doc)
 
 
 def real_windows():
@@ -241,6 +245,17 @@ def test_same_text_as_before(windows):
     got = digests(json_xz, windows)
     assert set(got) == set(EXPECTED)
     assert [key for key in EXPECTED if got[key] != EXPECTED[key]] == []
+
+
+def test_sections_keep_the_publishers_callerid_and_latching(windows):
+    """Of records with connection headers, each section keeps what its first record's says of the publisher."""
+    for name, records in windows:
+        doc = json_xz.document(json_xz.decoded_records(records)[0], META)
+        for section in doc['topics']:
+            first = next(record for record in records if record.topic == section['topic'])
+            assert section.get('connection', {}) == raw_message.publisher_keys(first.connection), name
+    pioneer = dict(windows)['socspioneer_trace0.bag start']
+    assert {record.connection.get('callerid') for record in pioneer} - {None}  # a bag that names its publishers
 
 
 def test_bytes_read_in_bulk(windows):

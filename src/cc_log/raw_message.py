@@ -145,6 +145,19 @@ def _seconds(stamp):
     return stamp.to_sec() if hasattr(stamp, 'to_sec') else float(stamp)
 
 
+PUBLISHER_KEYS = ('callerid', 'latching')  # what a connection header says of its publisher
+
+
+def class_header(topic, cls):
+    """The connection header rosbag writes for messages of the genpy class ``cls`` on ``topic``."""
+    return {'topic': topic, 'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}
+
+
+def publisher_keys(connection):
+    """The ``PUBLISHER_KEYS`` of a connection header (a dict; {} for None)."""
+    return dict((key, connection[key]) for key in PUBLISHER_KEYS if key in (connection or {}))
+
+
 def text_header(header):
     """A bag connection header (bytes values, as rosbag reads it) as a dict of str."""
     return {_text(key): _text(value) for key, value in header.items()}

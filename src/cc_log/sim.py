@@ -928,6 +928,7 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progr
     'none') and the sidecar ``truth_file`` (default ``<path>.truth.json``); ``progress(done, total)`` is
     called now and then with simulated ticks. Returns the truth list.
     """
+    from . import raw_message
     from .formats import bag_writer
     from .safe_files import AtomicFile
     config = (config or SimConfig()).validate()
@@ -945,7 +946,7 @@ def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progr
         while not simulator.done:
             for topic, stamp, item in simulator._advance():
                 if topic not in headers:  # filled before write_bag reads it, at the topic's first message
-                    headers[topic] = bag_writer.class_header(topic, kinds.get(topic) or type(item))
+                    headers[topic] = raw_message.class_header(topic, kinds.get(topic) or type(item))
                 when = item[1] if isinstance(item, tuple) else _time(stamp)[0]
                 yield topic, when.secs, when.nsecs, _serialized(item)
             if progress is not None and simulator.tick % every == 0:

@@ -82,9 +82,8 @@ def bag_messages(records, metadata):
         raise ValueError('window: has no records')
     if any(record.topic == METADATA_TOPIC for record in records):
         raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
-    from .bag_writer import class_header  # bag_writer imports this module
     string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
-    headers = {METADATA_TOPIC: class_header(METADATA_TOPIC, string_class)}
+    headers = {METADATA_TOPIC: raw_message.class_header(METADATA_TOPIC, string_class)}
     headers.update(connection_headers(records))
     topics = list(headers)[1:]
     rank = {topic: number for number, topic in enumerate(topics)}
@@ -109,19 +108,19 @@ def bag_messages(records, metadata):
 
 
 def connection_headers(records):
-    """topic -> the connection header its records are written with: the first record's own (a record held as
-    serialized bytes with its connection header: ``callerid`` and ``latching`` kept), else its message
-    class's. ValueError when a topic's records are of two message types (a bag has one connection per topic,
-    as rosbag writes it)."""
-    from .bag_writer import class_header  # bag_writer imports this module
+    """topic -> the connection header its records are written with: the first record's own (a record with its
+    connection header: held as serialized bytes, or read from a json-xz window that kept its publisher's
+    ``callerid`` and ``latching``), else its message class's. ValueError when a topic's records are of two
+    message types (a bag has one connection per topic, as rosbag writes it)."""
     headers, sources = {}, {}
     for record in records:
-        source = record.connection if _held_raw(record) else type(record.msg)
+        source = record.connection if record.connection else type(record.msg)
         key = (record.topic, id(source))
         if key in sources:
             continue
         sources[key] = source  # held, so that its id stays its own
-        header = dict(source, topic=record.topic) if _held_raw(record) else class_header(record.topic, source)
+        header = (dict(source, topic=record.topic) if record.connection else
+                  raw_message.class_header(record.topic, source))
         first = headers.setdefault(record.topic, header)
         if first.get('md5sum') != header.get('md5sum'):
             raise ValueError('topic %s: messages of two types (%s and %s); a bag holds one type per topic'

@@ -149,11 +149,6 @@ def write_bag(stream, messages, headers, chunk_threshold=None, compression='lz4'
     stream.seek(end)
 
 
-def class_header(topic, cls):
-    """The connection header rosbag writes for messages of the genpy class ``cls`` on ``topic``."""
-    return {'topic': topic, 'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}
-
-
 def bag_bytes(messages, headers, chunk_threshold=None, compression='lz4'):
     """The bytes ``write_bag`` writes (same arguments)."""
     stream = io.BytesIO()

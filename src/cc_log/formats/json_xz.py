@@ -11,6 +11,7 @@ The document (layout 2)::
         "columns": {"header.seq": [855, 1, ...], "pose.pose.position.x": [8.251562792367952, 0.02311227020083, ...],
                     "twist.twist.linear.x": [...], ...},
         "delta": ["header.seq", "pose.pose.position.x", ...],   # columns written as differences
+        "connection": {"callerid": "/odometry_node", "latching": "0"},  # when the records came with one
         "definition": "<full message definition, comments left out>"}, ...],
      "order": [0, 1, 0, ...]}                  # only when records are not in (stamp, section) order
 
@@ -28,6 +29,11 @@ delta-codes an integer column when that makes its text shorter, and a column of 
 differences need at most ``DELTA_GAIN`` of the significant digits and few values repeat an earlier,
 non-adjacent one (LZMA finds those repeats in the plain column, not in its differences): ``differences``.
 Layout 1 (no ``delta``) is still read.
+
+``connection`` (optional) keeps what the publisher's connection header said of it (``callerid``, ``latching``)
+when the records came with connection headers (live, ``cclog replay``): that of the topic's first record. A
+record read back carries a connection header of its class with these keys, so ``cclog export --to bag`` writes
+a latched topic (``/tf_static``) latched again.
 
 ``precision`` (optional, lossy): ``{field pattern: step}`` rounds every float of a field matching the
 pattern (``fnmatch`` on the dotted name, e.g. ``pose.pose.position.*``) to a multiple of its step before
@@ -585,8 +591,10 @@ def document(records, metadata, delta=differences):
             index[record.topic] = len(sections)
             sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
                              'definition': msg_codec.compact_definition(msg._full_text),
-                             'records': []})
+                             'records': [], 'connection': {}})
         section = sections[index[record.topic]]
+        if record.connection and not section['connection']:
+            section['connection'] = raw_message.publisher_keys(record.connection)
         if msg._type != section['type']:
             raise ValueError('topic %s: holds both %s and %s' % (record.topic, section['type'], msg._type))
         section['records'].append(record)
@@ -614,6 +622,8 @@ def document(records, metadata, delta=differences):
                  'count': len(recs), 'stamps': stamps, 'constant': constant, 'columns': columns}
         if delta_keys:
             topic['delta'] = delta_keys
+        if section['connection']:
+            topic['connection'] = section['connection']
         topic['definition'] = section['definition']
         topics.append(topic)
     meta.setdefault('codec', CODEC)
@@ -849,6 +859,12 @@ def _section_records(section):
     cls = msg_codec.message_class(msg_type, definition)
     if section.get('md5sum') not in (None, cls._md5sum):
         raise ValueError('md5sum %s does not match the definition (%s)' % (section['md5sum'], cls._md5sum))
+    connection = section.get('connection')
+    if connection is not None:
+        if not isinstance(connection, dict) or not set(connection) <= set(raw_message.PUBLISHER_KEYS) \
+                or not all(isinstance(value, str) for value in connection.values()):
+            raise ValueError('"connection" must map %s to text' % ' and '.join(raw_message.PUBLISHER_KEYS))
+        connection = dict(raw_message.class_header(topic, cls), **connection)
     stamps = _floats(section['stamps'])
     if stamps != HEADER_STAMP:
         if not isinstance(stamps, list) or len(stamps) != count:
@@ -867,5 +883,5 @@ def _section_records(section):
             stamp = msg.header.stamp.to_sec()
         else:
             stamp = stamps[i]
-        records.append(Record(stamp, topic, msg))
+        records.append(Record(stamp, topic, msg, connection=connection))
     return records
