@@ -15,11 +15,12 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 import unittest
 
+import rosbag
 import rospy
 import rostest
+from diagnostic_msgs.msg import DiagnosticArray
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
@@ -35,8 +36,8 @@ RATE = '10'  # rosbag play speed-up
 
 
 def play(bag):
-    """rosbag play --clock at RATE, waiting for the subscribers; returns when the bag is done."""
-    subprocess.check_call(['rosbag', 'play', '--clock', '-q', '-r', RATE, '-d', '0.5', bag],
+    """rosbag play --clock at RATE, waiting for a subscriber on each topic; returns when the bag is done."""
+    subprocess.check_call(['rosbag', 'play', '--clock', '-q', '-r', RATE, '--wait-for-subscribers', bag],
                           stdout=subprocess.DEVNULL, timeout=40)
 
 
@@ -68,13 +69,18 @@ class CollectLearnSmartTest(unittest.TestCase):
         shutil.rmtree(cls.tmp, ignore_errors=True)
 
     def test_1_collect(self):
+        diagnostics = []
+        rospy.Subscriber('/diagnostics', DiagnosticArray, diagnostics.append, queue_size=None)
         node = fx.start('collect_logger.py', '__name:=collect_logger', '_directory:=' + self.collect_dir,
                         '_window:=20', '_stride:=1', '_rotate:=15s', '_topics:=imu/data',
-                        '_diagnostic_period:=0')
+                        '_diagnostic_period:=0.2')
         fx.wait_for(lambda: fx.subscribed('/odom', '/collect_logger') and fx.subscribed('/imu/data', '/collect_logger'),
                     20, 'the collect logger to subscribe')
         play(self.nominal_bag)
-        time.sleep(1.0)
+        with rosbag.Bag(self.nominal_bag) as bag:
+            count = bag.get_message_count()
+        fx.wait_for(lambda: fx.received(diagnostics, 'collect_logger') >= count, 20, 'the collect logger to receive '
+                    'the bag')
         code, out, err = fx.stop(node)
         self.assertEqual(code, 0, err[-2000:])
         files = log_format.window_files(self.collect_dir)

@@ -19,6 +19,7 @@ import unittest
 import rosbag
 import rospy
 import rostest
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
 from std_srvs.srv import Trigger
@@ -72,12 +73,14 @@ class LatchedTopicsTest(unittest.TestCase):
         cls.tf_pub.publish(tf_static(transforms=[transform]))  # once, before the nodes start
         cls.odom_pub = rospy.Publisher('/odom', Odometry, queue_size=10000)
         cls.events = {fmt: [] for fmt in NODES}
+        cls.diagnostics = []
+        rospy.Subscriber('/diagnostics', DiagnosticArray, cls.diagnostics.append, queue_size=None)
         cls.nodes = {}
         for fmt, name in NODES.items():
             rospy.Subscriber('/%s/anomalies' % name, AnomalyEvent, cls.events[fmt].append, queue_size=None)
             cls.nodes[fmt] = fx.start('smart_logger.py', '__name:=' + name, '_config:=' + config,
                                       '_format:=' + fmt, '_directory:=' + os.path.join(cls.tmp, fmt),
-                                      '_diagnostic_period:=0')
+                                      '_diagnostic_period:=0.1')
         for name in NODES.values():
             rospy.wait_for_service('/%s/trigger' % name, timeout=30)
         fx.wait_for(lambda: cls.odom_pub.get_num_connections() == len(NODES) and
@@ -100,7 +103,9 @@ class LatchedTopicsTest(unittest.TestCase):
     def test_a_latched_message_published_once_starts_every_window_and_keeps_its_connection_header(self):
         for k in range(WINDOWS):
             self.publish(self.odom[k * 60:k * 60 + 30])
-            time.sleep(0.3)  # the request applies to the newest message fed
+            for name in NODES.values():  # the request applies to the newest message received: /tf_static, 30 more
+                fx.wait_for(lambda: fx.received(self.diagnostics, name) >= 1 + k * 60 + 30, 10,
+                            '%s to receive the odometry' % name)
             for name in NODES.values():
                 response = rospy.ServiceProxy('/%s/trigger' % name, Trigger)()
                 self.assertTrue(response.success, response.message)

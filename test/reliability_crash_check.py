@@ -101,14 +101,6 @@ class Streamer(object):
         return sent
 
 
-def status_values(diagnostics, node):
-    for array in reversed(diagnostics):
-        for status in array.status:
-            if status.name == 'cc_log: %s' % node:
-                return status.level, status.message, {kv.key: kv.value for kv in status.values}
-    return None, '', {}
-
-
 class CrashTest(unittest.TestCase):
 
     @classmethod
@@ -142,7 +134,7 @@ class CrashTest(unittest.TestCase):
                                    '_pre:=10', '_post:=10', '_max_window:=400', '_diagnostic_period:=0.2')
         # a killed node stays registered with the master: wait for diagnostics of the new one (it publishes
         # them once its subscribers exist, after recovering leftovers)
-        fx.wait_for(lambda: status_values(self.diagnostics, NODE)[0] is not None, 30, 'the smart node to start')
+        fx.wait_for(lambda: fx.status_values(self.diagnostics, NODE)[0] is not None, 30, 'the smart node to start')
         fx.wait_for(lambda: self.stream.connected() and fx.subscribed('/imu_in', '/' + NODE), 30,
                     'the smart node to subscribe')
         time.sleep(0.5)
@@ -169,9 +161,9 @@ class CrashTest(unittest.TestCase):
                     if count:  # complete: renamed, same messages
                         self.assertNotIn(leftover, remaining)
                 if remaining:  # kept only when reported as unrecoverable
-                    fx.wait_for(lambda: 'leftovers unrecoverable' in status_values(self.diagnostics, NODE)[2], 10,
+                    fx.wait_for(lambda: 'leftovers unrecoverable' in fx.status_values(self.diagnostics, NODE)[2], 10,
                                 'diagnostics')
-                    values = status_values(self.diagnostics, NODE)[2]
+                    values = fx.status_values(self.diagnostics, NODE)[2]
                     if int(values['leftovers unrecoverable']) < len(remaining):
                         code, out, err = fx.stop(self.node)
                         sys.stderr.write('node output:\n%s\n%s\n%s\n' % (out[-3000:], err[-3000:], values))
@@ -211,9 +203,9 @@ class CrashTest(unittest.TestCase):
         self.assertEqual(len(leftovers), 2)
         before = set(log_format.window_files(self.out))
         self.start(self.out)
-        fx.wait_for(lambda: status_values(self.diagnostics, NODE)[2].get('leftovers recovered') is not None, 10,
+        fx.wait_for(lambda: fx.status_values(self.diagnostics, NODE)[2].get('leftovers recovered') is not None, 10,
                     'diagnostics')
-        level, message, values = status_values(self.diagnostics, NODE)
+        level, message, values = fx.status_values(self.diagnostics, NODE)
         self.assertEqual(int(values['leftovers recovered']), 2)
         self.assertEqual(values['leftovers unrecoverable'], '0')
         self.assertEqual(recovery.scan(self.out), [])

@@ -30,7 +30,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
-from reliability_crash_check import Streamer, make_model, status_values  # noqa: E402
+from reliability_crash_check import Streamer, make_model  # noqa: E402
 
 from cc_log import log_format, recovery  # noqa: E402
 from test_reliability import window  # noqa: E402
@@ -114,13 +114,13 @@ class DiskTest(unittest.TestCase):
                                    '_model:=' + self.model, '_directory:=' + directory, '_pre:=10', '_post:=10',
                                    '_max_window:=300', '_diagnostic_period:=0.2', '_format:=json-xz',
                                    '_max_disk_mb:=0', '_min_free_mb:=0', *params)  # private params persist
-        fx.wait_for(lambda: status_values(self.diagnostics, NODE)[0] is not None, 30, 'the smart node to start')
+        fx.wait_for(lambda: fx.status_values(self.diagnostics, NODE)[0] is not None, 30, 'the smart node to start')
         fx.wait_for(lambda: self.stream.connected() and fx.subscribed('/disk_imu', '/' + NODE), 30,
                     'the smart node to subscribe')
         time.sleep(0.5)
 
     def status(self):
-        return status_values(self.diagnostics, NODE)
+        return fx.status_values(self.diagnostics, NODE)
 
     def wait_status(self, predicate, what, timeout=15):
         fx.wait_for(lambda: predicate(*self.status()), timeout, what)
@@ -241,7 +241,7 @@ class DiskTest(unittest.TestCase):
                                    '_directory:=' + directory, '_rotate:=300', '_window:=20', '_stride:=10',
                                    '_diagnostic_period:=0.2')
         try:
-            status = lambda: status_values(self.diagnostics, name)  # noqa: E731
+            status = lambda: fx.status_values(self.diagnostics, name)  # noqa: E731
             fx.wait_for(lambda: status()[0] is not None, 30, 'the collect node to start')
             fx.wait_for(lambda: self.stream.connected() and fx.subscribed('/disk_imu', '/' + name), 30,
                         'the collect node to subscribe')

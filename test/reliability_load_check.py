@@ -25,7 +25,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
-from reliability_crash_check import Streamer, make_model, status_values  # noqa: E402
+from reliability_crash_check import Streamer, make_model  # noqa: E402
 
 PKG = 'cc_log'
 NODE = 'smart_logger_load'
@@ -57,7 +57,7 @@ class LoadTest(unittest.TestCase):
                         '_model:=' + model, '_directory:=' + os.path.join(tmp, 'out'), '_pre:=2s', '_post:=2s',
                         '_diagnostic_period:=0.5')
         try:
-            fx.wait_for(lambda: status_values(diagnostics, NODE)[0] is not None, 30, 'the smart node to start')
+            fx.wait_for(lambda: fx.status_values(diagnostics, NODE)[0] is not None, 30, 'the smart node to start')
             fx.wait_for(lambda: stream.connected(), 30, 'the smart node to subscribe')
             time.sleep(1.0)
             warm = stream.publish(min(3.0, duration / 3), rate)
@@ -68,11 +68,11 @@ class LoadTest(unittest.TestCase):
             while time.time() < end:
                 sent += stream.publish(min(1.0, end - time.time()), rate)
                 rss_max = max(rss_max, rss_mb(node.pid))
-                queue_max = max(queue_max, int(status_values(diagnostics, NODE)[2].get('intake queue', 0)))
+                queue_max = max(queue_max, int(fx.status_values(diagnostics, NODE)[2].get('intake queue', 0)))
             total = 2 * sent
-            fx.wait_for(lambda: status_values(diagnostics, NODE)[2].get('messages seen') == str(total), 60,
+            fx.wait_for(lambda: fx.status_values(diagnostics, NODE)[2].get('messages seen') == str(total), 60,
                         '%d messages seen by the node' % total)
-            level, message, values = status_values(diagnostics, NODE)
+            level, message, values = fx.status_values(diagnostics, NODE)
             rss_end = rss_mb(node.pid)
             sys.stderr.write('load: %d + %d messages in %.0f s at %.0f Hz each; messages seen %s, lost %s, '
                              'buffered %s; intake queue max %d; RSS start %.1f MB, end %.1f MB, max %.1f MB\n'

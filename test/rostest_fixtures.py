@@ -150,6 +150,34 @@ def wait_for(predicate, timeout, what):
     raise AssertionError('timed out after %g s waiting for %s' % (timeout, what))
 
 
+def status_values(diagnostics, node):
+    """``(level, message, {key: value})`` of the newest status of cc_log node ``node`` in ``diagnostics`` (the
+    DiagnosticArrays received so far); ``(None, '', {})`` before the first."""
+    for array in reversed(diagnostics):
+        for status in array.status:
+            if status.name == 'cc_log: %s' % node:
+                return status.level, status.message, {kv.key: kv.value for kv in status.values}
+    return None, '', {}
+
+
+def received(diagnostics, node):
+    """Messages that ``node`` has received, by its newest status: fed to its logger or still in its intake
+    queue (-1 before the first status)."""
+    values = status_values(diagnostics, node)[2]
+    if 'messages seen' not in values:
+        return -1
+    return int(values['messages seen']) + int(values.get('intake queue', 0))
+
+
+def settled(diagnostics, node, count):
+    """Whether ``node`` has fed all of ``count`` messages to its logger and written what it had to: nothing
+    in its intake or writer queue, no window open (smart nodes: as many saved as opened, or more: parts)."""
+    values = status_values(diagnostics, node)[2]
+    return (int(values.get('messages seen', -1)) >= count and values.get('intake queue') == '0'
+            and values.get('writer queue') == '0'
+            and int(values.get('windows opened', 0)) <= int(values.get('windows saved', 0)))
+
+
 def subscribed(topic, node):
     """Whether ``node`` is registered with the master as a subscriber of ``topic``."""
     import rosgraph

@@ -94,11 +94,7 @@ class SmartWindowTest(unittest.TestCase):
 
     def status_of(self, node):
         """The newest /diagnostics values of ``node`` (a dict; empty before the first)."""
-        for array in reversed(self.diagnostics):
-            for status in array.status:
-                if status.name == 'cc_log: %s' % node:
-                    return {kv.key: kv.value for kv in status.values}
-        return {}
+        return fx.status_values(self.diagnostics, node)[2]
 
     def written(self):
         return [e for e in self.events if e.event == AnomalyEvent.WRITTEN]
@@ -197,17 +193,12 @@ class SmartWindowTest(unittest.TestCase):
             node = fx.start(script, '__name:=' + name, '_directory:=' + os.path.join(blocker, 'logs'),
                             '_diagnostic_period:=0.2', *extra, env={'HOME': home})
             try:
-                def status():
-                    for array in reversed(self.diagnostics):
-                        for item in array.status:
-                            if item.name == 'cc_log: ' + name:
-                                return item
-                fx.wait_for(lambda: status() is not None, 30, 'diagnostics of ' + name)
-                item = status()
-                values = {kv.key: kv.value for kv in item.values}
-                self.assertEqual(item.level, DiagnosticStatus.WARN, item.message)
-                self.assertIn('cannot be used', item.message)
-                self.assertTrue(item.message.endswith('logging to ' + in_use), item.message)
+                fx.wait_for(lambda: fx.status_values(self.diagnostics, name)[0] is not None, 30,
+                            'diagnostics of ' + name)
+                level, message, values = fx.status_values(self.diagnostics, name)
+                self.assertEqual(level, DiagnosticStatus.WARN, message)
+                self.assertIn('cannot be used', message)
+                self.assertTrue(message.endswith('logging to ' + in_use), message)
                 self.assertEqual(values['directory'], in_use)
             finally:
                 fx.stop(node)
@@ -223,7 +214,8 @@ class SmartWindowTest(unittest.TestCase):
         (lo, hi), = fx.expected_windows(run_fires, RUN.stop - RUN.start, PRE, POST)
         odom, imu = self.publish(RUN)
         fx.wait_for(lambda: self.written(), 20, 'the window to be written')
-        time.sleep(0.5)
+        fx.wait_for(lambda: fx.settled(self.diagnostics, NODE, len(odom) + len(imu)), 20,
+                    'the node to feed every message and write what it opened')
         files = self.files()
         self.assertEqual(len(files), 1, files)
         metadata, records = log_format.read_window(files[0])
@@ -258,10 +250,7 @@ class SmartWindowTest(unittest.TestCase):
         run = self.stream[:RUN.stop - RUN.start]
         received = len(run) + len(fx.imu_between(self.imu, run[0], run[-1])) + 40
 
-        def taken():  # received by the node: fed to the logger or still in its intake queue
-            values = self.status_of(NODE)
-            return int(values.get('messages seen', 0)) + int(values.get('intake queue', 0))
-        fx.wait_for(lambda: taken() >= received, 10, 'the node receiving the 40 messages')
+        fx.wait_for(lambda: fx.received(self.diagnostics, NODE) >= received, 10, 'the node receiving the 40 messages')
         # the service first feeds what the node received (its feeder drains in batches of up to 0.5 s), so the
         # window is around the newest of the 40
         response = rospy.ServiceProxy('/%s/trigger' % NODE, Trigger)()

@@ -568,7 +568,9 @@ def test_disk_full_keeps_the_window_in_memory_and_writes_it_when_space_returns(c
     assert stats['messages_dropped'] + stats['messages_queued'] + stats['messages_buffered'] == 200
     failed = [e for e in events if e.kind == FAILED]
     assert len(failed) == 1 and 'retrying' in failed[0].error
-    time.sleep(0.3)
+    deadline = time.time() + 10
+    while logger.stats()['write_retries'] < 2 and time.time() < deadline:
+        time.sleep(0.02)
     assert logger.stats()['write_retries'] >= 2  # it keeps trying, the writer thread is alive
     disk.failing = False
     assert logger.close(30)
