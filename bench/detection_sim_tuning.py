@@ -6,13 +6,15 @@ minutes and stride, and the smart logger's retrigger rule, judged on whole runs 
     python3 bench/detection_sim_tuning.py                 # the grid below (a few minutes)
     python3 bench/detection_sim_tuning.py --quick         # tiny run (smoke test)
     python3 bench/detection_sim_tuning.py --windows 1s --train-minutes 8 --retrigger onset
+    python3 bench/detection_sim_tuning.py --windows 1s,2s --train-minutes 16 --retrigger event --progress 500
 
 For every (feature window, training minutes, stride):
 
 1. training: a nominal simulated run (cc_log.sim.Simulator, seed ``--train-seed``, no anomalies, 100 Hz), its
    sliding feature vectors one every ``stride`` messages computed as the smart logger computes them, then
    ``learning.train`` on nominal vectors only (defaults: nu, gamma, held-out threshold) -- exactly what
-   ``demo.py`` does;
+   ``demo.py`` does; with ``--progress WINDOW`` also a model of the ``progress`` feature set, run as a second
+   classifier trigger (as a configuration with two classifiers runs them);
 2. test runs, each replayed message by message through ``SmartLogger`` (the class behind the live node and
    ``cclog replay``; json-xz, pre/post 100 messages, IMU as a side topic), once per retrigger rule:
    - ``run10``: 10 minutes, 6 anomalies (one of each type), seed ``--run-seed``, gap 20 s (the storage
@@ -37,17 +39,21 @@ import common  # noqa: E402
 
 from cc_log import learning, sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
+from cc_log.triggers import ClassifierTrigger  # noqa: E402
 
 
 SHORT = {'planning_failure': 'plan', 'collision': 'coll', 'sudden_acceleration': 'accel',
          'excessive_twisting': 'twist', 'localization_jump': 'loc', 'wheels_slipping': 'slip'}
 
 
-def replay(model, records, directory, retrigger, pre, post):
-    """Feed records to a SmartLogger; return (stats, windows [{start, end, messages, bytes, triggers}])."""
+def replay(model, records, directory, retrigger, pre, post, progress=None):
+    """Feed records to a SmartLogger (with a second classifier of the ``progress`` model when given); return
+    (stats, windows [{start, end, messages, bytes, triggers}])."""
     os.makedirs(directory)
+    triggers = [] if progress is None else [ClassifierTrigger('progress', progress, [sim.ODOM_TOPIC],
+                                                              retrigger=retrigger)]
     result = common.smart_replay(model, records, sim.ODOM_TOPIC, directory, side_topics=(sim.IMU_TOPIC,),
-                                 pre=pre, post=post, retrigger=retrigger)
+                                 pre=pre, post=post, retrigger=retrigger, triggers=triggers)
     shutil.rmtree(directory)
     return result['stats'], result['windows']
 
@@ -76,7 +82,10 @@ def main(argv=None):
     parser.add_argument('--windows', default='500,2s,1s', help='feature windows to compare (comma-separated)')
     parser.add_argument('--train-minutes', default='8,16', help='nominal training minutes (comma-separated)')
     parser.add_argument('--strides', default='10', help='messages between training vectors (comma-separated)')
-    parser.add_argument('--retrigger', default='every,onset', help='SmartLogger retrigger rules to compare')
+    parser.add_argument('--retrigger', default='every,onset,event', help='SmartLogger retrigger rules to compare')
+    parser.add_argument('--progress', metavar='WINDOW',
+                        help='also a classifier of the progress feature set over WINDOW (e.g. 500), trained on the '
+                        'same nominal run (the "motion + progress" column of bench/detection_sim.py)')
     parser.add_argument('--runs', default='run10,demo', help='test runs: run10, demo')
     parser.add_argument('--pre', default='100')
     parser.add_argument('--post', default='100')
@@ -103,7 +112,8 @@ def main(argv=None):
                 '%s = %g min, %d anomalies (one per type), gap %g s, seed %d, IMU side topic' % (
                     name, run_specs[name].minutes, run_specs[name].anomalies, run_specs[name].gap,
                     run_specs[name].seed) for name in runs)),
-        'smart logger: json-xz, pre %s, post %s' % (args.pre, args.post)])
+        'smart logger: json-xz, pre %s, post %s%s' % (args.pre, args.post, '; beside motion a progress classifier '
+                                                      'over %s' % args.progress if args.progress else '')])
 
     tests = {}
     for name in runs:
@@ -121,16 +131,24 @@ def main(argv=None):
         for window in windows:
             config = FeatureConfig('motion', window)
             reach = window_seconds(config, 100.0)
+            if args.progress:  # a progress fire counts up to its own window after the anomaly's end
+                reach = max(reach, window_seconds(FeatureConfig('progress', args.progress), 100.0))
             for minutes in minutes_list:
                 for stride in strides:
                     _, X = common.window_vectors(training[minutes], sim.ODOM_TOPIC, config, stride=stride)
                     with common.Timer() as timer:
                         model, info = learning.train(X, config=config)
+                        progress = None
+                        if args.progress:
+                            progress_config = FeatureConfig('progress', args.progress)
+                            _, Xp = common.window_vectors(training[minutes], sim.ODOM_TOPIC, progress_config,
+                                                          stride=stride)
+                            progress, _ = learning.train(Xp, config=progress_config)
                     for name in runs:
                         records, truth = tests[name]
                         for rule in rules:
                             stats, saved = replay(model, records, os.path.join(tmp, 'w%d' % len(rows)), rule,
-                                                  args.pre, args.post)
+                                                  args.pre, args.post, progress)
                             caught, n_caught, false, delays = judge(truth, saved, reach)
                             by_type = ' '.join('%s%d' % (SHORT[k], caught[k]) for k in sim.ANOMALY_TYPES
                                                if any(e['type'] == k for e in truth))

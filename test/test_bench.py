@@ -103,6 +103,14 @@ def test_slowed_copies_keep_the_path_and_the_twist_lag():
     assert 'all runs: caught ' in out
 
 
+def test_detection_sim_tuning_quick_with_a_progress_classifier():
+    out = run('detection_sim_tuning.py', '--quick', '--retrigger', 'event', '--progress', '500')
+    assert 'beside motion a progress classifier over 500' in out
+    rows = [line for line in out.splitlines() if line.startswith('| 1s ')]
+    assert len(rows) == 1 and '| demo ' in rows[0] and '| event ' in rows[0]
+    assert re.search(r'\| \d/6 +\| plan\d coll\d accel\d twist\d loc\d slip\d', rows[0]), rows[0]
+
+
 def test_detection_ranker_quick():
     out = run('detection_ranker.py', '--runs', 'icelab_normal_plan', '--seeds', '0', '--train-on', 'self')
     row = next(line for line in out.splitlines() if line.startswith('| icelab_normal_plan '))
