@@ -3,9 +3,11 @@
 
 Before the node starts, two models are trained on the first 40 s of the real Husky bag (odometry motion,
 and IMU shocks, each with injected examples as anomalous vectors) and a configuration file names them with a
-rule on /diagnostics. The node is started as a real process with ``_config:=``; this node then publishes:
+rule on a DiagnosticArray topic (``/robot_diagnostics``: the node's own statuses go to /diagnostics, where this
+node reads how many messages it has received before it asks for a window or counts the windows). The node is
+started as a real process with ``_config:=``; this node then publishes:
 
-1. nominal odometry while a status on /diagnostics switches to ERROR and flaps: exactly one window, ``pre``
+1. nominal odometry while a status on the rule's topic switches to ERROR and flaps: exactly one window, ``pre``
    before and ``post`` after the odometry message the first ERROR followed, named after the rule, its reason
    the status;
 2. a burst in the odometry and a shock in the IMU overlapping in time: the two classifiers' windows merge
@@ -49,6 +51,7 @@ IMU_CONFIG = FeatureConfig('imu', '20')
 NOMINAL = slice(700, 800)      # odometry the motion model calls nominal (smart_window.test's manual phase)
 OVERLAP = slice(400, 600)      # the burst at local index 100, the IMU shock 0.5 s later
 ERROR_AT = 40                  # the first ERROR follows this odometry message of NOMINAL
+RULE_TOPIC = '/robot_diagnostics'  # the rule's DiagnosticArray topic
 
 
 def shock(records, first, count=3, amplitude=25.0):
@@ -101,9 +104,11 @@ class TriggersTest(unittest.TestCase):
         rospy.Subscriber('/%s/anomalies' % NODE, AnomalyEvent, cls.events.append, queue_size=None)
         cls.odom_pub = rospy.Publisher('/husky_odom', Odometry, queue_size=10000)
         cls.imu_pub = rospy.Publisher('/imu', Imu, queue_size=10000)
-        cls.diag_pub = rospy.Publisher('/diagnostics', DiagnosticArray, queue_size=1000)
+        cls.diag_pub = rospy.Publisher(RULE_TOPIC, DiagnosticArray, queue_size=1000)
+        cls.diagnostics, cls.sent = [], 0
+        rospy.Subscriber('/diagnostics', DiagnosticArray, cls.diagnostics.append, queue_size=None)
         cls.node = fx.start('smart_logger.py', '__name:=' + NODE, '_config:=' + cls.config, '_directory:=' + cls.out,
-                            '_diagnostic_period:=0')
+                            '_diagnostic_period:=0.1')
         rospy.wait_for_service('/%s/trigger_window' % NODE, timeout=30)
         fx.wait_for(lambda: all(pub.get_num_connections() for pub in (cls.odom_pub, cls.imu_pub, cls.diag_pub)),
                     20, 'the smart logger to subscribe')
@@ -120,14 +125,21 @@ class TriggersTest(unittest.TestCase):
         """Publish (publisher, msg) in order, ``pause`` s apart (wall time)."""
         for publisher, msg in items:
             publisher.publish(msg)
+            type(self).sent += 1
             time.sleep(pause)
+
+    def wait_received(self):
+        """Until the node has received every message published so far (its /diagnostics)."""
+        fx.wait_for(lambda: fx.received(self.diagnostics, NODE) >= self.sent, 10, 'the node to receive %d messages'
+                    % self.sent)
 
     def written(self):
         return [e for e in self.events if e.event == AnomalyEvent.WRITTEN]
 
     def new_windows(self, before, count, what):
         fx.wait_for(lambda: len(self.written()) >= before + count, 30, what)
-        time.sleep(0.3)
+        fx.wait_for(lambda: fx.settled(self.diagnostics, NODE, self.sent), 10,
+                    'the node to feed every message and write every window it opened')
         paths = [e.path for e in self.written()[before:]]
         self.assertEqual(len(paths), count, paths)
         return [(path,) + log_format.read_window(path) for path in paths]
@@ -145,7 +157,7 @@ class TriggersTest(unittest.TestCase):
                 level = 2 if i == ERROR_AT or (ERROR_AT < i <= ERROR_AT + 20 and i % 3 == 0) else 0
                 items.append((self.diag_pub, diagnostics(record.stamp + 0.05, level)))
         self.publish(items[:2])
-        time.sleep(0.3)  # the node sees the first messages before the stream goes on
+        self.wait_received()  # the node sees the first messages before the stream goes on
         self.publish(items[2:])
         [(path, metadata, records)] = self.new_windows(0, 1, 'the rule window')
         kept = [r for r in records if r.topic == '/husky_odom']
@@ -191,7 +203,7 @@ class TriggersTest(unittest.TestCase):
         self.assertFalse(fx.flagged(self.motion, self.odom[NOMINAL.stop - 30:NOMINAL.stop + 60]))
         before = len(self.written())
         self.publish([(self.odom_pub, r.msg) for r in odom[:30]])
-        time.sleep(0.5)  # the request applies to the newest message fed
+        self.wait_received()  # the request applies to the newest message received
         response = rospy.ServiceProxy('/%s/trigger_window' % NODE, TriggerWindow)(
             reason='operator saw a wobble', before=0.5, after=1.0)
         self.assertTrue(response.success, response.message)
@@ -212,11 +224,11 @@ class TriggersTest(unittest.TestCase):
         odom = fx.inject(self.odom[OVERLAP.start:OVERLAP.stop + 200], 100)
         imu = [r for r in self.imu if odom[0].stamp <= r.stamp <= odom[-1].stamp]
         bag = os.path.join(self.tmp, 'run.bag')
-        diag = [Record(r.stamp + 0.05, '/diagnostics', diagnostics(r.stamp + 0.05, 2 if i == 250 else 0))
+        diag = [Record(r.stamp + 0.05, RULE_TOPIC, diagnostics(r.stamp + 0.05, 2 if i == 250 else 0))
                 for i, r in enumerate(odom) if i % 10 == 0]
         import rosbag
         merged = sorted([(r.stamp, '/husky_odom', r.msg) for r in odom] + [(r.stamp, '/imu', r.msg) for r in imu]
-                        + [(r.stamp, '/diagnostics', r.msg) for r in diag], key=lambda x: x[0])
+                        + [(r.stamp, RULE_TOPIC, r.msg) for r in diag], key=lambda x: x[0])
         with rosbag.Bag(bag, 'w') as out:
             for stamp, topic, msg in merged:
                 out.write(topic, msg, t=rospy.Time.from_sec(stamp))
@@ -235,13 +247,15 @@ class TriggersTest(unittest.TestCase):
         live_dir = os.path.join(self.tmp, 'live')
         rospy.set_param('/use_sim_time', True)
         node = fx.start('smart_logger.py', '__name:=smart_logger_play', '_config:=' + config,
-                        '_directory:=' + live_dir, '_diagnostic_period:=0')
+                        '_directory:=' + live_dir, '_diagnostic_period:=0.1')
         try:
             fx.wait_for(lambda: fx.subscribed('/husky_odom', '/smart_logger_play'), 30, 'the node to subscribe')
-            play = subprocess.run(['rosbag', 'play', '--clock', '-q', bag], capture_output=True, text=True,
-                                  timeout=120)
+            # the node is the only subscriber left: rosbag waits for it on every topic
+            play = subprocess.run(['rosbag', 'play', '--clock', '-q', '--wait-for-subscribers', bag],
+                                  capture_output=True, text=True, timeout=120)
             self.assertEqual(play.returncode, 0, play.stderr)
-            time.sleep(1.0)  # the last messages reach the node
+            fx.wait_for(lambda: fx.received(self.diagnostics, 'smart_logger_play') >= len(merged), 20,
+                        'the node to receive the whole bag')
         finally:
             code, out, err = fx.stop(node)
             rospy.set_param('/use_sim_time', False)
@@ -261,7 +275,7 @@ windows: {pre: %d, post: %d}
 triggers:
   - {name: odom_motion, kind: classifier, model: %s, topics: [/husky_odom], classify_every: '1'}
   - {name: imu_shock, kind: classifier, model: %s, topics: [/imu], classify_every: '1', retrigger: onset}
-  - {name: motor_error, kind: rule, topic: /diagnostics, level: ERROR, status: 'motor*', hold_off: 5s}
+  - {name: motor_error, kind: rule, topic: /robot_diagnostics, level: ERROR, status: 'motor*', hold_off: 5s}
 """
 
 
