@@ -31,9 +31,9 @@ non-adjacent one (LZMA finds those repeats in the plain column, not in its diffe
 Layout 1 (no ``delta``) is still read.
 
 ``connection`` (optional) keeps what the publisher's connection header said of it (``callerid``, ``latching``)
-when the records came with connection headers (live, ``cclog replay``): that of the topic's first record. A
-record read back carries a connection header of its class with these keys, so ``cclog export --to bag`` writes
-a latched topic (``/tf_static``) latched again.
+when the records came with connection headers (live, ``cclog replay``): that of the topic's first record with
+one. A record read back carries a connection header of its class with these keys, so ``cclog export --to bag``
+writes a latched topic (``/tf_static``) latched again.
 
 ``precision`` (optional, lossy): ``{field pattern: step}`` rounds every float of a field matching the
 pattern (``fnmatch`` on the dotted name, e.g. ``pose.pose.position.*``) to a multiple of its step before
@@ -591,9 +591,9 @@ def document(records, metadata, delta=differences):
             index[record.topic] = len(sections)
             sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
                              'definition': msg_codec.compact_definition(msg._full_text),
-                             'records': [], 'connection': {}})
+                             'records': [], 'connection': None})
         section = sections[index[record.topic]]
-        if record.connection and not section['connection']:
+        if section['connection'] is None and record.connection:  # the first record with a connection header
             section['connection'] = raw_message.publisher_keys(record.connection)
         if msg._type != section['type']:
             raise ValueError('topic %s: holds both %s and %s' % (record.topic, section['type'], msg._type))
