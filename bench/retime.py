@@ -65,6 +65,7 @@ def speed_profile(duration, dt, ramp_down, ramp_up, rng):
 
 
 def state(msg):
+    """``(position, orientation quaternion, twist: linear then angular)`` of a nav_msgs/Odometry, as tuples."""
     pose, twist = msg.pose.pose, msg.twist.twist
     p = (pose.position.x, pose.position.y, pose.position.z)
     q = (pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w)
