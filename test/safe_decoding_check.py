@@ -19,7 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
-from reliability_crash_check import Streamer, make_model, status_values  # noqa: E402
+from reliability_crash_check import Streamer, make_model  # noqa: E402
 from test_reliability import as_leftover  # noqa: E402
 from test_safe_decoding import crafted_class, crafted_window  # noqa: E402
 
@@ -54,9 +54,9 @@ class SafeDecodingTest(unittest.TestCase):
             for i in range(50):
                 evil.publish(x=float(i))
             streamer.publish(0.5, 200, imu=False)
-            fx.wait_for(lambda: status_values(diagnostics, NODE)[2].get(REFUSED) == '50', 20,
+            fx.wait_for(lambda: fx.status_values(diagnostics, NODE)[2].get(REFUSED) == '50', 20,
                         '50 refused messages on /diagnostics')
-            values = status_values(diagnostics, NODE)[2]
+            values = fx.status_values(diagnostics, NODE)[2]
             self.assertEqual(values['leftovers unrecoverable'], '1')
             self.assertIsNone(node.poll())
         finally:
