@@ -15,6 +15,8 @@ import copy
 import math
 import random
 
+import numpy as np
+
 from cc_log.window_buffer import Record
 
 STOP_SECONDS = (1.0, 8.0)     # how long a stop holds
@@ -78,14 +80,11 @@ def _yaw(q):
 
 
 def _correlation(a, b):
-    n = len(a)
-    if n < 3:
+    """Pearson's correlation of two equal-length sequences (0 when either does not vary)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if len(a) < 3 or a.std() == 0.0 or b.std() == 0.0:
         return 0.0
-    ma, mb = sum(a) / n, sum(b) / n
-    sab = sum((x - ma) * (y - mb) for x, y in zip(a, b))
-    saa = sum((x - ma) ** 2 for x in a)
-    sbb = sum((y - mb) ** 2 for y in b)
-    return sab / math.sqrt(saa * sbb) if saa > 0.0 and sbb > 0.0 else 0.0
+    return float(np.corrcoef(a, b)[0, 1])
 
 
 def twist_lag(t, states, max_lag=1.0):

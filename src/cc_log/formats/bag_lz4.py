@@ -173,7 +173,7 @@ def _serialized(msg):
 def write_record(bag, record, time):
     """Write one Record into an open rosbag at ``time``: its serialized bytes with the publisher's connection
     header when it has them (latching and callerid kept), else the decoded message."""
-    if record.raw is not None and record.connection:
+    if _held_raw(record):
         header = dict(record.connection, topic=record.topic)
         bag.write(record.topic, (header['type'], record.raw, header['md5sum'],
                                  raw_message.message_class(record.connection)), time, raw=True,
