@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from cc_log import log_format, msg_codec
+from cc_log import formats, log_format, msg_codec
 from cc_log.formats import json_xz
 from cc_log.log_format import Format, read_window, write_window
 from cc_log.window_buffer import LogWindow, Record, Trigger
@@ -142,7 +142,7 @@ def test_husky_odometry_and_imu_round_trip(fmt, husky_window, tmp_path):
     assert metadata['reasons'] == ['classifier']
     assert [t['score'] for t in metadata['triggers']] == [-0.1234, -0.5]
     assert metadata['triggers'][0]['stamp'] == husky_window.triggers[0].stamp
-    assert metadata['codec'] == fmt and metadata['layout'] == 2
+    assert metadata['codec'] == fmt and metadata['layout'] == formats.get(fmt).LAYOUT_VERSION
     assert metadata['cc_log_version'] == __import__('cc_log').__version__
     assert metadata['robot'] == 'husky' and metadata['rate'] == 10
     assert metadata['start_utc'].startswith('2015-05-21T19:')

@@ -64,34 +64,58 @@ def window_metadata(window, codec, extra=None):
     triggers that have one), reasons and names (distinct, in order: every trigger of the window), part (0, or
     1, 2, ... for a split window), codec, cc_log_version.
     """
-    types, counts = {}, {}
-    for record in window.records:
-        types.setdefault(record.topic, raw_message.type_of(record))
-        counts[record.topic] = counts.get(record.topic, 0) + 1
-    triggers = []
-    for trigger in window.triggers:
-        entry = {'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
-        if getattr(trigger, 'name', None) is not None:
-            entry['name'] = str(trigger.name)
-        triggers.append(entry)
-    meta = {
-        'topics': list(types),
-        'types': types,
-        'counts': counts,
-        'count': len(window.records),
-        'start': float(window.start),
-        'end': float(window.end),
-        'start_utc': utc_text(window.start),
-        'end_utc': utc_text(window.end),
-        'triggers': triggers,
-        'reasons': list(dict.fromkeys(trigger['reason'] for trigger in triggers)),
-        'names': list(dict.fromkeys(trigger.get('name', trigger['reason']) for trigger in triggers)),
-        'part': int(getattr(window, 'part', 0)),
-        'codec': codec,
-        'cc_log_version': __version__,
-    }
-    meta.update(extra or {})
-    return meta
+    contents = Contents()
+    contents.add(window.records)
+    return contents.metadata(window.triggers, getattr(window, 'part', 0), codec, extra)
+
+
+class Contents(object):
+    """What the metadata says of a window's records (types, counts, span), gathered a part at a time."""
+
+    def __init__(self):
+        self.types, self.counts = {}, {}
+        self.count = 0
+        self.start = self.end = None
+
+    def add(self, records):
+        """Take the next records of the window, in window order."""
+        types, counts = self.types, self.counts
+        for record in records:
+            if record.topic not in types:
+                types[record.topic] = raw_message.type_of(record)
+            counts[record.topic] = counts.get(record.topic, 0) + 1
+        if records:
+            self.count += len(records)
+            if self.start is None:
+                self.start = records[0].stamp
+            self.end = records[-1].stamp
+
+    def metadata(self, triggers, part, codec, extra=None):
+        """``window_metadata`` of the records taken."""
+        entries = []
+        for trigger in triggers:
+            entry = {'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
+            if getattr(trigger, 'name', None) is not None:
+                entry['name'] = str(trigger.name)
+            entries.append(entry)
+        meta = {
+            'topics': list(self.types),
+            'types': dict(self.types),
+            'counts': dict(self.counts),
+            'count': self.count,
+            'start': float(self.start),
+            'end': float(self.end),
+            'start_utc': utc_text(self.start),
+            'end_utc': utc_text(self.end),
+            'triggers': entries,
+            'reasons': list(dict.fromkeys(entry['reason'] for entry in entries)),
+            'names': list(dict.fromkeys(entry.get('name', entry['reason']) for entry in entries)),
+            'part': int(part),
+            'codec': codec,
+            'cc_log_version': __version__,
+        }
+        meta.update(extra or {})
+        return meta
 
 
 def trigger_name(trigger):
@@ -149,13 +173,15 @@ def _reason_text(window):
     return text or 'window'
 
 
-def base_name(window):
-    """``cc_log_<UTC of the first stamp>_<name of the first trigger>[_part<N>]`` (no extension)."""
+def base_name(window, part=None):
+    """``cc_log_<UTC of the first stamp>_<name of the first trigger>[_part<N>]`` (no extension; ``part``: None for
+    the window's own)."""
     moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
     stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
     name = PREFIX + stamp + '_' + _reason_text(window)
-    if getattr(window, 'part', 0):
-        name += '_part%d' % window.part
+    part = getattr(window, 'part', 0) if part is None else part
+    if part:
+        name += '_part%d' % part
     return name
 
 
@@ -241,6 +267,114 @@ def write_window(window, directory, fmt, metadata=None, base=None):
     with target as stream:
         write(stream)
     return target.path, target.size
+
+
+def streams(fmt):
+    """Whether windows of format ``fmt`` are written a part at a time into one file (``WindowFile``)."""
+    return hasattr(formats.get(fmt), 'WindowStream')
+
+
+class WindowFile(object):
+    """One window file written a part at a time, for a window handed on in parts (``LogWindow.part`` 1, 2, ...,
+    the last ``final``), by a format with a ``WindowStream``: ``append(part, metadata)`` for each part, then
+    ``finish(metadata)`` -> ``(path, bytes)``. The file is ``<base name of the window>.<ext>.tmp-<pid>`` until
+    it is finished (a crash leaves a leftover that ``recovery`` salvages), then gets its final name as
+    ``write_window``'s files do. ``summary``: the window as a whole (triggers, start, end, its length) once a part
+    was appended. Metadata counters that every part carries (``SUMMED``) are summed over the parts; ``lost``:
+    messages of parts that could not be written (said in the metadata)."""
+
+    SUMMED = ('dropped', 'undecodable')
+
+    def __init__(self, directory, fmt):
+        self.directory = directory
+        self.format = formats.check(fmt)
+        self._module = formats.get(fmt)
+        self._target = self._stream = None
+        self._contents = Contents()
+        self._summed = {}
+        self.triggers = []
+        self.metadata = None  # of the last part
+        self.lost = 0
+
+    def append(self, window, metadata=None):
+        """Write the records of the next part (OSError, ValueError: nothing of it was written; try again)."""
+        if self._stream is None:
+            ensure_directory(self.directory)
+            base, extension = base_name(window, part=0), self._module.EXTENSION
+            target = safe_files.AtomicFile(os.path.join(self.directory, base + extension),
+                                           names=final_names(self.directory, base, extension), keep=True)
+            stream = target.__enter__()
+            self._target, self._stream = target, self._module.WindowStream(stream)
+        if window.records:
+            first = self._contents.count == 0
+            self._stream.append(window.records, self._metadata(window, metadata) if first else None)
+            self._contents.add(window.records)
+        self._sum(metadata)
+        self.triggers, self.metadata = list(window.triggers), metadata
+
+    def lose(self, window, metadata=None):
+        """A part that could not be written: counted in the file's metadata."""
+        self.lost += len(window.records)
+        self._sum(metadata)
+        self.triggers, self.metadata = list(window.triggers), metadata
+
+    def finish(self, window, metadata=None):
+        """Append the last part, write the metadata, close the file and give it its final name: (path, bytes)."""
+        self.append(window, metadata)
+        if not self._contents.count:
+            self.discard()
+            raise ValueError('window: has no records')
+        self._stream.finish(self._metadata(window, metadata))
+        target, self._target = self._target, None
+        try:
+            target.__exit__(None, None, None)
+        except OSError as error:
+            raise OSError(error.errno, '%s (the window is kept in %s for recovery at the next start)'
+                          % (error.strerror or error, target.tmp)) from None
+        return target.path, target.size
+
+    def abandon(self):
+        """Stop writing; the unfinished file stays under its temporary name, a leftover for ``recovery``."""
+        if self._target is not None:
+            target, self._target = self._target, None
+            target.abandon()
+
+    def discard(self):
+        """Remove the unfinished file (nothing of it is kept)."""
+        if self._target is not None:
+            target, self._target = self._target, None
+            target.__exit__(ValueError, ValueError('discarded'), None)
+
+    @property
+    def summary(self):
+        """The window as a whole: ``triggers``, ``start``, ``end``, ``part`` 0 and its length."""
+        return _Summary(self.triggers, self._contents.start, self._contents.end, self._contents.count)
+
+    def _sum(self, metadata):
+        for key in self.SUMMED:
+            for topic, count in ((metadata or {}).get(key) or {}).items():
+                self._summed.setdefault(key, {})[topic] = self._summed.get(key, {}).get(topic, 0) + count
+
+    def _metadata(self, window, metadata):
+        contents = self._contents
+        if not contents.count:  # the first part: what the provisional metadata says
+            contents = Contents()
+            contents.add(window.records)
+        meta = contents.metadata(window.triggers, 0, self.format, metadata)
+        meta.update(self._summed)
+        if self.lost:
+            meta['lost'] = self.lost
+        return meta
+
+
+class _Summary(object):
+    __slots__ = ('triggers', 'start', 'end', 'count', 'part', 'records')
+
+    def __init__(self, triggers, start, end, count):
+        self.triggers, self.start, self.end, self.count, self.part, self.records = triggers, start, end, count, 0, ()
+
+    def __len__(self):
+        return self.count
 
 
 # -- reading --------------------------------------------------------------------------------------------

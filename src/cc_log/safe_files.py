@@ -113,10 +113,12 @@ class AtomicFile(object):
 
     ``names``: the final names to try in order (default: ``path`` alone); ``overwrite``: replace ``path``
     (by rename) instead; ``text``/``newline``: a text stream (UTF-8) instead of a binary one. The stream may be
-    closed inside the block (rosbag closes the file it is given).
+    closed inside the block (rosbag closes the file it is given). ``keep``: a temporary file that cannot be
+    published is left where it is (a leftover for ``recovery``) instead of removed: for a file written over a
+    long time whose bytes are no longer held anywhere else.
     """
 
-    def __init__(self, path, names=None, overwrite=False, text=False, newline=None):
+    def __init__(self, path, names=None, overwrite=False, text=False, newline=None, keep=False):
         self.path = path
         self.size = None
         self.tmp = None
@@ -124,6 +126,7 @@ class AtomicFile(object):
         self._overwrite = overwrite
         self._text = text
         self._newline = newline
+        self._keep = keep
         self._fd = None
         self.stream = None
 
@@ -147,6 +150,19 @@ class AtomicFile(object):
             self._discard()
             raise
         return self.stream
+
+    def abandon(self):
+        """Give up writing: close the file and leave it under its temporary name (a leftover for ``recovery``)."""
+        try:
+            self.stream.close()
+        except OSError:
+            pass
+        self._release()
+
+    def _release(self):
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
     def _discard(self):
         if self._fd is not None:
@@ -172,7 +188,10 @@ class AtomicFile(object):
                 else:
                     self.path = publish(self.tmp, self._names or [self.path])
         except BaseException:
-            self._discard()
+            if self._keep:
+                self._release()
+            else:
+                self._discard()
             raise
         if kind is not None:
             self._discard()

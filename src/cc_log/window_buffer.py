@@ -126,12 +126,17 @@ def budget_bytes(max_buffer_mb, name='max_buffer_mb'):
 
 
 class LogWindow(object):
-    """A logging window: records in stamp order and the triggers that opened and extended it."""
+    """A logging window: records in stamp order and the triggers that opened and extended it.
 
-    def __init__(self, records, triggers, part=0):
+    A window too long or too large to be held whole is handed on in parts (``part`` 1, 2, ...), all with the
+    same ``key``, the last one ``final`` (it may hold no record: the window ended right after a part)."""
+
+    def __init__(self, records, triggers, part=0, final=True, key=None):
         self.records = records
         self.triggers = triggers
-        self.part = part  # 0 for a whole window; 1, 2, ... when a long window was split at max_window
+        self.part = part    # 0 for a whole window; 1, 2, ... for the parts of a long one
+        self.final = final  # the last (or only) part of its window
+        self.key = key      # the same for every part of one window (None: not known)
 
     @property
     def start(self):
@@ -160,7 +165,10 @@ class _OpenWindow(object):
     """A window still collecting driving records (open) or waiting to learn whether the next one touches
     it (pending)."""
 
+    _keys = itertools.count(1)
+
     def __init__(self, records, trigger, post):
+        self.key = next(self._keys)
         self.records = list(records)
         self.triggers = []
         self.part = 0
@@ -277,8 +285,7 @@ class WindowBuffer(object):
         self._bytes += record.cost
         if self._pre_count is None or len(ring) > self._pre_count + 1:  # else nothing to trim
             if self._trim_ring(self.pre) and self._pending is not None:
-                if self._pending.records:
-                    done.append(self._emit(self._pending))
+                done.extend(self._finish(self._pending))
                 self._pending = None
         if self._side:
             self._prune_side()
@@ -356,10 +363,18 @@ class WindowBuffer(object):
         """Complete every window now (end of stream): the open one is written with what it has."""
         done = []
         for window in (self._pending, self._open):
-            if window is not None and window.records:
-                done.append(self._emit(window))
+            if window is not None:
+                done.extend(self._finish(window))
         self._pending = self._open = None
         return done
+
+    def _finish(self, window):
+        """The last part of a window (or the whole window); nothing for a window that holds nothing."""
+        if window.records:
+            return [self._emit(window)]
+        if window.part:  # its records went out in parts: say that it ended
+            return [LogWindow([], list(window.triggers), window.part, True, window.key)]
+        return []
 
     def _reset(self):
         """Start over after time jumped backwards (bag loop, simulator reset)."""
@@ -386,13 +401,12 @@ class WindowBuffer(object):
             # Written in parts, as max_window splits: what the window holds now, with every side record held.
             window = self._open
             window.part = max(window.part, 1)
-            done.append(self._emit(window, everything=True))
+            done.append(self._emit(window, everything=True, final=False))
             window.part += 1
             window.records = []
             window.continued = True
         if self._over_budget() and self._pending is not None:
-            if self._pending.records:
-                done.append(self._emit(self._pending))
+            done.extend(self._finish(self._pending))
             self._pending = None
         while self._over_budget() and (len(self._ring) > 1 or self._side):
             # Outside every window: the oldest go first; the newest driving record stays (a trigger needs it).
@@ -415,7 +429,7 @@ class WindowBuffer(object):
         while window.records and self._full(window):
             size = self.max_window.count or len(window.records)
             window.part = max(window.part, 1)
-            done.append(self._emit(window, window.records[:size]))
+            done.append(self._emit(window, window.records[:size], final=False))
             window.part += 1
             window.records = window.records[size:]
             window.continued = True
@@ -435,7 +449,7 @@ class WindowBuffer(object):
         while side and side[0].stamp < oldest:
             self._bytes -= side.popleft().cost
 
-    def _emit(self, window, records=None, everything=False):
+    def _emit(self, window, records=None, everything=False, final=True):
         """Turn a window (or the given first records of it) into a LogWindow with the side records of its
         time span (``everything``: every side record held from its start on), in stamp order. A part after
         the first takes the side records since the previous part (those of its time span and those between)."""
@@ -452,4 +466,4 @@ class WindowBuffer(object):
         self._bytes -= cost
         if side:
             records = sorted(records + side, key=lambda record: record.stamp)
-        return LogWindow(list(records), list(window.triggers), window.part)
+        return LogWindow(list(records), list(window.triggers), window.part, final, window.key)

@@ -28,6 +28,7 @@ import time
 
 from . import disk_guard
 from . import log_format
+from .window_buffer import LogWindow
 
 __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'WRITTEN', 'FAILED', 'DELETED', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
@@ -56,7 +57,7 @@ class Job(object):
     ``write``, a function that writes another file and returns its path. ``what`` names the kind of file
     (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events."""
 
-    __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'failed_at', 'reported')
+    __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole')
 
     def __init__(self, window=None, metadata=None, write=None, what=None, tag=None):
         if (window is None) == (write is None):
@@ -67,6 +68,8 @@ class Job(object):
         self.what = what or (WINDOW if window is not None else 'file')
         self.tag = tag
         self.messages = len(window) if window is not None else 0
+        self.bytes = sum(record.cost for record in window.records) if window is not None else 0  # memory held
+        self.whole = None       # a window written a part at a time, as a whole, once its file is finished
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent
 
@@ -110,6 +113,8 @@ class WindowWriter(object):
         self.last_deleted = ''
         self._closed = False
         self.cpu_seconds = 0.0            # CPU time of the writer thread writing (decoding, compressing, disk)
+        self._streams_parts = log_format.streams(self.format)  # a window's parts go into one file
+        self._streams = {}                # window key -> its log_format.WindowFile being written (writer thread)
         self._queue = queue.Queue()
         self._thread = None
         if background:
@@ -135,6 +140,7 @@ class WindowWriter(object):
                 raise ValueError('submit: the writer is closed')
             self._counts['jobs_queued'] += 1
             self._counts['messages_queued'] += job.messages
+            self._counts['bytes_queued'] += job.bytes
         if self._thread is not None:
             self._queue.put(job)
         else:
@@ -158,13 +164,14 @@ class WindowWriter(object):
         return True
 
     def stats(self):
-        """Counters (a dict): jobs_queued, messages_queued (waiting, held included), windows_saved,
+        """Counters (a dict): jobs_queued, messages_queued, bytes_queued (waiting, held included: the memory their
+        records take), windows_saved,
         messages_kept, stored_bytes, written ({what: files}), jobs_lost, messages_lost, write_errors,
         write_retries, last_error, jobs_held, messages_held, disk_paused, windows_deleted, bytes_deleted,
         last_deleted, queue_depth."""
         with self._lock:
             result = {key: self._counts[key] for key in (
-                'jobs_queued', 'messages_queued', 'messages_kept', 'stored_bytes', 'jobs_lost', 'messages_lost',
+                'jobs_queued', 'messages_queued', 'bytes_queued', 'messages_kept', 'stored_bytes', 'jobs_lost', 'messages_lost',
                 'write_errors', 'write_retries', 'jobs_held', 'messages_held', 'windows_deleted')}
             result['written'] = dict(self._written)
             result['windows_saved'] = self._written[WINDOW]
@@ -204,6 +211,8 @@ class WindowWriter(object):
     def _finish(self):
         self._wait_held(self.close_retry)
         self._retry_held(final=True)
+        for key, stream in list(self._streams.items()):  # a window whose last part never came: finished as it is
+            self._write(Job(LogWindow([], stream.triggers, 1, True, key), stream.metadata))
 
     def _wait_held(self, seconds):
         """Retry held jobs every retry_period for up to ``seconds`` or until none is held."""
@@ -297,17 +306,38 @@ class WindowWriter(object):
             made_room = True
 
     def _write_file(self, job):
-        if job.window is None:
+        """Write a job: ``(path, bytes)``; ``(None, 0)`` for a part appended to a window file not yet finished."""
+        window = job.window
+        if window is None:
             return job.write(), 0
-        return log_format.write_window(job.window, self.directory, self.format, job.metadata)
+        if window.part and window.key is not None and self._streams_parts:
+            stream = self._streams.get(window.key)
+            if stream is None:
+                stream = self._streams[window.key] = log_format.WindowFile(self.directory, self.format)
+            if not window.final:
+                stream.append(window, job.metadata)
+                return None, 0
+            path, nbytes = stream.finish(window, job.metadata)
+            del self._streams[window.key]
+            job.whole = stream.summary
+            return path, nbytes
+        if not window.records:  # the end of a window written as files of its parts: nothing more to write
+            return None, 0
+        return log_format.write_window(window, self.directory, self.format, job.metadata)
 
     def _written_file(self, job, path, nbytes):
         with self._lock:
             self._counts['jobs_queued'] -= 1
             self._counts['messages_queued'] -= job.messages
+            self._counts['bytes_queued'] -= job.bytes
             self._counts['messages_kept'] += job.messages
             self._counts['stored_bytes'] += nbytes
-            self._written[job.what] += 1
+            if path is not None:
+                self._written[job.what] += 1
+        if path is None:  # a part appended to its window's file
+            return
+        if job.whole is not None:  # a window written a part at a time: said as a whole
+            job = Job(job.whole, job.metadata, what=job.what, tag=job.tag)
         self._emit(WriterEvent(WRITTEN, job, path, nbytes, '', False))
         if job.window is not None or job.what == CONTEXT:
             self._quota(keep=path)
@@ -334,8 +364,16 @@ class WindowWriter(object):
         return deleted
 
     def _lose(self, job, error):
+        window = job.window
+        stream = self._streams.get(window.key) if window is not None and window.key is not None else None
+        if stream is not None:
+            stream.lose(window, job.metadata)
+            if window.final:  # what was written stays in its temporary file, for recovery at the next start
+                del self._streams[window.key]
+                stream.abandon()
         with self._lock:
             self._counts['jobs_queued'] -= 1
+            self._counts['bytes_queued'] -= job.bytes
             self._counts['messages_queued'] -= job.messages
             self._counts['jobs_lost'] += 1
             self._counts['messages_lost'] += job.messages

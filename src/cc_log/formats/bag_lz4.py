@@ -40,7 +40,7 @@ EXTENSION = '.bag'
 #: but at 1 kHz the live node's RSS grew 1.7-2.4 KB per buffered message estimated at 0.7 KB (allocator
 #: fragmentation across the receiving threads; bench/memory_live.py --format bag-lz4).
 PART_FACTOR = 4.0
-LAYOUT_VERSION = 2  # 2: the layout holds the records' crc32
+LAYOUT_VERSION = 3  # 2: the layout holds the records' crc32; 3: computed records first (written a part at a time)
 MAGIC = b'#ROSBAG V2.0\n'
 METADATA_TOPIC = '/cc_log/metadata'
 _STRING_DEFINITION = 'string data\n'
@@ -76,35 +76,143 @@ def bag_messages(records, metadata):
     with its connection header is written as it is; a decoded one is serialized, with its class's header.
     The records are read twice (the metadata holds their order, stamps and checksum); each message is made
     when it is written, so only the sort keys are held, while the metadata is made (a decoded record is
-    serialized in both passes; the nodes and replay hand over bytes). ValueError for no
-    records, the reserved topic, a bad stamp."""
+    serialized in both passes; the nodes and replay hand over bytes). ValueError for no records, the reserved
+    topic, a bad stamp."""
     if not records:
         raise ValueError('window: has no records')
-    if any(record.topic == METADATA_TOPIC for record in records):
-        raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
-    string_class = msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
-    headers = {METADATA_TOPIC: raw_message.class_header(METADATA_TOPIC, string_class)}
-    headers.update(connection_headers(records))
-    topics = list(headers)[1:]
-    rank = {topic: number for number, topic in enumerate(topics)}
-    keys = [(bag_stamp(record.stamp), rank[record.topic]) for record in records]
-    layout = {'topics': topics}
-    if any(later < earlier for earlier, later in zip(keys, keys[1:])):
-        read_order = sorted(range(len(keys)), key=keys.__getitem__)
-        position = {index: place for place, index in enumerate(read_order)}
-        layout['order'] = [position[i] for i in range(len(keys))]
-    if any(secs + nsecs / 1e9 != record.stamp for ((secs, nsecs), _), record in zip(keys, records)):
-        layout['stamps'] = [msg_codec.encode_float(float(record.stamp)) for record in records]
-    first = min(key[0] for key in keys)
-    del keys
-    layout['crc32'] = records_crc(topics, headers, ((record.topic, record.stamp, _data(record)) for record in records))
-    meta = dict(metadata or {})
-    meta.setdefault('codec', CODEC)
-    meta['layout'] = LAYOUT_VERSION
-    meta['bag'] = layout
-    text = json.dumps(meta, allow_nan=False, separators=(',', ':'))
-    metadata_message = (METADATA_TOPIC,) + first + (_serialized(string_class(data=text)),)
+    layout = _Layout()
+    layout.add(records)
+    headers = dict(layout.headers)
+    metadata_message = (METADATA_TOPIC,) + layout.first + (layout.metadata_data(metadata),)
     return itertools.chain([metadata_message], map(bag_message, records)), headers
+
+
+class _Layout(object):
+    """What a window's metadata says of its records (``"bag"``: topics, order, stamps, crc32), gathered as the
+    records are written, a batch at a time, with each topic's connection header (``headers``, the metadata topic
+    first)."""
+
+    def __init__(self):
+        self.headers = {METADATA_TOPIC: raw_message.class_header(METADATA_TOPIC, _string_class())}
+        self._sources = {}  # (topic, id(connection or class)) -> it (held, so that its id stays its own)
+        self._rank = {}     # record topic -> its number, in order of first appearance
+        self.keys = []      # (bag time, rank) of each record, in window order
+        self.exact = True   # every stamp survives the trip through bag time
+        self.stamps = []    # every record's stamp (float s), in window order
+        self.crc = 0        # of the records (``records_crc``), so far
+        self.first = None   # the earliest bag time
+
+    def add(self, records):
+        """Take the next records of the window (checked: the reserved topic, bag times, one type per topic)."""
+        for record in records:
+            if record.topic == METADATA_TOPIC:
+                raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
+        _add_headers(self.headers, self._sources, records)
+        rank = self._rank
+        for topic in self.headers:
+            if topic != METADATA_TOPIC and topic not in rank:
+                rank[topic] = len(rank)
+        keys = [(bag_stamp(record.stamp), rank[record.topic]) for record in records]
+        if keys:
+            earliest = min(key[0] for key in keys)
+            self.first = earliest if self.first is None else min(self.first, earliest)
+        self.exact = self.exact and all(secs + nsecs / 1e9 == record.stamp
+                                        for ((secs, nsecs), _), record in zip(keys, records))
+        self.keys.extend(keys)
+        self.stamps.extend(record.stamp for record in records)
+        self.crc = _records_crc(self.crc, rank, ((record.topic, record.stamp, _data(record)) for record in records))
+
+    def state(self):
+        """What ``restore`` needs to forget the records added after this call."""
+        return (dict(self.headers), dict(self._sources), dict(self._rank), len(self.keys), self.exact, self.crc,
+                self.first)
+
+    def restore(self, state):
+        """Back to ``state`` (of ``state()``)."""
+        headers, sources, rank, count, self.exact, self.crc, self.first = state
+        self.headers, self._sources, self._rank = headers, sources, rank
+        del self.keys[count:]
+        del self.stamps[count:]
+
+    def layout(self):
+        """The ``"bag"`` object of the metadata (layout 3)."""
+        topics = list(self._rank)
+        layout = {'topics': topics}
+        keys = self.keys
+        if any(later < earlier for earlier, later in zip(keys, keys[1:])):
+            read_order = sorted(range(len(keys)), key=keys.__getitem__)
+            position = {index: place for place, index in enumerate(read_order)}
+            layout['order'] = [position[i] for i in range(len(keys))]
+        if not self.exact:
+            layout['stamps'] = [msg_codec.encode_float(float(stamp)) for stamp in self.stamps]
+        layout['crc32'] = _topics_crc(self.crc, topics, self.headers)
+        return layout
+
+    def metadata_data(self, metadata, final=True):
+        """The serialized std_msgs/String of the window metadata; ``final``: with the layout of every record
+        added (else a provisional one, without it, written first by a stream)."""
+        meta = dict(metadata or {})
+        meta.setdefault('codec', CODEC)
+        meta['layout'] = LAYOUT_VERSION
+        if final:
+            meta['bag'] = self.layout()
+        return _serialized(_string_class()(data=json.dumps(meta, allow_nan=False, separators=(',', ':'))))
+
+
+class WindowStream(object):
+    """A window written into a bag a part at a time (a long window, or one larger than the memory budget, is one
+    file, as ``rosbag record`` writes one): ``append(records, metadata)`` writes a part (the first also writes
+    a provisional metadata message, so that a file cut off mid-write is salvaged with it), ``finish(metadata)``
+    writes the final metadata (the layout of every record) and the index. A failed ``append`` is rolled back:
+    the same part may be appended again."""
+
+    def __init__(self, stream):
+        from . import bag_writer
+        self.bag = bag_writer.BagStream(stream)
+        self._layout = _Layout()
+        self.count = 0
+
+    def append(self, records, metadata):
+        """Write the next part of the window (``records``, in window order); ``metadata``: the window's so far."""
+        if not records:
+            return
+        bag, layout = self.bag, self._layout
+        bag.mark()
+        saved = layout.state()
+        try:
+            layout.add(records)
+            headers = layout.headers
+            if self.count == 0:
+                bag.write(METADATA_TOPIC, *layout.first, layout.metadata_data(metadata, final=False),
+                          headers[METADATA_TOPIC])
+            write = bag.write
+            for record in records:
+                write(record.topic, *bag_stamp(record.stamp), _data(record), headers[record.topic])
+            bag.flush()
+            bag.stream.flush()  # a full disk fails here, in the part that filled it
+        except BaseException:
+            bag.rollback()
+            layout.restore(saved)
+            raise
+        self.count += len(records)
+
+    def finish(self, metadata):
+        """Write the final metadata and close the bag; ValueError when no record was appended."""
+        if not self.count:
+            raise ValueError('window: has no records')
+        layout, bag = self._layout, self.bag
+        bag.mark()
+        try:
+            bag.write(METADATA_TOPIC, *layout.first, layout.metadata_data(metadata), layout.headers[METADATA_TOPIC])
+            bag.close()
+            bag.stream.flush()
+        except BaseException:
+            bag.rollback()
+            raise
+
+
+def _string_class():
+    return msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
 
 
 def connection_headers(records):
@@ -112,7 +220,13 @@ def connection_headers(records):
     connection header: held as serialized bytes, or read from a json-xz window that kept its publisher's
     ``callerid`` and ``latching``), else its message class's. ValueError when a topic's records are of two
     message types (a bag has one connection per topic, as rosbag writes it)."""
-    headers, sources = {}, {}
+    headers = {}
+    _add_headers(headers, {}, records)
+    return headers
+
+
+def _add_headers(headers, sources, records):
+    """``connection_headers`` of more records into ``headers`` (``sources``: the connections and classes seen)."""
     for record in records:
         source = record.connection if record.connection else type(record.msg)
         key = (record.topic, id(source))
@@ -125,7 +239,6 @@ def connection_headers(records):
         if first.get('md5sum') != header.get('md5sum'):
             raise ValueError('topic %s: messages of two types (%s and %s); a bag holds one type per topic'
                              % (record.topic, first.get('type'), header.get('type')))
-    return headers
 
 
 def bag_message(record):
@@ -143,20 +256,29 @@ def _data(record):
     return record.raw if _held_raw(record) else _serialized(record.msg)
 
 
-def records_crc(topics, headers, records):
+def records_crc(topics, headers, records, layout=LAYOUT_VERSION):
     """CRC-32 of a window's records: ``topics`` in order with their connection ``headers`` (topic -> dict;
-    type, md5sum and message_definition count, str or bytes), then ``records`` ((topic, stamp, serialized
-    bytes) in window order)."""
-    crc = 0
-    number = {}
+    type, md5sum and message_definition count, str or bytes) and ``records`` ((topic, stamp, serialized bytes)
+    in window order); layout 3 (a file written a part at a time) takes the records first, layout 2 the topics."""
+    rank = {topic: number for number, topic in enumerate(topics)}
+    if layout >= 3:
+        return _topics_crc(_records_crc(0, rank, records), topics, headers)
+    return _records_crc(_topics_crc(0, topics, headers), rank, records)
+
+
+def _topics_crc(crc, topics, headers):
     for topic in topics:
-        number[topic] = len(number)
         header = headers[topic]
         for part in (topic, header.get('type', ''), header.get('md5sum', ''), header.get('message_definition', '')):
             crc = zlib.crc32(part if isinstance(part, bytes) else part.encode(), crc)
             crc = zlib.crc32(b'\0', crc)
+    return crc
+
+
+def _records_crc(crc, rank, records):
+    pack = _RECORD_HEAD.pack
     for topic, stamp, data in records:
-        crc = zlib.crc32(_RECORD_HEAD.pack(number[topic], stamp, len(data)), crc)
+        crc = zlib.crc32(pack(rank[topic], stamp, len(data)), crc)
         crc = zlib.crc32(data, crc)
     return crc
 
@@ -221,8 +343,9 @@ def read(path, stream=None):
                 for topic, raw, time, header in bag.read_messages(raw=True, return_connection_header=True):
                     # raw: (type, serialized bytes, md5sum, position, class)
                     if topic == METADATA_TOPIC:
-                        if metadata is None:
-                            metadata = _metadata(_deserialized(raw[4], raw[1]).data)
+                        found = _metadata(_deserialized(raw[4], raw[1]).data)
+                        if metadata is None or (isinstance(found, dict) and 'bag' in found):
+                            metadata = found  # a stream's final metadata after its provisional one
                         continue
                     if topic not in headers:
                         headers[topic], classes[topic] = header, raw[4]
@@ -237,7 +360,8 @@ def read(path, stream=None):
     try:
         records = _restore(read_records, layout)
         if 'crc32' in layout and layout['crc32'] != records_crc(
-                layout['topics'], headers, ((record.topic, record.stamp, record.raw) for record in records)):
+                layout['topics'], headers, ((record.topic, record.stamp, record.raw) for record in records),
+                metadata.get('layout', 2)):
             raise ValueError('the records do not match their crc32: the file is damaged')
     except (ValueError, TypeError, KeyError, IndexError) as error:
         raise ValueError('%s: metadata does not fit the records (%s)' % (path, error))

@@ -98,33 +98,45 @@ class _Chunk(object):
                 + _U32.pack(8 * len(counts)) + b''.join(_U32.pack(conn) + _U32.pack(n) for conn, n in counts))
 
 
-def write_bag(stream, messages, headers, chunk_threshold=None, compression='lz4'):
-    """Write the bag of ``messages`` into ``stream`` (binary, seekable, positioned at the start of the bag):
-    ``messages``, any iterable of (topic, secs, nsecs, serialized bytes) in the order written; ``headers``:
-    topic -> its connection header (a dict of str: topic, type, md5sum, message_definition, ... in the order
-    they are written; read when the topic's first message comes); ``chunk_threshold``: None for
-    CHUNK_THRESHOLD; ``compression`` of the chunks, one of COMPRESSIONS. ValueError for no message or a time
-    outside rosbag's (unsigned 32-bit secs, nsecs); the stream then holds an unfinished bag."""
-    if compression not in COMPRESSIONS:
-        raise ValueError('compression: %r is not one of: %s' % (compression, ', '.join(COMPRESSIONS)))
-    chunk_threshold = CHUNK_THRESHOLD if chunk_threshold is None else chunk_threshold
-    start = stream.tell()
-    stream.write(MAGIC + _file_header(0, 0, 0))
-    pos = len(MAGIC) + 8 + FILE_HEADER_LENGTH
-    connections = {}  # topic -> (conn, prefix of its message data records)
-    infos = []  # the chunk info record of each chunk written
-    chunk = None
-    for topic, secs, nsecs, data in messages:
+class BagStream(object):
+    """A rosbag 2.0 file written a message at a time into ``stream`` (binary, seekable, positioned at the start
+    of the bag): ``write(topic, secs, nsecs, data, header)`` appends a message (``header``: its topic's
+    connection header, read when the topic's first message comes), ``flush()`` closes the chunk being filled
+    so that everything written so far is on the stream in whole chunks, ``close()`` writes the index and the
+    bag header (an unclosed stream holds a bag that ``bag_salvage`` reads). ``mark()`` / ``rollback()``: after
+    a failed write, put the stream and the state back where they were at the last mark (the bytes after it
+    are truncated), so that the same messages can be written again. ``chunk_threshold``: None for
+    CHUNK_THRESHOLD; ``compression`` of the chunks, one of COMPRESSIONS."""
+
+    def __init__(self, stream, chunk_threshold=None, compression='lz4'):
+        if compression not in COMPRESSIONS:
+            raise ValueError('compression: %r is not one of: %s' % (compression, ', '.join(COMPRESSIONS)))
+        self.stream = stream
+        self.compression = compression
+        self.chunk_threshold = CHUNK_THRESHOLD if chunk_threshold is None else chunk_threshold
+        self._start = stream.tell()
+        stream.write(MAGIC + _file_header(0, 0, 0))
+        self.pos = len(MAGIC) + 8 + FILE_HEADER_LENGTH  # bytes of the bag written
+        self.connections = {}  # topic -> (conn, prefix of its message data records, its connection header)
+        self._infos = []       # the chunk info record of each chunk written
+        self._chunk = None
+        self._mark = None
+
+    def write(self, topic, secs, nsecs, data, header):
+        """Append one message (``header``: the topic's connection header, a dict of str); ValueError for a time
+        outside rosbag's (unsigned 32-bit secs, nsecs)."""
         if not (0 <= secs < 1 << 32 and 0 <= nsecs < 1 << 32):
             raise ValueError('time %d.%09d of a message on %s cannot be a bag time' % (secs, nsecs, topic))
         when = (secs, nsecs)
+        chunk = self._chunk
         if chunk is None:
-            chunk = _Chunk(pos, when)
-        if topic not in connections:
-            conn = len(connections)
-            chunk.add(_connection_record(conn, topic, headers[topic]))
-            connections[topic] = (conn, _message_prefix(conn))
-        conn, prefix = connections[topic]
+            chunk = self._chunk = _Chunk(self.pos, when)
+        known = self.connections.get(topic)
+        if known is None:
+            conn = len(self.connections)
+            chunk.add(_connection_record(conn, topic, header))
+            known = self.connections[topic] = (conn, _message_prefix(conn), header)
+        conn, prefix, _ = known
         chunk.entries.setdefault(conn, []).append((secs, nsecs, chunk.size))
         if when > chunk.end:
             chunk.end = when
@@ -132,21 +144,71 @@ def write_bag(stream, messages, headers, chunk_threshold=None, compression='lz4'
             chunk.start = when
         chunk.add(prefix + _TIME_AND_LENGTH.pack(secs, nsecs, len(data)))
         chunk.add(data)
-        if chunk.size > chunk_threshold:
-            pos = _close(chunk, infos, stream, pos, compression)
-            chunk = None
-    if chunk is not None:
-        pos = _close(chunk, infos, stream, pos, compression)
-    if not infos:
-        raise ValueError('a bag needs at least one message')
-    index_pos = pos
-    for topic, (conn, _) in connections.items():
-        stream.write(_connection_record(conn, topic, headers[topic]))
-    stream.write(b''.join(infos))
-    end = stream.tell()
-    stream.seek(start + len(MAGIC))
-    stream.write(_file_header(index_pos, len(connections), len(infos)))
-    stream.seek(end)
+        if chunk.size > self.chunk_threshold:
+            self.flush()
+
+    def flush(self):
+        """Write the chunk being filled, if any."""
+        if self._chunk is not None:
+            record = self._chunk.record(self.compression)
+            self.stream.write(record)
+            self._infos.append(self._chunk.info())
+            self.pos += len(record)
+            self._chunk = None
+
+    def mark(self):
+        """Remember the state after the last flush (``rollback`` returns to it)."""
+        self.flush()
+        self._mark = (self.pos, dict(self.connections), len(self._infos))
+
+    def rollback(self):
+        """Return to the last ``mark`` (or the empty bag): drop what was written since, truncating the stream."""
+        self._chunk = None
+        if self._mark is None:
+            self.connections, pos, infos = {}, len(MAGIC) + 8 + FILE_HEADER_LENGTH, 0
+        else:
+            pos, connections, infos = self._mark
+            self.connections = dict(connections)
+        del self._infos[infos:]
+        self.pos = pos
+        self.stream.seek(self._start + len(MAGIC))
+        self.stream.write(_file_header(0, 0, 0))  # close may have pointed it at an index
+        self.stream.seek(self._start + pos)
+        self.stream.truncate()
+
+    @property
+    def chunks(self):
+        """Chunks written so far."""
+        return len(self._infos)
+
+    def close(self):
+        """Flush, then write the index (connection and chunk info records) and the bag header pointing at it;
+        ValueError when no message was written."""
+        self.flush()
+        if not self._infos:
+            raise ValueError('a bag needs at least one message')
+        stream = self.stream
+        for topic, (conn, _, header) in self.connections.items():
+            stream.write(_connection_record(conn, topic, header))
+        stream.write(b''.join(self._infos))
+        end = stream.tell()
+        stream.seek(self._start + len(MAGIC))
+        stream.write(_file_header(self.pos, len(self.connections), len(self._infos)))
+        stream.seek(end)
+
+
+def write_bag(stream, messages, headers, chunk_threshold=None, compression='lz4'):
+    """Write the bag of ``messages`` into ``stream`` (binary, seekable, positioned at the start of the bag):
+    ``messages``, any iterable of (topic, secs, nsecs, serialized bytes) in the order written; ``headers``:
+    topic -> its connection header (a dict of str: topic, type, md5sum, message_definition, ... in the order
+    they are written; read when the topic's first message comes); ``chunk_threshold``: None for
+    CHUNK_THRESHOLD; ``compression`` of the chunks, one of COMPRESSIONS. ValueError for no message or a time
+    outside rosbag's (unsigned 32-bit secs, nsecs); the stream then holds an unfinished bag."""
+    bag = BagStream(stream, chunk_threshold, compression)
+    write = bag.write
+    for topic, secs, nsecs, data in messages:
+        write(topic, secs, nsecs, data, headers[topic])
+    bag.close()
 
 
 def bag_bytes(messages, headers, chunk_threshold=None, compression='lz4'):
@@ -162,10 +224,3 @@ def _file_header(index_pos, conn_count, chunk_count):
                      ('conn_count', _U32.pack(conn_count)), ('chunk_count', _U32.pack(chunk_count))])
     padding = FILE_HEADER_LENGTH - (len(fields) - 4)
     return fields + _U32.pack(padding) + b' ' * padding
-
-
-def _close(chunk, infos, stream, pos, compression):
-    record = chunk.record(compression)
-    stream.write(record)
-    infos.append(chunk.info())
-    return pos + len(record)
