@@ -449,4 +449,4 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
     assert all(same(a, b) for a, b in zip(records, run[lo:hi + 1]))
     every = replay(bag, ODOM, path, str(tmp_path / 'every'), PRE, POST, 'json-xz', retrigger='every')['windows']
     assert [(w['start'], w['end']) for w in every] == [(run[lo].stamp, run[max(flagged) + POST].stamp)]
-    assert smart_logger.DEFAULT_FORMAT == 'json-xz'
+    assert smart_logger.DEFAULT_FORMAT == 'bag-lz4'

@@ -56,7 +56,7 @@ from .intake import Intake
 from .node_extras import NodeExtras
 
 NODE_NAME = 'collect_logger'
-DEFAULT_FORMAT = 'json-xz'
+DEFAULT_FORMAT = log_format.formats.DEFAULT
 DEFAULT_ROTATE = collector.DEFAULT_ROTATE
 DEFAULT_LABEL = collector.DEFAULT_LABEL
 DEFAULT_WINDOW = collector.DEFAULT_WINDOW

@@ -180,7 +180,7 @@ class Config(object):
         if driving is not None and (not isinstance(driving, str) or not driving.strip()):
             raise ValueError('driving_topic: %r is not a topic name' % (driving,))
         self.driving_topic = driving.strip() if driving else None
-        self.format = log_format.Format.check(data.get('format', log_format.Format.JSON_XZ))
+        self.format = log_format.Format.check(data.get('format', log_format.formats.DEFAULT))
         options = _mapping(data.get('json_xz'), 'json_xz', JSON_XZ_KEYS)
         self.precision = json_xz.check_precision(options.get('precision'), 'json_xz.precision')
         if self.precision and self.format != log_format.Format.JSON_XZ:

@@ -51,7 +51,7 @@ __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 're
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
            'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
-DEFAULT_FORMAT = 'json-xz'
+DEFAULT_FORMAT = log_format.formats.DEFAULT
 DEFAULT_DRIVING_TOPIC = 'odom'
 
 PROGRESS_EVERY = 1000  # replay: messages between progress callbacks

@@ -36,6 +36,12 @@ def records_of(stamps, topics, msgs, costs, raws, connections):
     return list(map(tuple.__new__, itertools.repeat(Record), zip(stamps, topics, msgs, costs, raws, connections)))
 
 
+TopicLimits = collections.namedtuple('TopicLimits', 'pre post max_bytes', defaults=(None, None, 0))
+TopicLimits.__doc__ = """What one topic of the windows keeps, where it differs from the window's: ``pre`` and ``post``
+(seconds before the window's first trigger and after its last; None: the window's own, which they can only
+shorten) and ``max_bytes`` (memory its records may take outside every window; 0: no cap of its own)."""
+
+
 Trigger = collections.namedtuple('Trigger', 'stamp reason score name', defaults=(None,))
 Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
 NaN when none) and the name of the trigger (None: the reason is the name, as in files written before names)."""
@@ -211,7 +217,7 @@ class WindowBuffer(object):
 
     def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
                  jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None,
-                 part_factor=1.0):
+                 part_factor=1.0, topic_limits=None, held_elsewhere=None):
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
         self.max_window = Span.parse(max_window, 'max_window')
@@ -229,7 +235,10 @@ class WindowBuffer(object):
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
-        self._side = collections.deque()   # records of other topics, by time
+        self._side = {}                    # topic -> its records (other topics than the driving one), by time
+        self._side_bytes = {}              # topic -> memory of its records held
+        self.limits = dict(topic_limits or {})  # topic -> TopicLimits
+        self._held_elsewhere = held_elsewhere or (lambda: 0)  # bytes of parts handed on and not yet written
         self._open = None                  # window taking driving records
         self._pending = None               # closed window that the next one may still touch
         self._clock = None                 # newest stamp seen (stamps may jitter backwards a little)
@@ -250,7 +259,7 @@ class WindowBuffer(object):
     @property
     def buffered_messages(self):
         """Messages held in memory: pre buffer, windows not yet written, other topics."""
-        held = len(self._ring) + len(self._side)
+        held = len(self._ring) + sum(map(len, self._side.values()))
         for window in (self._open, self._pending):
             if window is not None:
                 held += len(window.records)
@@ -275,7 +284,7 @@ class WindowBuffer(object):
                 self._bytes += record.cost
                 if self._max_count is None or len(window.records) >= self._max_count:
                     done.extend(self._split(window))
-                if self._bytes > self._part_bytes and self.max_buffer_bytes:
+                if self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self._part_bytes:
                     done.extend(self._enforce_budget())
                 return done
             # Pending even when a split left it empty: a touching window continues its parts.
@@ -289,7 +298,7 @@ class WindowBuffer(object):
                 self._pending = None
         if self._side:
             self._prune_side()
-        if self._bytes > self._part_bytes and self.max_buffer_bytes:
+        if self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self._part_bytes:
             done.extend(self._enforce_budget())
         return done
 
@@ -298,11 +307,34 @@ class WindowBuffer(object):
         windows this completes (parts written because the memory budget was reached)."""
         if not record.cost:
             record = self._costed(record)
-        self._side.append(record)
+        topic = record.topic
+        side = self._side.get(topic)
+        if side is None:
+            side = self._side[topic] = collections.deque()
+            self._side_bytes[topic] = 0
+        side.append(record)
+        self._side_bytes[topic] += record.cost
         self._bytes += record.cost
-        if self._bytes > self._part_bytes and self.max_buffer_bytes:
+        limits = self.limits.get(topic)
+        if limits is not None and self._open is None and self._pending is None:
+            self._limit_topic(topic, side, limits, record.stamp)
+        if self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self._part_bytes:
             return self._enforce_budget()
         return []
+
+    def _limit_topic(self, topic, side, limits, clock):
+        """Outside every window: a topic's records older than its own ``pre`` or beyond its own memory cap go
+        (counted in ``trimmed``), the oldest first."""
+        while side and ((limits.pre is not None and side[0].stamp < clock - limits.pre)
+                        or (limits.max_bytes and self._side_bytes[topic] > limits.max_bytes and len(side) > 1)):
+            self._drop_side(topic)
+            self.trimmed += 1
+
+    def _drop_side(self, topic):
+        record = self._side[topic].popleft()
+        self._side_bytes[topic] -= record.cost
+        self._bytes -= record.cost
+        return record
 
     def trigger(self, reason, score=None, name=None, pre=None, post=None):
         """Mark the last driving record: open a window around it or extend the open one.
@@ -379,9 +411,10 @@ class WindowBuffer(object):
     def _reset(self):
         """Start over after time jumped backwards (bag loop, simulator reset)."""
         self.resets += 1
-        self._bytes -= sum(record.cost for record in self._ring) + sum(record.cost for record in self._side)
+        self._bytes -= sum(record.cost for record in self._ring) + sum(self._side_bytes.values())
         self._ring.clear()
         self._side.clear()
+        self._side_bytes.clear()
         self._clock = None
 
     def _costed(self, record):
@@ -390,14 +423,14 @@ class WindowBuffer(object):
         return record._replace(cost=self._cost.of(record))
 
     def _over_budget(self):
-        return self.max_buffer_bytes and self._bytes > self.max_buffer_bytes
+        return self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self.max_buffer_bytes
 
     def _enforce_budget(self):
         """Stay within max_buffer_mb (see the module docstring); return the windows completed doing so."""
         done = []
-        if not self.max_buffer_bytes or self._bytes <= self._part_bytes:
+        if not self.max_buffer_bytes or self._bytes + self._held_elsewhere() <= self._part_bytes:
             return done
-        if self._open is not None and (self._open.records or self._side):
+        if self._open is not None and (self._open.records or any(self._side.values())):
             # Written in parts, as max_window splits: what the window holds now, with every side record held.
             window = self._open
             window.part = max(window.part, 1)
@@ -408,13 +441,16 @@ class WindowBuffer(object):
         if self._over_budget() and self._pending is not None:
             done.extend(self._finish(self._pending))
             self._pending = None
-        while self._over_budget() and (len(self._ring) > 1 or self._side):
+        while self._over_budget():
             # Outside every window: the oldest go first; the newest driving record stays (a trigger needs it).
-            if self._side and (len(self._ring) <= 1 or self._side[0].stamp <= self._ring[0].stamp):
-                record = self._side.popleft()
+            heads = [(side[0].stamp, topic) for topic, side in self._side.items() if side]
+            oldest = min(heads) if heads else None
+            if oldest is not None and (len(self._ring) <= 1 or oldest[0] <= self._ring[0].stamp):
+                self._drop_side(oldest[1])
+            elif len(self._ring) > 1:
+                self._bytes -= self._ring.popleft().cost
             else:
-                record = self._ring.popleft()
-            self._bytes -= record.cost
+                break
             self.trimmed += 1
         return done
 
@@ -436,7 +472,8 @@ class WindowBuffer(object):
         return done
 
     def _prune_side(self):
-        """Drop records of other topics older than every driving record still held."""
+        """Drop records of other topics older than every driving record still held (or, outside every window,
+        than their topic's own ``pre``)."""
         if self._pending is not None and self._pending.records:
             oldest = self._pending.records[0].stamp
         elif self._open is not None and self._open.records:
@@ -445,24 +482,42 @@ class WindowBuffer(object):
             oldest = self._ring[0].stamp
         else:
             return
-        side = self._side
-        while side and side[0].stamp < oldest:
-            self._bytes -= side.popleft().cost
+        free = self._open is None and self._pending is None
+        for topic, side in self._side.items():
+            while side and side[0].stamp < oldest:
+                self._drop_side(topic)
+            limits = self.limits.get(topic)
+            if free and limits is not None and side:
+                self._limit_topic(topic, side, limits, self._clock)
 
     def _emit(self, window, records=None, everything=False, final=True):
         """Turn a window (or the given first records of it) into a LogWindow with the side records of its
         time span (``everything``: every side record held from its start on), in stamp order. A part after
-        the first takes the side records since the previous part (those of its time span and those between)."""
+        the first takes the side records since the previous part (those of its time span and those between).
+        A topic with its own ``pre`` or ``post`` (``limits``) keeps only what lies within them of the window's
+        first and last trigger."""
         records = window.records if records is None else records
         start = records[0].stamp if records and not getattr(window, 'continued', False) else float('-inf')
         end = float('inf') if everything else records[-1].stamp
-        side = []
         cost = sum(record.cost for record in records)
-        while self._side and self._side[0].stamp <= end:
-            record = self._side.popleft()
-            cost += record.cost
-            if record.stamp >= start:
-                side.append(record)
+        side = []
+        triggers = window.triggers
+        for topic, held in self._side.items():
+            low, high = start, end
+            limits = self.limits.get(topic)
+            if limits is not None and triggers:
+                if limits.pre is not None:
+                    low = max(low, triggers[0].stamp - limits.pre)
+                if limits.post is not None:
+                    high = min(high, max(trigger.stamp for trigger in triggers) + limits.post)
+            taken = 0
+            while held and held[0].stamp <= end:
+                record = held.popleft()
+                taken += record.cost
+                if low <= record.stamp <= high:
+                    side.append(record)
+            self._side_bytes[topic] -= taken
+            cost += taken
         self._bytes -= cost
         if side:
             records = sorted(records + side, key=lambda record: record.stamp)

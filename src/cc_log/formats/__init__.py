@@ -6,8 +6,14 @@ stream; it may encode first, before the file exists), ``read(path, stream)`` -> 
 raising ``ValueError('<path>: ...')``, ``PART_FACTOR`` (memory a window part takes while it waits and is
 written, per byte of its estimated size: the smart logger hands an open window on in parts at half its
 memory budget divided by it), optionally ``RAW_RECORDS`` (records are handed over as serialized bytes, not
-decoded) and ``salvage(path)`` for a file cut off mid-write (``recovery``; see ``bag_salvage.Salvaged``). To
-add a format: its module here and one entry in ``FORMATS``.
+decoded), ``WindowStream`` (a window handed on in parts is written into one file, a part at a time:
+``log_format.WindowFile``) and ``salvage(path)`` for a file cut off mid-write (``recovery``; see
+``bag_salvage.Salvaged``). To add a format: its module here and one entry in ``FORMATS``.
+
+The default is ``bag-lz4``: on cameras and lidars it costs about what ``rosbag record`` costs (LZ4 runs at
+~1.4 GB/s a core, LZMA at ~16 MB/s: json-xz cannot keep up with a 30 Hz camera), its windows stream to disk
+and open in rosbag, rqt_bag, PlotJuggler and Foxglove. ``json-xz`` stays the choice for robots whose kept
+topics are light and numeric (odometry, IMU): 4-30x smaller there (docs/FORMAT.md), readable with ``cclog cat``.
 
 Pure: a module that needs rosbag imports it inside its functions.
 """
@@ -15,7 +21,7 @@ import collections
 
 from . import bag_lz4, json_xz
 
-FORMATS = collections.OrderedDict((module.CODEC, module) for module in (json_xz, bag_lz4))  # the first: default
+FORMATS = collections.OrderedDict((module.CODEC, module) for module in (bag_lz4, json_xz))  # the first: default
 DEFAULT = next(iter(FORMATS))
 
 
