@@ -62,6 +62,8 @@ REPLAY_BATCH = 256      # replay: records fed to the logger at a time (``on_reco
 _TOPIC, _RAW, _CONNECTION, _STAMP, _MSG = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp', 'msg'))
 _TYPE = operator.itemgetter('type')
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
+HEAVY_BYTES = 64 * 1024  # a message this large (an image, a cloud, a scan) may be dropped when the writer falls behind
+DEFAULT_STAMP_TOLERANCE = 5.0  # seconds a header stamp may differ from the message's arrival (else: its arrival)
 
 OPENED = 'opened'
 WRITTEN = 'written'
@@ -199,7 +201,8 @@ class SmartLogger(object):
                  enabled=True, background=True, retrigger=DEFAULT_RETRIGGER, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
-                 close_retry=0.0, triggers=(), input_topics=None, format_options=None):
+                 close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None,
+                 stamp_tolerance=DEFAULT_STAMP_TOLERANCE):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -230,6 +233,13 @@ class SmartLogger(object):
         watched = set().union(*(trigger.topics for trigger in self.triggers))
         self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self.max_buffer_mb = max_buffer_mb
+        self.topic_limits = dict(topic_limits or {})  # topic -> window_buffer.TopicLimits
+        self.stamp_tolerance = float(stamp_tolerance)
+        if not self.stamp_tolerance > 0:
+            raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))
+        self._restamped = collections.Counter()  # topic -> messages whose header stamp was off the clock
+        self._shed = collections.Counter()       # topic -> messages of windows dropped under overload
+        self.writer = None
         self._expected = topic_types(self.triggers)  # topic -> the type its triggers read
         self._types = {}  # other topics -> their message type (the first seen)
         self._by_topic = collections.defaultdict(list)
@@ -297,7 +307,10 @@ class SmartLogger(object):
                 self._stats.raw_json_bytes += raw
             if not self._enabled or not self._type_ok(topic, getattr(msg, '_type', type(msg).__name__)):
                 return
-            stamp = features_mod.stamp_of(msg, time.time() if stamp is None else stamp)
+            if stamp is None:
+                stamp = features_mod.stamp_of(msg, time.time())
+            else:
+                stamp = self._on_clock([features_mod.stamp_of(msg, stamp)], [stamp], [topic])[0]
             self._take(Record(stamp, topic, msg, self._cost(msg, size)))
 
     def on_raw(self, topic, raw, connection, stamp=None):
@@ -349,16 +362,35 @@ class SmartLogger(object):
                            [connections[index] for index in places], places)
 
     def _take_raw(self, records, topics, connections, places):
-        """``_take_all`` of serialized records, restamped with their header stamps and costed by their length;
-        ``places``: where each is in the batch fed (said by an ``UndecodableRecord``)."""
+        """``_take_all`` of serialized records, restamped with their header stamps (``_on_clock``) and costed by
+        their length; ``places``: where each is in the batch fed (said by an ``UndecodableRecord``)."""
         raws = list(map(_RAW, records))
-        stamps = raw_message.stamps(raws, connections, list(map(_STAMP, records)))
+        arrivals = list(map(_STAMP, records))
+        stamps = self._on_clock(raw_message.stamps(raws, connections, arrivals), arrivals, topics)
         costs = list(map(RAW_RECORD_OVERHEAD.__add__, map(len, raws)))
         taken = records_of(stamps, topics, itertools.repeat(None), costs, raws, connections)
         try:
             self._take_all(taken, topics, connections)
         except raw_message.UndecodableRecord as error:
             raise raw_message.UndecodableRecord(places[error.index], error.topic, error.error)
+
+    def _on_clock(self, stamps, arrivals, topics):
+        """The stamps that place messages in windows: each message's header stamp, unless it is more than
+        ``stamp_tolerance`` from the message's arrival (receipt or bag time: the node's clock), when the arrival
+        is used and the message counted (``stats()['restamped_by_topic']``). So a sensor stamping by another clock
+        (wall time next to a bag's, a camera without time sync, a stamp in the future) can neither stretch a
+        window nor hold other messages back."""
+        tolerance = self.stamp_tolerance
+        off = [k for k, difference in enumerate(map(operator.sub, stamps, arrivals))
+               if not -tolerance <= difference <= tolerance]
+        if not off:
+            return stamps
+        stamps = list(stamps)
+        for k in off:
+            stamps[k] = float(arrivals[k].to_sec() if hasattr(arrivals[k], 'to_sec') else arrivals[k])
+        with self._stats.lock:
+            self._restamped.update(topics[k] for k in off)
+        return stamps
 
     def _needs_message(self, record, triggers):
         """Whether a trigger reads fields of ``record``'s messages (memoised per topic and connection)."""
@@ -561,10 +593,15 @@ class SmartLogger(object):
                 'messages_refused': s.messages_refused,
                 'last_refused': s.last_refused,
                 'queue_depth': written['queue_depth'],
+                'bytes_queued': written['bytes_queued'],
+                'messages_shed': sum(self._shed.values()),
+                'shed_by_topic': dict(self._shed),
+                'messages_restamped': sum(self._restamped.values()),
+                'restamped_by_topic': dict(self._restamped),
             }
         # Not in any window (outside every anomaly, seen while paused, or trimmed from the pre buffer).
         result['messages_dropped'] = (result['messages_seen'] - result['messages_kept'] - result['messages_queued']
-                                      - result['messages_buffered'] - result['messages_lost'])
+                                      - result['messages_buffered'] - result['messages_lost'] - result['messages_shed'])
         return result
 
     # -- message path ---------------------------------------------------------------------------------
@@ -586,7 +623,8 @@ class SmartLogger(object):
     def _new_buffer(self):
         buffer = WindowBuffer(pre=self.pre, post=self.post, max_window=self.max_window,
                               max_buffer_mb=self.max_buffer_mb, cost=self._cost,
-                              part_factor=log_format.formats.get(self.format).PART_FACTOR)
+                              part_factor=log_format.formats.get(self.format).PART_FACTOR,
+                              topic_limits=self.topic_limits, held_elsewhere=self._bytes_queued)
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed
@@ -620,10 +658,50 @@ class SmartLogger(object):
                 return trigger.threshold
         return self.threshold
 
+    def _bytes_queued(self):
+        """Memory of the parts handed to the writer and not yet written."""
+        return self.writer.bytes_queued if self.writer is not None else 0
+
     def _complete(self, windows):
-        """Hand completed windows to the writer, each with the latched messages at its start."""
+        """Hand completed windows to the writer, each with the latched messages at its start, thinned first when
+        the writer has fallen so far behind that it would not fit in the memory budget (``_within_budget``)."""
         for window in windows:
-            self.writer.submit(window_writer.Job(self._with_latched(window), self._metadata(window)))
+            window, shed = self._within_budget(window)
+            metadata = self._metadata(window)
+            if shed:
+                metadata['dropped'] = shed
+            self.writer.submit(window_writer.Job(self._with_latched(window), metadata))
+
+    def _within_budget(self, window):
+        """``(window, {topic: messages dropped})``: when the writer's queue, the buffer and this window together
+        pass the memory budget, the window's heavy messages (``HEAVY_BYTES`` or more: images, clouds, scans) are
+        thinned evenly, over the window, until it fits; light ones (odometry, IMU, diagnostics) are always kept.
+        What is dropped is counted per topic (``stats()['shed_by_topic']``) and said in the window's metadata."""
+        budget = self._buffer.max_buffer_bytes
+        if not budget or not window.records:
+            return window, {}
+        cost = sum(record.cost for record in window.records)
+        room = budget - self._buffer.buffered_bytes - self._bytes_queued()
+        if cost <= room:
+            return window, {}
+        heavy = [record.cost >= HEAVY_BYTES for record in window.records]
+        heavy_bytes = sum(record.cost for record, big in zip(window.records, heavy) if big)
+        if not heavy_bytes:
+            return window, {}
+        keep = max(0.0, min(1.0, (room - (cost - heavy_bytes)) / float(heavy_bytes)))
+        kept, shed, share = [], collections.Counter(), 0.0
+        for record, big in zip(window.records, heavy):
+            if big:
+                share += keep
+                if share < 1.0:
+                    shed[record.topic] += 1
+                    continue
+                share -= 1.0
+            kept.append(record)
+        with self._stats.lock:
+            self._shed.update(shed)
+        window.records = kept
+        return window, dict(shed)
 
     def _with_latched(self, window):
         """``window`` with, first, the newest message of each latched topic from before its start (not one it

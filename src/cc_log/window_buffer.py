@@ -284,7 +284,7 @@ class WindowBuffer(object):
                 self._bytes += record.cost
                 if self._max_count is None or len(window.records) >= self._max_count:
                     done.extend(self._split(window))
-                if self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self._part_bytes:
+                if self.max_buffer_bytes and self._bytes > self._part_bytes:
                     done.extend(self._enforce_budget())
                 return done
             # Pending even when a split left it empty: a touching window continues its parts.
@@ -298,7 +298,7 @@ class WindowBuffer(object):
                 self._pending = None
         if self._side:
             self._prune_side()
-        if self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self._part_bytes:
+        if self.max_buffer_bytes and self._bytes > self._part_bytes:
             done.extend(self._enforce_budget())
         return done
 
@@ -318,7 +318,7 @@ class WindowBuffer(object):
         limits = self.limits.get(topic)
         if limits is not None and self._open is None and self._pending is None:
             self._limit_topic(topic, side, limits, record.stamp)
-        if self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self._part_bytes:
+        if self.max_buffer_bytes and self._bytes > self._part_bytes:
             return self._enforce_budget()
         return []
 
@@ -428,11 +428,11 @@ class WindowBuffer(object):
     def _enforce_budget(self):
         """Stay within max_buffer_mb (see the module docstring); return the windows completed doing so."""
         done = []
-        if not self.max_buffer_bytes or self._bytes + self._held_elsewhere() <= self._part_bytes:
+        if not self.max_buffer_bytes or (self._bytes <= self._part_bytes and not self._over_budget()):
             return done
-        if self._open is not None and (self._open.records or any(self._side.values())):
+        window = self._open
+        if window is not None and self._bytes > self._part_bytes and (window.records or any(self._side.values())):
             # Written in parts, as max_window splits: what the window holds now, with every side record held.
-            window = self._open
             window.part = max(window.part, 1)
             done.append(self._emit(window, everything=True, final=False))
             window.part += 1
@@ -441,8 +441,9 @@ class WindowBuffer(object):
         if self._over_budget() and self._pending is not None:
             done.extend(self._finish(self._pending))
             self._pending = None
-        while self._over_budget():
+        while self._over_budget() and self._open is None:
             # Outside every window: the oldest go first; the newest driving record stays (a trigger needs it).
+            # (With a window open, what the buffer holds is in it: the logger thins the parts it hands on.)
             heads = [(side[0].stamp, topic) for topic, side in self._side.items() if side]
             oldest = min(heads) if heads else None
             if oldest is not None and (len(self._ring) <= 1 or oldest[0] <= self._ring[0].stamp):

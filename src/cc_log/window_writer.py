@@ -129,6 +129,11 @@ class WindowWriter(object):
         self._callbacks.append(callback)
 
     @property
+    def bytes_queued(self):
+        """Memory of the records of the jobs waiting or held (cheap: one counter)."""
+        return self._counts['bytes_queued']
+
+    @property
     def lost(self):
         """Jobs lost so far (an offline command stops at the first)."""
         return self._counts['jobs_lost']
