@@ -149,8 +149,8 @@ class Collector(object):
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
 
-    def __init__(self, directory, fmt=log_format.formats.DEFAULT, rotate=DEFAULT_ROTATE, driving_topic='odom', side_topics=None,
-                 input_topics=None,
+    def __init__(self, directory, fmt=log_format.formats.DEFAULT, rotate=DEFAULT_ROTATE, driving_topic='odom',
+                 side_topics=None, input_topics=None,
                  window=DEFAULT_WINDOW, feature_set=DEFAULT_FEATURE_SET, stride=DEFAULT_STRIDE,
                  label=DEFAULT_LABEL, background=True, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, max_disk_mb=0,
                  min_free_mb=0, retry_period=window_writer.DEFAULT_RETRY_PERIOD,

@@ -39,8 +39,10 @@ from .triggers import get as trigger_kind
 from .triggers.base import Context, check_name
 from .triggers.classifier import default_topics
 from .topic_select import TopicSelection
+from .window_buffer import TopicLimits
 
-KEYS = ('topics', 'driving_topic', 'format', 'json_xz', 'windows', 'limits', 'collect', 'triggers')
+KEYS = ('topics', 'topic_limits', 'driving_topic', 'format', 'json_xz', 'windows', 'limits', 'collect', 'triggers')
+TOPIC_LIMIT_KEYS = ('pre', 'post', 'max_mb')
 JSON_XZ_KEYS = ('precision',)
 WINDOW_KEYS = ('pre', 'post', 'max')
 LIMIT_KEYS = ('max_disk_mb', 'min_free_mb', 'max_buffer_mb')
@@ -54,7 +56,8 @@ FLAT = {'pre': ('windows', 'pre'), 'post': ('windows', 'post'), 'max_window': ('
         'max_disk_mb': ('limits', 'max_disk_mb'), 'min_free_mb': ('limits', 'min_free_mb'),
         'max_buffer_mb': ('limits', 'max_buffer_mb'), 'rotate': ('collect', 'rotate'),
         'label': ('collect', 'label'), 'stride': ('collect', 'stride'), 'format': ('format',),
-        'topics': ('topics',), 'driving_topic': ('driving_topic',), 'precision': ('json_xz', 'precision')}
+        'topics': ('topics',), 'topic_limits': ('topic_limits',), 'driving_topic': ('driving_topic',),
+        'precision': ('json_xz', 'precision')}
 
 
 def load_file(path):
@@ -176,6 +179,7 @@ class Config(object):
         entries = topic_list(data.get('topics', ()), 'topics')
         self.selection = TopicSelection.parse(entries, 'topics')  # names and patterns (*, re:..., !...)
         self.topics = [entry for entry in entries if not TopicSelection.is_pattern(entry)]
+        self.topic_limits = parse_topic_limits(data.get('topic_limits'), 'topic_limits')
         driving = data.get('driving_topic')
         if driving is not None and (not isinstance(driving, str) or not driving.strip()):
             raise ValueError('driving_topic: %r is not a topic name' % (driving,))
@@ -271,11 +275,48 @@ class Config(object):
                 'driving_topic': resolve(driving),
                 'side_topics': None if self.selection.dynamic else [resolve(t) for t in self.topics],
                 'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb,
-                'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers, 'format_options': self.format_options()}
+                'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers, 'format_options': self.format_options(),
+                'topic_limits': dict((resolve(topic), limits) for topic, limits in self.topic_limits.items())}
 
     def format_options(self):
         """What the window format is told in each window's metadata: ``{'precision': ...}`` when set."""
         return {'precision': self.precision} if self.precision else {}
+
+
+def parse_topic_limits(value, name='topic_limits'):
+    """``{topic: window_buffer.TopicLimits}`` of a mapping ``{topic: {pre: 2s, post: 1s, max_mb: 64}}`` (or its YAML
+    text, as a launch argument gives it): each topic's own seconds before the window's first trigger and after
+    its last (at most the window's) and memory cap outside every window; ValueError('<name>.<topic>: ...')."""
+    if value is None or value == '':
+        return {}
+    if isinstance(value, str):
+        value = _yaml_text(value, name)
+    if not isinstance(value, dict):
+        raise ValueError('%s: a mapping of topic names to {pre, post, max_mb}, not %s' % (name, type(value).__name__))
+    limits = {}
+    for topic, entry in value.items():
+        if not isinstance(topic, str) or not topic.strip():
+            raise ValueError('%s: %.80r is not a topic name' % (name, topic))
+        where = '%s.%s' % (name, topic)
+        entry = _mapping(entry, where, TOPIC_LIMIT_KEYS)
+        spans = {}
+        for key in ('pre', 'post'):
+            if entry.get(key) is not None:
+                span = Span.parse(entry[key], '%s.%s' % (where, key))
+                if not span.is_duration:
+                    raise ValueError('%s.%s: a duration (e.g. 2s), not a count of messages' % (where, key))
+                spans[key] = span.seconds
+        max_mb = megabytes(entry.get('max_mb', 0), '%s.max_mb' % where)
+        limits[topic.strip()] = TopicLimits(spans.get('pre'), spans.get('post'), int(max_mb * 1000 ** 2))
+    return limits
+
+
+def _yaml_text(text, name):
+    import yaml
+    try:
+        return yaml.safe_load(text[:MAX_FILE_BYTES])
+    except yaml.YAMLError as error:
+        raise ValueError('%s: not YAML: %s' % (name, ' '.join(str(error).split())[:200]))
 
 
 def _known(data, keys, where):

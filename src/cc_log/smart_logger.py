@@ -310,7 +310,8 @@ class SmartLogger(object):
             if stamp is None:
                 stamp = features_mod.stamp_of(msg, time.time())
             else:
-                stamp = self._on_clock([features_mod.stamp_of(msg, stamp)], [stamp], [topic])[0]
+                arrival = stamp.to_sec() if hasattr(stamp, 'to_sec') else float(stamp)
+                stamp = self._on_clock([features_mod.stamp_of(msg, arrival)], [arrival], [topic])[0]
             self._take(Record(stamp, topic, msg, self._cost(msg, size)))
 
     def on_raw(self, topic, raw, connection, stamp=None):
@@ -376,18 +377,18 @@ class SmartLogger(object):
 
     def _on_clock(self, stamps, arrivals, topics):
         """The stamps that place messages in windows: each message's header stamp, unless it is more than
-        ``stamp_tolerance`` from the message's arrival (receipt or bag time: the node's clock), when the arrival
-        is used and the message counted (``stats()['restamped_by_topic']``). So a sensor stamping by another clock
-        (wall time next to a bag's, a camera without time sync, a stamp in the future) can neither stretch a
-        window nor hold other messages back."""
+        ``stamp_tolerance`` from the message's non-zero arrival (receipt or bag time: the node's clock), when the
+        arrival is used and the message counted (``stats()['restamped_by_topic']``). So a sensor stamping by
+        another clock (wall time next to a bag's, a camera without time sync, a stamp in the future) can neither
+        stretch a window nor hold other messages back."""
         tolerance = self.stamp_tolerance
         off = [k for k, difference in enumerate(map(operator.sub, stamps, arrivals))
-               if not -tolerance <= difference <= tolerance]
+               if not -tolerance <= difference <= tolerance and arrivals[k]]  # (0: the clock has not started)
         if not off:
             return stamps
         stamps = list(stamps)
         for k in off:
-            stamps[k] = float(arrivals[k].to_sec() if hasattr(arrivals[k], 'to_sec') else arrivals[k])
+            stamps[k] = float(arrivals[k])
         with self._stats.lock:
             self._restamped.update(topics[k] for k in off)
         return stamps

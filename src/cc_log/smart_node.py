@@ -82,6 +82,7 @@ Stamps are header stamps (receipt time for messages without one), so ``use_sim_t
 """
 import math
 import sys
+import threading
 import time
 
 import rospy
@@ -143,6 +144,7 @@ class SmartNode(object):
             'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
             'precision': given(params.value, 'precision', None),
             'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
+            'topic_limits': given(params.value, 'topic_limits', None),
             'max_disk_mb': given(params.megabytes, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
             'min_free_mb': given(params.megabytes, 'min_free_mb', DEFAULT_MIN_FREE_MB),
             'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
@@ -188,6 +190,7 @@ class SmartNode(object):
         self.learners = [(t.name, t.learner) for t in classifiers if t.learner is not None]
         if self.learners:
             self.logger.on_event(self._flag_learners)
+        wait_for_clock()
         self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
@@ -197,7 +200,7 @@ class SmartNode(object):
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
-        self._ticker = rospy.Timer(rospy.Duration(TICK_PERIOD), self._tick)
+        self._ticker = WallTicker(TICK_PERIOD, self._tick)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
                                        self.intake.counts)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
@@ -241,7 +244,7 @@ class SmartNode(object):
         ok, message = self.logger.trigger_now(request.reason, request.before, request.after)
         return ok, message
 
-    def _tick(self, _event):
+    def _tick(self):
         """Message time passes even when no message comes: triggers watching for silence hear of it."""
         try:
             self.logger.tick(rospy.get_rostime().to_sec())
@@ -266,6 +269,10 @@ class SmartNode(object):
         level, message, disk = writer_status(level, message, self.logger.writer, self.leftovers,
                                              self.directory_warning)
         level, message, extra = self.extras.status(level, message)
+        if stats['messages_shed']:
+            level = max(level, DiagnosticStatus.WARN)
+            message += ('; %d messages of windows dropped: the writer fell behind (%s)'
+                        % (stats['messages_shed'], _per_topic(stats['shed_by_topic'])))
         overflowed = self.intake.overflowed
         if overflowed:
             level = max(level, DiagnosticStatus.WARN)
@@ -293,6 +300,11 @@ class SmartNode(object):
             ('writer CPU s', '%.3f' % self.logger.writer.cpu_seconds),
             ('anomalous messages', stats['anomalous_messages']),
             ('writer queue', stats['queue_depth']),
+            ('writer queue bytes', stats['bytes_queued']),
+            ('messages dropped (writer behind)', stats['messages_shed']),
+            ('dropped per topic (writer behind)', _per_topic(stats['shed_by_topic'])),
+            ('messages restamped (header stamp off the clock)', stats['messages_restamped']),
+            ('restamped per topic', _per_topic(stats['restamped_by_topic'])),
             ('intake queue', self.intake.queue.qsize()),
             ('intake dropped (queue full)', overflowed),
             ('classify every', str(self.logger.classify_every)),
@@ -322,14 +334,53 @@ class SmartNode(object):
 
     def shutdown(self):
         """Feed what is queued, write the last windows, stop diagnostics."""
-        self._ticker.shutdown()
+        self._ticker.stop()
         self.intake.stop()
         if not self.logger.close(CLOSE_TIMEOUT):
-            rospy.logerr('windows still unwritten after %g s', CLOSE_TIMEOUT)
+            stats = self.logger.stats()
+            rospy.logerr('%d windows (%d messages) still unwritten after %g s: lost', stats['windows_queued'],
+                         stats['messages_queued'], CLOSE_TIMEOUT)
+        stats = self.logger.stats()
+        if stats['messages_shed'] or stats['messages_lost']:
+            rospy.logwarn('messages of windows not written: %d dropped while the writer fell behind (%s), %d lost '
+                          'writing', stats['messages_shed'], _per_topic(stats['shed_by_topic']),
+                          stats['messages_lost'])
         self.extras.close()
         for _, learner in self.learners:  # a refit being saved finishes (the save is atomic either way)
             learner.wait(CLOSE_TIMEOUT)
         self.diagnostics.stop()
+
+
+def _per_topic(counts):
+    """``{topic: n}`` as one line, largest first ('none' when empty)."""
+    return ', '.join('%s: %d' % item for item in sorted(counts.items(), key=lambda item: (-item[1], item[0]))) or 'none'
+
+
+def wait_for_clock():
+    """Under ``use_sim_time``, wait (wall time) for the first ``/clock``: files are named by it."""
+    if rospy.get_rostime().is_zero() and rospy.get_param('/use_sim_time', False):
+        rospy.loginfo('use_sim_time: waiting for /clock')
+        while rospy.get_rostime().is_zero() and not rospy.is_shutdown():
+            time.sleep(0.05)
+
+
+class WallTicker(object):
+    """Calls ``callback()`` every ``period`` seconds of wall time on a daemon thread until ``stop``: unlike
+    rospy.Timer, it lives on when the ROS clock jumps back (a bag played in a loop with ``--clock``)."""
+
+    def __init__(self, period, callback):
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(period, callback), name='cc_log ticker')
+        self._thread.daemon = True
+        self._thread.start()
+
+    def _run(self, period, callback):
+        while not self._stop.wait(period):
+            callback()
+
+    def stop(self):
+        self._stop.set()
+        self._thread.join(1.0)
 
 
 def main(argv=None):

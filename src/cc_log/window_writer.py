@@ -176,8 +176,8 @@ class WindowWriter(object):
         last_deleted, queue_depth."""
         with self._lock:
             result = {key: self._counts[key] for key in (
-                'jobs_queued', 'messages_queued', 'bytes_queued', 'messages_kept', 'stored_bytes', 'jobs_lost', 'messages_lost',
-                'write_errors', 'write_retries', 'jobs_held', 'messages_held', 'windows_deleted')}
+                'jobs_queued', 'messages_queued', 'bytes_queued', 'messages_kept', 'stored_bytes', 'jobs_lost',
+                'messages_lost', 'write_errors', 'write_retries', 'jobs_held', 'messages_held', 'windows_deleted')}
             result['written'] = dict(self._written)
             result['windows_saved'] = self._written[WINDOW]
             result['last_error'] = self.last_error
