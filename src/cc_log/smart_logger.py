@@ -674,15 +674,15 @@ class SmartLogger(object):
             self.writer.submit(window_writer.Job(self._with_latched(window), metadata))
 
     def _within_budget(self, window):
-        """``(window, {topic: messages dropped})``: when the writer's queue, the buffer and this window together
-        pass the memory budget, the window's heavy messages (``HEAVY_BYTES`` or more: images, clouds, scans) are
+        """``(window, {topic: messages dropped})``: when the writer's queue, the buffer, this window and room for
+        the next part together pass the memory budget, the window's heavy messages (``HEAVY_BYTES`` or more: images, clouds, scans) are
         thinned evenly, over the window, until it fits; light ones (odometry, IMU, diagnostics) are always kept.
         What is dropped is counted per topic (``stats()['shed_by_topic']``) and said in the window's metadata."""
-        budget = self._buffer.max_buffer_bytes
-        if not budget or not window.records:
+        budget, queued = self._buffer.max_buffer_bytes, self._bytes_queued()
+        if not budget or not window.records or not queued:  # (an idle writer keeps up: the part is already held)
             return window, {}
         cost = sum(record.cost for record in window.records)
-        room = budget - self._buffer.buffered_bytes - self._bytes_queued()
+        room = budget - self._buffer.part_limit - self._buffer.buffered_bytes - queued  # and room for the next
         if cost <= room:
             return window, {}
         heavy = [record.cost >= HEAVY_BYTES for record in window.records]

@@ -257,6 +257,11 @@ class WindowBuffer(object):
         return self._bytes
 
     @property
+    def part_limit(self):
+        """Bytes of an open window's records held before they are handed on as a part (0: no budget)."""
+        return self._part_bytes
+
+    @property
     def buffered_messages(self):
         """Messages held in memory: pre buffer, windows not yet written, other topics."""
         held = len(self._ring) + sum(map(len, self._side.values()))
