@@ -182,3 +182,21 @@ def test_topics_on_different_clocks_are_not_a_jump_back(tmp_path):
         track.on_message('chatter', String(data='x'), 1005.0 + second)
     track.close()
     assert len(files(tmp_path)) == 1 and len(read(files(tmp_path)[0])) == 40
+
+
+def test_a_looping_bag_never_collides_on_temporary_names_and_loses_nothing(tmp_path):
+    """``rosbag play -l``: the clock goes back to the same stamps while the writer has not yet closed the file
+    of the previous loop (jobs run later, as on a busy writer thread): every loop is one file, nothing lost."""
+    jobs = []
+    track = ContextTrack(tmp_path, {'odom': None}, submit=jobs.append)
+    for loop in range(3):
+        for second in range(5):
+            track.on_message('odom', odom(100.0 + second), None)
+    track.close()
+    for job in jobs:
+        job.write()
+    stats = track.stats()
+    assert stats['write_errors'] == 0 and stats['last_error'] == '' and stats['messages_kept'] == 15
+    paths = files(tmp_path)
+    assert len(paths) == 3 and all(path.endswith('.bag') for path in paths)  # no temporary file left
+    assert [len(read(path)) for path in paths] == [5, 5, 5]

@@ -8,7 +8,9 @@ as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, r
   rate keeps at most one message per ``1/Hz`` slot of its stamps (``floor(stamp * Hz)``), so 100 Hz
   odometry at ``:1`` is exactly one message per second; ``None`` keeps every message.
 - files go to ``<directory>/context/cc_log_context_<UTC of the first stamp>.bag`` (LZ4 chunks); the open file
-  is ``<name>.tmp-<pid>`` and is closed, fsynced and renamed when it spans ``rotate`` seconds (stamps), when
+  is ``<name>.tmp-<pid>.<n>`` (``n`` counts the files this process opened, so the name is unique whatever the
+  stamps do: a looping bag starts over at the same stamps while the last loop's file is still being closed) and
+  is closed, fsynced and renamed when it spans ``rotate`` seconds (stamps), when
   a topic's stamps jump back (a replayed bag, a simulation reset; topics on different clocks are not a jump)
   and at ``close``. A closed file is handed to
   ``submit(job)`` as a ``window_writer.Job(write=..., what=CONTEXT)`` (the node's context writer: quota,
@@ -24,6 +26,7 @@ Crash leftovers (``cc_log_context_*.bag.tmp-*``) are reindexed and given their f
 Pure apart from rosbag (imported when a file opens).
 """
 import datetime
+import itertools
 import math
 import os
 import re
@@ -45,6 +48,7 @@ DEFAULT_ROTATE = 600.0   # seconds of stamps per file
 JUMP_BACK = 1.0          # stamps going back more than this start a new file
 # bwi_logging/record.launch names its odometry thinned to 1 Hz (topic_tools drop) odom_1hz; here it means the same.
 BWI_ALIASES = {'odom_1hz': ('odom', 1.0)}
+_SERIAL = itertools.count()  # the files this process opened: their temporary names never collide
 _ENTRY = re.compile(r'^(?P<topic>[^\s:]+)(?::(?P<rate>[^\s:]+))?$')
 
 
@@ -89,7 +93,7 @@ def file_name(stamp):
 
 
 class _OpenBag(object):
-    """One context file being written: a rosbag on ``<final>.tmp-<pid>``; ``finish`` closes it (rosbag writes
+    """One context file being written: a rosbag on ``<final>.tmp-<pid>.<n>``; ``finish`` closes it (rosbag writes
     its index), fsyncs it and gives it the first free final name. Idempotent, so a retried finish is safe."""
 
     def __init__(self, directory, first_stamp):
@@ -98,7 +102,8 @@ class _OpenBag(object):
         self.directory = directory
         self.base = file_name(first_stamp)
         self.first = first_stamp
-        self.tmp = os.path.join(directory, '%s%s%s%d' % (self.base, EXTENSION, safe_files.TMP_MARK, os.getpid()))
+        name = '%s%s%s%d.%d' % (self.base, EXTENSION, safe_files.TMP_MARK, os.getpid(), next(_SERIAL))
+        self.tmp = os.path.join(directory, name)
         fd = safe_files.create(self.tmp)
         self._sync_fd = os.dup(fd)
         self.bag = rosbag.Bag(os.fdopen(fd, 'w+b'), 'w', compression=rosbag.Compression.LZ4)
@@ -283,7 +288,7 @@ def tee(*sinks):
 
 
 def recover(directory):
-    """Give crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>`` of a dead
+    """Give crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>[.<n>]`` of a dead
     process) their final names after ``rosbag reindex``; returns ``(recovered paths, [(path, why)] kept)``."""
     import rosbag
     folder = os.path.join(str(directory), SUBDIRECTORY)
@@ -291,6 +296,7 @@ def recover(directory):
     for path in log_format.temporary_files(folder):
         name = os.path.basename(path)
         base, _, pid = name.partition(EXTENSION + safe_files.TMP_MARK)
+        pid = pid.partition('.')[0]  # <pid>.<n>
         if not name.startswith(PREFIX) or not pid.isdigit() or _alive(int(pid)):
             continue
         try:
