@@ -3,10 +3,11 @@ import os
 
 import pytest
 import rosbag
+from conftest import fill_disk
 from nav_msgs.msg import Odometry
 from std_msgs.msg import String
 
-from cc_log import context_track, window_writer
+from cc_log import context_track, safe_files, window_writer
 from cc_log.context_track import ContextTrack, Tee, parse_topics
 from cc_log.window_buffer import Record
 
@@ -200,3 +201,45 @@ def test_a_looping_bag_never_collides_on_temporary_names_and_loses_nothing(tmp_p
     paths = files(tmp_path)
     assert len(paths) == 3 and all(path.endswith('.bag') for path in paths)  # no temporary file left
     assert [len(read(path)) for path in paths] == [5, 5, 5]
+
+
+def test_a_full_disk_backs_off_counts_the_lost_messages_and_leaves_no_file(small_tmpfs):
+    """A real full file system: one attempt per retry period (not one empty ``.tmp`` file per message), every
+    message not written counted as lost, no file left behind; once space returns, messages are kept again."""
+    disk = small_tmpfs('1m')
+    fill_disk(os.path.join(disk, 'filler'))
+    now = [0.0]
+    track = ContextTrack(disk, {'odom': None}, retry=5.0, clock=lambda: now[0])
+    for i in range(1000):  # 10 s at 100 Hz: attempts at 0 s and 5 s only
+        now[0] = i * 0.01
+        assert not track.on_message('odom', odom(100.0 + i * 0.01), None)
+    stats = track.stats()
+    assert stats['write_errors'] == 2 and 'No space left' in stats['last_error']
+    assert stats['messages_lost'] == 1000 and stats['messages_kept'] == 0
+    folder = os.path.join(disk, context_track.SUBDIRECTORY)
+    assert not os.path.isdir(folder) or os.listdir(folder) == []
+    os.unlink(os.path.join(disk, 'filler'))
+    now[0] = 10.0  # the next retry (the last attempt was at 5 s)
+    assert track.on_message('odom', odom(110.0), None)
+    track.close()
+    [path] = files(disk)
+    assert path.endswith('.bag') and len(read(path)) == 1
+    assert track.stats()['messages_lost'] == 1000
+
+
+def test_a_file_that_fails_to_close_is_never_published_half_closed(small_tmpfs):
+    """rosbag cannot close a file twice: a close that failed (disk full) is not retried into a final name that
+    would hold a bag without its index; the temporary file stays for the recovery at the next start."""
+    disk = small_tmpfs('1m')
+    jobs = []
+    track = ContextTrack(disk, {'odom': None}, submit=jobs.append)
+    for i in range(50):
+        track.on_message('odom', odom(100.0 + i), None)
+    track.close()
+    fill_disk(os.path.join(disk, 'filler'))
+    [job] = jobs
+    for attempt in range(2):
+        with pytest.raises(Exception):
+            job.write()
+    [path] = files(disk)
+    assert safe_files.TMP_MARK in os.path.basename(path)
