@@ -162,7 +162,7 @@ def test_serialized_messages_reach_the_track_as_bytes_through_a_raw_tee(tmp_path
     assert info.header['callerid'] == b'/base'
 
 
-def test_recover_reindexes_a_crashed_file(tmp_path):
+def test_recover_salvages_a_crashed_file(tmp_path):
     track = ContextTrack(tmp_path, {'odom': None})
     for i in range(5):
         track.on_message('odom', odom(1.0 + i), None)
@@ -243,3 +243,61 @@ def test_a_file_that_fails_to_close_is_never_published_half_closed(small_tmpfs):
             job.write()
     [path] = files(disk)
     assert safe_files.TMP_MARK in os.path.basename(path)
+
+
+DEAD_PID = 999999999  # no such process
+
+
+@pytest.fixture(scope='module')
+def context_bag(tmp_path_factory):
+    """A closed context file of 4000 odometry messages in several of rosbag's chunks: its bytes, the messages and
+    (data end, messages) of each chunk from rosbag's own index."""
+    directory = tmp_path_factory.mktemp('context')
+    track = ContextTrack(directory, {'odom': None}, rotate=1e6)
+    for i in range(4000):
+        track.on_message('odom', odom(1000.0 + i * 0.01), None)
+    track.close()
+    [path] = files(directory)
+    with rosbag.Bag(path) as bag:
+        chunks = [(bag._chunk_headers[info.pos].data_pos + bag._chunk_headers[info.pos].compressed_size,
+                   sum(info.connection_counts.values())) for info in bag._chunks]
+    assert len(chunks) >= 3
+    with open(path, 'rb') as stream:
+        return stream.read(), read(path), chunks
+
+
+def leftover(directory, data):
+    folder = directory / context_track.SUBDIRECTORY
+    folder.mkdir(parents=True)
+    path = folder / ('cc_log_context_19700101T001640.000Z.bag.tmp-%d.3' % DEAD_PID)
+    path.write_bytes(data)
+    return path
+
+
+def test_recover_keeps_every_complete_chunk_of_a_cut_off_file(context_bag, tmp_path):
+    """A leftover cut off after any chunk (before the index that follows it) gives back every message of every
+    complete chunk, stamps and connection headers as written (``rosbag reindex`` dropped the last one)."""
+    data, messages, chunks = context_bag
+    complete = 0
+    for number, (end, count) in enumerate(chunks):
+        complete += count
+        for cut in (end, end + 40):  # just the chunk; the chunk and part of its index records
+            directory = tmp_path / ('%d-%d' % (number, cut))
+            path = leftover(directory, data[:cut])
+            recovered, kept = context_track.recover(directory)
+            assert len(recovered) == 1 and kept == [], (cut, kept)
+            got = read(recovered[0])
+            assert [(topic, t) for topic, _, t in got] == [(topic, t) for topic, _, t in messages[:complete]], cut
+            assert got[-1][1].pose.pose.position.x == messages[complete - 1][1].pose.pose.position.x
+            assert not path.exists() and files(directory) == recovered, cut
+
+
+def test_recover_removes_leftovers_that_hold_no_message(context_bag, tmp_path):
+    """An empty leftover (the old full-disk behaviour) and one that holds nothing but the bag header are removed:
+    no empty context file, no leftover reported at every start."""
+    data, _, _ = context_bag
+    for name, content in (('empty', b''), ('header', data[:4117])):
+        directory = tmp_path / name
+        path = leftover(directory, content)
+        assert context_track.recover(directory) == ([], []), name
+        assert not path.exists() and files(directory) == [], name

@@ -24,7 +24,7 @@ as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, r
   monotonic clock) no new file is opened: the messages of that time are counted in ``messages_lost``, then
   the next message opens a new file.
 
-Crash leftovers (``cc_log_context_*.bag.tmp-*``) are reindexed and given their final name by ``recover``.
+Crash leftovers (``cc_log_context_*.bag.tmp-*``) are salvaged by ``recover`` (through ``recovery``).
 Pure apart from rosbag (imported when a file opens).
 """
 import datetime
@@ -350,37 +350,15 @@ def tee(*sinks):
 
 
 def recover(directory):
-    """Give crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>[.<n>]`` of a dead
-    process) their final names after ``rosbag reindex``; returns ``(recovered paths, [(path, why)] kept)``."""
-    import rosbag
-    folder = os.path.join(str(directory), SUBDIRECTORY)
+    """Recover the crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>[.<n>]`` of
+    a dead process) through ``recovery`` (``formats.bag_salvage``: every message of every complete chunk, and
+    of a chunk cut off mid-write, into ``<name>_recovered.bag``; one that holds no message is removed); returns
+    ``(recovered paths, [(path, why)] kept)``."""
+    from . import recovery
     recovered, kept = [], []
-    for path in log_format.temporary_files(folder):
-        name = os.path.basename(path)
-        base, _, pid = name.partition(EXTENSION + safe_files.TMP_MARK)
-        pid = pid.partition('.')[0]  # <pid>.<n>
-        if not name.startswith(PREFIX) or not pid.isdigit() or _alive(int(pid)):
-            continue
-        try:
-            bag = rosbag.Bag(path, 'a', allow_unindexed=True)
-            try:
-                for _ in bag.reindex():
-                    pass
-            finally:
-                bag.close()
-            recovered.append(safe_files.publish(path, log_format.final_names(folder, base, EXTENSION)))
-        except Exception as error:  # an unreadable leftover is kept for a person to look at
-            kept.append((path, str(error) or type(error).__name__))
+    for outcome in recovery.recover_directory(os.path.join(str(directory), SUBDIRECTORY)):
+        if outcome.path and outcome.status != recovery.DUPLICATE:
+            recovered.append(outcome.path)
+        if outcome.status == recovery.UNRECOVERABLE or outcome.lost_bytes:
+            kept.append((outcome.kept or outcome.leftover, outcome.detail))
     return recovered, kept
-
-
-def _alive(pid):
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:
-        return True
-    return True

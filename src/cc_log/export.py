@@ -46,12 +46,13 @@ def to_jsonl(records, out):
     return [out]
 
 
-def to_bag(records, out, compression='lz4', progress=None):
+def to_bag(records, out, compression='lz4', progress=None, names=None):
     """The records as one rosbag ``out`` (replaced), each at its stamp, as rosbag writes them
     (``formats.bag_writer``; chunks lz4, bz2 or none): a record read with its serialized bytes and connection
     header (from a bag-lz4 window) keeps them, the publisher's ``callerid`` and ``latching`` too, so ``rosbag
     play`` latches what was latched. ``progress()`` after each record; ``[out]``. ValueError when a topic
-    holds messages of two types (a bag has one connection per topic)."""
+    holds messages of two types (a bag has one connection per topic). ``names``: the paths to try in order
+    instead of replacing ``out`` (the first free one is taken, nothing is overwritten)."""
     headers = bag_lz4.connection_headers(records)
 
     def messages():
@@ -60,9 +61,10 @@ def to_bag(records, out, compression='lz4', progress=None):
             if progress:
                 progress()
 
-    with AtomicFile(out, overwrite=True) as stream:
+    target = AtomicFile(out, names=names, overwrite=names is None)
+    with target as stream:
         bag_writer.write_bag(stream, messages(), headers, compression=compression)
-    return [out]
+    return [target.path]
 
 
 def _csv_cell(value):
