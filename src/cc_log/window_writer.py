@@ -299,7 +299,12 @@ class WindowWriter(object):
     def _write_file(self, job):
         if job.window is None:
             return job.write(), 0
-        return log_format.write_window(job.window, self.directory, self.format, job.metadata)
+        left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
+        written = log_format.write_window(job.window, self.directory, self.format, job.metadata, left_out=left_out)
+        with self._lock:
+            self._counts['messages_lost'] += sum(left_out.values())
+            self._counts['messages_kept'] -= sum(left_out.values())
+        return written
 
     def _written_file(self, job, path, nbytes):
         with self._lock:
