@@ -300,11 +300,14 @@ class WindowWriter(object):
         if job.window is None:
             return job.write(), 0
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
-        written = log_format.write_window(job.window, self.directory, self.format, job.metadata, left_out=left_out)
-        with self._lock:
-            self._counts['messages_lost'] += sum(left_out.values())
-            self._counts['messages_kept'] -= sum(left_out.values())
-        return written
+        path, nbytes = log_format.write_window(job.window, self.directory, self.format, job.metadata, left_out=left_out)
+        if left_out:
+            with self._lock:
+                self._counts['messages_lost'] += sum(left_out.values())
+                self._counts['messages_kept'] -= sum(left_out.values())
+                self.last_error = '%s: %d messages left out, their bytes cannot be decoded (per topic in its ' \
+                    'metadata)' % (path, sum(left_out.values()))
+        return path, nbytes
 
     def _written_file(self, job, path, nbytes):
         with self._lock:
