@@ -109,8 +109,8 @@ def file_name(stamp):
 class _OpenBag(object):
     """One context file being written: a rosbag on ``<final>.tmp-<pid>.<n>``; ``finish`` closes it (rosbag writes
     its index), fsyncs it and gives it the first free final name; a retried finish is safe (after a close that
-    failed half-way it raises, and the temporary file stays for recovery at the next start); ``discard`` removes
-    it. A file that cannot be opened is removed at once."""
+    failed half-way, what reached the disk is salvaged by ``recovery``); ``discard`` removes it. A file that cannot
+    be opened is removed at once."""
 
     def __init__(self, directory, first_stamp):
         import rosbag
@@ -145,9 +145,14 @@ class _OpenBag(object):
         """Close, fsync and name the file; its final path."""
         if self.path is not None:
             return self.path
-        if self._close_error is not None:
-            raise RuntimeError('%s: closing failed (%s): kept for recovery at the next start'
-                               % (self.tmp, self._close_error))
+        if self._close_error is not None:  # rosbag cannot close twice: what reached the disk is salvaged
+            from . import recovery
+            outcome = recovery.recover(self.tmp)
+            if not outcome.path:
+                raise RuntimeError('%s: closing failed (%s), %d messages lost: %s'
+                                   % (self.tmp, self._close_error, self.messages, outcome.detail))
+            self.path = outcome.path
+            return self.path
         if self.bag is not None:
             bag, self.bag = self.bag, None
             try:
