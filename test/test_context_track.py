@@ -3,10 +3,11 @@ import os
 
 import pytest
 import rosbag
+from conftest import fill_disk
 from nav_msgs.msg import Odometry
 from std_msgs.msg import String
 
-from cc_log import context_track, window_writer
+from cc_log import context_track, safe_files, window_writer
 from cc_log.context_track import ContextTrack, Tee, parse_topics
 from cc_log.window_buffer import Record
 
@@ -161,7 +162,7 @@ def test_serialized_messages_reach_the_track_as_bytes_through_a_raw_tee(tmp_path
     assert info.header['callerid'] == b'/base'
 
 
-def test_recover_reindexes_a_crashed_file(tmp_path):
+def test_recover_salvages_a_crashed_file(tmp_path):
     track = ContextTrack(tmp_path, {'odom': None})
     for i in range(5):
         track.on_message('odom', odom(1.0 + i), None)
@@ -182,3 +183,131 @@ def test_topics_on_different_clocks_are_not_a_jump_back(tmp_path):
         track.on_message('chatter', String(data='x'), 1005.0 + second)
     track.close()
     assert len(files(tmp_path)) == 1 and len(read(files(tmp_path)[0])) == 40
+
+
+def test_a_looping_bag_never_collides_on_temporary_names_and_loses_nothing(tmp_path):
+    """``rosbag play -l``: the clock goes back to the same stamps while the writer has not yet closed the file
+    of the previous loop (jobs run later, as on a busy writer thread): every loop is one file, nothing lost."""
+    jobs = []
+    track = ContextTrack(tmp_path, {'odom': None}, submit=jobs.append)
+    for loop in range(3):
+        for second in range(5):
+            track.on_message('odom', odom(100.0 + second), None)
+    track.close()
+    for job in jobs:
+        job.write()
+    stats = track.stats()
+    assert stats['write_errors'] == 0 and stats['last_error'] == '' and stats['messages_kept'] == 15
+    paths = files(tmp_path)
+    assert len(paths) == 3 and all(path.endswith('.bag') for path in paths)  # no temporary file left
+    assert [len(read(path)) for path in paths] == [5, 5, 5]
+
+
+def test_a_full_disk_backs_off_counts_the_lost_messages_and_leaves_no_file(small_tmpfs):
+    """A real full file system: one attempt per retry period (not one empty ``.tmp`` file per message), every
+    message not written counted as lost, no file left behind; once space returns, messages are kept again."""
+    disk = small_tmpfs('1m')
+    fill_disk(os.path.join(disk, 'filler'))
+    now = [0.0]
+    track = ContextTrack(disk, {'odom': None}, retry=5.0, clock=lambda: now[0])
+    for i in range(1000):  # 10 s at 100 Hz: attempts at 0 s and 5 s only
+        now[0] = i * 0.01
+        assert not track.on_message('odom', odom(100.0 + i * 0.01), None)
+    stats = track.stats()
+    assert stats['write_errors'] == 2 and 'No space left' in stats['last_error']
+    assert stats['messages_lost'] == 1000 and stats['messages_kept'] == 0
+    folder = os.path.join(disk, context_track.SUBDIRECTORY)
+    assert not os.path.isdir(folder) or os.listdir(folder) == []
+    os.unlink(os.path.join(disk, 'filler'))
+    now[0] = 10.0  # the next retry (the last attempt was at 5 s)
+    assert track.on_message('odom', odom(110.0), None)
+    track.close()
+    [path] = files(disk)
+    assert path.endswith('.bag') and len(read(path)) == 1
+    assert track.stats()['messages_lost'] == 1000
+
+
+def test_a_file_that_fails_to_close_is_never_published_half_closed(small_tmpfs):
+    """rosbag cannot close a file twice: a close that failed (disk full) is not retried into a final name that
+    would hold a bag without its index; the retry salvages what reached the disk (``recovery``), or says how many
+    messages were lost."""
+    disk = small_tmpfs('1m')
+    jobs = []
+    track = ContextTrack(disk, {'odom': None}, submit=jobs.append)
+    for i in range(50):
+        track.on_message('odom', odom(100.0 + i), None)
+    track.close()
+    fill_disk(os.path.join(disk, 'filler'))
+    [job] = jobs
+    with pytest.raises(OSError):
+        job.write()
+    os.unlink(os.path.join(disk, 'filler'))
+    try:
+        path = job.write()  # space is back: what reached the disk is salvaged into a bag of its own
+    except RuntimeError as error:  # nothing of them reached the disk
+        assert 'closing failed' in str(error) and '50 messages lost' in str(error)
+    else:
+        assert path.endswith('_recovered.bag') and 0 < len(read(path)) <= 50
+        assert [t for _, _, t in read(path)] == [100.0 + i for i in range(len(read(path)))]
+    for path in files(disk):  # every file under a final name is a whole bag
+        assert safe_files.TMP_MARK not in path
+        if path.endswith('.bag'):
+            read(path)
+
+
+DEAD_PID = 999999999  # no such process
+
+
+@pytest.fixture(scope='module')
+def context_bag(tmp_path_factory):
+    """A closed context file of 4000 odometry messages in several of rosbag's chunks: its bytes, the messages and
+    (data end, messages) of each chunk from rosbag's own index."""
+    directory = tmp_path_factory.mktemp('context')
+    track = ContextTrack(directory, {'odom': None}, rotate=1e6)
+    for i in range(4000):
+        track.on_message('odom', odom(1000.0 + i * 0.01), None)
+    track.close()
+    [path] = files(directory)
+    with rosbag.Bag(path) as bag:
+        chunks = [(bag._chunk_headers[info.pos].data_pos + bag._chunk_headers[info.pos].compressed_size,
+                   sum(info.connection_counts.values())) for info in bag._chunks]
+    assert len(chunks) >= 3
+    with open(path, 'rb') as stream:
+        return stream.read(), read(path), chunks
+
+
+def leftover(directory, data):
+    folder = directory / context_track.SUBDIRECTORY
+    folder.mkdir(parents=True)
+    path = folder / ('cc_log_context_19700101T001640.000Z.bag.tmp-%d.3' % DEAD_PID)
+    path.write_bytes(data)
+    return path
+
+
+def test_recover_keeps_every_complete_chunk_of_a_cut_off_file(context_bag, tmp_path):
+    """A leftover cut off after any chunk (before the index that follows it) gives back every message of every
+    complete chunk, stamps and connection headers as written (``rosbag reindex`` dropped the last one)."""
+    data, messages, chunks = context_bag
+    complete = 0
+    for number, (end, count) in enumerate(chunks):
+        complete += count
+        for cut in (end, end + 40):  # just the chunk; the chunk and part of its index records
+            directory = tmp_path / ('%d-%d' % (number, cut))
+            path = leftover(directory, data[:cut])
+            recovered, kept = context_track.recover(directory)
+            assert len(recovered) == 1 and kept == [], (cut, kept)
+            got = read(recovered[0])
+            assert [(topic, t) for topic, _, t in got] == [(topic, t) for topic, _, t in messages[:complete]], cut
+            assert got[-1][1].pose.pose.position.x == messages[complete - 1][1].pose.pose.position.x
+            assert not path.exists() and files(directory) == recovered, cut
+
+
+def test_recover_removes_leftovers_that_hold_no_message(context_bag, tmp_path):
+    """An empty leftover (the old full-disk behaviour) and one that holds nothing but the bag header are removed:
+    no empty context file, no leftover reported at every start."""
+    data, _, _ = context_bag
+    for name, content in (('empty', b''), ('header', data[:4117])):
+        directory = tmp_path / name
+        path = leftover(directory, content)
+        assert context_track.recover(directory) == ([], []), name
+        assert not path.exists() and files(directory) == [], name

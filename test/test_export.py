@@ -102,3 +102,27 @@ def test_a_topic_with_two_message_types_is_refused_and_nothing_is_written(husky_
     assert not out.exists() and list(tmp_path.iterdir()) == [tmp_path / 'logs']
     with pytest.raises(ValueError, match='topic %s: messages of two types' % ODOM):
         bag_lz4.bag_messages(mixed, {})
+
+
+def test_csv_names_are_unique_sanitized_and_never_overwrite(tmp_path):
+    """``/a/b`` and ``/a_b`` both map to ``a_b``: each gets a file of its own, the file already there is left as
+    it is, and a topic name never puts a separator, a control character or an unbounded name into a path."""
+    import os
+    import re
+    from std_msgs.msg import String
+    from cc_log.window_buffer import Record
+    topics = ['/a/b', '/a_b', '/x/../../escape', '/\x1b[31mred\n', '/' + 'n' * 5000]
+    records = [Record(float(number), topic, String(data='of %s' % number)) for number, topic in enumerate(topics)]
+    theirs = tmp_path / 'a_b.csv'
+    theirs.write_text('not ours\n')
+    files = export.to_csv(records, str(tmp_path))
+    assert theirs.read_text() == 'not ours\n'
+    assert len(set(files)) == len(topics) and str(theirs) not in files
+    assert sorted(os.listdir(str(tmp_path))) == sorted([theirs.name] + [os.path.basename(path) for path in files])
+    for path in files:
+        assert os.path.dirname(path) == str(tmp_path)
+        assert re.match(r'^[A-Za-z0-9_-]{1,110}\.csv$', os.path.basename(path)), path
+    # files in the order of the sorted topics (as ``cclog export --json`` lists them), each holding its topic
+    for path, topic in zip(files, sorted(topics)):
+        with open(path) as stream:
+            assert stream.read().splitlines()[1].endswith(',of %d' % topics.index(topic)), (path, topic)

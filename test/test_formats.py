@@ -432,10 +432,10 @@ def test_failed_write_leaves_nothing(tmp_path):
 def test_unknown_format_is_one_line_error(alfa_window, tmp_path):
     with pytest.raises(ValueError) as error:
         Format.check('xyz')
-    assert str(error.value) == "format: 'xyz' is not one of: json-xz, bag-lz4"
+    assert str(error.value) == "format: 'xyz' is not one of: bag-lz4, json-xz"
     with pytest.raises(ValueError) as error:
         Format.check('zip', 'format_param')
-    assert str(error.value) == "format_param: 'zip' is not one of: json-xz, bag-lz4"
+    assert str(error.value) == "format_param: 'zip' is not one of: bag-lz4, json-xz"
     with pytest.raises(ValueError) as error:
         write_window(alfa_window, str(tmp_path), 'xyz')
     assert str(error.value) == "format: 'xyz' is not one of: json-xz, bag-lz4"
@@ -670,3 +670,26 @@ def test_bag_lz4_refuses_records_that_do_not_match_their_crc32(husky_window, tmp
     with pytest.raises(ValueError, match='do not match their crc32') as error:
         read_window(str(bad))
     assert str(bad) in str(error.value)
+
+
+def test_json_xz_rows_that_cannot_be_decoded_are_counted_lost_per_topic(tmp_path):
+    """Serialized messages whose bytes are cut short cannot be decoded into a json-xz window: left out, named per
+    topic in the window's metadata and counted in the writer's ``messages_lost`` (not ``messages_kept``)."""
+    from cc_log import window_writer
+    from cc_log.bag_reader import read_raw
+    records = [record for record in read_raw(real(HUSKY), [HUSKY_ODOM, '/imu/data'])][:40]
+    odom = [index for index, record in enumerate(records) if record.topic == HUSKY_ODOM]
+    imu = [index for index, record in enumerate(records) if record.topic == '/imu/data']
+    broken = {odom[1]: 30, odom[5]: 12, imu[2]: 20}  # index -> bytes kept
+    records = [record._replace(raw=record.raw[:broken[index]]) if index in broken else record
+               for index, record in enumerate(records)]
+    writer = window_writer.WindowWriter(str(tmp_path), 'json-xz', background=False)
+    writer.submit(window_writer.Job(LogWindow(records, [Trigger(records[0].stamp, 'test', None)])))
+    writer.close()
+    stats = writer.stats()
+    assert stats['windows_saved'] == 1 and stats['jobs_lost'] == 0
+    assert stats['messages_lost'] == 3 and stats['messages_kept'] == len(records) - 3
+    [path] = log_format.window_files(str(tmp_path))
+    meta, kept = read_window(path)
+    assert len(kept) == len(records) - 3 and meta['undecodable'] == 3
+    assert meta['undecodable_topics'] == {HUSKY_ODOM: 2, '/imu/data': 1}

@@ -8,7 +8,9 @@ as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, r
   rate keeps at most one message per ``1/Hz`` slot of its stamps (``floor(stamp * Hz)``), so 100 Hz
   odometry at ``:1`` is exactly one message per second; ``None`` keeps every message.
 - files go to ``<directory>/context/cc_log_context_<UTC of the first stamp>.bag`` (LZ4 chunks); the open file
-  is ``<name>.tmp-<pid>`` and is closed, fsynced and renamed when it spans ``rotate`` seconds (stamps), when
+  is ``<name>.tmp-<pid>.<n>`` (``n`` counts the files this process opened, so the name is unique whatever the
+  stamps do: a looping bag starts over at the same stamps while the last loop's file is still being closed) and
+  is closed, fsynced and renamed when it spans ``rotate`` seconds (stamps), when
   a topic's stamps jump back (a replayed bag, a simulation reset; topics on different clocks are not a jump)
   and at ``close``. A closed file is handed to
   ``submit(job)`` as a ``window_writer.Job(write=..., what=CONTEXT)`` (the node's context writer: quota,
@@ -17,17 +19,21 @@ as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, r
   the publisher's connection header) the bytes are written as they came (``rosbag.Bag.write(..., raw=True,
   connection_header=...)``), else the decoded message. ``on_message(topic, msg, stamp, size)`` is the same
   for the intake's sink interface, so ``Tee`` can feed a logger and the track together.
-- a write that fails (disk full...) is counted and said in ``last_error``; the file is closed and a new one
-  opened for the next message: what was written before is kept.
+- a write that fails (disk full...) is counted and said in ``last_error``; the file is closed (what was
+  written before is kept; a file no message reached is removed) and for ``retry`` seconds (``RETRY_PERIOD``,
+  monotonic clock) no new file is opened: the messages of that time are counted in ``messages_lost``, then
+  the next message opens a new file.
 
-Crash leftovers (``cc_log_context_*.bag.tmp-*``) are reindexed and given their final name by ``recover``.
+Crash leftovers (``cc_log_context_*.bag.tmp-*``) are salvaged by ``recover`` (through ``recovery``).
 Pure apart from rosbag (imported when a file opens).
 """
 import datetime
+import itertools
 import math
 import os
 import re
 import threading
+import time
 
 from . import features as features_mod
 from . import log_format, raw_message, safe_files, window_writer
@@ -43,8 +49,10 @@ EXTENSION = '.bag'
 DEFAULT_TOPICS = 'odom:1 amcl_pose /diagnostics'
 DEFAULT_ROTATE = 600.0   # seconds of stamps per file
 JUMP_BACK = 1.0          # stamps going back more than this start a new file
+RETRY_PERIOD = 5.0       # seconds (monotonic clock) without a new file after a write failed: messages are lost
 # bwi_logging/record.launch names its odometry thinned to 1 Hz (topic_tools drop) odom_1hz; here it means the same.
 BWI_ALIASES = {'odom_1hz': ('odom', 1.0)}
+_SERIAL = itertools.count()  # the files this process opened: their temporary names never collide
 _ENTRY = re.compile(r'^(?P<topic>[^\s:]+)(?::(?P<rate>[^\s:]+))?$')
 
 
@@ -82,6 +90,16 @@ def _rate(value, name):
     return rate
 
 
+def _seconds(value, name):
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = float('nan')
+    if not number > 0 or not math.isfinite(number):
+        raise ValueError('%s: %r must be a positive number of seconds' % (name, value))
+    return number
+
+
 def file_name(stamp):
     """``cc_log_context_<UTC of stamp>`` (no extension)."""
     moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(stamp))
@@ -89,8 +107,10 @@ def file_name(stamp):
 
 
 class _OpenBag(object):
-    """One context file being written: a rosbag on ``<final>.tmp-<pid>``; ``finish`` closes it (rosbag writes
-    its index), fsyncs it and gives it the first free final name. Idempotent, so a retried finish is safe."""
+    """One context file being written: a rosbag on ``<final>.tmp-<pid>.<n>``; ``finish`` closes it (rosbag writes
+    its index), fsyncs it and gives it the first free final name; a retried finish is safe (after a close that
+    failed half-way, what reached the disk is salvaged by ``recovery``); ``discard`` removes it. A file that cannot
+    be opened is removed at once."""
 
     def __init__(self, directory, first_stamp):
         import rosbag
@@ -98,12 +118,24 @@ class _OpenBag(object):
         self.directory = directory
         self.base = file_name(first_stamp)
         self.first = first_stamp
-        self.tmp = os.path.join(directory, '%s%s%s%d' % (self.base, EXTENSION, safe_files.TMP_MARK, os.getpid()))
-        fd = safe_files.create(self.tmp)
-        self._sync_fd = os.dup(fd)
-        self.bag = rosbag.Bag(os.fdopen(fd, 'w+b'), 'w', compression=rosbag.Compression.LZ4)
-        self.path = None
+        name = '%s%s%s%d.%d' % (self.base, EXTENSION, safe_files.TMP_MARK, os.getpid(), next(_SERIAL))
+        self.tmp = os.path.join(directory, name)
+        self.bag = self._sync_fd = self.path = self._close_error = None
         self.messages = 0
+        fd = safe_files.create(self.tmp)
+        try:
+            self._sync_fd = os.dup(fd)
+            stream = os.fdopen(fd, 'w+b')
+        except BaseException:
+            os.close(fd)
+            self.discard()
+            raise
+        try:
+            self.bag = rosbag.Bag(stream, 'w', compression=rosbag.Compression.LZ4)
+        except BaseException:
+            _quietly(stream.close)
+            self.discard()
+            raise
 
     def write(self, record, time):
         bag_lz4.write_record(self.bag, record, time)
@@ -113,36 +145,71 @@ class _OpenBag(object):
         """Close, fsync and name the file; its final path."""
         if self.path is not None:
             return self.path
+        if self._close_error is not None:  # rosbag cannot close twice: what reached the disk is salvaged
+            from . import recovery
+            outcome = recovery.recover(self.tmp)
+            if not outcome.path:
+                raise RuntimeError('%s: closing failed (%s), %d messages lost: %s'
+                                   % (self.tmp, self._close_error, self.messages, outcome.detail))
+            self.path = outcome.path
+            return self.path
         if self.bag is not None:
             bag, self.bag = self.bag, None
-            bag.close()
+            try:
+                bag.close()
+            except Exception as error:  # rosbag cannot close twice: what reached the disk is for recovery
+                self._close_error = str(error) or type(error).__name__
+                self._release()
+                raise
         if self._sync_fd is not None:
             os.fsync(self._sync_fd)
-            os.close(self._sync_fd)
-            self._sync_fd = None
+            self._release()
         self.path = safe_files.publish(self.tmp, log_format.final_names(self.directory, self.base, EXTENSION))
         safe_files.fsync_directory(self.directory)
         return self.path
+
+    def discard(self):
+        """Close without keeping anything and remove the temporary file (a file no message reached)."""
+        if self.bag is not None:
+            bag, self.bag = self.bag, None
+            _quietly(bag.close)
+        self._release()
+        try:
+            os.unlink(self.tmp)
+        except FileNotFoundError:
+            pass
+
+    def _release(self):
+        if self._sync_fd is not None:
+            fd, self._sync_fd = self._sync_fd, None
+            os.close(fd)
+
+
+def _quietly(close):
+    """Call ``close()``; its failure (the disk is full) does not matter: what it would write is given up."""
+    try:
+        close()
+    except Exception:
+        pass
 
 
 class ContextTrack(object):
     """The context track of one logging directory (see the module docstring). Thread-safe."""
 
-    def __init__(self, directory, rates, rotate=DEFAULT_ROTATE, submit=None):
+    def __init__(self, directory, rates, rotate=DEFAULT_ROTATE, submit=None, retry=RETRY_PERIOD, clock=time.monotonic):
         self.directory = os.path.join(str(directory), SUBDIRECTORY)
         self.rates = dict(rates)
-        try:
-            self.rotate = float(rotate)
-        except (TypeError, ValueError):
-            self.rotate = float('nan')
-        if not self.rotate > 0 or not math.isfinite(self.rotate):
-            raise ValueError('context_rotate: %r must be a positive number of seconds' % (rotate,))
+        self.rotate = _seconds(rotate, 'context_rotate')
+        self.retry = _seconds(retry, 'context_retry')
+        self._clock = clock
+        self._retry_at = None  # clock before which no file is opened again after a failed write
         self._submit = submit
         self._lock = threading.Lock()
         self._slots = {}
         self._bag = None
         self._last = {}  # topic -> its last stamp written (topics may run on different clocks)
-        self.counts = {'messages_kept': 0, 'messages_thinned': 0, 'files_closed': 0, 'write_errors': 0}
+        self.counts = {'messages_kept': 0, 'messages_thinned': 0, 'messages_lost': 0, 'files_closed': 0,
+                       'write_errors': 0}
         self.last_error = ''
         self.last_file = ''
 
@@ -186,6 +253,10 @@ class ContextTrack(object):
                 return False
             if not math.isfinite(record.stamp) or record.stamp < 0:
                 self._failed('%s: stamp %r cannot be a bag time' % (record.topic, record.stamp))
+                self.counts['messages_lost'] += 1
+                return False
+            if self._retry_at is not None and self._clock() < self._retry_at:
+                self.counts['messages_lost'] += 1  # backing off after a failed write (the disk is full)
                 return False
             import genpy
             time = genpy.Time.from_sec(record.stamp)
@@ -199,8 +270,11 @@ class ContextTrack(object):
                 self._bag.write(record, time)
             except Exception as error:  # OSError (disk full), rosbag's, a bad message: the track goes on
                 self._failed('%s: %s' % (record.topic, error or type(error).__name__))
+                self.counts['messages_lost'] += 1
+                self._retry_at = self._clock() + self.retry
                 self._close_locked()
                 return False
+            self._retry_at = None
             self._last[record.topic] = record.stamp
             self.counts['messages_kept'] += 1
             return True
@@ -211,7 +285,8 @@ class ContextTrack(object):
             self._close_locked()
 
     def stats(self):
-        """Counters: messages_kept, messages_thinned, files_closed, write_errors; last_error, last_file."""
+        """Counters: messages_kept, messages_thinned, messages_lost (wanted, not written), files_closed,
+        write_errors; last_error, last_file."""
         with self._lock:
             result = dict(self.counts)
             result.update(last_error=self.last_error, last_file=self.last_file)
@@ -226,10 +301,7 @@ class ContextTrack(object):
         if bag is None:
             return
         if not bag.messages:  # nothing written (the first write failed): no file worth keeping
-            try:
-                bag.finish()
-            except Exception as error:
-                self._failed('closing %s: %s' % (bag.tmp, error))
+            bag.discard()
             return
         self.counts['files_closed'] += 1
 
@@ -283,36 +355,15 @@ def tee(*sinks):
 
 
 def recover(directory):
-    """Give crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>`` of a dead
-    process) their final names after ``rosbag reindex``; returns ``(recovered paths, [(path, why)] kept)``."""
-    import rosbag
-    folder = os.path.join(str(directory), SUBDIRECTORY)
+    """Recover the crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>[.<n>]`` of
+    a dead process) through ``recovery`` (``formats.bag_salvage``: every message of every complete chunk, and
+    of a chunk cut off mid-write, into ``<name>_recovered.bag``; one that holds no message is removed); returns
+    ``(recovered paths, [(path, why)] kept)``."""
+    from . import recovery
     recovered, kept = [], []
-    for path in log_format.temporary_files(folder):
-        name = os.path.basename(path)
-        base, _, pid = name.partition(EXTENSION + safe_files.TMP_MARK)
-        if not name.startswith(PREFIX) or not pid.isdigit() or _alive(int(pid)):
-            continue
-        try:
-            bag = rosbag.Bag(path, 'a', allow_unindexed=True)
-            try:
-                for _ in bag.reindex():
-                    pass
-            finally:
-                bag.close()
-            recovered.append(safe_files.publish(path, log_format.final_names(folder, base, EXTENSION)))
-        except Exception as error:  # an unreadable leftover is kept for a person to look at
-            kept.append((path, str(error) or type(error).__name__))
+    for outcome in recovery.recover_directory(os.path.join(str(directory), SUBDIRECTORY)):
+        if outcome.path and outcome.status != recovery.DUPLICATE:
+            recovered.append(outcome.path)
+        if outcome.status == recovery.UNRECOVERABLE or outcome.lost_bytes:
+            kept.append((outcome.kept or outcome.leftover, outcome.detail))
     return recovered, kept
-
-
-def _alive(pid):
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:
-        return True
-    return True

@@ -9,11 +9,12 @@ import json
 import math
 import os
 
-from . import msg_codec
+from . import log_format, msg_codec
 from .formats import bag_lz4, bag_writer
 from .safe_files import AtomicFile
 
 BAG_COMPRESSIONS = bag_writer.COMPRESSIONS
+MAX_CSV_NAME = 100  # characters of a topic name kept in its CSV file's name
 
 
 def plain(value):
@@ -46,12 +47,13 @@ def to_jsonl(records, out):
     return [out]
 
 
-def to_bag(records, out, compression='lz4', progress=None):
+def to_bag(records, out, compression='lz4', progress=None, names=None):
     """The records as one rosbag ``out`` (replaced), each at its stamp, as rosbag writes them
     (``formats.bag_writer``; chunks lz4, bz2 or none): a record read with its serialized bytes and connection
     header (from a bag-lz4 window) keeps them, the publisher's ``callerid`` and ``latching`` too, so ``rosbag
     play`` latches what was latched. ``progress()`` after each record; ``[out]``. ValueError when a topic
-    holds messages of two types (a bag has one connection per topic)."""
+    holds messages of two types (a bag has one connection per topic). ``names``: the paths to try in order
+    instead of replacing ``out`` (the first free one is taken, nothing is overwritten)."""
     headers = bag_lz4.connection_headers(records)
 
     def messages():
@@ -60,9 +62,10 @@ def to_bag(records, out, compression='lz4', progress=None):
             if progress:
                 progress()
 
-    with AtomicFile(out, overwrite=True) as stream:
+    target = AtomicFile(out, names=names, overwrite=names is None)
+    with target as stream:
         bag_writer.write_bag(stream, messages(), headers, compression=compression)
-    return [out]
+    return [target.path]
 
 
 def _csv_cell(value):
@@ -90,25 +93,31 @@ def _flatten(row, prefix, out):
 
 
 def csv_file_name(topic):
-    """``/base/odom`` -> ``base_odom.csv``."""
-    name = ''.join(c if c.isalnum() or c in '-_.' else '_' for c in topic.strip('/')) or 'root'
-    return name + '.csv'
+    """``/base/odom`` -> ``base_odom``: the topic's ASCII letters, digits, ``-`` and ``_``, anything else (``/``,
+    ``.``, control characters) as ``_``, at most ``MAX_CSV_NAME`` characters; ``root`` for ``/`` (no extension)."""
+    name = ''.join(c if c.isascii() and (c.isalnum() or c in '-_') else '_' for c in str(topic).strip('/'))
+    return name[:MAX_CSV_NAME] or 'root'
 
 
 def to_csv(records, directory):
-    """One CSV per topic in ``directory`` (``stamp`` then the message's dotted fields); the files written."""
+    """One CSV per topic in ``directory`` (``stamp`` then the message's dotted fields); the files written, in the
+    order of the sorted topics. A file takes the first free name of ``<csv_file_name>.csv``, ``..._1.csv``, ...:
+    two topics of one name (``/a/b``, ``/a_b``) get a file each, and no file already there is overwritten."""
     by_topic = collections.OrderedDict()
     for record in records:
         by_topic.setdefault(record.topic, []).append(record)
     files = []
-    for topic, topic_records in by_topic.items():
+    for topic in sorted(by_topic):
+        topic_records = by_topic[topic]
         rows = [_flatten(msg_codec.to_dict(record.msg), '', collections.OrderedDict()) for record in topic_records]
         fields = list(collections.OrderedDict.fromkeys(key for row in rows for key in row))
-        path = os.path.join(directory, csv_file_name(topic))
-        with AtomicFile(path, overwrite=True, text=True, newline='') as stream:
+        base = csv_file_name(topic)
+        target = AtomicFile(os.path.join(directory, base + '.csv'), text=True, newline='',
+                            names=log_format.final_names(directory, base, '.csv'))
+        with target as stream:
             writer = csv.writer(stream)
             writer.writerow(['stamp'] + fields)
             for record, row in zip(topic_records, rows):
                 writer.writerow([repr(float(record.stamp))] + [_csv_cell(row.get(field, '')) for field in fields])
-        files.append(path)
+        files.append(target.path)
     return files

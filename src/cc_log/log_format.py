@@ -15,6 +15,7 @@ systems without hard links), and the directory is fsynced (``safe_files.AtomicFi
 ``O_EXCL|O_NOFOLLOW``, never through a link). Readers ignore ``*.tmp-*``; they are leftovers of a crash
 (``temporary_files``).
 """
+import collections
 import datetime
 import os
 import re
@@ -236,7 +237,7 @@ def final_names(directory, base, extension):
         counter += 1
 
 
-def write_window(window, directory, fmt, metadata=None, base=None):
+def write_window(window, directory, fmt, metadata=None, base=None, left_out=None):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
 
     ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
@@ -244,7 +245,8 @@ def write_window(window, directory, fmt, metadata=None, base=None):
     ``metadata`` (JSON-able dict) is added to ``window_metadata``. Records held as serialized bytes are
     decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``), by the format's own
     ``decoded_records`` when it has one (json-xz reads fixed layouts from the bytes); one that cannot be
-    decoded is left out and counted in the metadata's ``undecodable``. Raises ValueError for a bad format or
+    decoded is left out and counted in the metadata's ``undecodable`` and, per topic, ``undecodable_topics``
+    (and added to ``left_out``, a ``collections.Counter``, when given). Raises ValueError for a bad format or
     an empty window, OSError when the file cannot be written (the temporary file is removed).
     """
     module = formats.get(fmt)
@@ -258,7 +260,12 @@ def write_window(window, directory, fmt, metadata=None, base=None):
             raise ValueError('window: none of its %d records can be decoded' % undecodable)
     meta = window_metadata(window, fmt, metadata)
     if undecodable:
+        topics = collections.Counter(record.topic for record in window.records)
+        topics.subtract(record.topic for record in records)
         meta['undecodable'] = undecodable
+        meta['undecodable_topics'] = {topic: count for topic, count in topics.items() if count}
+        if left_out is not None:
+            left_out.update(meta['undecodable_topics'])
     base = base or base_name(window)
     extension = module.EXTENSION
     write = module.encoder(records, meta)  # a format may encode now, before the temporary file exists

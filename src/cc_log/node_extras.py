@@ -101,6 +101,7 @@ class NodeExtras(object):
             stats, written = self.track.stats(), self.writer.stats()
             values += [('context topics', ' '.join(self.topics)),
                        ('context messages kept', stats['messages_kept']),
+                       ('context messages lost', stats['messages_lost']),
                        ('context files', written['written'].get(window_writer.CONTEXT, 0)),
                        ('context write errors', stats['write_errors'] + written['write_errors'])]
             if stats['write_errors'] or written['jobs_lost'] or written['jobs_held']:

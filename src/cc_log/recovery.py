@@ -11,7 +11,8 @@ leftover into a final window file with what it held:
 - ``partial``: a file cut off mid-write whose format can salvage it (``salvage`` of its module in
   ``formats``; bag-lz4: ``formats.bag_salvage`` reads the rosbag 2.0 records directly, every complete message
   of every chunk and of a chunk cut off mid-write): what it held is written as a new window file named
-  ``..._recovered<extension>`` with the original metadata plus ``"recovered": true``.
+  ``..._recovered<extension>`` with the original metadata plus ``"recovered": true`` (a context-track file,
+  ``cc_log_context_*``, as the plain rosbag it was, each message with its connection header).
   The leftover is then removed only when every byte of it was decoded; otherwise it is kept, renamed
   ``<final name>.unrecovered-<pid>`` (out of the leftovers, so it is not recovered twice), and the outcome
   says how many bytes could not be decoded.
@@ -127,10 +128,21 @@ def _triggers(metadata, first_stamp):
     return triggers
 
 
+def _is_context(path):
+    """Whether ``path`` is a context-track file (a plain rosbag, not a window)."""
+    from . import context_track  # which imports this module
+    return os.path.basename(path).startswith(context_track.PREFIX)
+
+
 def _write_recovered(path, directory, base, fmt, metadata, records):
     """Write ``records`` as ``<base>_recovered<extension>`` in format ``fmt`` with ``metadata`` (of the
-    leftover); return its path."""
+    leftover), or as the plain rosbag it was for a context file; return its path."""
     from .window_buffer import LogWindow
+    if _is_context(path):
+        from . import export
+        names = log_format.final_names(directory, base + RECOVERED_SUFFIX, fmt.EXTENSION)
+        return export.to_bag(records, os.path.join(directory, base + RECOVERED_SUFFIX + fmt.EXTENSION),
+                             names=names)[0]
     for key in ('topics', 'types', 'counts', 'count', 'start', 'end', 'start_utc', 'end_utc', 'codec', 'layout',
                 'cc_log_version'):
         metadata.pop(key, None)
@@ -140,7 +152,7 @@ def _write_recovered(path, directory, base, fmt, metadata, records):
     window = LogWindow(records, triggers, part if isinstance(part, int) and not isinstance(part, bool) else 0)
     metadata['recovered'] = True
     metadata['recovered_from'] = os.path.basename(path)
-    return log_format.write_window(window, directory, fmt, metadata, base=base + RECOVERED_SUFFIX)[0]
+    return log_format.write_window(window, directory, fmt.CODEC, metadata, base=base + RECOVERED_SUFFIX)[0]
 
 
 def _recover_partial(path, directory, base, extension, size, fmt):
@@ -161,7 +173,7 @@ def _recover_partial(path, directory, base, extension, size, fmt):
                                                'message data reached the disk): removed' % fmt.CODEC)
         return Outcome(path, UNRECOVERABLE, '', 0, '%s: no message decodes%s; %d bytes kept as they are'
                        % (path, why, size), size)
-    written, count = _write_recovered(path, directory, base, fmt.CODEC, metadata, records), len(records)
+    written, count = _write_recovered(path, directory, base, fmt, metadata, records), len(records)
     cut = ', %d of them from a chunk cut off mid-write' % salvage.cut if salvage.cut else ''
     detail = 'cut off while written; %d messages recovered into %s%s' % (count, os.path.basename(written), cut)
     if salvage.undecoded:

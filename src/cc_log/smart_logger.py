@@ -675,8 +675,9 @@ class SmartLogger(object):
 
     def _within_budget(self, window):
         """``(window, {topic: messages dropped})``: when the writer's queue, the buffer, this window and room for
-        the next part together pass the memory budget, the window's heavy messages (``HEAVY_BYTES`` or more: images, clouds, scans) are
-        thinned evenly, over the window, until it fits; light ones (odometry, IMU, diagnostics) are always kept.
+        the next part together pass the memory budget, the window's heavy messages (``HEAVY_BYTES`` or more:
+        images, clouds, scans) are thinned evenly, over the window, until it fits; light ones (odometry, IMU,
+        diagnostics) are always kept.
         What is dropped is counted per topic (``stats()['shed_by_topic']``) and said in the window's metadata."""
         budget, queued = self._buffer.max_buffer_bytes, self._bytes_queued()
         if not budget or not window.records or not queued:  # (an idle writer keeps up: the part is already held)

@@ -328,7 +328,15 @@ class WindowWriter(object):
             return path, nbytes
         if not window.records:  # the end of a window written as files of its parts: nothing more to write
             return None, 0
-        return log_format.write_window(window, self.directory, self.format, job.metadata)
+        left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
+        path, nbytes = log_format.write_window(window, self.directory, self.format, job.metadata, left_out=left_out)
+        if left_out:
+            with self._lock:
+                self._counts['messages_lost'] += sum(left_out.values())
+                self._counts['messages_kept'] -= sum(left_out.values())
+                self.last_error = '%s: %d messages left out, their bytes cannot be decoded (per topic in its ' \
+                    'metadata)' % (path, sum(left_out.values()))
+        return path, nbytes
 
     def _written_file(self, job, path, nbytes):
         with self._lock:

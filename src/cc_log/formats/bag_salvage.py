@@ -9,7 +9,7 @@ import mmap
 import os
 import struct
 
-from .. import msg_codec, safe_input
+from .. import msg_codec, raw_message, safe_input
 from .bag_lz4 import MAGIC, METADATA_TOPIC, bag_stamp
 
 MAX_CHUNK_BYTES = 1 << 28  # a decompressed chunk larger than this is not decoded (rosbag writes ~768 KiB)
@@ -17,7 +17,8 @@ MAX_CHUNK_BYTES = 1 << 28  # a decompressed chunk larger than this is not decode
 Salvaged = collections.namedtuple('Salvaged', 'metadata records decoded undecoded cut problems headers_only')
 Salvaged.__doc__ = """What a file cut off mid-write still holds.
 
-metadata: the window metadata it held ({} when none); records: its Records in window order; decoded: bytes of
+metadata: the window metadata it held ({} when none); records: its Records in window order (each with its message,
+its serialized bytes and its connection header: callerid and latching kept); decoded: bytes of
 the file that were decoded completely (the rest is lost if the file is removed); undecoded: message records
 read but not decoded; cut: records taken from a chunk cut off mid-write; problems: why something was not
 decoded (the first few reasons); headers_only: it holds no message, nothing but (part of) the format's headers.
@@ -136,11 +137,11 @@ def lz4_decompress(data, limit):
 class _Salvage(object):
     """Every complete message record of a rosbag 2.0 file, in file order, however the file ends.
 
-    ``messages``: (topic, secs, nsecs, message) of every message decoded; ``undecoded``: message records
-    that were read but could not be decoded; ``decoded``: bytes of the file in records decoded completely
-    (every message in them too); ``header_end``: where the bag header record ends (None when the file ends
-    inside it); ``cut``: messages taken from a chunk cut off mid-write; ``problems``: why something was not
-    decoded (the first few reasons).
+    ``messages``: (topic, secs, nsecs, message, serialized bytes, connection header) of every message decoded;
+    ``undecoded``: message records that were read but could not be decoded; ``decoded``: bytes of the file in
+    records decoded completely (every message in them too); ``header_end``: where the bag header record ends
+    (None when the file ends inside it); ``cut``: messages taken from a chunk cut off mid-write; ``problems``:
+    why something was not decoded (the first few reasons).
     """
 
     def __init__(self, data):
@@ -256,7 +257,7 @@ class _Salvage(object):
             return
         if conn in self.connections:  # each connection is written into the first chunk using it and the index
             return
-        self.connections[conn] = (None, None)
+        self.connections[conn] = (None, None, None)
         try:
             topic = fields.get('topic', b'').decode('utf-8')
             header = _fields(payload)
@@ -267,11 +268,11 @@ class _Salvage(object):
         except (ValueError, KeyError) as error:
             self._problem('connection: %s' % error)
             return
-        self.connections[conn] = (topic, cls)
+        self.connections[conn] = (topic, cls, raw_message.text_header(header))
 
     def _message(self, fields, payload):
         try:
-            topic, cls = self.connections.get(field_u32(fields, 'conn'), (None, None))
+            topic, cls, header = self.connections.get(field_u32(fields, 'conn'), (None, None, None))
             secs, nsecs = struct.unpack('<II', fields.get('time', b''))
             if cls is None:
                 raise ValueError('messages of a connection that could not be read')
@@ -280,7 +281,7 @@ class _Salvage(object):
             self._problem('message: %s' % error)
             self.undecoded += 1
             return
-        self.messages.append((topic, secs, nsecs, msg))
+        self.messages.append((topic, secs, nsecs, msg, bytes(payload), header))
 
 
 def _window_of(salvage):
@@ -288,7 +289,7 @@ def _window_of(salvage):
     import genpy
     from ..window_buffer import Record
     metadata, records = None, []
-    for topic, secs, nsecs, msg in salvage.messages:
+    for topic, secs, nsecs, msg, raw, header in salvage.messages:
         if topic == METADATA_TOPIC:
             if metadata is None:
                 try:
@@ -296,7 +297,7 @@ def _window_of(salvage):
                 except ValueError:
                     metadata = {}
             continue
-        records.append((Record(genpy.Time(secs, nsecs).to_sec(), topic, msg), secs, nsecs))
+        records.append((Record(genpy.Time(secs, nsecs).to_sec(), topic, msg, 0, raw, header), secs, nsecs))
     metadata = metadata if isinstance(metadata, dict) else {}
     layout = metadata.pop('bag', None)
     stamps = layout.get('stamps') if isinstance(layout, dict) else None
