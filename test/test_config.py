@@ -88,7 +88,7 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
     ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]', "triggers[0] (r): unknown key 'whenn'"),
     ('triggers: [{name: r, kind: rule, topic: odom, arrival: true}, {name: r, kind: manual}]',
      "triggers[1]: name 'r' is used twice"),
-    ('format: zip', "format: 'zip' is not one of: json-xz, bag-lz4"),
+    ('format: zip', "format: 'zip' is not one of: bag-lz4, json-xz"),
     ("json_xz: {precision: {'pose.*': 0}}", "json_xz.precision: pose.*: step 0 is not a number > 0"),
     ("json_xz: {precision: [1e-4]}", "json_xz.precision: a mapping of field patterns to steps"),
     ("json_xz: {level: 3}", "json_xz: unknown key 'level'"),

@@ -438,7 +438,7 @@ def test_unknown_format_is_one_line_error(alfa_window, tmp_path):
     assert str(error.value) == "format_param: 'zip' is not one of: bag-lz4, json-xz"
     with pytest.raises(ValueError) as error:
         write_window(alfa_window, str(tmp_path), 'xyz')
-    assert str(error.value) == "format: 'xyz' is not one of: json-xz, bag-lz4"
+    assert str(error.value) == "format: 'xyz' is not one of: bag-lz4, json-xz"
     assert Format.check('bag-lz4') == 'bag-lz4'
     assert os.listdir(str(tmp_path)) == []
 
