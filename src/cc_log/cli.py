@@ -39,7 +39,7 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 INTERRUPT_GRACE = 0.5  # seconds Ctrl-C leaves a command to finish what it is writing before it stops anyway
 
-EXPORT_TARGETS = ('bag', 'csv', 'jsonl')
+EXPORT_TARGETS = ('bag', 'csv', 'jsonl', 'png')
 
 
 class CommandError(ValueError):
@@ -764,6 +764,8 @@ def cmd_export(args):
             raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
         with _bar(args, 'export', len(records)) as bar:
             files = export.to_bag(records, args.out, args.compression, bar.update)
+    elif args.to == 'png':
+        return _export_frames(args, records)
     else:
         _writable_dir(args.out, 'out')
         files = export.to_csv(records, args.out)
@@ -774,6 +776,28 @@ def cmd_export(args):
         _print_json(summary)
     else:
         print('%d messages of %d topic(s) -> %s' % (len(records), len(summary['topics']), ', '.join(files)))
+    return EXIT_OK
+
+
+def _export_frames(args, records):
+    """``export --to png``: every camera frame as a PNG (or its own JPEG) file in the directory ``--out``."""
+    from . import raw_message
+    frames = [record for record in records if raw_message.type_of(record) in export.IMAGE_TYPES]
+    if not frames:
+        raise CommandError('%s: no sensor_msgs/Image or CompressedImage messages' % ', '.join(args.paths)[:200])
+    _writable_dir(args.out, 'out')
+    skipped = {}
+    with _bar(args, 'export', len(frames)) as bar:
+        files = export.to_frames(frames, args.out, skipped, bar.update)
+    summary = collections.OrderedDict([('to', args.to), ('frames', len(files)),
+                                       ('topics', sorted(set(record.topic for record in frames))),
+                                       ('directory', args.out), ('skipped', skipped), ('files', files)])
+    if args.json:
+        _print_json(summary)
+        return EXIT_OK
+    print('%d frame(s) of %s -> %s' % (len(files), ', '.join(summary['topics']), args.out))
+    for reason, count in sorted(skipped.items()):
+        print('  skipped %d frame(s): %s' % (count, reason))
     return EXIT_OK
 
 
@@ -1180,20 +1204,24 @@ def build_parser():
     _common(p, json_help=False)
     p.set_defaults(run=cmd_cat)
 
-    p = commands.add_parser('export', help='window files to a bag, CSV or JSON lines', **_help(
+    p = commands.add_parser('export', help='window files to a bag, CSV, JSON lines or PNG frames', **_help(
         """
         Export the messages of window files (merged, in stamp order) to one rosbag (messages on their own
         topics, stamp as bag time), to CSV (--out is a directory: one <topic>.csv per topic, a "stamp"
-        column then one column per field; arrays as JSON), or to one JSON-lines file.
+        column then one column per field; arrays as JSON), to one JSON-lines file, or the camera frames to
+        images (--to png, --out is a directory: each sensor_msgs/Image as <topic>_<stamp>.png, rgb8, bgr8,
+        rgba8, bgra8, mono8, 16UC1/mono16 with their values, 32FC1 depth as 16-bit millimetres; each
+        CompressedImage as its own .jpg or .png bytes; existing files are never overwritten).
         """,
         """
           cclog export logs --to bag --out anomalies.bag
           cclog export logs/cc_log_20150521T191138.027Z_classifier.json.xz --to csv --out csv/
           cclog export logs --to jsonl --out all.jsonl --topic /odom
+          cclog export logs --to png --out frames/ --topic /camera/image_raw
         """))
     p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
     p.add_argument('--to', required=True, choices=EXPORT_TARGETS, help='output kind')
-    p.add_argument('--out', required=True, metavar='PATH', help='output file (bag, jsonl) or directory (csv)')
+    p.add_argument('--out', required=True, metavar='PATH', help='output file (bag, jsonl) or directory (csv, png)')
     p.add_argument('--topic', action='append', metavar='T', help='only this topic (repeatable)')
     p.add_argument('--compression', default='none', choices=export.BAG_COMPRESSIONS,
                    help='bag compression (default: %(default)s)')
