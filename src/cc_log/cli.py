@@ -187,12 +187,15 @@ def _read_windows(args, paths, label):
 def _window_summary(path, metadata, records):
     """What ``info`` reports about one window file."""
     from . import msg_codec
+    from .formats import bag_lz4
     counts = collections.OrderedDict()
     types = collections.OrderedDict()
+    topic_bytes = collections.OrderedDict()   # serialized (ROS wire) bytes per topic
     raw = 0
     for record in records:
         counts[record.topic] = counts.get(record.topic, 0) + 1
         types.setdefault(record.topic, record.msg._type)
+        topic_bytes[record.topic] = topic_bytes.get(record.topic, 0) + len(bag_lz4.bag_message(record)[-1])
         raw += msg_codec.row_json_bytes(record.msg)
     stamps = [record.stamp for record in records]
     start = min(stamps) if stamps else None
@@ -215,6 +218,7 @@ def _window_summary(path, metadata, records):
         ('messages', len(records)),
         ('topics', counts),
         ('types', types),
+        ('topic_bytes', topic_bytes),
         ('bytes', size),
         ('raw_json_bytes', raw),
         ('ratio', _ratio(raw, size)),
@@ -680,6 +684,8 @@ def cmd_info(args):
         print('  span       %s .. %s  (%.2f s%s)' % (_stamp_text(w['start']), _stamp_text(w['end']),
                                                      w['duration'] or 0.0, utc))
         print('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
+        print('  topic MB   %s (serialized)' % ', '.join(
+            '%s %.2f' % (topic, size / 1e6) for topic, size in sorted(w['topic_bytes'].items(), key=lambda i: -i[1])))
         print('  size       %s (row JSON %s, %s)' % (
             human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
             '%.1fx' % w['ratio'] if w['ratio'] else '-'))
