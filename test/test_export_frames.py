@@ -3,26 +3,17 @@ import io
 import json
 import os
 import struct
-import subprocess
-import sys
 
 import numpy
 import pytest
+from conftest import cclog
 from PIL import Image as PILImage
 from sensor_msgs.msg import CompressedImage, Image
 
 from cc_log import export, log_format, sim
 from cc_log.window_buffer import LogWindow, Record
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CAMERA = sim.CAMERA_TOPIC
-
-
-def cclog(*args):
-    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:1',
-               PYTHONPATH=os.pathsep.join(filter(None, [os.path.join(ROOT, 'src'), os.environ.get('PYTHONPATH')])))
-    return subprocess.run([sys.executable, os.path.join(ROOT, 'scripts', 'cclog')] + [str(a) for a in args],
-                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, env=env, timeout=300)
 
 
 @pytest.fixture(scope='module')

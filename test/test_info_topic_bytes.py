@@ -1,23 +1,15 @@
 """``cclog info``: each window's serialized bytes per topic (MB in the text, bytes in --json), for both formats."""
 import json
-import os
-import subprocess
-import sys
 
 import pytest
+from conftest import cclog
 
 from cc_log import log_format, sim
 from cc_log.window_buffer import LogWindow, Record
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-
-def cclog(*args):
-    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:1',
-               PYTHONPATH=os.pathsep.join(filter(None, [os.path.join(ROOT, 'src'), os.environ.get('PYTHONPATH')])))
-    result = subprocess.run([sys.executable, os.path.join(ROOT, 'scripts', 'cclog')] + [str(a) for a in args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, env=env,
-                            timeout=300)
+def ok(*args):
+    result = cclog(*args)
     assert result.returncode == 0, result.stderr
     return result.stdout
 
@@ -31,10 +23,10 @@ def test_info_gives_the_serialized_bytes_of_each_topic(tmp_path, fmt):
     expected = {}
     for topic, _, msg in items:
         expected[topic] = expected.get(topic, 0) + len(sim._serialized(msg))
-    (window,) = json.loads(cclog('info', path, '--json'))['windows']
+    (window,) = json.loads(ok('info', path, '--json'))['windows']
     assert window['topic_bytes'] == expected
     assert expected[sim.CAMERA_TOPIC] == 15 * (320 * 240 * 3 + 52)    # 15 frames: pixels + Image's other fields
-    lines = cclog('info', path).splitlines()
+    lines = ok('info', path).splitlines()
     assert lines[lines.index(next(line for line in lines if line.startswith('  messages'))) + 1] == (
         '  topic MB   /camera/image_raw 3.46, %s (serialized)' % ', '.join(
             '%s %.2f' % (topic, expected[topic] / 1e6) for topic in (sim.ODOM_TOPIC, sim.IMU_TOPIC, sim.SCAN_TOPIC)))

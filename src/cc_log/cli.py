@@ -39,7 +39,7 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 INTERRUPT_GRACE = 0.5  # seconds Ctrl-C leaves a command to finish what it is writing before it stops anyway
 
-EXPORT_TARGETS = ('bag', 'csv', 'jsonl', 'png')
+EXPORT_TARGETS = ('bag', 'mcap', 'csv', 'jsonl', 'png')
 
 
 class CommandError(ValueError):
@@ -764,12 +764,13 @@ def cmd_export(args):
     if args.to == 'jsonl':
         _parent_exists(args.out, 'out')
         files = export.to_jsonl(records, args.out)
-    elif args.to == 'bag':
+    elif args.to in ('bag', 'mcap'):
         _parent_exists(args.out, 'out')
         if os.path.exists(args.out) and not args.force:
             raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
         with _bar(args, 'export', len(records)) as bar:
-            files = export.to_bag(records, args.out, args.compression, bar.update)
+            write = export.to_bag if args.to == 'bag' else export.to_mcap
+            files = write(records, args.out, args.compression, bar.update)
     elif args.to == 'png':
         return _export_frames(args, records)
     else:
@@ -1210,28 +1211,32 @@ def build_parser():
     _common(p, json_help=False)
     p.set_defaults(run=cmd_cat)
 
-    p = commands.add_parser('export', help='window files to a bag, CSV, JSON lines or PNG frames', **_help(
+    p = commands.add_parser('export', help='window files to a bag, MCAP, CSV, JSON lines or PNG frames', **_help(
         """
         Export the messages of window files (merged, in stamp order) to one rosbag (messages on their own
-        topics, stamp as bag time), to CSV (--out is a directory: one <topic>.csv per topic, a "stamp"
-        column then one column per field; arrays as JSON), to one JSON-lines file, or the camera frames to
+        topics, stamp as bag time), to one MCAP file (ROS 1 profile, for Foxglove and PlotJuggler; needs the
+        optional Python package mcap: /usr/bin/python3 -m pip install --break-system-packages mcap), to CSV
+        (--out is a directory: one <topic>.csv per topic, a "stamp" column then one column per field; arrays
+        as JSON), to one JSON-lines file, or the camera frames to
         images (--to png, --out is a directory: each sensor_msgs/Image as <topic>_<stamp>.png, rgb8, bgr8,
         rgba8, bgra8, mono8, 16UC1/mono16 with their values, 32FC1 depth as 16-bit millimetres; each
         CompressedImage as its own .jpg or .png bytes; existing files are never overwritten).
         """,
         """
           cclog export logs --to bag --out anomalies.bag
+          cclog export logs --to mcap --out anomalies.mcap --compression lz4
           cclog export logs/cc_log_20150521T191138.027Z_classifier.json.xz --to csv --out csv/
           cclog export logs --to jsonl --out all.jsonl --topic /odom
           cclog export logs --to png --out frames/ --topic /camera/image_raw
         """))
     p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
     p.add_argument('--to', required=True, choices=EXPORT_TARGETS, help='output kind')
-    p.add_argument('--out', required=True, metavar='PATH', help='output file (bag, jsonl) or directory (csv, png)')
+    p.add_argument('--out', required=True, metavar='PATH',
+                   help='output file (bag, mcap, jsonl) or directory (csv, png)')
     p.add_argument('--topic', action='append', metavar='T', help='only this topic (repeatable)')
     p.add_argument('--compression', default='none', choices=export.BAG_COMPRESSIONS,
-                   help='bag compression (default: %(default)s)')
-    p.add_argument('--force', action='store_true', help='overwrite an existing bag')
+                   help='bag compression; MCAP: none or lz4 (default: %(default)s)')
+    p.add_argument('--force', action='store_true', help='overwrite an existing bag or MCAP file')
     _common(p)
     p.set_defaults(run=cmd_export)
 

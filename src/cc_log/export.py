@@ -1,5 +1,5 @@
-"""Window records out to other tools: one JSON-lines file, one rosbag, one CSV per topic, or the camera frames as
-PNG/JPEG files (``cclog export``).
+"""Window records out to other tools: one JSON-lines file, one rosbag, one MCAP file, one CSV per topic, or the
+camera frames as PNG/JPEG files (``cclog export``).
 
 Each writer takes records in stamp order and returns the files it wrote; every file is written atomically
 (``safe_files.AtomicFile``). Pure.
@@ -69,6 +69,53 @@ def to_bag(records, out, compression='lz4', progress=None):
 
     with AtomicFile(out, overwrite=True) as stream:
         bag_writer.write_bag(stream, messages(), headers, compression=compression)
+    return [out]
+
+
+MCAP_COMPRESSIONS = ('none', 'lz4')
+#: The one line when the optional MCAP library is missing.
+MCAP_MISSING = ('--to mcap needs the Python package mcap (an optional extra): /usr/bin/python3 -m pip install '
+                '--break-system-packages mcap mcap-ros1-support')
+
+
+def to_mcap(records, out, compression='none', progress=None):
+    """The records as one MCAP file ``out`` (replaced) in its ROS 1 profile, for Foxglove, PlotJuggler and the
+    ``mcap`` tools: one ``ros1msg`` schema per message type (its full definition), one ``ros1`` channel per
+    topic (metadata ``md5sum``, ``callerid`` and ``latching`` where the window kept them), each message as its
+    serialized bytes at its stamp (log and publish time). ``compression``: chunks ``none`` or ``lz4``;
+    ``progress()`` after each record; ``[out]``. ValueError(``MCAP_MISSING``) without the ``mcap`` package, and
+    when a topic holds messages of two types."""
+    try:
+        from mcap.writer import CompressionType, Writer
+    except ImportError:
+        raise ValueError(MCAP_MISSING)
+    if compression not in MCAP_COMPRESSIONS:
+        raise ValueError('compression: MCAP chunks are %s, not %s' % (' or '.join(MCAP_COMPRESSIONS), compression))
+    headers = bag_lz4.connection_headers(records)
+    with AtomicFile(out, overwrite=True) as stream:
+        writer = Writer(stream, compression=CompressionType.LZ4 if compression == 'lz4' else CompressionType.NONE)
+        writer.start(profile='ros1', library='cc_log')
+        schemas, channels = {}, {}
+        for topic, header in headers.items():
+            text = raw_message.text_header(header)
+            if text['type'] not in schemas:
+                schemas[text['type']] = writer.register_schema(name=text['type'], encoding='ros1msg',
+                                                               data=text['message_definition'].encode('utf-8'))
+            metadata = {'md5sum': text['md5sum']}
+            if 'callerid' in text:
+                metadata['callerid'] = text['callerid']
+            if 'latching' in text:
+                metadata['latching'] = 'true' if raw_message.is_latched(text) else 'false'
+            channels[topic] = writer.register_channel(topic=topic, message_encoding='ros1',
+                                                      schema_id=schemas[text['type']], metadata=metadata)
+        for sequence, record in enumerate(records):
+            topic, secs, nsecs, data = bag_lz4.bag_message(record)
+            stamp = secs * 1000000000 + nsecs
+            writer.add_message(channel_id=channels[topic], log_time=stamp, publish_time=stamp, sequence=sequence,
+                               data=data)
+            if progress:
+                progress()
+        writer.finish()
     return [out]
 
 
