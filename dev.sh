@@ -70,8 +70,10 @@ install_pip_extras() {
   log "installing ${PIP_EXTRAS[*]} (PyPI)"
   local sudo=()
   [ "$(id -u)" -eq 0 ] || sudo=(sudo)
-  "${sudo[@]}" /usr/bin/python3 -m pip install -q --break-system-packages "${PIP_EXTRAS[@]}" >&2 \
-    || log "optional ${PIP_EXTRAS[*]} not installed (pip failed): cclog export --to mcap will not work"
+  if ! "${sudo[@]}" /usr/bin/python3 -m pip install -q --root-user-action=ignore --break-system-packages \
+      "${PIP_EXTRAS[@]}" >&2; then
+    log "optional ${PIP_EXTRAS[*]} not installed (pip failed): cclog export --to mcap says how to install it"
+  fi
 }
 
 install_missing() {
