@@ -132,7 +132,7 @@ class WallMap(object):
         vertical = self.lookup(hx, by) == 0     # the step along x alone reaches the wall: a face along y
         area = self.lookup(bx, by)
         if obstacle is not None:
-            area = numpy.where(_in_box(hx, hy, obstacle) & ~(self.lookup(hx, hy) == 0), _OBSTACLE, area)
+            area = numpy.where(_in_box(hx, hy, obstacle) & (self.lookup(hx, hy) != 0), _OBSTACLE, area)
         return distance, hx, hy, vertical, area
 
     def _blocked(self, px, py, obstacle):
