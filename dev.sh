@@ -5,6 +5,7 @@
 #   ./dev.sh test     install what is missing, build, run every test (unit tests and rostests)
 #   ./dev.sh setup    install what is missing and build only
 #   ./dev.sh packages the Debian packages setup installs when missing (package.xml's keys, the toolchain, Dask)
+#                     (setup also installs the MCAP library from PyPI: PIP_EXTRAS)
 #
 # Setup installs the Debian packages cc_log needs when they are missing (quick when they are present) and
 # builds a catkin workspace in .catkin_ws/ whose src/cc_log points at this repository (entry by entry). Afterwards
@@ -20,7 +21,11 @@ export PATH="/usr/bin:/bin:$PATH"
 BUILD_TOOLCHAIN=(g++ make cmake)
 # An optional extra without a rosdep key (ros/rosdistro's rosdep/python.yaml has no dask key): Dask, which the
 # fleet commands (cclog collect / learn / replay over many bags) run on; they ask for it in one line when missing.
-OPTIONAL_EXTRAS=(python3-dask python3-distributed)
+OPTIONAL_EXTRAS=(python3-dask python3-distributed python3-pip)
+# Optional extras only on PyPI (Debian 12 has no package): the MCAP library, which `cclog export --to mcap`
+# writes with (it says how to install it in one line when missing). pip puts them in /usr/local for /usr/bin/python3.
+PIP_EXTRAS=(mcap mcap-ros1-support)
+PIP_EXTRAS_IMPORT='import mcap, mcap_ros1'
 
 log() { printf '[dev.sh] %s\n' "$*" >&2; }
 
@@ -57,6 +62,17 @@ debian_packages() {
   if [ ${#unknown[@]} -gt 0 ]; then
     log "package.xml: no Debian package known for rosdep key(s) ${unknown[*]}: add them to debian_packages_of in dev.sh"
     return 1
+  fi
+}
+
+install_pip_extras() {
+  /usr/bin/python3 -c "$PIP_EXTRAS_IMPORT" 2>/dev/null && return 0
+  log "installing ${PIP_EXTRAS[*]} (PyPI)"
+  local sudo=()
+  [ "$(id -u)" -eq 0 ] || sudo=(sudo)
+  if ! "${sudo[@]}" /usr/bin/python3 -m pip install -q --root-user-action=ignore --break-system-packages \
+      "${PIP_EXTRAS[@]}" >&2; then
+    log "optional ${PIP_EXTRAS[*]} not installed (pip failed): cclog export --to mcap says how to install it"
   fi
 }
 
@@ -126,6 +142,7 @@ main() {
     *) echo "usage: ./dev.sh demo|test|setup|packages" >&2; exit 2 ;;
   esac
   install_missing
+  install_pip_extras
   build
   activate
   case "$job" in

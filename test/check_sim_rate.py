@@ -12,7 +12,7 @@ import unittest
 import rospy
 import rostest
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Image, Imu, LaserScan
 from std_msgs.msg import String
 
 from cc_log import sim
@@ -25,6 +25,9 @@ class SimBwibotRate(unittest.TestCase):
     def setUp(self):
         self.lock = threading.Lock()
         self.odom, self.imu, self.events = [], [], []
+        self.frames = {'camera/image_raw': [], 'scan': []}
+        rospy.Subscriber('camera/image_raw', Image, self.frames['camera/image_raw'].append, queue_size=100)
+        rospy.Subscriber('scan', LaserScan, self.frames['scan'].append, queue_size=100)
         rospy.Subscriber('odom', Odometry, self.on_odom, queue_size=1000)
         rospy.Subscriber('imu/data', Imu, self.on_imu, queue_size=1000)
         rospy.Subscriber('sim/anomaly', String, self.on_event, queue_size=100)
@@ -111,6 +114,23 @@ class SimBwibotRate(unittest.TestCase):
             truth = sim.load_truth(truth_file)
             self.assertEqual(truth[0], {'type': end['type'], 'start': end['start'], 'end': end['end']})
             os.remove(truth_file)
+
+    def test_camera_at_15_hz_and_scan_at_10_hz(self):
+        if not rospy.get_param('~sensors', False):
+            return
+        self.assertTrue(self.wait(lambda: all(self.frames.values()), 10.0), 'no camera/image_raw or no scan')
+        with self.lock:
+            before = dict((topic, len(frames)) for topic, frames in self.frames.items())
+        start = time.time()
+        self.assertTrue(self.wait(lambda: time.time() - start >= 4.0, 5.0))
+        for topic, hz in (('camera/image_raw', 15.0), ('scan', 10.0)):
+            frames = self.frames[topic][before[topic]:]
+            stamped = (len(frames) - 1) / (frames[-1].header.stamp.to_sec() - frames[0].header.stamp.to_sec())
+            self.assertLess(abs(stamped - hz), 1.0, '%s: %.2f Hz by stamps' % (topic, stamped))
+            self.assertGreater(len(frames), 0.8 * hz * 4.0, '%s: %d messages in 4 s' % (topic, len(frames)))
+        image = self.frames['camera/image_raw'][-1]
+        self.assertEqual((image.width, image.height, image.encoding, len(image.data)), (320, 240, 'rgb8', 230400))
+        self.assertEqual(len(self.frames['scan'][-1].ranges), 481)
 
 
 def _readable(path):

@@ -1,5 +1,6 @@
 """Shared pytest fixtures: where the real robot bags are."""
 import os
+import subprocess
 import sys
 
 import pytest
@@ -23,6 +24,13 @@ def real_data(name):
     if not os.path.exists(path):
         pytest.fail('real data missing: %s (tests read ../shared/data/real/)' % path)
     return path
+
+
+def cclog(*args):
+    """Run ``cclog ARGS`` of this tree with no roscore reachable; the CompletedProcess (text stdout, stderr)."""
+    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:1')
+    return subprocess.run([sys.executable, os.path.join(ROOT, 'scripts', 'cclog')] + [str(a) for a in args],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, env=env, timeout=300)
 
 
 @pytest.fixture

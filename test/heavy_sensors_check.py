@@ -117,8 +117,8 @@ class HeavySensors(unittest.TestCase):
         rospy.wait_for_service('/%s/trigger_window' % NODE, timeout=60)
         fx.wait_for(lambda: int(self.values().get('messages restamped (header stamp off the clock)', 0)) > 30, 60,
                     'camera frames to come')
-        response = rospy.ServiceProxy('/%s/trigger_window' % NODE, TriggerWindow)(reason='look', before=1.0,
-                                                                                 after=1.0)
+        trigger_window = rospy.ServiceProxy('/%s/trigger_window' % NODE, TriggerWindow)
+        response = trigger_window(reason='look', before=1.0, after=1.0)
         self.assertTrue(response.success, response.message)
         path = fx.wait_for(lambda: log_format.window_files(self.windows), 60, 'the window file')[0]
         self.assertTrue(path.endswith('.bag') and '_manual' in path, path)

@@ -92,3 +92,25 @@ def test_an_unusable_out_is_one_line(tmp_path):
     assert result.returncode == 1 and result.stderr.strip().count('\n') == 0
     assert result.stderr.startswith('demo: --out %s: ' % (blocker / 'demo'))
     assert blocker.read_text() == 'x'
+
+
+def test_the_summary_counts_the_frames_and_scans_kept_around_each_event_in_either_format(tmp_path):
+    from cc_log import log_format, sim
+    from cc_log.window_buffer import LogWindow, Record
+    simulator = sim.Simulator(sim.SimConfig(minutes=4.0 / 60, anomalies=0, camera=True, scan=True))
+    records = [Record(stamp, topic, msg) for topic, stamp, msg in simulator.messages()]
+    first, second = records[:len(records) // 3], records[2 * len(records) // 3:]    # a gap between them
+    log_format.write_window(LogWindow(first, []), str(tmp_path), 'json-xz')
+    log_format.write_window(LogWindow(second, []), str(tmp_path), 'bag-lz4')
+    windows = demo.read_windows(str(tmp_path))
+    assert sorted(w['path'].rsplit('.', 1)[-1] for w in windows) == ['bag', 'xz']
+    counted = lambda part, topic: sum(1 for record in part if record.topic == topic)  # noqa: E731
+    start = sim.DEFAULT_START_TIME
+    truth = [{'type': 'collision', 'start': start + 0.5, 'end': start + 0.8},        # inside the first window
+             {'type': 'wheels_slipping', 'start': start + 3.5, 'end': start + 3.6},  # inside the second
+             {'type': 'localization_jump', 'start': start + 1.5, 'end': start + 2.0}]  # in the gap, no slack
+    kept = demo.kept_around(windows, truth, slack=0.0)
+    assert [(frames, scans) for _, frames, scans in kept] == [
+        (counted(first, sim.CAMERA_TOPIC), counted(first, sim.SCAN_TOPIC)),
+        (counted(second, sim.CAMERA_TOPIC), counted(second, sim.SCAN_TOPIC)), (0, 0)]
+    assert kept[0][1] == 20 and kept[0][2] == 14

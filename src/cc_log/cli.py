@@ -39,7 +39,7 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 INTERRUPT_GRACE = 0.5  # seconds Ctrl-C leaves a command to finish what it is writing before it stops anyway
 
-EXPORT_TARGETS = ('bag', 'csv', 'jsonl')
+EXPORT_TARGETS = ('bag', 'mcap', 'csv', 'jsonl', 'png')
 
 
 class CommandError(ValueError):
@@ -187,12 +187,15 @@ def _read_windows(args, paths, label):
 def _window_summary(path, metadata, records):
     """What ``info`` reports about one window file."""
     from . import msg_codec
+    from .formats import bag_lz4
     counts = collections.OrderedDict()
     types = collections.OrderedDict()
+    topic_bytes = collections.OrderedDict()   # serialized (ROS wire) bytes per topic
     raw = 0
     for record in records:
         counts[record.topic] = counts.get(record.topic, 0) + 1
         types.setdefault(record.topic, record.msg._type)
+        topic_bytes[record.topic] = topic_bytes.get(record.topic, 0) + len(bag_lz4.bag_message(record)[-1])
         raw += msg_codec.row_json_bytes(record.msg)
     stamps = [record.stamp for record in records]
     start = min(stamps) if stamps else None
@@ -215,6 +218,7 @@ def _window_summary(path, metadata, records):
         ('messages', len(records)),
         ('topics', counts),
         ('types', types),
+        ('topic_bytes', topic_bytes),
         ('bytes', size),
         ('raw_json_bytes', raw),
         ('ratio', _ratio(raw, size)),
@@ -680,6 +684,8 @@ def cmd_info(args):
         print('  span       %s .. %s  (%.2f s%s)' % (_stamp_text(w['start']), _stamp_text(w['end']),
                                                      w['duration'] or 0.0, utc))
         print('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
+        print('  topic MB   %s (serialized)' % ', '.join(
+            '%s %.2f' % (topic, size / 1e6) for topic, size in sorted(w['topic_bytes'].items(), key=lambda i: -i[1])))
         print('  size       %s (row JSON %s, %s)' % (
             human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
             '%.1fx' % w['ratio'] if w['ratio'] else '-'))
@@ -758,12 +764,15 @@ def cmd_export(args):
     if args.to == 'jsonl':
         _parent_exists(args.out, 'out')
         files = export.to_jsonl(records, args.out)
-    elif args.to == 'bag':
+    elif args.to in ('bag', 'mcap'):
         _parent_exists(args.out, 'out')
         if os.path.exists(args.out) and not args.force:
             raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
         with _bar(args, 'export', len(records)) as bar:
-            files = export.to_bag(records, args.out, args.compression, bar.update)
+            write = export.to_bag if args.to == 'bag' else export.to_mcap
+            files = write(records, args.out, args.compression, bar.update)
+    elif args.to == 'png':
+        return _export_frames(args, records)
     else:
         _writable_dir(args.out, 'out')
         files = export.to_csv(records, args.out)
@@ -774,6 +783,28 @@ def cmd_export(args):
         _print_json(summary)
     else:
         print('%d messages of %d topic(s) -> %s' % (len(records), len(summary['topics']), ', '.join(files)))
+    return EXIT_OK
+
+
+def _export_frames(args, records):
+    """``export --to png``: every camera frame as a PNG (or its own JPEG) file in the directory ``--out``."""
+    from . import raw_message
+    frames = [record for record in records if raw_message.type_of(record) in export.IMAGE_TYPES]
+    if not frames:
+        raise CommandError('%s: no sensor_msgs/Image or CompressedImage messages' % ', '.join(args.paths)[:200])
+    _writable_dir(args.out, 'out')
+    skipped = {}
+    with _bar(args, 'export', len(frames)) as bar:
+        files = export.to_frames(frames, args.out, skipped, bar.update)
+    summary = collections.OrderedDict([('to', args.to), ('frames', len(files)),
+                                       ('topics', sorted(set(record.topic for record in frames))),
+                                       ('directory', args.out), ('skipped', skipped), ('files', files)])
+    if args.json:
+        _print_json(summary)
+        return EXIT_OK
+    print('%d frame(s) of %s -> %s' % (len(files), ', '.join(summary['topics']), args.out))
+    for reason, count in sorted(skipped.items()):
+        print('  skipped %d frame(s): %s' % (count, reason))
     return EXIT_OK
 
 
@@ -1180,24 +1211,32 @@ def build_parser():
     _common(p, json_help=False)
     p.set_defaults(run=cmd_cat)
 
-    p = commands.add_parser('export', help='window files to a bag, CSV or JSON lines', **_help(
+    p = commands.add_parser('export', help='window files to a bag, MCAP, CSV, JSON lines or PNG frames', **_help(
         """
         Export the messages of window files (merged, in stamp order) to one rosbag (messages on their own
-        topics, stamp as bag time), to CSV (--out is a directory: one <topic>.csv per topic, a "stamp"
-        column then one column per field; arrays as JSON), or to one JSON-lines file.
+        topics, stamp as bag time), to one MCAP file (ROS 1 profile, for Foxglove and PlotJuggler; needs the
+        optional Python package mcap: /usr/bin/python3 -m pip install --break-system-packages mcap), to CSV
+        (--out is a directory: one <topic>.csv per topic, a "stamp" column then one column per field; arrays
+        as JSON), to one JSON-lines file, or the camera frames to
+        images (--to png, --out is a directory: each sensor_msgs/Image as <topic>_<stamp>.png, rgb8, bgr8,
+        rgba8, bgra8, mono8, 16UC1/mono16 with their values, 32FC1 depth as 16-bit millimetres; each
+        CompressedImage as its own .jpg or .png bytes; existing files are never overwritten).
         """,
         """
           cclog export logs --to bag --out anomalies.bag
+          cclog export logs --to mcap --out anomalies.mcap --compression lz4
           cclog export logs/cc_log_20150521T191138.027Z_classifier.json.xz --to csv --out csv/
           cclog export logs --to jsonl --out all.jsonl --topic /odom
+          cclog export logs --to png --out frames/ --topic /camera/image_raw
         """))
     p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
     p.add_argument('--to', required=True, choices=EXPORT_TARGETS, help='output kind')
-    p.add_argument('--out', required=True, metavar='PATH', help='output file (bag, jsonl) or directory (csv)')
+    p.add_argument('--out', required=True, metavar='PATH',
+                   help='output file (bag, mcap, jsonl) or directory (csv, png)')
     p.add_argument('--topic', action='append', metavar='T', help='only this topic (repeatable)')
     p.add_argument('--compression', default='none', choices=export.BAG_COMPRESSIONS,
-                   help='bag compression (default: %(default)s)')
-    p.add_argument('--force', action='store_true', help='overwrite an existing bag')
+                   help='bag compression; MCAP: none or lz4 (default: %(default)s)')
+    p.add_argument('--force', action='store_true', help='overwrite an existing bag or MCAP file')
     _common(p)
     p.set_defaults(run=cmd_export)
 

@@ -4,15 +4,17 @@
 
 1. simulates a nominal run of the BWIBot (no roscore) and collects its feature vectors, as collect mode;
 2. learns a model from them, as learn mode;
-3. starts a roscore and ``demo.launch`` (simulator with injected anomalies, its planner's ``cmd_vel`` and a
-   move_base-like goal status + the smart logger with a configuration: the motion classifier and a rule on
-   aborted goals, ``DEMO_CONFIG``), live;
-4. prints what was injected and caught (and by which trigger), false windows, messages seen vs kept, raw vs
-   stored bytes, and writes a PNG timeline.
+3. starts a roscore and ``demo.launch`` (simulator with injected anomalies, its planner's ``cmd_vel``, a
+   move_base-like goal status, a 15 Hz camera and a 10 Hz laser scan + the smart logger with a configuration:
+   the motion classifier and a rule on aborted goals, ``DEMO_CONFIG``; it keeps IMU, camera and scan in its
+   windows), live;
+4. prints what was injected and caught (and by which trigger), false windows, the camera frames and scans kept
+   around each event, messages seen vs kept, raw vs stored bytes, and writes a PNG timeline.
 
 Everything it starts is stopped when it ends, whatever way it ends.
 """
 import argparse
+import collections
 import os
 import shutil
 import signal
@@ -137,14 +139,16 @@ class LiveRecorder(object):
     def __init__(self):
         import rospy
         from nav_msgs.msg import Odometry
-        from sensor_msgs.msg import Imu
+        from sensor_msgs.msg import Image, Imu, LaserScan
         self.lock = threading.Lock()
         self.messages = 0
         self.raw_bytes = 0
         self.track = []  # (stamp, speed, yaw rate)
         rospy.init_node('cc_log_demo', anonymous=True, disable_signals=True)
         self.subscribers = [rospy.Subscriber('odom', Odometry, self._odom, queue_size=1000),
-                            rospy.Subscriber('imu/data', Imu, self._count, queue_size=1000)]
+                            rospy.Subscriber('imu/data', Imu, self._count, queue_size=1000),
+                            rospy.Subscriber('camera/image_raw', Image, self._count, queue_size=30),
+                            rospy.Subscriber('scan', LaserScan, self._count, queue_size=30)]
 
     def _count(self, msg):
         with self.lock:
@@ -220,13 +224,18 @@ def wait_for_master(uri):
     raise RuntimeError('roscore did not come up within %.0f s' % MASTER_TIMEOUT)
 
 
+def overlaps(window, event, slack):
+    """Whether a window overlaps a true anomaly (with ``slack`` seconds after it, for the feature window to
+    see it)."""
+    return window['start'] <= event['end'] + slack and window['end'] >= event['start']
+
+
 def match(windows, truth, slack):
-    """Which true anomalies a window overlaps (with ``slack`` seconds after each, for the feature
-    window to see it); windows overlapping none are false windows."""
+    """Which true anomalies a window overlaps (``overlaps``); windows overlapping none are false windows."""
     caught = {}
     false_windows = []
     for window in windows:
-        hits = [event for event in truth if window['start'] <= event['end'] + slack and window['end'] >= event['start']]
+        hits = [event for event in truth if overlaps(window, event, slack)]
         for event in hits:
             caught.setdefault(id(event), set()).update(window.get('names', ()))
         if not hits:
@@ -234,13 +243,31 @@ def match(windows, truth, slack):
     return caught, false_windows
 
 
-def summarize(out, windows_dir, truth, recorder, window_seconds):
-    """Print the summary and write the PNG."""
+def read_windows(windows_dir):
+    """The window files of ``windows_dir`` (any format, read by ``log_format.read_window``): dicts of path,
+    start, end, count, bytes, names, and ``frames`` / ``scans``: how many camera images and laser scans it holds."""
     windows = []
     for path in log_format.window_files(windows_dir):
-        meta, _ = log_format.read_window(path)
+        meta, records = log_format.read_window(path)
+        topics = collections.Counter(record.topic for record in records)
         windows.append({'path': path, 'start': meta['start'], 'end': meta['end'], 'count': meta['count'],
-                        'bytes': os.path.getsize(path), 'names': meta.get('names', [])})
+                        'bytes': os.path.getsize(path), 'names': meta.get('names', []),
+                        'frames': topics[sim.CAMERA_TOPIC], 'scans': topics[sim.SCAN_TOPIC]})
+    return windows
+
+
+def kept_around(windows, truth, slack):
+    """``[(event, camera frames, scans)]``: what the windows overlapping each true anomaly (``overlaps``) hold."""
+    kept = []
+    for event in truth:
+        near = [window for window in windows if overlaps(window, event, slack)]
+        kept.append((event, sum(w['frames'] for w in near), sum(w['scans'] for w in near)))
+    return kept
+
+
+def summarize(out, windows_dir, truth, recorder, window_seconds):
+    """Print the summary and write the PNG."""
+    windows = read_windows(windows_dir)
     caught, false_windows = match(windows, truth, window_seconds)
     stored = sum(window['bytes'] for window in windows)
     kept = sum(window['count'] for window in windows)
@@ -249,13 +276,21 @@ def summarize(out, windows_dir, truth, recorder, window_seconds):
         injected, hit, names = by_type.get(event['type'], (0, 0, set()))
         by_type[event['type']] = (injected + 1, hit + (1 if id(event) in caught else 0),
                                   names | caught.get(id(event), set()))
-    lines = ['', 'cc_log demo: smart logger on a simulated BWIBot (100 Hz odometry + IMU, cmd_vel, goal status)',
+    lines = ['', 'cc_log demo: smart logger on a simulated BWIBot (100 Hz odometry + IMU, cmd_vel, goal status, '
+             '15 Hz camera, 10 Hz scan)',
              '  anomalies injected vs caught (by trigger):']
     for kind, (injected, hit, names) in sorted(by_type.items()):
         by = '  (%s)' % ', '.join(sorted(names)) if names else ''
         lines.append('    %-22s %d / %d%s' % (kind, hit, injected, by))
     lines.append('    %-22s %d / %d' % ('all', len(caught), len(truth)))
     lines.append('  false windows:          %d' % len(false_windows))
+    lines.append('  kept around each event: camera frames (320x240), laser scans')
+    t0 = recorder.track[0][0] if recorder.track else 0.0
+    for event, frames, scans in kept_around(windows, truth, window_seconds):
+        at = event['start'] - t0
+        lines.append('    %-22s at %5.1f s  %4d frames, %4d scans' % (event['type'], at, frames, scans))
+    lines.append('    %-22s            %4d frames, %4d scans' % (
+        'in all windows', sum(w['frames'] for w in windows), sum(w['scans'] for w in windows)))
     share = 100.0 * kept / max(recorder.messages, 1)
     lines.append('  messages seen / kept:   %d / %d (%.1f%%)' % (recorder.messages, kept, share))
     lines.append('  raw row JSON / stored:  %s / %s  (%.0fx less)' % (

@@ -21,7 +21,9 @@ What it publishes
     ``/move_base/status`` at ``STATUS_RATE`` Hz (the current goal ACTIVE while the robot heads for a
     destination, SUCCEEDED once there; a planning failure ends with its goal ABORTED, published at once, and
     the robot going on under a new goal). Ground truth on ``/sim/anomaly`` (``std_msgs/String`` holding JSON,
-    one message when an anomaly starts and one when it ends).
+    one message when an anomaly starts and one when it ends). Optionally (``camera``, ``scan``) a 320x240 rgb8
+    ``sensor_msgs/Image`` on ``/camera/image_raw`` at 15 Hz and a ``sensor_msgs/LaserScan`` on ``/scan`` at 10 Hz,
+    ray-cast against the floor plan's walls from the true pose (``sim_sensors``).
 
 Anomalies (``ANOMALY_TYPES``), each a separate event with nominal driving (at least ``gap`` seconds)
 between events:
@@ -62,6 +64,9 @@ from geometry_msgs.msg import Twist
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
+
+from . import sim_sensors
+from .sim_sensors import CAMERA_TOPIC, SCAN_TOPIC  # noqa: F401 (the simulator's topics, all here)
 
 ANOMALY_TYPES = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting',
                  'localization_jump', 'wheels_slipping')
@@ -130,6 +135,7 @@ class SimConfig(object):
     anomaly_types  which types to use (tuple, or comma-separated string)
     imu            also publish sensor_msgs/Imu on /imu/data
     commands       also publish /cmd_vel and /move_base/status (see the module docstring)
+    camera, scan   also publish the camera's images and the laser scans (``sim_sensors``; off: cheap tests)
     start_time     stamp (float seconds) of the first message
     gap            at least this many seconds of nominal driving between anomalies (and before the first)
     warmup         seconds of nominal driving before the first anomaly
@@ -138,7 +144,8 @@ class SimConfig(object):
     """
 
     def __init__(self, rate=100.0, seed=0, minutes=10.0, anomalies=6, anomaly_types=ANOMALY_TYPES, imu=False,
-                 start_time=DEFAULT_START_TIME, gap=20.0, warmup=20.0, jitter=0.0005, noise=1.0, commands=False):
+                 start_time=DEFAULT_START_TIME, gap=20.0, warmup=20.0, jitter=0.0005, noise=1.0, commands=False,
+                 camera=False, scan=False):
         self.rate = rate
         self.seed = seed
         self.minutes = minutes
@@ -151,6 +158,8 @@ class SimConfig(object):
         self.jitter = jitter
         self.noise = noise
         self.commands = commands
+        self.camera = camera
+        self.scan = scan
 
     def validate(self):
         """Check and normalise the fields; raise ValueError('<field>: <what is wrong>')."""
@@ -179,7 +188,7 @@ class SimConfig(object):
         number('noise', 0.0, 10.0)
         self.anomaly_types = parse_anomaly_types(self.anomaly_types)
         self.imu = bool(self.imu)
-        self.commands = bool(self.commands)
+        self.commands, self.camera, self.scan = bool(self.commands), bool(self.camera), bool(self.scan)
         if self.anomalies and self.minutes > 0:
             slot = self.slot_seconds()
             need = self.gap + MAX_ANOMALY_SECONDS
@@ -673,6 +682,8 @@ class Simulator(object):
         self._active = None
         self._last_end = -config.gap
         self._next_stamp = self._stamp_for(0)
+        self._sensors = (sim_sensors.Sensors(self.floor, seed, config.rate, config.camera, config.scan)
+                         if config.camera or config.scan else None)
 
     # -- time -------------------------------------------------------------------------------------------
     def _stamp_for(self, tick):
@@ -781,6 +792,9 @@ class Simulator(object):
                 out.append((CMD_TOPIC, stamp_s, _twist(self._cmd_v, self._cmd_w)))
             if k % self._status_every == 0 and self._goal:
                 out.append((STATUS_TOPIC, stamp_s, self._status(stamp, self._goal_status)))
+        if self._sensors is not None:
+            collision = active['start_tick'] if active is not None and active['type'] == 'collision' else None
+            out.extend(self._sensors.frames(k, stamp, stamp_s, (self.x, self.y, self.yaw), collision))
         self.tick += 1
         if len(out) > 1:
             out.sort(key=lambda item: item[1])
@@ -924,9 +938,9 @@ def load_truth(path):
 def simulate_to_bag(path, config=None, truth_file=None, compression='lz4', progress=None):
     """Simulate a whole run straight into a bag (no roscore) and its ground truth next to it.
 
-    Writes ``path`` (odometry, IMU and commands when configured, /sim/anomaly events; ``compression`` 'lz4', 'bz2' or
-    'none') and the sidecar ``truth_file`` (default ``<path>.truth.json``); ``progress(done, total)`` is
-    called now and then with simulated ticks. Returns the truth list.
+    Writes ``path`` (odometry; IMU, commands, camera and scan when configured; /sim/anomaly events;
+    ``compression`` 'lz4', 'bz2' or 'none') and the sidecar ``truth_file`` (default ``<path>.truth.json``);
+    ``progress(done, total)`` is called now and then with simulated ticks. Returns the truth list.
     """
     from . import raw_message
     from .formats import bag_writer

@@ -1,14 +1,16 @@
 """The simulated BWIBot node (``rosrun cc_log sim_bwibot.py``): odometry with labelled anomalies, live.
 
 Node name: ``sim_bwibot``. The robot, its floor and its anomalies are ``cc_log.sim``; this node publishes
-them in real time (rospy.Rate), stamped with the simulator's clock, which starts at the ROS time
-(``rospy.Time.now()``) when the node starts.
+them in real time (a tick every 1/rate s, late ticks made up for), stamped with the simulator's clock, which
+starts at the ROS time (``rospy.Time.now()``) when the node starts.
 
 Published topics (relative names: push the node into a namespace or remap them)
-  ``odom`` (nav_msgs/Odometry, frame ``odom`` -> ``base_link``): at ``~rate`` Hz, steady (rospy.Rate).
+  ``odom`` (nav_msgs/Odometry, frame ``odom`` -> ``base_link``): at ``~rate`` Hz, steady.
   ``imu/data`` (sensor_msgs/Imu): at the same rate when ``~imu`` is true.
   ``cmd_vel`` (geometry_msgs/Twist, the planner's command) and ``move_base/status``
   (actionlib_msgs/GoalStatusArray) when ``~commands`` is true (see ``cc_log.sim``).
+  ``camera/image_raw`` (sensor_msgs/Image, rgb8 320x240, 15 Hz) when ``~camera`` is true and ``scan``
+  (sensor_msgs/LaserScan, 10 Hz) when ``~scan`` is true: ray-cast from the simulated pose (``cc_log.sim_sensors``).
   ``sim/anomaly`` (std_msgs/String, JSON): ground truth, one message when an anomaly starts
   ``{"event": "start", "type", "start", "end": null}`` and one when it ends
   ``{"event": "end", "type", "start", "end"}``; stamps are those of the odometry published at that moment.
@@ -20,6 +22,7 @@ Parameters (each resolved value is logged once)
   ``~anomaly_types`` (list or comma-separated string, default: all): which types.
   ``~imu`` (bool, default false): also publish ``imu/data``.
   ``~commands`` (bool, default false): also publish ``cmd_vel`` and ``move_base/status``.
+  ``~camera``, ``~scan`` (bool, default false): also publish ``camera/image_raw`` / ``scan``.
   ``~minutes`` (double, default 0): how long to run; 0 = until shutdown. The node exits at the end.
   ``~truth_file`` (string, default: none): ground-truth JSON (as ``cc_log.sim.write_truth``), rewritten
   whenever an anomaly ends (and at shutdown when one was cut short; its end is then the last stamp).
@@ -33,7 +36,7 @@ import sys
 
 import rospy
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Image, Imu, LaserScan
 from std_msgs.msg import String
 
 from . import sim
@@ -45,8 +48,12 @@ IMU_TOPIC = 'imu/data'
 TRUTH_TOPIC = 'sim/anomaly'
 CMD_TOPIC = 'cmd_vel'
 STATUS_TOPIC = 'move_base/status'
+CAMERA_TOPIC = 'camera/image_raw'
+SCAN_TOPIC = 'scan'
+CATCH_UP = 1.0   # s: how far behind its clock the node still catches up
 DEFAULTS = {'rate': 100.0, 'seed': 0, 'anomalies': 0, 'anomaly_types': 'all', 'imu': False, 'minutes': 0.0,
-            'truth_file': '', 'gap': 20.0, 'warmup': 20.0, 'commands': False}
+            'truth_file': '', 'gap': 20.0, 'warmup': 20.0, 'commands': False, 'camera': False,
+            'scan': False}
 
 
 def read_config(start_time):
@@ -59,7 +66,9 @@ def read_config(start_time):
                                anomalies=values['anomalies'], anomaly_types=values['anomaly_types'],
                                imu=to_bool('imu', values['imu']), start_time=start_time, gap=values['gap'],
                                warmup=values['warmup'], jitter=0.0,
-                               commands=to_bool('commands', values['commands'])).validate()
+                               commands=to_bool('commands', values['commands']),
+                               camera=to_bool('camera', values['camera']),
+                               scan=to_bool('scan', values['scan'])).validate()
     except ConfigError:
         raise
     except ValueError as error:
@@ -80,17 +89,24 @@ class SimNode(object):
         self.odom_pub = rospy.Publisher(ODOM_TOPIC, Odometry, queue_size=50)
         self.imu_pub = rospy.Publisher(IMU_TOPIC, Imu, queue_size=50) if config.imu else None
         self.truth_pub = rospy.Publisher(TRUTH_TOPIC, String, queue_size=20)
-        self.command_pubs = {}
+        self.publishers = {}   # sim topic -> publisher of the optional topics
         if config.commands:
             from actionlib_msgs.msg import GoalStatusArray
             from geometry_msgs.msg import Twist
-            self.command_pubs = {sim.CMD_TOPIC: rospy.Publisher(CMD_TOPIC, Twist, queue_size=50),
-                                 sim.STATUS_TOPIC: rospy.Publisher(STATUS_TOPIC, GoalStatusArray, queue_size=20)}
+            self.publishers = {sim.CMD_TOPIC: rospy.Publisher(CMD_TOPIC, Twist, queue_size=50),
+                               sim.STATUS_TOPIC: rospy.Publisher(STATUS_TOPIC, GoalStatusArray, queue_size=20)}
+        if config.camera:
+            self.publishers[sim.CAMERA_TOPIC] = rospy.Publisher(CAMERA_TOPIC, Image, queue_size=5)
+        if config.scan:
+            self.publishers[sim.SCAN_TOPIC] = rospy.Publisher(SCAN_TOPIC, LaserScan, queue_size=10)
         self.published = 0
 
     def run(self):
-        """Publish until the run ends or ROS shuts down."""
-        rate = rospy.Rate(self.config.rate)
+        """Publish until the run ends or ROS shuts down, one tick every 1/rate s; a tick that took long (a
+        camera frame on a busy machine) is made up for by the next ones, up to ``CATCH_UP`` s behind."""
+        period = rospy.Duration(1.0 / self.config.rate)
+        catch_up = rospy.Duration(CATCH_UP)
+        due = rospy.get_rostime()
         last = None
         try:
             while not rospy.is_shutdown() and not self.simulator.done:
@@ -105,10 +121,15 @@ class SimNode(object):
                         self.imu_pub.publish(msg)
                     elif topic == sim.TRUTH_TOPIC:
                         self._truth_event(json.loads(msg.data), stamp)
-                    elif topic in self.command_pubs:
-                        self.command_pubs[topic].publish(msg)
+                    elif topic in self.publishers:
+                        self.publishers[topic].publish(msg)
                     last = stamp
-                rate.sleep()
+                due += period
+                now = rospy.get_rostime()
+                if now - due > catch_up:
+                    due = now          # too far behind to catch up: go on from now (stamps stay behind)
+                elif due > now:
+                    rospy.sleep(due - now)
         except rospy.ROSInterruptException:
             pass
         finally:
