@@ -351,3 +351,73 @@ def test_a_goal_status_rule_catches_every_simulated_planning_failure_once(tmp_pa
         assert metadata['names'] == ['goal_aborted'] and len(metadata['triggers']) == 1
         assert abs(metadata['triggers'][0]['stamp'] - entry['end']) < 0.02
         assert metadata['reason'] == 'status_list[0].status == 4 (4)'
+
+
+# -- pre and post per trigger, from the configuration -----------------------------------------------------
+
+HUSKY, HUSKY_ODOM = 'husky_outdoor_2015.bag', '/husky_velocity_controller/odom'
+
+
+def configured_logger(directory, text):
+    """A SmartLogger as the node and ``cclog replay --config`` build it from a configuration's text."""
+    import yaml
+    from cc_log.config import Config, installed_class
+    from cc_log.model import AnomalyModel
+    cfg = Config.from_dict(yaml.safe_load(text), 'test.yaml')
+    triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
+    return SmartLogger(None, str(directory), **cfg.logger_options(triggers))
+
+
+def test_a_trigger_of_the_configuration_keeps_its_own_pre_and_post_on_real_driving(tmp_path, real_bag):
+    """windows.pre 10 s, post 5 s; a turn rule of its own 1 s before and 0.5 s after: its windows on the Husky's
+    real turns start 1 s before its first fire and end 0.5 s after its last, not 10 s and 5 s."""
+    from cc_log import bagio
+    logger = configured_logger(tmp_path, """
+windows: {pre: 10s, post: 5s}
+triggers:
+  - {name: turn, kind: rule, topic: %s, type: nav_msgs/Odometry, when: 'abs(twist.twist.angular.z) > 0.4',
+     hold_off: 0.1s, pre: 1s, post: 0.5s}
+""" % HUSKY_ODOM)
+    feed(logger, [(r.topic, r.msg, r.stamp) for r in bagio.read_messages(real_bag(HUSKY), [HUSKY_ODOM])])
+    found = windows(tmp_path)
+    assert found
+    for metadata, kept in found:
+        odom = [r.stamp for r in kept if r.topic == HUSKY_ODOM]
+        fires = [t['stamp'] for t in metadata['triggers']]
+        assert metadata['names'] == ['turn']
+        assert odom[0] == pytest.approx(fires[0] - 1.0, abs=0.11)  # the Husky's odometry comes at 10 Hz
+        assert odom[-1] == pytest.approx(fires[-1] + 0.5, abs=0.11)
+
+
+def test_a_goal_abort_keeps_the_whole_planning_failure_before_it(tmp_path):
+    """The demo's rule with its own pre of 10 s (windows.pre 10 s, the classifier's 1 s): each simulated
+    planning failure (5-9 s of oscillation, aborted at its end) is inside the abort's window."""
+    from cc_log import sim
+    run = sim.SimConfig(minutes=3, anomalies=2, anomaly_types=('planning_failure',), seed=4, commands=True)
+    simulator = sim.Simulator(run)
+    logger = configured_logger(tmp_path, """
+driving_topic: /odom
+windows: {pre: 10s, post: 5s}
+triggers:
+  - {name: goal_aborted, kind: rule, topic: /move_base/status, type: actionlib_msgs/GoalStatusArray,
+     when: 'status_list[0].status == 4', pre: 10s, post: 1s}
+""")
+    feed(logger, [(topic, msg, stamp) for topic, stamp, msg in simulator.messages()])
+    found = sorted(windows(tmp_path), key=lambda w: w[0]['start'])
+    failures = simulator.truth
+    assert len(failures) == 2 and len(found) == 2
+    for (metadata, _), entry in zip(found, failures):
+        assert metadata['start'] <= entry['start'] and metadata['end'] >= entry['end'] - 0.02
+        assert metadata['end'] == pytest.approx(metadata['triggers'][-1]['stamp'] + 1.0, abs=0.02)
+
+
+def test_a_trigger_pre_longer_than_the_logger_holds_is_refused_with_one_line():
+    from cc_log.config import Config
+    entry = {'name': 'goal_aborted', 'kind': 'rule', 'topic': 'bumper', 'arrival': True, 'pre': '10s'}
+    with pytest.raises(ValueError) as error:
+        Config.from_dict({'windows': {'pre': '2s'}, 'triggers': [entry]}, 'robot.yaml')
+    assert str(error.value) == (
+        'robot.yaml: triggers[0] (goal_aborted): pre: 10s is longer than windows.pre 2s, the most the logger holds '
+        'before a trigger: raise windows.pre (and give shorter triggers their own pre)')
+    Config.from_dict({'windows': {'pre': '10s'}, 'triggers': [entry]})
+    Config.from_dict({'windows': {'pre': '100'}, 'triggers': [entry]})  # messages and seconds: not comparable
