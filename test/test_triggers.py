@@ -421,3 +421,55 @@ def test_a_trigger_pre_longer_than_the_logger_holds_is_refused_with_one_line():
         'before a trigger: raise windows.pre (and give shorter triggers their own pre)')
     Config.from_dict({'windows': {'pre': '10s'}, 'triggers': [entry]})
     Config.from_dict({'windows': {'pre': '100'}, 'triggers': [entry]})  # messages and seconds: not comparable
+
+
+# -- the periodic trigger -----------------------------------------------------------------------------------
+
+def test_a_periodic_trigger_keeps_a_sample_every_period_of_real_driving(tmp_path, real_bag):
+    """``kind: periodic, every: 1min`` on the Husky's 392 s of real odometry: a window of its own 2 s before
+    and 3 s after every minute of message time from the first message, reason ``periodic``, nothing else."""
+    from cc_log import bagio
+    logger = configured_logger(tmp_path, """
+driving_topic: %s
+windows: {pre: 10s, post: 5s}
+triggers:
+  - {name: sample, kind: periodic, every: 1min, pre: 2s, post: 3s}
+""" % HUSKY_ODOM)
+    items = [(r.topic, r.msg, r.stamp) for r in bagio.read_messages(real_bag(HUSKY), [HUSKY_ODOM])]
+    feed(logger, items)
+    first, last = items[0][2], items[-1][2]
+    found = sorted(windows(tmp_path), key=lambda w: w[0]['start'])
+    assert len(found) == int((last - first) // 60.0) == 6
+    for k, (metadata, kept) in enumerate(found, 1):
+        [fire] = metadata['triggers']
+        assert metadata['names'] == ['sample'] and metadata['reason'] == 'periodic'
+        assert first + 60.0 * k <= fire['stamp'] < first + 60.0 * k + 0.11  # the first message past each minute
+        odom = [r.stamp for r in kept]
+        assert odom[0] == pytest.approx(fire['stamp'] - 2.0, abs=0.11)
+        assert odom[-1] == pytest.approx(fire['stamp'] + 3.0, abs=0.11)
+    assert found[0][0]['trigger_info']['sample']['every'] == '1min'
+
+
+def test_a_periodic_trigger_keeps_its_grid_and_makes_one_window_after_a_gap():
+    from cc_log.triggers.periodic import PeriodicTrigger
+    periodic = PeriodicTrigger('periodic', every='10s')
+    fired = [t for t in [0.0, 5.0, 9.99, 10.03, 15.0, 20.01, 29.0, 95.0, 96.0, 105.0, 50.0, 59.0, 60.0]
+             if periodic.on_time(t)]
+    # grid 10, 20, 30 from the first stamp; the gap to 95 s gives one window, then 105; back to 50 s: restart
+    assert fired == [10.03, 20.01, 95.0, 105.0, 60.0]
+    assert periodic.stats()['fired'] == 5 and periodic.fire('periodic').reason == 'periodic'
+
+
+@pytest.mark.parametrize('every, message', [
+    (None, 'every: required'), ('10', "every: '10' is not a duration like 30s, 10min or 1h"),
+    ('0s', "every: '0s' must be a positive duration"), ('x' * 500, 'is not a duration'),
+    (12.5, 'is not a duration')])
+def test_a_bad_period_is_one_line_naming_every(every, message):
+    from cc_log.config import Config
+    entry = {'name': 'sample', 'kind': 'periodic', 'every': every}
+    with pytest.raises(ValueError) as error:
+        Config.from_dict({'driving_topic': 'odom', 'triggers': [entry]}, 'robot.yaml').build_triggers(
+            None, None)
+    text = str(error.value)
+    assert text.startswith('robot.yaml: triggers[0] (sample): every: ') and message in text
+    assert '\n' not in text and len(text) < 160
