@@ -26,7 +26,8 @@ For every (feature window, training minutes, stride):
    messages in saved windows / messages seen; raw/stored = row-per-message JSON bytes of every message /
    bytes of the window files; span kept: the share of each anomaly's span [start, end) inside saved windows
    (``demo.score``, the demo's own verdict), the smallest of the run and how many anomalies have >= 95 %;
-   no overlap: windows overlapping no anomaly (the demo's false windows).
+   no overlap: windows overlapping no anomaly (the demo's false windows); kept/ideal: odometry messages in saved
+   windows / those within [start - 2 s, end + 2 s] of an anomaly (issue 31's ideal).
 
 ``--config demo`` replays the demo's own configuration instead of a lone classifier (``demo.config_text``: the
 classifier with its ``pre``, a rule on aborted goals with a long ``pre``, ``windows``; the runs then also carry
@@ -207,6 +208,7 @@ def main(argv=None):
                                                   args.pre, post, progress)
                             caught, n_caught, false, delays = judge(truth, saved, reach)
                             least, whole, no_overlap, shares = span_kept(truth, saved)
+                            kept_odom, ideal = common.kept_messages(records, sim.ODOM_TOPIC, saved, truth, 2.0, 2.0)
                             by_type = ' '.join('%s%d' % (SHORT[k], caught[k]) for k in sim.ANOMALY_TYPES
                                                if any(e['type'] == k for e in truth))
                             rows.append([window, '%g' % minutes, stride, len(X), '%.1f' % timer.wall,
@@ -215,7 +217,8 @@ def main(argv=None):
                                          '%.1f%%' % (100.0 * stats['messages_kept'] / stats['messages_seen']),
                                          '%.0fx' % (stats['raw_json_bytes'] / max(1, stats['stored_bytes'])),
                                          '%.2f' % (max(delays) if delays else float('nan')),
-                                         '%.1f%%' % (100.0 * least), '%d/%d' % (whole, len(truth)), shares, no_overlap])
+                                         '%.1f%%' % (100.0 * least), '%d/%d' % (whole, len(truth)), shares, no_overlap,
+                                         '%.2fx' % (kept_odom / float(max(1, ideal)))])
                             print('  done: window %s, %g min, stride %d, %s, %s  [%.0f s]' % (
                                 window, minutes, stride, name, label, time.time() - started))
                             sys.stdout.flush()
@@ -224,7 +227,8 @@ def main(argv=None):
     print()
     common.table(['window', 'train min', 'stride', 'vectors', 'train s', 'run', 'setting', 'caught',
                   'caught by type', 'false windows', 'windows', 'kept', 'raw/stored', 'max delay s',
-                  'span kept (least)', 'span kept >= 95%', 'span kept % by anomaly', 'no overlap'], rows,
+                  'span kept (least)', 'span kept >= 95%', 'span kept % by anomaly', 'no overlap',
+                  'kept/ideal'], rows,
                  'Smart logger on simulated runs (caught: a trigger in [onset, end + feature window]):')
     print('total %.0f s' % (time.time() - started))
     return 0
