@@ -7,8 +7,8 @@
 3. starts a roscore and ``demo.launch`` (simulator with injected anomalies, its planner's ``cmd_vel`` and a
    move_base-like goal status + the smart logger with a configuration: the motion classifier and a rule on
    aborted goals, ``DEMO_CONFIG``), live;
-4. prints what was injected and caught (and by which trigger), false windows, messages seen vs kept, raw vs
-   stored bytes, and writes a PNG timeline.
+4. prints what was injected and the share of each anomaly's span kept (and by which trigger), false windows,
+   whether the demo passed (``score``), messages seen vs kept, raw vs stored bytes, and writes a PNG timeline.
 
 Everything it starts is stopped when it ends, whatever way it ends.
 """
