@@ -199,7 +199,7 @@ def main(argv=None):
                         settings = [(label, config, None, None) for label, config in demo_configs(
                             model, os.path.join(tmp, 'model.json'), posts, args.recent.split(','))]
                     else:
-                        settings = [('%s, post %s' % (rule, post), model, rule, post)
+                        settings = [(rule if len(posts) == 1 else '%s, post %s' % (rule, post), model, rule, post)
                                     for rule in rules for post in posts]
                     for name in runs:
                         records, truth = tests[name]
