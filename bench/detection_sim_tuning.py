@@ -24,7 +24,17 @@ For every (feature window, training minutes, stride):
 3. windows vs the ground truth ({type, start, end}): an anomaly is caught when a classifier trigger of a saved
    window falls in [start, end + feature window]; a window with no such trigger is a false window; kept =
    messages in saved windows / messages seen; raw/stored = row-per-message JSON bytes of every message /
-   bytes of the window files.
+   bytes of the window files; span kept: the share of each anomaly's span [start, end) inside saved windows
+   (``demo.score``, the demo's own verdict), the smallest of the run and how many anomalies have >= 95 %;
+   no overlap: windows overlapping no anomaly (the demo's false windows); kept/ideal: odometry messages in saved
+   windows / those within [start - 2 s, end + 2 s] of an anomaly (issue 31's ideal).
+
+``--config demo`` replays the demo's own configuration instead of a lone classifier (``demo.config_text``: the
+classifier with its ``pre``, a rule on aborted goals with a long ``pre``, ``windows``; the runs then also carry
+``/cmd_vel`` and ``/move_base/status``); ``--post`` and ``--recent`` (comma-separated) then compare values of
+its ``windows.post`` and the classifier's ``recent``::
+
+    python3 bench/detection_sim_tuning.py --windows 1s --train-minutes 8 --config demo --post 1s,3s,5s
 """
 import argparse
 import collections
@@ -37,7 +47,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import learning, sim  # noqa: E402
+from cc_log import config as configuration, demo, learning, sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 from cc_log.triggers import ClassifierTrigger  # noqa: E402
 
@@ -50,6 +60,13 @@ def replay(model, records, directory, retrigger, pre, post, progress=None):
     """Feed records to a SmartLogger (with a second classifier of the ``progress`` model when given); return
     (stats, windows [{start, end, messages, bytes, triggers}])."""
     os.makedirs(directory)
+    if isinstance(model, configuration.Config):  # the demo's configuration: its triggers and windows
+        triggers = model.build_triggers(learning.AnomalyModel.load, configuration.installed_class)
+        options = model.logger_options(triggers)
+        result = common.smart_replay(None, records, sim.ODOM_TOPIC, directory, side_topics=(sim.IMU_TOPIC,),
+                                     pre=options['pre'], post=options['post'], triggers=triggers)
+        shutil.rmtree(directory)
+        return result['stats'], result['windows']
     triggers = [] if progress is None else [ClassifierTrigger('progress', progress, [sim.ODOM_TOPIC],
                                                               retrigger=retrigger)]
     result = common.smart_replay(model, records, sim.ODOM_TOPIC, directory, side_topics=(sim.IMU_TOPIC,),
@@ -72,6 +89,31 @@ def judge(truth, windows, reach):
     return caught, sum(caught.values()), false, delays
 
 
+def span_kept(truth, windows):
+    """(smallest share of an anomaly's span kept, anomalies with >= demo.MIN_COVERAGE kept, windows overlapping no
+    anomaly, the share of each anomaly as text): the demo's verdict (``demo.score``)."""
+    events, no_overlap, _ = demo.score(windows, truth)
+    shares = [share for _, share, _ in events]
+    text = ' '.join('%s%.0f' % (SHORT[event['type']], 100.0 * share) for event, share, _ in events)
+    return (min(shares or [float('nan')]), sum(1 for s in shares if s >= demo.MIN_COVERAGE), len(no_overlap),
+            text)
+
+
+def demo_configs(model, model_path, posts, recents):
+    """[(label, Config)] of the demo's configuration with ``model`` saved at ``model_path``, one per (post, recent)."""
+    import yaml
+    model.save(model_path)
+    out = []
+    for post in posts:
+        for recent in recents:
+            data = yaml.safe_load(demo.config_text(model_path, post))
+            if recent:
+                data['triggers'][0]['recent'] = recent
+            out.append(('post %s%s' % (post, ', recent %s' % recent if recent else ''),
+                        configuration.Config.from_dict(data, 'demo config')))
+    return out
+
+
 def window_seconds(config, rate):
     span = config.span
     return span.seconds if span.is_duration else span.count / rate
@@ -87,8 +129,12 @@ def main(argv=None):
                         help='also a classifier of the progress feature set over WINDOW (e.g. 500), trained on the '
                         'same nominal run (the "motion + progress" column of bench/detection_sim.py)')
     parser.add_argument('--runs', default='run10,demo', help='test runs: run10, demo')
-    parser.add_argument('--pre', default='100')
-    parser.add_argument('--post', default='100')
+    parser.add_argument('--pre', default='100', help='the logger\'s pre (without --config)')
+    parser.add_argument('--post', default=None, help='the logger\'s post (default 100); with --config demo: its '
+                        'windows.post, comma-separated (default: demo.DEMO_POST)')
+    parser.add_argument('--config', choices=('demo',), help='replay the demo\'s configuration (see above)')
+    parser.add_argument('--recent', default='', help='with --config demo: the classifier\'s recent, comma-separated '
+                        '(default: a quarter of the feature window)')
     parser.add_argument('--train-seed', type=int, default=7)
     parser.add_argument('--run-seed', type=int, default=1)
     parser.add_argument('--demo-seed', type=int, default=8)
@@ -100,9 +146,12 @@ def main(argv=None):
     minutes_list = [float(m) for m in args.train_minutes.split(',')]
     strides = [int(s) for s in args.strides.split(',')]
     rules = args.retrigger.split(',')
+    posts = (args.post or (demo.DEMO_POST if args.config else '100')).split(',')
+    commands = bool(args.config)  # the demo's rule reads /move_base/status
     run_specs = {
-        'run10': sim.SimConfig(seed=args.run_seed, minutes=10.0, anomalies=6, imu=True),
-        'demo': sim.SimConfig(seed=args.demo_seed, minutes=2.5, anomalies=6, gap=10.0, imu=True, jitter=0.0),
+        'run10': sim.SimConfig(seed=args.run_seed, minutes=10.0, anomalies=6, imu=True, commands=commands),
+        'demo': sim.SimConfig(seed=args.demo_seed, minutes=2.5, anomalies=6, gap=10.0, imu=True, jitter=0.0,
+                              commands=commands),
     }
     runs = [name for name in args.runs.split(',')]
     started = time.time()
@@ -112,13 +161,14 @@ def main(argv=None):
                 '%s = %g min, %d anomalies (one per type), gap %g s, seed %d, IMU side topic' % (
                     name, run_specs[name].minutes, run_specs[name].anomalies, run_specs[name].gap,
                     run_specs[name].seed) for name in runs)),
-        'smart logger: json-xz, pre %s, post %s%s' % (args.pre, args.post, '; beside motion a progress classifier '
+        ('smart logger: the demo\'s configuration (demo.config_text), post %s' % ','.join(posts)) if args.config else
+        'smart logger: json-xz, pre %s, post %s%s' % (args.pre, posts[0], '; beside motion a progress classifier '
                                                       'over %s' % args.progress if args.progress else '')])
 
     tests = {}
     for name in runs:
         records, truth = common.sim_records(run_specs[name])
-        tests[name] = ([r for r in records if r.topic in (sim.ODOM_TOPIC, sim.IMU_TOPIC)], truth)
+        tests[name] = ([r for r in records if r.topic in (sim.ODOM_TOPIC, sim.IMU_TOPIC, sim.STATUS_TOPIC)], truth)
     training = {}
     for minutes in minutes_list:
         records, _ = common.sim_records(sim.SimConfig(seed=args.train_seed, minutes=minutes, anomalies=0))
@@ -144,28 +194,41 @@ def main(argv=None):
                             _, Xp = common.window_vectors(training[minutes], sim.ODOM_TOPIC, progress_config,
                                                           stride=stride)
                             progress, _ = learning.train(Xp, config=progress_config)
+                    # (label, a model or the demo's Config, retrigger, post) of each replay
+                    if args.config:
+                        settings = [(label, config, None, None) for label, config in demo_configs(
+                            model, os.path.join(tmp, 'model.json'), posts, args.recent.split(','))]
+                    else:
+                        settings = [(rule if len(posts) == 1 else '%s, post %s' % (rule, post), model, rule, post)
+                                    for rule in rules for post in posts]
                     for name in runs:
                         records, truth = tests[name]
-                        for rule in rules:
-                            stats, saved = replay(model, records, os.path.join(tmp, 'w%d' % len(rows)), rule,
-                                                  args.pre, args.post, progress)
+                        for label, source, rule, post in settings:
+                            stats, saved = replay(source, records, os.path.join(tmp, 'w%d' % len(rows)), rule,
+                                                  args.pre, post, progress)
                             caught, n_caught, false, delays = judge(truth, saved, reach)
+                            least, whole, no_overlap, shares = span_kept(truth, saved)
+                            kept_odom, ideal = common.kept_messages(records, sim.ODOM_TOPIC, saved, truth, 2.0, 2.0)
                             by_type = ' '.join('%s%d' % (SHORT[k], caught[k]) for k in sim.ANOMALY_TYPES
                                                if any(e['type'] == k for e in truth))
                             rows.append([window, '%g' % minutes, stride, len(X), '%.1f' % timer.wall,
-                                         name, rule, '%d/%d' % (n_caught, len(truth)), by_type, false,
+                                         name, label, '%d/%d' % (n_caught, len(truth)), by_type, false,
                                          len(saved),
                                          '%.1f%%' % (100.0 * stats['messages_kept'] / stats['messages_seen']),
                                          '%.0fx' % (stats['raw_json_bytes'] / max(1, stats['stored_bytes'])),
-                                         '%.2f' % (max(delays) if delays else float('nan'))])
+                                         '%.2f' % (max(delays) if delays else float('nan')),
+                                         '%.1f%%' % (100.0 * least), '%d/%d' % (whole, len(truth)), shares, no_overlap,
+                                         '%.2fx' % (kept_odom / float(max(1, ideal)))])
                             print('  done: window %s, %g min, stride %d, %s, %s  [%.0f s]' % (
-                                window, minutes, stride, name, rule, time.time() - started))
+                                window, minutes, stride, name, label, time.time() - started))
                             sys.stdout.flush()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print()
-    common.table(['window', 'train min', 'stride', 'vectors', 'train s', 'run', 'retrigger', 'caught',
-                  'caught by type', 'false windows', 'windows', 'kept', 'raw/stored', 'max delay s'], rows,
+    common.table(['window', 'train min', 'stride', 'vectors', 'train s', 'run', 'setting', 'caught',
+                  'caught by type', 'false windows', 'windows', 'kept', 'raw/stored', 'max delay s',
+                  'span kept (least)', 'span kept >= 95%', 'span kept % by anomaly', 'no overlap',
+                  'kept/ideal'], rows,
                  'Smart logger on simulated runs (caught: a trigger in [onset, end + feature window]):')
     print('total %.0f s' % (time.time() - started))
     return 0

@@ -111,6 +111,15 @@ def test_detection_sim_tuning_quick_with_a_progress_classifier():
     assert re.search(r'\| \d/6 +\| plan\d coll\d accel\d twist\d loc\d slip\d', rows[0]), rows[0]
 
 
+def test_detection_sim_tuning_quick_with_the_demos_configuration():
+    out = run('detection_sim_tuning.py', '--quick', '--config', 'demo', '--post', '1s,6s')
+    assert "the demo's configuration (demo.config_text), post 1s,6s" in out
+    rows = [line for line in out.splitlines() if line.startswith('| 1s ')]
+    assert [row.split('|')[7].strip() for row in rows] == ['post 1s', 'post 6s']
+    for row in rows:  # span kept (least), >= 95 %, by anomaly, windows overlapping none, kept/ideal
+        assert re.search(r'\| \d+\.\d% +\| \d/6 +\| (\w+\d+ ?){6} +\| \d+ +\| \d\.\d\dx +\|$', row), row
+
+
 def test_detection_ranker_quick():
     out = run('detection_ranker.py', '--runs', 'icelab_normal_plan', '--seeds', '0', '--train-on', 'self')
     row = next(line for line in out.splitlines() if line.startswith('| icelab_normal_plan '))

@@ -187,7 +187,7 @@ def test_learn_with_a_test_directory_reports_the_table(trained, real_bag, tmp_pa
 def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     from cc_log import log_format, msg_codec
     summary, bag = replayed['summary'], replayed['bag']
-    assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows']
+    assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift']
     records = bag_messages(bag, ['/odom', '/scan'])
     assert summary['input_messages'] == len(records) == 542
     # estimated from a sample of the messages (replay does not decode them all)

@@ -108,9 +108,64 @@ def test_the_summary_counts_the_frames_and_scans_kept_around_each_event_in_eithe
     start = sim.DEFAULT_START_TIME
     truth = [{'type': 'collision', 'start': start + 0.5, 'end': start + 0.8},        # inside the first window
              {'type': 'wheels_slipping', 'start': start + 3.5, 'end': start + 3.6},  # inside the second
-             {'type': 'localization_jump', 'start': start + 1.5, 'end': start + 2.0}]  # in the gap, no slack
-    kept = demo.kept_around(windows, truth, slack=0.0)
+             {'type': 'localization_jump', 'start': start + 1.5, 'end': start + 2.0}]  # in the gap
+    kept = demo.kept_around(windows, truth)
     assert [(frames, scans) for _, frames, scans in kept] == [
         (counted(first, sim.CAMERA_TOPIC), counted(first, sim.SCAN_TOPIC)),
         (counted(second, sim.CAMERA_TOPIC), counted(second, sim.SCAN_TOPIC)), (0, 0)]
     assert kept[0][1] == 20 and kept[0][2] == 14
+
+
+# -- the demo's verdict: the share of each event's span kept ------------------------------------------------
+
+def test_coverage_is_the_share_of_an_events_span_inside_the_windows():
+    event = {'type': 'collision', 'start': 10.0, 'end': 14.0}
+    assert demo.coverage(event, []) == 0.0
+    assert demo.coverage(event, [{'start': 9.0, 'end': 11.0}]) == 0.25  # only the onset: what onset windows kept
+    assert demo.coverage(event, [{'start': 9.0, 'end': 11.0}, {'start': 10.5, 'end': 12.0},
+                                 {'start': 13.0, 'end': 20.0}]) == 0.75  # overlapping windows counted once
+    assert demo.coverage(event, [{'start': 5.0, 'end': 20.0}]) == 1.0
+    assert demo.coverage({'start': 3.0, 'end': 3.0}, [{'start': 2.0, 'end': 4.0}]) == 1.0
+
+
+def test_the_demo_passes_only_with_every_event_kept_whole_and_no_false_window():
+    truth = [{'type': 'collision', 'start': 10.0, 'end': 14.0}, {'type': 'wheels_slipping', 'start': 30.0, 'end': 33.0}]
+    whole = [{'start': 9.0, 'end': 14.0, 'names': ['classifier']},
+             {'start': 29.0, 'end': 34.0, 'names': ['classifier', 'goal_aborted']}]
+    events, false_windows, passed = demo.score(whole, truth)
+    assert passed and false_windows == []
+    assert [(share, names) for _, share, names in events] == [(1.0, {'classifier'}),
+                                                              (1.0, {'classifier', 'goal_aborted'})]
+    onsets = [{'start': 9.0, 'end': 11.0, 'names': ['classifier']}, dict(whole[1])]
+    events, false_windows, passed = demo.score(onsets, truth)
+    assert not passed and events[0][1] == 0.25  # caught (it overlaps) but not kept whole
+    stray = whole + [{'start': 20.0, 'end': 22.0, 'names': ['classifier']}]
+    events, false_windows, passed = demo.score(stray, truth)
+    assert not passed and false_windows == [stray[2]]
+    # a window starting right after an event's end overlaps nothing: false, and it catches nothing
+    late = [{'start': 14.0, 'end': 16.0}, dict(whole[1])]
+    assert demo.score(late, truth)[0][0][1] == 0.0 and demo.score(late, truth)[1] == [late[0]]
+
+
+def test_the_demos_configuration_keeps_every_event_of_its_run_whole(tmp_path):
+    """The demo offline: its model (demo.train) and configuration (demo.config_text) replayed on its live
+    run (the simulator as demo.launch runs it: seed 8, 2.5 min, 6 anomalies, gap 10 s) through SmartLogger;
+    demo.score passes (with retrigger onset and 1 s + 1 s, the old demo, a collision kept about a third)."""
+    import yaml
+    from cc_log import config, learning, sim
+    from cc_log.smart_logger import SmartLogger, replay_records
+    from cc_log.window_buffer import Record
+    demo.prepare_out(str(tmp_path))
+    model_path = demo.train(str(tmp_path), demo.DEFAULT_TRAIN_MINUTES, demo.DEFAULT_SEED, demo.DEFAULT_WINDOW,
+                            demo.DEFAULT_STRIDE)
+    run = sim.Simulator(sim.SimConfig(rate=100.0, seed=8, minutes=demo.DEFAULT_LIVE_MINUTES,
+                                      anomalies=demo.DEFAULT_ANOMALIES, gap=10.0, imu=True, jitter=0.0, commands=True))
+    records = [Record(stamp, topic, msg) for topic, stamp, msg in run.messages() if topic != sim.TRUTH_TOPIC]
+    cfg = config.Config.from_dict(yaml.safe_load(demo.config_text(model_path)), 'demo.yaml')
+    triggers = cfg.build_triggers(learning.AnomalyModel.load, config.installed_class)
+    options = dict(cfg.logger_options(triggers), side_topics=[sim.IMU_TOPIC])
+    logger = SmartLogger(None, str(tmp_path / 'windows'), background=False, **options)
+    saved = replay_records(logger, records)['windows']
+    events, false_windows, passed = demo.score(saved, run.truth)
+    assert len(events) == 6 and false_windows == []
+    assert passed, [(event['type'], round(share, 3)) for event, share, _ in events]

@@ -351,3 +351,125 @@ def test_a_goal_status_rule_catches_every_simulated_planning_failure_once(tmp_pa
         assert metadata['names'] == ['goal_aborted'] and len(metadata['triggers']) == 1
         assert abs(metadata['triggers'][0]['stamp'] - entry['end']) < 0.02
         assert metadata['reason'] == 'status_list[0].status == 4 (4)'
+
+
+# -- pre and post per trigger, from the configuration -----------------------------------------------------
+
+HUSKY, HUSKY_ODOM = 'husky_outdoor_2015.bag', '/husky_velocity_controller/odom'
+
+
+def configured_logger(directory, text):
+    """A SmartLogger as the node and ``cclog replay --config`` build it from a configuration's text."""
+    import yaml
+    from cc_log.config import Config, installed_class
+    from cc_log.model import AnomalyModel
+    cfg = Config.from_dict(yaml.safe_load(text), 'test.yaml')
+    triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
+    return SmartLogger(None, str(directory), **cfg.logger_options(triggers))
+
+
+def test_a_trigger_of_the_configuration_keeps_its_own_pre_and_post_on_real_driving(tmp_path, real_bag):
+    """windows.pre 10 s, post 5 s; a turn rule of its own 1 s before and 0.5 s after: its windows on the Husky's
+    real turns start 1 s before its first fire and end 0.5 s after its last, not 10 s and 5 s."""
+    from cc_log import bagio
+    logger = configured_logger(tmp_path, """
+windows: {pre: 10s, post: 5s}
+triggers:
+  - {name: turn, kind: rule, topic: %s, type: nav_msgs/Odometry, when: 'abs(twist.twist.angular.z) > 0.4',
+     hold_off: 0.1s, pre: 1s, post: 0.5s}
+""" % HUSKY_ODOM)
+    feed(logger, [(r.topic, r.msg, r.stamp) for r in bagio.read_messages(real_bag(HUSKY), [HUSKY_ODOM])])
+    found = windows(tmp_path)
+    assert found
+    for metadata, kept in found:
+        odom = [r.stamp for r in kept if r.topic == HUSKY_ODOM]
+        fires = [t['stamp'] for t in metadata['triggers']]
+        assert metadata['names'] == ['turn']
+        assert odom[0] == pytest.approx(fires[0] - 1.0, abs=0.11)  # the Husky's odometry comes at 10 Hz
+        assert odom[-1] == pytest.approx(fires[-1] + 0.5, abs=0.11)
+
+
+def test_a_goal_abort_keeps_the_whole_planning_failure_before_it(tmp_path):
+    """The demo's rule with its own pre of 10 s (windows.pre 10 s, the classifier's 1 s): each simulated
+    planning failure (5-9 s of oscillation, aborted at its end) is inside the abort's window."""
+    from cc_log import sim
+    run = sim.SimConfig(minutes=3, anomalies=2, anomaly_types=('planning_failure',), seed=4, commands=True)
+    simulator = sim.Simulator(run)
+    logger = configured_logger(tmp_path, """
+driving_topic: /odom
+windows: {pre: 10s, post: 5s}
+triggers:
+  - {name: goal_aborted, kind: rule, topic: /move_base/status, type: actionlib_msgs/GoalStatusArray,
+     when: 'status_list[0].status == 4', pre: 10s, post: 1s}
+""")
+    feed(logger, [(topic, msg, stamp) for topic, stamp, msg in simulator.messages()])
+    found = sorted(windows(tmp_path), key=lambda w: w[0]['start'])
+    failures = simulator.truth
+    assert len(failures) == 2 and len(found) == 2
+    for (metadata, _), entry in zip(found, failures):
+        assert metadata['start'] <= entry['start'] and metadata['end'] >= entry['end'] - 0.02
+        assert metadata['end'] == pytest.approx(metadata['triggers'][-1]['stamp'] + 1.0, abs=0.02)
+
+
+def test_a_trigger_pre_longer_than_the_logger_holds_is_refused_with_one_line():
+    from cc_log.config import Config
+    entry = {'name': 'goal_aborted', 'kind': 'rule', 'topic': 'bumper', 'arrival': True, 'pre': '10s'}
+    with pytest.raises(ValueError) as error:
+        Config.from_dict({'windows': {'pre': '2s'}, 'triggers': [entry]}, 'robot.yaml')
+    assert str(error.value) == (
+        'robot.yaml: triggers[0] (goal_aborted): pre: 10s is longer than windows.pre 2s, the most the logger holds '
+        'before a trigger: raise windows.pre (and give shorter triggers their own pre)')
+    Config.from_dict({'windows': {'pre': '10s'}, 'triggers': [entry]})
+    Config.from_dict({'windows': {'pre': '100'}, 'triggers': [entry]})  # messages and seconds: not comparable
+
+
+# -- the periodic trigger -----------------------------------------------------------------------------------
+
+def test_a_periodic_trigger_keeps_a_sample_every_period_of_real_driving(tmp_path, real_bag):
+    """``kind: periodic, every: 1min`` on the Husky's 392 s of real odometry: a window of its own 2 s before
+    and 3 s after every minute of message time from the first message, reason ``periodic``, nothing else."""
+    from cc_log import bagio
+    logger = configured_logger(tmp_path, """
+driving_topic: %s
+windows: {pre: 10s, post: 5s}
+triggers:
+  - {name: sample, kind: periodic, every: 1min, pre: 2s, post: 3s}
+""" % HUSKY_ODOM)
+    items = [(r.topic, r.msg, r.stamp) for r in bagio.read_messages(real_bag(HUSKY), [HUSKY_ODOM])]
+    feed(logger, items)
+    first, last = items[0][2], items[-1][2]
+    found = sorted(windows(tmp_path), key=lambda w: w[0]['start'])
+    assert len(found) == int((last - first) // 60.0) == 6
+    for k, (metadata, kept) in enumerate(found, 1):
+        [fire] = metadata['triggers']
+        assert metadata['names'] == ['sample'] and metadata['reason'] == 'periodic'
+        assert first + 60.0 * k <= fire['stamp'] < first + 60.0 * k + 0.11  # the first message past each minute
+        odom = [r.stamp for r in kept]
+        assert odom[0] == pytest.approx(fire['stamp'] - 2.0, abs=0.11)
+        assert odom[-1] == pytest.approx(fire['stamp'] + 3.0, abs=0.11)
+    assert found[0][0]['trigger_info']['sample']['every'] == '1min'
+
+
+def test_a_periodic_trigger_keeps_its_grid_and_makes_one_window_after_a_gap():
+    from cc_log.triggers.periodic import PeriodicTrigger
+    periodic = PeriodicTrigger('periodic', every='10s')
+    fired = [t for t in [0.0, 5.0, 9.99, 10.03, 15.0, 20.01, 29.0, 95.0, 96.0, 105.0, 50.0, 59.0, 60.0]
+             if periodic.on_time(t)]
+    # grid 10, 20, 30 from the first stamp; the gap to 95 s gives one window, then 105; back to 50 s: restart
+    assert fired == [10.03, 20.01, 95.0, 105.0, 60.0]
+    assert periodic.stats()['fired'] == 5 and periodic.fire('periodic').reason == 'periodic'
+
+
+@pytest.mark.parametrize('every, message', [
+    (None, 'every: required'), ('10', "every: '10' is not a duration like 30s, 10min or 1h"),
+    ('0s', "every: '0s' must be a positive duration"), ('x' * 500, 'is not a duration'),
+    (12.5, 'is not a duration')])
+def test_a_bad_period_is_one_line_naming_every(every, message):
+    from cc_log.config import Config
+    entry = {'name': 'sample', 'kind': 'periodic', 'every': every}
+    with pytest.raises(ValueError) as error:
+        Config.from_dict({'driving_topic': 'odom', 'triggers': [entry]}, 'robot.yaml').build_triggers(
+            None, None)
+    text = str(error.value)
+    assert text.startswith('robot.yaml: triggers[0] (sample): every: ') and message in text
+    assert '\n' not in text and len(text) < 160

@@ -340,17 +340,20 @@ def _replay_many(args, cfg):
     _writable_dir(args.out, 'out')
     outcomes, summary = _run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
         engine, bags, args.out, cfg, progress=progress))
-    rows = _fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows'))
+    rows = _fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift'))
+    reports = {}
     for row in rows:
         row['windows'] = [collections.OrderedDict((key, w[key]) for key in ('start', 'end', 'messages', 'path'))
                           for w in row.get('windows', ())]
+        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ()))
+        row['drift'] = [monitor.as_dict() for monitor in row.get('drift', ())]
     good = [row for row in rows if 'error' not in row]
     summary['windows'] = sum(len(row['windows']) for row in good)
     summary['saved_messages'] = sum(w['messages'] for row in good for w in row['windows'])
     summary['stored_bytes'] = sum(row['stored_bytes'] for row in good)
-    return _fleet_end(args, summary, rows, ['%s: %d messages in, %d saved in %d window(s) (%s) -> %s' % (
+    return _fleet_end(args, summary, rows, ['%s: %d messages in, %d saved in %d window(s) (%s) -> %s%s' % (
         row['bag'], row['input_messages'], sum(w['messages'] for w in row['windows']), len(row['windows']),
-        human_bytes(row['stored_bytes']), row['directory']) for row in good])
+        human_bytes(row['stored_bytes']), row['directory'], reports[row['bag']]) for row in good])
 
 
 def _vector_dir(path):
@@ -642,6 +645,7 @@ def cmd_replay(args):
         ('windows', [collections.OrderedDict([('start', w['start']), ('end', w['end']),
                                               ('messages', w['messages']), ('path', w['path'])])
                      for w in summary['windows']]),
+        ('drift', [monitor.as_dict() for monitor in summary['drift']]),
     ])
     if args.json:
         _print_json(result)
@@ -658,6 +662,8 @@ def cmd_replay(args):
         print('  %3d  %s .. %s  %7.2f s  %6d msgs  %s' % (
             number, _stamp_text(window['start']), _stamp_text(window['end']), window['end'] - window['start'],
             window['messages'], window['path']))
+    for monitor in summary['drift']:
+        print('  %s' % monitor.report())
     return EXIT_OK
 
 

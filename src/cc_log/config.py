@@ -213,6 +213,7 @@ class Config(object):
                 raise ValueError('triggers[%d]: name %r is used twice' % (index, checked['name']))
             names.add(checked['name'])
             self.triggers.append(checked)
+            _check_pre(checked, index, self.pre)
 
     # -- what the modes build from it -----------------------------------------------------------------
 
@@ -349,6 +350,18 @@ def topic_list(value, name):
         if item.strip() not in out:
             out.append(item.strip())
     return out
+
+
+def _check_pre(entry, index, held):
+    """A trigger's own ``pre`` may not be longer than ``windows.pre`` (``held``): the logger holds no more."""
+    pre = entry.get('pre')
+    if pre in (None, ''):
+        return
+    where = 'triggers[%d] (%s): pre' % (index, entry['name'])
+    span = Span.parse(pre, where)
+    if span.is_duration == held.is_duration and (span.seconds or span.count) > (held.seconds or held.count):
+        raise ValueError('%s: %s is longer than windows.pre %s, the most the logger holds before a trigger: raise '
+                         'windows.pre (and give shorter triggers their own pre)' % (where, span, held))
 
 
 def _trigger_entry(entry, index):

@@ -303,16 +303,18 @@ def replay_setup(cfg, bag_path=None):
 
 def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None):
     """The smart logger of configuration ``cfg`` over one bag into ``out_dir`` (``smart_logger.replay_into``);
-    its summary plus ``driving_topic``, ``format`` and ``messages``. ``progress(done, total)``; ``make_dir(path)``
-    creates ``out_dir`` once the bag is checked (default: ``safe_files.make_dirs``)."""
-    from . import safe_files, smart_logger
+    its summary plus ``driving_topic``, ``format``, ``messages`` and ``drift`` (a ``drift.DriftMonitor`` of each
+    classifier). ``progress(done, total)``; ``make_dir(path)`` creates ``out_dir`` once the bag is checked
+    (default: ``safe_files.make_dirs``)."""
+    from . import drift, safe_files, smart_logger
     options, types, topics = replay_setup(cfg, bag_path)
     total = check_bag_topics(bag_path, topics, types)
     (make_dir or safe_files.make_dirs)(out_dir)
     logger = _offline_logger(out_dir, options)
+    monitors = drift.monitor_classifiers(logger.classifiers)
     summary = smart_logger.replay_into(logger, bag_path, None if progress is None
                                        else (lambda done: progress(done, total)))
-    summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total)
+    summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total, drift=monitors)
     return summary
 
 
