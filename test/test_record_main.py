@@ -51,3 +51,15 @@ def test_bad_flags_are_one_line(argv, message, capsys):
     assert record_main.main(['record'] + argv) == 2
     err = capsys.readouterr().err
     assert err.startswith('record: error: ') and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_private_arguments_are_settings_not_parameters():
+    settings, rest = record_main.command_line_settings(['_pre:=2s', '_max_disk_mb:=500', '__name:=rec', 'odom:=/o'])
+    assert settings == {'pre': '2s', 'max_disk_mb': 500} and rest == ['__name:=rec', 'odom:=/o']
+    with pytest.raises(ValueError):
+        record_main.command_line_settings(['_topics:=[unclosed'])
+
+
+def test_the_default_name_is_anonymous_as_rosbag_s():
+    first, second = record_main.anonymous_name(), record_main.anonymous_name()
+    assert first.startswith('record_%d_' % os.getpid()) and second.startswith('record_')

@@ -19,12 +19,16 @@ configuration, else collect mode, saying why). Mapping:
 - ``-b/--buffsize MB`` (0: no limit): ``~intake_max_mb``;
 - ``--model``, ``--config``, ``--mode``, ``--context TOPICS`` (``odom:1 amcl_pose``), ``--upload CMD``: cc_log's.
 
+Like rosbag record, the node is named ``record_<id>`` (anonymous; ``__name:=`` names it), so several
+recorders run side by side, and it reads its command line only: its settings never go to the parameter server
+and nothing left there is read (``_name:=value`` arguments are settings too).
+
 Bad flags print one line (``record: error: ...``) and exit 2, like rosbag record's own.
 """
 import argparse
-import json
 import os
 import sys
+import time
 
 from . import launcher
 
@@ -136,19 +140,40 @@ def node_params(args):
     return params
 
 
+def anonymous_name(base='record'):
+    """``record_<pid>_<ms>``, rosbag record's anonymous node name: several recorders run side by side."""
+    return '%s_%d_%d' % (base, os.getpid(), int(time.time() * 1000))
+
+
+def command_line_settings(ros_args):
+    """``(settings, rest)``: the private ``_name:=value`` arguments of ``ros_args`` as a dict (YAML values, as
+    rospy reads them) and the other ROS arguments; ValueError with one line for a value rospy cannot read."""
+    from rospy.client import load_command_line_node_params
+    from rospy.exceptions import ROSInitException
+    try:
+        settings = load_command_line_node_params(['record'] + list(ros_args))
+    except ROSInitException as error:
+        raise ValueError(' '.join(str(error).split()))
+    rest = [arg for arg in ros_args if not (arg.startswith('_') and not arg.startswith('__') and ':=' in arg)]
+    return settings, rest
+
+
 def main(argv=None):
-    """Run the chosen node with the mapped parameters; its exit status."""
+    """Run the chosen node with the mapped settings; its exit status. Like rosbag record it reads its command
+    line only: the settings are handed to the node in this process (``node_common.read_settings_only``),
+    never set on the parameter server, and ``_name:=value`` arguments override them."""
     import rospy
+    from . import node_common
     argv = sys.argv if argv is None else argv
     mine = rospy.myargv(argv)
     try:
         module, params, note = parse(mine[1:])
+        settings, ros_args = command_line_settings([arg for arg in argv[1:] if arg not in mine])
     except ValueError as error:
         sys.stderr.write('record: error: %s\n' % ' '.join(str(error).split()))
         return 2
-    ros_args = [arg for arg in argv[1:] if arg not in mine]
-    # private parameters on the node's command line (rospy sets them at init_node); JSON is YAML
-    node_argv = [argv[0]] + ['_%s:=%s' % (key, json.dumps(value)) for key, value in sorted(params.items())]
+    params.update(settings)
     if not any(arg.startswith('__name:=') for arg in ros_args):
-        ros_args.append('__name:=cc_log_record')
-    return launcher.run(module, node_argv + ros_args, note)
+        ros_args.append('__name:=' + anonymous_name())
+    node_common.read_settings_only(params)
+    return launcher.run(module, [argv[0]] + ros_args, note)
