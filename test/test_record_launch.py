@@ -30,3 +30,9 @@ def test_bwi_arguments_keep_their_meaning():
                  'extra_prefix:=heavy')
     assert got['/cc_log/directory'] == '/data/logs'
     assert got['/cc_log/context_topics'] == 'odom_1hz scan' and got['/cc_log/topics'] == 'imu/data camera/image'
+
+
+@pytest.mark.parametrize('value, topics', [('true', '*'), ('True', '*'), ('false', ''), ('False', ''),
+                                           ('scan', 'scan')])
+def test_extra_topics_true_is_every_topic_false_none(value, topics):
+    assert params('extra_topics:=' + value)['/cc_log/topics'] == topics
