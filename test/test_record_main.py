@@ -1,5 +1,7 @@
 """rosrun cc_log record: rosbag record's flags mapped onto the nodes' parameters."""
 import os
+import subprocess
+import sys
 
 import pytest
 
@@ -98,3 +100,15 @@ def test_help_is_plain_text(capsys):
     out = capsys.readouterr().out
     assert leaving.value.code == 0 and 'usage: rosrun cc_log record' in out and '``' not in out
     assert '--duration' in out and '-O, --output-name' not in out
+
+
+@pytest.mark.parametrize('script', ['smart_logger.py', 'collect_logger.py', 'sim_bwibot.py', 'record_node.py'])
+def test_node_scripts_print_help_without_starting(script):
+    """--help prints the node's documentation and exits 0, with no master to reach (it would wait for one)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:9')  # nothing listens there
+    done = subprocess.run([sys.executable, os.path.join(root, 'scripts', script), '--help'], env=env,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, timeout=20)
+    assert done.returncode == 0, done.stderr[-500:]
+    assert done.stdout.startswith('usage: rosrun cc_log %s ' % script) and '``' not in done.stdout
+    assert 'Parameters' in done.stdout or 'parameters' in done.stdout
