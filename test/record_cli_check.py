@@ -13,6 +13,7 @@ import rosbag
 import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import String
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from rostest_fixtures import finish, start, subscribed, wait_for  # noqa: E402
@@ -73,10 +74,17 @@ class RecordCliTest(unittest.TestCase):
             self.assertGreaterEqual(bag.get_message_count('/diagnostics'), 3)
 
     def test_duration_without_split_stops(self):
+        """--duration 4 without --split: it stops by itself after 4 s; -p: the directory on begin_write."""
         directory = os.path.join(rospy.get_param('~directory'), 'duration')
+        announced = []
+        listener = rospy.Subscriber('/begin_write', String, lambda msg: announced.append(msg.data))
         began = rospy.get_time()
-        process = start('record', '/odom', '--duration', '4', '-o', directory + '/',
+        process = start('record', '/odom', '--duration', '4', '-o', directory + '/', '-p',
                         '--model', os.path.join(directory, 'none.json'))
+        try:
+            self.assertEqual(wait_for(lambda: announced, 30, 'begin_write'), [directory])
+        finally:
+            listener.unregister()  # not a topic of this node for --node below
         code, out, err = finish(process, 60)
         self.assertEqual(code, 0, err[-2000:])
         self.assertIn('--duration 4s reached', out)

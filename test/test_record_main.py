@@ -23,10 +23,10 @@ def test_sizes_and_durations_as_rosbag_writes_them():
 def test_rosbag_record_flags_map_onto_the_node_parameters(tmp_path):
     model = tmp_path / 'model.json'
     model.write_text('{}')
-    module, params, note, stop = parse(['-a', '-x', '/camera/.*', '-o', str(tmp_path) + '/', '--lz4', '--split',
-                                        '--duration', '5m', '-L', '2G', '-b', '0', '--model', str(model),
-                                        '--context', 'odom:1'])
-    assert module == 'smart_node' and note == '' and stop == {}
+    module, params, note, stop, publish = parse(['-a', '-x', '/camera/.*', '-o', str(tmp_path) + '/', '--lz4',
+                                                 '--split', '--duration', '5m', '-L', '2G', '-b', '0', '--model',
+                                                 str(model), '--context', 'odom:1', '-p'])
+    assert module == 'smart_node' and note == '' and stop == {} and publish is True
     assert params['topics'] == ['*', '!re:/camera/.*']
     assert params['directory'] == str(tmp_path) and params['format'] == 'bag-lz4'
     assert params['rotate'] == '300s' and params['context_rotate'] == 300.0
@@ -35,8 +35,10 @@ def test_rosbag_record_flags_map_onto_the_node_parameters(tmp_path):
 
 
 def test_without_a_model_it_collects_and_says_why(tmp_path):
-    module, params, note, stop = parse(['-e', '/scan.*', '/imu/.*', '-o', 'out/', '--duration', '20',
-                                        '--model', str(tmp_path / 'none.json'), '--context', 'odom:1 amcl_pose'])
+    module, params, note, stop, publish = parse(['-e', '/scan.*', '/imu/.*', '-o', 'out/', '--duration', '20',
+                                                 '--model', str(tmp_path / 'none.json'), '--context',
+                                                 'odom:1 amcl_pose'])
+    assert publish is False
     assert module == 'collect_node' and 'no model yet' in note
     assert params['topics'] == ['re:/scan.*', 're:/imu/.*'] and 'rotate' not in params
     assert stop == {'seconds': 20.0}  # --duration without --split: stop after it, as rosbag
@@ -53,8 +55,6 @@ def test_without_a_model_it_collects_and_says_why(tmp_path):
                                    'give a directory with its trailing / (-o /data/)'),
     (['/odom', '--split', '--size', '20'], '--size: cc_log cannot split by bytes on disk'),
     (['/odom', '--split', '--duration', '5', '--mode', 'smart'], '--split: smart mode writes one file per'),
-    (['/odom', '-p'], '-p: not supported'),
-    (['/odom', '--publish'], '--publish: not supported'),
     (['/odom', '--tcpnodelay'], '--tcpnodelay: not supported'),
     (['/odom', '--udp'], '--udp: not supported'),
     (['/odom', '--chunksize', '768'], '--chunksize: not supported'),

@@ -16,11 +16,12 @@ configuration, else collect mode, saying why) in a ``Plan``. Mapping:
 - ``--split --duration D`` (``30``, ``30s``, ``5m``, ``2h``): a new file every D, collect mode's ``~rotate``
   and the context track's ``~context_rotate`` (smart mode without ``--context`` refuses it: its files are
   the anomaly windows); ``--duration D`` without ``--split``: stop after D, as rosbag; ``-l NUM``: stop once
-  each named topic had NUM messages (``Stopper``); ``--size`` is refused (cc_log cannot cut by bytes on disk);
+  each named topic had NUM messages (``Watch``); ``--size`` is refused (cc_log cannot cut by bytes on disk);
 - ``-L/--min-space SIZE`` (``1G``, ``500M``, ``100K``, bytes; rosbag's default 1G): ``~min_free_mb``;
 - ``-b/--buffsize MB`` (0: no limit): ``~intake_max_mb``;
-- ``-p``, ``--tcpnodelay``, ``--udp``, ``--chunksize``, ``--max-splits``, ``--repeat-latched``: refused,
-  one line saying why (``REFUSED``);
+- ``-p/--publish``: the directory on ``begin_write`` once the node has subscribed (``Watch``);
+- ``--tcpnodelay``, ``--udp``, ``--chunksize``, ``--max-splits``, ``--repeat-latched``: refused, one line
+  saying why (``REFUSED``);
 - ``--model``, ``--config``, ``--mode``, ``--context TOPICS`` (``odom:1 amcl_pose``), ``--upload CMD``: cc_log's.
 
 Like rosbag record, the node is named ``record_<id>`` (anonymous; ``__name:=`` names it), so several
@@ -38,8 +39,9 @@ import threading
 import time
 
 from . import launcher
+from .directory import LoggingDirectory
 
-__all__ = ['parse', 'node_params', 'main', 'parse_size', 'parse_duration', 'Plan', 'Stopper']
+__all__ = ['parse', 'node_params', 'main', 'parse_size', 'parse_duration', 'Plan', 'Watch']
 
 DEFAULT_MODEL = '~/.ros/cc_log/model.json'
 DEFAULT_MIN_SPACE = '1G'
@@ -56,18 +58,15 @@ REFUSED = {
     'max_splits': 'not supported: cc_log bounds its files by disk use, oldest deleted first: use _max_disk_mb:=SIZE',
     'repeat_latched': 'not supported: latched messages are kept where they arrive (the context track keeps '
                       'latched topics given to --context)',
-    'publish': 'not supported: cc_log writes each file whole when it closes; smart mode announces each written '
-               'window on ~anomalies',
 }
 REFUSED_FLAGS = ((('--tcpnodelay',), 'tcpnodelay', 0), (('--udp',), 'udp', 0), (('--chunksize',), 'chunksize', 1),
-                 (('--max-splits',), 'max_splits', 1), (('--repeat-latched',), 'repeat_latched', 0),
-                 (('-p', '--publish'), 'publish', 0))
+                 (('--max-splits',), 'max_splits', 1), (('--repeat-latched',), 'repeat_latched', 0))
 DESCRIPTION = "rosbag record's flags in front of the cc_log nodes: smart windows around anomalies with a model, " \
     "else collect mode."
 EPILOG = """example:
   rosrun cc_log record /odom /imu/data -o /data/ --split --duration 10m -L 2G --model model.json
 
-Not supported, refused with one line saying why: -O, --size, -p, --tcpnodelay, --udp, --chunksize,
+Not supported, refused with one line saying why: -O, --size, --tcpnodelay, --udp, --chunksize,
 --max-splits, --repeat-latched. ROS arguments (__name:=, remappings, _param:=value) work as for any node."""
 _SIZES = {'K': 1 << 10, 'M': 1 << 20, 'G': 1 << 30, 'T': 1 << 40}
 _DURATIONS = {'s': 1.0, 'm': 60.0, 'h': 3600.0}
@@ -133,6 +132,8 @@ def _parser():
                         help='stop writing below this much free disk (default 1G)')
     parser.add_argument('-b', '--buffsize', type=float, metavar='MB', help='input queue in MB (0: no limit)')
     parser.add_argument('-q', '--quiet', action='store_true', help='accepted')
+    parser.add_argument('-p', '--publish', action='store_true',
+                        help='publish the directory on begin_write (std_msgs/String, latched) once recording')
     for flags, dest, nargs in REFUSED_FLAGS:
         parser.add_argument(*flags, dest=dest, nargs=nargs, action=_Refuse, help=argparse.SUPPRESS)
     parser.add_argument('--model', default=DEFAULT_MODEL, help='model file: smart windows when it exists')
@@ -143,9 +144,10 @@ def _parser():
     return parser
 
 
-Plan = collections.namedtuple('Plan', 'module params note stop')
-Plan.__doc__ = """What ``record`` runs: the node module, its settings, why collect mode runs (or ''), and ``stop``:
-``{'seconds': D}`` (``--duration`` without ``--split``) and/or ``{'limit': N, 'topics': [...]}`` (``-l``)."""
+Plan = collections.namedtuple('Plan', 'module params note stop publish')
+Plan.__doc__ = """What ``record`` runs: the node module, its settings, why collect mode runs (or ''), ``stop``:
+``{'seconds': D}`` (``--duration`` without ``--split``) and/or ``{'limit': N, 'topics': [...]}`` (``-l``), and
+``publish``: whether to announce on ``begin_write`` (``-p``) (see ``Watch``)."""
 
 
 def parse(argv, subscriptions=None):
@@ -177,7 +179,7 @@ def parse(argv, subscriptions=None):
         if args.all or args.regex or not args.topics:
             raise ValueError('--limit: needs the topics named (TOPIC ...), not -a, -e or --config')
         stop.update(limit=args.limit, topics=list(args.topics))
-    return Plan(module, node_params(args), note, stop)
+    return Plan(module, node_params(args), note, stop, args.publish)
 
 
 def node_params(args):
@@ -220,20 +222,24 @@ def master_subscriptions(node):
     return sorted(topic for topic, nodes in subscribers if name in nodes)
 
 
-class Stopper(object):
-    """Stops the node as rosbag record stops: after ``seconds`` of ROS time (``--duration`` without
-    ``--split``) or once each of ``topics`` had ``limit`` messages (``-l``; counted on the node's own
-    subscriptions, so faster topics may have a few more by then). ``start()`` runs it on a daemon thread."""
+class Watch(object):
+    """What ``record`` does beside the node, as rosbag record: stop after ``seconds`` of ROS time (``--duration``
+    without ``--split``) or once each of ``topics`` had ``limit`` messages (``-l``; counted on the node's own
+    subscriptions, so faster topics may have a few more by then), and with ``begin_write`` (``-p``) publish
+    that text (the directory files go to) on ``begin_write`` (std_msgs/String, latched) once the node has
+    subscribed. ``start()`` runs it on a daemon thread."""
 
-    def __init__(self, seconds=None, limit=None, topics=()):
+    def __init__(self, seconds=None, limit=None, topics=(), begin_write=None):
         self.seconds = seconds
         self.limit = limit
         self.topics = list(topics)
+        self.begin_write = begin_write
+        self._publisher = None
         self.counts = {}
         self._lock = threading.Lock()
 
     def start(self):
-        thread = threading.Thread(target=self._run, name='cc_log record stop')
+        thread = threading.Thread(target=self._run, name='cc_log record watch')
         thread.daemon = True
         thread.start()
         return thread
@@ -252,20 +258,28 @@ class Stopper(object):
         rospy.loginfo('record: %s: stopping', reason)
         rospy.signal_shutdown(reason)
 
+    def _subscribed(self):
+        from rospy.impl.registration import get_topic_manager
+        manager = get_topic_manager()
+        return bool(manager.get_subscriptions()) and all(manager.has_subscription(t) for t in self.topics)
+
     def _run(self):
         import rospy
-        from rospy.impl.registration import get_topic_manager
         while not (rospy.core.is_initialized() and rospy.rostime.is_rostime_initialized()):
             if rospy.core.is_shutdown_requested():
                 return
             time.sleep(0.05)
         self.topics = [rospy.resolve_name(topic) for topic in self.topics]
-        while not rospy.is_shutdown() and not all(get_topic_manager().has_subscription(t) for t in self.topics):
+        while not rospy.is_shutdown() and not self._subscribed():
             time.sleep(0.05)  # count on the node's subscriptions, not before them
-        for topic in self.topics:
+        if self.begin_write is not None:
+            from std_msgs.msg import String
+            self._publisher = rospy.Publisher('begin_write', String, queue_size=1, latch=True)
+            self._publisher.publish(String(self.begin_write))
+        for topic in self.topics if self.limit is not None else ():
             rospy.Subscriber(topic, rospy.AnyMsg, self._count, topic)
         deadline = None
-        while not rospy.is_shutdown():
+        while not rospy.is_shutdown() and (self.seconds is not None or self.limit is not None):
             now = rospy.get_time()
             if self.seconds is not None and now > 0:
                 deadline = deadline or now + self.seconds
@@ -274,6 +288,15 @@ class Stopper(object):
             if self.limit is not None and self._reached():
                 return self._stop('--limit %d reached on %s' % (self.limit, ', '.join(self.topics)))
             time.sleep(0.05)
+
+
+def _directory_in_use(params):
+    """The directory the node will write to (``LoggingDirectory``: ``~directory`` or its fallbacks), or the
+    one asked for when none can be used (the node then says why)."""
+    try:
+        return LoggingDirectory(params.get('directory')).path
+    except OSError:
+        return params.get('directory', '')
 
 
 def anonymous_name(base='record'):
@@ -312,6 +335,6 @@ def main(argv=None):
     if not any(arg.startswith('__name:=') for arg in ros_args):
         ros_args.append('__name:=' + anonymous_name())
     node_common.read_settings_only(plan.params)
-    if plan.stop:
-        Stopper(**plan.stop).start()
+    if plan.stop or plan.publish:
+        Watch(begin_write=_directory_in_use(plan.params) if plan.publish else None, **plan.stop).start()
     return launcher.run(plan.module, [argv[0]] + ros_args, plan.note)
