@@ -61,8 +61,8 @@ REFUSED = {
 }
 REFUSED_FLAGS = ((('--tcpnodelay',), 'tcpnodelay', 0), (('--udp',), 'udp', 0), (('--chunksize',), 'chunksize', 1),
                  (('--max-splits',), 'max_splits', 1), (('--repeat-latched',), 'repeat_latched', 0))
-DESCRIPTION = "rosbag record's flags in front of the cc_log nodes: smart windows around anomalies with a model, " \
-    "else collect mode."
+DESCRIPTION = "rosbag record's flags in front of the cc_log nodes: smart windows around anomalies with a\n" \
+    "model, else collect mode."
 EPILOG = """example:
   rosrun cc_log record /odom /imu/data -o /data/ --split --duration 10m -L 2G --model model.json
 
