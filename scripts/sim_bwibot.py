@@ -2,7 +2,7 @@
 """The simulated BWIBot node: odometry (and IMU) at 100 Hz with labelled anomalies (see cc_log.sim_node)."""
 import sys
 
-from cc_log.sim_node import main
+from cc_log.launcher import script_main
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(script_main('sim_node'))

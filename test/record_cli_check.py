@@ -13,9 +13,10 @@ import rosbag
 import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import String
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from rostest_fixtures import wait_for  # noqa: E402
+from rostest_fixtures import finish, start, subscribed, wait_for  # noqa: E402
 
 from cc_log import context_track, log_format  # noqa: E402
 
@@ -57,6 +58,40 @@ class RecordCliTest(unittest.TestCase):
             topics = set(bag.get_type_and_topic_info().topics)
         self.assertIn('/odom', topics)  # subscribed at start or by the watcher when it appeared
         self.assertFalse([topic for topic in topics if topic.startswith('/imu')], topics)  # -x '/imu.*'
+
+    def test_limit_of_a_node_s_topics(self):
+        """-l 3 --node: the topics this test node subscribes to (/diagnostics), then it stops by itself."""
+        rospy.Subscriber('/diagnostics', DiagnosticArray, lambda msg: None)
+        directory = os.path.join(rospy.get_param('~directory'), 'limit')
+        wait_for(lambda: subscribed('/diagnostics', rospy.get_name()), 10, 'this node subscribed')
+        process = start('record', '--node', rospy.get_name(), '-l', '3', '-o', directory + '/',
+                        '--model', os.path.join(directory, 'none.json'))
+        code, out, err = finish(process, 60)
+        self.assertEqual(code, 0, err[-2000:])
+        self.assertIn('--limit 3 reached on /diagnostics', out)
+        [path] = log_format.window_files(directory)
+        with rosbag.Bag(path) as bag:
+            self.assertGreaterEqual(bag.get_message_count('/diagnostics'), 3)
+
+    def test_duration_without_split_stops(self):
+        """--duration 4 without --split: it stops by itself after 4 s; -p: the directory on begin_write."""
+        directory = os.path.join(rospy.get_param('~directory'), 'duration')
+        announced = []
+        listener = rospy.Subscriber('/begin_write', String, lambda msg: announced.append(msg.data))
+        began = rospy.get_time()
+        process = start('record', '/odom', '--duration', '4', '-o', directory + '/', '-p',
+                        '--model', os.path.join(directory, 'none.json'))
+        try:
+            self.assertEqual(wait_for(lambda: announced, 30, 'begin_write'), [directory])
+        finally:
+            listener.unregister()  # not a topic of this node for --node below
+        code, out, err = finish(process, 60)
+        self.assertEqual(code, 0, err[-2000:])
+        self.assertIn('--duration 4s reached', out)
+        self.assertGreaterEqual(rospy.get_time() - began, 4.0)
+        [path] = log_format.window_files(directory)
+        with rosbag.Bag(path) as bag:
+            self.assertAlmostEqual(bag.get_end_time() - bag.get_start_time(), 4.0, delta=1.0)
 
 
 if __name__ == '__main__':

@@ -36,3 +36,35 @@ def test_trigger_scores_and_threshold_come_from_the_window_metadata():
     windows = [('a', {'triggers': [{'stamp': 1.0, 'score': -2.0}, {'stamp': 2.0}], 'threshold': -1.5}, []),
                ('b', {'triggers': None}, [])]
     assert plot.trigger_scores(windows) == ([(1.0, -2.0)], -1.5)
+
+
+class _Record(object):
+    def __init__(self, stamp):
+        self.stamp = stamp
+
+
+def test_drawing_yaw_rate_seconds_from_start_legend_off_the_data_window_kinds():
+    """Three panels (speed, yaw rate, score); x in seconds from the start; every legend right of its panel;
+    a classifier window filled, a manual one hatched."""
+    t0 = 1432236698.0
+    motion = [(t0 + i * 0.1, 1.0, 0.5 * (i % 7)) for i in range(200)]
+    windows = [('c', {'triggers': [{'stamp': t0 + 5, 'reason': 'classifier', 'score': -2.0}], 'threshold': -1.0},
+                [_Record(t0 + 4), _Record(t0 + 7)]),
+               ('m', {'triggers': [{'stamp': t0 + 12, 'reason': 'operator saw it', 'name': 'manual',
+                                    'score': None}]}, [_Record(t0 + 11), _Record(t0 + 13)])]
+    figure, summary = plot.draw(windows, motion, speed_label='speed (/odom)')
+    axes = figure.axes
+    assert [axis.get_ylabel() for axis in axes] == ['speed (m/s)', 'yaw rate (rad/s)', 'score']
+    assert axes[1].lines[0].get_ydata()[3] == 1.5  # the yaw rate drawn
+    assert axes[0].lines[0].get_xdata()[0] == 0.0 and summary['start'] == t0
+    assert axes[-1].get_xlabel() == 'seconds from the start (2015-05-21 19:31:38 UTC)'
+    figure.canvas.draw()
+    for axis in axes:
+        legend = axis.get_legend()
+        assert legend is not None
+        assert legend.get_window_extent().x0 >= axis.get_window_extent().x1  # right of the data
+    labels = axes[0].get_legend_handles_labels()[1]
+    assert 'classifier window' in labels and 'manual window' in labels
+    spans = {patch.get_label(): patch for patch in axes[0].patches}
+    assert spans['manual window'].get_hatch() == '//' and not spans['classifier window'].get_hatch()
+    assert plot.window_kind({'triggers': [{'stamp': 1.0, 'reason': 'x > 2'}]}) == 'other'

@@ -1,5 +1,7 @@
 """rosrun cc_log record: rosbag record's flags mapped onto the nodes' parameters."""
 import os
+import subprocess
+import sys
 
 import pytest
 
@@ -21,9 +23,10 @@ def test_sizes_and_durations_as_rosbag_writes_them():
 def test_rosbag_record_flags_map_onto_the_node_parameters(tmp_path):
     model = tmp_path / 'model.json'
     model.write_text('{}')
-    module, params, note = parse(['-a', '-x', '/camera/.*', '-o', str(tmp_path / 'run'), '--lz4', '--split',
-                                  '--duration', '5m', '-L', '2G', '-b', '0', '--model', str(model)])
-    assert module == 'smart_node' and note == ''
+    module, params, note, stop, publish = parse(['-a', '-x', '/camera/.*', '-o', str(tmp_path) + '/', '--lz4',
+                                                 '--split', '--duration', '5m', '-L', '2G', '-b', '0', '--model',
+                                                 str(model), '--context', 'odom:1', '-p'])
+    assert module == 'smart_node' and note == '' and stop == {} and publish is True
     assert params['topics'] == ['*', '!re:/camera/.*']
     assert params['directory'] == str(tmp_path) and params['format'] == 'bag-lz4'
     assert params['rotate'] == '300s' and params['context_rotate'] == 300.0
@@ -32,22 +35,80 @@ def test_rosbag_record_flags_map_onto_the_node_parameters(tmp_path):
 
 
 def test_without_a_model_it_collects_and_says_why(tmp_path):
-    module, params, note = parse(['-e', '/scan.*', '/imu/.*', '-O', 'out.bag', '--split', '--size', '20',
-                                  '--model', str(tmp_path / 'none.json'), '--context', 'odom:1 amcl_pose'])
+    module, params, note, stop, publish = parse(['-e', '/scan.*', '/imu/.*', '-o', 'out/', '--duration', '20',
+                                                 '--model', str(tmp_path / 'none.json'), '--context',
+                                                 'odom:1 amcl_pose'])
+    assert publish is False
     assert module == 'collect_node' and 'no model yet' in note
-    assert params['topics'] == ['re:/scan.*', 're:/imu/.*'] and params['rotate'] == '20MB'
-    assert params['directory'] == os.path.abspath('.') and params['context_topics'] == 'odom:1 amcl_pose'
+    assert params['topics'] == ['re:/scan.*', 're:/imu/.*'] and 'rotate' not in params
+    assert stop == {'seconds': 20.0}  # --duration without --split: stop after it, as rosbag
+    assert params['directory'] == os.path.abspath('out') and params['context_topics'] == 'odom:1 amcl_pose'
     assert params['min_free_mb'] == pytest.approx(2 ** 30 / 1e6)  # rosbag's default -L 1G
 
 
 @pytest.mark.parametrize('argv, message', [
     ([], 'no topics given'),
-    (['/odom', '--split'], '--split needs --size or --duration'),
-    (['/odom', '--publish'], 'unrecognized arguments: --publish'),
+    (['/odom', '--split'], '--split needs --duration'),
+    (['/odom', '--bogus'], 'unrecognized arguments: --bogus'),
+    (['/odom', '-O', 'run.bag'], '-O: cc_log writes one file per window'),
+    (['/odom', '-o', '/data/run'], '-o: cc_log names its files cc_log_<UTC>_<reason>, not PREFIX_<date>.bag: '
+                                   'give a directory with its trailing / (-o /data/)'),
+    (['/odom', '--split', '--size', '20'], '--size: cc_log cannot split by bytes on disk'),
+    (['/odom', '--split', '--duration', '5', '--mode', 'smart'], '--split: smart mode writes one file per'),
+    (['/odom', '--tcpnodelay'], '--tcpnodelay: not supported'),
+    (['/odom', '--udp'], '--udp: not supported'),
+    (['/odom', '--chunksize', '768'], '--chunksize: not supported'),
+    (['/odom', '--max-splits', '3'], '--max-splits: not supported'),
+    (['/odom', '--repeat-latched'], '--repeat-latched: not supported'),
+    (['-a', '-l', '5'], '--limit: needs the topics named'),
+    (['/odom', '-l', '0'], '--limit: 0 must be'),
     (['/odom', '-L', 'much'], 'min-space'),
     (['/odom', '--mode', 'fast'], 'invalid choice'),
 ])
 def test_bad_flags_are_one_line(argv, message, capsys):
+    argv = argv + ['--model', '/nonexistent/model.json'] if '--mode' not in argv else argv
     assert record_main.main(['record'] + argv) == 2
     err = capsys.readouterr().err
     assert err.startswith('record: error: ') and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_private_arguments_are_settings_not_parameters():
+    settings, rest = record_main.command_line_settings(['_pre:=2s', '_max_disk_mb:=500', '__name:=rec', 'odom:=/o'])
+    assert settings == {'pre': '2s', 'max_disk_mb': 500} and rest == ['__name:=rec', 'odom:=/o']
+    with pytest.raises(ValueError):
+        record_main.command_line_settings(['_topics:=[unclosed'])
+
+
+def test_the_default_name_is_anonymous_as_rosbag_s():
+    first, second = record_main.anonymous_name(), record_main.anonymous_name()
+    assert first.startswith('record_%d_' % os.getpid()) and second.startswith('record_')
+
+
+def test_limit_and_node_flags(tmp_path):
+    plan = parse(['/odom', 'imu/data', '-l', '100', '--model', str(tmp_path / 'none.json')])
+    assert plan.stop == {'limit': 100, 'topics': ['/odom', 'imu/data']}
+    plan = parse(['--node', '/move_base', '--model', str(tmp_path / 'none.json')],
+                 {'/move_base': ['/odom', '/scan']}.get)
+    assert plan.params['topics'] == ['/odom', '/scan']
+    with pytest.raises(ValueError, match='^--node: /nobody subscribes to no topic'):
+        parse(['--node', '/nobody'], {}.get)
+
+
+def test_help_is_plain_text(capsys):
+    with pytest.raises(SystemExit) as leaving:
+        record_main.main(['record', '--help'])
+    out = capsys.readouterr().out
+    assert leaving.value.code == 0 and 'usage: rosrun cc_log record' in out and '``' not in out
+    assert '--duration' in out and '-O, --output-name' not in out
+
+
+@pytest.mark.parametrize('script', ['smart_logger.py', 'collect_logger.py', 'sim_bwibot.py', 'record_node.py'])
+def test_node_scripts_print_help_without_starting(script):
+    """--help prints the node's documentation and exits 0, with no master to reach (it would wait for one)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:9')  # nothing listens there
+    done = subprocess.run([sys.executable, os.path.join(root, 'scripts', script), '--help'], env=env,
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, timeout=20)
+    assert done.returncode == 0, done.stderr[-500:]
+    assert done.stdout.startswith('usage: rosrun cc_log %s ' % script) and '``' not in done.stdout
+    assert 'Parameters' in done.stdout or 'parameters' in done.stdout

@@ -251,3 +251,21 @@ def test_cclog_outputs_under_umask_0_and_through_no_link(trained, replayed, real
         assert not path.is_symlink()
         _file_ok(path)
     assert (tmp_path / 'run.png').read_bytes()[:4] == b'\x89PNG'
+
+
+@pytest.mark.parametrize('umask, world', [(0o022, 0o005), (0o077, 0o000)])
+def test_group_writable_whatever_the_umask(tmp_path, umask, world):
+    """Directories 2775 and files 0664 as BWI's logger under umask 002, whatever the umask (it may only take
+    the world bits)."""
+    from cc_log.directory import LoggingDirectory
+    old = os.umask(umask)
+    try:
+        chosen = LoggingDirectory(str(tmp_path / 'robot' / 'logs'))
+        paths = [write_window(window(), chosen.path, fmt)[0] for fmt in Format.ALL]
+        vector = learning.write_vector(str(tmp_path / 'v'), 'nominal', 1.0, [1.0], CONFIG)
+    finally:
+        os.umask(old)
+    for folder in ('robot', 'robot/logs', 'v', 'v/nominal'):
+        assert mode(tmp_path / folder) == 0o2770 | world, (folder, oct(mode(tmp_path / folder)))
+    for path in paths + [vector]:
+        assert mode(path) == 0o660 | (world & 0o004), (path, oct(mode(path)))

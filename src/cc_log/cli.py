@@ -894,7 +894,7 @@ def cmd_plot(args):
         speed = []
         with _bar(args, 'read', total) as bar:
             for record in bagio.read_messages(args.bag, [driving]):
-                speed.append((record.stamp, plot.speed_of(record.msg)))
+                speed.append((record.stamp,) + plot.motion_of(record.msg))
                 bar.update()
     else:
         speed = plot.window_speeds(windows, driving)

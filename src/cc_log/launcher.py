@@ -7,12 +7,38 @@ that it collects feature vectors because it has no model yet. Both read their pr
 (record.launch sets those of both).
 """
 import argparse
+import importlib
 import os
 import sys
 
-__all__ = ['choose', 'main', 'run']
+__all__ = ['choose', 'main', 'run', 'script_main', 'plain']
 
 MODES = ('auto', 'smart', 'collect')
+HELP_FLAGS = ('-h', '--help')
+ROS_USAGE = '[_param:=value ...] [topic:=remapped ...] [__name:=NAME] [__ns:=NAMESPACE]'
+
+
+def plain(text):
+    """A docstring as a terminal shows it: no RST double backticks."""
+    return text.replace('``', '')
+
+
+def _help(argv, usage, doc):
+    """Print the help and return True when ``argv`` (after the program name) asks for it."""
+    if not any(arg in HELP_FLAGS for arg in argv[1:]):
+        return False
+    sys.stdout.write('usage: rosrun cc_log %s %s\n\n%s\n' % (os.path.basename(argv[0]), usage, plain(doc).strip()))
+    return True
+
+
+def script_main(module_name, argv=None):
+    """A node script's entry: ``-h``/``--help`` prints the node's documentation (its module docstring) and
+    returns 0 without starting the node; otherwise ``cc_log.<module_name>.main(argv)``."""
+    argv = sys.argv if argv is None else argv
+    module = importlib.import_module('cc_log.' + module_name)
+    if _help(argv, ROS_USAGE, module.__doc__):
+        return 0
+    return module.main(argv)
 
 
 def choose(mode, model, config=''):
@@ -32,8 +58,11 @@ def choose(mode, model, config=''):
 
 def main(argv=None):
     """Run the chosen node; its exit status (1 with one line for a bad mode)."""
-    import rospy
     argv = sys.argv if argv is None else argv
+    if _help(argv, '--mode=auto|smart|collect --model=PATH [--config=FILE] ' + ROS_USAGE,
+             __doc__ + '\nThe parameters are those of smart_logger.py and collect_logger.py (--help).'):
+        return 0
+    import rospy
     parser = argparse.ArgumentParser(prog='record_node.py', add_help=False)
     parser.add_argument('--mode', default='auto')
     parser.add_argument('--model', default='')

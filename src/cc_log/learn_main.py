@@ -1,13 +1,13 @@
 """Learn mode (``rosrun cc_log learn.py``; no roscore): train on one directory of feature vectors,
 validate on a disjoint one, print the report, save the model.
 
-    learn.py --train DIR --validate DIR --model PATH [--nu NU] [--gamma GAMMA] [--method auto|exact|nystroem]
+    learn.py --train DIR [--validate DIR] --model PATH [--nu NU] [--gamma GAMMA] [--method auto|exact|nystroem]
 
 Both directories hold ``<label>/<stamp>.json`` vector files (written by collect mode or ``cclog collect``).
 The label ``nominal`` is normal behaviour; every other label (``anomalous``, ``collision``, ...) is
 anomalous. Training needs nominal vectors; anomalous ones there, when present, tune ``nu``, ``gamma`` and
-the threshold for full recall. The validation directory must not be, contain or lie inside the training
-one, and may not share a single vector with it.
+the threshold for full recall. The validation directory (optional: without it the model is trained and saved
+unvalidated) must not be, contain or lie inside the training one, and may not share a single vector with it.
 
 Pure (no rospy); ``cclog learn`` calls ``learn`` and ``format_result`` too.
 """
@@ -93,9 +93,11 @@ def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAU
 
 
 def format_result(model, report, info):
-    """The printed result: the paper's table, then where the model went."""
+    """The printed result: the paper's table (or that nothing was validated), then where the model went."""
+    table = learning.format_report(report, info) if report is not None else \
+        '%-16s %s' % ('Validated', 'no (--validate DIR validates on a disjoint set)')
     return '%s\n%-16s %s (%s features, window %s)' % (
-        learning.format_report(report, info), 'Saved', info['model'], model.config.feature_set,
+        table, 'Saved', info['model'], model.config.feature_set,
         model.config.window)
 
 
@@ -104,7 +106,7 @@ def parse_args(argv):
         prog='learn.py', description='Learn mode: train the anomaly model on one directory of feature vectors, '
         'validate it on a disjoint one, print the report and save the model.')
     parser.add_argument('--train', required=True, metavar='DIR', help='training vectors (<label>/<stamp>.json)')
-    parser.add_argument('--validate', required=True, metavar='DIR', help='validation vectors, disjoint from --train')
+    parser.add_argument('--validate', metavar='DIR', help='validation vectors, disjoint from --train (optional)')
     parser.add_argument('--model', required=True, metavar='PATH', help='where to save the model (JSON)')
     parser.add_argument('--nu', type=float, default=None, help='one-class SVM nu (default: %g, or a grid search '
                         'when the training directory has anomalous vectors)' % learning.DEFAULT_NU)

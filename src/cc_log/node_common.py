@@ -58,7 +58,19 @@ def to_bool(name, value):
     raise ConfigError('~%s: %r is not true or false' % (name, value))
 
 
+_SETTINGS = []  # [dict] once ``read_settings_only`` was called: the private parameters, not the master's
+
+
+def read_settings_only(settings):
+    """From now on every ``Params`` of this process reads ``settings`` (a dict) and never the parameter
+    server: ``rosrun cc_log record`` reads its command line only, as rosbag record does (it sets nothing on
+    the master and reads nothing an earlier run left there)."""
+    _SETTINGS[:] = [dict(settings)]
+
+
 def _ros_get(name, default):
+    if _SETTINGS:
+        return _SETTINGS[0].get(name, default)
     return rospy.get_param('~' + name, default)
 
 

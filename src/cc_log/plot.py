@@ -1,12 +1,15 @@
 """``cclog plot``: a run's timeline, so a user sees why a window was or was not kept.
 
-Top: the speed of the driving topic (nav_msgs/Odometry) over time with the saved windows shaded and, with a
-ground-truth file, the true events. Bottom: the model's score over the whole run (with a bag and a model),
-the scores of the triggers that fired, and the threshold. ``timeline(...)`` takes what was read (windows,
-speeds, scores, truth) and writes the image; the readers here turn windows, bags and models into those.
-matplotlib (Agg backend: no display) is imported only when drawing.
+Top: the speed of the driving topic (nav_msgs/Odometry) over time with the saved windows shaded (classifier,
+manual and rule windows each drawn their own way) and, with a ground-truth file, the true events. Middle: its
+yaw rate (a twist, a spin). Bottom: the model's score over the whole run (with a bag and a model), the scores
+of the triggers that fired, and the threshold. Time is in seconds from the start of the run; legends sit
+right of the panels, off the data. ``draw(...)`` takes what was read (windows, motion samples, scores, truth)
+and returns the figure, ``timeline(...)`` writes it; the readers here turn windows, bags and models into
+those. matplotlib (Agg backend: no display) is imported only when drawing.
 """
 import collections
+import datetime
 import math
 import os
 
@@ -19,11 +22,36 @@ def speed_of(msg):
     return math.sqrt(twist.x ** 2 + twist.y ** 2 + twist.z ** 2)
 
 
+def motion_of(msg):
+    """``(speed, yaw rate)`` of a nav_msgs/Odometry: |linear twist| and its angular z (rad/s)."""
+    return speed_of(msg), msg.twist.twist.angular.z
+
+
 def window_speeds(windows, driving):
-    """``[(stamp, speed)]`` of the driving topic's odometry inside the windows (``[(path, metadata,
+    """``[(stamp, speed, yaw rate)]`` of the driving topic's odometry inside the windows (``[(path, metadata,
     records)]``), one list per window."""
-    return [[(r.stamp, speed_of(r.msg)) for r in records if r.topic == driving and r.msg._type == ODOMETRY]
+    return [[(r.stamp,) + motion_of(r.msg) for r in records if r.topic == driving and r.msg._type == ODOMETRY]
             for _, _, records in windows]
+
+
+# how each kind of window is shaded: classifier windows filled, manual ones hatched, others (rules, collect
+# mode's files) in another colour
+WINDOW_STYLES = collections.OrderedDict([
+    ('classifier', dict(color='tab:orange', alpha=0.25, lw=0)),
+    ('manual', dict(facecolor='none', edgecolor='tab:green', hatch='//', lw=0.8)),
+    ('other', dict(color='tab:purple', alpha=0.18, lw=0)),
+])
+
+
+def window_kind(metadata):
+    """``'classifier'`` when a trigger of the window has a score, else ``'manual'`` when one is the manual
+    trigger, else ``'other'`` (rules, collect mode's files)."""
+    triggers = [t for t in metadata.get('triggers') or [] if isinstance(t, dict)]
+    if any(isinstance(t.get('score'), (int, float)) and not isinstance(t.get('score'), bool) for t in triggers):
+        return 'classifier'
+    if any(t.get('name', t.get('reason')) == 'manual' for t in triggers):
+        return 'manual'
+    return 'other'
 
 
 def run_scores(bag, driving, model, stride=1):
@@ -58,18 +86,22 @@ def load_truth(path):
                          % (path, error))
 
 
-def timeline(out, windows, speed, curve=(), threshold=None, truth=(), title=None, width=11.0, dpi=100,
-             speed_label=None):
-    """Draw the timeline into ``out`` (PNG, or the format of its extension); return a summary dict.
+def _outside_legend(axis):
+    """The axis's legend right of it, off the data (nothing when it has no labelled artist)."""
+    if axis.get_legend_handles_labels()[0]:
+        axis.legend(loc='upper left', bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8)
 
-    windows: ``[(path, metadata, records)]``; speed: ``[(stamp, speed)]`` of the whole run, or a list of such
-    lists (one per window: drawn apart); curve: ``[(stamp, score)]``; threshold: the model's, else the
-    windows'; truth: ``[{type, start, end}]``.
-    """
+
+def _utc(stamp):
+    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(stamp))
+    return moment.strftime('%Y-%m-%d %H:%M:%S UTC')
+
+
+def draw(windows, speed, curve=(), threshold=None, truth=(), title=None, width=11.0, speed_label=None):
+    """``(figure, summary)``: the timeline drawn (see ``timeline`` for the arguments), not yet saved."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    from .safe_files import AtomicFile
     parts = speed if speed and isinstance(speed[0], list) else [list(speed)]
     samples = sorted(s for part in parts for s in part)
     triggers, window_threshold = trigger_scores(windows)
@@ -78,20 +110,28 @@ def timeline(out, windows, speed, curve=(), threshold=None, truth=(), title=None
     starts += [min(r.stamp for r in records) for _, _, records in windows if records]
     starts += [t for t, _ in curve[:1]] + [e['start'] for e in truth]
     origin = min(starts) if starts else 0.0
-    figure, (top, bottom) = plt.subplots(2, 1, sharex=True, figsize=(width, 6),
-                                         gridspec_kw={'height_ratios': [3, 1]})
+    yaw = any(len(s) > 2 for s in samples)
+    rows = 3 if yaw else 2
+    figure, axes = plt.subplots(rows, 1, sharex=True, figsize=(width, 7.5 if yaw else 6),
+                                gridspec_kw={'height_ratios': [3, 2, 1.5] if yaw else [3, 1]})
+    top, bottom = axes[0], axes[-1]
     for number, part in enumerate(parts):
-        top.plot([s - origin for s, _ in part], [v for _, v in part], lw=0.8, color='tab:blue',
+        top.plot([s[0] - origin for s in part], [s[1] for s in part], lw=0.8, color='tab:blue',
                  label=speed_label if number == 0 else None)
-    kept = []
-    for number, (_, _, records) in enumerate(windows):
+        if yaw:
+            axes[1].plot([s[0] - origin for s in part if len(s) > 2], [s[2] for s in part if len(s) > 2], lw=0.8,
+                         color='tab:cyan', label='yaw rate' if number == 0 else None)
+    kept, labelled = [], set()
+    for _, metadata, records in windows:
         if not records:
             continue
         start, end = min(r.stamp for r in records), max(r.stamp for r in records)
         kept.append((start, end))
-        for axis in (top, bottom):
-            axis.axvspan(start - origin, end - origin, color='tab:orange', alpha=0.25, lw=0,
-                         label='saved window' if number == 0 and axis is top else None)
+        kind = window_kind(metadata)
+        for axis in axes:
+            label = '%s window' % kind if axis is top and kind not in labelled else None
+            axis.axvspan(start - origin, end - origin, label=label, **WINDOW_STYLES[kind])
+        labelled.add(kind)
     for number, event in enumerate(truth):
         top.axvspan(event['start'] - origin, event['end'] - origin, ymin=0.0, ymax=0.06, color='tab:red',
                     lw=0, label='true event' if number == 0 else None)
@@ -106,18 +146,37 @@ def timeline(out, windows, speed, curve=(), threshold=None, truth=(), title=None
         bottom.axhline(threshold, color='k', ls='--', lw=0.8, label='threshold %.3g' % threshold)
     top.set_ylabel('speed (m/s)')
     top.set_title(title or '', fontsize=9)
-    top.legend(loc='upper right', fontsize=8)
+    if yaw:
+        axes[1].set_ylabel('yaw rate (rad/s)')
+        axes[1].axhline(0.0, color='k', lw=0.4)
     bottom.set_ylabel('score')
-    bottom.set_xlabel('time since %.3f (s)' % origin)
-    if curve or triggers or threshold is not None:
-        bottom.legend(loc='lower right', fontsize=8)
+    bottom.set_xlabel('seconds from the start (%s)' % _utc(origin))
+    for axis in axes:
+        _outside_legend(axis)
     figure.tight_layout()
-    with AtomicFile(out, overwrite=True) as stream:
-        figure.savefig(stream, dpi=dpi, format=os.path.splitext(out)[1][1:].lower() or None)
-    plt.close(figure)
     caught = sum(1 for e in truth if any(a <= e['end'] and e['start'] <= b for a, b in kept))
-    ends = [s for s, _ in samples[-1:]] + [b for _, b in kept]
-    return collections.OrderedDict([
-        ('out', out), ('windows', len(windows)), ('triggers', len(triggers)), ('speed_samples', len(samples)),
+    ends = [s[0] for s in samples[-1:]] + [b for _, b in kept]
+    return figure, collections.OrderedDict([
+        ('windows', len(windows)), ('triggers', len(triggers)), ('speed_samples', len(samples)),
         ('scores', len(curve)), ('truth', len(truth)), ('truth_in_windows', caught), ('start', origin),
         ('end', max(ends) if ends else origin)])
+
+
+def timeline(out, windows, speed, curve=(), threshold=None, truth=(), title=None, width=11.0, dpi=100,
+             speed_label=None):
+    """Draw the timeline into ``out`` (PNG, or the format of its extension); return a summary dict.
+
+    windows: ``[(path, metadata, records)]``; speed: ``[(stamp, speed)]`` or ``[(stamp, speed, yaw rate)]`` of
+    the whole run, or a list of such lists (one per window: drawn apart); curve: ``[(stamp, score)]``;
+    threshold: the model's, else the windows'; truth: ``[{type, start, end}]``.
+    """
+    import matplotlib.pyplot as plt
+    from .safe_files import AtomicFile
+    figure, summary = draw(windows, speed, curve, threshold, truth, title, width, speed_label)
+    with AtomicFile(out, overwrite=True) as stream:
+        figure.savefig(stream, dpi=dpi, format=os.path.splitext(out)[1][1:].lower() or None,
+                       bbox_inches='tight')
+    plt.close(figure)
+    summary['out'] = out
+    summary.move_to_end('out', last=False)
+    return summary

@@ -11,8 +11,9 @@
 - ``make_dirs(path)``: the missing directories of ``path`` (parents too), each set to 2775 through an
   ``O_NOFOLLOW`` descriptor: group-writable, setgid so files inherit the group, never world-writable.
 
-Modes: files 0664, directories 2775, less what the umask takes; the world-write bit is never set, even
-under umask 0. Existing directories are left as they are.
+Modes: files 0664, directories 2775 whatever the umask (as BWI's logger makes them under umask 002: a lab's
+users can all read and clean the logs), except that the umask may take the world-read bits; the world-write
+bit is never set, even under umask 0. Existing directories are left as they are.
 """
 import errno
 import os
@@ -25,11 +26,13 @@ _TRIES = 100  # temporary names tried when some are taken (a leftover, a planted
 _NO_HARD_LINKS = (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK)
 
 
-def _not_world_writable(fd, extra=0):
-    """fchmod ``fd`` so the world-write bit is off and the ``extra`` bits (setgid) are on."""
-    mode = stat.S_IMODE(os.fstat(fd).st_mode)
-    wanted = (mode & ~0o002) | extra
-    if wanted != mode:
+def _group_writable(fd, mode):
+    """fchmod ``fd`` to ``mode``'s owner, group and special bits (setgid), whatever the umask took from them
+    (so a lab's users can all read and clean the logs, as BWI's logger under umask 002), with the world bits
+    the umask left, never world-write."""
+    current = stat.S_IMODE(os.fstat(fd).st_mode)
+    wanted = (mode & 0o7770) | (current & 0o005)
+    if wanted != current:
         os.fchmod(fd, wanted)
 
 
@@ -38,7 +41,7 @@ def create(path, mode=FILE_MODE):
     file, a link, even a dangling one) is there already."""
     fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, mode)
     try:
-        _not_world_writable(fd)
+        _group_writable(fd, mode)
     except BaseException:
         os.close(fd)
         raise
@@ -46,7 +49,7 @@ def create(path, mode=FILE_MODE):
 
 
 def make_dirs(path, mode=DIR_MODE):
-    """Create directory ``path`` and its missing parents (2775 less the umask, never world-writable); return
+    """Create directory ``path`` and its missing parents (2775, the umask taking world bits only); return
     ``path``. OSError when a part of it exists and is not a directory."""
     missing = []
     head = os.path.abspath(path)
@@ -65,7 +68,7 @@ def make_dirs(path, mode=DIR_MODE):
             raise
         fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
         try:
-            _not_world_writable(fd, mode & 0o7000)
+            _group_writable(fd, mode)
         finally:
             os.close(fd)
     return path
