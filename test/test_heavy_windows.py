@@ -6,6 +6,7 @@ import os
 
 import pytest
 
+from conftest import cclog
 from cc_log import log_format, recovery
 from cc_log.formats import bag_lz4, bag_writer
 from cc_log.raw_message import class_header
@@ -257,3 +258,34 @@ def test_a_writer_that_falls_behind_drops_heavy_frames_counted_never_light_ones(
     dropped = sum(meta.get('dropped', {}).get(CAMERA, 0) for meta, _ in kept)
     assert dropped == stats['shed_by_topic'][CAMERA]
     assert camera_kept + dropped == sum(1 for r in in_window if r.topic == CAMERA)  # each frame kept or counted
+    info = cclog('info', str(tmp_path))
+    assert info.returncode == 0 and info.stdout.count('DROPPED') == sum(1 for meta, _ in kept if meta.get('dropped'))
+    assert sum(int(line.split()[1]) for line in info.stdout.splitlines() if 'DROPPED' in line) == dropped
+
+
+# -- configuration -------------------------------------------------------------------------------------------
+
+def test_topic_limits_from_the_configuration_and_from_a_launch_argument():
+    from cc_log import config
+    text = '{camera/image_raw: {pre: 2s, post: 500ms, max_mb: 64}, /scan: {post: 1s}}'
+    for value in (text, {'camera/image_raw': {'pre': '2s', 'post': '500ms', 'max_mb': 64}, '/scan': {'post': '1s'}}):
+        limits = config.parse_topic_limits(value)
+        assert limits == {'camera/image_raw': TopicLimits(2.0, 0.5, 64000000), '/scan': TopicLimits(None, 1.0, 0)}
+    cfg = config.Config.from_dict({'topic_limits': text, 'driving_topic': 'odom'})
+    options = cfg.logger_options([], config.global_name)
+    assert options['topic_limits'] == {'/camera/image_raw': TopicLimits(2.0, 0.5, 64000000),
+                                       '/scan': TopicLimits(None, 1.0, 0)}
+
+
+@pytest.mark.parametrize('value, error', [
+    ('{camera: {pre: 20}}', 'topic_limits.camera.pre: a duration (e.g. 2s), not a count of messages'),
+    ('{camera: {size: 1}}', "topic_limits.camera: unknown key 'size'"),
+    ('[camera]', 'topic_limits: a mapping of topic names to {pre, post, max_mb}, not list'),
+    ('{camera: {max_mb: lots}}', 'topic_limits.camera.max_mb'),
+    ('{camera: {pre: [1', 'topic_limits: not YAML'),
+])
+def test_bad_topic_limits_are_one_line_naming_the_key(value, error):
+    from cc_log import config
+    with pytest.raises(ValueError) as raised:
+        config.parse_topic_limits(value)
+    assert error in str(raised.value) and '\n' not in str(raised.value)

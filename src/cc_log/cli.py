@@ -184,6 +184,14 @@ def _read_windows(args, paths, label):
             bar.update()
 
 
+def _counts_of(value):
+    """``{topic: count}`` of a metadata entry that should be one (anything else: {})."""
+    if not isinstance(value, dict):
+        return {}
+    return dict((str(key), count) for key, count in value.items()
+                if isinstance(count, int) and not isinstance(count, bool) and count >= 0)
+
+
 def _window_summary(path, metadata, records):
     """What ``info`` reports about one window file."""
     from . import msg_codec
@@ -228,6 +236,7 @@ def _window_summary(path, metadata, records):
         ('threshold', metadata.get('threshold')),
         ('driving_topic', metadata.get('driving_topic')),
         ('part', metadata.get('part', 0)),
+        ('dropped', _counts_of(metadata.get('dropped'))),
         ('pre', metadata.get('pre')),
         ('post', metadata.get('post')),
         ('model', metadata.get('model')),
@@ -692,6 +701,9 @@ def cmd_info(args):
         print('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
         print('  topic MB   %s (serialized)' % ', '.join(
             '%s %.2f' % (topic, size / 1e6) for topic, size in sorted(w['topic_bytes'].items(), key=lambda i: -i[1])))
+        if w['dropped']:
+            print('  DROPPED    %d messages the writer could not keep up with: %s' % (
+                sum(w['dropped'].values()), ', '.join('%s %d' % item for item in sorted(w['dropped'].items()))))
         print('  size       %s (row JSON %s, %s)' % (
             human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
             '%.1fx' % w['ratio'] if w['ratio'] else '-'))
