@@ -12,8 +12,10 @@ Subscribed topics
 Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/dropped, raw vs stored
-  bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``), every
-  ``~diagnostic_period`` seconds (wall time).
+  bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``), messages dropped
+  because the writer fell behind (WARN, per topic), messages restamped (header stamp off the clock), each
+  classifier's drift (WARN when it flags far more of the driving than of its training data, with the
+  remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
@@ -28,7 +30,9 @@ Parameters (defaults below as module constants; each resolved value is logged on
   ``~model`` (string, required without triggers in the configuration): model file from learn mode of the
   classifier named ``classifier`` (its feature window is used).
   ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): where window files go.
-  ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
+  ``~format`` (string, default: bag-lz4): ``bag-lz4`` or ``json-xz``.
+  ``~topic_limits`` (dict or YAML string, default: none): per topic, ``pre``, ``post`` (durations, at most the
+  window's) and ``max_mb`` (memory outside every window), e.g. ``{camera/image_raw: {pre: 2s, max_mb: 64}}``.
   ``~precision`` (dict or string, default: none = lossless): json-xz only, opt-in lossy: round fields to a
   step, ``{'pose.pose.position.*': 1e-4}`` or ``'pose.pose.position.*=1e-4, twist.twist.*=1e-5'``
   (configuration key ``json_xz.precision``; recorded in each window's metadata; docs/FORMAT.md).
@@ -77,8 +81,9 @@ Subscriber callbacks only put the message on an intake queue (``intake``); one f
 messages, as their serialized bytes and connection headers, to the triggers and the window buffer in batches
 of up to half a second (``SmartLogger.on_records``: decoded only where a field is read; a manual trigger first
 waits for the messages received before it), whose writer thread decodes (json-xz), compresses and writes.
-Stamps are header stamps (receipt time for messages without one), so ``use_sim_time`` and ``rosbag play
---clock`` work, and time jumping backwards (a bag played again) restarts the buffer instead of failing.
+Stamps are header stamps (receipt time for messages without one or with one more than 5 s off the node's
+clock), so ``use_sim_time`` (the node waits for /clock) and ``rosbag play --clock`` work, and time jumping
+backwards (a bag played again) restarts the buffer instead of failing; the silence ticker runs on wall time.
 """
 import math
 import sys
@@ -89,6 +94,7 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
+from . import drift
 from . import intake
 from . import log_format
 from . import smart_logger
@@ -187,6 +193,7 @@ class SmartNode(object):
         self._refused = 0
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
+        self.drift = drift.monitor_classifiers(classifiers)  # the live flag rate against the trained one
         self.learners = [(t.name, t.learner) for t in classifiers if t.learner is not None]
         if self.learners:
             self.logger.on_event(self._flag_learners)
@@ -273,6 +280,11 @@ class SmartNode(object):
             level = max(level, DiagnosticStatus.WARN)
             message += ('; %d messages of windows dropped: the writer fell behind (%s)'
                         % (stats['messages_shed'], _per_topic(stats['shed_by_topic'])))
+        for monitor in self.drift:
+            drift_level, drift_message = monitor.status()
+            if drift_level:
+                level = max(level, DiagnosticStatus.WARN)
+                message += '; ' + drift_message
         overflowed = self.intake.overflowed
         if overflowed:
             level = max(level, DiagnosticStatus.WARN)
@@ -314,7 +326,8 @@ class SmartNode(object):
             ('time resets', stats['time_resets']),
             ('messages refused', stats['messages_refused']),
             ('messages refused (unsafe definition)', self.intake.decoder.refused),
-        ] + extra + disk + self._online_status(stats)
+        ] + [('drift %s' % monitor.name, monitor.status()[1]) for monitor in self.drift] \
+            + extra + disk + self._online_status(stats)
         return level, message, values
 
     def _online_status(self, stats):
