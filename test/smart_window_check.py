@@ -239,6 +239,9 @@ class SmartWindowTest(unittest.TestCase):
                          (files[0], len(records), os.path.getsize(files[0])))
         self.assertAlmostEqual(written.start.to_sec(), records[0].stamp, places=6)
         self.assertAlmostEqual(written.end.to_sec(), records[-1].stamp, places=6)
+        # the classifier's drift: judged only after a minute of decisions, said on /diagnostics
+        self.assertTrue(self.status_of(NODE)['drift classifier'].startswith('drift: not judged yet'),
+                        self.status_of(NODE))
 
     def test_2_trigger_service_writes_a_window(self):
         self.assertFalse([i for i in self.flags if TRIGGER.start - RUN.start <= i < TRIGGER.stop - RUN.start])

@@ -224,6 +224,19 @@ def test_a_topic_on_another_clock_neither_stretches_nor_empties_the_window(offse
     assert stats['restamped_by_topic'] == {CAMERA: 8 * 30} and stats['messages_restamped'] == 240
 
 
+def test_a_bag_played_without_its_clock_keeps_its_own_stamps(tmp_path):
+    """Every topic stamped 11 years before it arrives (``rosbag play`` without ``--clock``): one clock, the bag's."""
+    records = [r._replace(stamp=r.stamp + 3.5e8) for r in stream(6, camera_clock=0.0)]  # arrival: now-ish
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, side_topics=[CAMERA],
+                         background=False)
+    feed(logger, records, trigger_at=T0 + 3.5e8 + 3.0, before=1.0, after=1.0)
+    logger.close()
+    path, = log_format.window_files(str(tmp_path))
+    metadata, kept = log_format.read_window(path)
+    assert T0 + 1.9 <= metadata['start'] <= T0 + 2.2 and metadata['end'] - metadata['start'] <= 2.1  # header stamps
+    assert logger.stats()['messages_restamped'] == 0 and 55 <= metadata['counts'][CAMERA] <= 65
+
+
 def test_stamps_a_little_off_the_arrival_are_kept():
     records = stream(4, camera_clock=-0.3)  # a camera pipeline's latency: its own stamps stay
     logger = SmartLogger(None, '/nonexistent-unused', 'bag-lz4', '1s', '1s', driving_topic=ODOM,

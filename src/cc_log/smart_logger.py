@@ -238,6 +238,7 @@ class SmartLogger(object):
         if not self.stamp_tolerance > 0:
             raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))
         self._restamped = collections.Counter()  # topic -> messages whose header stamp was off the clock
+        self._clock_offset = 0.0                 # the driving topic's header stamps minus their arrival
         self._shed = collections.Counter()       # topic -> messages of windows dropped under overload
         self.writer = None
         self._expected = topic_types(self.triggers)  # topic -> the type its triggers read
@@ -376,21 +377,28 @@ class SmartLogger(object):
             raise raw_message.UndecodableRecord(places[error.index], error.topic, error.error)
 
     def _on_clock(self, stamps, arrivals, topics):
-        """The stamps that place messages in windows: each message's header stamp, unless it is more than
-        ``stamp_tolerance`` from the message's non-zero arrival (receipt or bag time: the node's clock), when the
-        arrival is used and the message counted (``stats()['restamped_by_topic']``). So a sensor stamping by
-        another clock (wall time next to a bag's, a camera without time sync, a stamp in the future) can neither
-        stretch a window nor hold other messages back."""
-        tolerance = self.stamp_tolerance
-        off = [k for k, difference in enumerate(map(operator.sub, stamps, arrivals))
-               if not -tolerance <= difference <= tolerance and arrivals[k]]  # (0: the clock has not started)
-        if not off:
-            return stamps
-        stamps = list(stamps)
-        for k in off:
-            stamps[k] = float(arrivals[k])
-        with self._stats.lock:
-            self._restamped.update(topics[k] for k in off)
+        """The stamps that place messages in windows. The driving topic's header stamps set the clock: its
+        offset from the arrival (receipt or bag time) of each of its messages (0 before the first; a bag played
+        without its clock keeps its own stamps). Any other message whose header stamp is more than
+        ``stamp_tolerance`` from its arrival on that clock is placed at that arrival instead, and counted
+        (``stats()['restamped_by_topic']``): a sensor stamping by another clock (wall time next to a bag's, a
+        camera without time sync, a stamp in the future) can neither stretch a window nor hold others back."""
+        tolerance, driving, offset = self.stamp_tolerance, self.driving_topic, self._clock_offset
+        restamped = None
+        for k, (stamp, arrival, topic) in enumerate(zip(stamps, arrivals, topics)):
+            if not arrival:  # the clock has not started (use_sim_time before /clock)
+                continue
+            if topic == driving:
+                offset = stamp - arrival
+            elif not -tolerance <= stamp - arrival - offset <= tolerance:
+                if restamped is None:
+                    stamps, restamped = list(stamps), []
+                stamps[k] = arrival + offset
+                restamped.append(topic)
+        self._clock_offset = offset
+        if restamped:
+            with self._stats.lock:
+                self._restamped.update(restamped)
         return stamps
 
     def _needs_message(self, record, triggers):
