@@ -82,8 +82,9 @@ messages, as their serialized bytes and connection headers, to the triggers and 
 of up to half a second (``SmartLogger.on_records``: decoded only where a field is read; a manual trigger first
 waits for the messages received before it), whose writer thread decodes (json-xz), compresses and writes.
 Stamps are header stamps (receipt time for messages without one; the driving topic's set the clock, and a
-message of another topic stamped more than 5 s off it is placed at its arrival), so ``use_sim_time`` (the node waits for /clock) and ``rosbag play --clock`` work, and time jumping
-backwards (a bag played again) restarts the buffer instead of failing; the silence ticker runs on wall time.
+message of another topic stamped more than 5 s off it is placed at its arrival), so ``use_sim_time`` (the
+node waits for /clock) and ``rosbag play --clock`` work, and time jumping backwards (a bag played again)
+restarts the buffer instead of failing; the silence ticker runs on wall time.
 """
 import math
 import sys
