@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from . import safe_input
+from .safe_input import brief
 from .features import FeatureConfig, vector_length
 
 FORMAT = 'cc_log-model'
@@ -186,8 +187,8 @@ class AnomalyModel(object):
         if not isinstance(document, dict) or document.get('format') != FORMAT:
             raise ModelError('%s: not a cc_log model (no "format": "%s")' % (path, FORMAT))
         if document.get('version') != VERSION or isinstance(document.get('version'), bool):
-            raise ModelError('%s: model version %r is not supported (this cc_log reads version %d)'
-                             % (path, document.get('version'), VERSION))
+            raise ModelError('%s: model version %s is not supported (this cc_log reads version %d)'
+                             % (path, brief(document.get('version')), VERSION))
         for key in ('config', 'kind', 'scaler', 'kernel', 'threshold'):
             if key not in document:
                 raise ModelError('%s: missing "%s"' % (path, key))
@@ -197,7 +198,7 @@ class AnomalyModel(object):
             raise ModelError('%s: %s' % (path, error))
         kind = document['kind']
         if kind not in KINDS:
-            raise ModelError('%s: kind %r is not one of %s' % (path, kind, ', '.join(KINDS)))
+            raise ModelError('%s: kind %s is not one of %s' % (path, brief(kind), ', '.join(KINDS)))
         scaler = document['scaler']
         if not isinstance(scaler, dict):
             raise ModelError('%s: scaler must be an object' % path)
@@ -245,7 +246,7 @@ _KERNEL_FIELDS = {
 
 def _number(value, path, name):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ModelError('%s: %s must be a finite number, got %r' % (path, name, value))
+        raise ModelError('%s: %s must be a finite number, got %s' % (path, name, brief(value)))
     return float(value)
 
 
@@ -267,7 +268,7 @@ def _array(value, ndim, path, name):
     for row in rows:
         for item in row:
             if isinstance(item, bool) or not isinstance(item, (int, float)):
-                raise bad('must hold numbers only, found %r' % (item,))
+                raise bad('must hold numbers only, found %s' % brief(item))
     array = np.array(value, dtype=float)
     if not np.all(np.isfinite(array)):
         raise bad('holds non-finite values')
@@ -280,7 +281,7 @@ def _validate(model, path):
         return ModelError('%s: %s' % (path, what))
 
     if model.kind not in KINDS:
-        raise bad('kind %r is not one of %s' % (model.kind, ', '.join(KINDS)))
+        raise bad('kind %s is not one of %s' % (brief(model.kind), ', '.join(KINDS)))
     dimension = vector_length(model.config)
     for name, array in (('scaler.mean', model.mean), ('scaler.scale', model.scale)):
         if array.shape != (dimension,):

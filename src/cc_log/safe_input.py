@@ -16,6 +16,11 @@ connection it reads), so a definition is checked here before any class is genera
 - ``json_loads(text)``: ``json.loads`` after a nesting check (a deeply nested document would raise
   RecursionError inside ``json``).
 - ``open_input(path)``: open a file to read, refusing FIFOs, devices and sockets (a FIFO blocks forever).
+- ``load_yaml(path, max_bytes)``: the one YAML reader: a bounded file, ``yaml.SafeLoader`` (no object of the
+  file constructed), at most MAX_YAML_ALIASES aliases and MAX_YAML_WEIGHT nodes and scalar characters once
+  aliases are expanded (an alias bomb of a few hundred bytes expands to gigabytes).
+- ``brief(value)``: a repr of at most BRIEF_CHARS characters, computed in bounded time and memory: what error
+  messages show of a value read from outside.
 
 Every refusal is a ValueError with one line saying what is wrong; callers add the file or topic. Pure: no
 rospy, no rosbag, no genpy.
@@ -26,10 +31,12 @@ import json
 import keyword
 import os
 import re
+import reprlib
 import stat
 
 __all__ = ['UnsafeDefinition', 'check_definition', 'check_connection', 'check_bag', 'check_type_name',
-           'check_json_depth', 'json_loads', 'open_input', 'check_regular', 'MAX_DEFINITION_CHARS', 'MAX_NESTING',
+           'check_json_depth', 'json_loads', 'open_input', 'check_regular', 'load_yaml', 'brief',
+           'MAX_DEFINITION_CHARS', 'MAX_NESTING',
            'MAX_TYPES', 'MAX_DECLARATIONS', 'MAX_DEFAULT_VALUES', 'MAX_JSON_DEPTH']
 
 #: Longest message definition accepted (characters); real ones, comments included, are a few kB to ~50 kB.
@@ -45,6 +52,13 @@ MAX_DECLARATIONS = 10000
 MAX_DEFAULT_VALUES = 1 << 20
 #: Deepest JSON nesting accepted; a json-xz window document reaches about 2 * MAX_NESTING + 4.
 MAX_JSON_DEPTH = 100
+#: Most aliases (``*name``) in one YAML document.
+MAX_YAML_ALIASES = 100
+#: Most nodes plus scalar characters of a YAML document once its aliases are expanded (each alias counts
+#: the whole of what it names): about what a file of MAX_YAML_WEIGHT bytes without aliases holds.
+MAX_YAML_WEIGHT = 1 << 21
+#: Longest repr of an outside value in an error message (``brief``).
+BRIEF_CHARS = 80
 
 SEPARATOR = '\n' + '=' * 80 + '\n'
 _INT_RANGES = {'int8': (-2 ** 7, 2 ** 7 - 1), 'uint8': (0, 2 ** 8 - 1), 'int16': (-2 ** 15, 2 ** 15 - 1),
@@ -375,3 +389,81 @@ def open_input(path):
     except BaseException:
         os.close(fd)
         raise
+
+
+# -- YAML and error messages -------------------------------------------------------------------------------
+
+def _yaml_weight(node, memo, open_nodes):
+    """Nodes plus scalar characters under ``node``, aliases expanded (``memo``: by id); ValueError for a
+    node that contains itself."""
+    key = id(node)
+    if key in memo:
+        return memo[key]
+    if key in open_nodes:
+        raise ValueError('a YAML alias refers to a node that contains it')
+    if isinstance(node.value, str):
+        weight = 1 + len(node.value)
+    else:
+        open_nodes.add(key)
+        items = [part for pair in node.value for part in pair] if node.id == 'mapping' else node.value
+        weight = 1 + sum(_yaml_weight(item, memo, open_nodes) for item in items)
+        open_nodes.discard(key)
+    memo[key] = weight
+    return weight
+
+
+def _safe_loader(text):
+    """A ``yaml.SafeLoader`` of ``text`` that counts aliases and checks the expanded weight of the document."""
+    import yaml
+
+    class BoundedLoader(yaml.SafeLoader):
+        aliases = 0
+
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                self.aliases += 1
+                if self.aliases > MAX_YAML_ALIASES:
+                    raise ValueError('more than %d YAML aliases' % MAX_YAML_ALIASES)
+            return super(BoundedLoader, self).compose_node(parent, index)
+
+        def get_single_node(self):
+            node = super(BoundedLoader, self).get_single_node()
+            if node is not None and _yaml_weight(node, {}, set()) > MAX_YAML_WEIGHT:
+                raise ValueError('YAML aliases expand to more than %d nodes and characters' % MAX_YAML_WEIGHT)
+            return node
+
+    return BoundedLoader(text)
+
+
+def load_yaml(path, max_bytes):
+    """The document of the YAML file ``path`` (at most ``max_bytes``; see the module docstring);
+    ValueError('<path>: ...') with one line when it cannot be read, is too large or is not YAML."""
+    import yaml
+    try:
+        with open_input(path) as stream:
+            data = stream.read(max_bytes + 1)
+    except (IOError, OSError) as error:
+        raise ValueError('%s: cannot read: %s' % (path, error.strerror or error))
+    if len(data) > max_bytes:
+        raise ValueError('%s: larger than %d bytes' % (path, max_bytes))
+    try:
+        loader = _safe_loader(data.decode('utf-8'))
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
+    except (ValueError, yaml.YAMLError, RecursionError) as error:  # UnicodeDecodeError is a ValueError
+        raise ValueError('%s: not YAML: %s' % (path, ' '.join(str(error).split())[:200]))
+
+
+_BRIEF = reprlib.Repr()
+_BRIEF.maxlevel = 3
+_BRIEF.maxstring = _BRIEF.maxother = _BRIEF.maxlong = BRIEF_CHARS
+for _name in ('maxtuple', 'maxlist', 'maxarray', 'maxdict', 'maxset', 'maxfrozenset', 'maxdeque'):
+    setattr(_BRIEF, _name, 8)
+
+
+def brief(value, limit=BRIEF_CHARS):
+    """A repr of ``value`` of at most ``limit`` characters (``...`` where cut), whatever its size."""
+    text = _BRIEF.repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + '...'

@@ -2,6 +2,8 @@
 import collections
 import math
 
+from .safe_input import brief
+
 
 class Span(collections.namedtuple('Span', 'count seconds')):
     """A window size: exactly one of ``count`` (messages) and ``seconds`` is set."""
@@ -38,10 +40,10 @@ class Span(collections.namedtuple('Span', 'count seconds')):
                     raise ValueError(text)
                 span = cls.messages(int(number))
         except (ValueError, OverflowError):
-            raise ValueError('%s: %r is not a message count (500) or a duration (5s)' % (name, value))
+            raise ValueError('%s: %s is not a message count (500) or a duration (5s)' % (name, brief(value)))
         amount = span.count if span.count is not None else span.seconds
         if amount < 0 or not math.isfinite(amount):
-            raise ValueError('%s: %r must be zero or positive' % (name, value))
+            raise ValueError('%s: %s must be zero or positive' % (name, brief(value)))
         return span
 
     @property
@@ -73,5 +75,6 @@ def megabytes(value, name='size'):
         except (ValueError, OverflowError):
             pass
     if not number >= 0 or not math.isfinite(number):
-        raise ValueError('%s: %r is not a size >= 0 (MB as a number, or 64MB, 2GB, 500kB, 1.5GiB)' % (name, value))
+        raise ValueError('%s: %s is not a size >= 0 (MB as a number, or 64MB, 2GB, 500kB, 1.5GiB)'
+                         % (name, brief(value)))
     return number

@@ -18,6 +18,8 @@ must be discovered (``-a`` or a regular expression: see ``topic_watch``). Pure; 
 """
 import re
 
+from .safe_input import brief
+
 __all__ = ['TopicSelection', 'ALL', 'REGEX', 'EXCLUDE']
 
 ALL = '*'
@@ -29,7 +31,7 @@ def _compile(pattern, name):
     try:
         return re.compile(pattern)
     except re.error as error:
-        raise ValueError('%s: %r is not a regular expression: %s' % (name, pattern, error))
+        raise ValueError('%s: %s is not a regular expression: %s' % (name, brief(pattern), error))
 
 
 class TopicSelection(object):
@@ -47,19 +49,19 @@ class TopicSelection(object):
         topics, regex, exclude, all_topics = [], [], [], False
         for entry in entries:
             if not isinstance(entry, str) or not entry.strip():
-                raise ValueError('%s: %r is not a topic name or pattern' % (name, entry))
+                raise ValueError('%s: %s is not a topic name or pattern' % (name, brief(entry)))
             entry = entry.strip()
             negated = entry.startswith(EXCLUDE)
             body = entry[len(EXCLUDE):] if negated else entry
             if body.startswith(REGEX):
                 pattern = body[len(REGEX):]
                 if not pattern:
-                    raise ValueError('%s: %r has an empty regular expression' % (name, entry))
+                    raise ValueError('%s: %s has an empty regular expression' % (name, brief(entry)))
             elif body == ALL and not negated:
                 all_topics = True
                 continue
             elif not body or body == ALL:
-                raise ValueError('%s: %r excludes nothing (a name, or re:PATTERN)' % (name, entry))
+                raise ValueError('%s: %s excludes nothing (a name, or re:PATTERN)' % (name, brief(entry)))
             else:
                 pattern = None
             if negated:

@@ -15,6 +15,7 @@ import subprocess
 import threading
 
 from . import window_writer
+from .safe_input import brief
 
 __all__ = ['UploadHook', 'parse_command']
 
@@ -30,13 +31,13 @@ def parse_command(value, name='upload_command'):
         try:
             words = shlex.split(value)
         except ValueError as error:
-            raise ValueError('%s: %r cannot be split into arguments: %s' % (name, value, error))
+            raise ValueError('%s: %s cannot be split into arguments: %s' % (name, brief(value), error))
     elif isinstance(value, (list, tuple)) and all(isinstance(word, str) for word in value):
         words = list(value)
     else:
-        raise ValueError('%s: %r is not an argument list' % (name, value))
+        raise ValueError('%s: %s is not an argument list' % (name, brief(value)))
     if words and not words[0].strip():
-        raise ValueError('%s: %r has no program' % (name, value))
+        raise ValueError('%s: %s has no program' % (name, brief(value)))
     return words
 
 

@@ -28,6 +28,7 @@ import operator
 import re
 
 from .. import msg_codec
+from ..safe_input import brief
 from ..spans import Span
 from .base import Trigger, register
 
@@ -56,7 +57,7 @@ class Condition(object):
     def __init__(self, text, name='when'):
         match = _CONDITION.match(text) if isinstance(text, str) else None
         if match is None:
-            raise ValueError('%s: %r is not "<field> <op> <value>" (op: < <= > >= == !=)' % (name, text))
+            raise ValueError('%s: %s is not "<field> <op> <value>" (op: < <= > >= == !=)' % (name, brief(text)))
         self.text = ' '.join(text.split())
         self.absolute = match.group('absolute') is not None
         field = match.group('absolute') or match.group('plain')
@@ -74,9 +75,10 @@ class Condition(object):
         elif _NUMBER.match(raw):
             self.value = float(raw)
         else:
-            raise ValueError('%s: value %r of %r is not a number, true, false or a quoted string' % (name, raw, text))
+            raise ValueError('%s: value %s of %s is not a number, true, false or a quoted string'
+                             % (name, brief(raw), brief(text)))
         if isinstance(self.value, str) and (self.absolute or self.op_text not in ('==', '!=')):
-            raise ValueError('%s: a string compares only with == or != (%r)' % (name, text))
+            raise ValueError('%s: a string compares only with == or != (%s)' % (name, brief(text)))
 
     def check(self, msg_type, definition, name='when'):
         """Raise ValueError('<name>: ...') unless the field exists in ``msg_type`` (full ``definition``) and is
@@ -136,7 +138,7 @@ def parse_level(value, name='level'):
         return LEVELS[value.upper()]
     if isinstance(value, int) and not isinstance(value, bool) and value in LEVELS.values():
         return value
-    raise ValueError('%s: %r is not one of %s (or 0-3)' % (name, value, ', '.join(LEVELS)))
+    raise ValueError('%s: %s is not one of %s (or 0-3)' % (name, brief(value), ', '.join(LEVELS)))
 
 
 def level_name(level):
@@ -165,7 +167,7 @@ class RuleTrigger(Trigger):
         if rule.type is not None:
             msg_class = context.message_class(rule.type)
             if msg_class is None:
-                raise ValueError('type: unknown message type %r (not installed)' % rule.type)
+                raise ValueError('type: unknown message type %s (not installed)' % brief(rule.type))
             rule.check(msg_class)
         return rule
 
@@ -200,7 +202,8 @@ class RuleTrigger(Trigger):
         if min_rate is not None:
             if isinstance(min_rate, bool) or not isinstance(min_rate, (int, float)) or not min_rate > 0 \
                     or not math.isfinite(min_rate):
-                raise ValueError('%s: min_rate: %r must be a positive number of messages per second' % (name, min_rate))
+                raise ValueError('%s: min_rate: %s must be a positive number of messages per second'
+                                 % (name, brief(min_rate)))
             self.min_rate = float(min_rate)
         self.over = _seconds(over, '%s: over' % name)
         self.watches_time = self.silent is not None or self.min_rate is not None
@@ -335,7 +338,7 @@ class RuleTrigger(Trigger):
 def _seconds(value, name):
     span = Span.parse(value, name)
     if not span.is_duration:
-        raise ValueError('%s: %r must be a duration (2s, 500ms)' % (name, value))
+        raise ValueError('%s: %s must be a duration (2s, 500ms)' % (name, brief(value)))
     return span.seconds
 
 
