@@ -90,3 +90,96 @@ def test_brief_is_bounded():
     assert len(safe_input.brief('x' * 10 ** 6)) <= safe_input.BRIEF_CHARS
     assert len(safe_input.brief([[list(range(10 ** 5))] * 10 ** 3])) <= safe_input.BRIEF_CHARS
     assert safe_input.brief('/odom') == "'/odom'"
+
+
+# -- 13: types and ranges where each input enters ----------------------------------------------------------
+
+@pytest.mark.parametrize('document, expected', [
+    ({'format': ['json-xz']}, 'format: '),
+    ({'format': {'bag-lz4': 1}}, 'format: '),
+    ({'windows': {'pre': '1e303'}}, 'windows.pre: '),
+    ({'windows': {'post': 1e303}}, 'windows.post: '),
+    ({'windows': {'max': '1e303s'}}, 'windows.max: '),
+    ({'limits': {'max_buffer_mb': '1e303'}}, 'limits.max_buffer_mb: '),
+    ({'limits': {'max_disk_mb': '1e300GB'}}, 'limits.max_disk_mb: '),
+    ({'triggers': [{'name': 'r', 'kind': 'rule', 'topic': '/a', 'silent': '1e303s'}]}, 'silent: '),
+])
+def test_config_types_and_ranges_are_one_line_naming_the_key(document, expected):
+    with pytest.raises(ValueError) as error:
+        cfg = Config.from_dict(document, 'robot.yaml')
+        cfg.build_triggers(lambda path: None, lambda msg_type: None)
+    text = one_line(error)
+    assert text.startswith('robot.yaml: ') and expected in text
+
+
+def test_a_rule_topic_must_be_a_string():
+    cfg = Config.from_dict({'triggers': [{'name': 'r', 'kind': 'rule', 'topic': 5, 'arrival': True}]}, 'robot.yaml')
+    with pytest.raises(ValueError) as error:
+        cfg.build_triggers(lambda path: None, lambda msg_type: None)
+    assert one_line(error) == 'robot.yaml: triggers[0] (r): topic: 5 is not a topic name'
+
+
+def test_a_classifier_window_of_collect_mode_is_bounded():
+    cfg = Config.from_dict({'triggers': [{'name': 'c', 'kind': 'classifier', 'window': 99999999999999}]}, 'x')
+    with pytest.raises(ValueError) as error:
+        cfg.feature_specs()
+    assert "(c): window: '99999999999999' is more than" in one_line(error)
+    cfg = Config.from_dict({'triggers': [{'name': 'c', 'kind': 'classifier', 'window': 200000}]}, 'x')
+    with pytest.raises(ValueError) as error:
+        cfg.feature_specs()
+    assert '(c): window: 200000 is more than 100000 messages' in one_line(error)
+
+
+def test_spans_and_sizes_are_bounded():
+    from cc_log.spans import Span, megabytes, MAX_COUNT, MAX_SECONDS
+    assert Span.parse(str(MAX_COUNT)).count == MAX_COUNT
+    assert Span.parse('%gs' % MAX_SECONDS).seconds == MAX_SECONDS
+    for value in ('1e303', 1e303, '1e300s', '1e300ms', 10 ** 400):
+        with pytest.raises(ValueError):
+            Span.parse(value, 'size')
+    with pytest.raises(ValueError):
+        megabytes('1e303', 'size')
+
+
+def test_the_diagnostic_period_is_bounded():
+    node_common = pytest.importorskip('cc_log.node_common')
+    params = node_common.Params(get={'diagnostic_period': 1e308}.get, log=lambda *args: None)
+    with pytest.raises(node_common.ConfigError) as error:
+        params.number('diagnostic_period', 1.0)
+    assert one_line(error).startswith('~diagnostic_period: 1e+308 must be a number <= ')
+    params = node_common.Params(get={'diagnostic_period': 30}.get, log=lambda *args: None)
+    assert params.number('diagnostic_period', 1.0) == 30
+
+
+def small_model_document(window='5s'):
+    """The document of a small valid ocsvm model of the motion features."""
+    import numpy as np
+    from cc_log.features import FeatureConfig, vector_length
+    from cc_log.model import AnomalyModel
+    config_ = FeatureConfig('motion', window)
+    dimension = vector_length(config_)
+    model = AnomalyModel(config_, np.zeros(dimension), np.ones(dimension), 'ocsvm',
+                         {'support_vectors': np.eye(2, dimension), 'dual_coef': [0.5, 0.5], 'intercept': -0.1,
+                          'gamma': 0.1}, threshold=0.0)
+    return model.to_dict()
+
+
+@pytest.mark.parametrize('change, expected', [
+    (lambda doc: doc['config'].update(window='99999999999999'), "window: '99999999999999' is more than"),
+    (lambda doc: doc['config'].update(window='200000'), 'config: window: 200000 is more than'),
+    (lambda doc: doc['config'].update(window='1e300s'), 'window: '),
+    (lambda doc: doc['config'].update(window='7200s'), 'config: window: 7200s is longer than'),
+    (lambda doc: doc['kernel'].update(gamma=1e308), 'kernel.gamma: 1e+308 is not in'),
+    (lambda doc: doc['scaler'].update(scale=[5e-324] * len(doc['scaler']['scale'])), 'scaler.scale must be'),
+])
+def test_implausible_models_are_refused_naming_the_key(tmp_path, change, expected):
+    import json
+    from cc_log.model import AnomalyModel, ModelError
+    document = small_model_document()
+    change(document)
+    path = tmp_path / 'model.json'
+    path.write_text(json.dumps(document))
+    with pytest.raises(ModelError) as error:
+        AnomalyModel.load(str(path))
+    text = one_line(error)
+    assert text.startswith(str(path)) and expected in text

@@ -35,6 +35,7 @@ from . import log_format
 from .formats import json_xz
 from . import safe_input
 from .safe_input import brief
+from .model import check_window
 from .spans import Span, megabytes
 from .triggers import get as trigger_kind
 from .triggers.base import Context, check_name
@@ -171,7 +172,10 @@ class Config(object):
         if driving is not None and (not isinstance(driving, str) or not driving.strip()):
             raise ValueError('driving_topic: %s is not a topic name' % brief(driving))
         self.driving_topic = driving.strip() if driving else None
-        self.format = log_format.Format.check(data.get('format', log_format.Format.JSON_XZ))
+        fmt = data.get('format', log_format.Format.JSON_XZ)
+        if not isinstance(fmt, str):
+            raise ValueError('format: %s is not a format name (%s)' % (brief(fmt), ', '.join(log_format.Format.ALL)))
+        self.format = log_format.Format.check(fmt)
         options = _mapping(data.get('json_xz'), 'json_xz', JSON_XZ_KEYS)
         self.precision = json_xz.check_precision(options.get('precision'), 'json_xz.precision')
         if self.precision and self.format != log_format.Format.JSON_XZ:
@@ -241,6 +245,7 @@ class Config(object):
             window = entry.get('window', model_config.window if model_config else DEFAULT_WINDOW)
             try:
                 config = features.FeatureConfig(feature_set, str(window))
+                check_window(config)
             except ValueError as error:
                 raise ValueError('%s: %s' % (where, error))
             try:

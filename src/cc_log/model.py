@@ -28,6 +28,11 @@ KINDS = ('ocsvm', 'nystroem-sgd')
 #: Largest model file read: an ``ocsvm`` model of 20,000 support vectors of 200 features is ~80 MB of JSON.
 MAX_MODEL_BYTES = 1 << 30
 SCORE_BLOCK = 32  # vectors scored at a time by score_each (bounds its block of distances to the centres)
+#: Plausible ranges of a model (anything outside is refused, naming the key): the feature window in
+#: messages (held as rows) or seconds, the RBF kernel's gamma (of standardised features: ~1e-3 to 10).
+MAX_WINDOW_COUNT = 100000
+MAX_WINDOW_SECONDS = 3600.0
+MAX_GAMMA = 1e6
 
 
 class ModelError(ValueError):
@@ -275,6 +280,16 @@ def _array(value, ndim, path, name):
     return array
 
 
+def check_window(config):
+    """Raise ValueError('window: ...') unless the feature window of ``config`` (a FeatureConfig) is at most
+    MAX_WINDOW_COUNT messages or MAX_WINDOW_SECONDS seconds."""
+    span = config.span
+    if span.is_duration and span.seconds > MAX_WINDOW_SECONDS:
+        raise ValueError('window: %s is longer than %gs' % (span, MAX_WINDOW_SECONDS))
+    if not span.is_duration and span.count > MAX_WINDOW_COUNT:
+        raise ValueError('window: %s is more than %d messages' % (span, MAX_WINDOW_COUNT))
+
+
 def _validate(model, path):
     """Check shapes and values of a model; raise ModelError naming ``path``."""
     def bad(what):
@@ -282,6 +297,10 @@ def _validate(model, path):
 
     if model.kind not in KINDS:
         raise bad('kind %s is not one of %s' % (brief(model.kind), ', '.join(KINDS)))
+    try:
+        check_window(model.config)
+    except ValueError as error:
+        raise bad('config: %s' % error)
     dimension = vector_length(model.config)
     for name, array in (('scaler.mean', model.mean), ('scaler.scale', model.scale)):
         if array.shape != (dimension,):
@@ -289,8 +308,9 @@ def _validate(model, path):
                       % (name, array.shape, model.config.feature_set, model.config.window, dimension))
         if not np.all(np.isfinite(array)):
             raise bad('%s holds non-finite values' % name)
-    if not np.all(model.scale > 0):
-        raise bad('scaler.scale must be positive')
+    with np.errstate(divide='ignore', over='ignore'):
+        if not np.all(model.scale > 0) or not np.all(np.isfinite(1.0 / model.scale)):
+            raise bad('scaler.scale must be positive, with a finite inverse')
     if not math.isfinite(model.threshold):
         raise bad('threshold must be finite')
     expected = _KERNEL_FIELDS[model.kind]
@@ -303,8 +323,8 @@ def _validate(model, path):
                 raise bad('kernel.%s must be a finite number' % key)
         elif not isinstance(value, np.ndarray) or value.ndim != ndim or not np.all(np.isfinite(value)):
             raise bad('kernel.%s must be a finite %d-D array' % (key, ndim))
-    if not model.kernel['gamma'] > 0:
-        raise bad('kernel.gamma must be positive')
+    if not 0 < model.kernel['gamma'] <= MAX_GAMMA:
+        raise bad('kernel.gamma: %g is not in (0, %g]' % (model.kernel['gamma'], MAX_GAMMA))
     if model.kind == 'ocsvm':
         sv, coef = model.kernel['support_vectors'], model.kernel['dual_coef']
         if sv.shape[1] != dimension:

@@ -161,6 +161,8 @@ class RuleTrigger(Trigger):
     def from_config(cls, name, options, context):
         """The rule on its resolved topic, its ``when`` checked against ``type`` (which must be installed)."""
         options = dict(options)
+        if options.get('topic') is not None and not isinstance(options['topic'], str):
+            raise ValueError('topic: %s is not a topic name' % brief(options['topic']))
         if options.get('topic'):
             options['topic'] = context.resolve(options['topic'])
         rule = cls(name, **options)
