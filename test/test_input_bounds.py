@@ -183,3 +183,107 @@ def test_implausible_models_are_refused_naming_the_key(tmp_path, change, expecte
         AnomalyModel.load(str(path))
     text = one_line(error)
     assert text.startswith(str(path)) and expected in text
+
+
+# -- 10: topic patterns and rule conditions ----------------------------------------------------------------
+
+@pytest.mark.parametrize('pattern', ['(a+)+', '(/a|/a)*', '(x*y?)*z', '(.*)*', '.*.*.*.*x', r'(/a)\1',
+                                     '/' + 'a' * 300], ids=range(7))
+def test_patterns_that_backtrack_badly_are_refused_with_one_line(pattern):
+    from cc_log.topic_select import TopicSelection
+    for entry in ('re:' + pattern, '!re:' + pattern):
+        with pytest.raises(ValueError) as error:
+            TopicSelection.parse([entry])
+        assert one_line(error).startswith('topics: regular expression ')
+
+
+def test_ordinary_patterns_are_kept():
+    from cc_log.topic_select import TopicSelection
+    selection = TopicSelection.parse(['re:/(camera|lidar)/.*', '!re:.*/compressed', 're:/a{2,5}/b', 're:(/ns)?/odom'])
+    assert selection.select(['/camera/x', '/lidar/y', '/camera/x/compressed', '/aaa/b', '/odom', '/ns/odom',
+                             '/imu']) == ['/camera/x', '/lidar/y', '/aaa/b', '/odom', '/ns/odom']
+
+
+def test_a_topic_is_matched_once():
+    from cc_log.topic_select import TopicSelection
+    selection = TopicSelection(regex=['/camera/.*'], exclude=['.*/compressed'])
+    calls = []
+
+    class Counting(object):
+        def __init__(self, compiled):
+            self.compiled, self.pattern = compiled, compiled.pattern
+
+        def fullmatch(self, topic):
+            calls.append((self.pattern, topic))
+            return self.compiled.fullmatch(topic)
+
+    selection.regex = [Counting(p) for p in selection.regex]
+    selection.exclude = [Counting(p) for p in selection.exclude]
+    for _ in range(5):  # the topic watcher polls every second
+        assert selection.select(['/camera/a', '/camera/a/compressed', '/odom']) == ['/camera/a']
+    assert len(calls) == len(set(calls)) == 5  # each pattern tried once on each topic it had to decide
+
+
+RULE_TEXTS = [  # (text, (absolute, path, op, value)) as the regular expression parsed them
+    ('twist.twist.linear.x > 2.0', (False, [('twist', None), ('twist', None), ('linear', None), ('x', None)],
+                                    '>', 2.0)),
+    ('  abs( twist.angular.z )>=1.5 ', (True, [('twist', None), ('angular', None), ('z', None)], '>=', 1.5)),
+    ('status_list[0].status == 4', (False, [('status_list', 0), ('status', None)], '==', 4.0)),
+    ("status[2].text != 'ok'", (False, [('status', 2), ('text', None)], '!=', 'ok')),
+    ('data<=-.5e3', (False, [('data', None)], '<=', -500.0)),
+    ('data == false', (False, [('data', None)], '==', False)),
+]
+
+
+@pytest.mark.parametrize('text, expected', RULE_TEXTS)
+def test_conditions_are_read_by_the_tokenizer_as_before(text, expected):
+    from cc_log.triggers.rule import Condition
+    condition = Condition(text)
+    assert (condition.absolute, condition.path, condition.op_text, condition.value) == expected
+
+
+@pytest.mark.parametrize('text', ['x > ' + ' ' * 100000 + 'y', 'x == "' + 'a' * 100000 + '"',
+                                  'a.' * 50000 + 'b > 1', 'abs(' + ' ' * 100000, 'x[1234567890] > 1', 'x = 1',
+                                  'abs(x) > nan', '1x > 2', 'x..y > 1', 'x > 1e'], ids=range(10))
+def test_long_or_malformed_conditions_are_refused_with_one_line(text):
+    from cc_log.triggers.rule import Condition
+    with pytest.raises(ValueError) as error:
+        Condition(text, 'r: when')
+    assert one_line(error).startswith('r: when: ')
+
+
+# -- 15: smaller ----------------------------------------------------------------------------------------------
+
+def test_an_all_nan_odometry_stream_fires_a_nan_rule():
+    nav_msgs = pytest.importorskip('nav_msgs.msg')
+    from cc_log.triggers import RuleTrigger
+    from cc_log.window_buffer import Record
+    rule = RuleTrigger('odom_nan', '/odom', when='twist.twist.linear.x == nan', type='nav_msgs/Odometry')
+    rule.check(nav_msgs.Odometry)
+    fires = []
+    for index in range(100):
+        msg = nav_msgs.Odometry()
+        msg.twist.twist.linear.x = float('nan') if index >= 50 else 0.5
+        fires += rule.on_record(Record(index * 0.02, '/odom', msg))
+    assert len(fires) == 1 and fires[0].reason.startswith('twist.twist.linear.x == nan (nan)')
+    assert not RuleTrigger('ok', '/odom', when='twist.twist.linear.x != nan').condition.holds(msg)[0]
+
+
+def test_a_silent_topic_rule_gives_a_topic_time_at_start_up():
+    from cc_log.triggers import RuleTrigger
+    from cc_log.triggers.rule import STARTUP_GRACE
+    from cc_log.window_buffer import Record
+    for rule in (RuleTrigger('dead', '/scan', silent='1s'), RuleTrigger('slow', '/scan', min_rate=5, over='1s')):
+        fired = []
+        for tick in range(0, int((STARTUP_GRACE - 1) * 10)):  # the topic's first message comes late
+            fired += rule.on_time(100.0 + tick / 10.0)
+        assert fired == [], rule.name
+        for tick in range(int((STARTUP_GRACE - 1) * 10), int((STARTUP_GRACE + 5) * 10)):  # 10 Hz from then on
+            rule.on_record(Record(100.0 + tick / 10.0, '/scan', None))
+            fired += rule.on_time(100.0 + tick / 10.0)
+        assert fired == [], rule.name
+        fired += rule.on_time(100.0 + STARTUP_GRACE + 7)  # then it stops
+        assert len(fired) == 1, rule.name
+    never = RuleTrigger('never', '/scan', silent='1s')
+    fired = [fire for tick in range(0, 100) for fire in never.on_time(100.0 + tick / 10.0)]
+    assert len(fired) == 1  # a topic that never comes is still caught, after the grace
