@@ -122,8 +122,8 @@ class NodeExtras(object):
                        ('uploads dropped', stats['dropped']), ('last upload error', stats['last_error'] or 'none')]
             if stats['failed'] or stats['dropped']:
                 level = max(level, DiagnosticStatus.WARN)
-                message += '; %d uploads failed, %d dropped (last: %s)' % (stats['failed'], stats['dropped'],
-                                                                          stats['last_error'])
+                message += '; %d uploads failed, %d dropped (last: %s)' % (
+                    stats['failed'], stats['dropped'], stats['last_error'])
         return level, message, values
 
     def close(self):
