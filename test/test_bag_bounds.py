@@ -121,3 +121,15 @@ def test_a_topic_of_two_types_is_read_as_its_first_type(real_bag, two_types_bag,
     result = cclog('plot', windows, '--out', tmp_path / 'plot.png', '--bag', two_types_bag, '--topic', '/odom')
     assert result.returncode == 0 and 'Traceback' not in result.stderr, result.stderr[-2000:]
     assert os.path.getsize(str(tmp_path / 'plot.png')) > 0
+
+
+def test_a_damaged_lz4_chunk_is_one_line_naming_the_file(lz4_bag, tmp_path):
+    data = bytearray(open(lz4_bag, 'rb').read())
+    at = data.find(b'compression=lz4') + 200
+    data[at:at + 2000] = b'\xff' * 2000
+    damaged = str(tmp_path / 'damaged.bag')
+    open(damaged, 'wb').write(bytes(data))
+    with pytest.raises(ValueError) as error:
+        list(bagio.read_messages(damaged, ['/odom']))
+    assert str(error.value).startswith(damaged + ': bag is truncated or damaged (chunk at byte ')
+    one_line_naming(cclog('codecs', damaged, '--topic', '/odom'), damaged)

@@ -287,3 +287,27 @@ def test_a_silent_topic_rule_gives_a_topic_time_at_start_up():
     never = RuleTrigger('never', '/scan', silent='1s')
     fired = [fire for tick in range(0, 100) for fire in never.on_time(100.0 + tick / 10.0)]
     assert len(fired) == 1  # a topic that never comes is still caught, after the grace
+
+
+def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, real_bag):
+    import os
+    import subprocess
+    import sys
+    rosbag = pytest.importorskip('rosbag')
+    from cc_log import log_format
+    from cc_log.window_buffer import LogWindow, Record, Trigger
+    hostile = '/odom\x1b]0;owned\x07\x1b[2J\u202e'
+    with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
+        records = [Record(m.header.stamp.to_sec(), hostile, m) for topic, m, _ in
+                   bag.read_messages(topics=['/husky_velocity_controller/odom'])][:20]
+    log_format.write_window(LogWindow(records, [Trigger(records[0].stamp, 'reason \x1b[31m', -1.0)]),
+                            str(tmp_path), 'json-xz')
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    for command in (['info', str(tmp_path)], ['stats', str(tmp_path), '--odom', hostile]):
+        result = subprocess.run([sys.executable, os.path.join(root, 'scripts', 'cclog')] + command,
+                                capture_output=True, text=True, timeout=300)
+        assert result.returncode == 0, result.stderr[-2000:]
+        assert '\x1b' not in result.stdout and '\x07' not in result.stdout and '\u202e' not in result.stdout
+    info = subprocess.run([sys.executable, os.path.join(root, 'scripts', 'cclog'), 'info', str(tmp_path)],
+                          capture_output=True, text=True, timeout=300).stdout
+    assert '/odom\\x1b]0;owned\\x07\\x1b[2J\\u202e 20' in info and 'reason \\x1b[31m' in info
