@@ -311,3 +311,11 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
     info = subprocess.run([sys.executable, os.path.join(root, 'scripts', 'cclog'), 'info', str(tmp_path)],
                           capture_output=True, text=True, timeout=300).stdout
     assert '/odom\\x1b]0;owned\\x07\\x1b[2J\\u202e 20' in info and 'reason \\x1b[31m' in info
+
+
+@pytest.mark.parametrize('value', ['9' * 400 + 'GB', '9' * 5000 + 'x', 'r' * 10 ** 6], ids=['huge', 'digits', 'long'])
+def test_collect_rotation_sizes_are_bounded_one_line(value):
+    from cc_log.collector import Rotation
+    with pytest.raises(ValueError) as error:
+        Rotation.parse(value, 'collect.rotate')
+    assert one_line(error).startswith('collect.rotate: ')
