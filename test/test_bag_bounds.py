@@ -52,13 +52,14 @@ def lz4_bag(real_bag, tmp_path):
     return copy_bag(real_bag(SMALL), tmp_path / 'small.bag', 'lz4')
 
 
-def windows_of(real_bag, tmp_path):
+def windows_of(real_bag, tmp_path, *options):
     """A directory of window files of the small bag (what ``cclog plot`` draws over a run)."""
     config = tmp_path / 'fast.yaml'
     config.write_text("triggers: [{name: fast, kind: rule, topic: /odom, type: nav_msgs/Odometry, "
                       "when: 'twist.twist.linear.x > 0.3'}]\n")
     windows = tmp_path / 'windows'
-    result = cclog('replay', real_bag(SMALL), '--config', config, '--out', windows, '--pre', '1s', '--post', '1s')
+    result = cclog('replay', real_bag(SMALL), '--config', config, '--out', windows, '--pre', '1s', '--post', '1s',
+                   *options)
     assert result.returncode == 0 and os.listdir(str(windows)), result.stderr[-2000:]
     return windows
 
@@ -133,3 +134,11 @@ def test_a_damaged_lz4_chunk_is_one_line_naming_the_file(lz4_bag, tmp_path):
         list(bagio.read_messages(damaged, ['/odom']))
     assert str(error.value).startswith(damaged + ': bag is truncated or damaged (chunk at byte ')
     one_line_naming(cclog('codecs', damaged, '--topic', '/odom'), damaged)
+
+
+def test_a_bag_lz4_window_file_claiming_huge_chunks_is_refused(real_bag, tmp_path):
+    windows = windows_of(real_bag, tmp_path, '--format', 'bag-lz4')
+    window = str(windows / sorted(os.listdir(str(windows)))[0])
+    claim_sizes(window, 3 << 30)
+    line = one_line_naming(cclog('info', window), window)
+    assert 'bag is damaged: the lz4 chunk at byte ' in line and 'declares %d' % (3 << 30) in line

@@ -1,9 +1,9 @@
 """Reading bags for replay, collect and learning (edge module: imports rosbag).
 
 Every failure to read a bag is a ValueError with one clear line naming the file: missing, not a regular
-file, not a bag, truncated or unindexed, a chunk declaring more bytes than it can hold (``check_chunks``: a
-bag of a few kB must not make a reader allocate gigabytes), a connection with an unsafe message definition,
-topic not in the bag (the topics are listed), topic of another type.
+file, not a bag, truncated or unindexed, a chunk declaring more bytes than it can hold or a connection with
+an unsafe message definition (``safe_input.check_bag``), topic not in the bag (the topics are listed), topic
+of another type.
 
 ``read_messages`` reads through ``bag_reader`` (chunks decompressed once, their declared sizes capped), then
 decodes each message. A topic carrying messages of several types (two publishers, a replayed bag) is read as
@@ -19,7 +19,6 @@ import numpy as np
 import rosbag
 
 from . import raw_message, safe_input
-from .formats.bag_salvage import MAX_CHUNK_BYTES
 from .features import FeatureStream, stamp_of
 from .window_buffer import Record
 
@@ -52,7 +51,6 @@ def open_bag(path, skip_index=False):
         raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
     try:
         _check_index(bag, path)
-        check_chunks(bag, path)
         safe_input.check_bag(bag, path)
     except Exception:
         bag.close()
@@ -71,23 +69,6 @@ def _check_index(bag, path):
     for chunk in getattr(bag, '_chunks', []):
         if chunk.pos >= size:
             raise ValueError('%s: bag is truncated (chunk at byte %d, file has %d bytes)' % (path, chunk.pos, size))
-
-
-#: Most an LZ4 block can expand (a 255:1 run-length limit), plus a frame's worth of slack.
-LZ4_MAX_RATIO = 256
-LZ4_SLACK = 1 << 16
-
-
-def check_chunks(bag, path):
-    """Raise ValueError('<path>: ...') for a chunk whose declared (decompressed) size is more than
-    MAX_CHUNK_BYTES or more than its compressed bytes can hold (uncompressed: exactly them; LZ4: 256 times
-    them): readers allocate what a chunk declares before decompressing it."""
-    for pos, header in sorted(getattr(bag, '_chunk_headers', {}).items()):
-        declared, stored = header.uncompressed_size, header.compressed_size
-        most = {'none': stored, 'lz4': stored * LZ4_MAX_RATIO + LZ4_SLACK}.get(header.compression, MAX_CHUNK_BYTES)
-        if declared > min(most, MAX_CHUNK_BYTES):
-            raise ValueError('%s: bag is damaged: the %s chunk at byte %d declares %d bytes from %d stored (at most %d)'
-                             % (path, header.compression, pos, declared, stored, min(most, MAX_CHUNK_BYTES)))
 
 
 def types_of(bag):

@@ -12,7 +12,9 @@ connection it reads), so a definition is checked here before any class is genera
   ``_full_text`` triple-quoted literal) stays one Python string literal with the same value. Cycles are
   refused; length, nesting, the number of types and of fields (genpy's time) and the size of a default
   instance (fixed-size arrays) are bounded.
-- ``check_bag(bag, path)``: every connection of an open rosbag, before any message is read.
+- ``check_bag(bag, path)``: every connection and chunk header of an open rosbag, before any message is read
+  (a chunk may not declare more than ``formats.bag_salvage.MAX_CHUNK_BYTES``, nor more than its stored bytes
+  can hold: readers allocate what a chunk declares before decompressing it).
 - ``json_loads(text)``: ``json.loads`` after a nesting check (a deeply nested document would raise
   RecursionError inside ``json``).
 - ``open_input(path)``: open a file to read, refusing FIFOs, devices and sockets (a FIFO blocks forever).
@@ -119,9 +121,30 @@ def _shown(name):
 
 def check_bag(bag, source):
     """Check every connection of an open ``rosbag.Bag`` before any message is read (rosbag generates a class
-    from each connection's definition); ValueError naming ``source`` and the topic."""
+    from each connection's definition), and every chunk header (``check_chunks``); ValueError naming
+    ``source`` and the topic or chunk."""
+    check_chunks(bag, source)
     for connection in list(getattr(bag, '_connections', {}).values()):
         check_connection(connection.topic, connection.datatype, connection.msg_def, source)
+
+
+#: Most an LZ4 block can expand (a 255:1 run-length limit), plus a frame's worth of slack.
+LZ4_MAX_RATIO = 256
+LZ4_SLACK = 1 << 16
+
+
+def check_chunks(bag, source):
+    """Raise ValueError('<source>: ...') for a chunk of an open ``rosbag.Bag`` whose declared (decompressed)
+    size is more than MAX_CHUNK_BYTES or more than its stored bytes can hold (uncompressed: exactly them;
+    LZ4: 256 times them)."""
+    from .formats.bag_salvage import MAX_CHUNK_BYTES
+    for pos, header in sorted(getattr(bag, '_chunk_headers', {}).items()):
+        declared, stored = header.uncompressed_size, header.compressed_size
+        most = {'none': stored, 'lz4': stored * LZ4_MAX_RATIO + LZ4_SLACK}.get(header.compression, MAX_CHUNK_BYTES)
+        most = min(most, MAX_CHUNK_BYTES)
+        if declared > most:
+            raise ValueError('%s: bag is damaged: the %s chunk at byte %d declares %d bytes from %d stored (at most %d)'
+                             % (source, header.compression, pos, declared, stored, most))
 
 
 @functools.lru_cache(maxsize=128)
