@@ -143,8 +143,8 @@ def check_chunks(bag, source):
         most = {'none': stored, 'lz4': stored * LZ4_MAX_RATIO + LZ4_SLACK}.get(header.compression, MAX_CHUNK_BYTES)
         most = min(most, MAX_CHUNK_BYTES)
         if declared > most:
-            raise ValueError('%s: bag is damaged: the %s chunk at byte %d declares %d bytes from %d stored (at most %d)'
-                             % (source, header.compression, pos, declared, stored, most))
+            raise ValueError('%s: bag is truncated or damaged (chunk at byte %d declares %d bytes, more than %d: %s, '
+                             '%d bytes stored)' % (source, pos, declared, most, header.compression, stored))
 
 
 @functools.lru_cache(maxsize=128)
