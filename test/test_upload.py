@@ -134,3 +134,20 @@ def test_only_the_tail_of_a_failing_commands_stderr_is_kept():
     stats = hook.stats()
     assert stats['failed'] == 1 and stats['last_error'].endswith('exit status 4: the last line')
     assert peak < 5 * 10 ** 6, peak  # 40 MB were written to stderr
+
+
+def test_a_process_left_holding_stderr_does_not_hold_the_upload(tmp_path):
+    pid_file = tmp_path / 'pid'
+    script = ('import subprocess, sys\n'
+              'left = subprocess.Popen(["sleep", "60"])\n'  # inherits stderr, like an ssh master
+              'open(sys.argv[1], "w").write(str(left.pid))\n'
+              'sys.stderr.write("connection kept\\n")\n'
+              'sys.exit(5)\n')
+    hook = UploadHook([sys.executable, '-c', script, str(pid_file)])
+    try:
+        hook.run('/w/a.bag')
+        wait_for(lambda: hook.stats()['running'] == 0)
+        assert hook.stats()['last_error'].endswith('exit status 5: connection kept')
+    finally:
+        wait_for(lambda: pid_file.exists() and pid_file.read_text())
+        os.kill(int(pid_file.read_text()), 9)

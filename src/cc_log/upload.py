@@ -17,6 +17,8 @@ the queue grow, never the number of processes or threads.
 it (not feature vectors). Pure (subprocess, threading).
 """
 import collections
+import os
+import select
 import shlex
 import subprocess
 import threading
@@ -29,6 +31,7 @@ __all__ = ['UploadHook', 'parse_command']
 STDERR_TAIL = 4096  # bytes of a failing command's stderr kept for its error line
 MAX_RUNNING = 2     # upload commands running at a time
 MAX_QUEUED = 1000   # paths waiting for a command; more are dropped (counted)
+POLL_SECONDS = 0.2  # how often a waiting thread looks whether its command has ended
 
 
 def parse_command(value, name='upload_command'):
@@ -113,15 +116,27 @@ class UploadHook(object):
             return
 
     def _wait(self, process, path):
-        tail = bytearray()
-        while True:  # only the last STDERR_TAIL bytes are kept, however much the command writes
-            chunk = process.stderr.read(65536)
-            if not chunk:
+        """Wait for the command to end, keeping the last STDERR_TAIL bytes of its stderr; a process it left
+        behind holding stderr open (an ssh master) does not hold the slot."""
+        tail, stream, reading = bytearray(), process.stderr, True
+        while True:
+            status = process.poll()
+            if reading:
+                readable = select.select([stream], [], [], 0 if status is not None else POLL_SECONDS)[0]
+                while readable:
+                    chunk = os.read(stream.fileno(), 65536)
+                    if not chunk:  # closed: nothing more to read
+                        reading = False
+                        break
+                    tail += chunk
+                    del tail[:-STDERR_TAIL]
+                    readable = select.select([stream], [], [], 0)[0]
+            if status is not None:
                 break
-            tail += chunk
-            del tail[:-STDERR_TAIL]
-        process.stderr.close()
-        status = process.wait()
+            if not reading:
+                status = process.wait()
+                break
+        stream.close()
         error = None
         if status != 0:
             lines = bytes(tail).decode('utf-8', 'replace').strip().splitlines()
