@@ -72,6 +72,9 @@ class RecordDropinTest(unittest.TestCase):
         values = dict((v.key, v.value) for v in warn[-1].values)
         self.assertIn('upload refused', values['last upload error'])
         self.assertIn('exit status 3', values['last upload error'])
+        # the upload queue on /diagnostics: nothing dropped, nothing waiting once every file is uploaded
+        self.assertEqual((values['uploads queued'], values['uploads dropped']), ('0', '0'))
+        self.assertIn(values['uploads running'], ('0', '1', '2'))
 
 
 if __name__ == '__main__':

@@ -80,7 +80,7 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
 
 @pytest.mark.parametrize('text, message', [
     ('windows: {pre: 1s, psot: 2s}', "windows: unknown key 'psot'"),
-    ('topic: [a]', "unknown key 'topic' (known: topics, driving_topic"),
+    ('topic: [a]', "unknown key 'topic' (known: topics, topic_limits, driving_topic"),
     ('triggers: [{name: x, kind: alarm}]', "triggers[0] (x): kind: 'alarm' is not one of classifier, rule, "
                                            'manual'),
     ('triggers: [{kind: classifier, feature_set: pixels}]', "triggers[0] (classifier): feature_set: 'pixels' is "

@@ -73,3 +73,81 @@ def test_record_launch_mode_choice(tmp_path):
     assert launcher.choose('smart', '') == ('smart_node', '')
     with pytest.raises(ValueError, match='^mode: '):
         launcher.choose('fast', '')
+
+
+BLOCKING = ('import os, sys, time\n'
+            'folder, path = sys.argv[1], sys.argv[2]\n'
+            'open(os.path.join(folder, "started-%d" % os.getpid()), "w").close()\n'
+            'while not os.path.exists(os.path.join(folder, "release")):\n'
+            '    time.sleep(0.01)\n'
+            'open(os.path.join(folder, "done-%d" % os.getpid()), "w").close()\n')
+
+
+def test_a_slow_uploader_runs_two_at_a_time_and_queues_the_rest(tmp_path):
+    hook = UploadHook([sys.executable, '-c', BLOCKING, str(tmp_path)])
+    for index in range(40):
+        hook.run('/w/%d.bag' % index)
+    started = lambda: [name for name in os.listdir(str(tmp_path)) if name.startswith('started-')]  # noqa: E731
+    wait_for(lambda: len(started()) == 2)
+    stats = hook.stats()
+    assert (stats['running'], stats['queued'], stats['started']) == (2, 38, 2)
+    assert len(started()) == 2
+    (tmp_path / 'release').write_text('')
+    wait_for(lambda: hook.stats()['succeeded'] == 40, timeout=60)
+    stats = hook.stats()
+    assert (stats['running'], stats['queued'], stats['dropped'], stats['started']) == (0, 0, 0, 40)
+
+
+def test_a_full_queue_drops_and_counts(tmp_path):
+    hook = UploadHook([sys.executable, '-c', BLOCKING, str(tmp_path)], max_running=1, max_queued=3)
+    for index in range(10):
+        hook.run('/w/%d.bag' % index)
+    stats = hook.stats()
+    assert (stats['running'], stats['queued'], stats['dropped']) == (1, 3, 6)
+    assert stats['last_error'] == 'upload queue full (3 waiting): not uploaded: /w/9.bag'
+    (tmp_path / 'release').write_text('')
+    wait_for(lambda: hook.stats()['succeeded'] == 4)
+    wait_for(lambda: hook.stats()['running'] == 0)
+
+
+def test_a_program_that_cannot_start_lets_the_queue_run_on(tmp_path):
+    hook = UploadHook([str(tmp_path / 'no-such-program')], max_running=1)
+    hook.run('/w/a.bag')
+    assert hook.stats()['failed'] == 1 and hook.stats()['running'] == 0
+
+
+def test_only_the_tail_of_a_failing_commands_stderr_is_kept():
+    import tracemalloc
+    noisy = ('import sys\n'
+             'for _ in range(400):\n'
+             '    sys.stderr.write("x" * 99999 + "\\n")\n'
+             'sys.stderr.write("the last line\\n")\n'
+             'sys.exit(4)\n')
+    hook = UploadHook([sys.executable, '-c', noisy])
+    tracemalloc.start()
+    try:
+        hook.run('/w/a.bag')
+        wait_for(lambda: hook.stats()['running'] == 0, timeout=60)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    stats = hook.stats()
+    assert stats['failed'] == 1 and stats['last_error'].endswith('exit status 4: the last line')
+    assert peak < 5 * 10 ** 6, peak  # 40 MB were written to stderr
+
+
+def test_a_process_left_holding_stderr_does_not_hold_the_upload(tmp_path):
+    pid_file = tmp_path / 'pid'
+    script = ('import subprocess, sys\n'
+              'left = subprocess.Popen(["sleep", "60"])\n'  # inherits stderr, like an ssh master
+              'open(sys.argv[1], "w").write(str(left.pid))\n'
+              'sys.stderr.write("connection kept\\n")\n'
+              'sys.exit(5)\n')
+    hook = UploadHook([sys.executable, '-c', script, str(pid_file)])
+    try:
+        hook.run('/w/a.bag')
+        wait_for(lambda: hook.stats()['running'] == 0)
+        assert hook.stats()['last_error'].endswith('exit status 5: connection kept')
+    finally:
+        wait_for(lambda: pid_file.exists() and pid_file.read_text())
+        os.kill(int(pid_file.read_text()), 9)

@@ -1,11 +1,19 @@
 """Reading bags for replay, collect and learning (edge module: imports rosbag).
 
 Every failure to read a bag is a ValueError with one clear line naming the file: missing, not a regular
-file, not a bag, truncated or unindexed, a connection with an unsafe message definition, topic not in the
-bag (the topics are listed), topic of another type.
+file, not a bag, truncated or unindexed, a chunk declaring more bytes than it can hold or a connection with
+an unsafe message definition (``safe_input.check_bag``), topic not in the bag (the topics are listed), topic
+of another type.
+
+``read_messages`` reads through ``bag_reader`` (chunks decompressed once, their declared sizes capped), then
+decodes each message. A topic carrying messages of several types (two publishers, a replayed bag) is read as
+its first type, or the type the caller expects: messages of the others are skipped and counted, in one
+warning line on stderr.
 """
+import collections
 import os
 import struct
+import sys
 
 import numpy as np
 import rosbag
@@ -63,6 +71,16 @@ def _check_index(bag, path):
             raise ValueError('%s: bag is truncated (chunk at byte %d, file has %d bytes)' % (path, chunk.pos, size))
 
 
+def types_of(bag):
+    """dict topic -> the message types of its connections, in connection order (the first is ``topics_of``'s)."""
+    types = collections.OrderedDict()
+    for connection in bag._connections.values():
+        kinds = types.setdefault(connection.topic, [])
+        if connection.datatype not in kinds:
+            kinds.append(connection.datatype)
+    return types
+
+
 def topics_of(bag):
     """dict topic -> message type of an open bag."""
     return {topic: info.msg_type for topic, info in bag.get_type_and_topic_info().topics.items()}
@@ -75,6 +93,8 @@ def check_topic(bag, topic, expected_type=None):
         listing = ', '.join('%s (%s)' % (name, topics[name]) for name in sorted(topics)) or 'none'
         raise ValueError('%s: topic %s is not in the bag; its topics: %s' % (bag.filename, topic, listing))
     if expected_type is not None and topics[topic] != expected_type:
+        if expected_type in types_of(bag).get(topic, ()):
+            return expected_type  # one of its types: the others are skipped (read_messages)
         raise ValueError('%s: topic %s is %s, expected %s' % (bag.filename, topic, topics[topic], expected_type))
     return topics[topic]
 
@@ -82,22 +102,36 @@ def check_topic(bag, topic, expected_type=None):
 def read_messages(path, topics, expected_types=None):
     """Yield Record(stamp, topic, msg) of ``topics`` in bag order; stamp is the header stamp, else bag time.
 
-    ``expected_types``: optional dict topic -> type to check. Raises ValueError (before yielding anything)
-    for an unreadable bag or a missing topic.
+    ``expected_types``: optional dict topic -> type to check (and to read, when the topic has several).
+    Messages of a topic's other types are skipped (see the module docstring). Raises ValueError (before
+    yielding anything) for an unreadable bag or a missing topic, and naming the file for a damaged chunk or
+    a message that cannot be decoded.
     """
+    from . import bag_reader
     if isinstance(topics, str):
         topics = [topics]
-    bag = open_bag(path)
+    bag = open_bag(path, skip_index=True)
     try:
-        for topic in topics:
-            check_topic(bag, topic, (expected_types or {}).get(topic))
-        try:
-            for topic, msg, t in bag.read_messages(topics=list(topics)):
-                yield Record(stamp_of(msg, t.to_sec()), topic, msg)
-        except (rosbag.ROSBagException, struct.error, EOFError) as error:
-            raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
+        chosen = dict((topic, check_topic(bag, topic, (expected_types or {}).get(topic))) for topic in topics)
     finally:
         bag.close()
+    skipped = collections.Counter()
+    for run in bag_reader.read_runs(path, topics):
+        for record in run:
+            kind = record.connection['type']
+            if kind != chosen[record.topic]:
+                skipped[record.topic, kind] += 1
+                continue
+            try:
+                msg = raw_message.decode(record.raw, record.connection)
+            except raw_message.DECODE_ERRORS as error:
+                raise ValueError('%s: a %s message on %s at %.3f cannot be decoded (%s)'
+                                 % (path, kind, record.topic, record.stamp, _one_line(error)))
+            yield Record(stamp_of(msg, record.stamp), record.topic, msg)
+    if skipped:
+        sys.stderr.write('warning: %s: read as %s; skipped %s\n' % (
+            path, ', '.join('%s %s' % (topic, chosen[topic]) for topic in sorted(set(t for t, _ in skipped))),
+            ', '.join('%d %s on %s' % (count, kind, topic) for (topic, kind), count in sorted(skipped.items()))))
 
 
 def read_raw(path, topics):

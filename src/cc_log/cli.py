@@ -26,6 +26,7 @@ import copy
 import json
 import math
 import os
+import re
 import sys
 import textwrap
 
@@ -53,6 +54,21 @@ _plain = export.plain
 
 def _print_json(document):
     sys.stdout.write(json.dumps(_plain(document), allow_nan=False, sort_keys=False) + '\n')
+
+
+# control characters (a terminal escape sequence starts with one) and the bidirectional overrides
+_UNPRINTABLE = re.compile('[\x00-\x1f\x7f-\x9f\u200e\u200f\u202a-\u202e\u2066-\u2069]')
+
+
+def printable(text):
+    """``text`` with control characters shown as ``\\xNN`` / ``\\uNNNN``: names read from files (topics,
+    reasons, paths) never reach the terminal as escape sequences."""
+    return _UNPRINTABLE.sub(lambda found: ascii(found.group())[1:-1], str(text))
+
+
+def _say(text):
+    """Print a line of a report made of names read from files (see ``printable``)."""
+    print(printable(text))
 
 
 def human_bytes(count):
@@ -693,29 +709,29 @@ def cmd_info(args):
         _print_json(collections.OrderedDict([('windows', windows), ('total', total)]))
         return EXIT_OK
     for w in windows:
-        print(w['path'])
-        print('  codec      %s' % w['codec'])
+        _say(w['path'])
+        _say('  codec      %s' % w['codec'])
         utc = ', from %s' % w['start_utc'] if w['start_utc'] else ''
-        print('  span       %s .. %s  (%.2f s%s)' % (_stamp_text(w['start']), _stamp_text(w['end']),
-                                                     w['duration'] or 0.0, utc))
-        print('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
-        print('  topic MB   %s (serialized)' % ', '.join(
+        _say('  span       %s .. %s  (%.2f s%s)' % (_stamp_text(w['start']), _stamp_text(w['end']),
+                                                    w['duration'] or 0.0, utc))
+        _say('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
+        _say('  topic MB   %s (serialized)' % ', '.join(
             '%s %.2f' % (topic, size / 1e6) for topic, size in sorted(w['topic_bytes'].items(), key=lambda i: -i[1])))
         if w['dropped']:
-            print('  DROPPED    %d messages the writer could not keep up with: %s' % (
+            _say('  DROPPED    %d messages the writer could not keep up with: %s' % (
                 sum(w['dropped'].values()), ', '.join('%s %d' % item for item in sorted(w['dropped'].items()))))
-        print('  size       %s (row JSON %s, %s)' % (
+        _say('  size       %s (row JSON %s, %s)' % (
             human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
             '%.1fx' % w['ratio'] if w['ratio'] else '-'))
         if w['triggers']:
             scores = [t['score'] for t in w['triggers'] if t['score'] is not None]
-            print('  trigger    %s, %d trigger(s)%s%s' % (
+            _say('  trigger    %s, %d trigger(s)%s%s' % (
                 w['reason'], len(w['triggers']),
                 ', scores %.4g .. %.4g' % (min(scores), max(scores)) if scores else '',
                 ', threshold %.4g' % w['threshold'] if isinstance(w['threshold'], (int, float)) else ''))
         if w['part']:
-            print('  part       %s of a window split at max_window' % w['part'])
-    print('%d window(s), %d messages, %s on disk, %s as row JSON%s' % (
+            _say('  part       %s of a window split at max_window' % w['part'])
+    _say('%d window(s), %d messages, %s on disk, %s as row JSON%s' % (
         total['windows'], total['messages'], human_bytes(total['bytes']), human_bytes(total['raw_json_bytes']),
         ' (%.1fx)' % total['ratio'] if total['ratio'] else ''))
     return EXIT_OK
@@ -966,7 +982,8 @@ def cmd_stats(args):
     if args.json:
         _print_json(result)
     else:
-        print('\n'.join(stats.format_text(result)))
+        for line in stats.format_text(result):
+            _say(line)
     return EXIT_OK
 
 

@@ -27,7 +27,8 @@ from . import log_format
 from . import msg_codec
 from . import safe_files
 from . import window_writer
-from .spans import Span
+from .safe_input import brief
+from .spans import MAX_MEGABYTES, Span
 from .window_buffer import DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, budget_bytes, part_bytes
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
@@ -42,7 +43,7 @@ DEFAULT_FEATURE_SET = 'motion'
 FEATURES_SUBDIRECTORY = 'features'
 JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream counts as restarted
 
-_SIZE = re.compile(r'^\s*([0-9]*\.?[0-9]+)\s*(b|kb|mb|gb)\s*$', re.IGNORECASE)
+_SIZE = re.compile(r'^\s*([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*(b|kb|mb|gb)\s*$', re.IGNORECASE)  # no backtracking
 _SIZE_FACTORS = {'b': 1, 'kb': 1000, 'mb': 1000 ** 2, 'gb': 1000 ** 3}
 _LABEL = re.compile(r'^[A-Za-z0-9_.-]+$')
 
@@ -59,17 +60,17 @@ class Rotation(collections.namedtuple('Rotation', 'span bytes')):
             return value
         match = _SIZE.match(str(value))
         if match:
-            size = int(float(match.group(1)) * _SIZE_FACTORS[match.group(2).lower()])
-            if size <= 0:
-                raise ValueError('%s: %r must be positive' % (name, value))
-            return cls(None, size)
+            size = float(match.group(1)) * _SIZE_FACTORS[match.group(2).lower()]
+            if not 0 < size <= MAX_MEGABYTES * 1e6:
+                raise ValueError('%s: %s must be positive, at most %gMB' % (name, brief(value), MAX_MEGABYTES))
+            return cls(None, int(size))
         try:
             span = Span.parse(value, name)
         except ValueError:
-            raise ValueError('%s: %r is not a message count (6000), a duration (60s) or a size (20MB)'
-                             % (name, value))
+            raise ValueError('%s: %s is not a message count (6000), a duration (60s) or a size (20MB)'
+                             % (name, brief(value)))
         if span.count == 0 or span.seconds == 0:
-            raise ValueError('%s: %r must be positive' % (name, value))
+            raise ValueError('%s: %s must be positive' % (name, brief(value)))
         return cls(span, None)
 
     def __str__(self):
@@ -79,7 +80,7 @@ class Rotation(collections.namedtuple('Rotation', 'span bytes')):
 def check_label(label):
     """Return ``label`` when it can name a directory, else raise ValueError('label: ...')."""
     if not isinstance(label, str) or not _LABEL.match(label) or label in ('.', '..'):
-        raise ValueError('label: %r must be letters, digits, ".", "_" or "-"' % (label,))
+        raise ValueError('label: %s must be letters, digits, ".", "_" or "-"' % brief(label))
     return label
 
 
@@ -107,7 +108,7 @@ def parse_stride(value):
     """A positive whole number of messages; ValueError('stride: ...') otherwise."""
     span = Span.parse(value, 'stride')
     if span.is_duration or span.count < 1:
-        raise ValueError('stride: %r must be a whole number of messages, at least 1' % (value,))
+        raise ValueError('stride: %s must be a whole number of messages, at least 1' % brief(value))
     return span.count
 
 

@@ -34,6 +34,8 @@ from . import features
 from . import log_format
 from .formats import json_xz
 from . import safe_input
+from .safe_input import brief
+from .model import check_window
 from .spans import Span, megabytes
 from .triggers import get as trigger_kind
 from .triggers.base import Context, check_name
@@ -62,19 +64,9 @@ FLAT = {'pre': ('windows', 'pre'), 'post': ('windows', 'post'), 'max_window': ('
 
 def load_file(path):
     """The configuration dict of a YAML file; ValueError('<path>: ...') when it cannot be read or is not
-    a mapping (YAML is read with ``safe_load``: no object of the file is ever constructed or run)."""
-    import yaml
-    try:
-        with safe_input.open_input(path) as stream:
-            data = stream.read(MAX_FILE_BYTES + 1)
-    except (IOError, OSError) as error:
-        raise ValueError('%s: cannot read: %s' % (path, error.strerror or error))
-    if len(data) > MAX_FILE_BYTES:
-        raise ValueError('%s: a configuration larger than %d bytes' % (path, MAX_FILE_BYTES))
-    try:
-        document = yaml.safe_load(data.decode('utf-8'))
-    except (yaml.YAMLError, UnicodeDecodeError, RecursionError) as error:
-        raise ValueError('%s: not YAML: %s' % (path, ' '.join(str(error).split())))
+    a mapping (read by ``safe_input.load_yaml``: ``safe_load``'s loader, no object of the file is ever
+    constructed or run; size and aliases bounded)."""
+    document = safe_input.load_yaml(path, MAX_FILE_BYTES)
     if document is None:
         return {}
     if not isinstance(document, dict):
@@ -182,9 +174,12 @@ class Config(object):
         self.topic_limits = parse_topic_limits(data.get('topic_limits'), 'topic_limits')
         driving = data.get('driving_topic')
         if driving is not None and (not isinstance(driving, str) or not driving.strip()):
-            raise ValueError('driving_topic: %r is not a topic name' % (driving,))
+            raise ValueError('driving_topic: %s is not a topic name' % brief(driving))
         self.driving_topic = driving.strip() if driving else None
-        self.format = log_format.Format.check(data.get('format', log_format.formats.DEFAULT))
+        fmt = data.get('format', log_format.formats.DEFAULT)
+        if not isinstance(fmt, str):
+            raise ValueError('format: %s is not a format name (%s)' % (brief(fmt), ', '.join(log_format.Format.ALL)))
+        self.format = log_format.Format.check(fmt)
         options = _mapping(data.get('json_xz'), 'json_xz', JSON_XZ_KEYS)
         self.precision = json_xz.check_precision(options.get('precision'), 'json_xz.precision')
         if self.precision and self.format != log_format.Format.JSON_XZ:
@@ -204,13 +199,13 @@ class Config(object):
         self.stride = None if collect.get('stride') is None else parse_stride(collect['stride'])
         triggers = data.get('triggers', [])
         if not isinstance(triggers, list):
-            raise ValueError('triggers: a list of triggers, not %r' % (triggers,))
+            raise ValueError('triggers: a list of triggers, not %s' % brief(triggers))
         self.triggers = []
         names = set()
         for index, entry in enumerate(triggers):
             checked = _trigger_entry(entry, index)
             if checked['name'] in names:
-                raise ValueError('triggers[%d]: name %r is used twice' % (index, checked['name']))
+                raise ValueError('triggers[%d]: name %s is used twice' % (index, brief(checked['name'])))
             names.add(checked['name'])
             self.triggers.append(checked)
             _check_pre(checked, index, self.pre)
@@ -255,6 +250,7 @@ class Config(object):
             window = entry.get('window', model_config.window if model_config else DEFAULT_WINDOW)
             try:
                 config = features.FeatureConfig(feature_set, str(window))
+                check_window(config)
             except ValueError as error:
                 raise ValueError('%s: %s' % (where, error))
             try:
@@ -291,13 +287,15 @@ def parse_topic_limits(value, name='topic_limits'):
     if value is None or value == '':
         return {}
     if isinstance(value, str):
-        value = _yaml_text(value, name)
+        if len(value) > MAX_FILE_BYTES:
+            raise ValueError('%s: longer than %d characters' % (name, MAX_FILE_BYTES))
+        value = safe_input.loads_yaml(value, name)
     if not isinstance(value, dict):
         raise ValueError('%s: a mapping of topic names to {pre, post, max_mb}, not %s' % (name, type(value).__name__))
     limits = {}
     for topic, entry in value.items():
         if not isinstance(topic, str) or not topic.strip():
-            raise ValueError('%s: %.80r is not a topic name' % (name, topic))
+            raise ValueError('%s: %s is not a topic name' % (name, brief(topic)))
         where = '%s.%s' % (name, topic)
         entry = _mapping(entry, where, TOPIC_LIMIT_KEYS)
         spans = {}
@@ -312,20 +310,12 @@ def parse_topic_limits(value, name='topic_limits'):
     return limits
 
 
-def _yaml_text(text, name):
-    import yaml
-    try:
-        return yaml.safe_load(text[:MAX_FILE_BYTES])
-    except yaml.YAMLError as error:
-        raise ValueError('%s: not YAML: %s' % (name, ' '.join(str(error).split())[:200]))
-
-
 def _known(data, keys, where):
     if not isinstance(data, dict):
-        raise ValueError('%s: a mapping, not %r' % (where.rstrip('.') or 'configuration', data))
-    unknown = sorted(str(key) for key in data if key not in keys)
+        raise ValueError('%s: a mapping, not %s' % (where.rstrip('.') or 'configuration', brief(data)))
+    unknown = sorted(brief(key) for key in data if key not in keys)
     if unknown:
-        raise ValueError('%sunknown key %r (known: %s)' % (where, unknown[0], ', '.join(keys)))
+        raise ValueError('%sunknown key %s (known: %s)' % (where, unknown[0], ', '.join(keys)))
 
 
 def _mapping(value, name, keys):
@@ -342,11 +332,11 @@ def topic_list(value, name):
     elif isinstance(value, (list, tuple)):
         items = list(value)
     else:
-        raise ValueError('%s: %r is not a list of topic names' % (name, value))
+        raise ValueError('%s: %s is not a list of topic names' % (name, brief(value)))
     out = []
     for item in items:
         if not isinstance(item, str) or not item.strip():
-            raise ValueError('%s: %r is not a topic name' % (name, item))
+            raise ValueError('%s: %s is not a topic name' % (name, brief(item)))
         if item.strip() not in out:
             out.append(item.strip())
     return out
@@ -367,7 +357,7 @@ def _check_pre(entry, index, held):
 def _trigger_entry(entry, index):
     """A trigger entry checked for its keys: a dict with name, kind and index."""
     if not isinstance(entry, dict):
-        raise ValueError('triggers[%d]: a mapping with name and kind, not %r' % (index, entry))
+        raise ValueError('triggers[%d]: a mapping with name and kind, not %s' % (index, brief(entry)))
     kind = entry.get('kind')
     try:
         trigger_kind(kind)

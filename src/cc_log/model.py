@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from . import safe_input
+from .safe_input import brief
 from .features import FeatureConfig, vector_length
 
 FORMAT = 'cc_log-model'
@@ -27,6 +28,11 @@ KINDS = ('ocsvm', 'nystroem-sgd')
 #: Largest model file read: an ``ocsvm`` model of 20,000 support vectors of 200 features is ~80 MB of JSON.
 MAX_MODEL_BYTES = 1 << 30
 SCORE_BLOCK = 32  # vectors scored at a time by score_each (bounds its block of distances to the centres)
+#: Plausible ranges of a model (anything outside is refused, naming the key): the feature window in
+#: messages (held as rows) or seconds, the RBF kernel's gamma (of standardised features: ~1e-3 to 10).
+MAX_WINDOW_COUNT = 100000
+MAX_WINDOW_SECONDS = 3600.0
+MAX_GAMMA = 1e6
 
 
 class ModelError(ValueError):
@@ -186,8 +192,8 @@ class AnomalyModel(object):
         if not isinstance(document, dict) or document.get('format') != FORMAT:
             raise ModelError('%s: not a cc_log model (no "format": "%s")' % (path, FORMAT))
         if document.get('version') != VERSION or isinstance(document.get('version'), bool):
-            raise ModelError('%s: model version %r is not supported (this cc_log reads version %d)'
-                             % (path, document.get('version'), VERSION))
+            raise ModelError('%s: model version %s is not supported (this cc_log reads version %d)'
+                             % (path, brief(document.get('version')), VERSION))
         for key in ('config', 'kind', 'scaler', 'kernel', 'threshold'):
             if key not in document:
                 raise ModelError('%s: missing "%s"' % (path, key))
@@ -197,7 +203,7 @@ class AnomalyModel(object):
             raise ModelError('%s: %s' % (path, error))
         kind = document['kind']
         if kind not in KINDS:
-            raise ModelError('%s: kind %r is not one of %s' % (path, kind, ', '.join(KINDS)))
+            raise ModelError('%s: kind %s is not one of %s' % (path, brief(kind), ', '.join(KINDS)))
         scaler = document['scaler']
         if not isinstance(scaler, dict):
             raise ModelError('%s: scaler must be an object' % path)
@@ -245,7 +251,7 @@ _KERNEL_FIELDS = {
 
 def _number(value, path, name):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ModelError('%s: %s must be a finite number, got %r' % (path, name, value))
+        raise ModelError('%s: %s must be a finite number, got %s' % (path, name, brief(value)))
     return float(value)
 
 
@@ -267,11 +273,21 @@ def _array(value, ndim, path, name):
     for row in rows:
         for item in row:
             if isinstance(item, bool) or not isinstance(item, (int, float)):
-                raise bad('must hold numbers only, found %r' % (item,))
+                raise bad('must hold numbers only, found %s' % brief(item))
     array = np.array(value, dtype=float)
     if not np.all(np.isfinite(array)):
         raise bad('holds non-finite values')
     return array
+
+
+def check_window(config):
+    """Raise ValueError('window: ...') unless the feature window of ``config`` (a FeatureConfig) is at most
+    MAX_WINDOW_COUNT messages or MAX_WINDOW_SECONDS seconds."""
+    span = config.span
+    if span.is_duration and span.seconds > MAX_WINDOW_SECONDS:
+        raise ValueError('window: %s is longer than %gs' % (span, MAX_WINDOW_SECONDS))
+    if not span.is_duration and span.count > MAX_WINDOW_COUNT:
+        raise ValueError('window: %s is more than %d messages' % (span, MAX_WINDOW_COUNT))
 
 
 def _validate(model, path):
@@ -280,7 +296,11 @@ def _validate(model, path):
         return ModelError('%s: %s' % (path, what))
 
     if model.kind not in KINDS:
-        raise bad('kind %r is not one of %s' % (model.kind, ', '.join(KINDS)))
+        raise bad('kind %s is not one of %s' % (brief(model.kind), ', '.join(KINDS)))
+    try:
+        check_window(model.config)
+    except ValueError as error:
+        raise bad('config: %s' % error)
     dimension = vector_length(model.config)
     for name, array in (('scaler.mean', model.mean), ('scaler.scale', model.scale)):
         if array.shape != (dimension,):
@@ -288,8 +308,9 @@ def _validate(model, path):
                       % (name, array.shape, model.config.feature_set, model.config.window, dimension))
         if not np.all(np.isfinite(array)):
             raise bad('%s holds non-finite values' % name)
-    if not np.all(model.scale > 0):
-        raise bad('scaler.scale must be positive')
+    with np.errstate(divide='ignore', over='ignore'):
+        if not np.all(model.scale > 0) or not np.all(np.isfinite(1.0 / model.scale)):
+            raise bad('scaler.scale must be positive, with a finite inverse')
     if not math.isfinite(model.threshold):
         raise bad('threshold must be finite')
     expected = _KERNEL_FIELDS[model.kind]
@@ -302,8 +323,8 @@ def _validate(model, path):
                 raise bad('kernel.%s must be a finite number' % key)
         elif not isinstance(value, np.ndarray) or value.ndim != ndim or not np.all(np.isfinite(value)):
             raise bad('kernel.%s must be a finite %d-D array' % (key, ndim))
-    if not model.kernel['gamma'] > 0:
-        raise bad('kernel.gamma must be positive')
+    if not 0 < model.kernel['gamma'] <= MAX_GAMMA:
+        raise bad('kernel.gamma: %g is not in (0, %g]' % (model.kernel['gamma'], MAX_GAMMA))
     if model.kind == 'ocsvm':
         sv, coef = model.kernel['support_vectors'], model.kernel['dual_coef']
         if sv.shape[1] != dimension:

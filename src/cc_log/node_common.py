@@ -35,6 +35,9 @@ EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
 XMLRPC_INT = 2 ** 31               # XML-RPC integers are 32-bit signed
 DEFAULT_DIAGNOSTIC_PERIOD = 1.0    # seconds between diagnostics (``~diagnostic_period``)
+MAX_DIAGNOSTIC_PERIOD = 3600.0     # longest ``~diagnostic_period`` (a longer wait overflows the thread's timer)
+# Largest values of numeric parameters, where the node's use of them has one (``Params.number``).
+MAXIMA = {'diagnostic_period': MAX_DIAGNOSTIC_PERIOD}
 DEFAULT_MAX_BUFFER_MB = window_buffer.DEFAULT_MAX_BUFFER_MB
 CLOSE_TIMEOUT = 60.0               # seconds to wait at shutdown for the last windows to be written
 CLOSE_RETRY = 5.0                  # seconds held windows are retried at shutdown before they count as lost
@@ -126,7 +129,8 @@ class Params(object):
         return to_bool(name, self.value(name, default))
 
     def number(self, name, default, minimum=0.0, integer=False):
-        """A finite number >= ``minimum`` (an int when ``integer``); a numeric string is accepted."""
+        """A finite number >= ``minimum`` and <= its maximum in MAXIMA, if any (an int when ``integer``); a
+        numeric string is accepted."""
         value = self.value(name, default)
         number = float('nan')
         if not isinstance(value, bool) and isinstance(value, (int, float, str)):
@@ -138,6 +142,8 @@ class Params(object):
             raise ConfigError('~%s: %r is not a whole number' % (name, value))
         if not math.isfinite(number) or number < minimum:
             raise ConfigError('~%s: %r must be a number >= %g' % (name, value, minimum))
+        if number > MAXIMA.get(name, math.inf):
+            raise ConfigError('~%s: %r must be a number <= %g' % (name, value, MAXIMA[name]))
         return int(number) if integer else number
 
     def megabytes(self, name, default, minimum=0.0):

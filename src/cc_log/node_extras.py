@@ -6,7 +6,8 @@ Parameters (private, both nodes)
   driving topic ``odom`` at 1 Hz), into ``<directory>/context/`` (see ``context_track``).
   ``~context_rotate`` (double, default: 600): seconds of stamps per context file.
   ``~upload_command`` (list or string, default: none): run detached with the path of each closed window or
-  context file (see ``upload``); failures are a WARN on /diagnostics.
+  context file (see ``upload``: at most ``upload.MAX_RUNNING`` at a time, the others queued); uploads running,
+  queued, failed and dropped (queue full) are on /diagnostics, failures and drops as a WARN.
 
 The context files have a writer of their own (closing, fsync, naming, retries) whose disk guard and the
 node's count the window and context files together: ``~max_disk_mb`` holds for both, oldest deleted first.
@@ -117,11 +118,13 @@ class NodeExtras(object):
                 message += '; topic watch: %s' % self.watcher.last_error
         if self.hook.enabled:
             stats = self.hook.stats()
-            values += [('uploads started', stats['started']), ('uploads failed', stats['failed']),
-                       ('last upload error', stats['last_error'] or 'none')]
-            if stats['failed']:
+            values += [('uploads started', stats['started']), ('uploads running', stats['running']),
+                       ('uploads queued', stats['queued']), ('uploads failed', stats['failed']),
+                       ('uploads dropped', stats['dropped']), ('last upload error', stats['last_error'] or 'none')]
+            if stats['failed'] or stats['dropped']:
                 level = max(level, DiagnosticStatus.WARN)
-                message += '; %d uploads failed (last: %s)' % (stats['failed'], stats['last_error'])
+                message += '; %d uploads failed, %d dropped (last: %s)' % (
+                    stats['failed'], stats['dropped'], stats['last_error'])
         return level, message, values
 
     def close(self):

@@ -83,7 +83,7 @@ def load_truth(path):
         raise ValueError('%s: cannot read: %s' % (path, error.strerror or error))
     except (ValueError, KeyError, TypeError, AttributeError) as error:
         raise ValueError('%s: not a truth file (a JSON list of {type, start, end}, or {"anomalies": [...]}): %s'
-                         % (path, error))
+                         % (path, ' '.join(str(error).split())[:200]))
 
 
 def _outside_legend(axis):

@@ -1,6 +1,8 @@
 """A registry of named classes (feature sets, trigger kinds): where a newcomer adds one, and how it is found."""
 import collections
 
+from .safe_input import brief
+
 
 class Registry(object):
     """Classes by the value of their attribute ``key``; ``what`` names them in errors
@@ -25,4 +27,4 @@ class Registry(object):
         try:
             return self._classes[name]
         except (KeyError, TypeError):
-            raise ValueError('%s: %r is not one of %s' % (self.what, name, ', '.join(self._classes)))
+            raise ValueError('%s: %s is not one of %s' % (self.what, brief(name), ', '.join(self._classes)))

@@ -12,10 +12,17 @@ connection it reads), so a definition is checked here before any class is genera
   ``_full_text`` triple-quoted literal) stays one Python string literal with the same value. Cycles are
   refused; length, nesting, the number of types and of fields (genpy's time) and the size of a default
   instance (fixed-size arrays) are bounded.
-- ``check_bag(bag, path)``: every connection of an open rosbag, before any message is read.
+- ``check_bag(bag, path)``: every connection and chunk header of an open rosbag, before any message is read
+  (a chunk may not declare more than ``formats.bag_salvage.MAX_CHUNK_BYTES``, nor more than its stored bytes
+  can hold: readers allocate what a chunk declares before decompressing it).
 - ``json_loads(text)``: ``json.loads`` after a nesting check (a deeply nested document would raise
   RecursionError inside ``json``).
 - ``open_input(path)``: open a file to read, refusing FIFOs, devices and sockets (a FIFO blocks forever).
+- ``load_yaml(path, max_bytes)``: the one YAML reader: a bounded file, ``yaml.SafeLoader`` (no object of the
+  file constructed), at most MAX_YAML_ALIASES aliases and MAX_YAML_WEIGHT nodes and scalar characters once
+  aliases are expanded (an alias bomb of a few hundred bytes expands to gigabytes).
+- ``brief(value)``: a repr of at most BRIEF_CHARS characters, computed in bounded time and memory: what error
+  messages show of a value read from outside.
 
 Every refusal is a ValueError with one line saying what is wrong; callers add the file or topic. Pure: no
 rospy, no rosbag, no genpy.
@@ -26,10 +33,12 @@ import json
 import keyword
 import os
 import re
+import reprlib
 import stat
 
 __all__ = ['UnsafeDefinition', 'check_definition', 'check_connection', 'check_bag', 'check_type_name',
-           'check_json_depth', 'json_loads', 'open_input', 'check_regular', 'MAX_DEFINITION_CHARS', 'MAX_NESTING',
+           'check_json_depth', 'json_loads', 'open_input', 'check_regular', 'load_yaml', 'brief',
+           'MAX_DEFINITION_CHARS', 'MAX_NESTING',
            'MAX_TYPES', 'MAX_DECLARATIONS', 'MAX_DEFAULT_VALUES', 'MAX_JSON_DEPTH']
 
 #: Longest message definition accepted (characters); real ones, comments included, are a few kB to ~50 kB.
@@ -45,6 +54,13 @@ MAX_DECLARATIONS = 10000
 MAX_DEFAULT_VALUES = 1 << 20
 #: Deepest JSON nesting accepted; a json-xz window document reaches about 2 * MAX_NESTING + 4.
 MAX_JSON_DEPTH = 100
+#: Most aliases (``*name``) in one YAML document.
+MAX_YAML_ALIASES = 100
+#: Most nodes plus scalar characters of a YAML document once its aliases are expanded (each alias counts
+#: the whole of what it names): about what a file of MAX_YAML_WEIGHT bytes without aliases holds.
+MAX_YAML_WEIGHT = 1 << 21
+#: Longest repr of an outside value in an error message (``brief``).
+BRIEF_CHARS = 80
 
 SEPARATOR = '\n' + '=' * 80 + '\n'
 _INT_RANGES = {'int8': (-2 ** 7, 2 ** 7 - 1), 'uint8': (0, 2 ** 8 - 1), 'int16': (-2 ** 15, 2 ** 15 - 1),
@@ -105,9 +121,30 @@ def _shown(name):
 
 def check_bag(bag, source):
     """Check every connection of an open ``rosbag.Bag`` before any message is read (rosbag generates a class
-    from each connection's definition); ValueError naming ``source`` and the topic."""
+    from each connection's definition), and every chunk header (``check_chunks``); ValueError naming
+    ``source`` and the topic or chunk."""
+    check_chunks(bag, source)
     for connection in list(getattr(bag, '_connections', {}).values()):
         check_connection(connection.topic, connection.datatype, connection.msg_def, source)
+
+
+#: Most an LZ4 block can expand (a 255:1 run-length limit), plus a frame's worth of slack.
+LZ4_MAX_RATIO = 256
+LZ4_SLACK = 1 << 16
+
+
+def check_chunks(bag, source):
+    """Raise ValueError('<source>: ...') for a chunk of an open ``rosbag.Bag`` whose declared (decompressed)
+    size is more than MAX_CHUNK_BYTES or more than its stored bytes can hold (uncompressed: exactly them;
+    LZ4: 256 times them)."""
+    from .formats.bag_salvage import MAX_CHUNK_BYTES
+    for pos, header in sorted(getattr(bag, '_chunk_headers', {}).items()):
+        declared, stored = header.uncompressed_size, header.compressed_size
+        most = {'none': stored, 'lz4': stored * LZ4_MAX_RATIO + LZ4_SLACK}.get(header.compression, MAX_CHUNK_BYTES)
+        most = min(most, MAX_CHUNK_BYTES)
+        if declared > most:
+            raise ValueError('%s: bag is truncated or damaged (chunk at byte %d declares %d bytes, more than %d: %s, '
+                             '%d bytes stored)' % (source, pos, declared, most, header.compression, stored))
 
 
 @functools.lru_cache(maxsize=128)
@@ -375,3 +412,91 @@ def open_input(path):
     except BaseException:
         os.close(fd)
         raise
+
+
+# -- YAML and error messages -------------------------------------------------------------------------------
+
+def _yaml_weight(node, memo, open_nodes):
+    """Nodes plus scalar characters under ``node``, aliases expanded (``memo``: by id); ValueError for a
+    node that contains itself."""
+    key = id(node)
+    if key in memo:
+        return memo[key]
+    if key in open_nodes:
+        raise ValueError('a YAML alias refers to a node that contains it')
+    if isinstance(node.value, str):
+        weight = 1 + len(node.value)
+    else:
+        open_nodes.add(key)
+        items = [part for pair in node.value for part in pair] if node.id == 'mapping' else node.value
+        weight = 1 + sum(_yaml_weight(item, memo, open_nodes) for item in items)
+        open_nodes.discard(key)
+    memo[key] = weight
+    return weight
+
+
+def _safe_loader(text):
+    """A ``yaml.SafeLoader`` of ``text`` that counts aliases and checks the expanded weight of the document."""
+    import yaml
+
+    class BoundedLoader(yaml.SafeLoader):
+        aliases = 0
+
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                self.aliases += 1
+                if self.aliases > MAX_YAML_ALIASES:
+                    raise ValueError('more than %d YAML aliases' % MAX_YAML_ALIASES)
+            return super(BoundedLoader, self).compose_node(parent, index)
+
+        def get_single_node(self):
+            node = super(BoundedLoader, self).get_single_node()
+            if node is not None and _yaml_weight(node, {}, set()) > MAX_YAML_WEIGHT:
+                raise ValueError('YAML aliases expand to more than %d nodes and characters' % MAX_YAML_WEIGHT)
+            return node
+
+    return BoundedLoader(text)
+
+
+def load_yaml(path, max_bytes):
+    """The document of the YAML file ``path`` (at most ``max_bytes``; see the module docstring);
+    ValueError('<path>: ...') with one line when it cannot be read, is too large or is not YAML."""
+    try:
+        with open_input(path) as stream:
+            data = stream.read(max_bytes + 1)
+    except (IOError, OSError) as error:
+        raise ValueError('%s: cannot read: %s' % (path, error.strerror or error))
+    if len(data) > max_bytes:
+        raise ValueError('%s: larger than %d bytes' % (path, max_bytes))
+    try:
+        text = data.decode('utf-8')
+    except ValueError as error:
+        raise ValueError('%s: not YAML: %s' % (path, ' '.join(str(error).split())[:200]))
+    return loads_yaml(text, path)
+
+
+def loads_yaml(text, name):
+    """The document of YAML ``text`` (a parameter's, a file's: bounded as ``load_yaml``'s); ValueError('<name>:
+    not YAML: ...') with one line."""
+    import yaml
+    try:
+        loader = _safe_loader(text)
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
+    except (ValueError, yaml.YAMLError, RecursionError) as error:
+        raise ValueError('%s: not YAML: %s' % (name, ' '.join(str(error).split())[:200]))
+
+
+_BRIEF = reprlib.Repr()
+_BRIEF.maxlevel = 3
+_BRIEF.maxstring = _BRIEF.maxother = _BRIEF.maxlong = BRIEF_CHARS
+for _name in ('maxtuple', 'maxlist', 'maxarray', 'maxdict', 'maxset', 'maxfrozenset', 'maxdeque'):
+    setattr(_BRIEF, _name, 8)
+
+
+def brief(value, limit=BRIEF_CHARS):
+    """A repr of ``value`` of at most ``limit`` characters (``...`` where cut), whatever its size."""
+    text = _BRIEF.repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + '...'

@@ -2,6 +2,15 @@
 import collections
 import math
 
+from .safe_input import brief
+
+#: Largest message count of a span (a billion messages: days of a 1 kHz topic).
+MAX_COUNT = 10 ** 9
+#: Longest duration of a span (seconds): about 115 days.
+MAX_SECONDS = 1e7
+#: Largest byte size (MB): a petabyte.
+MAX_MEGABYTES = 1e9
+
 
 class Span(collections.namedtuple('Span', 'count seconds')):
     """A window size: exactly one of ``count`` (messages) and ``seconds`` is set."""
@@ -22,7 +31,8 @@ class Span(collections.namedtuple('Span', 'count seconds')):
     def parse(cls, value, name='size'):
         """Parse ``500``, ``'500'``, ``'5s'``, ``'2.5s'`` or ``'250ms'``; a Span is returned as is.
 
-        Raises ValueError naming ``name`` when the value is not a non-negative count or duration.
+        Raises ValueError naming ``name`` when the value is not a count or duration from 0 to MAX_COUNT
+        messages or MAX_SECONDS seconds.
         """
         if isinstance(value, cls):
             return value
@@ -38,10 +48,13 @@ class Span(collections.namedtuple('Span', 'count seconds')):
                     raise ValueError(text)
                 span = cls.messages(int(number))
         except (ValueError, OverflowError):
-            raise ValueError('%s: %r is not a message count (500) or a duration (5s)' % (name, value))
+            raise ValueError('%s: %s is not a message count (500) or a duration (5s)' % (name, brief(value)))
         amount = span.count if span.count is not None else span.seconds
         if amount < 0 or not math.isfinite(amount):
-            raise ValueError('%s: %r must be zero or positive' % (name, value))
+            raise ValueError('%s: %s must be zero or positive' % (name, brief(value)))
+        if amount > (MAX_COUNT if span.count is not None else MAX_SECONDS):
+            raise ValueError('%s: %s is more than %s' % (
+                name, brief(value), MAX_COUNT if span.count is not None else '%gs' % MAX_SECONDS))
         return span
 
     @property
@@ -62,7 +75,8 @@ _BYTE_UNITS = {'b': 1e-6, 'kb': 1e-3, 'mb': 1.0, 'gb': 1e3, 'tb': 1e6,
 
 def megabytes(value, name='size'):
     """MB (10^6 bytes) of a number of MB (``64``, ``'64'``) or a size with a unit (``'64MB'``, ``'2GB'``,
-    ``'500kB'``, ``'1.5GiB'``, ``'100B'``; units case-insensitive). ValueError naming ``name`` otherwise."""
+    ``'500kB'``, ``'1.5GiB'``, ``'100B'``; units case-insensitive), at most MAX_MEGABYTES. ValueError naming
+    ``name`` otherwise."""
     number = float('nan')
     if not isinstance(value, bool) and isinstance(value, (int, float, str)):
         text = str(value).strip().lower().replace(' ', '')
@@ -73,5 +87,8 @@ def megabytes(value, name='size'):
         except (ValueError, OverflowError):
             pass
     if not number >= 0 or not math.isfinite(number):
-        raise ValueError('%s: %r is not a size >= 0 (MB as a number, or 64MB, 2GB, 500kB, 1.5GiB)' % (name, value))
+        raise ValueError('%s: %s is not a size >= 0 (MB as a number, or 64MB, 2GB, 500kB, 1.5GiB)'
+                         % (name, brief(value)))
+    if number > MAX_MEGABYTES:
+        raise ValueError('%s: %s is more than %gMB' % (name, brief(value), MAX_MEGABYTES))
     return number

@@ -15,6 +15,7 @@ import collections
 import re
 
 from ..registry import Registry
+from ..safe_input import brief
 from ..spans import Span
 
 Context = collections.namedtuple('Context', 'load_model message_class resolve')
@@ -36,7 +37,8 @@ get = _KINDS.get
 def check_name(name):
     """A trigger name (it goes into file names): a letter, then letters, digits, '_' or '-'."""
     if not isinstance(name, str) or not _NAME.match(name):
-        raise ValueError('trigger name: %r must be a letter then letters, digits, "_" or "-" (64 at most)' % (name,))
+        raise ValueError('trigger name: %s must be a letter then letters, digits, "_" or "-" (64 at most)'
+                         % brief(name))
     return name
 
 

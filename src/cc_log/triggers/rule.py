@@ -4,17 +4,21 @@ One rule watches one topic for one of:
 
 - ``when``: a field compared with a value, ``'twist.twist.linear.x > 2.0'``, ``'abs(twist.twist.angular.z) >=
   1.5'``, ``'status.status == 4'``, ``'status_list[0].text != "ok"'`` (operators ``< <= > >= == !=``; a number,
-  ``true``/``false`` or a quoted string). The text is parsed by a regular expression into a field path, an
-  operator and a value: it is never evaluated as code. With the topic's message ``type`` the field and the
-  value's type are checked at start (an unknown field is a ValueError naming it); without it, at the first
-  message (a bad field then turns the rule off, and ``error`` says why);
+  ``true``/``false``, a quoted string, or ``nan`` with ``==`` / ``!=``: ``'twist.twist.linear.x == nan'`` holds
+  for a value that is not a number, such as odometry gone NaN, which no other comparison holds for; at most
+  MAX_CONDITION_CHARS characters). The text is read left to right, once, into a field path, an operator and a
+  value: it is never evaluated as code. With the topic's message ``type`` the field and the value's type are
+  checked at start (an unknown field is a ValueError naming it); without it, at the first message (a bad
+  field then turns the rule off, and ``error`` says why);
 - ``level``: a diagnostic_msgs/DiagnosticArray status at or above a level (``OK``, ``WARN``, ``ERROR``, ``STALE``
   or 0-3), optionally only statuses whose name matches ``status`` (a shell pattern, ``'motors*'``); the
   cc_log nodes' own statuses (``cc_log: ...``) are ignored;
 - ``arrival``: any message arriving on the topic (a bumper, an e-stop);
 - ``silent``: the topic silent for longer than a duration (``'2s'``), or ``min_rate``: fewer than that many
   messages per second over ``over`` (default 2 s): a sensor dying. Message time is the newest stamp the
-  logger has seen on any topic; a topic that never published counts from the first message of any topic.
+  logger has seen on any topic; a topic that never published is given STARTUP_GRACE seconds more, counted
+  from the first message of any topic (a subscriber takes a while to connect), and its rate is measured
+  from its first message.
 
 A rule fires at the onset of its condition: the first message on which it holds after one on which it did
 not (or after more than ``hold_off`` without a message where it held: event topics such as a goal result), and
@@ -28,6 +32,7 @@ import operator
 import re
 
 from .. import msg_codec
+from ..safe_input import brief
 from ..spans import Span
 from .base import Trigger, register
 
@@ -38,12 +43,12 @@ DIAGNOSTIC_ARRAY = 'diagnostic_msgs/DiagnosticArray'
 LEVELS = collections.OrderedDict([('OK', 0), ('WARN', 1), ('ERROR', 2), ('STALE', 3)])
 OWN_STATUS = 'cc_log:'  # prefix of the cc_log nodes' own diagnostic statuses: never a reason to log
 JUMP_BACK_TOLERANCE = 1.0
+STARTUP_GRACE = 5.0  # seconds a silence or rate rule waits, before the topic's first message, on top of its own
 
-_FIELD = r'[A-Za-z_][A-Za-z0-9_]*(?:\[[0-9]{1,9}\])?'
-_CONDITION = re.compile(r'^\s*(?:abs\(\s*(?P<absolute>%s(?:\.%s)*)\s*\)|(?P<plain>%s(?:\.%s)*))\s*'
-                        r'(?P<op><=|>=|==|!=|<|>)\s*(?P<value>.*?)\s*$' % (_FIELD, _FIELD, _FIELD, _FIELD))
-_PART = re.compile(r'^([A-Za-z_][A-Za-z0-9_]*)(?:\[([0-9]+)\])?$')
-_NUMBER = re.compile(r'^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?$')
+MAX_CONDITION_CHARS = 1000
+_FIELD_PATH = re.compile(r'[A-Za-z0-9_.\[\]]*')  # the characters a field path may hold (one pass, no backtracking)
+_PART = re.compile(r'([A-Za-z_][A-Za-z0-9_]*)(?:\[([0-9]{1,9})\])?\Z')
+_NUMBER = re.compile(r'[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\Z')
 _STRING = re.compile(r'^(?:"([^"\\]*)"|\'([^\'\\]*)\')$')
 OPERATORS = {'<': operator.lt, '<=': operator.le, '>': operator.gt, '>=': operator.ge, '==': operator.eq,
              '!=': operator.ne}
@@ -54,29 +59,30 @@ class Condition(object):
     """A parsed ``when`` text: ``path`` ([(field, index or None)]), ``op``, ``value``, ``absolute``."""
 
     def __init__(self, text, name='when'):
-        match = _CONDITION.match(text) if isinstance(text, str) else None
-        if match is None:
-            raise ValueError('%s: %r is not "<field> <op> <value>" (op: < <= > >= == !=)' % (name, text))
+        parsed = _split_condition(text) if isinstance(text, str) and len(text) <= MAX_CONDITION_CHARS else None
+        if parsed is None:
+            raise ValueError('%s: %s is not "<field> <op> <value>" (op: < <= > >= == !=; at most %d characters)'
+                             % (name, brief(text), MAX_CONDITION_CHARS))
         self.text = ' '.join(text.split())
-        self.absolute = match.group('absolute') is not None
-        field = match.group('absolute') or match.group('plain')
+        self.absolute, field, self.path, self.op_text, raw = parsed
         self.field = field
-        self.path = [(part.group(1), None if part.group(2) is None else int(part.group(2)))
-                     for part in (_PART.match(item) for item in field.split('.'))]
-        self.op_text = match.group('op')
         self.op = OPERATORS[self.op_text]
-        raw = match.group('value')
         string = _STRING.match(raw)
         if string:
             self.value = string.group(1) if string.group(1) is not None else string.group(2)
         elif raw in ('true', 'false'):
             self.value = raw == 'true'
+        elif raw == 'nan':
+            self.value = float('nan')
+            if self.op_text not in ('==', '!='):
+                raise ValueError('%s: nan compares only with == or != (%s)' % (name, brief(text)))
         elif _NUMBER.match(raw):
             self.value = float(raw)
         else:
-            raise ValueError('%s: value %r of %r is not a number, true, false or a quoted string' % (name, raw, text))
+            raise ValueError('%s: value %s of %s is not a number, true, false or a quoted string'
+                             % (name, brief(raw), brief(text)))
         if isinstance(self.value, str) and (self.absolute or self.op_text not in ('==', '!=')):
-            raise ValueError('%s: a string compares only with == or != (%r)' % (name, text))
+            raise ValueError('%s: a string compares only with == or != (%s)' % (name, brief(text)))
 
     def check(self, msg_type, definition, name='when'):
         """Raise ValueError('<name>: ...') unless the field exists in ``msg_type`` (full ``definition``) and is
@@ -125,9 +131,35 @@ class Condition(object):
         number = float(value)
         if self.absolute:
             number = abs(number)
+        if self.value != self.value:  # == nan, != nan
+            return math.isnan(number) == (self.op_text == '=='), number
         if math.isnan(number):
             return False, number
         return self.op(number, float(self.value)), number
+
+
+def _split_condition(text):
+    """``(absolute, field, path, op, value text)`` of a ``when`` text read left to right, or None."""
+    rest = text.strip()
+    absolute = rest.startswith('abs(')
+    if absolute:
+        close = rest.find(')')
+        if close < 0:
+            return None
+        field, rest = rest[4:close].strip(), rest[close + 1:].lstrip()
+    else:
+        field = _FIELD_PATH.match(rest).group()
+        rest = rest[len(field):].lstrip()
+    path = []
+    for item in field.split('.'):
+        part = _PART.match(item)
+        if part is None:
+            return None
+        path.append((part.group(1), None if part.group(2) is None else int(part.group(2))))
+    op = rest[:2] if rest[:2] in OPERATORS else rest[:1] if rest[:1] in OPERATORS else None
+    if op is None:
+        return None
+    return absolute, field, path, op, rest[len(op):].strip()
 
 
 def parse_level(value, name='level'):
@@ -136,7 +168,7 @@ def parse_level(value, name='level'):
         return LEVELS[value.upper()]
     if isinstance(value, int) and not isinstance(value, bool) and value in LEVELS.values():
         return value
-    raise ValueError('%s: %r is not one of %s (or 0-3)' % (name, value, ', '.join(LEVELS)))
+    raise ValueError('%s: %s is not one of %s (or 0-3)' % (name, brief(value), ', '.join(LEVELS)))
 
 
 def level_name(level):
@@ -159,13 +191,15 @@ class RuleTrigger(Trigger):
     def from_config(cls, name, options, context):
         """The rule on its resolved topic, its ``when`` checked against ``type`` (which must be installed)."""
         options = dict(options)
+        if options.get('topic') is not None and not isinstance(options['topic'], str):
+            raise ValueError('topic: %s is not a topic name' % brief(options['topic']))
         if options.get('topic'):
             options['topic'] = context.resolve(options['topic'])
         rule = cls(name, **options)
         if rule.type is not None:
             msg_class = context.message_class(rule.type)
             if msg_class is None:
-                raise ValueError('type: unknown message type %r (not installed)' % rule.type)
+                raise ValueError('type: unknown message type %s (not installed)' % brief(rule.type))
             rule.check(msg_class)
         return rule
 
@@ -200,7 +234,8 @@ class RuleTrigger(Trigger):
         if min_rate is not None:
             if isinstance(min_rate, bool) or not isinstance(min_rate, (int, float)) or not min_rate > 0 \
                     or not math.isfinite(min_rate):
-                raise ValueError('%s: min_rate: %r must be a positive number of messages per second' % (name, min_rate))
+                raise ValueError('%s: min_rate: %s must be a positive number of messages per second'
+                                 % (name, brief(min_rate)))
             self.min_rate = float(min_rate)
         self.over = _seconds(over, '%s: over' % name)
         self.watches_time = self.silent is not None or self.min_rate is not None
@@ -223,6 +258,7 @@ class RuleTrigger(Trigger):
         self._now = None            # message time (newest stamp seen)
         self._since = None          # when the watching began (first message of any topic, or a restart)
         self._last_seen = None      # stamp of the topic's last message
+        self._first_seen = None     # stamp of the topic's first message
         self._recent = collections.deque()  # stamps of the topic's messages within ``over``
         self._slow = False          # silent or slow now (fired for this episode)
 
@@ -289,6 +325,8 @@ class RuleTrigger(Trigger):
 
     def _seen(self, stamp):
         self._last_seen = stamp if self._last_seen is None else max(self._last_seen, stamp)
+        if self._first_seen is None:
+            self._first_seen = stamp
         if self.min_rate is not None:
             self._recent.append(stamp)
 
@@ -301,14 +339,15 @@ class RuleTrigger(Trigger):
             self._since = stamp
         now = self._now
         if self.silent is not None:
-            since = self._last_seen if self._last_seen is not None else self._since
+            since = self._last_seen if self._last_seen is not None else self._since + STARTUP_GRACE
             slow = now - since > self.silent
             reason = '%s silent for more than %gs' % (self.topic, self.silent)
         else:
             recent = self._recent
             while recent and recent[0] <= now - self.over:
                 recent.popleft()
-            slow = now - self._since >= self.over and len(recent) < self.min_rate * self.over
+            start = self._first_seen if self._first_seen is not None else self._since + STARTUP_GRACE
+            slow = now - start >= self.over and len(recent) < self.min_rate * self.over
             reason = '%s below %g Hz (%d messages in %gs)' % (self.topic, self.min_rate, len(recent), self.over)
         fires = []
         if slow and not self._slow and self._may_fire(now):
@@ -335,7 +374,7 @@ class RuleTrigger(Trigger):
 def _seconds(value, name):
     span = Span.parse(value, name)
     if not span.is_duration:
-        raise ValueError('%s: %r must be a duration (2s, 500ms)' % (name, value))
+        raise ValueError('%s: %s must be a duration (2s, 500ms)' % (name, brief(value)))
     return span.seconds
 
 

@@ -1,0 +1,145 @@
+"""Bags built to hurt (issue 29): chunks that claim huge sizes, a topic carrying two message types. Every
+reader (``cclog collect``, ``codecs``, ``plot --bag``, replay's reader) answers with one line naming the file,
+or reads the topic's type and says what it skipped; never a traceback, never gigabytes."""
+import os
+import subprocess
+import sys
+
+import pytest
+
+rosbag = pytest.importorskip('rosbag')
+from cc_log import bag_reader, bagio  # noqa: E402
+from cc_log.formats.bag_salvage import MAX_CHUNK_BYTES  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SMALL = 'sequor_N2_anomalous_jerky_driving.bag'  # 486 kB, 271 messages on each of 5 topics
+OTHER = '/odoX'  # a topic name as long as /odom: renamed to /odom in the bytes
+
+
+def cclog(*args):
+    return subprocess.run([sys.executable, os.path.join(ROOT, 'scripts', 'cclog')] + [str(a) for a in args],
+                          capture_output=True, text=True, timeout=600)
+
+
+def copy_bag(source, path, compression, rename=None):
+    """``source`` written again to ``path`` with ``compression``; ``rename``: {topic: topic written instead}."""
+    with rosbag.Bag(source) as bag_in, rosbag.Bag(str(path), 'w', compression=compression) as bag_out:
+        for topic, raw, stamp, header in bag_in.read_messages(raw=True, return_connection_header=True):
+            topic = (rename or {}).get(topic, topic)
+            bag_out.write(topic, raw, stamp, raw=True, connection_header=dict(header, topic=topic))
+    return str(path)
+
+
+def claim_sizes(path, claimed):
+    """Rewrite the ``size`` field of every LZ4 chunk header of the bag at ``path`` to ``claimed``."""
+    data = bytearray(open(path, 'rb').read())
+    at, count = 0, 0
+    while True:
+        at = data.find(b'compression=lz4', at)
+        if at < 0:
+            break
+        field = data.find(b'\x09\x00\x00\x00size=', at)
+        assert 0 < field - at < 64
+        data[field + 9:field + 13] = int(claimed).to_bytes(4, 'little')
+        at, count = field, count + 1
+    assert count >= 1
+    open(path, 'wb').write(bytes(data))
+    return path
+
+
+@pytest.fixture
+def lz4_bag(real_bag, tmp_path):
+    return copy_bag(real_bag(SMALL), tmp_path / 'small.bag', 'lz4')
+
+
+def windows_of(real_bag, tmp_path, *options):
+    """A directory of window files of the small bag (what ``cclog plot`` draws over a run)."""
+    config = tmp_path / 'fast.yaml'
+    config.write_text("triggers: [{name: fast, kind: rule, topic: /odom, type: nav_msgs/Odometry, "
+                      "when: 'twist.twist.linear.x > 0.3'}]\n")
+    windows = tmp_path / 'windows'
+    result = cclog('replay', real_bag(SMALL), '--config', config, '--out', windows, '--pre', '1s', '--post', '1s',
+                   *options)
+    assert result.returncode == 0 and os.listdir(str(windows)), result.stderr[-2000:]
+    return windows
+
+
+def one_line_naming(result, path):
+    assert result.returncode != 0 and 'Traceback' not in result.stderr, result.stderr[-2000:]
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and path in lines[0], result.stderr[-2000:]
+    return lines[0]
+
+
+@pytest.mark.parametrize('claimed', [MAX_CHUNK_BYTES + 1, 3 << 30, 100 << 20], ids=['cap', '3GB', 'ratio'])
+def test_chunks_claiming_huge_sizes_are_refused_by_every_reader(real_bag, lz4_bag, tmp_path, claimed):
+    assert list(bagio.read_messages(lz4_bag, ['/odom']))  # the bag as written reads
+    hostile = claim_sizes(lz4_bag, claimed)
+    for read in (lambda: list(bagio.read_messages(hostile, ['/odom'])),
+                 lambda: list(bag_reader.read_raw(hostile, ['/odom'])),
+                 lambda: list(bagio.read_raw(hostile, ['/odom']))):
+        with pytest.raises(ValueError) as error:
+            read()
+        text = str(error.value)
+        assert text.startswith(hostile + ': bag is truncated or damaged (chunk at byte ')
+        assert 'declares %d bytes, more than ' % claimed in text and 'lz4, ' in text
+        assert '\n' not in text
+    out = tmp_path / 'vectors'
+    one_line_naming(cclog('collect', hostile, '--topic', '/odom', '--out', out, '--window', '1s'), hostile)
+    one_line_naming(cclog('codecs', hostile, '--topic', '/odom'), hostile)
+    windows = windows_of(real_bag, tmp_path)
+    one_line_naming(cclog('plot', windows, '--out', tmp_path / 'plot.png', '--bag', hostile, '--topic', '/odom'),
+                    hostile)
+
+
+@pytest.fixture
+def two_types_bag(real_bag, tmp_path):
+    """The small bag with /lin_acc's AccelStamped messages also on /odom (a second connection)."""
+    path = copy_bag(real_bag(SMALL), tmp_path / 'two_types.bag', 'none', {'/lin_acc': OTHER})
+    data = open(path, 'rb').read()
+    assert OTHER.encode() in data
+    open(path, 'wb').write(data.replace(OTHER.encode(), b'/odom'))
+    with rosbag.Bag(path) as bag:
+        assert sorted(c.datatype for c in bag._connections.values() if c.topic == '/odom') == [
+            'geometry_msgs/AccelStamped', 'nav_msgs/Odometry']
+    return path
+
+
+def test_a_topic_of_two_types_is_read_as_its_first_type(real_bag, two_types_bag, tmp_path, capfd):
+    records = list(bagio.read_messages(two_types_bag, ['/odom']))
+    assert len(records) == 271 and all(r.msg._type == 'nav_msgs/Odometry' for r in records)
+    warning = capfd.readouterr().err.strip().splitlines()
+    assert warning == ['warning: %s: read as /odom nav_msgs/Odometry; skipped 271 geometry_msgs/AccelStamped on /odom'
+                       % two_types_bag]
+    out = tmp_path / 'vectors'
+    result = cclog('collect', two_types_bag, '--topic', '/odom', '--out', out, '--window', '1s')
+    assert result.returncode == 0 and 'Traceback' not in result.stderr, result.stderr[-2000:]
+    assert 'skipped 271 geometry_msgs/AccelStamped on /odom' in result.stderr
+    assert os.listdir(str(out / 'nominal'))
+    result = cclog('codecs', two_types_bag, '--topic', '/odom')
+    assert result.returncode == 0 and 'Traceback' not in result.stderr, result.stderr[-2000:]
+    assert result.stdout.startswith('271 messages')
+    windows = windows_of(real_bag, tmp_path)
+    result = cclog('plot', windows, '--out', tmp_path / 'plot.png', '--bag', two_types_bag, '--topic', '/odom')
+    assert result.returncode == 0 and 'Traceback' not in result.stderr, result.stderr[-2000:]
+    assert os.path.getsize(str(tmp_path / 'plot.png')) > 0
+
+
+def test_a_damaged_lz4_chunk_is_one_line_naming_the_file(lz4_bag, tmp_path):
+    data = bytearray(open(lz4_bag, 'rb').read())
+    at = data.find(b'compression=lz4') + 200
+    data[at:at + 2000] = b'\xff' * 2000
+    damaged = str(tmp_path / 'damaged.bag')
+    open(damaged, 'wb').write(bytes(data))
+    with pytest.raises(ValueError) as error:
+        list(bagio.read_messages(damaged, ['/odom']))
+    assert str(error.value).startswith(damaged + ': bag is truncated or damaged (chunk at byte ')
+    one_line_naming(cclog('codecs', damaged, '--topic', '/odom'), damaged)
+
+
+def test_a_bag_lz4_window_file_claiming_huge_chunks_is_refused(real_bag, tmp_path):
+    windows = windows_of(real_bag, tmp_path, '--format', 'bag-lz4')
+    window = str(windows / sorted(os.listdir(str(windows)))[0])
+    claim_sizes(window, 3 << 30)
+    line = one_line_naming(cclog('info', window), window)
+    assert 'bag is truncated or damaged (chunk at byte ' in line and 'declares %d bytes' % (3 << 30) in line
