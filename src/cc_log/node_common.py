@@ -39,7 +39,9 @@ MAX_DIAGNOSTIC_PERIOD = 3600.0     # longest ``~diagnostic_period`` (a longer wa
 # Largest values of numeric parameters, where the node's use of them has one (``Params.number``).
 MAXIMA = {'diagnostic_period': MAX_DIAGNOSTIC_PERIOD}
 DEFAULT_MAX_BUFFER_MB = window_buffer.DEFAULT_MAX_BUFFER_MB
-CLOSE_TIMEOUT = 60.0               # seconds to wait at shutdown for the last windows to be written
+CLOSE_TIMEOUT = 10.0               # seconds to wait at shutdown for the last windows to be written: roslaunch
+#                                    sends SIGTERM 15 s after SIGINT (what is not written by then is counted in a
+#                                    last log line; a window file cut off is recovered at the next start)
 CLOSE_RETRY = 5.0                  # seconds held windows are retried at shutdown before they count as lost
 
 
