@@ -24,7 +24,7 @@ Scenarios (bag time from the bag's start):
 - one: ``~trigger`` halfway: one 4 s window (pre 2 s, post 2 s);
 - tenth: ``~trigger_window`` (before 1.5 s, after 1.5 s) at 15 s and every 30 s: windows open 10% of the time;
 - all: ``~trigger_window`` (before 2 s, after the run + 10 s) at 2.5 s: a window open to the end that message
-  time never closes; the node is stopped (SIGINT) 2 s after the play and its files counted once it exits.
+  time never closes; the node is stopped (SIGINT) once the recorders are (2-3 s after the play).
 
 Measured per run:
 - CPU: user + system seconds of each process tree (cost_live.cpu_of) from the play's start to 1 s after it
@@ -32,7 +32,8 @@ Measured per run:
 - peak RSS: VmHWM summed over the process tree (cost_live.memory_mb), sampled every 0.1 s;
 - the window directory, listed every 0.1 s; after the play a window is complete when no ``*.tmp-*`` is left,
   no new file came for 2 s and the node's /diagnostics says writer queue 0, within --wait seconds; then the
-  node is stopped (SIGINT; --wait seconds, then SIGKILL) and the files it writes on the way out count too;
+  node is stopped (SIGINT; after --wait seconds SIGTERM, 5 s later SIGKILL) and the files it writes on the way
+  out count too;
 - s to disk: from the wall time the played clock passed the last window's end (scenario all: the SIGINT) to
   the first sight of the last file (``*``: written only at shutdown; ``>N``: none by then);
 - kept: messages per topic in the window files (log_format.read_window) against the workload's messages whose
@@ -61,6 +62,7 @@ PRE = POST = 2.0            # the node's _pre and _post, seconds
 NODE = '/smart_logger'
 SCENARIOS = ('one', 'tenth', 'all')
 LOSS_WORDS = re.compile(r'lost|dropped|trimmed|unwritten|not written', re.I)
+STATE = ('windows opened', 'windows saved', 'messages kept', 'messages buffered', 'writer queue')  # printed
 NOT_LOSSES = {'messages dropped'}  # /diagnostics: messages outside every window, let go as they should be
 
 
@@ -188,6 +190,20 @@ def signal_group(process, signum):
         pass
 
 
+def stop_node(node, watch, ros, wait):
+    """After its SIGINT: wait for the node to exit, SIGTERM it after ``wait`` s (as roslaunch would), SIGKILL 5 s
+    later; return how it ended."""
+    import signal
+    if sample_until(watch, ros, lambda: node.poll() is not None, wait):
+        return 'exit %s' % node.returncode
+    signal_group(node, signal.SIGTERM)
+    if sample_until(watch, ros, lambda: node.poll() is not None, 5.0):
+        return 'exit %s on SIGTERM %g s after SIGINT' % (node.returncode, wait)
+    signal_group(node, signal.SIGKILL)
+    node.wait(10)
+    return 'SIGKILL (no exit %g s after SIGINT nor 5 s after SIGTERM)' % wait
+
+
 def run(procs, tmp, ros, workload, bag, model, scenario, fmt, args):
     """One scenario with one format: start, play, trigger, measure; return the figures (a dict)."""
     import signal
@@ -228,7 +244,7 @@ def run(procs, tmp, ros, workload, bag, model, scenario, fmt, args):
         if 'thread' in plan:
             plan['thread'].join(30.0)
     sample_until(watch, ros, lambda: False, 1.0)
-    for name, process in (('record', record), ('record_lz4', record_lz4)):
+    for process in (record, record_lz4):
         procs.stop(process)
     if scenario != 'all':  # scenario all: its window ends only when the node is stopped
 
@@ -239,11 +255,7 @@ def run(procs, tmp, ros, workload, bag, model, scenario, fmt, args):
         result['complete'] = sample_until(watch, ros, complete, args.wait)
     result['shutdown_wall'] = time.time()
     signal_group(node, signal.SIGINT)
-    exited = sample_until(watch, ros, lambda: node.poll() is not None, args.wait)
-    if not exited:
-        signal_group(node, signal.SIGKILL)
-        node.wait(10)
-    result['node_exit'] = node.returncode if exited else 'killed after %g s' % args.wait
+    result['node_exit'] = stop_node(node, watch, ros, args.wait)
     watch.sample()
     result['done_wall'] = time.time()
     result['cpu_after'] = watch.cpu['node'] - cpu0['node'] - result['cpu_play']['node']
@@ -252,6 +264,7 @@ def run(procs, tmp, ros, workload, bag, model, scenario, fmt, args):
     result['level'] = ros.level
     result['log'] = loss_lines(os.path.join(tmp, 'node_%s_%s.log' % (scenario, fmt)))
     result['files'] = count_windows(windows)
+    result['leftovers'] = len(watch.temporary)
     result['bags'] = {name: bag_counts(path) for name, path in bags.items()}
     result['seen'], result['clock'] = watch.seen, watch.clock
     shutil.rmtree(work, ignore_errors=True)  # the recorders' bags are large
@@ -358,8 +371,9 @@ def rows_of(result, info, workload):
         detail.append([result['scenario'], result['format'], topic, played] + recorded
                       + ['%d / %d' % (kept[topic], expected[topic])])
     notes = ['%s %s: %s' % (result['scenario'], result['format'], text) for text in
-             ['node exit: %s; last /diagnostics level %s: %s' % (
-                 result['node_exit'], *(result['level'] or ('none', 'no diagnostics received')))]
+             ['node %s; unfinished *.tmp-* files %d; its last /diagnostics: level %s, %s' % (
+                 result['node_exit'], result['leftovers'], *(result['level'] or ('none', 'no diagnostics received')))
+              + ''.join('; %s %s' % (key, result['diagnostics'][key]) for key in STATE if key in result['diagnostics'])]
              + ['node log: ' + line for line in result['log']]
              + ['unreadable window file: ' + e for e in errors] + ['trigger failed: ' + m for m in failed]]
     return main, detail, notes
@@ -387,8 +401,9 @@ def parse(argv):
     formats = list(log_format.Format.ALL)
     parser.add_argument('--format', nargs='+', choices=formats, default=formats,
                         help='window formats, one run each (default every format: %s)' % ' '.join(formats))
-    parser.add_argument('--wait', type=float, default=60.0,
-                        help='at most this many seconds for the windows after the play, and again for the node to exit')
+    parser.add_argument('--wait', type=float, default=65.0,
+                        help='at most this many seconds for the windows after the play, and again for the node to '
+                        'exit after SIGINT (then SIGTERM, as roslaunch, and SIGKILL 5 s later); default 65')
     parser.add_argument('--out', default='/tmp/cc_log_heavy', help='where the workload bag and model are cached')
     parser.add_argument('--quick', dest='preset', action='store_const', const=QUICK, default={},
                         help='6 s, one window, bag-lz4')

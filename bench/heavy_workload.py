@@ -14,7 +14,6 @@ uncompressed chunks; header stamps = bag times, from 1600000000):
 import heapq
 import json
 import os
-import sys
 
 WORKLOAD_VERSION = 1        # bump when the bag's content changes: cached bags of another version are rebuilt
 START = 1600000000.0        # bag time of the first message (cc_log.sim's default start)
@@ -160,8 +159,6 @@ def workload_bag(workload, out):
             return path, info
     except (OSError, ValueError, KeyError):
         pass
-    print('building the workload bag %s ...' % path)
-    sys.stdout.flush()
     return path, build(workload, path)
 
 
