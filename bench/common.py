@@ -68,6 +68,16 @@ def describe_data(path, note=''):
                                                     (' ' + note) if note else '')
 
 
+def revision():
+    """The commit of this tree (``git describe --always --dirty``), or 'unknown' outside git."""
+    import subprocess
+    try:
+        return subprocess.run(['git', '-C', ROOT, 'describe', '--always', '--dirty'], stdout=subprocess.PIPE,
+                              stderr=subprocess.DEVNULL, universal_newlines=True).stdout.strip() or 'unknown'
+    except OSError:
+        return 'unknown'
+
+
 def header(title, data_lines=(), argv=None):
     """Print the standard header of a bench script."""
     print('# %s' % title)

@@ -8,7 +8,7 @@ source .catkin_ws/devel/setup.bash
 export PATH=/usr/bin:$PATH
 OUT=${OUT:-/tmp/cc_log_bench_out}
 mkdir -p "$OUT"
-for script in detection_real detection_sim injected_husky storage cost_offline training cost_live memory_live context_track; do
+for script in detection_real detection_sim injected_husky storage cost_offline training cost_live memory_live context_track heavy_sensors; do
     args="$*"
     if [ "$script" = detection_real ]; then args=""; fi   # the detection engineer's script has no --quick
     echo "== bench/$script.py $args"

@@ -189,3 +189,44 @@ def test_context_track_quick():
 def test_progress_bars_quick():
     out = run('progress_bars.py', '--quick')
     assert 'microseconds per update()' in out and '| disabled ' in out and '| enabled, drawn ' in out
+
+
+def test_heavy_workload_has_the_stated_sizes(tmp_path):
+    pytest.importorskip('roslz4', reason='needs a sourced ROS workspace (rosbag, roslz4)')
+    import rosbag
+    sys.path.insert(0, BENCH)
+    import heavy_workload
+    one = heavy_workload.Workload(cameras=1, seconds=1.0)
+    path, info = heavy_workload.workload_bag(one, str(tmp_path))
+    assert heavy_workload.workload_bag(one, str(tmp_path))[1] == info  # cached, not rebuilt
+    with rosbag.Bag(path) as bag:
+        counts = {topic: i.message_count for topic, i in bag.get_type_and_topic_info().topics.items()}
+        assert bag.get_compression_info().compression == 'none'
+        frames = [msg for _, msg, _ in bag.read_messages(topics=['/camera/image_raw'])]
+        scan = next(msg for _, msg, _ in bag.read_messages(topics=['/velodyne_points']))
+    assert counts == {'/camera/image_raw': 30, '/velodyne_points': 10, '/odom': 100, '/imu/data': 100}
+    assert (frames[0].width, frames[0].height, frames[0].encoding, frames[0].step) == (640, 480, 'rgb8', 1920)
+    assert len(frames[0].data) == 921600 and len(set(frame.data for frame in frames)) == 30  # every frame differs
+    assert (scan.width * scan.height, scan.point_step, len(scan.data)) == (28800, 32, 28800 * 32)
+    assert [field.name for field in scan.fields] == ['x', 'y', 'z', 'intensity', 'ring', 'time']
+    assert 36.5e6 <= sum(info['bytes'].values()) <= 37.5e6  # bytes in 1 s: ~37 MB/s
+    assert info['ratios']['/camera/image_raw']['lz4'] > 0.95  # LZ4 does not make the frames free
+    two = heavy_workload.Workload(cameras=2, seconds=1.0)
+    _, info = heavy_workload.workload_bag(two, str(tmp_path))
+    assert sorted(info['bytes']) == sorted(['/camera/image_raw', '/camera2/image_raw', '/velodyne_points', '/odom',
+                                            '/imu/data'])
+    assert info['message_bytes']['/velodyne_points'] - 131072 * 32 < 200  # 128 x 1024 points
+    assert 95e6 <= sum(info['bytes'].values()) <= 100e6
+
+
+@pytest.mark.skipif(shutil.which('roscore') is None or shutil.which('rosrun') is None,
+                    reason='needs roscore and rosrun (a sourced ROS workspace)')
+def test_heavy_sensors_quick(tmp_path):
+    out = run('heavy_sensors.py', '--quick', '--out', str(tmp_path))
+    assert 'workload: 37.0 MB/s for 6 s' in out and 'node / record --lz4 CPU' in out
+    row = next(line for line in out.splitlines() if line.startswith('| one ') and 'bag-lz4' in line)
+    cells = [cell.strip() for cell in row.split('|')[1:-1]]
+    assert cells[7].endswith(' / 120')  # the 4 s window spans 120 frames of the 30 Hz camera
+    detail = next(line for line in out.splitlines() if line.startswith('| one ') and '/camera/image_raw' in line)
+    played, recorded, recorded_lz4 = (cell.strip() for cell in detail.split('|')[4:7])
+    assert played == '180' and recorded.isdigit() and recorded_lz4.isdigit()
