@@ -238,13 +238,13 @@ def test_info_of_a_directory_and_of_a_file(replayed):
     assert info['total']['messages'] == sum(w['messages'] for w in summary['windows'])
     assert info['total']['bytes'] == summary['stored_bytes']
     first = info['windows'][0]
-    assert first['codec'] == 'json-xz'
+    assert first['codec'] == 'bag-lz4'
     assert first['start'] == summary['windows'][0]['start'] and first['end'] == summary['windows'][0]['end']
     assert set(first['topics']) == {'/odom', '/scan'} and sum(first['topics'].values()) == first['messages']
     assert first['reason'] == 'classifier' and first['triggers']
     assert first['min_score'] < first['threshold']  # a classifier trigger means score below the threshold
     text = ok('info', summary['windows'][0]['path'])
-    assert 'codec      json-xz' in text and 'trigger    classifier' in text
+    assert 'codec      bag-lz4' in text and 'trigger    classifier' in text
 
 
 def test_cat_decodes_every_message_and_other_cc_log_files(replayed, trained):
@@ -256,7 +256,7 @@ def test_cat_decodes_every_message_and_other_cc_log_files(replayed, trained):
     odom = [row for row in rows if row['topic'] == '/odom']
     assert odom[0]['type'] == 'nav_msgs/Odometry' and 'twist' in odom[0]['msg']
     only = ok('cat', window['path'], '--topic', '/scan', '--metadata').splitlines()
-    assert json.loads(only[0])['metadata']['codec'] == 'json-xz'
+    assert json.loads(only[0])['metadata']['codec'] == 'bag-lz4'
     assert len(only) - 1 == sum(1 for row in rows if row['topic'] == '/scan')
     model = ok('cat', trained['model']).splitlines()
     assert len(model) == 1 and json.loads(model[0])['format'] == 'cc_log-model'
@@ -295,7 +295,7 @@ def test_export_to_bag_csv_and_jsonl(replayed, tmp_path):
 
 # -- codecs, plot, simulate -----------------------------------------------------------------------------------
 
-TABLE_2 = ['none', 'LZ4', 'LZFSE', 'ZIP', 'gzip', 'bzip2', 'LZMA-6', 'zstd', 'cc_log json-xz', 'cc_log bag-lz4']
+TABLE_2 = ['none', 'LZ4', 'LZFSE', 'ZIP', 'gzip', 'bzip2', 'LZMA-6', 'zstd', 'cc_log bag-lz4', 'cc_log json-xz']
 
 
 def test_codecs_on_a_bag_topic(real_bag):

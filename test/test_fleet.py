@@ -273,7 +273,7 @@ def test_ctrl_c_stops_a_replay_in_this_process_within_a_second(tmp_path):
     (tmp_path / 'hot.json').write_text(json.dumps(model))
     out = tmp_path / 'windows'
     process = started('replay', bag, '--topic', '/odom', '--side-topic', '/imu/data', '--model',
-                      tmp_path / 'hot.json', '--out', out, '--workers', 0)
+                      tmp_path / 'hot.json', '--out', out, '--workers', 0, '--format', 'json-xz')
     # well into the run: the process has spent 2 s of CPU since its output directory appeared (of ~5 s)
     wait_for(lambda: os.path.isdir(str(out / 'run')), process, 'output directory')
     begun = cpu_seconds(process.pid)

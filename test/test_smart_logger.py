@@ -227,11 +227,11 @@ def test_writer_thread_never_blocks_the_message_path(husky, tmp_path, monkeypatc
     real_write = log_format.write_window
     calls = []
 
-    def slow_write(window, directory, fmt, metadata=None):
+    def slow_write(window, directory, fmt, metadata=None, **options):
         calls.append(len(window))
         writing.set()
         release.wait(30)
-        return real_write(window, directory, fmt, metadata)
+        return real_write(window, directory, fmt, metadata, **options)
 
     monkeypatch.setattr(log_format, 'write_window', slow_write)
     model = ScriptedModel({50, 150, 250, 350})

@@ -23,7 +23,7 @@ from .topic_watch import TopicWatcher
 
 __all__ = ['NodeExtras']
 
-CLOSE_TIMEOUT = 3.0  # seconds the context track may take to close at shutdown, after the windows (roslaunch: 15 s in all)
+CLOSE_TIMEOUT = 3.0  # seconds the context track may take to close at shutdown, after the windows' 10 s
 
 
 class NodeExtras(object):
