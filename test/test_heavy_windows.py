@@ -302,3 +302,19 @@ def test_bad_topic_limits_are_one_line_naming_the_key(value, error):
     with pytest.raises(ValueError) as raised:
         config.parse_topic_limits(value)
     assert error in str(raised.value) and '\n' not in str(raised.value)
+
+
+def test_a_latched_message_opens_a_window_in_parts_once(tmp_path):
+    from std_msgs.msg import String
+    latched = dict(class_header('/tf_static', String), latching='1', callerid='/robot_state_publisher')
+    static = Record(T0 - 10.0, '/tf_static', None, 0, serialized(String(data='base_link->camera')), latched)
+    records = [static] + stream(6, size=(320, 240))
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM,
+                         side_topics=[CAMERA, '/tf_static'], background=False, max_buffer_mb=8)
+    feed(logger, records, trigger_at=T0 + 1.5, before=1.0, after=3.0)
+    logger.close()
+    path, = log_format.window_files(str(tmp_path))
+    metadata, kept = log_format.read_window(path)
+    assert metadata['counts']['/tf_static'] == 1 and kept[0].topic == '/tf_static'  # once, first, as rosbag
+    assert kept[0].stamp == metadata['start'] and kept[0].connection['latching'] == '1'
+    assert metadata['counts'][CAMERA] * 230400 > 2 * 8e6  # written in several parts

@@ -715,8 +715,9 @@ class SmartLogger(object):
 
     def _with_latched(self, window):
         """``window`` with, first, the newest message of each latched topic from before its start (not one it
-        holds), restamped at its start, as ``rosbag record`` writes latched messages when it subscribes."""
-        if not self._latched:
+        holds), restamped at its start, as ``rosbag record`` writes latched messages when it subscribes (in the
+        first part of a window whose parts go into one file)."""
+        if not self._latched or not window.records or (window.part > 1 and log_format.streams(self.format)):
             return window
         held = set(id(record) for record in window.records)
         start = window.start
@@ -757,10 +758,11 @@ class SmartLogger(object):
             return
         window, metadata = event.job.window, event.job.metadata
         scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
-        first = window.triggers[0].stamp if window.triggers else window.start
+        start, end = (window.start, window.end) if len(window) else (None, None)  # (the end of a window in parts)
+        first = window.triggers[0].stamp if window.triggers else start
         kind = WRITTEN if event.kind == window_writer.WRITTEN else FAILED
         self._emit(Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
-                         self._threshold_of(metadata['trigger']), window.start, window.end, len(window), event.path,
+                         self._threshold_of(metadata['trigger']), start, end, len(window), event.path,
                          event.bytes, event.error, metadata['trigger']))
 
     def _emit(self, event):
