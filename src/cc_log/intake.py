@@ -224,6 +224,7 @@ class Intake(object):
 
     def _feed(self):
         batched = hasattr(self.sink, 'on_records')
+        self._await_clock()
         while True:
             batch = self.queue.take_batch(self.batch_delay)
             started = time.thread_time()
@@ -232,6 +233,21 @@ class Intake(object):
                     return
             finally:
                 self.cpu_seconds += time.thread_time() - started
+
+    @staticmethod
+    def _await_clock():
+        """Under ``use_sim_time``, hand nothing over before the first /clock (the queue holds what comes, bounded):
+        what arrived before it gets that first clock as its receipt time (``_receipt``), never 1970."""
+        if rospy.get_param('/use_sim_time', False):
+            while rospy.get_rostime().is_zero() and not rospy.is_shutdown():
+                time.sleep(0.05)
+
+    @staticmethod
+    def _receipt(receipt):
+        """Float seconds of a receipt time; one taken before the clock started (zero) is now."""
+        if receipt.is_zero():
+            receipt = rospy.get_rostime()
+        return receipt.secs + 1e-9 * receipt.nsecs
 
     def _feed_each(self, batch):
         """Hand a drained batch to the sink message by message; False once the end mark (None) is reached."""
@@ -265,8 +281,7 @@ class Intake(object):
             elif not self.decoder.accepts(msg._connection_header, topic):
                 self.dropped += 1  # refused (warned once by the decoder)
             else:
-                records.append(Record(receipt.secs + 1e-9 * receipt.nsecs, topic, None, 0, msg._buff,
-                                      msg._connection_header))
+                records.append(Record(self._receipt(receipt), topic, None, 0, msg._buff, msg._connection_header))
         self._feed_batch(records)
         return True
 
@@ -292,13 +307,13 @@ class Intake(object):
                 if not self.decoder.accepts(msg._connection_header, topic):
                     self.dropped += 1  # refused (warned once by the decoder)
                     return
-                self.sink.on_raw(topic, msg._buff, msg._connection_header, receipt.secs + 1e-9 * receipt.nsecs)
+                self.sink.on_raw(topic, msg._buff, msg._connection_header, self._receipt(receipt))
                 return
             decoded = self.decoder.decode(msg, topic)
             if decoded is None:  # refused (warned once by the decoder)
                 self.dropped += 1
                 return
-            self.sink.on_message(topic, decoded, receipt.secs + 1e-9 * receipt.nsecs,
+            self.sink.on_message(topic, decoded, self._receipt(receipt),
                                  len(getattr(msg, '_buff', b'') or b''))
         except raw_message.DECODE_ERRORS as error:
             self.dropped += 1

@@ -83,7 +83,7 @@ of up to half a second (``SmartLogger.on_records``: decoded only where a field i
 waits for the messages received before it), whose writer thread decodes (json-xz), compresses and writes.
 Stamps are header stamps (receipt time for messages without one; the driving topic's set the clock, and a
 message of another topic stamped more than 5 s off it is placed at its arrival), so ``use_sim_time`` (the
-node waits for /clock) and ``rosbag play --clock`` work, and time jumping backwards (a bag played again)
+intake hands nothing over before the first /clock) and ``rosbag play --clock`` work, and time jumping backwards (a bag played again)
 restarts the buffer instead of failing; the silence ticker runs on wall time.
 """
 import math
@@ -198,7 +198,6 @@ class SmartNode(object):
         self.learners = [(t.name, t.learner) for t in classifiers if t.learner is not None]
         if self.learners:
             self.logger.on_event(self._flag_learners)
-        wait_for_clock()
         self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
@@ -368,14 +367,6 @@ class SmartNode(object):
 def _per_topic(counts):
     """``{topic: n}`` as one line, largest first ('none' when empty)."""
     return ', '.join('%s: %d' % item for item in sorted(counts.items(), key=lambda item: (-item[1], item[0]))) or 'none'
-
-
-def wait_for_clock():
-    """Under ``use_sim_time``, wait (wall time) for the first ``/clock``: files are named by it."""
-    if rospy.get_rostime().is_zero() and rospy.get_param('/use_sim_time', False):
-        rospy.loginfo('use_sim_time: waiting for /clock')
-        while rospy.get_rostime().is_zero() and not rospy.is_shutdown():
-            time.sleep(0.05)
 
 
 class WallTicker(object):
