@@ -3,7 +3,8 @@
 
 The node is started before any /clock: it subscribes at once, but hands nothing over before the first /clock,
 so a message received at time 0 is named by the sim clock, not 1970 (a context track of the odometry is on).
-This node then publishes /clock (2015, as a bag played with ``--clock``), odometry and a heartbeat stamped by it, and a 15 Hz camera stamped by the wall clock (another clock, years away):
+This node then publishes /clock (2015, as a bag played with ``--clock``), odometry and a heartbeat stamped by it,
+and a 15 Hz camera stamped by the wall clock (another clock, years away):
 
 1. ``~trigger_window``: one bag file, whose camera frames are those that arrived in the window's span (by the
    node's clock), counted as restamped on /diagnostics; the context file is named from 2015, not 1970;

@@ -83,8 +83,8 @@ of up to half a second (``SmartLogger.on_records``: decoded only where a field i
 waits for the messages received before it), whose writer thread decodes (json-xz), compresses and writes.
 Stamps are header stamps (receipt time for messages without one; the driving topic's set the clock, and a
 message of another topic stamped more than 5 s off it is placed at its arrival), so ``use_sim_time`` (the
-intake hands nothing over before the first /clock) and ``rosbag play --clock`` work, and time jumping backwards (a bag played again)
-restarts the buffer instead of failing; the silence ticker runs on wall time.
+intake hands nothing over before the first /clock) and ``rosbag play --clock`` work, and time jumping
+backwards (a bag played again) restarts the buffer instead of failing; the silence ticker runs on wall time.
 """
 import math
 import sys
