@@ -318,3 +318,12 @@ def test_a_latched_message_opens_a_window_in_parts_once(tmp_path):
     assert metadata['counts']['/tf_static'] == 1 and kept[0].topic == '/tf_static'  # once, first, as rosbag
     assert kept[0].stamp == metadata['start'] and kept[0].connection['latching'] == '1'
     assert metadata['counts'][CAMERA] * 230400 > 2 * 8e6  # written in several parts
+
+
+@pytest.mark.parametrize('before, after', [(1.0, 1e12), (1e9, 1.0), (1.0, float('inf')), (-1.0, 1.0)])
+def test_a_manual_window_asks_for_at_most_a_day(before, after, tmp_path):
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, background=False)
+    feed(logger, stream(1, camera_hz=1))
+    ok, why = logger.trigger_now('x', before, after)
+    assert not ok and 'seconds from 0 to 86400' in why and len(why) < 120
+    assert logger.trigger_now('x', 1.0, 86400.0)[0]

@@ -263,7 +263,7 @@ def test_manual_request_with_a_reason_and_its_own_span(tmp_path):
         logger.on_message(topic, msg, stamp)
     ok, message = logger.trigger_now('operator saw a wobble', before=0.5, after=3.0)
     assert ok and 'operator saw a wobble' in message and 'from 104.480' in message
-    assert logger.trigger_now('x', before=-1.0) == (False, 'before: -1.0 must be a number of seconds >= 0')
+    assert logger.trigger_now('x', before=-1.0) == (False, 'before: -1.0 must be a number of seconds from 0 to 86400')
     for topic, msg, stamp in items[500:]:
         logger.on_message(topic, msg, stamp)
     assert logger.close(30)

@@ -7,11 +7,13 @@ has start and stop times, with the after-part too. Pure: no rospy.
 """
 import math
 
+from ..safe_input import brief
 from ..spans import Span
 from .base import Fire, Trigger, register
 
 DEFAULT_REASON = 'manual'
 MAX_REASON = 200  # characters of a request's reason kept (it goes into metadata and events)
+MAX_SECONDS = 86400.0  # the longest before / after a request may ask for (a day: a window streams to disk)
 
 
 @register
@@ -32,8 +34,8 @@ class ManualTrigger(Trigger):
                 spans.append(default)
                 continue
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value < 0:
-                raise ValueError('%s: %r must be a number of seconds >= 0' % (name, value))
+                    or value < 0 or value > MAX_SECONDS:
+                raise ValueError('%s: %s must be a number of seconds from 0 to %g' % (name, brief(value), MAX_SECONDS))
             spans.append(Span.duration(value))
         text = ' '.join(str(reason or '').split())[:MAX_REASON] or DEFAULT_REASON
         self.fired += 1
