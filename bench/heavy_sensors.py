@@ -213,7 +213,8 @@ def run(procs, tmp, ros, workload, bag, model, scenario, fmt, args):
     ros.reset()
     node = procs.start('node_%s_%s' % (scenario, fmt), [
         'rosrun', 'cc_log', 'smart_logger.py', '_model:=' + model, 'odom:=/odom', '_directory:=' + windows,
-        '_topics:=' + workload.node_topics(), '_pre:=%gs' % PRE, '_post:=%gs' % POST, '_format:=' + fmt])
+        '_topics:=' + workload.node_topics(), '_pre:=%gs' % PRE, '_post:=%gs' % POST, '_format:=' + fmt]
+        + args.node_param)
     bags = {'record': os.path.join(work, 'record.bag'), 'record_lz4': os.path.join(work, 'record_lz4.bag')}
     record = procs.start('record_%s_%s' % (scenario, fmt), ['rosbag', 'record', '-O', bags['record']] + workload.topics)
     record_lz4 = procs.start('record_lz4_%s_%s' % (scenario, fmt),
@@ -405,6 +406,8 @@ def parse(argv):
                         help='at most this many seconds for the windows after the play, and again for the node to '
                         'exit after SIGINT (then SIGTERM, as roslaunch, and SIGKILL 5 s later); default 65')
     parser.add_argument('--out', default='/tmp/cc_log_heavy', help='where the workload bag and model are cached')
+    parser.add_argument('--node-param', action='append', default=[], metavar='_NAME:=VALUE',
+                        help='another parameter of the node, e.g. _max_buffer_mb:=512 (repeatable)')
     parser.add_argument('--quick', dest='preset', action='store_const', const=QUICK, default={},
                         help='6 s, one window, bag-lz4')
     args = parser.parse_args(argv)
@@ -448,8 +451,8 @@ def main(argv=None):
         common.describe_data(bag, '(uncompressed chunks)'),
         'date: %s; code: %s; node: rosrun cc_log smart_logger.py from %s' % (
             time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()), common.revision(), package.stdout.strip() or '?'),
-        'runs: scenarios %s x formats %s; node _pre:=%gs _post:=%gs, motion model that never fires'
-        % (', '.join(args.scenarios), ', '.join(args.format), PRE, POST)])
+        'runs: scenarios %s x formats %s; node _pre:=%gs _post:=%gs%s, motion model that never fires'
+        % (', '.join(args.scenarios), ', '.join(args.format), PRE, POST, ''.join(' ' + p for p in args.node_param))])
     results = []
     with roscore_session('cc_log_bench_heavy_') as (procs, tmp):
         import rosgraph
