@@ -166,7 +166,7 @@ class TriggersTest(unittest.TestCase):
         self.assertEqual(metadata['reason'], 'motors: ERROR overcurrent')
         self.assertEqual(len(metadata['triggers']), 1)
         self.assertEqual(metadata['triggers'][0]['stamp'], odom[ERROR_AT].stamp)
-        self.assertTrue(path.endswith('_motor-error.json.xz'), path)
+        self.assertTrue(path.endswith('_motor-error.bag'), path)
         opened = [e for e in self.events if e.event == AnomalyEvent.OPENED]
         self.assertEqual([(e.trigger, e.reason) for e in opened], [('motor_error', 'motors: ERROR overcurrent')])
 

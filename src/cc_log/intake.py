@@ -238,7 +238,7 @@ class Intake(object):
     def _await_clock():
         """Under ``use_sim_time``, hand nothing over before the first /clock (the queue holds what comes, bounded):
         what arrived before it gets that first clock as its receipt time (``_receipt``), never 1970."""
-        if rospy.get_param('/use_sim_time', False):
+        if not rospy.rostime.is_wallclock():  # use_sim_time (read by init_node; no master asked here)
             while rospy.get_rostime().is_zero() and not rospy.is_shutdown():
                 time.sleep(0.05)
 
