@@ -263,8 +263,7 @@ def test_a_writer_that_falls_behind_drops_heavy_frames_counted_never_light_ones(
     kept = [log_format.read_window(path) for path in log_format.window_files(str(tmp_path))]
     start = min(meta['start'] for meta, _ in kept)
     assert T0 + 0.5 <= start <= T0 + 1.0
-    end = max(meta['end'] for meta, _ in kept)
-    in_window = [r for r in records if start <= r.stamp <= end]
+    in_window = [r for r in records if start <= r.stamp]  # open to the end of the stream
     odom_kept = sum(meta['counts'].get(ODOM, 0) for meta, _ in kept)
     assert odom_kept == sum(1 for r in in_window if r.topic == ODOM)  # every light message
     camera_kept = sum(meta['counts'].get(CAMERA, 0) for meta, _ in kept)
@@ -327,3 +326,16 @@ def test_a_manual_window_asks_for_at_most_a_day(before, after, tmp_path):
     ok, why = logger.trigger_now('x', before, after)
     assert not ok and 'seconds from 0 to 86400' in why and len(why) < 120
     assert logger.trigger_now('x', 1.0, 86400.0)[0]
+
+
+def test_a_window_still_open_at_the_end_keeps_the_frames_after_the_last_odometry(tmp_path):
+    records = stream(3)
+    records.append(Record(T0 + 3.01, CAMERA, None, 0, serialized(image(T0 + 3.01)), CONNECTIONS[CAMERA]))
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, side_topics=[CAMERA],
+                         background=False)
+    feed(logger, records, trigger_at=T0 + 1.0, before=0.5, after=60.0)
+    logger.close()
+    path, = log_format.window_files(str(tmp_path))
+    metadata, kept = log_format.read_window(path)
+    assert kept[-1].topic == CAMERA and kept[-1].stamp == pytest.approx(T0 + 3.01)
+    assert metadata['counts'][CAMERA] == sum(1 for r in records if r.topic == CAMERA and r.stamp >= metadata['start'])

@@ -397,18 +397,21 @@ class WindowBuffer(object):
         return dropped
 
     def flush(self):
-        """Complete every window now (end of stream): the open one is written with what it has."""
+        """Complete every window now (end of stream): the open one is written with what it has, messages of
+        other topics that came after its last driving message included (its span had not ended)."""
         done = []
-        for window in (self._pending, self._open):
-            if window is not None:
-                done.extend(self._finish(window))
+        if self._pending is not None:
+            done.extend(self._finish(self._pending))
+        if self._open is not None:
+            done.extend(self._finish(self._open, everything=True))
         self._pending = self._open = None
         return done
 
-    def _finish(self, window):
-        """The last part of a window (or the whole window); nothing for a window that holds nothing."""
-        if window.records:
-            return [self._emit(window)]
+    def _finish(self, window, everything=False):
+        """The last part of a window (or the whole window; ``everything``: with every side record held from its
+        start on); nothing for a window that holds nothing."""
+        if window.records or (everything and any(self._side.values())):
+            return [self._emit(window, everything=everything)]
         if window.part:  # its records went out in parts: say that it ended
             return [LogWindow([], list(window.triggers), window.part, True, window.key)]
         return []
