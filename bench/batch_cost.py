@@ -20,9 +20,11 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import bagio, learning, raw_message, sim  # noqa: E402
+from cc_log.storage.bag import bagio  # noqa: E402
+from cc_log.core import learning, raw_message  # noqa: E402
+from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
-from cc_log.smart_logger import SmartLogger  # noqa: E402
+from cc_log.core.smart import SmartLogger  # noqa: E402
 from cc_log.triggers.classifier import ClassifierTrigger  # noqa: E402
 
 

@@ -142,7 +142,7 @@ class Timer(object):
 
 def husky_records(topics=(HUSKY_ODOM,)):
     """Record(stamp, topic, msg) of the Husky bag's ``topics``, in bag order."""
-    from cc_log import bagio
+    from cc_log.storage.bag import bagio
     return list(bagio.read_messages(HUSKY_BAG, list(topics)))
 
 
@@ -168,7 +168,7 @@ def write_bag(path, records, compression='none'):
 def sim_records(config):
     """(records, truth) of a whole simulated run: Record(stamp, topic, msg) in time order (header stamps)."""
     from cc_log import sim
-    from cc_log.window_buffer import Record
+    from cc_log.core.window_buffer import Record
     simulator = sim.Simulator(config)
     records = [Record(stamp, topic, msg) for topic, stamp, msg in simulator.messages()]
     return records, simulator.truth
@@ -196,8 +196,8 @@ def smart_replay(model, records, driving_topic, directory, side_topics=(), fmt='
     """Feed records (decoded or serialized) to a SmartLogger through ``smart_logger.replay_records``, the
     replay of ``cclog replay``; return a dict: stats (SmartLogger.stats()), windows [{start, end, messages,
     path, bytes, triggers: [stamps]}]. ``triggers``: more triggers beside ``model``'s classifier."""
-    from cc_log import log_format
-    from cc_log.smart_logger import SmartLogger, replay_records
+    from cc_log.storage import log_format
+    from cc_log.core.smart import SmartLogger, replay_records
     logger = SmartLogger(model, directory, fmt, pre, post, driving_topic=driving_topic,
                          side_topics=tuple(side_topics), retrigger=retrigger, triggers=triggers)
     windows = replay_records(logger, records)['windows']

@@ -23,9 +23,10 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import sim, stats  # noqa: E402
-from cc_log.context_track import ContextTrack  # noqa: E402
-from cc_log.window_buffer import Record  # noqa: E402
+from cc_log import sim  # noqa: E402
+from cc_log.offline import stats  # noqa: E402
+from cc_log.storage.context_track import ContextTrack  # noqa: E402
+from cc_log.core.window_buffer import Record  # noqa: E402
 
 
 def run(minutes, noise, directory):

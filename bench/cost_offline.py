@@ -40,9 +40,10 @@ import common  # noqa: E402
 import genpy  # noqa: E402
 import rosbag  # noqa: E402
 
-from cc_log import learning, sim  # noqa: E402
+from cc_log.core import learning  # noqa: E402
+from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
-from cc_log.smart_logger import replay  # noqa: E402
+from cc_log.core.smart import replay  # noqa: E402
 
 
 def plain_read(path, topics):
@@ -54,10 +55,10 @@ def plain_read(path, topics):
 
 
 STAGES = (  # (stage, substrings of the file names whose functions' own time counts for it), first match wins
-    ('bag read', ('/cc_log/bag_reader.py', '/cc_log/bagio.py')),
+    ('bag read', ('/cc_log/storage/bag/bag_reader.py', '/cc_log/storage/bag/bagio.py')),
     ('features', ('/cc_log/features/',)),
-    ('classifier', ('/cc_log/model.py', '/cc_log/triggers/classifier.py', '/sklearn/', '/numpy/', '/scipy/')),
-    ('window buffer, triggers', ('/cc_log/window_buffer.py', '/cc_log/smart_logger.py', '/cc_log/triggers/')),
+    ('classifier', ('/cc_log/core/model.py', '/cc_log/triggers/classifier.py', '/sklearn/', '/numpy/', '/scipy/')),
+    ('window buffer, triggers', ('/cc_log/core/window_buffer.py', '/cc_log/core/smart.py', '/cc_log/triggers/')),
     ('writer (decode, json-xz, disk)', ('/cc_log/', 'lzma', 'json', '/genpy/', '_Odometry', '_Imu', 'dynamic')),
     ('bag read', ('/rosbag/', 'bz2', 'lz4', '/roslz4/')),
 )
@@ -75,8 +76,8 @@ def profile(path, topics, model_path, out, name, top, fmt='json-xz'):
     functions grouped by file) and the ``top`` functions by own time."""
     import cProfile
     import pstats
-    from cc_log.model import AnomalyModel
-    from cc_log.smart_logger import SmartLogger, replay_into
+    from cc_log.core.model import AnomalyModel
+    from cc_log.core.smart import SmartLogger, replay_into
     logger = SmartLogger(AnomalyModel.load(model_path), out, fmt=fmt, driving_topic=topics[0],
                          side_topics=tuple(topics[1:]), background=False)
     profiler = cProfile.Profile()
@@ -124,8 +125,8 @@ def writer_cost(windows, rounds):
     document + JSON) now (``json_xz.decoded_records``: fields read from the bytes) and earlier (every message
     decoded by genpy, ``raw_message.decoded_records``, then rows), and of LZMA on that text. Both texts must be
     the same."""
-    from cc_log import raw_message
-    from cc_log.formats import json_xz
+    from cc_log.core import raw_message
+    from cc_log.storage.formats import json_xz
     times = {'now': [], 'earlier': [], 'lzma': []}
     texts = {}
     for _ in range(rounds):
@@ -167,7 +168,7 @@ class BagTime(genpy.Time):
 def rosbag_write(path, messages, headers):
     """``messages`` and ``headers`` (``bag_lz4.bag_messages``) written by rosbag, as bag-lz4 wrote them before
     ``formats.bag_writer`` (raw, with the connection headers, ``BagTime``)."""
-    from cc_log import raw_message
+    from cc_log.core import raw_message
     classes = dict((topic, raw_message.message_class(header)) for topic, header in headers.items())
     bag = rosbag.Bag(path, 'w', compression=rosbag.Compression.LZ4)
     for topic, secs, nsecs, data in messages:
@@ -181,7 +182,8 @@ def bag_writer_cost(windows, rounds, tmp):
     """``{'rosbag': CPU s, 'bag_writer': CPU s}``: best of ``rounds`` alternating runs over ``windows`` of the
     bag-lz4 writer (``bag_lz4.bag_messages``, then the file) with the bag written by rosbag (as before) and by
     ``formats.bag_writer`` (now); the files must be the same, byte for byte."""
-    from cc_log.formats import bag_lz4, bag_writer
+    from cc_log.storage.formats import bag_lz4
+    from cc_log.storage.bag import bag_writer
     times = {'rosbag': [], 'bag_writer': []}
     files = {}
     for k in range(rounds):
@@ -208,7 +210,7 @@ def bag_writer_cost(windows, rounds, tmp):
 
 def kept_windows(path, topics, model_path, tmp):
     """``[(metadata, records)]`` of the json-xz windows a replay of ``path`` writes, read back."""
-    from cc_log import log_format
+    from cc_log.storage import log_format
     out = os.path.join(tmp, 'kept')
     replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt='json-xz')
     windows = [log_format.read_window(os.path.join(out, name)) for name in sorted(os.listdir(out))

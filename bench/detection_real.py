@@ -32,7 +32,8 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'src'))
 
-from cc_log import bagio, learning  # noqa: E402
+from cc_log.storage.bag import bagio  # noqa: E402
+from cc_log.core import learning  # noqa: E402
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
 
 DATA = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real'))

@@ -73,7 +73,10 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 import retime  # noqa: E402
-from cc_log import bagio, learning, sim, tuning  # noqa: E402
+from cc_log.storage.bag import bagio  # noqa: E402
+from cc_log.core import learning  # noqa: E402
+from cc_log import sim  # noqa: E402
+from cc_log.offline import tuning  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream, vector_length  # noqa: E402
 
 # (name, odometry topic, seconds after the start where nominal driving ends or None)

@@ -36,7 +36,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import learning, sim  # noqa: E402
+from cc_log.core import learning  # noqa: E402
+from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig, OdometryFeatures, vector_length, window_vector  # noqa: E402
 
 PAPER = learning.Report(512, 20, 183, 0, 309, 20 / 203.0, 1.0)

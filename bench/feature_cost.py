@@ -27,9 +27,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, 'src'))
 
 import common  # noqa: E402
-from cc_log import bagio, learning, raw_message  # noqa: E402
+from cc_log.storage.bag import bagio  # noqa: E402
+from cc_log.core import learning, raw_message  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureWindow, OdometryFeatures, window_vector  # noqa: E402
-from cc_log.model import AnomalyModel  # noqa: E402
+from cc_log.core.model import AnomalyModel  # noqa: E402
 
 BAG = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real', 'husky_outdoor_2015.bag'))
 TOPIC = '/husky_velocity_controller/odom'

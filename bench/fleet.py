@@ -44,7 +44,9 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import fleet, learning, sim  # noqa: E402
+from cc_log.offline import fleet  # noqa: E402
+from cc_log.core import learning  # noqa: E402
+from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 
 CCLOG = os.path.join(common.ROOT, 'scripts', 'cclog')
@@ -159,7 +161,7 @@ def save_results(work, results):
 
 def partition_of_run(job):
     """Nominal vectors of one run: every ``stride``-th window of /odom not reached by an anomaly of its truth."""
-    from cc_log import bagio
+    from cc_log.storage.bag import bagio
     path, stride = job
     config = FeatureConfig('motion', WINDOW)
     stamps, X = bagio.feature_vectors(path, '/odom', config, stride)

@@ -44,9 +44,9 @@ try:
 except ImportError:
     sys.path.insert(0, os.path.join(ROOT, 'src'))
     import cc_log
-from cc_log import msg_codec  # noqa: E402
-from cc_log.formats import json_xz  # noqa: E402
-from cc_log.window_buffer import Record  # noqa: E402
+from cc_log.core import msg_codec  # noqa: E402
+from cc_log.storage.formats import json_xz  # noqa: E402
+from cc_log.core.window_buffer import Record  # noqa: E402
 
 BAGS = [
     ('husky_outdoor_2015.bag', '/husky_velocity_controller/odom'),
@@ -164,7 +164,7 @@ LAYOUTS = [('rows', rows_layout), ('columns-v1', v1_layout), ('columns', columns
 
 
 def bag_bytes(records):
-    from cc_log.formats import bag_lz4
+    from cc_log.storage.formats import bag_lz4
     with tempfile.TemporaryDirectory() as directory:
         path = os.path.join(directory, 'w.bag')
         bag_lz4.write(path, records, dict(METADATA, codec='bag-lz4'))

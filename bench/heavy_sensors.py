@@ -166,7 +166,7 @@ class Watch(object):
         for name, pid in self.pids.items():
             self.cpu[name] = max(self.cpu[name], cpu_of(pid))
             self.peak[name] = max(self.peak[name], memory_mb(pid))
-        from cc_log import log_format
+        from cc_log.storage import log_format
         now = time.time()
         for path in log_format.window_files(self.directory):
             self.seen.setdefault(os.path.basename(path), now)
@@ -284,7 +284,7 @@ def loss_lines(path, limit=3):
 
 def count_windows(directory):
     """[{name, counts {topic: records}, triggers [(reason, stamp)], error}] of the window files."""
-    from cc_log import log_format
+    from cc_log.storage import log_format
     files = []
     for path in log_format.window_files(directory):
         entry = {'name': os.path.basename(path), 'counts': {}, 'triggers': [], 'error': None}
@@ -391,7 +391,7 @@ QUICK = {'seconds': 6.0, 'scenarios': 'one', 'format': ['bag-lz4'], 'wait': 30.0
 
 
 def parse(argv):
-    from cc_log import log_format
+    from cc_log.storage import log_format
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rate', type=float, choices=(37.0, 100.0), default=None,
                         help='MB/s of the workload: 37 (one camera, the default) or 100 (two cameras, denser lidar)')
@@ -425,7 +425,7 @@ def parse(argv):
 
 def never_firing_model(path):
     """cost_live's motion model for 100 Hz odometry with a threshold no score goes below: it never fires."""
-    from cc_log.model import AnomalyModel
+    from cc_log.core.model import AnomalyModel
     if not os.path.exists(path):
         train_model(path + '.trained', ODOM_RATE, minutes=1.0)
         model = AnomalyModel.load(path + '.trained')

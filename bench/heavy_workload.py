@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The workload of bench/heavy_sensors.py: a bag of cameras, a lidar, odometry and IMU at ~37 or ~100 MB/s.
 
-Workload (built once, cached in --out as heavy_<N>cam_<S>s.bag and .json; written by cc_log.formats.bag_writer,
+Workload (built once, cached in --out as heavy_<N>cam_<S>s.bag and .json; written by cc_log.storage.bag.bag_writer,
 uncompressed chunks; header stamps = bag times, from 1600000000):
 - /camera/image_raw (and /camera2/image_raw with --cameras 2 or --rate 100): sensor_msgs/Image 640x480 rgb8 at
   30 Hz, 921,600 bytes of pixels: a diagonal gradient moving 4 px a frame plus uniform noise 0-31 on every byte
@@ -122,9 +122,9 @@ def compression_ratios(data):
 
 def build(workload, path):
     """Write the workload bag at ``path`` (uncompressed chunks); return its description (also in path.json)."""
-    from cc_log import raw_message
-    from cc_log.formats import bag_writer
-    from cc_log.safe_files import AtomicFile
+    from cc_log.core import raw_message
+    from cc_log.storage.bag import bag_writer
+    from cc_log.core.safe_files import AtomicFile
     stamps = {topic: [] for topic in workload.topics}
     sizes = dict.fromkeys(workload.topics, 0)
     headers, samples = {}, {}

@@ -23,8 +23,9 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import msg_codec, sim  # noqa: E402
-from cc_log.formats import json_xz  # noqa: E402
+from cc_log.core import msg_codec  # noqa: E402
+from cc_log import sim  # noqa: E402
+from cc_log.storage.formats import json_xz  # noqa: E402
 
 BASE = {'lc': 1, 'pb': 0}
 OPTION_SETS = [  # (name, options on top of preset 6)

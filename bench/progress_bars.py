@@ -12,7 +12,7 @@ import time
 import common  # noqa: F401  (puts src/ on sys.path)
 from common import header, table
 
-from cc_log.progress import Progress
+from cc_log.offline.progress import Progress
 
 
 def per_call(enabled, calls, stream):

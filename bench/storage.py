@@ -34,9 +34,11 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log import codecs, learning, log_format, msg_codec, sim  # noqa: E402
+from cc_log.storage import codecs, log_format  # noqa: E402
+from cc_log.core import learning, msg_codec  # noqa: E402
+from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
-from cc_log.window_buffer import LogWindow  # noqa: E402
+from cc_log.core.window_buffer import LogWindow  # noqa: E402
 
 SIM_RUN_SEED = 1
 SIM_TRAIN_SEED = 2
@@ -65,7 +67,7 @@ def cc_log_format_size(records, fmt, directory):
 
 def lossy_size(records, directory):
     """Bytes of one json-xz window of ``records`` with PRECISION and the largest error per field read back."""
-    from cc_log.formats import json_xz
+    from cc_log.storage.formats import json_xz
     path, nbytes = log_format.write_window(LogWindow(list(records), []), directory, 'json-xz',
                                            {'precision': PRECISION})
     _, back = log_format.read_window(path)

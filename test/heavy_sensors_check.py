@@ -30,7 +30,7 @@ from std_msgs.msg import Empty
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 
-from cc_log import log_format  # noqa: E402
+from cc_log.storage import log_format  # noqa: E402
 from cc_log.msg import AnomalyEvent  # noqa: E402
 from cc_log.srv import TriggerWindow  # noqa: E402
 

@@ -18,7 +18,7 @@ from std_msgs.msg import String
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from rostest_fixtures import finish, start, subscribed, wait_for  # noqa: E402
 
-from cc_log import context_track, log_format  # noqa: E402
+from cc_log.storage import context_track, log_format  # noqa: E402
 
 PKG = 'cc_log'
 

@@ -19,7 +19,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from rostest_fixtures import wait_for  # noqa: E402
 
-from cc_log import context_track, log_format  # noqa: E402
+from cc_log.storage import context_track, log_format  # noqa: E402
 
 PKG = 'cc_log'
 CONTEXT_FILES = 4  # of 10 s each: the first may start late; three full ones hold 30 s

@@ -18,7 +18,7 @@ import rostest
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from rostest_fixtures import start, stop, subscribed, wait_for  # noqa: E402
 
-from cc_log import log_format  # noqa: E402
+from cc_log.storage import log_format  # noqa: E402
 
 PKG = 'cc_log'
 LEFTOVERS = ['/record_fixed/context_topics', '/record_fixed/topics']

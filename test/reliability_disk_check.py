@@ -32,7 +32,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 from reliability_crash_check import Streamer, make_model  # noqa: E402
 
-from cc_log import log_format, recovery  # noqa: E402
+from cc_log.storage import log_format, recovery  # noqa: E402
 from test_reliability import window  # noqa: E402
 
 PKG = 'cc_log'

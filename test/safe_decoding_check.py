@@ -23,7 +23,8 @@ from reliability_crash_check import Streamer, make_model  # noqa: E402
 from test_reliability import as_leftover  # noqa: E402
 from test_safe_decoding import crafted_class, crafted_window  # noqa: E402
 
-from cc_log import log_format, msg_codec  # noqa: E402
+from cc_log.storage import log_format  # noqa: E402
+from cc_log.core import msg_codec  # noqa: E402
 
 PKG = 'cc_log'
 NODE = 'smart_logger_safe'

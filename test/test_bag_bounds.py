@@ -8,8 +8,8 @@ import sys
 import pytest
 
 rosbag = pytest.importorskip('rosbag')
-from cc_log import bag_reader, bagio  # noqa: E402
-from cc_log.formats.bag_salvage import MAX_CHUNK_BYTES  # noqa: E402
+from cc_log.storage.bag import bag_reader, bagio  # noqa: E402
+from cc_log.storage.bag.bag_salvage import MAX_CHUNK_BYTES  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SMALL = 'sequor_N2_anomalous_jerky_driving.bag'  # 486 kB, 271 messages on each of 5 topics

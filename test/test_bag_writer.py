@@ -2,8 +2,10 @@
 import pytest
 from conftest import real_data
 
-from cc_log import bag_reader, raw_message
-from cc_log.formats import bag_lz4, bag_writer
+from cc_log.storage.bag import bag_reader
+from cc_log.core import raw_message
+from cc_log.storage.formats import bag_lz4
+from cc_log.storage.bag import bag_writer
 
 rosbag = pytest.importorskip('rosbag')
 

@@ -4,7 +4,7 @@ import shutil
 import numpy as np
 import pytest
 
-from cc_log import bagio
+from cc_log.storage.bag import bagio
 from cc_log.features import FeatureConfig, OdometryFeatures, vector_length, window_vector
 
 HUSKY = 'husky_outdoor_2015.bag'

@@ -8,14 +8,16 @@ import struct
 import numpy as np
 import pytest
 
-from cc_log import learning, log_format, raw_message, sim
+from cc_log.core import learning, raw_message
+from cc_log.storage import log_format
+from cc_log import sim
 from cc_log.features import FeatureConfig
-from cc_log.smart_logger import SmartLogger, replay_into
+from cc_log.core.smart import SmartLogger, replay_into
 from cc_log.triggers.classifier import scores_of
 from cc_log.triggers.rule import RuleTrigger
 
-bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
-bag_reader = pytest.importorskip('cc_log.bag_reader')
+bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
+bag_reader = pytest.importorskip('cc_log.storage.bag.bag_reader')
 
 HUSKY = 'husky_outdoor_2015.bag'
 HUSKY_ODOM = '/husky_velocity_controller/odom'
@@ -131,7 +133,7 @@ def windows_of(directory):
 def replay_both(tmp_path, path, topic, side, model_path, fmt, rule=None, **options):
     """The windows of a batched replay (``replay_into``: chunk reader, ``on_records``) and of one fed record by
     record (``on_raw``) from rosbag's raw read."""
-    from cc_log.model import AnomalyModel
+    from cc_log.core.model import AnomalyModel
     results = []
     for how in ('batched', 'one by one'):
         out = str(tmp_path / ('%s %s' % (fmt, how)))
@@ -181,7 +183,7 @@ def test_batched_replay_writes_the_same_windows_as_record_by_record_on_the_husky
 
 
 def test_scoring_a_batch_gives_each_vectors_own_score_exactly(sim_case):
-    from cc_log.model import AnomalyModel
+    from cc_log.core.model import AnomalyModel
     model = AnomalyModel.load(sim_case[1])
     rng = np.random.default_rng(5)
     vectors = [model.mean + model.scale * rng.normal(size=model.mean.shape) * spread
@@ -205,7 +207,7 @@ def test_a_record_that_cannot_be_decoded_stops_a_batch_after_the_records_before_
 def test_the_intake_feeds_a_drained_batch_at_once_and_drops_only_a_message_that_cannot_be_decoded(sim_case,
                                                                                                   tmp_path):
     rospy = pytest.importorskip('rospy')
-    from cc_log.intake import Intake, MessageDecoder
+    from cc_log.nodes.intake import Intake, MessageDecoder
     bags, _ = sim_case
     records = [r for r in bagio.read_raw(bags['anomalies'], [sim.ODOM_TOPIC])][:30]
     rule = RuleTrigger('fast', topic=sim.ODOM_TOPIC, when='twist.twist.linear.x > 100')  # reads the fields
@@ -243,7 +245,7 @@ def _taken_in_thread(queue, delay):
 
 def test_the_intake_queue_hands_a_batch_when_it_is_full_by_count_or_bytes_or_marked_long_before_the_delay():
     pytest.importorskip('rospy')
-    from cc_log.intake import IntakeQueue
+    from cc_log.nodes.intake import IntakeQueue
     for fill in ('count', 'bytes', 'force'):
         queue = IntakeQueue(100, 10000, batch_messages=5, batch_bytes=1000)
         thread, result = _taken_in_thread(queue, 3600.0)
@@ -258,7 +260,7 @@ def test_the_intake_queue_hands_a_batch_when_it_is_full_by_count_or_bytes_or_mar
 
 def test_the_intake_queue_hands_what_arrived_once_the_delay_is_over():
     pytest.importorskip('rospy')
-    from cc_log.intake import IntakeQueue
+    from cc_log.nodes.intake import IntakeQueue
     queue = IntakeQueue(100, 10000, batch_messages=50)
     thread, result = _taken_in_thread(queue, 0.2)
     assert queue.put('a', 10) and queue.put('b', 10)
@@ -271,7 +273,7 @@ def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, t
     # the feeder thread with an hour's batch delay: only the sync mark can make it feed now
     rospy = pytest.importorskip('rospy')
     import threading
-    from cc_log.intake import Intake, IntakeQueue, MessageDecoder
+    from cc_log.nodes.intake import Intake, IntakeQueue, MessageDecoder
     bags, _ = sim_case
     records = [r for r in bagio.read_raw(bags['nominal'], [sim.ODOM_TOPIC])][:25]
     logger = SmartLogger(None, str(tmp_path), driving_topic=sim.ODOM_TOPIC, background=False)

@@ -185,7 +185,8 @@ def test_learn_with_a_test_directory_reports_the_table(trained, real_bag, tmp_pa
 # -- replay ---------------------------------------------------------------------------------------------------
 
 def test_replay_json_fields_match_the_bag_and_the_files(replayed):
-    from cc_log import log_format, msg_codec
+    from cc_log.storage import log_format
+    from cc_log.core import msg_codec
     summary, bag = replayed['summary'], replayed['bag']
     assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift']
     records = bag_messages(bag, ['/odom', '/scan'])
@@ -299,7 +300,7 @@ TABLE_2 = ['none', 'LZ4', 'LZFSE', 'ZIP', 'gzip', 'bzip2', 'LZMA-6', 'zstd', 'cc
 
 
 def test_codecs_on_a_bag_topic(real_bag):
-    from cc_log import msg_codec
+    from cc_log.core import msg_codec
     bag = real_bag(HUSKY)
     table = ok_json('codecs', bag, '--topic', HUSKY_ODOM)
     raw = sum(msg_codec.row_json_bytes(msg) for _, _, msg in bag_messages(bag, [HUSKY_ODOM]))
@@ -370,7 +371,7 @@ def test_progress_only_on_stderr_and_only_when_asked(replayed, trained):
 
 
 def test_progress_bar_counts_sets_totals_relabels_and_spins():
-    from cc_log.progress import Progress, SPINNER
+    from cc_log.offline.progress import Progress, SPINNER
     stream = io.StringIO()
     with Progress('read', 4, enabled=True, stream=stream) as bar:
         for _ in range(4):
@@ -524,8 +525,8 @@ def test_bad_window_files_and_option_values(replayed, trained, tmp_path):
 
 
 def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
-    from cc_log import log_format
-    from cc_log.window_buffer import LogWindow, Record, Trigger
+    from cc_log.storage import log_format
+    from cc_log.core.window_buffer import LogWindow, Record, Trigger
     import rosbag
     with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
         records = [Record(m.header.stamp.to_sec(), topic, m) for topic, m, _ in
@@ -548,7 +549,7 @@ def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
 def test_replay_into_a_full_disk_retries_then_fails_naming_the_directory_and_the_loss(trained, replayed,
                                                                                       small_tmpfs):
     from conftest import fill_disk
-    from cc_log import window_writer
+    from cc_log.storage import window_writer
     disk = small_tmpfs('1m')
     out = os.path.join(disk, 'logs')
     os.makedirs(out)
@@ -569,7 +570,7 @@ def test_collect_into_a_full_disk_retries_then_fails_naming_the_directory(traine
     fill_disk(os.path.join(disk, 'filler'))
     out = os.path.join(disk, 'vectors')
     line = fails('collect', real_bag(NORMAL), '--topic', '/odom', '--out', out, '--window', WINDOW, '--stride', 5)
-    from cc_log import bagio
+    from cc_log.storage.bag import bagio
     from cc_log.features import FeatureConfig
     expected = len(bagio.feature_vectors(real_bag(NORMAL), '/odom', FeatureConfig('motion', WINDOW), 5)[0])
     assert line.startswith('cclog collect: error: %s: ' % os.path.join(out, 'nominal')), line

@@ -3,7 +3,8 @@ import importlib
 
 import pytest
 
-from cc_log import codecs, msg_codec
+from cc_log.storage import codecs
+from cc_log.core import msg_codec
 
 rosbag = pytest.importorskip('rosbag')
 

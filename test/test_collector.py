@@ -4,11 +4,13 @@ import os
 import numpy as np
 import pytest
 
-from cc_log import learning, learn_main, log_format, msg_codec
-from cc_log.collector import Collector, Rotation, VectorStream, collect_bag
+from cc_log.core import learning, msg_codec
+from cc_log.offline import learn_main
+from cc_log.storage import log_format
+from cc_log.core.collector import Collector, Rotation, VectorStream, collect_bag
 from cc_log.features import FeatureConfig
 
-bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 
 HUSKY = 'husky_outdoor_2015.bag'
 ODOM = '/husky_velocity_controller/odom'
@@ -152,7 +154,7 @@ def test_learn_trains_validates_and_saves(husky_path, tmp_path, capsys):
     out = capsys.readouterr().out
     assert status == 0 and os.path.exists(model_path)
     assert 'Precision' in out and 'Recall' in out and model_path in out
-    from cc_log.model import AnomalyModel
+    from cc_log.core.model import AnomalyModel
     model = AnomalyModel.load(model_path)
     assert model.config == config and len(records) > 0
     tn = int(out.split('TN')[1].split()[0])
@@ -181,7 +183,7 @@ def test_learn_refuses_overlapping_sets(husky_path, tmp_path, capsys):
 
 def test_json_xz_precision_rounds_collected_windows(husky, tmp_path):
     """format_options (the configuration's json_xz.precision) reach every collected window."""
-    from cc_log.formats import json_xz
+    from cc_log.storage.formats import json_xz
     precision = {'linear_acceleration.*': 1e-3, 'pose.pose.position.*': 1e-4}
     collector = Collector(str(tmp_path), 'json-xz', '500', driving_topic=ODOM, side_topics=[IMU], window='20',
                           stride=10, format_options={'precision': precision})

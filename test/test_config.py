@@ -6,13 +6,14 @@ import sys
 
 import pytest
 
-from cc_log import config, learning, log_format
-from cc_log.config import Config, installed_class
+from cc_log.core import config, learning
+from cc_log.storage import log_format
+from cc_log.core.config import Config, installed_class
 from cc_log.features import FeatureConfig
-from cc_log.model import AnomalyModel
+from cc_log.core.model import AnomalyModel
 from cc_log.triggers import ClassifierTrigger, RuleTrigger
 
-bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 HUSKY = 'husky_outdoor_2015.bag'
@@ -212,7 +213,7 @@ triggers:
 
 def test_a_node_reads_the_file_then_its_structured_parameters_then_the_flat_ones(tmp_path, model_path):
     pytest.importorskip('rospy')
-    from cc_log.node_common import ConfigError, Params, node_config
+    from cc_log.nodes.node_common import ConfigError, Params, node_config
     path = write(tmp_path, EXAMPLE.replace('MODEL', model_path))
     values = {'config': path, 'windows': {'post': '3s'}, 'triggers': [
         {'name': 'bump', 'kind': 'rule', 'topic': 'bumper', 'arrival': True}]}
@@ -245,7 +246,7 @@ def test_the_example_configuration_is_valid(tmp_path):
 def test_collect_mode_live_writes_the_same_vectors_of_every_classifier_as_cclog_collect(tmp_path, real_bag_path):
     """Collector with a configuration's classifiers (the collect node's path) against collect_bag (cclog
     collect --config): the same vector files, in features/<name>/<label>/."""
-    from cc_log.collector import Collector, collect_bag
+    from cc_log.core.collector import Collector, collect_bag
     cfg = Config.from_dict({'triggers': [
         {'name': 'motion', 'kind': 'classifier', 'feature_set': 'motion', 'window': '2s', 'topics': [HUSKY_ODOM]},
         {'name': 'shock', 'kind': 'classifier', 'feature_set': 'imu', 'window': '1s', 'topics': ['/imu/data']}]})
@@ -301,7 +302,7 @@ def test_json_xz_precision_from_the_file_and_from_cclog_replay(tmp_path, model_p
 
 def test_a_node_precision_parameter_overrides_the_file(tmp_path, model_path):
     pytest.importorskip('rospy')
-    from cc_log.node_common import ConfigError, Params, node_config
+    from cc_log.nodes.node_common import ConfigError, Params, node_config
     text = EXAMPLE.replace('MODEL', model_path).replace('format: bag-lz4', 'format: json-xz')
     path = write(tmp_path, text + "json_xz: {precision: {'pose.pose.position.*': 1e-4}}\n")
     params = Params(get={'config': path}.get, log=lambda *args: None)

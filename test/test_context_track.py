@@ -7,9 +7,10 @@ from conftest import fill_disk
 from nav_msgs.msg import Odometry
 from std_msgs.msg import String
 
-from cc_log import context_track, safe_files, window_writer
-from cc_log.context_track import ContextTrack, Tee, parse_topics
-from cc_log.window_buffer import Record
+from cc_log.storage import context_track, window_writer
+from cc_log.core import safe_files
+from cc_log.storage.context_track import ContextTrack, Tee, parse_topics
+from cc_log.core.window_buffer import Record
 
 
 def odom(stamp):

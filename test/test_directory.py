@@ -3,8 +3,8 @@ import os
 
 import pytest
 
-from cc_log import directory as directory_module
-from cc_log.directory import LoggingDirectory
+from cc_log.storage import directory as directory_module
+from cc_log.storage.directory import LoggingDirectory
 
 
 @pytest.fixture

@@ -8,8 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from cc_log import drift, learning, sim
-from cc_log.drift import OK, WARN, DriftMonitor
+from cc_log.core import drift, learning
+from cc_log import sim
+from cc_log.core.drift import OK, WARN, DriftMonitor
 from cc_log.features import FeatureConfig, FeatureStream
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -107,7 +108,7 @@ def test_replay_of_a_real_car_states_drift_within_two_minutes(tmp_path, sim_mode
     result = cclog('replay', bag, '--topic', '/odom', '--model', sim_model, '--out', tmp_path / 'json', '--json')
     assert result.returncode == 0, result.stderr
     [state] = json.loads(result.stdout)['drift']
-    from cc_log import bagio
+    from cc_log.storage.bag import bagio
     first = next(iter(bagio.read_messages(bag, ['/odom']))).stamp
     assert state['drift'] and state['first_drift'] - first <= 120.0
     assert state['peak'] > 0.5 and state['trained_rate'] == 0.002

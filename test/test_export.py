@@ -6,9 +6,12 @@ import json
 import pytest
 from conftest import real_data
 
-from cc_log import bag_reader, export, log_format, raw_message
-from cc_log.formats import bag_lz4, json_xz
-from cc_log.window_buffer import LogWindow
+from cc_log.storage.bag import bag_reader
+from cc_log.offline import export
+from cc_log.storage import log_format
+from cc_log.core import raw_message
+from cc_log.storage.formats import bag_lz4, json_xz
+from cc_log.core.window_buffer import LogWindow
 
 rosbag = pytest.importorskip('rosbag')
 
@@ -110,7 +113,7 @@ def test_csv_names_are_unique_sanitized_and_never_overwrite(tmp_path):
     import os
     import re
     from std_msgs.msg import String
-    from cc_log.window_buffer import Record
+    from cc_log.core.window_buffer import Record
     topics = ['/a/b', '/a_b', '/x/../../escape', '/\x1b[31mred\n', '/' + 'n' * 5000]
     records = [Record(float(number), topic, String(data='of %s' % number)) for number, topic in enumerate(topics)]
     theirs = tmp_path / 'a_b.csv'

@@ -10,8 +10,10 @@ from conftest import cclog
 from PIL import Image as PILImage
 from sensor_msgs.msg import CompressedImage, Image
 
-from cc_log import export, log_format, sim
-from cc_log.window_buffer import LogWindow, Record
+from cc_log.offline import export
+from cc_log.storage import log_format
+from cc_log import sim
+from cc_log.core.window_buffer import LogWindow, Record
 
 CAMERA = sim.CAMERA_TOPIC
 

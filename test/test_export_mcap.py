@@ -7,9 +7,12 @@ import pytest
 from conftest import cclog, real_data
 from sensor_msgs.msg import LaserScan
 
-from cc_log import bag_reader, export, log_format, sim
-from cc_log.formats import bag_lz4
-from cc_log.window_buffer import LogWindow, Record
+from cc_log.storage.bag import bag_reader
+from cc_log.offline import export
+from cc_log.storage import log_format
+from cc_log import sim
+from cc_log.storage.formats import bag_lz4
+from cc_log.core.window_buffer import LogWindow, Record
 
 HUSKY = 'husky_outdoor_2015.bag'
 ODOM, IMU = '/husky_velocity_controller/odom', '/imu/data'

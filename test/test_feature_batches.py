@@ -7,13 +7,15 @@ import random
 import numpy as np
 import pytest
 
-from cc_log import bagio, features, learning, raw_message
+from cc_log.storage.bag import bagio
+from cc_log import features
+from cc_log.core import learning, raw_message
 from cc_log.features import FeatureConfig, FeatureStream, FeatureWindow, window_vector
 from cc_log.features.base import statistics, window_statistics
 from cc_log.features.window import EVERY_SLACK, JUMP_BACK_TOLERANCE
-from cc_log.spans import Span
+from cc_log.core.spans import Span
 from cc_log.triggers import ClassifierTrigger
-from cc_log.window_buffer import Record
+from cc_log.core.window_buffer import Record
 
 from conftest import REAL_DATA
 

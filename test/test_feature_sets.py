@@ -5,7 +5,8 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
-from cc_log import features, learning, sim
+from cc_log import features, sim
+from cc_log.core import learning
 from cc_log.features import FEATURE_SETS, FeatureConfig, FeatureStream, vector_length, vector_names, window_vector
 
 

@@ -6,9 +6,10 @@ from types import SimpleNamespace as NS
 import numpy as np
 import pytest
 
-from cc_log.features import (FEATURE_SETS, MOTION_COLUMNS, RAW_COLUMNS, FeatureConfig, FeatureWindow,
-                             OdometryFeatures, get, stamp_of, vector_length, vector_names, window_vector)
-from cc_log.spans import Span
+from cc_log.features import (
+    FEATURE_SETS, MOTION_COLUMNS, RAW_COLUMNS, FeatureConfig, FeatureWindow, OdometryFeatures, get, stamp_of,
+    vector_length, vector_names, window_vector)
+from cc_log.core.spans import Span
 
 rosbag = pytest.importorskip('rosbag')
 

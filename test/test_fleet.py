@@ -11,7 +11,9 @@ import time
 
 import pytest
 
-from cc_log import fleet, learning, log_format
+from cc_log.offline import fleet
+from cc_log.core import learning
+from cc_log.storage import log_format
 
 distributed = pytest.importorskip('distributed')
 

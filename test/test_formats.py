@@ -12,10 +12,11 @@ import sys
 
 import pytest
 
-from cc_log import formats, log_format, msg_codec
-from cc_log.formats import json_xz
-from cc_log.log_format import Format, read_window, write_window
-from cc_log.window_buffer import LogWindow, Record, Trigger
+from cc_log.storage import formats, log_format
+from cc_log.core import msg_codec
+from cc_log.storage.formats import json_xz
+from cc_log.storage.log_format import Format, read_window, write_window
+from cc_log.core.window_buffer import LogWindow, Record, Trigger
 
 rosbag = pytest.importorskip('rosbag')
 
@@ -233,7 +234,7 @@ def test_a_window_of_decoded_messages_is_the_bag_rosbag_writes(husky_window, tmp
     # out of stamp order, two topics, decoded messages: the bag written without rosbag is the one rosbag
     # writes for the same messages (its own connection headers and serialization), byte for byte
     import genpy
-    from cc_log.formats import bag_lz4
+    from cc_log.storage.formats import bag_lz4
     records = list(reversed(husky_window.records[:400]))
     ours, _ = write_window(LogWindow(records, husky_window.triggers), str(tmp_path / 'ours'), Format.BAG_LZ4)
     with rosbag.Bag(ours) as bag:
@@ -566,9 +567,10 @@ def test_compact_definition_keeps_md5(real_bag):
     assert msg_codec.compact_definition('string S=a # b\nint32 X=1 # one\n') == 'string S=a # b\nint32 X=1\n'
 
 
-@pytest.mark.parametrize('module', ['cc_log.msg_codec', 'cc_log.formats.json_xz', 'cc_log.log_format',
-                                    'cc_log.formats.bag_lz4', 'cc_log.formats.bag_salvage', 'cc_log.codecs',
-                                    'cc_log.directory', 'cc_log.export'])
+@pytest.mark.parametrize('module', ['cc_log.core.msg_codec', 'cc_log.storage.formats.json_xz',
+                                    'cc_log.storage.log_format', 'cc_log.storage.formats.bag_lz4',
+                                    'cc_log.storage.bag.bag_salvage', 'cc_log.storage.codecs',
+                                    'cc_log.storage.directory', 'cc_log.offline.export'])
 def test_pure_modules_do_not_import_rospy(module):
     code = ('import sys, %s\n'
             'bad = sorted(m for m in sys.modules if m.split(".")[0] in ("rospy", "rosbag", "roslib"))\n'
@@ -653,7 +655,8 @@ def test_bag_lz4_layout_1_file_still_read(real_bag):
 
 def test_bag_lz4_refuses_records_that_do_not_match_their_crc32(husky_window, tmp_path):
     # rosbag has no checksum: one bit of a message's bytes flipped after the window was encoded
-    from cc_log.formats import bag_lz4, bag_writer
+    from cc_log.storage.formats import bag_lz4
+    from cc_log.storage.bag import bag_writer
     messages, headers = bag_lz4.bag_messages(husky_window.records, {})
     messages = list(messages)
     good = tmp_path / 'good.bag'
@@ -675,8 +678,8 @@ def test_bag_lz4_refuses_records_that_do_not_match_their_crc32(husky_window, tmp
 def test_json_xz_rows_that_cannot_be_decoded_are_counted_lost_per_topic(tmp_path):
     """Serialized messages whose bytes are cut short cannot be decoded into a json-xz window: left out, named per
     topic in the window's metadata and counted in the writer's ``messages_lost`` (not ``messages_kept``)."""
-    from cc_log import window_writer
-    from cc_log.bag_reader import read_raw
+    from cc_log.storage import window_writer
+    from cc_log.storage.bag.bag_reader import read_raw
     records = [record for record in read_raw(real(HUSKY), [HUSKY_ODOM, '/imu/data'])][:40]
     odom = [index for index, record in enumerate(records) if record.topic == HUSKY_ODOM]
     imu = [index for index, record in enumerate(records) if record.topic == '/imu/data']

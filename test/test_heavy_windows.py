@@ -7,11 +7,12 @@ import os
 import pytest
 
 from conftest import cclog
-from cc_log import log_format, recovery
-from cc_log.formats import bag_lz4, bag_writer
-from cc_log.raw_message import class_header
-from cc_log.smart_logger import HEAVY_BYTES, SmartLogger
-from cc_log.window_buffer import LogWindow, Record, TopicLimits, Trigger, WindowBuffer
+from cc_log.storage import log_format, recovery
+from cc_log.storage.formats import bag_lz4
+from cc_log.storage.bag import bag_writer
+from cc_log.core.raw_message import class_header
+from cc_log.core.smart import HEAVY_BYTES, SmartLogger
+from cc_log.core.window_buffer import LogWindow, Record, TopicLimits, Trigger, WindowBuffer
 
 rosbag = pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -278,7 +279,7 @@ def test_a_writer_that_falls_behind_drops_heavy_frames_counted_never_light_ones(
 # -- configuration -------------------------------------------------------------------------------------------
 
 def test_topic_limits_from_the_configuration_and_from_a_launch_argument():
-    from cc_log import config
+    from cc_log.core import config
     text = '{camera/image_raw: {pre: 2s, post: 500ms, max_mb: 64}, /scan: {post: 1s}}'
     for value in (text, {'camera/image_raw': {'pre': '2s', 'post': '500ms', 'max_mb': 64}, '/scan': {'post': '1s'}}):
         limits = config.parse_topic_limits(value)
@@ -297,7 +298,7 @@ def test_topic_limits_from_the_configuration_and_from_a_launch_argument():
     ('{camera: {pre: [1', 'topic_limits: not YAML'),
 ])
 def test_bad_topic_limits_are_one_line_naming_the_key(value, error):
-    from cc_log import config
+    from cc_log.core import config
     with pytest.raises(ValueError) as raised:
         config.parse_topic_limits(value)
     assert error in str(raised.value) and '\n' not in str(raised.value)

@@ -4,8 +4,9 @@ import json
 import pytest
 from conftest import cclog
 
-from cc_log import log_format, sim
-from cc_log.window_buffer import LogWindow, Record
+from cc_log.storage import log_format
+from cc_log import sim
+from cc_log.core.window_buffer import LogWindow, Record
 
 
 def ok(*args):

@@ -2,8 +2,8 @@
 input, in bounded time and memory, never a traceback."""
 import pytest
 
-from cc_log import config, safe_input
-from cc_log.config import Config
+from cc_log.core import config, safe_input
+from cc_log.core.config import Config
 
 
 def one_line(error, limit=300):
@@ -131,7 +131,7 @@ def test_a_classifier_window_of_collect_mode_is_bounded():
 
 
 def test_spans_and_sizes_are_bounded():
-    from cc_log.spans import Span, megabytes, MAX_COUNT, MAX_SECONDS
+    from cc_log.core.spans import Span, megabytes, MAX_COUNT, MAX_SECONDS
     assert Span.parse(str(MAX_COUNT)).count == MAX_COUNT
     assert Span.parse('%gs' % MAX_SECONDS).seconds == MAX_SECONDS
     for value in ('1e303', 1e303, '1e300s', '1e300ms', 10 ** 400):
@@ -142,7 +142,7 @@ def test_spans_and_sizes_are_bounded():
 
 
 def test_the_diagnostic_period_is_bounded():
-    node_common = pytest.importorskip('cc_log.node_common')
+    node_common = pytest.importorskip('cc_log.nodes.node_common')
     params = node_common.Params(get={'diagnostic_period': 1e308}.get, log=lambda *args: None)
     with pytest.raises(node_common.ConfigError) as error:
         params.number('diagnostic_period', 1.0)
@@ -155,7 +155,7 @@ def small_model_document(window='5s'):
     """The document of a small valid ocsvm model of the motion features."""
     import numpy as np
     from cc_log.features import FeatureConfig, vector_length
-    from cc_log.model import AnomalyModel
+    from cc_log.core.model import AnomalyModel
     config_ = FeatureConfig('motion', window)
     dimension = vector_length(config_)
     model = AnomalyModel(config_, np.zeros(dimension), np.ones(dimension), 'ocsvm',
@@ -174,7 +174,7 @@ def small_model_document(window='5s'):
 ])
 def test_implausible_models_are_refused_naming_the_key(tmp_path, change, expected):
     import json
-    from cc_log.model import AnomalyModel, ModelError
+    from cc_log.core.model import AnomalyModel, ModelError
     document = small_model_document()
     change(document)
     path = tmp_path / 'model.json'
@@ -190,7 +190,7 @@ def test_implausible_models_are_refused_naming_the_key(tmp_path, change, expecte
 @pytest.mark.parametrize('pattern', ['(a+)+', '(/a|/a)*', '(x*y?)*z', '(.*)*', '.*.*.*.*x', r'(/a)\1',
                                      '/' + 'a' * 300], ids=range(7))
 def test_patterns_that_backtrack_badly_are_refused_with_one_line(pattern):
-    from cc_log.topic_select import TopicSelection
+    from cc_log.core.topic_select import TopicSelection
     for entry in ('re:' + pattern, '!re:' + pattern):
         with pytest.raises(ValueError) as error:
             TopicSelection.parse([entry])
@@ -198,14 +198,14 @@ def test_patterns_that_backtrack_badly_are_refused_with_one_line(pattern):
 
 
 def test_ordinary_patterns_are_kept():
-    from cc_log.topic_select import TopicSelection
+    from cc_log.core.topic_select import TopicSelection
     selection = TopicSelection.parse(['re:/(camera|lidar)/.*', '!re:.*/compressed', 're:/a{2,5}/b', 're:(/ns)?/odom'])
     assert selection.select(['/camera/x', '/lidar/y', '/camera/x/compressed', '/aaa/b', '/odom', '/ns/odom',
                              '/imu']) == ['/camera/x', '/lidar/y', '/aaa/b', '/odom', '/ns/odom']
 
 
 def test_a_topic_is_matched_once():
-    from cc_log.topic_select import TopicSelection
+    from cc_log.core.topic_select import TopicSelection
     selection = TopicSelection(regex=['/camera/.*'], exclude=['.*/compressed'])
     calls = []
 
@@ -257,7 +257,7 @@ def test_long_or_malformed_conditions_are_refused_with_one_line(text):
 def test_an_all_nan_odometry_stream_fires_a_nan_rule():
     nav_msgs = pytest.importorskip('nav_msgs.msg')
     from cc_log.triggers import RuleTrigger
-    from cc_log.window_buffer import Record
+    from cc_log.core.window_buffer import Record
     rule = RuleTrigger('odom_nan', '/odom', when='twist.twist.linear.x == nan', type='nav_msgs/Odometry')
     rule.check(nav_msgs.Odometry)
     fires = []
@@ -272,7 +272,7 @@ def test_an_all_nan_odometry_stream_fires_a_nan_rule():
 def test_a_silent_topic_rule_gives_a_topic_time_at_start_up():
     from cc_log.triggers import RuleTrigger
     from cc_log.triggers.rule import STARTUP_GRACE
-    from cc_log.window_buffer import Record
+    from cc_log.core.window_buffer import Record
     for rule in (RuleTrigger('dead', '/scan', silent='1s'), RuleTrigger('slow', '/scan', min_rate=5, over='1s')):
         fired = []
         for tick in range(0, int((STARTUP_GRACE - 1) * 10)):  # the topic's first message comes late
@@ -294,8 +294,8 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
     import subprocess
     import sys
     rosbag = pytest.importorskip('rosbag')
-    from cc_log import log_format
-    from cc_log.window_buffer import LogWindow, Record, Trigger
+    from cc_log.storage import log_format
+    from cc_log.core.window_buffer import LogWindow, Record, Trigger
     hostile = '/odom\x1b]0;owned\x07\x1b[2J\u202e'
     with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
         records = [Record(m.header.stamp.to_sec(), hostile, m) for topic, m, _ in
@@ -315,7 +315,7 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
 
 @pytest.mark.parametrize('value', ['9' * 400 + 'GB', '9' * 5000 + 'x', 'r' * 10 ** 6], ids=['huge', 'digits', 'long'])
 def test_collect_rotation_sizes_are_bounded_one_line(value):
-    from cc_log.collector import Rotation
+    from cc_log.core.collector import Rotation
     with pytest.raises(ValueError) as error:
         Rotation.parse(value, 'collect.rotate')
     assert one_line(error).startswith('collect.rotate: ')

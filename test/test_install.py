@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from cc_log.demo import Processes, free_port, wait_for_master
+from cc_log.offline.demo import Processes, free_port, wait_for_master
 
 ROOT = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
 NOT_SOURCES = ('.catkin_ws', '.git', '__pycache__', '.hypothesis', '.pytest_cache', 'out')

@@ -1,9 +1,10 @@
 """learn.py: --validate is optional (train and save; the report says nothing was validated)."""
 import numpy as np
 
-from cc_log import learn_main, learning
+from cc_log.offline import learn_main
+from cc_log.core import learning
 from cc_log.features import FeatureConfig
-from cc_log.model import AnomalyModel
+from cc_log.core.model import AnomalyModel
 
 
 def test_learn_without_validation_trains_and_saves(tmp_path, capsys):

@@ -1,7 +1,7 @@
 """Learning from little data: 20 s of real nominal driving through ``cclog collect`` and ``cclog learn``."""
 import pytest
 
-from cc_log import collector, learning
+from cc_log.core import collector, learning
 
 from test_cli import HUSKY, HUSKY_ODOM, fails, ok_json
 

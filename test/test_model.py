@@ -11,7 +11,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.svm import OneClassSVM
 
 from cc_log.features import FeatureConfig, vector_length, vector_names
-from cc_log.model import AnomalyModel, ModelError
+from cc_log.core.model import AnomalyModel, ModelError
 
 CONFIG = FeatureConfig('motion', '5s')
 D = vector_length(CONFIG)

@@ -6,12 +6,13 @@ import sys
 import numpy as np
 import pytest
 
-from cc_log import config, learning, online_learning, sim
+from cc_log.core import config, learning, online_learning
+from cc_log import sim
 from cc_log.features import FeatureConfig
-from cc_log.model import AnomalyModel
-from cc_log.online_learning import OnlineLearner
+from cc_log.core.model import AnomalyModel
+from cc_log.core.online_learning import OnlineLearner
 from cc_log.triggers import ClassifierTrigger
-from cc_log.window_buffer import Record
+from cc_log.core.window_buffer import Record
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bench'))
 from learn_online import flag_starts, odometry, slow_model  # noqa: E402  (the bench's runs and counting)

@@ -1,7 +1,7 @@
 """``cclog plot`` with true events, and the plot module's readers (real bags, real window files)."""
 import json
 
-from cc_log import plot
+from cc_log.offline import plot
 
 from test_cli import fails, ok, ok_json, replayed, trained  # noqa: F401 (fixtures)
 

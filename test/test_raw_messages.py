@@ -7,12 +7,14 @@ import tracemalloc
 
 import pytest
 
-from cc_log import features, log_format, msg_codec, raw_message
+from cc_log import features
+from cc_log.storage import log_format
+from cc_log.core import msg_codec, raw_message
 from cc_log.features import FeatureConfig, FeatureStream
-from cc_log.smart_logger import SmartLogger
-from cc_log.window_buffer import RAW_RECORD_OVERHEAD, MemoryCost, Record
+from cc_log.core.smart import SmartLogger
+from cc_log.core.window_buffer import RAW_RECORD_OVERHEAD, MemoryCost, Record
 
-bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 from geometry_msgs.msg import Twist  # noqa: E402
 from nav_msgs.msg import Odometry  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -239,7 +241,7 @@ def test_a_bag_lz4_window_keeps_the_connection_headers(husky_raw, tmp_path):
 
 
 def test_json_xz_leaves_out_a_kept_message_that_cannot_be_decoded_and_says_so(husky_raw, tmp_path):
-    from cc_log.window_buffer import LogWindow, Trigger
+    from cc_log.core.window_buffer import LogWindow, Trigger
     records = [r for r in husky_raw if r.topic == ODOM][:5]
     broken = records[2]._replace(raw=records[2].raw[:30])
     window = LogWindow(records[:2] + [broken] + records[3:], [Trigger(records[0].stamp, 'test', None)])
@@ -264,7 +266,7 @@ def test_replay_reads_serialized_messages_and_a_truncated_one_is_one_line(tmp_pa
     from cc_log.triggers import RuleTrigger
     rule = RuleTrigger('fast', '/odom', when='twist.twist.linear.x > 1')  # reads a field: decodes every message
     logger = SmartLogger(None, str(tmp_path / 'out'), triggers=[rule], driving_topic='/odom', background=False)
-    from cc_log.smart_logger import replay_into
+    from cc_log.core.smart import replay_into
     with pytest.raises(ValueError, match=r'cut\.bag: a message of /odom cannot be decoded'):
         replay_into(logger, bag)
 
@@ -289,7 +291,7 @@ def test_stamps_of_a_batch_are_each_message_s_stamp_with_and_without_headers(hus
 
 
 def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_raw):
-    from cc_log.smart_logger import RawJsonEstimate
+    from cc_log.core.smart import RawJsonEstimate
     one, batched = RawJsonEstimate(every=7, first=20), RawJsonEstimate(every=7, first=20)
     records = husky_raw[:400]
     for record in records:

@@ -5,8 +5,8 @@ import sys
 
 import pytest
 
-from cc_log import record_main
-from cc_log.record_main import parse, parse_duration, parse_size
+from cc_log.nodes import record_main
+from cc_log.nodes.record_main import parse, parse_duration, parse_size
 
 
 def test_sizes_and_durations_as_rosbag_writes_them():

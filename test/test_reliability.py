@@ -14,10 +14,10 @@ import time
 
 import pytest
 
-from cc_log import disk_guard, log_format, recovery
-from cc_log.disk_guard import DiskGuard
-from cc_log.log_format import Format, read_window, write_window
-from cc_log.window_buffer import LogWindow, Record, Trigger
+from cc_log.storage import disk_guard, log_format, recovery
+from cc_log.storage.disk_guard import DiskGuard
+from cc_log.storage.log_format import Format, read_window, write_window
+from cc_log.core.window_buffer import LogWindow, Record, Trigger
 
 rosbag = pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -44,7 +44,7 @@ def window(n=300, start=0, reason='classifier'):
 
 
 def same(records_a, records_b):
-    from cc_log import msg_codec
+    from cc_log.core import msg_codec
     return ([(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in records_a]
             == [(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in records_b])
 
@@ -116,8 +116,9 @@ CRASHING_WRITER = textwrap.dedent('''
     sys.path.insert(0, {test!r})
     import rosbag
     from test_reliability import window
-    from cc_log import log_format
-    from cc_log.formats import bag_lz4, bag_writer
+    from cc_log.storage import log_format
+    from cc_log.storage.formats import bag_lz4
+    from cc_log.storage.bag import bag_writer
     bag_writer.CHUNK_THRESHOLD = {chunk_threshold!r}  # several chunks in one window
     kill_at = {kill_at!r}
     write_bag = bag_writer.write_bag
@@ -319,7 +320,7 @@ def _chunks(path):
 @pytest.fixture(scope='module')
 def chunked_bag(tmp_path_factory):
     """A bag-lz4 window of 600 odometry messages in about 30 chunks: its bytes and its chunks."""
-    from cc_log.formats import bag_writer
+    from cc_log.storage.bag import bag_writer
     directory = str(tmp_path_factory.mktemp('chunked'))
     default = bag_writer.CHUNK_THRESHOLD
     bag_writer.CHUNK_THRESHOLD = 16 * 1024
@@ -335,7 +336,7 @@ def chunked_bag(tmp_path_factory):
 
 
 def test_bag_truncated_anywhere_keeps_every_complete_chunk_and_never_deletes_data(chunked_bag, tmp_path):
-    from cc_log import msg_codec
+    from cc_log.core import msg_codec
     data, chunks = chunked_bag
     full = [(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in window(600).records]
     header_end = 4117
@@ -381,7 +382,7 @@ def test_bag_truncated_anywhere_keeps_every_complete_chunk_and_never_deletes_dat
 
 def test_no_empty_leftover_while_encoding(tmp_path, monkeypatch):
     """json-xz is encoded before the temporary file exists: dying while encoding leaves nothing."""
-    from cc_log.formats import json_xz
+    from cc_log.storage.formats import json_xz
 
     def boom(*args, **kwargs):
         assert recovery.scan(str(tmp_path)) == []
@@ -460,7 +461,7 @@ def _group_writable_not_world(path, directory):
 
 @pytest.mark.parametrize('fmt', Format.ALL)
 def test_window_files_and_directories_group_writable_never_world_writable_even_with_umask_0(fmt, tmp_path):
-    from cc_log.directory import LoggingDirectory
+    from cc_log.storage.directory import LoggingDirectory
     old = os.umask(0)
     try:
         chosen = LoggingDirectory(str(tmp_path / 'a' / 'logs'))
@@ -475,7 +476,7 @@ def test_window_files_and_directories_group_writable_never_world_writable_even_w
 
 
 def test_feature_vector_files_never_world_writable_even_with_umask_0(tmp_path):
-    from cc_log import learning
+    from cc_log.core import learning
     from cc_log.features import FeatureConfig
     old = os.umask(0)
     try:
@@ -505,7 +506,7 @@ def test_no_shell_anywhere():
 # -- SmartLogger: write failures, disk limits, bad input -------------------------------------------------
 
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
-from cc_log.smart_logger import DELETED, FAILED, OPENED, WRITTEN, SmartLogger  # noqa: E402
+from cc_log.core.smart import DELETED, FAILED, OPENED, WRITTEN, SmartLogger  # noqa: E402
 
 CONFIG = FeatureConfig('motion', '20')
 

@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from cc_log import features, raw_message
+from cc_log import features
+from cc_log.core import raw_message
 from cc_log.features import FeatureConfig
 
-bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 from nav_msgs.msg import Odometry  # noqa: E402
 
 STATE = ('_prev', '_deriv', '_prev_stamp', '_last_row', '_kind', '_dt', 'segment_start', 'segment_rows', 'restarts',

@@ -22,10 +22,11 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from cc_log import log_format, msg_codec, recovery, safe_input
-from cc_log.formats import json_xz
-from cc_log.log_format import read_window, write_window
-from cc_log.window_buffer import LogWindow, Record
+from cc_log.storage import log_format, recovery
+from cc_log.core import msg_codec, safe_input
+from cc_log.storage.formats import json_xz
+from cc_log.storage.log_format import read_window, write_window
+from cc_log.core.window_buffer import LogWindow, Record
 
 rosbag = pytest.importorskip('rosbag')
 import genpy.dynamic  # noqa: E402
@@ -64,7 +65,7 @@ def crafted(records, marker):
 def quick_model(directory):
     """A model file for commands that need one (trained on random vectors in a fraction of a second)."""
     import numpy as np
-    from cc_log import learning
+    from cc_log.core import learning
     from cc_log.features import FeatureConfig, vector_length
     config = FeatureConfig('motion', '20')
     model, _ = learning.train(np.random.RandomState(0).normal(size=(60, vector_length(config))), None, config)
@@ -324,7 +325,7 @@ def test_a_crafted_window_file_is_refused_naming_file_and_topic(fmt, marker, tmp
 
 
 def test_a_crafted_input_bag_is_refused_by_every_command_that_reads_bags(marker, tmp_path):
-    from cc_log import bagio
+    from cc_log.storage.bag import bagio
     bag_path = str(tmp_path / 'input.bag')
     with rosbag.Bag(bag_path, 'w') as bag:
         for record in crafted(window(100).records, marker):
@@ -360,7 +361,7 @@ def test_a_crafted_leftover_is_kept_unrecovered_and_never_runs(fmt, marker, tmp_
 
 def test_a_side_topic_publisher_with_a_crafted_definition_is_refused_counted_and_warned_once(marker, caplog):
     import rospy
-    from cc_log.intake import MessageDecoder
+    from cc_log.nodes.intake import MessageDecoder
     from std_msgs.msg import String
 
     def any_msg(msg_type, definition, data):
@@ -454,7 +455,7 @@ def test_xz_decompression_is_lzma_decompress_with_a_limit(monkeypatch):
 PEAK = textwrap.dedent('''
     import resource, sys
     sys.path.insert(0, {src!r})
-    from cc_log import cli
+    from cc_log.offline import cli
     status = cli.main(['info', {path!r}])
     print(status, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
 ''')

@@ -14,9 +14,10 @@ import textwrap
 import numpy as np
 import pytest
 
-from cc_log import learning, log_format, recovery, safe_files
+from cc_log.core import learning, safe_files
+from cc_log.storage import log_format, recovery
 from cc_log.features import FeatureConfig, vector_length
-from cc_log.log_format import Format, read_window, write_window
+from cc_log.storage.log_format import Format, read_window, write_window
 
 from test_cli import replayed, run, trained  # noqa: F401  (fixtures of the cclog runs)
 from test_reliability import ROOT, crashing_writer, window
@@ -120,7 +121,7 @@ def test_window_writer_never_follows_a_link_at_its_temporary_or_final_name(fmt, 
 
 
 def test_vector_and_model_writers_replace_a_link_never_write_through_it(tmp_path, victim):
-    from cc_log.model import AnomalyModel
+    from cc_log.core.model import AnomalyModel
     vector = tmp_path / 'features' / 'nominal' / ('%.6f.json' % 12.5)
     vector.parent.mkdir(parents=True)
     plant(str(vector) + safe_files.TMP_MARK + str(os.getpid()), victim)
@@ -152,7 +153,7 @@ FAILING_WRITER = textwrap.dedent('''
     import json, os, resource, signal, sys
     sys.path.insert(0, {test!r})
     from test_reliability import window
-    from cc_log import log_format
+    from cc_log.storage import log_format
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
     resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit}))
     def descriptors():
@@ -201,7 +202,7 @@ def _dir_ok(path):
 
 
 def test_library_writers_under_umask_0(tmp_path):
-    from cc_log.directory import LoggingDirectory
+    from cc_log.storage.directory import LoggingDirectory
     old = os.umask(0)
     try:
         chosen = LoggingDirectory(str(tmp_path / 'robot' / 'ros' / 'logs'))
@@ -257,7 +258,7 @@ def test_cclog_outputs_under_umask_0_and_through_no_link(trained, replayed, real
 def test_group_writable_whatever_the_umask(tmp_path, umask, world):
     """Directories 2775 and files 0664 as BWI's logger under umask 002, whatever the umask (it may only take
     the world bits)."""
-    from cc_log.directory import LoggingDirectory
+    from cc_log.storage.directory import LoggingDirectory
     old = os.umask(umask)
     try:
         chosen = LoggingDirectory(str(tmp_path / 'robot' / 'logs'))

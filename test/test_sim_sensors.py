@@ -5,7 +5,8 @@ import math
 import numpy
 import pytest
 
-from cc_log import sim, sim_sensors
+from cc_log import sim
+from cc_log.sim import sensors as sim_sensors
 
 RED = (150, 60)  # a pixel is the obstacle's red when R > 150 and G, B < 60
 

@@ -7,14 +7,15 @@ import time
 import numpy as np
 import pytest
 
-from cc_log import learning, log_format, msg_codec, smart_logger
-from cc_log.collector import VectorStream
+from cc_log.core import learning, msg_codec, smart
+from cc_log.storage import log_format
+from cc_log.core.collector import VectorStream
 from cc_log.features import FeatureConfig, vector_length
-from cc_log.smart_logger import FAILED, OPENED, WRITTEN, SmartLogger, replay
+from cc_log.core.smart import FAILED, OPENED, WRITTEN, SmartLogger, replay
 from cc_log.triggers import ClassifierTrigger
-from cc_log.window_buffer import Record, WindowBuffer
+from cc_log.core.window_buffer import Record, WindowBuffer
 
-bagio = pytest.importorskip('cc_log.bagio')  # needs rosbag (a sourced ROS environment)
+bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 
 HUSKY = 'husky_outdoor_2015.bag'
 ODOM = '/husky_velocity_controller/odom'
@@ -196,7 +197,7 @@ def test_memory_budget_bounds_every_topic_and_writes_an_endless_window_in_parts(
 def test_an_endless_window_is_handed_on_at_half_the_budget_over_the_formats_part_factor(fmt, husky, tmp_path):
     """The buffer of an open window reaches half max_buffer_mb divided by its format's PART_FACTOR (the memory its
     part takes while written), then hands a part on."""
-    from cc_log import formats
+    from cc_log.storage import formats
     odom = [r for r in husky if r.topic == ODOM]
     model = ScriptedModel(set(range(len(odom))))
     budget = 2.0  # MB
@@ -449,4 +450,4 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
     assert all(same(a, b) for a, b in zip(records, run[lo:hi + 1]))
     every = replay(bag, ODOM, path, str(tmp_path / 'every'), PRE, POST, 'json-xz', retrigger='every')['windows']
     assert [(w['start'], w['end']) for w in every] == [(run[lo].stamp, run[max(flagged) + POST].stamp)]
-    assert smart_logger.DEFAULT_FORMAT == 'bag-lz4'
+    assert smart.DEFAULT_FORMAT == 'bag-lz4'

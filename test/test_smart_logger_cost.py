@@ -5,7 +5,8 @@ import os
 
 import pytest
 
-from cc_log import features, msg_codec, smart_logger
+from cc_log import features
+from cc_log.core import msg_codec, smart
 
 REAL = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..', 'shared', 'data', 'real')
 
@@ -86,7 +87,7 @@ def _feed(logger, n, rate):
     ('50ms', '0.5s', 100.0, 10)])
 def test_classify_every(tmp_path, every, window, rate, expected):
     model = _CountingModel(window)
-    logger = smart_logger.SmartLogger(model, str(tmp_path), classify_every=every, background=False)
+    logger = smart.SmartLogger(model, str(tmp_path), classify_every=every, background=False)
     _feed(logger, 100, rate)
     assert logger.stats()['classifier_calls'] == len(model.vectors) == expected
 
@@ -95,7 +96,7 @@ def test_classify_every_vectors_equal_window_vector(tmp_path):
     """The ring-array window gives window_vector of the same rows (every message scored)."""
     from nav_msgs.msg import Odometry
     model = _CountingModel('10')
-    logger = smart_logger.SmartLogger(model, str(tmp_path), classify_every='1', background=False)
+    logger = smart.SmartLogger(model, str(tmp_path), classify_every='1', background=False)
     reference = features.OdometryFeatures(model.config)
     msg = Odometry()
     msg.pose.pose.orientation.w = 1.0
@@ -114,4 +115,4 @@ def test_classify_every_vectors_equal_window_vector(tmp_path):
 
 def test_classify_every_zero_refused(tmp_path):
     with pytest.raises(ValueError, match='classify_every'):
-        smart_logger.SmartLogger(_CountingModel(), str(tmp_path), classify_every='0')
+        smart.SmartLogger(_CountingModel(), str(tmp_path), classify_every='0')

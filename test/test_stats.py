@@ -3,9 +3,11 @@ import json
 
 import pytest
 
-from cc_log import cli, log_format, sim, stats
-from cc_log.context_track import ContextTrack
-from cc_log.window_buffer import LogWindow, Record, Trigger
+from cc_log.offline import cli, stats
+from cc_log.storage import log_format
+from cc_log import sim
+from cc_log.storage.context_track import ContextTrack
+from cc_log.core.window_buffer import LogWindow, Record, Trigger
 
 MINUTES = 4.0
 

@@ -1,9 +1,9 @@
 """Topic selection (rosbag record's -a, -e, -x), the configuration's topic patterns, and the topic watcher."""
 import pytest
 
-from cc_log import config
-from cc_log.topic_select import TopicSelection
-from cc_log.topic_watch import TopicWatcher
+from cc_log.core import config
+from cc_log.core.topic_select import TopicSelection
+from cc_log.nodes.topic_watch import TopicWatcher
 
 TOPICS = ['/odom', '/scan', '/camera/rgb/image_raw', '/camera/rgb/image_raw/compressed', '/tf', '/tf_static']
 
@@ -73,7 +73,8 @@ def test_watcher_failures_are_counted_and_retried():
 
 
 def test_cclog_replay_selects_the_bags_topics_with_patterns(tmp_path, real_bag):
-    from cc_log import cli, log_format
+    from cc_log.offline import cli
+    from cc_log.storage import log_format
     cfg = tmp_path / 'patterns.yaml'
     cfg.write_text('topics: ["*", "!re:/imu/.*"]\ndriving_topic: /husky_velocity_controller/odom\n'
                    'windows: {pre: 5, post: 5}\n'

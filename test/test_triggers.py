@@ -4,12 +4,12 @@ import os
 
 import pytest
 
-from cc_log import log_format
+from cc_log.storage import log_format
 from cc_log.features import FeatureConfig
-from cc_log.smart_logger import OPENED, WRITTEN, SmartLogger
+from cc_log.core.smart import OPENED, WRITTEN, SmartLogger
 from cc_log.triggers import ClassifierTrigger, ManualTrigger, RuleTrigger
 from cc_log.triggers.rule import Condition
-from cc_log.window_buffer import Record
+from cc_log.core.window_buffer import Record
 
 diagnostic_msgs = pytest.importorskip('diagnostic_msgs.msg')
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -340,7 +340,7 @@ def test_a_goal_status_rule_catches_every_simulated_planning_failure_once(tmp_pa
     simulator = sim.Simulator(run)
     rule = RuleTrigger('goal_aborted', sim.STATUS_TOPIC, type='actionlib_msgs/GoalStatusArray',
                        when='status_list[0].status == 4')
-    from cc_log.config import installed_class
+    from cc_log.core.config import installed_class
     rule.check(installed_class(rule.type))
     logger = SmartLogger(None, str(tmp_path), 'json-xz', '1s', '1s', driving_topic=sim.ODOM_TOPIC, triggers=[rule])
     feed(logger, [(topic, msg, stamp) for topic, stamp, msg in simulator.messages()])
@@ -361,8 +361,8 @@ HUSKY, HUSKY_ODOM = 'husky_outdoor_2015.bag', '/husky_velocity_controller/odom'
 def configured_logger(directory, text):
     """A SmartLogger as the node and ``cclog replay --config`` build it from a configuration's text."""
     import yaml
-    from cc_log.config import Config, installed_class
-    from cc_log.model import AnomalyModel
+    from cc_log.core.config import Config, installed_class
+    from cc_log.core.model import AnomalyModel
     cfg = Config.from_dict(yaml.safe_load(text), 'test.yaml')
     triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
     return SmartLogger(None, str(directory), **cfg.logger_options(triggers))
@@ -371,7 +371,7 @@ def configured_logger(directory, text):
 def test_a_trigger_of_the_configuration_keeps_its_own_pre_and_post_on_real_driving(tmp_path, real_bag):
     """windows.pre 10 s, post 5 s; a turn rule of its own 1 s before and 0.5 s after: its windows on the Husky's
     real turns start 1 s before its first fire and end 0.5 s after its last, not 10 s and 5 s."""
-    from cc_log import bagio
+    from cc_log.storage.bag import bagio
     logger = configured_logger(tmp_path, """
 windows: {pre: 10s, post: 5s}
 triggers:
@@ -412,7 +412,7 @@ triggers:
 
 
 def test_a_trigger_pre_longer_than_the_logger_holds_is_refused_with_one_line():
-    from cc_log.config import Config
+    from cc_log.core.config import Config
     entry = {'name': 'goal_aborted', 'kind': 'rule', 'topic': 'bumper', 'arrival': True, 'pre': '10s'}
     with pytest.raises(ValueError) as error:
         Config.from_dict({'windows': {'pre': '2s'}, 'triggers': [entry]}, 'robot.yaml')
@@ -428,7 +428,7 @@ def test_a_trigger_pre_longer_than_the_logger_holds_is_refused_with_one_line():
 def test_a_periodic_trigger_keeps_a_sample_every_period_of_real_driving(tmp_path, real_bag):
     """``kind: periodic, every: 1min`` on the Husky's 392 s of real odometry: a window of its own 2 s before
     and 3 s after every minute of message time from the first message, reason ``periodic``, nothing else."""
-    from cc_log import bagio
+    from cc_log.storage.bag import bagio
     logger = configured_logger(tmp_path, """
 driving_topic: %s
 windows: {pre: 10s, post: 5s}
@@ -465,7 +465,7 @@ def test_a_periodic_trigger_keeps_its_grid_and_makes_one_window_after_a_gap():
     ('0s', "every: '0s' must be a positive duration"), ('x' * 500, 'is not a duration'),
     (12.5, 'is not a duration')])
 def test_a_bad_period_is_one_line_naming_every(every, message):
-    from cc_log.config import Config
+    from cc_log.core.config import Config
     entry = {'name': 'sample', 'kind': 'periodic', 'every': every}
     with pytest.raises(ValueError) as error:
         Config.from_dict({'driving_topic': 'odom', 'triggers': [entry]}, 'robot.yaml').build_triggers(

@@ -5,9 +5,12 @@ import json
 import numpy as np
 import pytest
 
-from cc_log import bagio, learning, sim, tuning
+from cc_log.storage.bag import bagio
+from cc_log.core import learning
+from cc_log import sim
+from cc_log.offline import tuning
 from cc_log.features import FeatureConfig, FeatureStream
-from cc_log.model import AnomalyModel
+from cc_log.core.model import AnomalyModel
 
 from test_cli import fails, ok_json
 

@@ -5,8 +5,9 @@ import time
 
 import pytest
 
-from cc_log import launcher, window_writer
-from cc_log.upload import UploadHook, parse_command
+from cc_log.nodes import launcher
+from cc_log.storage import window_writer
+from cc_log.storage.upload import UploadHook, parse_command
 
 
 def wait_for(condition, timeout=10.0):

@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cc_log.spans import Span
-from cc_log.window_buffer import LogWindow, MemoryCost, Record, WindowBuffer, deep_size
+from cc_log.core.spans import Span
+from cc_log.core.window_buffer import LogWindow, MemoryCost, Record, WindowBuffer, deep_size
 
 
 def run(buffer, stamps, anomalies, side=()):
@@ -164,7 +164,7 @@ def test_span_parse_rejects(text):
 
 def test_window_buffer_does_not_import_rospy():
     import subprocess
-    code = 'import sys, cc_log.window_buffer, cc_log.spans; sys.exit("rospy" in sys.modules)'
+    code = 'import sys, cc_log.core.window_buffer, cc_log.core.spans; sys.exit("rospy" in sys.modules)'
     assert subprocess.call([sys.executable, '-c', code], env=None) == 0
 
 

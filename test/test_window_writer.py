@@ -9,12 +9,12 @@ import time
 import pytest
 
 from conftest import fill_disk
-from cc_log import log_format, window_writer
-from cc_log.collector import Collector
-from cc_log.disk_guard import DiskGuard
-from cc_log.log_format import Format, read_window, write_window
-from cc_log.smart_logger import DELETED, FAILED, WRITTEN, SmartLogger
-from cc_log.window_writer import Job, WindowWriter
+from cc_log.storage import log_format, window_writer
+from cc_log.core.collector import Collector
+from cc_log.storage.disk_guard import DiskGuard
+from cc_log.storage.log_format import Format, read_window, write_window
+from cc_log.core.smart import DELETED, FAILED, WRITTEN, SmartLogger
+from cc_log.storage.window_writer import Job, WindowWriter
 
 pytest.importorskip('rosbag')
 from test_reliability import EveryNthModel, FlakyDisk, feed, odom, window  # noqa: E402

@@ -20,17 +20,18 @@ row repeats the last good row (zeros before any) and ``rejected`` counts it.
 Pure Python plus numpy: no rospy.
 """
 # Each module registers its feature set; the order is the registry's (motion, the default, first).
-from . import motion  # noqa: F401
-from . import raw  # noqa: F401
-from . import imu  # noqa: F401
-from . import command  # noqa: F401
-from . import progress  # noqa: F401
-from . import dynamics  # noqa: F401
-from .base import (CLIP, DEFAULT_MAX_DT, DEFAULT_MIN_DT, STATISTICS, FeatureConfig, FeatureSet, get, names,
-                   register, stamp_of)
-from .motion import MOTION_COLUMNS
-from .raw import RAW_COLUMNS
-from .window import FeatureStream, FeatureWindow, columns, vector_length, vector_names, window_vector
+from cc_log.features import motion  # noqa: F401
+from cc_log.features import raw  # noqa: F401
+from cc_log.features import imu  # noqa: F401
+from cc_log.features import command  # noqa: F401
+from cc_log.features import progress  # noqa: F401
+from cc_log.features import dynamics  # noqa: F401
+from cc_log.features.base import (
+    CLIP, DEFAULT_MAX_DT, DEFAULT_MIN_DT, STATISTICS, FeatureConfig, FeatureSet, get, names, register, stamp_of)
+from cc_log.features.motion import MOTION_COLUMNS
+from cc_log.features.raw import RAW_COLUMNS
+from cc_log.features.window import (
+    FeatureStream, FeatureWindow, columns, vector_length, vector_names, window_vector)
 
 FEATURE_SETS = names()
 

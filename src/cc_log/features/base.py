@@ -31,8 +31,8 @@ import struct
 
 import numpy as np
 
-from ..registry import Registry
-from ..spans import Span
+from cc_log.core.registry import Registry
+from cc_log.core.spans import Span
 
 STATISTICS = ('mean', 'std', 'min', 'max')
 DEFAULT_MAX_DT = 1.0    # seconds: a longer gap between messages restarts the derivatives

@@ -10,8 +10,8 @@ command. A window becomes the mean, std, min and max of every column.
 """
 import struct
 
-from .base import REPEAT, RESTART, register
-from .motion import ODOMETRY_MD5, OdometrySet, to_body
+from cc_log.features.base import REPEAT, RESTART, register
+from cc_log.features.motion import ODOMETRY_MD5, OdometrySet, to_body
 
 COMMAND_COLUMNS = ('cmd_v', 'cmd_w', 'v', 'w', 'v_err', 'w_err', 'lag_v', 'lag_w', 'over_v', 'over_w', 'slip_v',
                    'cmd_age')

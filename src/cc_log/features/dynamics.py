@@ -16,8 +16,8 @@ A window becomes the mean, std, min and max of every channel, as for ``motion``.
 """
 import math
 
-from .base import REPEAT, RESTART, register
-from .motion import MotionFeatures
+from cc_log.features.base import REPEAT, RESTART, register
+from cc_log.features.motion import MotionFeatures
 
 DYNAMICS_COLUMNS = ('ax', 'ay', 'az', 'jerk', 'yaw_acc', 'pose_vx_err', 'pose_vy_err', 'pose_vz_err', 'yaw_err')
 _FROM_MOTION = (7, 8, 9, 10, 11, 12, 13)   # ax ay az jerk pose_v*_err in motion's row

@@ -8,7 +8,7 @@ accelerations is the vibration, the max jerk the hardest shock.
 import math
 import struct
 
-from .base import REPEAT, RESTART, FeatureSet, after_header, register, xyz
+from cc_log.features.base import REPEAT, RESTART, FeatureSet, after_header, register, xyz
 
 IMU_COLUMNS = ('acc_x', 'acc_y', 'acc_z', 'acc_norm', 'gyro_x', 'gyro_y', 'gyro_z', 'gyro_norm', 'jerk',
                'gyro_change')

@@ -13,8 +13,8 @@ import struct
 
 import numpy as np
 
-from ..spans import Span
-from .base import CLIP, REPEAT, RESTART, STEP, FeatureSet, after_header, after_string, register, xyz
+from cc_log.core.spans import Span
+from cc_log.features.base import CLIP, REPEAT, RESTART, STEP, FeatureSet, after_header, after_string, register, xyz
 
 MOTION_COLUMNS = (
     'vx', 'vy', 'vz',                      # reported linear twist (body frame by the ROS convention)

@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from .base import RESTART, STEP, register
-from .motion import OdometrySet
+from cc_log.features.base import RESTART, STEP, register
+from cc_log.features.motion import OdometrySet
 
 PROGRESS_COLUMNS = ('x', 'y', 'v', 'w', 'dt', 'still_yaw')
 PROGRESS_VECTOR = ('displacement', 'path_length', 'progress_ratio', 'rotation', 'net_rotation', 'rotation_in_place',

@@ -4,8 +4,8 @@ The concatenation of position, orientation, linear and angular twist of the W me
 (nav_msgs/Odometry). It depends on where the robot is and which way it faces.
 """
 
-from .base import register
-from .motion import OdometrySet
+from cc_log.features.base import register
+from cc_log.features.motion import OdometrySet
 
 RAW_COLUMNS = ('px', 'py', 'pz', 'qx', 'qy', 'qz', 'qw', 'vx', 'vy', 'vz', 'wx', 'wy', 'wz')
 

@@ -12,8 +12,8 @@ Pure: numpy only.
 """
 import numpy as np
 
-from ..spans import Span
-from .base import BlockCache, FeatureSet, get, window_statistics
+from cc_log.core.spans import Span
+from cc_log.features.base import BlockCache, FeatureSet, get, window_statistics
 
 JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream starts over (as WindowBuffer)
 SMALL_BLOCK = 8            # rows: add_block finds the slices of fewer in plain Python

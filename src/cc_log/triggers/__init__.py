@@ -10,14 +10,15 @@
 ``base.Trigger`` is what they share and ``base.Fire`` what they say; ``SmartLogger`` runs a list of them.
 How to add a trigger: docs/DESIGN.md.
 """
-from . import classifier  # noqa: F401  (each module registers its kind)
-from . import rule  # noqa: F401
-from . import manual  # noqa: F401
-from . import periodic  # noqa: F401
-from .base import Fire, Trigger, get, kinds, register
-from .classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger
-from .manual import ManualTrigger
-from .rule import RuleTrigger
+from cc_log.triggers import classifier  # noqa: F401
+from cc_log.triggers import rule  # noqa: F401
+from cc_log.triggers import manual  # noqa: F401
+from cc_log.triggers import periodic  # noqa: F401
+from cc_log.triggers.base import Fire, Trigger, get, kinds, register
+from cc_log.triggers.classifier import (
+    DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger)
+from cc_log.triggers.manual import ManualTrigger
+from cc_log.triggers.rule import RuleTrigger
 
 __all__ = ['Fire', 'Trigger', 'ClassifierTrigger', 'RuleTrigger', 'ManualTrigger', 'get', 'kinds', 'register',
            'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_RETRIGGER', 'RETRIGGER_MODES']

@@ -14,9 +14,9 @@ itself from one (``from_config``; see ``config``). Pure: no rospy.
 import collections
 import re
 
-from ..registry import Registry
-from ..safe_input import brief
-from ..spans import Span
+from cc_log.core.registry import Registry
+from cc_log.core.safe_input import brief
+from cc_log.core.spans import Span
 
 Context = collections.namedtuple('Context', 'load_model message_class resolve')
 Context.__doc__ = """What building a trigger from a configuration may need: ``load_model(path)`` (a model; ValueError

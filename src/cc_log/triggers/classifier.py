@@ -14,10 +14,11 @@ import time
 
 import numpy as np
 
-from .. import features, online_learning
-from ..features import FeatureStream
-from ..spans import Span
-from .base import Trigger, register
+from cc_log import features
+from cc_log.core import online_learning
+from cc_log.features import FeatureStream
+from cc_log.core.spans import Span
+from cc_log.triggers.base import Trigger, register
 
 # Which anomalous scores fire:
 # - 'every': every message scored anomalous (the paper's rule). A feature window of W messages keeps scoring
@@ -44,7 +45,7 @@ DEFAULT_CLASSIFY_EVERY = '50ms'
 def default_topics(topics, feature_set, resolve):
     """The resolved topics of a classifier: ``topics`` (a list or a space-separated string), else the role
     names of its feature set's inputs (``odom``, ``imu``, ``cmd_vel``)."""
-    from ..config import topic_list
+    from cc_log.core.config import topic_list
     if topics is None:
         topics = [role for role, _ in features.get(feature_set).inputs]
     return [resolve(topic) for topic in topic_list(topics, 'topics')]

@@ -7,9 +7,9 @@ has start and stop times, with the after-part too. Pure: no rospy.
 """
 import math
 
-from ..safe_input import brief
-from ..spans import Span
-from .base import Fire, Trigger, register
+from cc_log.core.safe_input import brief
+from cc_log.core.spans import Span
+from cc_log.triggers.base import Fire, Trigger, register
 
 DEFAULT_REASON = 'manual'
 MAX_REASON = 200  # characters of a request's reason kept (it goes into metadata and events)

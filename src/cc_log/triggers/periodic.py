@@ -13,8 +13,8 @@ count again). Pure: no rospy.
 import math
 import re
 
-from ..spans import Span
-from .base import Trigger, register
+from cc_log.core.spans import Span
+from cc_log.triggers.base import Trigger, register
 
 REASON = 'periodic'
 _UNITS = {'ms': 0.001, 's': 1.0, 'min': 60.0, 'h': 3600.0}

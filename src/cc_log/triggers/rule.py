@@ -31,10 +31,10 @@ import math
 import operator
 import re
 
-from .. import msg_codec
-from ..safe_input import brief
-from ..spans import Span
-from .base import Trigger, register
+from cc_log.core import msg_codec
+from cc_log.core.safe_input import brief
+from cc_log.core.spans import Span
+from cc_log.triggers.base import Trigger, register
 
 DEFAULT_HOLD_OFF = '5s'
 DEFAULT_OVER = '2s'

@@ -1,0 +1,379 @@
+"""One configuration, live and offline: topics, triggers (models, rules), windows, format and limits.
+
+The same YAML file drives ``smart_logger.py`` and ``collect_logger.py`` (``~config``, or loaded into their
+private namespace with ``rosparam load``), ``cclog replay --config`` and ``cclog collect --config``, so a
+configuration tuned offline on bags behaves the same on the robot::
+
+    topics: [imu/data, scan]          # other topics to keep in the windows; also '*', 're:/camera/.*', '!/tf'
+    driving_topic: odom               # counts pre and post (default: the first trigger's first topic)
+    format: json-xz
+    json_xz: {precision: {'pose.pose.position.*': 1e-4, 'twist.twist.*': 1e-5}}   # lossy, opt-in
+    windows: {pre: 2s, post: 2s, max: 100000}
+    limits: {max_disk_mb: 500, min_free_mb: 100, max_buffer_mb: 256}
+    collect: {rotate: 60s, label: nominal, stride: 25}
+    triggers:
+      - {name: motion, kind: classifier, model: ~/.ros/cc_log/motion.json, topics: [odom],
+         classify_every: 50ms, retrigger: event, recent: 0.5s, learn_online: false}   # learn_*: cc_log.online_learning
+      - {name: shock, kind: classifier, model: ~/.ros/cc_log/imu.json, topics: [imu/data]}
+      - {name: motors, kind: rule, topic: /diagnostics, level: ERROR, status: 'motor*', hold_off: 5s}
+      - {name: too_fast, kind: rule, topic: odom, type: nav_msgs/Odometry, when: 'twist.twist.linear.x > 2.0'}
+      - {name: bumper, kind: rule, topic: bumper, arrival: true}
+      - {name: scan_dead, kind: rule, topic: scan, silent: 1s}
+
+``Config.from_dict`` checks everything at start: an unknown key, trigger kind, feature set, field or message
+type fails with one line naming it (``ValueError('<source>: triggers[2] (motors): level: ...')``). Topic
+names may be relative: nodes resolve them in their namespace, offline tools as global names (``odom`` is
+``/odom`` in a bag). A classifier's ``feature_set`` and ``window`` are what collect mode computes (default:
+its model's when the model file can be read, else ``motion`` and ``500``); in smart mode they must match the
+model. Pure: yaml, no rospy.
+"""
+import copy
+import os
+
+from cc_log import features
+from cc_log.storage import log_format
+from cc_log.storage.formats import json_xz
+from cc_log.core import safe_input
+from cc_log.core.safe_input import brief
+from cc_log.core.model import check_window
+from cc_log.core.spans import Span, megabytes
+from cc_log.triggers import get as trigger_kind
+from cc_log.triggers.base import Context, check_name
+from cc_log.triggers.classifier import default_topics
+from cc_log.core.topic_select import TopicSelection
+from cc_log.core.window_buffer import TopicLimits
+
+KEYS = ('topics', 'topic_limits', 'driving_topic', 'format', 'json_xz', 'windows', 'limits', 'collect', 'triggers')
+TOPIC_LIMIT_KEYS = ('pre', 'post', 'max_mb')
+JSON_XZ_KEYS = ('precision',)
+WINDOW_KEYS = ('pre', 'post', 'max')
+LIMIT_KEYS = ('max_disk_mb', 'min_free_mb', 'max_buffer_mb')
+COLLECT_KEYS = ('rotate', 'label', 'stride')
+COMMON_TRIGGER_KEYS = ('name', 'kind', 'pre', 'post')
+DEFAULT_FEATURE_SET = 'motion'
+DEFAULT_WINDOW = '500'
+MAX_FILE_BYTES = 1 << 20
+# Flat node parameters (and cclog options) that override a key of the configuration.
+FLAT = {'pre': ('windows', 'pre'), 'post': ('windows', 'post'), 'max_window': ('windows', 'max'),
+        'max_disk_mb': ('limits', 'max_disk_mb'), 'min_free_mb': ('limits', 'min_free_mb'),
+        'max_buffer_mb': ('limits', 'max_buffer_mb'), 'rotate': ('collect', 'rotate'),
+        'label': ('collect', 'label'), 'stride': ('collect', 'stride'), 'format': ('format',),
+        'topics': ('topics',), 'topic_limits': ('topic_limits',), 'driving_topic': ('driving_topic',),
+        'precision': ('json_xz', 'precision')}
+
+
+def load_file(path):
+    """The configuration dict of a YAML file; ValueError('<path>: ...') when it cannot be read or is not
+    a mapping (read by ``safe_input.load_yaml``: ``safe_load``'s loader, no object of the file is ever
+    constructed or run; size and aliases bounded)."""
+    document = safe_input.load_yaml(path, MAX_FILE_BYTES)
+    if document is None:
+        return {}
+    if not isinstance(document, dict):
+        raise ValueError('%s: a configuration is a mapping of %s, not %s' % (
+            path, ', '.join(KEYS), type(document).__name__))
+    return document
+
+
+def merge(base, override):
+    """``base`` with ``override``'s keys: mappings (windows, limits, collect) merged key by key, anything
+    else (topics, triggers) replaced. Neither argument is changed."""
+    result = copy.deepcopy(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(result.get(key), dict):
+            result[key] = merge(result[key], value)
+        else:
+            result[key] = copy.deepcopy(value)
+    return result
+
+
+def with_flat(data, flat):
+    """``data`` with the flat parameters of ``flat`` (``{'pre': '2s', ...}``, see FLAT; None values are
+    ignored) in their places."""
+    override = {}
+    for name, value in flat.items():
+        if value is None:
+            continue
+        path = FLAT[name]
+        if len(path) == 1:
+            override[path[0]] = value
+        else:
+            override.setdefault(path[0], {})[path[1]] = value
+    return merge(data, override)
+
+
+def with_classifier(data, **values):
+    """``data`` with the single-classifier parameters of the nodes and ``cclog`` (None: not given):
+    ``model``, ``topics``, ``feature_set`` and ``window`` go to the trigger named ``classifier`` (added first
+    when there is none; without ``topics``, on its feature set's default topics); ``classify_every``,
+    ``retrigger``, ``recent`` and ``learn_online`` to every classifier."""
+    data = copy.deepcopy(data)
+    triggers = data.get('triggers', [])
+    if not isinstance(triggers, list):
+        return data  # from_dict says what is wrong
+    own = dict((key, values[key]) for key in ('model', 'topics', 'feature_set', 'window')
+               if values.get(key) is not None)
+    if own:
+        named = [entry for entry in triggers if isinstance(entry, dict)
+                 and entry.get('kind') == 'classifier' and entry.get('name', 'classifier') == 'classifier']
+        if not named:
+            named = [{'name': 'classifier', 'kind': 'classifier'}]
+            triggers.insert(0, named[0])
+        named[0].update(own)
+    for key in ('classify_every', 'retrigger', 'recent', 'learn_online'):
+        if values.get(key) is not None:
+            for entry in triggers:
+                if isinstance(entry, dict) and entry.get('kind') == 'classifier':
+                    entry[key] = values[key]
+    if triggers:
+        data['triggers'] = triggers
+    return data
+
+
+def installed_class(msg_type):
+    """The installed message class of ``msg_type`` (found by roslib; the name is checked first), or None."""
+    safe_input.check_type_name(msg_type)
+    import roslib.message  # no rospy: only the installed message packages
+    return roslib.message.get_message_class(msg_type)
+
+
+def global_name(topic):
+    """How offline tools resolve a topic name: relative names are global (``odom`` -> ``/odom``)."""
+    return topic if topic.startswith('/') else '/' + topic
+
+
+class Config(object):
+    """A checked configuration (see the module docstring); build it with ``from_dict``.
+
+    Attributes: topics, driving_topic (None: the first trigger's first topic), format, precision (json-xz
+    rounding, ``{}``: lossless), pre, post,
+    max_window (Spans), max_disk_mb, min_free_mb, max_buffer_mb, rotate, label, stride (None: the
+    collector's defaults), triggers (checked trigger entries, dicts with ``name`` and ``kind``), source.
+    """
+
+    def __init__(self):
+        self.source = 'config'
+
+    @classmethod
+    def from_dict(cls, data, source='config'):
+        """Check ``data`` (a dict of KEYS); ValueError('<source>: <key>: ...') for anything wrong."""
+        self = cls()
+        self.source = source
+        try:
+            self._read(data if data is not None else {})
+        except ValueError as error:
+            raise ValueError('%s: %s' % (source, error))
+        return self
+
+    def _read(self, data):
+        from cc_log.core.collector import Rotation, check_label, parse_stride
+        _known(data, KEYS, '')
+        entries = topic_list(data.get('topics', ()), 'topics')
+        self.selection = TopicSelection.parse(entries, 'topics')  # names and patterns (*, re:..., !...)
+        self.topics = [entry for entry in entries if not TopicSelection.is_pattern(entry)]
+        self.topic_limits = parse_topic_limits(data.get('topic_limits'), 'topic_limits')
+        driving = data.get('driving_topic')
+        if driving is not None and (not isinstance(driving, str) or not driving.strip()):
+            raise ValueError('driving_topic: %s is not a topic name' % brief(driving))
+        self.driving_topic = driving.strip() if driving else None
+        fmt = data.get('format', log_format.formats.DEFAULT)
+        if not isinstance(fmt, str):
+            raise ValueError('format: %s is not a format name (%s)' % (brief(fmt), ', '.join(log_format.Format.ALL)))
+        self.format = log_format.Format.check(fmt)
+        options = _mapping(data.get('json_xz'), 'json_xz', JSON_XZ_KEYS)
+        self.precision = json_xz.check_precision(options.get('precision'), 'json_xz.precision')
+        if self.precision and self.format != log_format.Format.JSON_XZ:
+            raise ValueError('json_xz.precision: rounds json-xz windows only (format is %s)' % self.format)
+        windows = _mapping(data.get('windows'), 'windows', WINDOW_KEYS)
+        self.pre = Span.parse(windows.get('pre', '100'), 'windows.pre')
+        self.post = Span.parse(windows.get('post', '100'), 'windows.post')
+        self.max_window = Span.parse(windows.get('max', '100000'), 'windows.max')
+        limits = _mapping(data.get('limits'), 'limits', LIMIT_KEYS)
+        self.max_disk_mb = megabytes(limits.get('max_disk_mb', 0), 'limits.max_disk_mb')
+        self.min_free_mb = megabytes(limits.get('min_free_mb', 0), 'limits.min_free_mb')
+        self.max_buffer_mb = megabytes(limits.get('max_buffer_mb', 256.0), 'limits.max_buffer_mb')
+        collect = _mapping(data.get('collect'), 'collect', COLLECT_KEYS)
+        rotate = collect.get('rotate')
+        self.rotate = None if rotate is None else str(Rotation.parse(rotate, 'collect.rotate'))
+        self.label = None if collect.get('label') is None else check_label(collect['label'])
+        self.stride = None if collect.get('stride') is None else parse_stride(collect['stride'])
+        triggers = data.get('triggers', [])
+        if not isinstance(triggers, list):
+            raise ValueError('triggers: a list of triggers, not %s' % brief(triggers))
+        self.triggers = []
+        names = set()
+        for index, entry in enumerate(triggers):
+            checked = _trigger_entry(entry, index)
+            if checked['name'] in names:
+                raise ValueError('triggers[%d]: name %s is used twice' % (index, brief(checked['name'])))
+            names.add(checked['name'])
+            self.triggers.append(checked)
+            _check_pre(checked, index, self.pre)
+
+    # -- what the modes build from it -----------------------------------------------------------------
+
+    def _where(self, entry):
+        return '%s: triggers[%d] (%s)' % (self.source, entry['index'], entry['name'])
+
+    def build_triggers(self, load_model, message_class, resolve=global_name):
+        """The Trigger objects of smart mode. ``load_model(path)``: a model (raising ValueError naming the
+        file); ``message_class(type)``: the class of a message type, or None when it is not installed;
+        ``resolve(topic)``: a topic's full name. ValueError naming the trigger for anything wrong."""
+        context = Context(load_model, message_class, resolve)
+        built = []
+        for entry in self.triggers:
+            options = dict((key, value) for key, value in entry.items() if key not in ('name', 'kind', 'index'))
+            try:
+                built.append(trigger_kind(entry['kind']).from_config(entry['name'], options, context))
+            except ValueError as error:
+                text = str(error)
+                prefix = entry['name'] + ': '
+                raise ValueError('%s: %s' % (self._where(entry), text[len(prefix):] if text.startswith(prefix)
+                                             else text))
+        return built
+
+    def feature_specs(self, load_model=None, resolve=global_name):
+        """What collect mode computes: ``[(name, FeatureConfig, topics)]`` of every classifier entry (its
+        ``feature_set`` and ``window``, else its model's when ``load_model`` can read it, else the defaults)."""
+        specs = []
+        for entry in self.triggers:
+            if entry['kind'] != 'classifier':
+                continue
+            where = self._where(entry)
+            model_config = None
+            if load_model is not None and isinstance(entry.get('model'), str):
+                try:
+                    model_config = load_model(os.path.expanduser(entry['model'])).config
+                except ValueError:
+                    model_config = None  # collect mode comes before the model exists
+            feature_set = entry.get('feature_set', model_config.feature_set if model_config else DEFAULT_FEATURE_SET)
+            window = entry.get('window', model_config.window if model_config else DEFAULT_WINDOW)
+            try:
+                config = features.FeatureConfig(feature_set, str(window))
+                check_window(config)
+            except ValueError as error:
+                raise ValueError('%s: %s' % (where, error))
+            try:
+                topics = default_topics(entry.get('topics'), feature_set, resolve)
+            except ValueError as error:
+                raise ValueError('%s: %s' % (where, error))
+            specs.append((entry['name'], config, topics))
+        return specs
+
+    def logger_options(self, triggers, resolve=global_name):
+        """Keyword arguments of SmartLogger for ``triggers`` (built by ``build_triggers``)."""
+        driving = self.driving_topic
+        if driving is None:
+            first = [t for t in triggers if t.topics]
+            if not first:
+                raise ValueError('%s: driving_topic: needed when no trigger watches a topic' % self.source)
+            driving = first[0].topic if hasattr(first[0], 'topic') else sorted(first[0].topics)[0]
+        return {'fmt': self.format, 'pre': self.pre, 'post': self.post, 'max_window': self.max_window,
+                'driving_topic': resolve(driving),
+                'side_topics': None if self.selection.dynamic else [resolve(t) for t in self.topics],
+                'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb,
+                'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers, 'format_options': self.format_options(),
+                'topic_limits': dict((resolve(topic), limits) for topic, limits in self.topic_limits.items())}
+
+    def format_options(self):
+        """What the window format is told in each window's metadata: ``{'precision': ...}`` when set."""
+        return {'precision': self.precision} if self.precision else {}
+
+
+def parse_topic_limits(value, name='topic_limits'):
+    """``{topic: window_buffer.TopicLimits}`` of a mapping ``{topic: {pre: 2s, post: 1s, max_mb: 64}}`` (or its YAML
+    text, as a launch argument gives it): each topic's own seconds before the window's first trigger and after
+    its last (at most the window's) and memory cap outside every window; ValueError('<name>.<topic>: ...')."""
+    if value is None or value == '':
+        return {}
+    if isinstance(value, str):
+        if len(value) > MAX_FILE_BYTES:
+            raise ValueError('%s: longer than %d characters' % (name, MAX_FILE_BYTES))
+        value = safe_input.loads_yaml(value, name)
+    if not isinstance(value, dict):
+        raise ValueError('%s: a mapping of topic names to {pre, post, max_mb}, not %s' % (name, type(value).__name__))
+    limits = {}
+    for topic, entry in value.items():
+        if not isinstance(topic, str) or not topic.strip():
+            raise ValueError('%s: %s is not a topic name' % (name, brief(topic)))
+        where = '%s.%s' % (name, topic)
+        entry = _mapping(entry, where, TOPIC_LIMIT_KEYS)
+        spans = {}
+        for key in ('pre', 'post'):
+            if entry.get(key) is not None:
+                span = Span.parse(entry[key], '%s.%s' % (where, key))
+                if not span.is_duration:
+                    raise ValueError('%s.%s: a duration (e.g. 2s), not a count of messages' % (where, key))
+                spans[key] = span.seconds
+        max_mb = megabytes(entry.get('max_mb', 0), '%s.max_mb' % where)
+        limits[topic.strip()] = TopicLimits(spans.get('pre'), spans.get('post'), int(max_mb * 1000 ** 2))
+    return limits
+
+
+def _known(data, keys, where):
+    if not isinstance(data, dict):
+        raise ValueError('%s: a mapping, not %s' % (where.rstrip('.') or 'configuration', brief(data)))
+    unknown = sorted(brief(key) for key in data if key not in keys)
+    if unknown:
+        raise ValueError('%sunknown key %s (known: %s)' % (where, unknown[0], ', '.join(keys)))
+
+
+def _mapping(value, name, keys):
+    if value is None:
+        return {}
+    _known(value, keys, name + ': ')
+    return value
+
+
+def topic_list(value, name):
+    """Topic names from a list or a space/comma-separated string (duplicates removed); ValueError('<name>: ...')."""
+    if isinstance(value, str):
+        items = value.replace(',', ' ').split()
+    elif isinstance(value, (list, tuple)):
+        items = list(value)
+    else:
+        raise ValueError('%s: %s is not a list of topic names' % (name, brief(value)))
+    out = []
+    for item in items:
+        if not isinstance(item, str) or not item.strip():
+            raise ValueError('%s: %s is not a topic name' % (name, brief(item)))
+        if item.strip() not in out:
+            out.append(item.strip())
+    return out
+
+
+def _check_pre(entry, index, held):
+    """A trigger's own ``pre`` may not be longer than ``windows.pre`` (``held``): the logger holds no more."""
+    pre = entry.get('pre')
+    if pre in (None, ''):
+        return
+    where = 'triggers[%d] (%s): pre' % (index, entry['name'])
+    span = Span.parse(pre, where)
+    if span.is_duration == held.is_duration and (span.seconds or span.count) > (held.seconds or held.count):
+        raise ValueError('%s: %s is longer than windows.pre %s, the most the logger holds before a trigger: raise '
+                         'windows.pre (and give shorter triggers their own pre)' % (where, span, held))
+
+
+def _trigger_entry(entry, index):
+    """A trigger entry checked for its keys: a dict with name, kind and index."""
+    if not isinstance(entry, dict):
+        raise ValueError('triggers[%d]: a mapping with name and kind, not %s' % (index, brief(entry)))
+    kind = entry.get('kind')
+    try:
+        trigger_kind(kind)
+    except ValueError as error:
+        raise ValueError('triggers[%d] (%s): %s' % (index, entry.get('name', '?'), error))
+    name = entry.get('name', kind)
+    try:
+        check_name(name)
+    except ValueError as error:
+        raise ValueError('triggers[%d]: %s' % (index, error))
+    _known(entry, COMMON_TRIGGER_KEYS + trigger_kind(kind).config_keys, 'triggers[%d] (%s): ' % (index, name))
+    if kind == 'classifier' and 'feature_set' in entry:
+        try:
+            features.get(entry['feature_set'])
+        except ValueError as error:
+            raise ValueError('triggers[%d] (%s): %s' % (index, name, error))
+    checked = dict(entry)
+    checked.update(name=name, kind=kind, index=index)
+    return checked

@@ -1,0 +1,369 @@
+"""Learning: feature-vector files, training the one-class SVM, evaluating it.
+
+Vector files (written by collect mode, read by ``cclog learn``): one vector per file,
+``<directory>/<label>/<stamp>.json`` holding ``{"stamp", "features": [...], "names"?, "config": {...}}``.
+
+``train`` fits scikit-learn's ``OneClassSVM`` (RBF kernel) on standardised vectors and returns an
+``AnomalyModel`` holding only arrays. It works with nominal data alone: the nominal vectors (in time order)
+are cut into contiguous blocks, some blocks are held out, the model is fitted on the rest, and the
+threshold is set below nearly all held-out scores with a margin. Contiguous blocks matter: neighbouring
+sliding-window vectors share most of their rows, so a random hold-out would score like the training data
+and give a threshold that is far too tight. With anomalous examples, ``nu``, ``gamma`` and the threshold are
+chosen so that every anomalous vector is flagged (recall 100%) with the fewest held-out nominal ones.
+
+scikit-learn is imported inside ``train`` only: scoring never needs it.
+"""
+import collections
+import json
+import math
+import os
+import resource
+import time
+
+import numpy as np
+
+from cc_log.core import safe_files, safe_input
+from cc_log.features import FeatureConfig, vector_length, vector_names
+from cc_log.core.model import AnomalyModel
+
+DEFAULT_NU = 0.02
+DEFAULT_GAMMA_FACTOR = 0.5      # gamma = factor / n_features on standardised vectors
+DEFAULT_HOLDOUT = 0.2
+DEFAULT_BLOCKS = 10
+DEFAULT_QUANTILE = 0.002        # the threshold sits below this quantile of held-out nominal scores ...
+DEFAULT_MARGIN = 0.5            # ... by this fraction of (median - quantile) of those scores
+DEFAULT_MAX_EXACT = 20000       # above this many training vectors: 'auto' subsamples evenly in time
+NYSTROEM_COMPONENTS = 300
+NU_GRID = (0.005, 0.02, 0.05, 0.1)
+GAMMA_FACTOR_GRID = (0.1, 0.25, 0.5, 1.0, 2.0)
+MIN_VECTORS = 10               # fewer nominal vectors cannot be split into training and held-out blocks
+METHODS = ('auto', 'exact', 'nystroem')
+
+Report = collections.namedtuple('Report', 'total tp fp fn tn precision recall')
+Report.__doc__ = 'Counts with positive = anomalous; precision and recall are fractions (nan when undefined).'
+
+
+# -- vector files -------------------------------------------------------------------------------------
+
+def _label_ok(label):
+    return (isinstance(label, str) and label not in ('', '.', '..') and '/' not in label
+            and os.sep not in label and '\0' not in label)
+
+
+def write_vector(directory, label, stamp, vector, config, names=None):
+    """Write one feature vector to ``<directory>/<label>/<stamp>.json`` atomically; return the path."""
+    if not _label_ok(label):
+        raise ValueError('label: %r is not a valid directory name' % (label,))
+    stamp = float(stamp)
+    if not math.isfinite(stamp):
+        raise ValueError('stamp: %r is not finite' % stamp)
+    values = np.asarray(vector, dtype=float)
+    if values.ndim != 1 or not np.all(np.isfinite(values)):
+        raise ValueError('vector: must be a 1-D array of finite numbers')
+    document = {'stamp': stamp, 'features': values.tolist(), 'config': config.to_dict()}
+    if names is not None:
+        if len(names) != len(values):
+            raise ValueError('names: %d names for %d features' % (len(names), len(values)))
+        document['names'] = list(names)
+    folder = safe_files.make_dirs(os.path.join(directory, label))
+    path = os.path.join(folder, '%.6f.json' % stamp)
+    with safe_files.AtomicFile(path, overwrite=True, text=True) as stream:
+        json.dump(document, stream, allow_nan=False, separators=(',', ':'))
+    return path
+
+
+def load_vectors(directory, with_stamps=False):
+    """Read every vector file under ``directory``.
+
+    Returns ``(vectors, config)``: ``vectors`` maps label -> 2-D array (rows in stamp order) and config is
+    the FeatureConfig all files share. With ``with_stamps``: ``(vectors, config, stamps)`` with stamps a
+    dict label -> 1-D array. Raises ValueError naming the path for a missing or empty directory, an
+    unreadable file, or files of different configs or lengths.
+    """
+    if not os.path.isdir(directory):
+        raise ValueError('%s: no such directory of feature vectors' % directory)
+    found = {}
+    config = None
+    config_path = None
+    length = None
+    for label in sorted(os.listdir(directory)):
+        folder = os.path.join(directory, label)
+        if not os.path.isdir(folder):
+            continue
+        entries = []
+        for name in os.listdir(folder):
+            if not name.endswith('.json') or '.tmp-' in name:
+                continue
+            path = os.path.join(folder, name)
+            try:
+                with safe_input.open_input(path) as stream:
+                    document = safe_input.json_loads(stream.read(), parse_constant=_refuse)
+            except (IOError, OSError, ValueError) as error:
+                raise ValueError('%s: not a feature vector file (%s)' % (path, error))
+            if not isinstance(document, dict) or 'features' not in document or 'config' not in document:
+                raise ValueError('%s: not a feature vector file (needs "features" and "config")' % path)
+            try:
+                file_config = FeatureConfig.from_dict(document['config'])
+            except ValueError as error:
+                raise ValueError('%s: %s' % (path, error))
+            if config is None:
+                config, config_path = file_config, path
+            elif file_config != config:
+                raise ValueError('%s: config %s differs from %s in %s'
+                                 % (path, file_config.to_dict(), config.to_dict(), config_path))
+            features = document['features']
+            if not isinstance(features, list) or not all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in features):
+                raise ValueError('%s: features must be a list of numbers' % path)
+            values = np.array(features, dtype=float)
+            if not np.all(np.isfinite(values)):
+                raise ValueError('%s: features hold non-finite values' % path)
+            if length is None:
+                length = len(values)
+            elif len(values) != length:
+                raise ValueError('%s: %d features, other files have %d' % (path, len(values), length))
+            stamp = document.get('stamp')
+            if isinstance(stamp, bool) or not isinstance(stamp, (int, float)):
+                raise ValueError('%s: stamp must be a number' % path)
+            entries.append((float(stamp), values))
+        if entries:
+            entries.sort(key=lambda entry: entry[0])
+            found[label] = (np.array([stamp for stamp, _ in entries]), np.array([v for _, v in entries]))
+    if not found:
+        raise ValueError('%s: no feature vector files (<label>/<stamp>.json) found' % directory)
+    if length != vector_length(config):
+        raise ValueError('%s: vectors have %d features, the config %s needs %d'
+                         % (config_path, length, config.to_dict(), vector_length(config)))
+    vectors = {label: pair[1] for label, pair in found.items()}
+    if with_stamps:
+        return vectors, config, {label: pair[0] for label, pair in found.items()}
+    return vectors, config
+
+
+def _refuse(name):
+    raise ValueError('%s is not allowed' % name)
+
+
+# -- training -----------------------------------------------------------------------------------------
+
+def _peak_rss_mb():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def split_blocks(n, holdout=DEFAULT_HOLDOUT, blocks=DEFAULT_BLOCKS):
+    """Indices (train, held) cutting ``n`` time-ordered vectors into contiguous blocks, ~holdout held out.
+
+    The held-out blocks are spread over the data (not only its end), so the threshold sees every phase.
+    """
+    blocks = max(2, min(blocks, n // 2))
+    edges = np.linspace(0, n, blocks + 1).astype(int)
+    n_held = max(1, int(round(holdout * blocks)))
+    # spread the held-out blocks evenly, inside the data (the first and last blocks train)
+    chosen = sorted(set(min(blocks - 1, int((k + 0.5) * blocks / n_held)) for k in range(n_held)))
+    held = np.concatenate([np.arange(edges[b], edges[b + 1]) for b in chosen])
+    mask = np.ones(n, dtype=bool)
+    mask[held] = False
+    return np.flatnonzero(mask), held
+
+
+class _Fitted(object):
+    """A fitted scaler + kernel model (arrays only) with its numpy scorer."""
+
+    def __init__(self, config, mean, scale, kind, kernel, names):
+        self.model = AnomalyModel(config, mean, scale, kind, kernel, 0.0, names)
+
+    def scores(self, X):
+        return self.model.scores(X)
+
+
+def _fit(X, config, nu, gamma, method, names, seed):
+    from sklearn.preprocessing import StandardScaler
+    scaler = StandardScaler().fit(X)
+    Z = scaler.transform(X)
+    mean = scaler.mean_
+    scale = scaler.scale_  # sklearn uses 1.0 for constant columns
+    if method == 'nystroem':
+        from sklearn.kernel_approximation import Nystroem
+        from sklearn.linear_model import SGDOneClassSVM
+        components = min(NYSTROEM_COMPONENTS, len(Z))
+        nystroem = Nystroem(kernel='rbf', gamma=gamma, n_components=components, random_state=seed).fit(Z)
+        features = nystroem.transform(Z)
+        sgd = SGDOneClassSVM(nu=nu, random_state=seed, max_iter=50, tol=1e-4).fit(features)
+        kernel = {'components': nystroem.components_, 'normalization': nystroem.normalization_,
+                  'coef': sgd.coef_.ravel(), 'offset': float(np.ravel(sgd.offset_)[0]), 'gamma': gamma}
+        return _Fitted(config, mean, scale, 'nystroem-sgd', kernel, names), (nystroem, sgd, scaler)
+    from sklearn.svm import OneClassSVM
+    svm = OneClassSVM(kernel='rbf', nu=nu, gamma=gamma, cache_size=200).fit(Z)
+    kernel = {'support_vectors': svm.support_vectors_, 'dual_coef': svm.dual_coef_.ravel(),
+              'intercept': float(svm.intercept_[0]), 'gamma': gamma}
+    return _Fitted(config, mean, scale, 'ocsvm', kernel, names), (svm, scaler)
+
+
+def nominal_threshold(scores, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN):
+    """Threshold below nearly all ``scores`` of held-out nominal vectors: q - margin * (median - q)."""
+    scores = np.asarray(scores, dtype=float)
+    low = float(np.quantile(scores, quantile))
+    median = float(np.median(scores))
+    return low - margin * max(median - low, 1e-12)
+
+
+def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='auto',
+          holdout=DEFAULT_HOLDOUT, blocks=DEFAULT_BLOCKS, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN,
+          max_exact=DEFAULT_MAX_EXACT, names=None, seed=0):
+    """Train a one-class SVM; return ``(AnomalyModel, info)``.
+
+    ``nominal`` (and ``anomalous``) are 2-D arrays of window vectors in time order. ``config`` is the
+    FeatureConfig they were computed with (default: FeatureConfig()). ``nu`` and ``gamma`` (RBF on
+    standardised vectors) default to DEFAULT_NU and DEFAULT_GAMMA_FACTOR / n_features, or are chosen on a
+    grid when anomalous vectors are given and they are None. ``method``: 'exact' (OneClassSVM on all
+    training vectors), 'nystroem' (Nystroem + SGDOneClassSVM), 'auto' (exact; above ``max_exact`` training
+    vectors, on an even subsample in time). ``info`` holds the figures of the run (sizes, parameters,
+    threshold calibration, training seconds, peak memory).
+    """
+    started = time.time()
+    config = config if config is not None else FeatureConfig()
+    if method not in METHODS:
+        raise ValueError('method: %r is not one of %s' % (method, ', '.join(METHODS)))
+    X = np.asarray(nominal, dtype=float)
+    if X.ndim != 2:
+        raise ValueError('nominal: need a 2-D array of vectors, got shape %s' % (X.shape,))
+    if len(X) < MIN_VECTORS:
+        raise ValueError('nominal: %d vectors, need at least %d: collect with a smaller stride (--stride 1 gives '
+                         'one per message), a shorter feature window, or from more nominal driving'
+                         % (len(X), MIN_VECTORS))
+    dimension = vector_length(config)
+    if X.shape[1] != dimension:
+        raise ValueError('nominal: vectors have %d features, the config %s needs %d'
+                         % (X.shape[1], config.to_dict(), dimension))
+    if not np.all(np.isfinite(X)):
+        raise ValueError('nominal: holds non-finite values')
+    A = None
+    if anomalous is not None and len(anomalous):
+        A = np.asarray(anomalous, dtype=float)
+        if A.ndim != 2 or A.shape[1] != dimension or not np.all(np.isfinite(A)):
+            raise ValueError('anomalous: need a finite 2-D array of %d columns' % dimension)
+    if names is None:
+        names = vector_names(config)
+    train_index, held_index = split_blocks(len(X), holdout, blocks)
+    X_train, X_held = X[train_index], X[held_index]
+    fit_method = 'nystroem' if method == 'nystroem' else 'exact'
+    subsampled = False
+    if method == 'auto' and len(X_train) > max_exact:
+        X_train = X_train[np.linspace(0, len(X_train) - 1, max_exact).astype(int)]
+        subsampled = True
+    info = {'method': fit_method, 'requested_method': method, 'vectors_nominal': len(X),
+            'vectors_train': len(X_train), 'vectors_held_out': len(X_held), 'subsampled': subsampled,
+            'vectors_anomalous': 0 if A is None else len(A), 'features': dimension,
+            'config': config.to_dict()}
+
+    candidates = []
+    if A is not None and (nu is None or gamma is None):
+        nus = NU_GRID if nu is None else (nu,)
+        gammas = [f / dimension for f in GAMMA_FACTOR_GRID] if gamma is None else (gamma,)
+        for candidate_nu in nus:
+            for candidate_gamma in gammas:
+                fitted, _ = _fit(X_train, config, candidate_nu, candidate_gamma, fit_method, names, seed)
+                held_scores = fitted.scores(X_held)
+                anomalous_scores = fitted.scores(A)
+                threshold = _recall_threshold(held_scores, anomalous_scores)
+                fp = int(np.sum(held_scores < threshold))
+                precision = len(A) / float(len(A) + fp)
+                spread = max(float(np.median(held_scores) - np.min(anomalous_scores)), 1e-12)
+                candidates.append({'nu': candidate_nu, 'gamma': candidate_gamma, 'false_positives': fp,
+                                   'precision': precision, 'threshold': threshold,
+                                   'margin': (np.min(held_scores) - np.max(anomalous_scores)) / spread,
+                                   'fitted': fitted})
+        best = max(candidates, key=lambda c: (c['precision'], c['margin']))
+        fitted, nu, gamma, threshold = best['fitted'], best['nu'], best['gamma'], best['threshold']
+        info['grid'] = [{key: value for key, value in c.items() if key != 'fitted'} for c in candidates]
+        info['threshold_rule'] = 'midway between the highest anomalous score and the next held-out nominal score'
+        held_scores = fitted.scores(X_held)
+    else:
+        nu = DEFAULT_NU if nu is None else float(nu)
+        gamma = DEFAULT_GAMMA_FACTOR / dimension if gamma is None else float(gamma)
+        reductions = 0
+        while True:
+            fitted, _ = _fit(X_train, config, nu, gamma, fit_method, names, seed)
+            held_scores = fitted.scores(X_held)
+            floor = _score_floor(fitted.model)
+            low = float(np.quantile(held_scores, quantile))
+            # Held-out nominal vectors beyond the reach of every support vector (their score is the floor):
+            # the kernel is too narrow for this data; widen it (smaller gamma) and refit.
+            if floor is None or low - floor > 0.01 * (float(np.median(held_scores)) - floor) or reductions >= 4:
+                break
+            gamma *= 0.5
+            reductions += 1
+        threshold = nominal_threshold(held_scores, quantile, margin)
+        info['threshold_rule'] = ('held-out nominal: q%g - %g * (median - q%g)' % (quantile, margin, quantile))
+        info['gamma_reductions'] = reductions
+        if floor is not None and threshold <= floor + 0.1 * (low - floor):
+            # a threshold at or below the lowest possible score would never flag anything
+            threshold = floor + 0.1 * (low - floor)
+            info['threshold_rule'] += ', raised above the lowest possible score'
+        if A is not None:
+            threshold = max(threshold, _recall_threshold(held_scores, fitted.scores(A)))
+    model = fitted.model
+    model.threshold = float(threshold)
+    info.update({
+        'nu': nu, 'gamma': gamma, 'threshold': float(threshold),
+        'support_vectors': int(model.kernel['support_vectors'].shape[0]) if model.kind == 'ocsvm'
+        else int(model.kernel['components'].shape[0]),
+        'held_out_score_min': float(np.min(held_scores)), 'held_out_score_median': float(np.median(held_scores)),
+        'held_out_flagged': int(np.sum(held_scores < threshold)),
+        'train_seconds': time.time() - started, 'peak_rss_mb': _peak_rss_mb(),
+    })
+    model.info = {key: value for key, value in info.items() if key != 'grid'}
+    return model, info
+
+
+def _score_floor(model):
+    """The lowest score the model can give (far from every support vector), or None when unbounded."""
+    if model.kind == 'ocsvm':
+        return model.kernel['intercept'] + float(np.sum(np.minimum(model.kernel['dual_coef'], 0.0)))
+    return None
+
+
+def _recall_threshold(nominal_scores, anomalous_scores):
+    """Threshold flagging every anomalous score: midway to the next nominal score above the highest one."""
+    top = float(np.max(anomalous_scores))
+    above = nominal_scores[nominal_scores > top]
+    if len(above) == 0:
+        return top + max(1e-9, 1e-6 * abs(top))
+    return 0.5 * (top + float(np.min(above)))
+
+
+# -- evaluation -----------------------------------------------------------------------------------------
+
+def evaluate(model, nominal, anomalous):
+    """Count decisions of ``model`` on nominal and anomalous vectors (positive = anomalous)."""
+    fp = tn = tp = fn = 0
+    if nominal is not None and len(nominal):
+        flagged = model.scores(np.asarray(nominal, dtype=float)) < model.threshold
+        fp, tn = int(flagged.sum()), int((~flagged).sum())
+    if anomalous is not None and len(anomalous):
+        flagged = model.scores(np.asarray(anomalous, dtype=float)) < model.threshold
+        tp, fn = int(flagged.sum()), int((~flagged).sum())
+    precision = tp / float(tp + fp) if tp + fp else float('nan')
+    recall = tp / float(tp + fn) if tp + fn else float('nan')
+    return Report(tp + fp + fn + tn, tp, fp, fn, tn, precision, recall)
+
+
+def format_report(report, info=None):
+    """The paper's table: Total, TP, FP, FN, TN, Precision, Recall, training time, peak memory."""
+    def percent(value):
+        return 'n/a' if value != value else '%.1f%%' % (100.0 * value)
+
+    lines = ['%-16s %s' % ('Total', report.total), '%-16s %s' % ('TP', report.tp),
+             '%-16s %s' % ('FP', report.fp), '%-16s %s' % ('FN', report.fn), '%-16s %s' % ('TN', report.tn),
+             '%-16s %s' % ('Precision', percent(report.precision)),
+             '%-16s %s' % ('Recall', percent(report.recall))]
+    if info:
+        if 'train_seconds' in info:
+            lines.append('%-16s %.2f s' % ('Training time', info['train_seconds']))
+        if 'peak_rss_mb' in info:
+            lines.append('%-16s %.0f MB (process peak RSS)' % ('Peak memory', info['peak_rss_mb']))
+        if 'method' in info:
+            lines.append('%-16s %s, nu=%g, gamma=%.4g, %s vectors (%s held out), threshold %.4g' % (
+                'Model', info['method'], info.get('nu', float('nan')), info.get('gamma', float('nan')),
+                info.get('vectors_train', '?'), info.get('vectors_held_out', '?'), info.get('threshold', 0.0)))
+    return '\n'.join(lines)

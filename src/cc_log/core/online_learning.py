@@ -1,0 +1,182 @@
+"""Online learning of nominal: refit a classifier's model from the vectors of spans no trigger flagged.
+
+Off by default; a classifier's ``learn_online: true`` (the smart node's ``~learn_online``) turns it on. The
+classifier offers each vector it scored nominal (``offer(stamp, vector)``) and reports every anomalous score,
+and the node every window opened by any trigger (``flag(stamp)``). A vector waits until ``guard`` of message
+time has passed after it; a flag within ``guard`` of it (before or after) drops it, so nothing from around a
+flagged span is ever learned (``guard`` should cover the feature window and the logger's pre and post). The
+vectors that pass go into a bounded reservoir (``keep`` vectors, a uniform sample of all of them, kept in time
+order). Every ``every`` new vectors the model is refitted in a background thread with ``learning.train`` (the
+same scaling, kernel and held-out threshold as learn mode) on the original model's support vectors (what the
+model file keeps of its training data) followed by the reservoir; the classifier takes the new model at its
+next message (``take()``), and it is saved to ``online_path(model file)``, beside the original, which is never
+written (an atomic write: a crash mid-save leaves the previous file whole). A failed refit keeps the model in
+use and says why in ``stats()['last_error']``.
+
+Pure: numpy and learning; no rospy.
+"""
+import collections
+import os
+import random
+import threading
+import time
+
+import numpy as np
+
+from cc_log.core import learning
+from cc_log.core.spans import Span
+
+DEFAULT_EVERY = 2000    # new nominal vectors between refits
+DEFAULT_KEEP = 5000     # vectors in the reservoir
+DEFAULT_GUARD = '10s'   # message time around a flag whose vectors are never learned
+ONLINE_MARK = '.online'
+
+
+def online_path(path):
+    """Where the refitted model of the model file ``path`` is saved: ``model.json`` -> ``model.online.json``."""
+    root, ext = os.path.splitext(path)
+    return root + ONLINE_MARK + (ext or '.json')
+
+
+def training_support(model):
+    """The training vectors the model keeps (support vectors, or the Nystroem components), unscaled."""
+    centres = model.kernel['support_vectors' if model.kind == 'ocsvm' else 'components']
+    return np.asarray(centres, dtype=float) * model.scale + model.mean
+
+
+class OnlineLearner(object):
+    """Learns nominal online for one model (see the module docstring). ``save_path``: None = not saved;
+    ``background=False`` refits in the caller's thread (tests, offline replay)."""
+
+    def __init__(self, model, save_path=None, every=DEFAULT_EVERY, keep=DEFAULT_KEEP, guard=DEFAULT_GUARD,
+                 seed=0, background=True):
+        every, keep = _count(every, 'learn_every', 1), _count(keep, 'learn_keep', learning.MIN_VECTORS)
+        guard = Span.parse(guard, 'learn_guard')
+        if not guard.is_duration:
+            raise ValueError('learn_guard: %s must be a duration such as 10s' % (guard,))
+        self.model = model
+        self.save_path = save_path
+        self.every, self.keep, self.guard = every, keep, guard.seconds
+        self.background = background
+        self._support = training_support(model)
+        self._rng = random.Random(seed)
+        self._lock = threading.Lock()
+        self._pending = collections.deque()   # (stamp, vector) younger than guard
+        self._reservoir = []                  # (arrival index, vector)
+        self._last_flag = -float('inf')
+        self._arrived = 0                     # vectors that passed the guard
+        self._new = 0                         # ... since the last refit started
+        self._ready = None                    # a refitted model not taken yet
+        self._thread = None
+        self.seen = self.refused = self.refits = 0
+        self.last_refit = None                # wall time of the last refit that finished
+        self.last_error = None
+
+    def flag(self, stamp):
+        """Something was flagged at ``stamp``: vectors within ``guard`` of it are never learned (thread-safe)."""
+        with self._lock:
+            self._last_flag = max(self._last_flag, stamp)
+            while self._pending and self._pending[-1][0] >= stamp - self.guard:
+                self._pending.pop()
+                self.refused += 1
+
+    def offer(self, stamp, vector):
+        """A vector scored nominal at ``stamp`` (message time, increasing); starts a refit when due."""
+        with self._lock:
+            self.seen += 1
+            if stamp - self._last_flag <= self.guard:
+                self.refused += 1
+                return
+            if self._pending and stamp < self._pending[-1][0]:  # time went back (a bag played again)
+                self.refused += len(self._pending)
+                self._pending.clear()
+            self._pending.append((stamp, np.array(vector, dtype=float)))
+            while self._pending and self._pending[0][0] < stamp - self.guard:
+                self._absorb(self._pending.popleft()[1])
+            due = self._new >= self.every and self._thread is None
+            if due:
+                self._new = 0
+                vectors = np.vstack([self._support] + [v for _, v in sorted(self._reservoir, key=lambda e: e[0])])
+        if due:
+            if self.background:
+                self._thread = threading.Thread(target=self._refit, args=(vectors,), name='cc_log-online-learning')
+                self._thread.daemon = True
+                self._thread.start()
+            else:
+                self._thread = True
+                self._refit(vectors)
+
+    def _absorb(self, vector):
+        """Reservoir sampling: every vector that passed has the same chance to be in the reservoir."""
+        self._arrived += 1
+        self._new += 1
+        if len(self._reservoir) < self.keep:
+            self._reservoir.append((self._arrived, vector))
+        else:
+            slot = self._rng.randrange(self._arrived)
+            if slot < self.keep:
+                self._reservoir[slot] = (self._arrived, vector)
+
+    def _refit(self, vectors):
+        started = time.time()
+        try:
+            model, info = learning.train(vectors, config=self.model.config)
+            model.info['online'] = {'support_vectors_kept': len(self._support),
+                                    'reservoir': len(vectors) - len(self._support), 'learned': self._arrived,
+                                    'refit': self.refits + 1, 'seconds': time.time() - started}
+            if self.save_path is not None:
+                model.save(self.save_path)
+            with self._lock:
+                self._ready = model
+                self.refits += 1
+                self.last_refit = time.time()
+                self.last_error = None
+        except Exception as error:  # a refit must never stop the logger: the model in use stays
+            with self._lock:
+                self.last_error = '%s: %s' % (type(error).__name__, error)
+        finally:
+            self._thread = None
+
+    def take(self):
+        """The refitted model once it is ready (then None until the next one)."""
+        if self._ready is None:
+            return None
+        with self._lock:
+            model, self._ready = self._ready, None
+        self.model = model
+        return model
+
+    def wait(self, timeout=None):
+        """Wait for a refit under way (tests, shutdown); True when none is left."""
+        thread = self._thread
+        if isinstance(thread, threading.Thread):
+            thread.join(timeout)
+            return not thread.is_alive()
+        return True
+
+    def stats(self):
+        """Counters for the diagnostics: vectors seen, learned (passed the guard), refused (near a flag), in the
+        reservoir, refits, last refit (wall time, None before the first), last error."""
+        with self._lock:
+            return {'vectors_seen': self.seen, 'vectors_learned': self._arrived, 'vectors_refused': self.refused,
+                    'reservoir': len(self._reservoir), 'refits': self.refits, 'last_refit': self.last_refit,
+                    'refitting': self._thread is not None, 'last_error': self.last_error}
+
+
+def _count(value, name, minimum):
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError('%s: %r must be a whole number >= %d' % (name, value, minimum))
+    return value
+
+
+def from_options(model, path, options):
+    """The OnlineLearner of a classifier entry's ``learn_*`` keys (popped from ``options``), or None when
+    ``learn_online`` is not true. ``path``: the model file (the refitted model goes beside it)."""
+    enabled = options.pop('learn_online', False)
+    keys = dict((key[len('learn_'):], options.pop(key)) for key in ('learn_every', 'learn_keep', 'learn_guard')
+                if key in options)
+    if not isinstance(enabled, bool):
+        raise ValueError('learn_online: %r must be true or false' % (enabled,))
+    if not enabled:
+        return None
+    return OnlineLearner(model, online_path(path), **keys)

@@ -1,0 +1,172 @@
+"""Topic selection as ``rosbag record`` users know it: all topics, regular expressions, exclusions.
+
+``TopicSelection(topics=(), all_topics=False, regex=(), exclude=())``: ``matches(topic)`` is True for a topic
+named in ``topics``, or matching one of the ``regex`` patterns (whole name, ``re.fullmatch``, like
+``rosbag record -e``), or any topic with ``all_topics`` (``-a``), unless it matches an ``exclude`` pattern
+(``-x``). Names are compared as given (resolve them first).
+
+``TopicSelection.parse(entries)`` reads the configuration's ``topics`` list, whose entries may be patterns:
+
+- ``/scan``: a topic name;
+- ``*``: every topic (``-a``);
+- ``re:/camera/.*``: a regular expression (``-e``);
+- ``!re:/camera/.*/compressed``, ``!/tf``: an exclusion (``-x``; a name excludes that topic only).
+
+``names`` are the plain topic names (subscribed at start); ``dynamic`` says whether topics that appear later
+must be discovered (``-a`` or a regular expression: see ``topic_watch``). Pure; a bad pattern raises
+``ValueError('<name>: ...')``.
+
+Python's regular expressions backtrack, so a pattern could take exponential time on one topic name. A pattern
+is compiled once and refused when it is longer than MAX_PATTERN_CHARS or has a shape that backtracks badly: a
+repetition inside a repetition (``(a+)+``, ``(a*b?)*``), alternatives inside a repetition (``(a|a)*``), a
+back reference, or more than MAX_UNBOUNDED_REPEATS unbounded repetitions (``.*.*.*.*x``). ``matches`` keeps
+its answer per topic (at most CACHE_TOPICS topics), so the topic watcher's polls do not match again.
+"""
+import re
+try:
+    from re import _parser as _sre_parse  # Python >= 3.11
+except ImportError:  # pragma: no cover
+    import sre_parse as _sre_parse
+
+from cc_log.core.safe_input import brief
+
+__all__ = ['TopicSelection', 'ALL', 'REGEX', 'EXCLUDE']
+
+ALL = '*'
+REGEX = 're:'
+EXCLUDE = '!'
+MAX_PATTERN_CHARS = 256
+MAX_UNBOUNDED_REPEATS = 3
+CACHE_TOPICS = 10000
+
+_REPEATS = frozenset(op for op in (getattr(_sre_parse, name, None) for name in (
+    'MAX_REPEAT', 'MIN_REPEAT', 'POSSESSIVE_REPEAT')) if op is not None)
+
+
+def _compile(pattern, name):
+    """The compiled ``pattern``, after the checks of the module docstring; ValueError('<name>: ...')."""
+    if len(pattern) > MAX_PATTERN_CHARS:
+        raise ValueError('%s: regular expression %s is longer than %d characters'
+                         % (name, brief(pattern), MAX_PATTERN_CHARS))
+    try:
+        compiled = re.compile(pattern)
+        problem = _backtracking_shape(_sre_parse.parse(pattern), False, [0])
+    except re.error as error:
+        raise ValueError('%s: %s is not a regular expression: %s' % (name, brief(pattern), error))
+    if problem:
+        raise ValueError('%s: regular expression %s is refused: %s (matching could take very long)'
+                         % (name, brief(pattern), problem))
+    return compiled
+
+
+def _backtracking_shape(items, in_repeat, unbounded):
+    """What makes the parsed pattern ``items`` backtrack badly, or '' (``unbounded``: [repeats seen])."""
+    for op, value in items:
+        parts = []
+        if op in _REPEATS:
+            low, high, body = value
+            if high > 1:
+                if in_repeat:
+                    return 'a repetition inside a repetition'
+                if high == _sre_parse.MAXREPEAT:
+                    unbounded[0] += 1
+                    if unbounded[0] > MAX_UNBOUNDED_REPEATS:
+                        return 'more than %d unbounded repetitions' % MAX_UNBOUNDED_REPEATS
+            problem = _backtracking_shape(body, in_repeat or high > 1, unbounded)
+            if problem:
+                return problem
+            continue
+        if op == _sre_parse.BRANCH:
+            if in_repeat:
+                return 'alternatives inside a repetition'
+            parts = value[1]
+        elif op in (_sre_parse.GROUPREF, getattr(_sre_parse, 'GROUPREF_EXISTS', None)):
+            return 'a back reference'
+        elif op == _sre_parse.SUBPATTERN:
+            parts = [value[-1]]
+        elif op in (_sre_parse.ASSERT, _sre_parse.ASSERT_NOT):
+            parts = [value[1]]
+        elif op == getattr(_sre_parse, 'ATOMIC_GROUP', None):
+            parts = [value]
+        for part in parts:
+            problem = _backtracking_shape(part, in_repeat, unbounded)
+            if problem:
+                return problem
+    return ''
+
+
+class TopicSelection(object):
+    """Which topics to record (see the module docstring)."""
+
+    def __init__(self, topics=(), all_topics=False, regex=(), exclude=(), name='topics'):
+        self.names = list(dict.fromkeys(topics))
+        self.all_topics = bool(all_topics)
+        self.regex = [_compile(pattern, name) for pattern in regex]
+        self.exclude = [_compile(pattern, name) for pattern in exclude]
+        self._matched = {}
+
+    @classmethod
+    def parse(cls, entries, name='topics'):
+        """A selection from configuration entries (names, ``*``, ``re:...``, ``!...``)."""
+        topics, regex, exclude, all_topics = [], [], [], False
+        for entry in entries:
+            if not isinstance(entry, str) or not entry.strip():
+                raise ValueError('%s: %s is not a topic name or pattern' % (name, brief(entry)))
+            entry = entry.strip()
+            negated = entry.startswith(EXCLUDE)
+            body = entry[len(EXCLUDE):] if negated else entry
+            if body.startswith(REGEX):
+                pattern = body[len(REGEX):]
+                if not pattern:
+                    raise ValueError('%s: %s has an empty regular expression' % (name, brief(entry)))
+            elif body == ALL and not negated:
+                all_topics = True
+                continue
+            elif not body or body == ALL:
+                raise ValueError('%s: %s excludes nothing (a name, or re:PATTERN)' % (name, brief(entry)))
+            else:
+                pattern = None
+            if negated:
+                exclude.append(pattern if pattern is not None else re.escape(body))
+            elif pattern is not None:
+                regex.append(pattern)
+            else:
+                topics.append(body)
+        return cls(topics, all_topics, regex, exclude, name)
+
+    @staticmethod
+    def is_pattern(entry):
+        """Whether a configuration entry is a pattern (``*``, ``re:...``, ``!...``) rather than a name."""
+        return isinstance(entry, str) and (entry.strip() == ALL or entry.strip().startswith((REGEX, EXCLUDE)))
+
+    @property
+    def dynamic(self):
+        """Whether topics not named must be discovered as they appear (``-a`` or a regular expression)."""
+        return self.all_topics or bool(self.regex)
+
+    def matches(self, topic):
+        """Whether ``topic`` is selected (kept per topic)."""
+        known = self._matched.get(topic)
+        if known is not None:
+            return known
+        if any(pattern.fullmatch(topic) for pattern in self.exclude):
+            selected = False
+        else:
+            selected = self.all_topics or topic in self.names or any(pattern.fullmatch(topic) for pattern in self.regex)
+        if len(self._matched) >= CACHE_TOPICS:
+            self._matched.clear()
+        self._matched[topic] = selected
+        return selected
+
+    def select(self, topics):
+        """The selected topics of ``topics``, in order."""
+        return [topic for topic in topics if self.matches(topic)]
+
+    def describe(self):
+        """One line for the log."""
+        parts = (['all topics'] if self.all_topics else []) + self.names + \
+            ['re:' + pattern.pattern for pattern in self.regex]
+        text = ', '.join(parts) or 'no topics'
+        if self.exclude:
+            text += ' except ' + ', '.join('re:' + pattern.pattern for pattern in self.exclude)
+        return text

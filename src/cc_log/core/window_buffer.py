@@ -1,0 +1,533 @@
+"""The window buffer of smart mode.
+
+It holds the *logging windows* of the driving topic (the topic whose messages count ``pre`` and ``post``):
+on a trigger at message i, messages i-pre ... i+post are kept. A trigger inside an open window extends it,
+and two windows that touch or overlap become one, so no message is written twice and none inside a window
+is skipped. Messages of other topics are buffered by time and saved in the windows whose time span holds
+them. (The feature window the classifiers score is ``features.FeatureWindow``.)
+
+Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
+window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``: a message held as its
+serialized bytes costs their length plus ``RAW_RECORD_OVERHEAD``). An open window is
+handed on in parts (as ``max_window`` splits it, with every message of other topics held) whenever the
+buffer reaches half the budget, so that the buffer and the part being compressed and written stay within
+the budget together. At the full budget a window waiting to be completed is completed, then messages
+outside every window (the ``pre`` buffer, oldest first) go, counted in ``trimmed``. No message inside a
+window is ever dropped.
+
+Everything is pure Python: records carry any message object, stamps are float seconds.
+"""
+import collections
+import itertools
+import sys
+
+from cc_log.core.spans import Span
+
+Record = collections.namedtuple('Record', 'stamp topic msg cost raw connection', defaults=(0, None, None))
+Record.__doc__ = """One message: its stamp (float seconds), topic, message object and estimated memory in
+bytes (``cost``; 0: not known, WindowBuffer estimates it); ``raw`` and ``connection``: its serialized bytes and
+connection header (a dict: type, md5sum, message_definition, and live also callerid and latching), alongside
+or instead of the decoded ``msg`` (None until something reads a field: ``raw_message.decoded``)."""
+
+
+def records_of(stamps, topics, msgs, costs, raws, connections):
+    """The list of ``Record``s of these columns (iterables, one item per record), built without a Python call per
+    record."""
+    return list(map(tuple.__new__, itertools.repeat(Record), zip(stamps, topics, msgs, costs, raws, connections)))
+
+
+TopicLimits = collections.namedtuple('TopicLimits', 'pre post max_bytes', defaults=(None, None, 0))
+TopicLimits.__doc__ = """What one topic of the windows keeps, where it differs from the window's: ``pre`` and ``post``
+(seconds before the window's first trigger and after its last; None: the window's own, which they can only
+shorten) and ``max_bytes`` (memory its records may take outside every window; 0: no cap of its own)."""
+
+
+Trigger = collections.namedtuple('Trigger', 'stamp reason score name', defaults=(None,))
+Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
+NaN when none) and the name of the trigger (None: the reason is the name, as in files written before names)."""
+
+DEFAULT_PRE = Span.messages(100)
+DEFAULT_POST = Span.messages(100)
+DEFAULT_MAX_WINDOW = Span.messages(100000)
+DEFAULT_JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the buffer resets
+DEFAULT_MAX_BUFFER_MB = 256.0      # memory budget of everything buffered (MB = 10^6 bytes); 0: none
+MB = 1000 ** 2
+RECORD_OVERHEAD = 130              # bytes of a Record around its message: the tuple, stamp, cost, a deque slot
+ALLOCATOR_FACTOR = 1.15            # measured RSS per buffered nav_msgs/Odometry / its deep sys.getsizeof
+RAW_RECORD_OVERHEAD = 200          # bytes of a Record of serialized bytes besides their length: the tuple, stamp,
+#                                    cost, the bytes object's header, a deque slot (193 measured by tracemalloc)
+
+
+def deep_size(obj):
+    """Bytes of ``obj`` and everything it holds (sys.getsizeof over slots, lists, tuples, dicts; shared
+    objects counted once)."""
+    seen = set()
+    total = 0
+    stack = [obj]
+    while stack:
+        item = stack.pop()
+        if id(item) in seen:
+            continue
+        seen.add(id(item))
+        total += sys.getsizeof(item)
+        if isinstance(item, (str, bytes, bytearray, int, float, complex, bool)) or item is None:
+            continue
+        if isinstance(item, (list, tuple, set, frozenset)):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            stack.extend(item.keys())
+            stack.extend(item.values())
+        else:
+            for cls in type(item).__mro__:
+                for name in getattr(cls, '__slots__', ()):
+                    if isinstance(name, str) and hasattr(item, name):
+                        stack.append(getattr(item, name))
+            if hasattr(item, '__dict__'):
+                stack.append(item.__dict__)
+    return total
+
+
+class MemoryCost(object):
+    """Estimated memory of a buffered message, cheap: the deep size of the first message of each type is
+    measured once (``deep_size``, times ALLOCATOR_FACTOR, plus RECORD_OVERHEAD) and memoised; when the
+    serialized length of messages is known (``size``), later messages of the type scale it by their length
+    over the first one's, so a scan or an image twice as long counts twice. Not thread-safe (one per owner)."""
+
+    def __init__(self):
+        self._memo = {}
+
+    def of(self, record):
+        """Bytes ``record`` takes: its serialized length plus RAW_RECORD_OVERHEAD when it holds only its
+        bytes, else the estimate of its message."""
+        if record.msg is None and record.raw is not None:
+            return len(record.raw) + RAW_RECORD_OVERHEAD
+        return self(record.msg, len(record.raw) if record.raw is not None else None)
+
+    def __call__(self, msg, size=None):
+        """Bytes ``msg`` takes in memory, estimated (``size``: its serialized length, or None)."""
+        memo = self._memo.get(type(msg))
+        if memo is None:
+            memo = self._memo[type(msg)] = (int(deep_size(msg) * ALLOCATOR_FACTOR) + RECORD_OVERHEAD, size)
+        cost, first = memo
+        if size and first:
+            return max(RECORD_OVERHEAD, cost * size // first)
+        return cost
+
+
+def part_bytes(budget):
+    """The most a buffer of ``budget`` bytes holds before it hands a window on in parts: half of it, the other
+    half being for the part the writer is busy with."""
+    return budget // 2
+
+
+def budget_bytes(max_buffer_mb, name='max_buffer_mb'):
+    """``max_buffer_mb`` (a number >= 0; 0 or None: no budget) in bytes; ValueError('<name>: ...')."""
+    try:
+        number = float(max_buffer_mb or 0)
+    except (TypeError, ValueError):
+        number = float('nan')
+    if not number >= 0 or number == float('inf'):
+        raise ValueError('%s: %r must be a number of MB >= 0 (0: no budget)' % (name, max_buffer_mb))
+    return int(number * MB)
+
+
+class LogWindow(object):
+    """A logging window: records in stamp order and the triggers that opened and extended it.
+
+    A window too long or too large to be held whole is handed on in parts (``part`` 1, 2, ...), all with the
+    same ``key``, the last one ``final`` (it may hold no record: the window ended right after a part)."""
+
+    def __init__(self, records, triggers, part=0, final=True, key=None):
+        self.records = records
+        self.triggers = triggers
+        self.part = part    # 0 for a whole window; 1, 2, ... for the parts of a long one
+        self.final = final  # the last (or only) part of its window
+        self.key = key      # the same for every part of one window (None: not known)
+
+    @property
+    def start(self):
+        """Stamp of the first record."""
+        return self.records[0].stamp
+
+    @property
+    def end(self):
+        """Stamp of the last record."""
+        return self.records[-1].stamp
+
+    @property
+    def topics(self):
+        """Topics in the window, in order of first appearance."""
+        return list(collections.OrderedDict.fromkeys(record.topic for record in self.records))
+
+    def __len__(self):
+        return len(self.records)
+
+    def __repr__(self):
+        return 'LogWindow(%d records, %.3f..%.3f, %d triggers)' % (
+            len(self.records), self.start, self.end, len(self.triggers))
+
+
+class _OpenWindow(object):
+    """A window still collecting driving records (open) or waiting to learn whether the next one touches
+    it (pending)."""
+
+    _keys = itertools.count(1)
+
+    def __init__(self, records, trigger, post):
+        self.key = next(self._keys)
+        self.records = list(records)
+        self.triggers = []
+        self.part = 0
+        self.continued = False  # a part was written: side records after it belong to the next part
+        self.remaining = 0     # messages still to take after the last trigger (count post)
+        self.until = None      # last stamp to take (duration post)
+        self.extend(trigger, post)
+
+    def extend(self, trigger, post):
+        """Add a trigger; the window takes what the longest post of its triggers still asks for."""
+        self.triggers.append(trigger)
+        if post.is_duration:
+            until = trigger.stamp + post.seconds
+            self.until = until if self.until is None else max(self.until, until)
+        else:
+            self.remaining = max(self.remaining, post.count)
+
+    def takes(self, stamp):
+        """Whether a driving record at ``stamp`` still belongs to this window."""
+        return self.remaining > 0 or (self.until is not None and stamp <= self.until)
+
+    def take(self, record):
+        self.records.append(record)
+        if self.remaining > 0:
+            self.remaining -= 1
+
+
+class WindowBuffer(object):
+    """Logging windows around triggers.
+
+    Call ``add`` for every driving message, ``add_side`` for messages of
+    other topics, ``trigger`` when the last driving message is anomalous, and ``flush`` at the end of the
+    stream. ``add``, ``add_side``, ``trigger`` and ``flush`` return the windows completed by that call (a
+    list of LogWindow); a window is complete once ``pre`` further messages have shown that the next window
+    does not touch it, or when it reaches ``max_window`` or the memory budget ``max_buffer_mb`` (written in
+    parts). ``cost``: the MemoryCost estimating records that carry no cost. ``part_factor``: the memory the writer
+    needs for a part per byte of it (>= 1; a format that decodes serialized messages needs several times
+    their size): parts are handed on at half the budget divided by it.
+    """
+
+    def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
+                 jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None,
+                 part_factor=1.0, topic_limits=None, held_elsewhere=None):
+        self.pre = Span.parse(pre, 'pre')
+        self.post = Span.parse(post, 'post')
+        self.max_window = Span.parse(max_window, 'max_window')
+        if self.max_window.count == 0 or self.max_window.seconds == 0:
+            raise ValueError('max_window: must hold at least one message')
+        if (self.pre.is_duration == self.max_window.is_duration) and \
+                (self.pre.count or self.pre.seconds or 0) >= (self.max_window.count or self.max_window.seconds):
+            raise ValueError('pre: %s is larger than the buffer can hold (max_window %s)' % (self.pre, self.max_window))
+        self.jump_back_tolerance = jump_back_tolerance
+        self.max_buffer_bytes = budget_bytes(max_buffer_mb)
+        self._part_bytes = int(part_bytes(self.max_buffer_bytes) / max(1.0, float(part_factor)))
+        self._cost = cost if cost is not None else MemoryCost()
+        self._pre_count = None if self.pre.is_duration else self.pre.count  # (None: a duration)
+        self._max_count = None if self.max_window.is_duration else self.max_window.count
+        self._bytes = 0                    # estimated memory of every record held
+        self.trimmed = 0                   # records outside any window dropped early to stay within the budget
+        self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
+        self._side = {}                    # topic -> its records (other topics than the driving one), by time
+        self._side_bytes = {}              # topic -> memory of its records held
+        self.limits = dict(topic_limits or {})  # topic -> TopicLimits
+        self._held_elsewhere = held_elsewhere or (lambda: 0)  # bytes of parts handed on and not yet written
+        self._open = None                  # window taking driving records
+        self._pending = None               # closed window that the next one may still touch
+        self._clock = None                 # newest stamp seen (stamps may jitter backwards a little)
+        self.resets = 0                    # times time jumped backwards and the buffer started over
+
+    # -- logging windows ------------------------------------------------------------------------------
+
+    @property
+    def window_open(self):
+        """True while a logging window is taking messages."""
+        return self._open is not None
+
+    @property
+    def buffered_bytes(self):
+        """Estimated memory (bytes) of the messages held (see ``buffered_messages``)."""
+        return self._bytes
+
+    @property
+    def part_limit(self):
+        """Bytes of an open window's records held before they are handed on as a part (0: no budget)."""
+        return self._part_bytes
+
+    @property
+    def buffered_messages(self):
+        """Messages held in memory: pre buffer, windows not yet written, other topics."""
+        held = len(self._ring) + sum(map(len, self._side.values()))
+        for window in (self._open, self._pending):
+            if window is not None:
+                held += len(window.records)
+        return held
+
+    def add(self, record):
+        """Add a driving record; return the windows this completes."""
+        if not record.cost:
+            record = self._costed(record)
+        done = []
+        stamp, clock = record.stamp, self._clock
+        if clock is not None and stamp < clock - self.jump_back_tolerance:
+            done.extend(self.flush())
+            self._reset()
+            clock = None
+        if clock is None or stamp > clock:
+            self._clock = clock = stamp
+        window = self._open
+        if window is not None:
+            if window.remaining > 0 or (window.until is not None and clock <= window.until):  # window.takes(clock)
+                window.take(record)
+                self._bytes += record.cost
+                if self._max_count is None or len(window.records) >= self._max_count:
+                    done.extend(self._split(window))
+                if self.max_buffer_bytes and self._bytes > self._part_bytes:
+                    done.extend(self._enforce_budget())
+                return done
+            # Pending even when a split left it empty: a touching window continues its parts.
+            self._pending, self._open = window, None
+        ring = self._ring
+        ring.append(record)
+        self._bytes += record.cost
+        if self._pre_count is None or len(ring) > self._pre_count + 1:  # else nothing to trim
+            if self._trim_ring(self.pre) and self._pending is not None:
+                done.extend(self._finish(self._pending))
+                self._pending = None
+        if self._side:
+            self._prune_side()
+        if self.max_buffer_bytes and self._bytes > self._part_bytes:
+            done.extend(self._enforce_budget())
+        return done
+
+    def add_side(self, record):
+        """Add a record of another topic; it is saved in the window whose time span holds it. Returns the
+        windows this completes (parts written because the memory budget was reached)."""
+        if not record.cost:
+            record = self._costed(record)
+        topic = record.topic
+        side = self._side.get(topic)
+        if side is None:
+            side = self._side[topic] = collections.deque()
+            self._side_bytes[topic] = 0
+        side.append(record)
+        self._side_bytes[topic] += record.cost
+        self._bytes += record.cost
+        limits = self.limits.get(topic)
+        if limits is not None and self._open is None and self._pending is None:
+            self._limit_topic(topic, side, limits, record.stamp)
+        if self.max_buffer_bytes and self._bytes > self._part_bytes:
+            return self._enforce_budget()
+        return []
+
+    def _limit_topic(self, topic, side, limits, clock):
+        """Outside every window: a topic's records older than its own ``pre`` or beyond its own memory cap go
+        (counted in ``trimmed``), the oldest first."""
+        while side and ((limits.pre is not None and side[0].stamp < clock - limits.pre)
+                        or (limits.max_bytes and self._side_bytes[topic] > limits.max_bytes and len(side) > 1)):
+            self._drop_side(topic)
+            self.trimmed += 1
+
+    def _drop_side(self, topic):
+        record = self._side[topic].popleft()
+        self._side_bytes[topic] -= record.cost
+        self._bytes -= record.cost
+        return record
+
+    def trigger(self, reason, score=None, name=None, pre=None, post=None):
+        """Mark the last driving record: open a window around it or extend the open one.
+
+        ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the
+        buffer's). A ``pre`` longer than the buffer's gets what the buffer holds (its ``pre``); a window that
+        is open or may still merge keeps what it has. Returns the windows this completes: only parts of a
+        window that reached max_window, since a new window either extends the open one or merges with the
+        pending one (a pending window is completed as soon as a message after it leaves the pre buffer).
+        """
+        if self._clock is None:
+            raise ValueError('trigger: no message has been added yet')
+        trigger = Trigger(self._clock, reason, score, name)
+        post = self.post if post is None else Span.parse(post, 'post')
+        if self._open is not None:
+            self._open.extend(trigger, post)
+            return []
+        if self._pending is not None:
+            # Every record after the pending window is still in the ring: the new window touches it.
+            self._open, self._pending = self._pending, None
+            self._open.records.extend(self._ring)
+            self._open.extend(trigger, post)
+        else:
+            if pre is not None:
+                self._trim_ring(Span.parse(pre, 'pre'))
+            self._open = _OpenWindow(self._ring, trigger, post)
+        self._ring.clear()
+        return self._split(self._open)
+
+    @property
+    def window_active(self):
+        """Whether a window is open or complete but not yet handed on (a new trigger then joins it)."""
+        return self._open is not None or (self._pending is not None and bool(self._pending.records))
+
+    @property
+    def window_start(self):
+        """Stamp of the first driving record of the open window (None when none is open or it was split)."""
+        if self._open is None or not self._open.records or self._open.continued:
+            return None
+        return self._open.records[0].stamp
+
+    def _trim_ring(self, pre):
+        """Keep the newest driving record plus ``pre`` before it (the others stay outside every window);
+        return whether any was dropped."""
+        ring = self._ring
+        dropped = False
+        if pre.is_duration:
+            while ring and ring[0].stamp < self._clock - pre.seconds:
+                self._bytes -= ring.popleft().cost
+                dropped = True
+        else:
+            while len(ring) > pre.count + 1:
+                self._bytes -= ring.popleft().cost
+                dropped = True
+        return dropped
+
+    def flush(self):
+        """Complete every window now (end of stream): the open one is written with what it has, messages of
+        other topics that came after its last driving message included (its span had not ended)."""
+        done = []
+        if self._pending is not None:
+            done.extend(self._finish(self._pending))
+        if self._open is not None:
+            done.extend(self._finish(self._open, everything=True))
+        self._pending = self._open = None
+        return done
+
+    def _finish(self, window, everything=False):
+        """The last part of a window (or the whole window; ``everything``: with every side record held from its
+        start on); nothing for a window that holds nothing."""
+        if window.records or (everything and any(self._side.values())):
+            return [self._emit(window, everything=everything)]
+        if window.part:  # its records went out in parts: say that it ended
+            return [LogWindow([], list(window.triggers), window.part, True, window.key)]
+        return []
+
+    def _reset(self):
+        """Start over after time jumped backwards (bag loop, simulator reset)."""
+        self.resets += 1
+        self._bytes -= sum(record.cost for record in self._ring) + sum(self._side_bytes.values())
+        self._ring.clear()
+        self._side.clear()
+        self._side_bytes.clear()
+        self._clock = None
+
+    def _costed(self, record):
+        if record.cost:
+            return record
+        return record._replace(cost=self._cost.of(record))
+
+    def _over_budget(self):
+        return self.max_buffer_bytes and self._bytes + self._held_elsewhere() > self.max_buffer_bytes
+
+    def _enforce_budget(self):
+        """Stay within max_buffer_mb (see the module docstring); return the windows completed doing so."""
+        done = []
+        if not self.max_buffer_bytes or (self._bytes <= self._part_bytes and not self._over_budget()):
+            return done
+        window = self._open
+        if window is not None and self._bytes > self._part_bytes and (window.records or any(self._side.values())):
+            # Written in parts, as max_window splits: what the window holds now, with every side record held.
+            window.part = max(window.part, 1)
+            done.append(self._emit(window, everything=True, final=False))
+            window.part += 1
+            window.records = []
+            window.continued = True
+        if self._over_budget() and self._pending is not None:
+            done.extend(self._finish(self._pending))
+            self._pending = None
+        while self._over_budget() and self._open is None:
+            # Outside every window: the oldest go first; the newest driving record stays (a trigger needs it).
+            # (With a window open, what the buffer holds is in it: the logger thins the parts it hands on.)
+            heads = [(side[0].stamp, topic) for topic, side in self._side.items() if side]
+            oldest = min(heads) if heads else None
+            if oldest is not None and (len(self._ring) <= 1 or oldest[0] <= self._ring[0].stamp):
+                self._drop_side(oldest[1])
+            elif len(self._ring) > 1:
+                self._bytes -= self._ring.popleft().cost
+            else:
+                break
+            self.trimmed += 1
+        return done
+
+    def _full(self, window):
+        if self.max_window.is_duration:
+            return window.records[-1].stamp - window.records[0].stamp >= self.max_window.seconds
+        return len(window.records) >= self.max_window.count
+
+    def _split(self, window):
+        """Emit the parts of a window that reached max_window; the rest goes on as the next part."""
+        done = []
+        while window.records and self._full(window):
+            size = self.max_window.count or len(window.records)
+            window.part = max(window.part, 1)
+            done.append(self._emit(window, window.records[:size], final=False))
+            window.part += 1
+            window.records = window.records[size:]
+            window.continued = True
+        return done
+
+    def _prune_side(self):
+        """Drop records of other topics older than every driving record still held (or, outside every window,
+        than their topic's own ``pre``)."""
+        if self._pending is not None and self._pending.records:
+            oldest = self._pending.records[0].stamp
+        elif self._open is not None and self._open.records:
+            oldest = self._open.records[0].stamp
+        elif self._ring:
+            oldest = self._ring[0].stamp
+        else:
+            return
+        free = self._open is None and self._pending is None
+        for topic, side in self._side.items():
+            while side and side[0].stamp < oldest:
+                self._drop_side(topic)
+            limits = self.limits.get(topic)
+            if free and limits is not None and side:
+                self._limit_topic(topic, side, limits, self._clock)
+
+    def _emit(self, window, records=None, everything=False, final=True):
+        """Turn a window (or the given first records of it) into a LogWindow with the side records of its
+        time span (``everything``: every side record held from its start on), in stamp order. A part after
+        the first takes the side records since the previous part (those of its time span and those between).
+        A topic with its own ``pre`` or ``post`` (``limits``) keeps only what lies within them of the window's
+        first and last trigger."""
+        records = window.records if records is None else records
+        start = records[0].stamp if records and not getattr(window, 'continued', False) else float('-inf')
+        end = float('inf') if everything else records[-1].stamp
+        cost = sum(record.cost for record in records)
+        side = []
+        triggers = window.triggers
+        for topic, held in self._side.items():
+            low, high = start, end
+            limits = self.limits.get(topic)
+            if limits is not None and triggers:
+                if limits.pre is not None:
+                    low = max(low, triggers[0].stamp - limits.pre)
+                if limits.post is not None:
+                    high = min(high, max(trigger.stamp for trigger in triggers) + limits.post)
+            taken = 0
+            while held and held[0].stamp <= end:
+                record = held.popleft()
+                taken += record.cost
+                if low <= record.stamp <= high:
+                    side.append(record)
+            self._side_bytes[topic] -= taken
+            cost += taken
+        self._bytes -= cost
+        if side:
+            records = sorted(records + side, key=lambda record: record.stamp)
+        return LogWindow(list(records), list(window.triggers), window.part, final, window.key)

@@ -1,0 +1,1 @@
+"""The ROS edge: the nodes, their intake, parameters and topic watching."""

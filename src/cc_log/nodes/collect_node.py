@@ -1,0 +1,185 @@
+"""The collect logger node (``rosrun cc_log collect_logger.py``): log everything for learning.
+
+Node name: ``collect_logger``.
+
+Subscribed topics
+  ``odom`` (nav_msgs/Odometry): the driving topic; its feature vectors are written for learn mode.
+  every topic in ``~topics`` (any type): logged too.
+
+Published topics
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
+  bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
+  ``~diagnostic_period`` seconds (wall time).
+
+Parameters (defaults below as module constants; each resolved value is logged once)
+  ``~config`` (string, default: none): the configuration file (``cc_log.core.config``); with classifiers, the
+  vectors of each go to ``<directory>/features/<name>/<label>/`` (``~feature_set`` and ``~window`` are then
+  not used); the parameters below override it.
+  ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): window files go here, vectors into
+  ``<directory>/features/<label>/``; a fallback is a WARN on /diagnostics naming the directory in use.
+  ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
+  ``~precision`` (dict or string, default: none = lossless): json-xz rounding, as the smart node's.
+  ``~rotate`` (string, default: 60s): a new file after this many messages (``6000``), seconds (``60s``) or
+  raw row-JSON bytes (``20MB``).
+  ``~topics`` (list or space-separated string, default: none): other topics to log.
+  ``~label`` (string, default: nominal): label of the feature vectors.
+  ``~window`` (string, default: 500): feature window, messages or seconds.
+  ``~feature_set`` (string, default: motion): a registered feature set (``features.FEATURE_SETS``: motion,
+  raw, imu, command, progress). Its first input is the driving topic (``odom``; ``imu`` for the imu set) and
+  its other inputs are subscribed under their role names (``cmd_vel`` for the command set): remap them.
+  ``~stride`` (int, default: 25): a vector every this many odometry messages.
+  ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
+  ``~max_buffer_mb`` (size, default: 256; 0 = no budget): memory budget of the file being collected; a new
+  file starts when it is reached.
+  ``~max_disk_mb`` (size, default: 0 = no quota), ``~min_free_mb`` (size, default: 0 = off): the disk
+  limits of the smart node, for the window files.
+
+Every parameter is type-checked (one line ``/collect_logger: ~<name>: ...``, exit 1). On start, crash
+leftovers in ``~directory`` are recovered or reported and kept, as the smart node does. Files and vectors
+go through the smart node's window writer: a write that fails (disk full...) is reported and kept in memory
+and retried; at shutdown the current file is written, so every file is complete.
+"""
+import os
+import sys
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from cc_log.core import collector
+from cc_log import features
+from cc_log.storage import log_format
+from cc_log.core.model import AnomalyModel
+from cc_log.nodes.node_common import (
+    CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, ConfigError, Diagnostics,
+    Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+from cc_log.nodes.intake import Intake
+from cc_log.nodes.node_extras import NodeExtras
+
+NODE_NAME = 'collect_logger'
+DEFAULT_FORMAT = log_format.formats.DEFAULT
+DEFAULT_ROTATE = collector.DEFAULT_ROTATE
+DEFAULT_LABEL = collector.DEFAULT_LABEL
+DEFAULT_WINDOW = collector.DEFAULT_WINDOW
+DEFAULT_FEATURE_SET = collector.DEFAULT_FEATURE_SET
+DEFAULT_STRIDE = collector.DEFAULT_STRIDE
+
+
+class CollectNode(object):
+    """Parameters, subscribers and diagnostics around a Collector."""
+
+    def __init__(self, note=''):
+        self.note = note  # why collect mode runs (record.launch without a model): said on /diagnostics
+        params = Params()
+        self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
+        self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
+                                                                        collector.FEATURES_SUBDIRECTORY))
+
+        def given(reader, name, *args):
+            """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
+            return reader(name, *args) if params.given(name) else None
+
+        cfg = node_config(params, {
+            'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
+            'precision': given(params.value, 'precision', None),
+            'rotate': given(params.scalar, 'rotate', DEFAULT_ROTATE), 'topics': given(params.topics, 'topics'),
+            'label': given(params.scalar, 'label', DEFAULT_LABEL),
+            'stride': given(params.number, 'stride', DEFAULT_STRIDE, 1, True),
+            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB),
+            'max_disk_mb': given(params.megabytes, 'max_disk_mb', 0.0),
+            'min_free_mb': given(params.megabytes, 'min_free_mb', 0.0)})
+        window = given(params.scalar, 'window', DEFAULT_WINDOW) or DEFAULT_WINDOW
+        feature_set = given(params.choice, 'feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS) or \
+            DEFAULT_FEATURE_SET
+        period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        options = {'side_topics': None if cfg.selection.dynamic else [rospy.resolve_name(t) for t in cfg.topics],
+                   'close_retry': CLOSE_RETRY,
+                   'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,
+                   'max_buffer_mb': cfg.max_buffer_mb, 'max_disk_mb': cfg.max_disk_mb,
+                   'min_free_mb': cfg.min_free_mb, 'format_options': cfg.format_options()}
+        try:
+            specs = cfg.feature_specs(AnomalyModel.load, rospy.resolve_name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+        if specs:  # the configuration's classifiers: vectors of each into features/<name>/<label>/
+            if params.given('feature_set') or params.given('window'):
+                rospy.logwarn('~feature_set and ~window are not used: the configuration names its classifiers')
+            driving = rospy.resolve_name(cfg.driving_topic) if cfg.driving_topic else None
+            options.update(feature_specs=specs, driving_topic=driving)
+        else:  # one feature set, its inputs by their role names (odom, imu, cmd_vel): remap them
+            inputs = features.get(feature_set).inputs
+            options.update(window=window, feature_set=feature_set, driving_topic=rospy.resolve_name(inputs[0][0]),
+                           input_topics=[rospy.resolve_name(role) for role, _ in inputs[1:]])
+        try:
+            self.collector = collector.Collector(self.directory, cfg.format, cfg.rotate or DEFAULT_ROTATE,
+                                                 **options)
+        except ValueError as error:
+            raise ConfigError('~%s' % error)
+        label = self.collector.label
+        types = dict((spec.topic, spec.config.topic_type) for spec in self.collector.specs)
+        topics = sorted(self.collector.side_topics or [rospy.resolve_name(t) for t in cfg.topics])
+        self.collector.on_event(self._on_event)
+        self.extras = NodeExtras(params, self.collector.writer, self.directory, self.collector.driving_topic)
+        self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic,
+                             sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}))
+        self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
+        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
+                                       self.intake.counts)
+        rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
+                      ', '.join(self.intake.side_topics) or 'no other topics',
+                      self.collector.features_directory, label)
+
+    def _on_event(self, kind, detail):
+        if kind == 'file':
+            rospy.loginfo('wrote %s (%d messages, %d bytes)', detail['path'], detail['messages'], detail['bytes'])
+        elif kind == 'failed':
+            rospy.logerr('%s of %d messages not written: %s', detail['what'], detail['messages'], detail['error'])
+        elif kind == 'deleted':
+            rospy.logwarn('window file deleted (~max_disk_mb): %s', detail['path'])
+
+    def _status(self):
+        stats = self.collector.stats()
+        level, message, disk = writer_status(DiagnosticStatus.OK, self.note or 'collecting', self.collector.writer,
+                                             self.leftovers, self.directory_warning)
+        level, message, extra = self.extras.status(level, message)
+        raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
+        values = [
+            ('files written', stats['files_written']),
+            ('vectors written', stats['vectors_written']),
+            ('messages seen', stats['messages_seen']),
+            ('messages kept', stats['messages_kept']),
+            ('messages buffered', stats['messages_buffered']),
+            ('buffered bytes (estimated)', stats['buffered_bytes']),
+            ('messages lost', stats['messages_lost'] + self.intake.dropped),
+            ('files lost', stats['files_lost']),
+            ('raw JSON bytes', raw),
+            ('stored bytes', stored),
+            ('stored / raw', '%.4f' % (float(stored) / raw) if raw and stats['messages_kept'] else 'n/a'),
+            ('writer queue', stats['queue_depth']),
+            ('intake queue', self.intake.queue.qsize()),
+            ('time resets', stats['time_resets']),
+        ] + extra + disk
+        return level, message, values
+
+    def shutdown(self):
+        """Feed what is queued, write the current file, stop diagnostics."""
+        self.intake.stop()
+        if not self.collector.close(CLOSE_TIMEOUT):
+            rospy.logerr('files still unwritten after %g s', CLOSE_TIMEOUT)
+        self.extras.close()
+        self.diagnostics.stop()
+
+
+def main(argv=None, note=''):
+    """Run the node; return the exit status (1 with one line on stderr for bad configuration). ``note``: why
+    collect mode runs, logged and shown as the status message."""
+    argv = sys.argv if argv is None else argv
+    try:
+        init_node(NODE_NAME, argv)
+        if note:
+            rospy.logwarn(note)
+        node = CollectNode(note)
+    except ConfigError as error:
+        return fail(node_name(NODE_NAME, argv), error)
+    rospy.spin()
+    node.shutdown()
+    return 0

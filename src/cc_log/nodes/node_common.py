@@ -1,0 +1,454 @@
+"""What the cc_log nodes share: typed parameters, start-up, the logging directory, crash leftovers,
+diagnostics and the writer's part of their status.
+
+- ``Params``: every private parameter is read through one typed reader that checks its type and range and
+  raises ``ConfigError('~<name>: ...')`` (one line, printed by ``fail``) instead of a traceback; each
+  resolved value is logged once. ``init_node`` first checks the ``_name:=value`` arguments for what rospy
+  itself would choke on (an integer beyond XML-RPC's 32 bits, YAML it cannot parse).
+- ``resolve_directory``: ``~directory``, else ``~/.ros/cc_log``, else ``/tmp/cc_log``; a fallback is
+  returned as a warning the node keeps on /diagnostics (WARN, with the directory in use).
+- ``recover_leftovers``: crash leftovers recovered or reported at start (``recovery``), each logged.
+- ``Diagnostics``: one DiagnosticStatus every period of wall time through diagnostic_updater, with each
+  subscribed topic's message rate (``TopicRates``); ``writer_status``: the status of the
+  window writer and the disk (write errors, held windows, paused writing, quota, leftovers, fallback).
+
+ROS edge (rospy).
+"""
+import math
+import os
+import sys
+import threading
+import time
+
+import diagnostic_updater
+import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+from cc_log.core import config
+from cc_log.storage import log_format
+from cc_log.storage import recovery
+from cc_log.storage.directory import LoggingDirectory
+from cc_log.core import window_buffer
+from cc_log.core.spans import Span, megabytes
+
+EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
+DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
+XMLRPC_INT = 2 ** 31               # XML-RPC integers are 32-bit signed
+DEFAULT_DIAGNOSTIC_PERIOD = 1.0    # seconds between diagnostics (``~diagnostic_period``)
+MAX_DIAGNOSTIC_PERIOD = 3600.0     # longest ``~diagnostic_period`` (a longer wait overflows the thread's timer)
+# Largest values of numeric parameters, where the node's use of them has one (``Params.number``).
+MAXIMA = {'diagnostic_period': MAX_DIAGNOSTIC_PERIOD}
+DEFAULT_MAX_BUFFER_MB = window_buffer.DEFAULT_MAX_BUFFER_MB
+CLOSE_TIMEOUT = 10.0               # seconds to wait at shutdown for the last windows to be written: roslaunch
+#                                    sends SIGTERM 15 s after SIGINT (what is not written by then is counted in a
+#                                    last log line; a window file cut off is recovered at the next start)
+CLOSE_RETRY = 5.0                  # seconds held windows are retried at shutdown before they count as lost
+
+
+class ConfigError(ValueError):
+    """Bad configuration: the message is one line naming the parameter."""
+
+
+# -- parameters -------------------------------------------------------------------------------------------
+
+def to_bool(name, value):
+    """A parameter value as a bool (``true``/``1``/``yes``/``on`` or the opposites); ConfigError otherwise."""
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower() if isinstance(value, (str, int)) else None
+    if text in ('true', '1', 'yes', 'on'):
+        return True
+    if text in ('false', '0', 'no', 'off'):
+        return False
+    raise ConfigError('~%s: %r is not true or false' % (name, value))
+
+
+_SETTINGS = []  # [dict] once ``read_settings_only`` was called: the private parameters, not the master's
+
+
+def read_settings_only(settings):
+    """From now on every ``Params`` of this process reads ``settings`` (a dict) and never the parameter
+    server: ``rosrun cc_log record`` reads its command line only, as rosbag record does (it sets nothing on
+    the master and reads nothing an earlier run left there)."""
+    _SETTINGS[:] = [dict(settings)]
+
+
+def _ros_get(name, default):
+    if _SETTINGS:
+        return _SETTINGS[0].get(name, default)
+    return rospy.get_param('~' + name, default)
+
+
+class Params(object):
+    """Typed private parameters. ``get(name, default)`` reads one (default: ``rospy.get_param('~' + name,
+    default)``; a dict's ``get`` serves in tests); ``log(format, *args)`` reports the resolved value
+    (default: rospy.loginfo). Every reader raises ConfigError('~name: ...') for a value of the wrong type
+    or out of range."""
+
+    def __init__(self, get=None, log=None):
+        self._get = get if get is not None else _ros_get
+        self._log = log if log is not None else rospy.loginfo
+
+    def value(self, name, default, log=True):
+        """The raw value (any type) or ``default``; logged once unless ``log`` is False."""
+        value = self._get(name, default)
+        if log:
+            shown = value
+            if value in (None, '') or value == default:
+                shown = '%s (default)' % (value if value not in (None, '', ()) else 'none')
+            self._log('~%s: %s', name, shown)
+        return value
+
+    def given(self, name):
+        """Whether the parameter is set to something other than '' (launch files pass '' for "not given")."""
+        return self.value(name, None, log=False) not in (None, '')
+
+    def text(self, name, default='', log=True):
+        """A string (None and '' give ``default``)."""
+        value = self.value(name, default, log)
+        if value is None or value == '':
+            return default
+        if not isinstance(value, str):
+            raise ConfigError('~%s: %r is not a string' % (name, value))
+        return value
+
+    def scalar(self, name, default):
+        """A string or a number, as a string (``_rotate:=6000`` arrives as an int)."""
+        value = self.value(name, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise ConfigError('~%s: %r is not a string or a number' % (name, value))
+        return str(value)
+
+    def choice(self, name, default, choices):
+        """One of ``choices`` (strings)."""
+        value = self.text(name, default)
+        if value not in choices:
+            raise ConfigError('~%s: %r is not one of: %s' % (name, value, ', '.join(choices)))
+        return value
+
+    def boolean(self, name, default):
+        """A bool (see ``to_bool``)."""
+        return to_bool(name, self.value(name, default))
+
+    def number(self, name, default, minimum=0.0, integer=False):
+        """A finite number >= ``minimum`` and <= its maximum in MAXIMA, if any (an int when ``integer``); a
+        numeric string is accepted."""
+        value = self.value(name, default)
+        number = float('nan')
+        if not isinstance(value, bool) and isinstance(value, (int, float, str)):
+            try:
+                number = float(value)
+            except (ValueError, OverflowError):
+                pass
+        if integer and math.isfinite(number) and number != int(number):
+            raise ConfigError('~%s: %r is not a whole number' % (name, value))
+        if not math.isfinite(number) or number < minimum:
+            raise ConfigError('~%s: %r must be a number >= %g' % (name, value, minimum))
+        if number > MAXIMA.get(name, math.inf):
+            raise ConfigError('~%s: %r must be a number <= %g' % (name, value, MAXIMA[name]))
+        return int(number) if integer else number
+
+    def megabytes(self, name, default, minimum=0.0):
+        """A byte size in MB >= ``minimum``: a number of MB (``64``) or a size with a unit (``64MB``, ``2GB``,
+        ``500kB``, ``1.5GiB``)."""
+        try:
+            size = megabytes(self.value(name, default), '~' + name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+        if size < minimum:
+            raise ConfigError('~%s: %gMB is below the minimum of %gMB' % (name, size, minimum))
+        return size
+
+    def span(self, name, default):
+        """A message count (``100``) or a duration (``2s``) as a Span."""
+        value = self.value(name, default)
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise ConfigError('~%s: %r is not a message count (100) or a duration (2s)' % (name, value))
+        try:
+            return Span.parse(value, '~' + name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+
+    def topics(self, name='topics', default=()):
+        """Topic names from a YAML list or a space/comma-separated string (duplicates removed)."""
+        try:
+            return config.topic_list(self.value(name, default), '~' + name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+
+
+def _too_large(value):
+    if isinstance(value, bool):
+        return False
+    if isinstance(value, int):
+        return not -XMLRPC_INT <= value < XMLRPC_INT
+    if isinstance(value, (list, tuple)):
+        return any(_too_large(item) for item in value)
+    if isinstance(value, dict):
+        return any(_too_large(item) for item in value.values())
+    return False
+
+
+def check_command_line(argv):
+    """ConfigError for a ``_name:=value`` argument that rospy.init_node would fail on with a traceback."""
+    from rospy.client import load_command_line_node_params
+    try:
+        params = load_command_line_node_params(argv)
+    except rospy.exceptions.ROSInitException as error:
+        raise ConfigError(' '.join(str(error).split()))
+    for name, value in sorted(params.items()):
+        if _too_large(value):
+            raise ConfigError('~%s: %s is too large (a ROS parameter integer has 32 bits: -2147483648 to '
+                              '2147483647)' % (name, value))
+
+
+def node_name(name, argv):
+    """The node's name for messages: rospy's once initialized, else ``__name:=`` or ``name``."""
+    if rospy.core.is_initialized():
+        return rospy.get_name()
+    import rosgraph.names
+    return '/' + rosgraph.names.load_mappings(argv).get('__name', name).lstrip('/')
+
+
+def init_node(name, argv):
+    """``rospy.init_node`` after ``check_command_line`` (ConfigError instead of a traceback)."""
+    check_command_line(argv)
+    rospy.init_node(name, argv=argv)
+
+
+def fail(node, error):
+    """Print the one-line configuration error and return the exit status."""
+    sys.stderr.write('%s: %s\n' % (node, ' '.join(str(error).split())))
+    return EXIT_BAD_CONFIG
+
+
+# -- configuration ----------------------------------------------------------------------------------------
+
+STRUCTURED = ('driving_topic', 'windows', 'limits', 'collect', 'triggers')
+
+
+def node_config(params, flat, classifier=None):
+    """The node's ``config.Config``: the YAML file ``~config``, then the structured parameters (``~triggers``,
+    ``~windows``, ``~limits``, ``~collect``, ``~driving_topic``: what ``rosparam load`` of such a file into the
+    node's namespace sets), then the flat ones (``flat``: ``{'pre': value or None, ...}``, see
+    ``config.FLAT``) and the single classifier of ``classifier`` (see ``config.with_classifier``): later ones
+    override. ConfigError naming what is wrong."""
+    path = params.text('config', '')
+    data = {}
+    if path:
+        try:
+            data = config.load_file(os.path.expanduser(path))
+        except ValueError as error:
+            raise ConfigError('~config: %s' % error)
+    structured = dict((key, params.value(key, None)) for key in STRUCTURED if params.given(key))
+    data = config.with_classifier(config.with_flat(config.merge(data, structured), flat), **(classifier or {}))
+    try:
+        return config.Config.from_dict(data, ('~config %s' % path) if path else 'parameters')
+    except ValueError as error:
+        raise ConfigError(str(error))
+
+
+# -- directory and leftovers ------------------------------------------------------------------------------
+
+def resolve_directory(value):
+    """``(directory, warning)``: ``value``, else ~/.ros/cc_log, else /tmp/cc_log (created); ``warning`` is ''
+    or says why the requested directory is not used and which one is (the node shows it on /diagnostics)."""
+    try:
+        directory = LoggingDirectory(value or None)
+    except OSError as error:
+        raise ConfigError('~directory: %s' % error)
+    for path, reason in directory.tried:
+        rospy.logwarn('~directory: cannot use %s (%s)', path, reason)
+    rospy.loginfo('logging to %s', directory.path)
+    warning = ''
+    if directory.tried and value:
+        warning = '~directory %s cannot be used (%s): logging to %s' % (
+            directory.tried[0][0], directory.tried[0][1], directory.path)
+    return directory.path, warning
+
+
+def recover_leftovers(directory, vector_directory=None):
+    """Recover crash leftovers in ``directory`` (see ``recovery``) and log each; return the outcomes. Leftovers
+    of feature-vector files under ``vector_directory`` (``<label>/*.tmp-*``) are reported (UNRECOVERABLE,
+    kept)."""
+    outcomes = recovery.recover_directory(directory)
+    if vector_directory and os.path.isdir(vector_directory):
+        for label in sorted(os.listdir(vector_directory)):
+            folder = os.path.join(vector_directory, label)
+            names = sorted(os.listdir(folder)) if os.path.isdir(folder) else []
+            outcomes.extend(recovery.Outcome(os.path.join(folder, name), recovery.UNRECOVERABLE, '', 0,
+                                             'a feature vector file cut off by a crash, kept')
+                            for name in names if log_format.TMP_MARK in name)
+    for outcome in outcomes:
+        if outcome.status == recovery.BUSY:
+            rospy.loginfo('leftover %s: %s', outcome.leftover, outcome.detail)
+        elif outcome.status == recovery.UNRECOVERABLE:
+            rospy.logwarn('crash leftover NOT recovered, kept: %s: %s', outcome.leftover, outcome.detail)
+        else:
+            rospy.logwarn('crash leftover %s: %s', outcome.leftover, outcome.detail)
+    return outcomes
+
+
+# -- diagnostics ------------------------------------------------------------------------------------------
+
+def free_disk(path):
+    """Bytes free for an unprivileged user on the file system of ``path`` (None if unknown)."""
+    try:
+        status = os.statvfs(path)
+    except OSError:
+        return None
+    return status.f_bavail * status.f_frsize
+
+
+class TopicRates(object):
+    """Messages per second of wall time of each topic since the previous ``values`` call (pure).
+
+    ``clock``: seconds of wall time (default ``time.monotonic``). ``values(counts)`` takes ``{topic: messages
+    received so far}`` and returns the /diagnostics pairs ``('rate <topic> Hz', '12.50')``, sorted by topic; a
+    topic first seen counts from 0, so its first rate is taken over the whole interval."""
+
+    def __init__(self, clock=time.monotonic):
+        self._clock = clock
+        self._last = clock()
+        self._counts = {}
+
+    def values(self, counts):
+        """The rate pairs for ``counts`` (see the class)."""
+        now = self._clock()
+        elapsed = now - self._last
+        pairs = [('rate %s Hz' % topic, '%.2f' % ((count - self._counts.get(topic, 0)) / elapsed if elapsed else 0.0))
+                 for topic, count in sorted(counts.items())]
+        self._last, self._counts = now, dict(counts)
+        return pairs
+
+
+class _Updater(diagnostic_updater.Updater):
+    """diagnostic_updater's Updater that publishes each status under the task's own name (the library
+    prefixes the node's name) and publishes nothing when a task is added (no "Node starting up" status
+    without the node's values)."""
+
+    def publish(self, msg):
+        array = DiagnosticArray(status=msg if isinstance(msg, list) else [msg])
+        array.header.stamp = rospy.get_rostime()
+        self.publisher.publish(array)
+
+    def addedTaskCallback(self, task):
+        pass
+
+
+class Diagnostics(object):
+    """The node's DiagnosticStatus ``name`` on /diagnostics through a ``diagnostic_updater.Updater``, every
+    ``period`` seconds of wall time (0: none), so a paused or jumping simulated clock never stops it: the
+    updater's own ``update()`` schedules on rospy time, so a wall-time thread calls ``force_update()``.
+
+    ``status_fn()`` returns ``(level, message, [(key, value), ...])``; ``counts()`` (optional) returns
+    ``{topic: messages received so far}`` (``Intake.counts``), shown as ``rate <topic> Hz`` entries (see
+    ``TopicRates``) after the node's values."""
+
+    def __init__(self, name, period, status_fn, counts=None):
+        self.name = name
+        self.period = period
+        self.status_fn = status_fn
+        self.counts = counts
+        self.rates = TopicRates()
+        self.updater = None
+        self._stop = threading.Event()
+        self._thread = None
+        if period > 0:
+            self.updater = _Updater()
+            self.updater.setHardwareID(rospy.get_name())
+            self.updater.add(name, self._run)
+            self._thread = threading.Thread(target=self._loop, name='cc_log diagnostics')
+            self._thread.daemon = True
+            self._thread.start()
+
+    def _run(self, stat):
+        level, message, values = self.status_fn()
+        stat.summary(level, message)
+        for key, value in list(values) + (self.rates.values(self.counts()) if self.counts else []):
+            stat.add(key, value)
+        return stat
+
+    def _loop(self):
+        while not self._stop.wait(self.period) and not rospy.is_shutdown():
+            self.publish()
+
+    def publish(self):
+        """Publish the status now (nothing when diagnostics are off)."""
+        if self.updater is None:
+            return
+        try:
+            self.updater.force_update()
+        except rospy.ROSException:  # shutting down (rospy.ROSTimeMovedBackwardsException is one too)
+            pass
+
+    def stop(self):
+        """Stop publishing (waits for the thread)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+
+
+def writer_status(level, message, writer, leftovers=(), directory_warning=''):
+    """The window writer's and the disk's part of a node's status.
+
+    ``level``, ``message``: the node's own status so far; ``writer``: its ``WindowWriter``; ``leftovers``:
+    the start-up recovery outcomes; ``directory_warning``: from ``resolve_directory``. Returns ``(level,
+    message, values)``: the most severe condition wins (disk low, directory fallback, unrecovered leftovers:
+    WARN; write errors: WARN once all were retried and written, ERROR when messages were lost; windows held
+    or writing paused: ERROR), quota deletions are appended, values are the /diagnostics key-value pairs.
+    """
+    written, guard, directory = writer.stats(), writer.guard, writer.directory
+    free = free_disk(directory)
+    low = guard.min_free_bytes and free is not None and free < guard.min_free_bytes
+    unrecovered = recovery.incomplete(leftovers)
+    candidates = []
+    if free is not None and free < DISK_WARN_BYTES:
+        candidates.append((DiagnosticStatus.WARN, 'low disk space: %d MB free' % (free // 1000 ** 2)))
+    if directory_warning:
+        candidates.append((DiagnosticStatus.WARN, directory_warning))
+    if unrecovered:
+        candidates.append((DiagnosticStatus.WARN, '%d crash leftovers could not be recovered (kept): %s' % (
+            len(unrecovered), unrecovered[0].kept or unrecovered[0].leftover)))
+    if (written['write_errors'] or written['jobs_lost']) and not written['jobs_held']:
+        if written['messages_lost'] or written['jobs_lost']:
+            candidates.append((DiagnosticStatus.ERROR, 'write errors, %d messages (%d files) lost: %s' % (
+                written['messages_lost'], written['jobs_lost'], written['last_error'])))
+        else:
+            candidates.append((DiagnosticStatus.WARN, 'write errors (%d, all retried and written): %s' % (
+                written['write_errors'], written['last_error'])))
+    if written['jobs_held'] or low or written['disk_paused']:
+        if low or written['disk_paused']:
+            text = 'disk nearly full: %.1f MB free < ~min_free_mb %g: writing paused' % (
+                (free or 0) / 1e6, guard.min_free_bytes / 1e6)
+        else:
+            text = 'cannot write: %s' % written['last_error']
+        candidates.append((DiagnosticStatus.ERROR, text + '; %d windows (%d messages) held in memory' % (
+            written['jobs_held'], written['messages_held'])))
+    for candidate in candidates:
+        if candidate[0] >= level:
+            level, message = candidate
+    if written['windows_deleted']:
+        message += '; %d oldest window files deleted to stay within ~max_disk_mb' % written['windows_deleted']
+    values = [
+        ('write errors', written['write_errors']),
+        ('directory', directory),
+        ('directory fallback', directory_warning or 'no'),
+        ('free disk bytes', free if free is not None else 'unknown'),
+        ('windows held', written['jobs_held']),
+        ('messages held', written['messages_held']),
+        ('write retries', written['write_retries']),
+        ('writing paused', bool(low or written['disk_paused'])),
+        ('max disk bytes', guard.max_bytes or 'no quota'),
+        ('min free bytes', guard.min_free_bytes or 'off'),
+        ('disk usage bytes', guard.usage()),
+        ('windows deleted (quota)', written['windows_deleted']),
+        ('bytes deleted (quota)', written['bytes_deleted']),
+        ('last deleted', written['last_deleted']),
+        ('leftovers recovered', sum(1 for o in leftovers if o.status in (
+            recovery.COMPLETE, recovery.PARTIAL, recovery.DUPLICATE, recovery.EMPTY))),
+        ('leftovers unrecoverable', len(unrecovered)),
+        ('leftover messages recovered', sum(o.messages for o in leftovers if o.status == recovery.PARTIAL)),
+        ('leftover bytes unrecoverable', sum(o.lost_bytes for o in leftovers)),
+    ]
+    return level, message, values

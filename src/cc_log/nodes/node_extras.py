@@ -1,0 +1,137 @@
+"""The context track and the upload hook of a node (smart or collect): parameters, writer, sink, status.
+
+Parameters (private, both nodes)
+  ``~context_topics`` (list or space-separated string, default: none = no context track): topics recorded
+  always, each ``topic`` or ``topic:Hz`` (``odom:1 amcl_pose /diagnostics``; BWI's ``odom_1hz`` means the
+  driving topic ``odom`` at 1 Hz), into ``<directory>/context/`` (see ``context_track``).
+  ``~context_rotate`` (double, default: 600): seconds of stamps per context file.
+  ``~upload_command`` (list or string, default: none): run detached with the path of each closed window or
+  context file (see ``upload``: at most ``upload.MAX_RUNNING`` at a time, the others queued); uploads running,
+  queued, failed and dropped (queue full) are on /diagnostics, failures and drops as a WARN.
+
+The context files have a writer of their own (closing, fsync, naming, retries) whose disk guard and the
+node's count the window and context files together: ``~max_disk_mb`` holds for both, oldest deleted first.
+"""
+import os
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+
+from cc_log.storage import context_track, disk_guard, upload, window_writer
+from cc_log.nodes.node_common import ConfigError
+from cc_log.nodes.topic_watch import TopicWatcher
+
+__all__ = ['NodeExtras']
+
+CLOSE_TIMEOUT = 3.0  # seconds the context track may take to close at shutdown, after the windows' 10 s
+
+
+class NodeExtras(object):
+    """The context track and upload hook around a node's ``writer`` (its WindowWriter) in ``directory``."""
+
+    def __init__(self, params, writer, directory, driving_topic):
+        try:
+            aliases = {'odom_1hz': (driving_topic, 1.0)}
+            rates = context_track.parse_topics(params.value('context_topics', ''), '~context_topics', aliases)
+            self.hook = upload.UploadHook(params.value('upload_command', ''))
+        except ValueError as error:
+            raise ConfigError(str(error))
+        self.rates = dict((rospy.resolve_name(topic), rate) for topic, rate in rates.items())
+        rotate = params.number('context_rotate', context_track.DEFAULT_ROTATE, minimum=1e-3) \
+            if params.given('context_rotate') else context_track.DEFAULT_ROTATE
+        self.track = self.writer = self.watcher = None
+        self.leftovers = []
+        if self.rates:
+            recovered, self.leftovers = context_track.recover(directory)
+            for path in recovered:
+                rospy.logwarn('context track: crash leftover recovered as %s', path)
+            for path, why in self.leftovers:
+                rospy.logwarn('context track: crash leftover NOT recovered, kept: %s: %s', path, why)
+            folder = os.path.join(directory, context_track.SUBDIRECTORY)
+            guard = writer.guard
+            self.writer = window_writer.WindowWriter(
+                folder, max_disk_mb=guard.max_bytes / float(disk_guard.MB),
+                min_free_mb=guard.min_free_bytes / float(disk_guard.MB), close_retry=writer.close_retry,
+                name='cc_log context writer')
+            self.writer.guard.directories.append(writer.directory)
+            guard.directories.append(folder)
+            self.writer.on_event(self._context_event)
+            self.track = context_track.ContextTrack(directory, self.rates, rotate, submit=self.writer.submit)
+            rospy.loginfo('context track: %s into %s', ', '.join(
+                '%s%s' % (topic, ' at %g Hz' % rate if rate else '') for topic, rate in sorted(self.rates.items())),
+                folder)
+        if self.hook.enabled:
+            writer.on_event(self.hook.on_event)
+            if self.writer is not None:
+                self.writer.on_event(self.hook.on_event)
+            rospy.loginfo('upload command: %s', ' '.join(self.hook.command))
+
+    def watch(self, selection, intake, skip):
+        """With ``~topics`` patterns (``*``, ``re:...``): subscribe to matching topics as they appear, through
+        ``intake.subscribe`` (``skip``: topics subscribed already)."""
+        if not selection.dynamic:
+            return
+        if not hasattr(intake, 'subscribe'):
+            raise ConfigError('~topics: %s: topics that appear later need an intake that subscribes at run time '
+                              '(intake.subscribe)' % selection.describe())
+        rospy.loginfo('topics: %s (subscribed as they appear)', selection.describe())
+        self.watcher = TopicWatcher(selection, intake.subscribe, skip=skip).start()
+
+    @property
+    def topics(self):
+        """The context topics (resolved)."""
+        return sorted(self.rates)
+
+    def sink(self, main):
+        """The intake's sink: ``main`` and the context track."""
+        return context_track.tee(main, self.track) if self.track is not None else main
+
+    def _context_event(self, event):
+        if event.kind == window_writer.WRITTEN:
+            rospy.loginfo('context file closed: %s', event.path)
+        elif event.kind == window_writer.FAILED:
+            rospy.logerr('context file not closed: %s', event.error)
+        else:
+            rospy.logwarn('file deleted (~max_disk_mb): %s', event.path)
+
+    def status(self, level, message):
+        """``(level, message, values)``: the node's level and message with the context track's and the upload
+        hook's problems added, and their diagnostic values."""
+        values = []
+        if self.track is not None:
+            stats, written = self.track.stats(), self.writer.stats()
+            values += [('context topics', ' '.join(self.topics)),
+                       ('context messages kept', stats['messages_kept']),
+                       ('context messages lost', stats['messages_lost']),
+                       ('context files', written['written'].get(window_writer.CONTEXT, 0)),
+                       ('context write errors', stats['write_errors'] + written['write_errors'])]
+            if stats['write_errors'] or written['jobs_lost'] or written['jobs_held']:
+                level = max(level, DiagnosticStatus.WARN)
+                message += '; context track: %s' % (written['last_error'] or stats['last_error'])
+            if self.leftovers:
+                level = max(level, DiagnosticStatus.WARN)
+                message += '; %d context leftovers kept (not recovered)' % len(self.leftovers)
+        if self.watcher is not None:
+            values += [('topics discovered', len(self.watcher.added)), ('topic watch errors', self.watcher.errors)]
+            if self.watcher.errors:
+                level = max(level, DiagnosticStatus.WARN)
+                message += '; topic watch: %s' % self.watcher.last_error
+        if self.hook.enabled:
+            stats = self.hook.stats()
+            values += [('uploads started', stats['started']), ('uploads running', stats['running']),
+                       ('uploads queued', stats['queued']), ('uploads failed', stats['failed']),
+                       ('uploads dropped', stats['dropped']), ('last upload error', stats['last_error'] or 'none')]
+            if stats['failed'] or stats['dropped']:
+                level = max(level, DiagnosticStatus.WARN)
+                message += '; %d uploads failed, %d dropped (last: %s)' % (
+                    stats['failed'], stats['dropped'], stats['last_error'])
+        return level, message, values
+
+    def close(self):
+        """Stop watching for topics, close the open context file and wait for its writer."""
+        if self.watcher is not None:
+            self.watcher.stop()
+        if self.track is not None:
+            self.track.close()
+            if not self.writer.close(CLOSE_TIMEOUT):
+                rospy.logerr('context file still unwritten after %g s', CLOSE_TIMEOUT)

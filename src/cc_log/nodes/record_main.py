@@ -1,0 +1,340 @@
+"""``rosrun cc_log record``: ``rosbag record``'s common flags in front of the cc_log nodes.
+
+A script or launch file that runs ``rosbag record ...`` switches to cc_log by changing the command name:
+
+    rosrun cc_log record -a -x '/camera/.*' -o /data/ --lz4 -L 2G --model model.json --context 'odom:1 amcl_pose'
+
+``parse(argv)`` maps the flags (``rospy.myargv`` removes the ROS remappings first) onto the nodes' private
+parameters (``node_params``) and picks the node with ``launcher.choose`` (auto: smart with a model file or a
+configuration, else collect mode, saying why) in a ``Plan``. Mapping:
+
+- ``TOPIC ...``: ``~topics``; ``-a``: ``*``; ``-e``: the TOPIC arguments are regular expressions (``re:``);
+  ``-x REGEX``: ``!re:REGEX`` (see ``topic_select``); topics that appear later are subscribed as they appear;
+  ``--node NODE``: the topics NODE subscribes to, asked of the master at start;
+- ``-o DIRECTORY/``: ``~directory`` (cc_log names its files ``cc_log_<UTC>_<reason>``: a prefix without
+  the trailing ``/`` and ``-O NAME`` are refused); ``--lz4`` and ``-j/--bz2``: ``~format`` bag-lz4;
+- ``--split --duration D`` (``30``, ``30s``, ``5m``, ``2h``): a new file every D, collect mode's ``~rotate``
+  and the context track's ``~context_rotate`` (smart mode without ``--context`` refuses it: its files are
+  the anomaly windows); ``--duration D`` without ``--split``: stop after D, as rosbag; ``-l NUM``: stop once
+  each named topic had NUM messages (``Watch``); ``--size`` is refused (cc_log cannot cut by bytes on disk);
+- ``-L/--min-space SIZE`` (``1G``, ``500M``, ``100K``, bytes; rosbag's default 1G): ``~min_free_mb``;
+- ``-b/--buffsize MB`` (0: no limit): ``~intake_max_mb``;
+- ``-p/--publish``: the directory on ``begin_write`` once the node has subscribed (``Watch``);
+- ``--tcpnodelay``, ``--udp``, ``--chunksize``, ``--max-splits``, ``--repeat-latched``: refused, one line
+  saying why (``REFUSED``);
+- ``--model``, ``--config``, ``--mode``, ``--context TOPICS`` (``odom:1 amcl_pose``), ``--upload CMD``: cc_log's.
+
+Like rosbag record, the node is named ``record_<id>`` (anonymous; ``__name:=`` names it), so several
+recorders run side by side, and it reads its command line only: its settings never go to the parameter server
+and nothing left there is read (``_name:=value`` arguments are settings too).
+
+Bad flags print one line (``record: error: ...``) and exit 2, like rosbag record's own.
+"""
+import argparse
+import collections
+import os
+import re
+import sys
+import threading
+import time
+
+from cc_log.nodes import launcher
+from cc_log.storage.directory import LoggingDirectory
+
+__all__ = ['parse', 'node_params', 'main', 'parse_size', 'parse_duration', 'Plan', 'Watch']
+
+DEFAULT_MODEL = '~/.ros/cc_log/model.json'
+DEFAULT_MIN_SPACE = '1G'
+UNLIMITED_MB = 1e6  # -b 0 (rosbag: an infinite buffer)
+REFUSED = {
+    'output_name': 'cc_log writes one file per window or split, named cc_log_<UTC>_<reason>, never one file of '
+                   'a given name: give a directory with -o DIRECTORY/',
+    'size': 'cc_log cannot split by bytes on disk (it cuts files before compressing them): use --split '
+            '--duration, or _rotate:=20MB for raw message bytes',
+    'tcpnodelay': 'not supported: cc_log subscribes without TCP_NODELAY (its windows are cut by message stamps, '
+                  'not arrival times)',
+    'udp': 'not supported: cc_log subscribes over TCPROS only',
+    'chunksize': 'not supported: cc_log writes each file whole, in LZ4 chunks of its own size',
+    'max_splits': 'not supported: cc_log bounds its files by disk use, oldest deleted first: use _max_disk_mb:=SIZE',
+    'repeat_latched': 'not supported: latched messages are kept where they arrive (the context track keeps '
+                      'latched topics given to --context)',
+}
+REFUSED_FLAGS = ((('--tcpnodelay',), 'tcpnodelay', 0), (('--udp',), 'udp', 0), (('--chunksize',), 'chunksize', 1),
+                 (('--max-splits',), 'max_splits', 1), (('--repeat-latched',), 'repeat_latched', 0))
+DESCRIPTION = "rosbag record's flags in front of the cc_log nodes: smart windows around anomalies with a\n" \
+    "model, else collect mode."
+EPILOG = """example:
+  rosrun cc_log record /odom /imu/data -o /data/ --split --duration 10m -L 2G --model model.json
+
+Not supported, refused with one line saying why: -O, --size, --tcpnodelay, --udp, --chunksize,
+--max-splits, --repeat-latched. ROS arguments (__name:=, remappings, _param:=value) work as for any node."""
+_SIZES = {'K': 1 << 10, 'M': 1 << 20, 'G': 1 << 30, 'T': 1 << 40}
+_DURATIONS = {'s': 1.0, 'm': 60.0, 'h': 3600.0}
+
+
+def parse_size(value, name='min-space'):
+    """Bytes of rosbag's ``1G``, ``500M``, ``100K`` or a number of bytes; ValueError('<name>: ...')."""
+    text = str(value).strip().upper().rstrip('B')
+    factor = _SIZES.get(text[-1:], 1)
+    try:
+        number = float(text[:-1] if factor != 1 else text)
+    except ValueError:
+        number = float('nan')
+    if not number >= 0 or number == float('inf'):
+        raise ValueError('%s: %r is not a size (1G, 500M, 100K or bytes)' % (name, value))
+    return number * factor
+
+
+def parse_duration(value, name='duration'):
+    """Seconds of rosbag's ``30``, ``30s``, ``5m`` or ``2h``; ValueError('<name>: ...')."""
+    text = str(value).strip().lower()
+    factor = _DURATIONS.get(text[-1:], None)
+    try:
+        number = float(text[:-1] if factor else text) * (factor or 1.0)
+    except ValueError:
+        number = float('nan')
+    if not number > 0 or number == float('inf'):
+        raise ValueError('%s: %r is not a duration (30, 30s, 5m, 2h)' % (name, value))
+    return number
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise ValueError(message)
+
+
+class _Refuse(argparse.Action):
+    """A rosbag record flag with no meaning here: one line saying why, at once."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        raise ValueError('%s: %s' % (option_string, REFUSED[self.dest]))
+
+
+def _parser():
+    parser = _Parser(prog='rosrun cc_log record', description=DESCRIPTION, epilog=EPILOG,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('topics', nargs='*', metavar='TOPIC', help='topics (regular expressions with -e)')
+    parser.add_argument('-a', '--all', action='store_true', help='every topic, also those that appear later')
+    parser.add_argument('-e', '--regex', action='store_true', help='TOPIC arguments are regular expressions')
+    parser.add_argument('-x', '--exclude', action='append', default=[], metavar='REGEX', help='leave out topics')
+    parser.add_argument('--node', metavar='NODE', help='the topics NODE subscribes to (asked of the master at start)')
+    parser.add_argument('-o', '--output-prefix', metavar='DIRECTORY/',
+                        help='where files go: a directory, with its trailing / (files are named cc_log_*)')
+    parser.add_argument('-O', '--output-name', metavar='NAME', nargs=1, action=_Refuse, help=argparse.SUPPRESS)
+    parser.add_argument('--lz4', action='store_true', help='LZ4 (cc_log writes LZ4 bags in any case)')
+    parser.add_argument('-j', '--bz2', action='store_true', help='accepted; cc_log writes LZ4')
+    parser.add_argument('--split', action='store_true', help='with --duration: a new file every DURATION')
+    parser.add_argument('--size', nargs=1, action=_Refuse, help=argparse.SUPPRESS)
+    parser.add_argument('--duration', metavar='DURATION',
+                        help='30, 30s, 5m, 2h: with --split, a new file every DURATION; without, stop after it')
+    parser.add_argument('-l', '--limit', type=int, metavar='NUM', help='stop once each TOPIC has NUM messages')
+    parser.add_argument('-L', '--min-space', default=DEFAULT_MIN_SPACE, metavar='SIZE',
+                        help='stop writing below this much free disk (default 1G)')
+    parser.add_argument('-b', '--buffsize', type=float, metavar='MB', help='input queue in MB (0: no limit)')
+    parser.add_argument('-q', '--quiet', action='store_true', help='accepted')
+    parser.add_argument('-p', '--publish', action='store_true',
+                        help='publish the directory on begin_write (std_msgs/String, latched) once recording')
+    for flags, dest, nargs in REFUSED_FLAGS:
+        parser.add_argument(*flags, dest=dest, nargs=nargs, action=_Refuse, help=argparse.SUPPRESS)
+    parser.add_argument('--model', default=DEFAULT_MODEL, help='model file: smart windows when it exists')
+    parser.add_argument('--config', default='', help='configuration file (YAML)')
+    parser.add_argument('--mode', default='auto', choices=launcher.MODES)
+    parser.add_argument('--context', default='', metavar='TOPICS', help='context track: "odom:1 amcl_pose"')
+    parser.add_argument('--upload', default='', metavar='CMD', help='run with the path of each closed file')
+    return parser
+
+
+Plan = collections.namedtuple('Plan', 'module params note stop publish')
+Plan.__doc__ = """What ``record`` runs: the node module, its settings, why collect mode runs (or ''), ``stop``:
+``{'seconds': D}`` (``--duration`` without ``--split``) and/or ``{'limit': N, 'topics': [...]}`` (``-l``), and
+``publish``: whether to announce on ``begin_write`` (``-p``) (see ``Watch``)."""
+
+
+def parse(argv, subscriptions=None):
+    """The ``Plan`` for the flags ``argv`` (no program name, no ROS remappings); ValueError with one line for
+    bad flags. ``subscriptions(node)``: the topics ``node`` subscribes to (``--node``; asked of the master)."""
+    args = _parser().parse_args(argv)
+    if args.node:
+        if subscriptions is None:
+            raise ValueError('--node: no master to ask for the topics of %s' % args.node[:200])
+        found = subscriptions(args.node)
+        if not found:
+            raise ValueError('--node: %s subscribes to no topic (or is not running)' % args.node[:200])
+        args.topics = list(args.topics) + [('^%s$' % re.escape(topic)) if args.regex else topic
+                                           for topic in found]
+    if not (args.all or args.topics or args.config):
+        raise ValueError('no topics given: TOPIC ..., -a, -e REGEX ... or --node NODE (or --config)')
+    if args.split and args.duration is None:
+        raise ValueError('--split needs --duration (cc_log does not split by --size)')
+    module, note = launcher.choose(args.mode, args.model, args.config)
+    if args.split and module == 'smart_node' and not args.context:
+        raise ValueError('--split: smart mode writes one file per anomaly window; --split --duration splits '
+                         'collect mode\'s files (--mode collect) or the context track (--context TOPICS)')
+    stop = {}
+    if args.duration is not None and not args.split:
+        stop['seconds'] = parse_duration(args.duration)
+    if args.limit is not None:
+        if args.limit < 1:
+            raise ValueError('--limit: %d must be a number of messages >= 1' % args.limit)
+        if args.all or args.regex or not args.topics:
+            raise ValueError('--limit: needs the topics named (TOPIC ...), not -a, -e or --config')
+        stop.update(limit=args.limit, topics=list(args.topics))
+    return Plan(module, node_params(args), note, stop, args.publish)
+
+
+def node_params(args):
+    """The nodes' private parameters for parsed flags."""
+    topics = ['*'] if args.all else []
+    topics += [('re:' + topic) if args.regex else topic for topic in args.topics]
+    topics += ['!re:' + pattern for pattern in args.exclude]
+    params = {'format': 'bag-lz4', 'min_free_mb': parse_size(args.min_space) / 1e6}
+    if topics:
+        params['topics'] = topics
+    if args.output_prefix:
+        if not args.output_prefix.endswith(os.sep):
+            directory = (os.path.dirname(args.output_prefix) or '.')[:200]
+            raise ValueError('-o: cc_log names its files cc_log_<UTC>_<reason>, not PREFIX_<date>.bag: give a '
+                             'directory with its trailing / (-o %s/)' % directory)
+        params['directory'] = os.path.abspath(args.output_prefix)
+    if args.split:
+        params['rotate'] = '%gs' % parse_duration(args.duration)
+        params['context_rotate'] = parse_duration(args.duration)
+    if args.buffsize is not None:
+        if args.buffsize < 0:
+            raise ValueError('buffsize: %r must be a number of MB >= 0 (0: no limit)' % args.buffsize)
+        params['intake_max_mb'] = args.buffsize or UNLIMITED_MB
+    for key, value in (('model', args.model), ('config', args.config), ('context_topics', args.context),
+                       ('upload_command', args.upload)):
+        if value:
+            params[key] = os.path.expanduser(value) if key in ('model', 'config') else value
+    return params
+
+
+def master_subscriptions(node):
+    """The topics ``node`` subscribes to, by the master's system state (``--node``)."""
+    import rosgraph
+    import rospy
+    name = rospy.names.resolve_name(node, '/')
+    try:
+        _, subscribers, _ = rosgraph.Master('/record').getSystemState()
+    except Exception as error:  # the master is down or unreachable: one line
+        raise ValueError('--node: cannot ask the master: %s' % ' '.join(str(error).split())[:200])
+    return sorted(topic for topic, nodes in subscribers if name in nodes)
+
+
+class Watch(object):
+    """What ``record`` does beside the node, as rosbag record: stop after ``seconds`` of ROS time (``--duration``
+    without ``--split``) or once each of ``topics`` had ``limit`` messages (``-l``; counted on the node's own
+    subscriptions, so faster topics may have a few more by then), and with ``begin_write`` (``-p``) publish
+    that text (the directory files go to) on ``begin_write`` (std_msgs/String, latched) once the node has
+    subscribed. ``start()`` runs it on a daemon thread."""
+
+    def __init__(self, seconds=None, limit=None, topics=(), begin_write=None):
+        self.seconds = seconds
+        self.limit = limit
+        self.topics = list(topics)
+        self.begin_write = begin_write
+        self._publisher = None
+        self.counts = {}
+        self._lock = threading.Lock()
+
+    def start(self):
+        thread = threading.Thread(target=self._run, name='cc_log record watch')
+        thread.daemon = True
+        thread.start()
+        return thread
+
+    def _count(self, _msg, topic):
+        with self._lock:
+            self.counts[topic] = self.counts.get(topic, 0) + 1
+
+    def _reached(self):
+        with self._lock:
+            return all(self.counts.get(topic, 0) >= self.limit for topic in self.topics)
+
+    @staticmethod
+    def _stop(reason):
+        import rospy
+        rospy.loginfo('record: %s: stopping', reason)
+        rospy.signal_shutdown(reason)
+
+    def _subscribed(self):
+        from rospy.impl.registration import get_topic_manager
+        manager = get_topic_manager()
+        return bool(manager.get_subscriptions()) and all(manager.has_subscription(t) for t in self.topics)
+
+    def _run(self):
+        import rospy
+        while not (rospy.core.is_initialized() and rospy.rostime.is_rostime_initialized()):
+            if rospy.core.is_shutdown_requested():
+                return
+            time.sleep(0.05)
+        self.topics = [rospy.resolve_name(topic) for topic in self.topics]
+        while not rospy.is_shutdown() and not self._subscribed():
+            time.sleep(0.05)  # count on the node's subscriptions, not before them
+        if self.begin_write is not None:
+            from std_msgs.msg import String
+            self._publisher = rospy.Publisher('begin_write', String, queue_size=1, latch=True)
+            self._publisher.publish(String(self.begin_write))
+        for topic in self.topics if self.limit is not None else ():
+            rospy.Subscriber(topic, rospy.AnyMsg, self._count, topic)
+        deadline = None
+        while not rospy.is_shutdown() and (self.seconds is not None or self.limit is not None):
+            now = rospy.get_time()
+            if self.seconds is not None and now > 0:
+                deadline = deadline or now + self.seconds
+                if now >= deadline:
+                    return self._stop('--duration %gs reached' % self.seconds)
+            if self.limit is not None and self._reached():
+                return self._stop('--limit %d reached on %s' % (self.limit, ', '.join(self.topics)))
+            time.sleep(0.05)
+
+
+def _directory_in_use(params):
+    """The directory the node will write to (``LoggingDirectory``: ``~directory`` or its fallbacks), or the
+    one asked for when none can be used (the node then says why)."""
+    try:
+        return LoggingDirectory(params.get('directory')).path
+    except OSError:
+        return params.get('directory', '')
+
+
+def anonymous_name(base='record'):
+    """``record_<pid>_<ms>``, rosbag record's anonymous node name: several recorders run side by side."""
+    return '%s_%d_%d' % (base, os.getpid(), int(time.time() * 1000))
+
+
+def command_line_settings(ros_args):
+    """``(settings, rest)``: the private ``_name:=value`` arguments of ``ros_args`` as a dict (YAML values, as
+    rospy reads them) and the other ROS arguments; ValueError with one line for a value rospy cannot read."""
+    from rospy.client import load_command_line_node_params
+    from rospy.exceptions import ROSInitException
+    try:
+        settings = load_command_line_node_params(['record'] + list(ros_args))
+    except ROSInitException as error:
+        raise ValueError(' '.join(str(error).split()))
+    rest = [arg for arg in ros_args if not (arg.startswith('_') and not arg.startswith('__') and ':=' in arg)]
+    return settings, rest
+
+
+def main(argv=None):
+    """Run the chosen node with the mapped settings; its exit status. Like rosbag record it reads its command
+    line only: the settings are handed to the node in this process (``node_common.read_settings_only``),
+    never set on the parameter server, and ``_name:=value`` arguments override them."""
+    import rospy
+    from cc_log.nodes import node_common
+    argv = sys.argv if argv is None else argv
+    mine = rospy.myargv(argv)
+    try:
+        plan = parse(mine[1:], master_subscriptions)
+        settings, ros_args = command_line_settings([arg for arg in argv[1:] if arg not in mine])
+    except ValueError as error:
+        sys.stderr.write('record: error: %s\n' % ' '.join(str(error).split()))
+        return 2
+    plan.params.update(settings)
+    if not any(arg.startswith('__name:=') for arg in ros_args):
+        ros_args.append('__name:=' + anonymous_name())
+    node_common.read_settings_only(plan.params)
+    if plan.stop or plan.publish:
+        Watch(begin_write=_directory_in_use(plan.params) if plan.publish else None, **plan.stop).start()
+    return launcher.run(plan.module, [argv[0]] + ros_args, plan.note)

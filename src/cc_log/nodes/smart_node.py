@@ -1,0 +1,401 @@
+"""The smart logger node (``rosrun cc_log smart_logger.py``): keep only the data around anomalies.
+
+Node name: ``smart_logger``.
+
+Subscribed topics
+  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it); the topics of
+  the model's other inputs by their role names (``cmd_vel`` for a command model; ``imu`` is the driving
+  topic of an imu model), or those of the configuration's triggers.
+  every topic in ``~topics`` (any type): saved in the windows whose time span holds them; of a latched topic
+  (``/tf_static``, a map) the newest message before a window's start is also written at the start of it.
+
+Published topics
+  ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/dropped, raw vs stored
+  bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``), messages dropped
+  because the writer fell behind (WARN, per topic), messages restamped (header stamp off the clock), each
+  classifier's drift (WARN when it flags far more of the driving than of its training data, with the
+  remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
+
+Services
+  ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
+  ``~trigger_window`` (cc_log/TriggerWindow): the same with a reason and, optionally, the seconds before and
+  after to keep.
+  ``~enable`` (std_srvs/SetBool): resume (true) or pause (false) logging.
+
+Parameters (defaults below as module constants; each resolved value is logged once)
+  ``~config`` (string, default: none): the configuration file (``cc_log.core.config``: topics, triggers, windows,
+  format, limits); keys loaded into the node's namespace (``rosparam load``) and the parameters below
+  override it.
+  ``~model`` (string, required without triggers in the configuration): model file from learn mode of the
+  classifier named ``classifier`` (its feature window is used).
+  ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): where window files go.
+  ``~format`` (string, default: bag-lz4): ``bag-lz4`` or ``json-xz``.
+  ``~topic_limits`` (dict or YAML string, default: none): per topic, ``pre``, ``post`` (durations, at most the
+  window's) and ``max_mb`` (memory outside every window), e.g. ``{camera/image_raw: {pre: 2s, max_mb: 64}}``.
+  ``~precision`` (dict or string, default: none = lossless): json-xz only, opt-in lossy: round fields to a
+  step, ``{'pose.pose.position.*': 1e-4}`` or ``'pose.pose.position.*=1e-4, twist.twist.*=1e-5'``
+  (configuration key ``json_xz.precision``; recorded in each window's metadata; docs/FORMAT.md).
+  ``~window`` (string, default: the model's): only checked against the model; a mismatch is an error.
+  ``~pre``, ``~post`` (string, default: 100): messages (``100``) or seconds (``2s``) before / after.
+  ``~max_window`` (string, default: 100000): longer windows are written in parts.
+  ``~retrigger`` (string, default: event): ``event``: the onset of an anomaly opens a window, which is then
+  extended only while the newest ``~recent`` rows of the feature window are anomalous (it ends at the
+  anomaly's end + recent + post); ``every`` anomalous score opens or extends a window (the paper's rule); or
+  only the ``onset`` of an anomaly (the score must come back above the threshold before it triggers again).
+  ``~recent`` (string, default: a quarter of the feature window): ``event`` only: the newest rows that decide
+  whether an open anomaly goes on, a count (``5``) or duration (``0.5s``) of the feature window's kind, at
+  most the window; every classifier of the configuration.
+  ``~topics`` (list or space-separated string, default: none): other topics to keep.
+  ``~enabled`` (bool, default: true): start logging, or start paused.
+  ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
+  ``~max_disk_mb`` (size, default: 0 = no quota): cc_log window files in ``~directory`` are kept within this
+  many MB (10^6 bytes) by deleting the oldest ones (only cc_log window files); each deletion is logged and
+  counted on /diagnostics.
+  ``~min_free_mb`` (size, default: 0 = off): below this much free space writing stops (ERROR on
+  /diagnostics), windows wait in memory (bounded) and are written when space returns.
+  ``~learn_online`` (bool, default: false): every classifier learns nominal online from the spans no trigger
+  flagged and refits its model in the background, saving it beside the model file (``model.online.json``;
+  configuration keys ``learn_online``, ``learn_every``, ``learn_keep``, ``learn_guard``: cc_log.online_learning);
+  /diagnostics shows the vectors seen, learned and refused, the refits and the last refit's time.
+  ``~classify_every`` (string, default: 50ms): score the feature window on every message (``1``), every N-th
+  (``N``) or at most once per duration (``50ms``: ~20 decisions/s); see smart.DEFAULT_CLASSIFY_EVERY.
+  ``~intake_max_messages`` (int, default: 20000), ``~intake_max_mb`` (size, default: 64): bounds of the
+  intake queue; a message arriving when it is full is dropped and counted (``intake dropped (queue full)``
+  and ``messages lost`` on /diagnostics, WARN): never silently.
+  ``~max_buffer_mb`` (size, default: 256; 0 = no budget): memory budget of every buffered message (all
+  topics, estimated): an open window is written in parts at half of it (the other half is for the part being
+  written), never dropped.
+  A size is a number of MB (10^6 bytes) or a string with a unit: ``64MB``, ``2GB``, ``500kB``, ``1.5GiB``.
+
+Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
+the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
+
+On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``) are recovered into window files or,
+when they cannot be, reported (logwarn and /diagnostics) and left in place: never deleted silently. A write
+that fails (disk full, directory not writable) is reported (ERROR on /diagnostics, a FAILED event) and the
+window is kept in memory and retried every few seconds (``window_writer``); when space is short the quota
+makes room first. At shutdown held windows are retried for ``CLOSE_RETRY`` seconds.
+
+Subscriber callbacks only put the message on an intake queue (``intake``); one feeder thread hands the
+messages, as their serialized bytes and connection headers, to the triggers and the window buffer in batches
+of up to half a second (``SmartLogger.on_records``: decoded only where a field is read; a manual trigger first
+waits for the messages received before it), whose writer thread decodes (json-xz), compresses and writes.
+Stamps are header stamps (receipt time for messages without one; the driving topic's set the clock, and a
+message of another topic stamped more than 5 s off it is placed at its arrival), so ``use_sim_time`` (the
+intake hands nothing over before the first /clock) and ``rosbag play --clock`` work, and time jumping
+backwards (a bag played again) restarts the buffer instead of failing; the silence ticker runs on wall time.
+"""
+import math
+import sys
+import threading
+import time
+
+import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
+
+from cc_log.core import drift
+from cc_log.nodes import intake
+from cc_log.storage import log_format
+from cc_log.core import smart
+from cc_log.core import config
+from cc_log.core.model import AnomalyModel
+from cc_log.nodes.node_common import (
+    CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, ConfigError, Diagnostics,
+    Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+from cc_log.nodes.node_extras import NodeExtras
+from cc_log.triggers import ClassifierTrigger
+
+NODE_NAME = 'smart_logger'
+DEFAULT_FORMAT = smart.DEFAULT_FORMAT
+DEFAULT_PRE = str(smart.DEFAULT_PRE)
+DEFAULT_POST = str(smart.DEFAULT_POST)
+DEFAULT_MAX_WINDOW = str(smart.DEFAULT_MAX_WINDOW)
+DEFAULT_RETRIGGER = smart.DEFAULT_RETRIGGER
+DEFAULT_TOPICS = ()
+DEFAULT_ENABLED = True
+DEFAULT_MAX_DISK_MB = 0.0
+DEFAULT_MIN_FREE_MB = 0.0
+DEFAULT_CLASSIFY_EVERY = smart.DEFAULT_CLASSIFY_EVERY
+DEFAULT_INTAKE_MAX_MESSAGES = intake.DEFAULT_MAX_MESSAGES  # intake queue bound (messages); beyond, dropped
+DEFAULT_INTAKE_MAX_MB = intake.DEFAULT_MAX_MB                # intake queue bound (MB of serialized messages)
+TICK_PERIOD = 0.5                    # seconds (ROS time) between ticks for the triggers that watch for silence
+
+
+def time_of(stamp):
+    """rospy.Time of float seconds (zero for None or NaN)."""
+    if stamp is None or not math.isfinite(stamp) or stamp < 0:
+        return rospy.Time()
+    return rospy.Time.from_sec(stamp)
+
+
+# -- the node ------------------------------------------------------------------------------------------
+
+class SmartNode(object):
+    """Parameters, subscribers, publishers, services and diagnostics around a SmartLogger."""
+
+    def __init__(self):
+        from cc_log.msg import AnomalyEvent  # generated message and service: only in a built workspace
+        from cc_log.srv import TriggerWindow
+        self._event_class = AnomalyEvent
+        params = Params()
+
+        def given(reader, name, *args):
+            """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
+            return reader(name, *args) if params.given(name) else None
+        model_path = given(params.text, 'model', '')
+        cfg = node_config(params, {
+            'pre': given(params.span, 'pre', DEFAULT_PRE), 'post': given(params.span, 'post', DEFAULT_POST),
+            'max_window': given(params.span, 'max_window', DEFAULT_MAX_WINDOW),
+            'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
+            'precision': given(params.value, 'precision', None),
+            'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
+            'topic_limits': given(params.value, 'topic_limits', None),
+            'max_disk_mb': given(params.megabytes, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
+            'min_free_mb': given(params.megabytes, 'min_free_mb', DEFAULT_MIN_FREE_MB),
+            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
+            {'model': model_path,
+             'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart.RETRIGGER_MODES),
+             'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY),
+             'recent': given(params.scalar, 'recent', ''),
+             'learn_online': given(params.boolean, 'learn_online', False)})
+        if not cfg.triggers:
+            raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
+        try:
+            triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
+            options = cfg.logger_options(triggers, rospy.resolve_name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+        classifiers = [t for t in triggers if isinstance(t, ClassifierTrigger)]
+        window = given(params.span, 'window', '')
+        named = [t for t in classifiers if t.name == 'classifier']
+        if window is not None and named and window != named[0].config.span:
+            raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
+                              'the model; leave ~window unset)' % (window, named[0].config.window))
+        self.model = classifiers[0].model if classifiers else None
+        for trigger in triggers:
+            rospy.loginfo('trigger %s: %s', trigger.name, trigger.describe())
+        self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
+        self.leftovers = recover_leftovers(self.directory)
+        enabled = params.boolean('enabled', DEFAULT_ENABLED)
+        period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES,
+                                            minimum=1, integer=True)
+        intake_max_mb = params.megabytes('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
+        try:
+            self.logger = smart.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
+                                            **options)
+        except ValueError as error:
+            raise ConfigError('~%s' % error)
+        types = smart.topic_types(triggers)
+        if self.logger.driving_topic in types and config.installed_class(types[self.logger.driving_topic]) is None:
+            raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
+        self._refused = 0
+        self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
+        self.logger.on_event(self._publish_event)
+        self.drift = drift.monitor_classifiers(classifiers)  # the live flag rate against the trained one
+        self.learners = [(t.name, t.learner) for t in classifiers if t.learner is not None]
+        if self.learners:
+            self.logger.on_event(self._flag_learners)
+        self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
+        self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
+                                    sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
+                                           {self.logger.driving_topic}),
+                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
+        self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
+        self.services = [rospy.Service('~trigger', Trigger, self._trigger),
+                         rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
+                         rospy.Service('~enable', SetBool, self._enable)]
+        self._ticker = WallTicker(TICK_PERIOD, self._tick)
+        self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
+                                       self.intake.counts)
+        rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
+                      ', '.join(self.intake.side_topics) or 'no other topics',
+                      'enabled' if enabled else 'disabled until ~enable')
+
+    def _publish_event(self, event):
+        if event.kind == smart.DELETED:
+            rospy.logwarn('window file deleted (~max_disk_mb): %s', event.path)
+            return
+        kind = {smart.OPENED: self._event_class.OPENED, smart.WRITTEN: self._event_class.WRITTEN,
+                smart.FAILED: self._event_class.FAILED}[event.kind]
+        msg = self._event_class(event=kind, trigger=event.trigger, reason=event.reason, score=event.score,
+                                threshold=event.threshold, start=time_of(event.start), end=time_of(event.end),
+                                messages=event.messages, path=event.path, bytes=event.bytes)
+        msg.header.stamp = time_of(event.stamp)
+        if event.kind == smart.WRITTEN:
+            rospy.loginfo('window written: %s (%d messages, %d bytes)', event.path, event.messages, event.bytes)
+        elif event.kind == smart.FAILED:
+            rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
+        else:
+            rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, event.reason, event.score)
+        try:
+            self.events.publish(msg)
+        except rospy.ROSException:  # shutting down
+            pass
+
+    def _flag_learners(self, event):
+        """Online learning: nothing from around a window any trigger opened is learned."""
+        if event.kind == smart.OPENED:
+            for _, learner in self.learners:
+                learner.flag(event.stamp)
+
+    def _trigger(self, request):
+        self.intake.sync()  # the messages received before the call are fed: the window is around the newest
+        ok, message = self.logger.trigger_now('manual')
+        return TriggerResponse(success=ok, message=message)
+
+    def _trigger_window(self, request):
+        self.intake.sync()
+        ok, message = self.logger.trigger_now(request.reason, request.before, request.after)
+        return ok, message
+
+    def _tick(self):
+        """Message time passes even when no message comes: triggers watching for silence hear of it."""
+        try:
+            self.logger.tick(rospy.get_rostime().to_sec())
+        except Exception as error:  # the timer thread must go on
+            rospy.logerr_throttle(10.0, 'tick: %s: %s' % (type(error).__name__, error))
+
+    def _enable(self, request):
+        self.logger.set_enabled(request.data)
+        state = 'enabled' if request.data else 'disabled'
+        rospy.loginfo('smart logger %s', state)
+        return SetBoolResponse(success=True, message=state)
+
+    def _status(self):
+        stats = self.logger.stats()
+        level, message = DiagnosticStatus.OK, 'logging' if stats['enabled'] else 'disabled'
+        if stats['messages_refused'] > self._refused:
+            self._refused = stats['messages_refused']
+            rospy.logwarn_throttle(10.0, stats['last_refused'])
+        if stats['messages_refused']:
+            level, message = DiagnosticStatus.WARN, '%d messages of the wrong type refused (last: %s)' % (
+                stats['messages_refused'], stats['last_refused'])
+        level, message, disk = writer_status(level, message, self.logger.writer, self.leftovers,
+                                             self.directory_warning)
+        level, message, extra = self.extras.status(level, message)
+        if stats['messages_shed']:
+            level = max(level, DiagnosticStatus.WARN)
+            message += ('; %d messages of windows dropped: the writer fell behind (%s)'
+                        % (stats['messages_shed'], _per_topic(stats['shed_by_topic'])))
+        for monitor in self.drift:
+            drift_level, drift_message = monitor.status()
+            if drift_level:
+                level = max(level, DiagnosticStatus.WARN)
+                message += '; ' + drift_message
+        overflowed = self.intake.overflowed
+        if overflowed:
+            level = max(level, DiagnosticStatus.WARN)
+            message += '; %d messages dropped: intake queue full (the node falls behind)' % overflowed
+        raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
+        values = [
+            ('enabled', stats['enabled']),
+            ('windows opened', stats['windows_opened']),
+            ('windows saved', stats['windows_saved']),
+            ('messages seen', stats['messages_seen']),
+            ('messages kept', stats['messages_kept']),
+            ('messages dropped', stats['messages_dropped']),
+            ('messages buffered', stats['messages_buffered']),
+            ('buffered bytes (estimated)', stats['buffered_bytes']),
+            ('max buffer bytes', self.logger.buffer_budget or 'no budget'),
+            ('messages trimmed (buffer budget)', stats['buffer_trimmed']),
+            ('messages lost', stats['messages_lost'] + self.intake.dropped),
+            ('raw JSON bytes', raw),
+            ('stored bytes', stored),
+            ('stored / raw', '%.4f' % (float(stored) / raw) if raw else 'n/a'),
+            ('classifier mean us', '%.1f' % stats['classifier_mean_us']),
+            ('classifier max us', '%.1f' % stats['classifier_max_us']),
+            ('classifier CPU s', '%.3f' % (stats['classifier_mean_us'] * stats['classifier_calls'] * 1e-6)),
+            ('feeder CPU s', '%.3f' % self.intake.cpu_seconds),
+            ('writer CPU s', '%.3f' % self.logger.writer.cpu_seconds),
+            ('anomalous messages', stats['anomalous_messages']),
+            ('writer queue', stats['queue_depth']),
+            ('writer queue bytes', stats['bytes_queued']),
+            ('messages dropped (writer behind)', stats['messages_shed']),
+            ('dropped per topic (writer behind)', _per_topic(stats['shed_by_topic'])),
+            ('messages restamped (header stamp off the clock)', stats['messages_restamped']),
+            ('restamped per topic', _per_topic(stats['restamped_by_topic'])),
+            ('intake queue', self.intake.queue.qsize()),
+            ('intake dropped (queue full)', overflowed),
+            ('classify every', str(self.logger.classify_every)),
+            ('triggers fired', ', '.join('%s: %d' % (name, counters['fired'])
+                                         for name, counters in sorted(stats['triggers'].items()))),
+            ('fires dropped (no message yet)', stats['fires_dropped']),
+            ('time resets', stats['time_resets']),
+            ('messages refused', stats['messages_refused']),
+            ('messages refused (unsafe definition)', self.intake.decoder.refused),
+        ] + [('drift %s' % monitor.name, monitor.status()[1]) for monitor in self.drift] \
+            + extra + disk + self._online_status(stats)
+        return level, message, values
+
+    def _online_status(self, stats):
+        """Diagnostics of online learning: per classifier that learns, what it has seen and refitted."""
+        values = []
+        for name, _ in self.learners:
+            online = stats['triggers'][name]['online']
+            last = online['last_refit']
+            values += [('%s: online vectors seen' % name, online['vectors_seen']),
+                       ('%s: online vectors learned' % name, online['vectors_learned']),
+                       ('%s: online vectors refused (near a flag)' % name, online['vectors_refused']),
+                       ('%s: online refits' % name, online['refits']),
+                       ('%s: online last refit' % name, time.strftime('%Y-%m-%d %H:%M:%S', time.localtime(last))
+                        if last else 'never'),
+                       ('%s: online last error' % name, online['last_error'] or 'none')]
+        return values
+
+    def shutdown(self):
+        """Feed what is queued, write the last windows, stop diagnostics."""
+        self._ticker.stop()
+        self.intake.stop()
+        if not self.logger.close(CLOSE_TIMEOUT):
+            stats = self.logger.stats()
+            rospy.logerr('%d windows (%d messages) still unwritten after %g s: lost', stats['windows_queued'],
+                         stats['messages_queued'], CLOSE_TIMEOUT)
+        stats = self.logger.stats()
+        if stats['messages_shed'] or stats['messages_lost']:
+            rospy.logwarn('messages of windows not written: %d dropped while the writer fell behind (%s), %d lost '
+                          'writing', stats['messages_shed'], _per_topic(stats['shed_by_topic']),
+                          stats['messages_lost'])
+        self.extras.close()
+        for _, learner in self.learners:  # a refit being saved finishes (the save is atomic either way)
+            learner.wait(CLOSE_TIMEOUT)
+        self.diagnostics.stop()
+
+
+def _per_topic(counts):
+    """``{topic: n}`` as one line, largest first ('none' when empty)."""
+    return ', '.join('%s: %d' % item for item in sorted(counts.items(), key=lambda item: (-item[1], item[0]))) or 'none'
+
+
+class WallTicker(object):
+    """Calls ``callback()`` every ``period`` seconds of wall time on a daemon thread until ``stop``: unlike
+    rospy.Timer, it lives on when the ROS clock jumps back (a bag played in a loop with ``--clock``)."""
+
+    def __init__(self, period, callback):
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(period, callback), name='cc_log ticker')
+        self._thread.daemon = True
+        self._thread.start()
+
+    def _run(self, period, callback):
+        while not self._stop.wait(period):
+            callback()
+
+    def stop(self):
+        self._stop.set()
+        self._thread.join(1.0)
+
+
+def main(argv=None):
+    """Run the node; return the exit status (1 with one line on stderr for bad configuration)."""
+    argv = sys.argv if argv is None else argv
+    try:
+        init_node(NODE_NAME, argv)
+        node = SmartNode()
+    except ConfigError as error:
+        return fail(node_name(NODE_NAME, argv), error)
+    rospy.spin()
+    node.shutdown()
+    return 0

@@ -1,0 +1,1 @@
+"""Offline: the cclog command, replay, fleet (Dask), tuning, stats, export, plots, the demo."""

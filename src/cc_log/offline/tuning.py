@@ -1,0 +1,224 @@
+"""A false-window budget: set a model's threshold so nominal runs give at most N false windows per hour.
+
+``tune(model, runs, topic, max_false_per_hour, ...)`` replays nominal runs (lists of ``Record``s) through the
+classifier trigger the smart logger runs (``triggers.ClassifierTrigger``: classify_every, retrigger), merges
+its fires into logging windows of [fire - pre, fire + post] as ``WindowBuffer`` does, and lowers the threshold
+(to just below the score of a nominal classification) until the windows per hour of nominal driving are
+within the budget. It then injects one anomaly of every simulator type (``sim.inject_anomalies``) into the
+first run and reports which the tuned threshold still catches (a fire between onset and end + feature
+window; the latency is the first such fire's delay after onset). The result goes into
+``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out nominal runs give the honest rate.
+
+``choose(model, runs, topic, max_false_per_hour, windows, rates)`` also picks the feature window and the
+classify rate: for every window of a small grid and every classify rate it tunes the threshold as above, then
+keeps the setting that meets the budget and catches the most injected types, with the smallest mean latency
+among those (then the fewest false windows). When a window other than the model's is tried, a model of it is
+trained (``learning.train``'s defaults) on the first half of every run by time, and every setting, the given
+model's too, is tuned and judged on the second halves: no setting is judged on the data it was trained on.
+Pure: no rospy.
+"""
+import collections
+import copy
+
+import numpy as np
+
+from cc_log.core import learning
+from cc_log import sim
+from cc_log.features import FeatureConfig, FeatureStream
+from cc_log.core.spans import Span
+from cc_log.triggers import ClassifierTrigger
+
+DEFAULT_PRE = DEFAULT_POST = '2s'
+DEFAULT_RETRIGGER = 'event'
+DEFAULT_CLASSIFY_EVERY = '50ms'
+TRAIN_EVERY = '100ms'   # one training vector per this much of the nominal runs (a model of another window)
+
+
+def _seconds(span, rate, name):
+    span = Span.parse(span, name)
+    return span.seconds if span.is_duration else span.count / rate
+
+
+def _rate(records):
+    steps = np.diff([r.stamp for r in records])
+    steps = steps[steps > 0]
+    return 1.0 / float(np.median(steps)) if len(steps) else 1.0
+
+
+def _below(score):
+    """A threshold just below ``score``: below it by more than the rounding between the batch scores
+    (``model.scores``) and the trigger's one-vector ``model.score``."""
+    return float(score - 1e-9 * max(1.0, abs(score)))
+
+
+def windows_of(stamps, pre, post):
+    """Merged ``[fire - pre, fire + post]`` intervals of sorted fire stamps (seconds)."""
+    out = []
+    for t in stamps:
+        if out and t - pre <= out[-1][1]:
+            out[-1][1] = t + post
+        else:
+            out.append([t - pre, t + post])
+    return out
+
+
+def fires(model, records, topic, threshold, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER):
+    """Stamps at which the classifier trigger fires on ``records`` (of ``topic``) with ``threshold``."""
+    tuned = copy.copy(model)
+    tuned.threshold = float(threshold)
+    trigger = ClassifierTrigger('classifier', tuned, topic, classify_every=classify_every, retrigger=retrigger)
+    return [r.stamp for r in records if r.topic == topic and trigger.on_record(r)]
+
+
+def step_scores(model, records, topic, classify_every=DEFAULT_CLASSIFY_EVERY):
+    """Scores of every classification of the whole feature window (as the trigger classifies) of ``topic``."""
+    stream = FeatureStream(model.config, every=classify_every)
+    vectors = [v for v in (stream.add(r.msg, r.stamp) for r in records if r.topic == topic) if v is not None]
+    return model.scores(np.array(vectors)) if vectors else np.array([])
+
+
+def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_POST,
+         classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, sources=None):
+    """Lower ``model.threshold`` (in place) until the nominal ``runs`` give at most ``max_false_per_hour``
+    windows per hour; return the record stored in ``model.info['tuned']`` (see the module docstring)."""
+    if not (max_false_per_hour >= 0):
+        raise ValueError('max_false_per_hour: %r must be zero or positive' % (max_false_per_hour,))
+    runs = [[r for r in run if r.topic == topic] for run in runs]
+    runs = [run for run in runs if len(run) > 1]
+    if not runs:
+        raise ValueError('bag: no %s messages to tune on' % topic)
+    hours = sum(run[-1].stamp - run[0].stamp for run in runs) / 3600.0
+    rate = _rate(runs[0])
+    pre_s, post_s = _seconds(pre, rate, 'pre'), _seconds(post, rate, 'post')
+    allowed = int(np.floor(max_false_per_hour * hours + 1e-9))
+
+    def false_windows(threshold):
+        return sum(len(windows_of(fires(model, run, topic, threshold, classify_every, retrigger), pre_s, post_s))
+                   for run in runs)
+
+    before = model.threshold
+    start = false_windows(before)
+    threshold, count = before, start
+    if count > allowed:
+        scores = np.concatenate([step_scores(model, run, topic, classify_every) for run in runs])
+        candidates = np.unique(scores[scores < before])  # ascending: each lowers the threshold below a score
+        lo, hi = 0, len(candidates)   # threshold just below candidates[i]; i = 0: below every nominal score
+        while lo < hi:
+            middle = (lo + hi) // 2
+            if false_windows(_below(candidates[middle])) <= allowed:
+                lo = middle + 1
+            else:
+                hi = middle
+        while True:
+            threshold = _below(candidates[lo - 1]) if lo else (_below(candidates[0]) if len(candidates) else before)
+            count = false_windows(threshold)
+            # Fewer fires can split a window in two (and 'event' fires where a lower threshold re-arms it), so
+            # the count is not monotonic in the threshold: the search may end on a setting it only inferred.
+            if count <= allowed or lo == 0:
+                break
+            lo -= 1
+    model.threshold = threshold
+    found = detections(model, runs[0], topic, classify_every, retrigger)
+    caught = [kind for kind, delay in found.items() if delay is not None]
+    latencies = [found[kind] for kind in caught]
+    record = collections.OrderedDict([
+        ('max_false_per_hour', float(max_false_per_hour)), ('hours', hours), ('bags', list(sources or [])),
+        ('topic', topic), ('pre', str(Span.parse(pre, 'pre'))), ('post', str(Span.parse(post, 'post'))),
+        ('classify_every', str(Span.parse(classify_every, 'classify_every'))), ('retrigger', retrigger),
+        ('threshold_before', before), ('false_windows_before', start), ('threshold', threshold),
+        ('false_windows', count), ('false_per_hour', count / hours if hours else 0.0),
+        ('catches', caught), ('misses', [kind for kind, delay in found.items() if delay is None]),
+        ('latencies', dict((kind, found[kind]) for kind in caught)),
+        ('mean_latency', float(np.mean(latencies)) if latencies else None)])
+    model.info = dict(model.info, tuned=record)
+    return record
+
+
+def detections(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
+    """``{type: seconds from onset to the first fire within [onset, end + feature window], or None}``: one
+    anomaly of every simulator type injected into ``run`` at a time (a type that does not fit into the run is
+    None under the key ``'<type> (no room)'``)."""
+    span = model.config.span
+    reach = span.seconds if span.is_duration else span.count / _rate(run)
+    found = collections.OrderedDict()
+    for kind in sim.ANOMALY_TYPES:
+        try:
+            injected, truth = sim.inject_anomalies(run, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+        except ValueError:
+            found['%s (no room)' % kind] = None
+            continue
+        entry = truth[0]
+        hits = [t for t in fires(model, injected, topic, model.threshold, classify_every, retrigger)
+                if entry['start'] <= t <= entry['end'] + reach]
+        found[kind] = hits[0] - entry['start'] if hits else None
+    return found
+
+
+def catches(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
+    """``(caught types, missed types)`` of ``detections``."""
+    found = detections(model, run, topic, classify_every, retrigger, seed)
+    return ([kind for kind, delay in found.items() if delay is not None],
+            [kind for kind, delay in found.items() if delay is None])
+
+
+def _halves(run):
+    """``run`` cut in two at the middle of its time span."""
+    if not run:
+        return [], []
+    middle = (run[0].stamp + run[-1].stamp) / 2.0
+    index = next(i for i, r in enumerate(run) if r.stamp >= middle)
+    return run[:index], run[index:]
+
+
+def model_for(model, runs, topic, window, every=TRAIN_EVERY):
+    """``model`` when its feature window is ``window``, else a model of its feature set with that window
+    trained with ``learning.train``'s defaults on the vectors of ``runs`` (one per ``every``)."""
+    config = FeatureConfig(model.config.feature_set, window, model.config.topic_type)
+    if config == model.config:
+        return copy.deepcopy(model)
+    vectors = []
+    for run in runs:
+        stream = FeatureStream(config, every=every)
+        vectors += [v for v in (stream.add(r.msg, r.stamp) for r in run if r.topic == topic) if v is not None]
+    try:
+        trained, _ = learning.train(np.array(vectors), config=config)
+    except ValueError as error:
+        raise ValueError('windows: %s: %s' % (config.window, error))
+    return trained
+
+
+def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_CLASSIFY_EVERY,), pre=DEFAULT_PRE,
+           post=DEFAULT_POST, retrigger=DEFAULT_RETRIGGER, sources=None):
+    """Tune every feature window in ``windows`` (default: the model's) with every classify rate in ``rates``;
+    return ``(model, record)`` of the chosen setting (see the module docstring). ``record`` is ``tune``'s with
+    ``window``, ``chosen_by`` and ``grid`` (a summary of every setting) added; it is the model's
+    ``info['tuned']``."""
+    windows = [model.config.window] if not windows else list(windows)
+    configs = [FeatureConfig(model.config.feature_set, window, model.config.topic_type) for window in windows]
+    train_runs = tune_runs = runs
+    if any(config != model.config for config in configs):
+        halves = [_halves([r for r in run if r.topic == topic]) for run in runs]
+        train_runs, tune_runs = [first for first, _ in halves], [second for _, second in halves]
+    grid, best = [], None
+    for config in configs:
+        base = model_for(model, train_runs, topic, config.window)
+        for rate in rates:
+            candidate = copy.deepcopy(base)
+            record = tune(candidate, tune_runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources)
+            meets = record['false_per_hour'] <= max_false_per_hour + 1e-9
+            key = (meets, len(record['catches']), -(record['mean_latency'] if record['catches'] else float('inf')),
+                   -record['false_windows'])
+            grid.append(collections.OrderedDict([
+                ('window', candidate.config.window), ('classify_every', record['classify_every']),
+                ('trained', candidate.config != model.config), ('threshold', record['threshold']),
+                ('false_windows', record['false_windows']), ('false_per_hour', record['false_per_hour']),
+                ('meets_budget', meets), ('catches', record['catches']), ('mean_latency', record['mean_latency'])]))
+            if best is None or key > best[0]:
+                best = (key, candidate, record)
+    _, chosen, record = best
+    record = collections.OrderedDict(record, window=chosen.config.window, grid=grid,
+                                     chosen_by='meets the budget, most types caught, smallest mean latency',
+                                     tuned_on='whole runs' if tune_runs is runs else
+                                     'second halves (the first halves trained the other windows)')
+    chosen.info = dict(chosen.info, tuned=record)
+    return chosen, record

@@ -1,0 +1,64 @@
+"""Where window files go: the explicit path, else ``~/.ros/cc_log``, else ``/tmp/cc_log``.
+
+As in the BWI logging nodes, a robot keeps logging when the configured directory cannot be used: the
+first directory that can be created and written to wins. ``fallback`` tells the caller to warn.
+"""
+import os
+import tempfile
+
+from cc_log.core import safe_files
+
+HOME_DIRECTORY = os.path.join('~', '.ros', 'cc_log')
+TMP_DIRECTORY = os.path.join(tempfile.gettempdir(), 'cc_log')
+DIR_MODE = safe_files.DIR_MODE  # group-writable, setgid, never world-writable (parents made too)
+
+
+def _usable(path):
+    """None when ``path`` is (made) a writable directory, else why not."""
+    try:
+        safe_files.make_dirs(path)
+        # access() can lie (root, read-only mounts, ACLs): create and remove a file.
+        fd, probe = tempfile.mkstemp(prefix='.cc_log-probe-', dir=path)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as error:
+        return error.strerror or str(error)
+    return None
+
+
+class LoggingDirectory(object):
+    """The directory window files are written to.
+
+    ``path``: the explicit directory (None or '' for none). ``.path`` is the one chosen, ``.tried`` the
+    ``(path, reason)`` pairs that failed before it, ``.fallback`` whether it is not the first candidate.
+    Raises OSError naming every path tried when none can be written.
+    """
+
+    def __init__(self, path=None):
+        candidates = []
+        if path:
+            candidates.append(os.path.abspath(os.path.expanduser(str(path))))
+        for default in (os.path.expanduser(HOME_DIRECTORY), TMP_DIRECTORY):
+            default = os.path.abspath(default)
+            if default not in candidates:
+                candidates.append(default)
+        self.requested = candidates[0] if path else None
+        self.tried = []
+        for candidate in candidates:
+            reason = _usable(candidate)
+            if reason is None:
+                self.path = candidate
+                self.fallback = candidate != candidates[0]
+                return
+            self.tried.append((candidate, reason))
+        raise OSError('no writable logging directory; tried: %s'
+                      % '; '.join('%s (%s)' % (candidate, reason) for candidate, reason in self.tried))
+
+    def __str__(self):
+        return self.path
+
+    def __repr__(self):
+        return 'LoggingDirectory(%r)' % self.path
+
+    def __fspath__(self):
+        return self.path

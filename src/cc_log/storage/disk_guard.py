@@ -1,0 +1,149 @@
+"""Disk limits of a logging directory: a quota for cc_log's window files and a floor of free space.
+
+``DiskGuard(directory, max_disk_mb, min_free_mb)`` (MB = 10^6 bytes; 0 turns a limit off):
+
+- ``max_disk_mb``: after each window file is written, ``enforce_quota(keep=path)`` deletes the *oldest*
+  cc_log window files (final names ``cc_log_*.json.xz`` / ``cc_log_*.bag`` only; oldest by the time they
+  were written, ``st_mtime_ns``, ties by name: not by the message stamps in their names, which jump back
+  with a bag replayed or a simulation reset) until the files of the directory fit the quota. The file just
+  written is never deleted, so the newest window is kept even when it alone is larger than the quota.
+  When a write finds too little space, ``enforce_quota(reserve=bytes)`` makes room for the next file the
+  same way (oldest first) until the files and ``reserve`` fit the quota. Nothing else in the directory is
+  ever deleted: not other files, not crash leftovers (``*.tmp-*``), not feature vectors.
+- ``min_free_mb``: ``check()`` says whether writing may go on: ``False`` while the file system holds less
+  than ``min_free_mb`` free. The caller then keeps windows in memory (bounded) and tries again later;
+  writing resumes by itself once space returns.
+
+``is_retryable(error)``: whether an OSError from a write is worth retrying later (disk full, quota,
+permissions, read-only, I/O errors, directory gone) rather than a bug; ``is_out_of_space(error)``: whether
+it says the disk (or the user's disk quota) is full.
+
+Pure (os only); ``statvfs`` can be replaced for tests.
+"""
+import errno
+import os
+
+from cc_log.storage import log_format
+
+__all__ = ['DiskGuard', 'MB', 'is_retryable', 'is_out_of_space', 'RETRYABLE_ERRNOS']
+
+MB = 1000 ** 2
+RETRYABLE_ERRNOS = frozenset(getattr(errno, name) for name in (
+    'ENOSPC', 'EDQUOT', 'EACCES', 'EPERM', 'EROFS', 'EIO', 'ENOENT', 'ENOTDIR', 'EEXIST', 'EAGAIN', 'EINTR',
+    'EMFILE', 'ENFILE', 'ENOMEM', 'EBUSY', 'ESTALE') if hasattr(errno, name))
+_OUT_OF_SPACE = frozenset(getattr(errno, name) for name in ('ENOSPC', 'EDQUOT') if hasattr(errno, name))
+
+
+def is_retryable(error):
+    """True for an OSError that may go away (disk full, permissions, read-only or missing directory...)."""
+    return isinstance(error, OSError) and (error.errno in RETRYABLE_ERRNOS or error.errno is None)
+
+
+def is_out_of_space(error):
+    """True for an OSError saying the file system (or the user's disk quota) is full."""
+    return isinstance(error, OSError) and error.errno in _OUT_OF_SPACE
+
+
+def _limit(value, name):
+    try:
+        number = float(value or 0)
+    except (TypeError, ValueError):
+        raise ValueError('%s: %r is not a number of MB' % (name, value))
+    if not number >= 0 or number == float('inf'):
+        raise ValueError('%s: %r must be a number >= 0 (0: no limit)' % (name, value))
+    return int(number * MB)
+
+
+class DiskGuard(object):
+    """Quota and free-space floor of one logging directory (see the module docstring).
+
+    Counters: ``deleted`` (files deleted by the quota), ``deleted_bytes``, ``last_deleted`` (path);
+    ``paused`` (the last ``check`` found too little free space).
+    """
+
+    def __init__(self, directory, max_disk_mb=0, min_free_mb=0, statvfs=os.statvfs):
+        self.directory = str(directory)
+        self.directories = [self.directory]  # the quota counts the cc_log files of each (add the context track's)
+        self.max_bytes = _limit(max_disk_mb, 'max_disk_mb')
+        self.min_free_bytes = _limit(min_free_mb, 'min_free_mb')
+        self._statvfs = statvfs
+        self.deleted = 0
+        self.deleted_bytes = 0
+        self.last_deleted = ''
+        self.paused = False
+
+    @property
+    def active(self):
+        """Whether any limit is set."""
+        return bool(self.max_bytes or self.min_free_bytes)
+
+    def free(self):
+        """Bytes free for an unprivileged user on the directory's file system (None if unknown)."""
+        try:
+            status = self._statvfs(self.directory)
+        except OSError:
+            return None
+        return status.f_bavail * status.f_frsize
+
+    def window_files(self):
+        """``(path, bytes)`` of the files the quota counts, oldest written first (``st_mtime_ns``, ties by name):
+        the cc_log window files (final names only) and the leftovers a partial recovery kept
+        (``*.unrecovered-<pid>``), which are as old as the crash that left them."""
+        files = []
+        for path in (path for directory in self.directories
+                     for path in log_format.window_files(directory) + log_format.kept_leftovers(directory)):
+            try:
+                status = os.stat(path)
+            except OSError:
+                continue
+            files.append((status.st_mtime_ns, path, status.st_size))
+        files.sort()
+        return [(path, size) for _, path, size in files]
+
+    def usage(self):
+        """Bytes of the files the quota counts (``window_files``)."""
+        return sum(size for _, size in self.window_files())
+
+    def check(self):
+        """``(True, '')`` when writing may go on, else ``(False, why)``; sets ``paused``."""
+        if not self.min_free_bytes:
+            self.paused = False
+            return True, ''
+        free = self.free()
+        if free is not None and free < self.min_free_bytes:
+            self.paused = True
+            return False, ('%.1f MB free on %s, below min_free_mb %g: writing paused'
+                           % (free / float(MB), self.directory, self.min_free_bytes / float(MB)))
+        self.paused = False
+        return True, ''
+
+    def enforce_quota(self, keep=(), reserve=0):
+        """Delete the oldest window files (by time written) until the rest, plus ``reserve`` bytes still to
+        be written, fit ``max_disk_mb``; never the paths in ``keep`` (a path or a list). Returns the deleted
+        paths (oldest first)."""
+        if not self.max_bytes:
+            return []
+        keep = {keep} if isinstance(keep, str) else set(keep)
+        keep = {os.path.abspath(path) for path in keep}
+        files = self.window_files()
+        limit = max(0, self.max_bytes - max(0, int(reserve)))
+        total = sum(size for _, size in files)
+        deleted = []
+        for path, size in files:  # oldest first
+            if total <= limit:
+                break
+            if os.path.abspath(path) in keep:
+                continue
+            try:
+                os.unlink(path)
+            except FileNotFoundError:
+                total -= size
+                continue
+            except OSError:
+                continue
+            total -= size
+            deleted.append(path)
+            self.deleted += 1
+            self.deleted_bytes += size
+            self.last_deleted = path
+        return deleted

@@ -1,0 +1,419 @@
+"""Window files: the formats, their names, atomic writing and reading.
+
+``write_window(window, directory, fmt, metadata)`` writes one LogWindow in a format of ``formats``
+(``json-xz``: pure, ``formats.json_xz``; ``bag-lz4``: a rosbag, ``formats.bag_lz4``, rosbag imported only
+when that format is written or read); ``read_window(path)`` reads any of them by its magic bytes. Files are
+named by the UTC time of their first stamp and the first trigger reason, so names sort by time::
+
+    cc_log_20150521T191138.027Z_classifier.json.xz
+    cc_log_20150521T191138.027Z_classifier_part2.json.xz   (second part of a split window)
+    cc_log_20150521T191138.027Z_classifier_1.json.xz       (a file of that name existed already)
+
+A file is written as ``<final name>.tmp-<pid>``, flushed and fsynced, moved to a final name that does not
+exist yet (hard link then unlink, so a file is never overwritten even by another process; rename on file
+systems without hard links), and the directory is fsynced (``safe_files.AtomicFile``: created with
+``O_EXCL|O_NOFOLLOW``, never through a link). Readers ignore ``*.tmp-*``; they are leftovers of a crash
+(``temporary_files``).
+"""
+import collections
+import datetime
+import os
+import re
+
+from cc_log import __version__
+from cc_log.storage import formats
+from cc_log.core import msg_codec
+from cc_log.core import raw_message
+from cc_log.core import safe_files, safe_input
+
+PREFIX = 'cc_log_'
+TMP_MARK = safe_files.TMP_MARK
+KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
+FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
+DIR_MODE = safe_files.DIR_MODE
+
+
+class Format(object):
+    """The window file formats, as named in the code (the table is ``formats.FORMATS``)."""
+
+    JSON_XZ = formats.json_xz.CODEC
+    BAG_LZ4 = formats.bag_lz4.CODEC
+    ALL = formats.names()
+    EXTENSIONS = {name: module.EXTENSION for name, module in formats.FORMATS.items()}
+    check = staticmethod(formats.check)
+
+
+# -- metadata -------------------------------------------------------------------------------------------
+
+def utc_text(stamp):
+    """``1432236698.0275`` -> ``'2015-05-21T19:31:38.027500Z'`` (ISO 8601, UTC)."""
+    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(stamp))
+    return moment.strftime('%Y-%m-%dT%H:%M:%S.%fZ')
+
+
+def _score(value):
+    if value is None:
+        return None
+    return msg_codec.encode_float(float(value))
+
+
+def window_metadata(window, codec, extra=None):
+    """The metadata every window file carries; keys of ``extra`` (JSON-able) are added, overriding.
+
+    topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the
+    first/last record), start_utc/end_utc, triggers ([{stamp, reason, score, name}]; name only for
+    triggers that have one), reasons and names (distinct, in order: every trigger of the window), part (0, or
+    1, 2, ... for a split window), codec, cc_log_version.
+    """
+    contents = Contents()
+    contents.add(window.records)
+    return contents.metadata(window.triggers, getattr(window, 'part', 0), codec, extra)
+
+
+class Contents(object):
+    """What the metadata says of a window's records (types, counts, span), gathered a part at a time."""
+
+    def __init__(self):
+        self.types, self.counts = {}, {}
+        self.count = 0
+        self.start = self.end = None
+
+    def add(self, records):
+        """Take the next records of the window, in window order."""
+        types, counts = self.types, self.counts
+        for record in records:
+            if record.topic not in types:
+                types[record.topic] = raw_message.type_of(record)
+            counts[record.topic] = counts.get(record.topic, 0) + 1
+        if records:
+            self.count += len(records)
+            if self.start is None:
+                self.start = records[0].stamp
+            self.end = records[-1].stamp
+
+    def metadata(self, triggers, part, codec, extra=None):
+        """``window_metadata`` of the records taken."""
+        entries = []
+        for trigger in triggers:
+            entry = {'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
+            if getattr(trigger, 'name', None) is not None:
+                entry['name'] = str(trigger.name)
+            entries.append(entry)
+        meta = {
+            'topics': list(self.types),
+            'types': dict(self.types),
+            'counts': dict(self.counts),
+            'count': self.count,
+            'start': float(self.start),
+            'end': float(self.end),
+            'start_utc': utc_text(self.start),
+            'end_utc': utc_text(self.end),
+            'triggers': entries,
+            'reasons': list(dict.fromkeys(entry['reason'] for entry in entries)),
+            'names': list(dict.fromkeys(entry.get('name', entry['reason']) for entry in entries)),
+            'part': int(part),
+            'codec': codec,
+            'cc_log_version': __version__,
+        }
+        meta.update(extra or {})
+        return meta
+
+
+def trigger_name(trigger):
+    """The name of a window_buffer.Trigger: its ``name``, or its reason when it has none."""
+    name = getattr(trigger, 'name', None)
+    return str(trigger.reason if name is None else name)
+
+
+def _is_number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_score(value):
+    return value is None or _is_number(value) or (isinstance(value, str) and value in msg_codec.NON_FINITE)
+
+
+_METADATA_TYPES = (  # key, test, what it must be (keys a reader uses; each may be absent)
+    ('count', lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, 'a count'),
+    ('part', lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, 'a count'),
+    ('start', _is_number, 'a number'),
+    ('end', _is_number, 'a number'),
+    ('threshold', lambda v: v is None or _is_number(v), 'a number'),
+    ('topics', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
+    ('reasons', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
+    ('names', lambda v: isinstance(v, list) and all(isinstance(t, str) for t in v), 'a list of strings'),
+    ('types', lambda v: isinstance(v, dict) and all(isinstance(t, str) for t in v.values()),
+     'an object of strings'),
+    ('counts', lambda v: isinstance(v, dict) and all(_is_number(n) for n in v.values()), 'an object of counts'),
+    ('triggers', lambda v: isinstance(v, list) and all(
+        isinstance(t, dict) and _is_number(t.get('stamp')) and isinstance(t.get('reason', ''), str)
+        and _is_score(t.get('score')) and isinstance(t.get('name', ''), str) for t in v),
+     'a list of objects {"stamp": number, "reason": string, "score": number or null, "name": string}'),
+)
+_METADATA_STRINGS = ('codec', 'reason', 'trigger', 'driving_topic', 'start_utc', 'end_utc', 'cc_log_version')
+
+
+def check_metadata(metadata):
+    """Raise ValueError('metadata: <key> must be ...') unless ``metadata`` is an object whose known keys have
+    the types cc_log writes (readers such as ``cclog info`` and ``plot`` rely on them)."""
+    if not isinstance(metadata, dict):
+        raise ValueError('metadata must be an object')
+    for key, test, what in _METADATA_TYPES:
+        if key in metadata and not test(metadata[key]):
+            raise ValueError('metadata: %s must be %s' % (key, what))
+    for key in _METADATA_STRINGS:
+        if key in metadata and not isinstance(metadata[key], str):
+            raise ValueError('metadata: %s must be a string' % key)
+
+
+# -- names ----------------------------------------------------------------------------------------------
+
+def _reason_text(window):
+    reason = trigger_name(window.triggers[0]) if window.triggers else 'window'
+    text = re.sub(r'[^A-Za-z0-9-]+', '-', reason).strip('-')
+    return text or 'window'
+
+
+def base_name(window, part=None):
+    """``cc_log_<UTC of the first stamp>_<name of the first trigger>[_part<N>]`` (no extension; ``part``: None for
+    the window's own)."""
+    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
+    stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
+    name = PREFIX + stamp + '_' + _reason_text(window)
+    part = getattr(window, 'part', 0) if part is None else part
+    if part:
+        name += '_part%d' % part
+    return name
+
+
+def _extension(path):
+    module = formats.by_extension(path)
+    return module.CODEC if module else None
+
+
+def window_files(directory):
+    """Final window files in ``directory`` (paths, sorted by name, hence by time); ``*.tmp-*`` ignored."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    return [os.path.join(directory, name) for name in sorted(names)
+            if name.startswith(PREFIX) and TMP_MARK not in name and _extension(name)]
+
+
+def kept_leftovers(directory):
+    """Leftovers kept after a partial recovery (``cc_log_*.unrecovered-<pid>``), sorted: bytes no reader
+    could decode, left for a person to look at."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    return [os.path.join(directory, name) for name in sorted(names)
+            if name.startswith(PREFIX) and KEPT_MARK in name and TMP_MARK not in name]
+
+
+def temporary_files(directory):
+    """Leftovers of an interrupted write (``cc_log_*.tmp-<pid>``), sorted."""
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return []
+    return [os.path.join(directory, name) for name in sorted(names)
+            if name.startswith(PREFIX) and TMP_MARK in name]
+
+
+# -- writing --------------------------------------------------------------------------------------------
+
+def ensure_directory(directory):
+    """Create ``directory`` (and parents) group-writable, not world-writable, if it does not exist."""
+    return safe_files.make_dirs(directory)
+
+
+def final_names(directory, base, extension):
+    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ..."""
+    counter = 0
+    while True:
+        yield os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
+        counter += 1
+
+
+def write_window(window, directory, fmt, metadata=None, base=None, left_out=None):
+    """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
+
+    ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
+
+    ``metadata`` (JSON-able dict) is added to ``window_metadata``. Records held as serialized bytes are
+    decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``), by the format's own
+    ``decoded_records`` when it has one (json-xz reads fixed layouts from the bytes); one that cannot be
+    decoded is left out and counted in the metadata's ``undecodable`` and, per topic, ``undecodable_topics``
+    (and added to ``left_out``, a ``collections.Counter``, when given). Raises ValueError for a bad format or
+    an empty window, OSError when the file cannot be written (the temporary file is removed).
+    """
+    module = formats.get(fmt)
+    if not window.records:
+        raise ValueError('window: has no records')
+    ensure_directory(directory)
+    records, undecodable = window.records, 0
+    if not getattr(module, 'RAW_RECORDS', False):
+        records, undecodable = getattr(module, 'decoded_records', raw_message.decoded_records)(records)
+        if not records:
+            raise ValueError('window: none of its %d records can be decoded' % undecodable)
+    meta = window_metadata(window, fmt, metadata)
+    if undecodable:
+        topics = collections.Counter(record.topic for record in window.records)
+        topics.subtract(record.topic for record in records)
+        meta['undecodable'] = undecodable
+        meta['undecodable_topics'] = {topic: count for topic, count in topics.items() if count}
+        if left_out is not None:
+            left_out.update(meta['undecodable_topics'])
+    base = base or base_name(window)
+    extension = module.EXTENSION
+    write = module.encoder(records, meta)  # a format may encode now, before the temporary file exists
+    target = safe_files.AtomicFile(os.path.join(directory, base + extension),
+                                   names=final_names(directory, base, extension))
+    with target as stream:
+        write(stream)
+    return target.path, target.size
+
+
+def streams(fmt):
+    """Whether windows of format ``fmt`` are written a part at a time into one file (``WindowFile``)."""
+    return hasattr(formats.get(fmt), 'WindowStream')
+
+
+class WindowFile(object):
+    """One window file written a part at a time, for a window handed on in parts (``LogWindow.part`` 1, 2, ...,
+    the last ``final``), by a format with a ``WindowStream``: ``append(part, metadata)`` for each part, then
+    ``finish(metadata)`` -> ``(path, bytes)``. The file is ``<base name of the window>.<ext>.tmp-<pid>`` until
+    it is finished (a crash leaves a leftover that ``recovery`` salvages), then gets its final name as
+    ``write_window``'s files do. ``summary``: the window as a whole (triggers, start, end, its length) once a part
+    was appended. Metadata counters that every part carries (``SUMMED``) are summed over the parts; ``lost``:
+    messages of parts that could not be written (said in the metadata)."""
+
+    SUMMED = ('dropped', 'undecodable')
+
+    def __init__(self, directory, fmt):
+        self.directory = directory
+        self.format = formats.check(fmt)
+        self._module = formats.get(fmt)
+        self._target = self._stream = None
+        self._contents = Contents()
+        self._summed = {}
+        self.triggers = []
+        self.metadata = None  # of the last part
+        self.lost = 0
+
+    def append(self, window, metadata=None):
+        """Write the records of the next part (OSError, ValueError: nothing of it was written; try again)."""
+        if self._stream is None:
+            ensure_directory(self.directory)
+            base, extension = base_name(window, part=0), self._module.EXTENSION
+            target = safe_files.AtomicFile(os.path.join(self.directory, base + extension),
+                                           names=final_names(self.directory, base, extension), keep=True)
+            stream = target.__enter__()
+            self._target, self._stream = target, self._module.WindowStream(stream)
+        if window.records:
+            first = self._contents.count == 0
+            self._stream.append(window.records, self._metadata(window, metadata) if first else None)
+            self._contents.add(window.records)
+        self._sum(metadata)
+        self.triggers, self.metadata = list(window.triggers), metadata
+
+    def lose(self, window, metadata=None):
+        """A part that could not be written: counted in the file's metadata."""
+        self.lost += len(window.records)
+        self._sum(metadata)
+        self.triggers, self.metadata = list(window.triggers), metadata
+
+    def finish(self, window, metadata=None):
+        """Append the last part, write the metadata, close the file and give it its final name: (path, bytes)."""
+        self.append(window, metadata)
+        if not self._contents.count:
+            self.discard()
+            raise ValueError('window: has no records')
+        self._stream.finish(self._metadata(window, metadata))
+        target, self._target = self._target, None
+        try:
+            target.__exit__(None, None, None)
+        except OSError as error:
+            raise OSError(error.errno, '%s (the window is kept in %s for recovery at the next start)'
+                          % (error.strerror or error, target.tmp)) from None
+        return target.path, target.size
+
+    def abandon(self):
+        """Stop writing; the unfinished file stays under its temporary name, a leftover for ``recovery``."""
+        if self._target is not None:
+            target, self._target = self._target, None
+            target.abandon()
+
+    def discard(self):
+        """Remove the unfinished file (nothing of it is kept)."""
+        if self._target is not None:
+            target, self._target = self._target, None
+            target.__exit__(ValueError, ValueError('discarded'), None)
+
+    @property
+    def summary(self):
+        """The window as a whole: ``triggers``, ``start``, ``end``, ``part`` 0 and its length."""
+        return _Summary(self.triggers, self._contents.start, self._contents.end, self._contents.count)
+
+    def _sum(self, metadata):
+        for key in self.SUMMED:
+            for topic, count in ((metadata or {}).get(key) or {}).items():
+                self._summed.setdefault(key, {})[topic] = self._summed.get(key, {}).get(topic, 0) + count
+
+    def _metadata(self, window, metadata):
+        contents = self._contents
+        if not contents.count:  # the first part: what the provisional metadata says
+            contents = Contents()
+            contents.add(window.records)
+        meta = contents.metadata(window.triggers, 0, self.format, metadata)
+        meta.update(self._summed)
+        if self.lost:
+            meta['lost'] = self.lost
+        return meta
+
+
+class _Summary(object):
+    __slots__ = ('triggers', 'start', 'end', 'count', 'part', 'records')
+
+    def __init__(self, triggers, start, end, count):
+        self.triggers, self.start, self.end, self.count, self.part, self.records = triggers, start, end, count, 0, ()
+
+    def __len__(self):
+        return self.count
+
+
+# -- reading --------------------------------------------------------------------------------------------
+
+def read_window(path):
+    """``(metadata, records)`` of a window file, by its magic bytes (then extension).
+
+    Raises ValueError('<path>: <what is wrong>') for a missing, truncated, corrupt or foreign file, one that
+    is not a regular file (a FIFO), metadata of the wrong types (``check_metadata``) or an unsafe message
+    definition (``safe_input.check_definition``).
+    """
+    try:
+        stream = safe_input.open_input(path)
+    except OSError as error:
+        raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
+    with stream:
+        try:
+            head = stream.read(16)
+            stream.seek(0)
+        except OSError as error:
+            raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
+        module = formats.by_magic(head)
+        metadata, records = module.read(path, stream) if module else (None, None)
+    if records is not None:
+        try:
+            check_metadata(metadata)
+        except ValueError as error:
+            raise ValueError('%s: %s' % (path, error))
+        return metadata, records
+    fmt = _extension(path)
+    if not head:
+        raise ValueError('%s: empty file' % path)
+    if fmt is not None:
+        raise ValueError('%s: not a %s file (wrong magic bytes; truncated or corrupt?)' % (path, fmt))
+    raise ValueError('%s: not a cc_log window file (not %s)' % (path, ' nor '.join(formats.names())))
