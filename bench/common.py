@@ -168,7 +168,7 @@ def write_bag(path, records, compression='none'):
 def sim_records(config):
     """(records, truth) of a whole simulated run: Record(stamp, topic, msg) in time order (header stamps)."""
     from cc_log import sim
-    from cc_log.core.window_buffer import Record
+    from cc_log.core.records import Record
     simulator = sim.Simulator(config)
     records = [Record(stamp, topic, msg) for topic, stamp, msg in simulator.messages()]
     return records, simulator.truth

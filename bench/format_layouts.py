@@ -46,7 +46,7 @@ except ImportError:
     import cc_log
 from cc_log.core import msg_codec  # noqa: E402
 from cc_log.storage.formats import json_xz  # noqa: E402
-from cc_log.core.window_buffer import Record  # noqa: E402
+from cc_log.core.records import Record  # noqa: E402
 
 BAGS = [
     ('husky_outdoor_2015.bag', '/husky_velocity_controller/odom'),

@@ -28,7 +28,7 @@ from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream  # noqa: E402
 from cc_log.core.online_learning import OnlineLearner  # noqa: E402
 from cc_log.triggers import ClassifierTrigger  # noqa: E402
-from cc_log.core.window_buffer import Record  # noqa: E402
+from cc_log.core.records import Record  # noqa: E402
 
 FEATURE = FeatureConfig('motion', '1s')
 SLOW = sim.Limits(max_speed=0.5, max_accel=0.8, max_decel=1.0, max_yaw_rate=0.5, max_yaw_accel=2.0)

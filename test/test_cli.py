@@ -526,7 +526,7 @@ def test_bad_window_files_and_option_values(replayed, trained, tmp_path):
 
 def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
     from cc_log.storage import log_format
-    from cc_log.core.window_buffer import LogWindow, Record, Trigger
+    from cc_log.core.records import LogWindow, Record, Trigger
     import rosbag
     with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
         records = [Record(m.header.stamp.to_sec(), topic, m) for topic, m, _ in

@@ -10,7 +10,7 @@ from std_msgs.msg import String
 from cc_log.storage import context_track, window_writer
 from cc_log.core import safe_files
 from cc_log.storage.context_track import ContextTrack, Tee, parse_topics
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 
 def odom(stamp):

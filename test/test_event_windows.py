@@ -10,7 +10,7 @@ from cc_log.features.window import FeatureWindow
 from cc_log.core.spans import Span
 from cc_log.triggers import ClassifierTrigger
 from cc_log.triggers.classifier import recent_span
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 from nav_msgs.msg import Odometry  # noqa: E402
 

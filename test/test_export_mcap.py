@@ -12,7 +12,7 @@ from cc_log.offline import export
 from cc_log.storage import log_format
 from cc_log import sim
 from cc_log.storage.formats import bag_lz4
-from cc_log.core.window_buffer import LogWindow, Record
+from cc_log.core.records import LogWindow, Record
 
 HUSKY = 'husky_outdoor_2015.bag'
 ODOM, IMU = '/husky_velocity_controller/odom', '/imu/data'

@@ -15,7 +15,7 @@ from cc_log.features.base import statistics, window_statistics
 from cc_log.features.window import EVERY_SLACK, JUMP_BACK_TOLERANCE
 from cc_log.core.spans import Span
 from cc_log.triggers import ClassifierTrigger
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 from conftest import REAL_DATA
 

@@ -16,7 +16,7 @@ from cc_log.storage import formats, log_format
 from cc_log.core import msg_codec
 from cc_log.storage.formats import json_xz
 from cc_log.storage.log_format import Format, read_window, write_window
-from cc_log.core.window_buffer import LogWindow, Record, Trigger
+from cc_log.core.records import LogWindow, Record, Trigger
 
 rosbag = pytest.importorskip('rosbag')
 

@@ -257,7 +257,7 @@ def test_long_or_malformed_conditions_are_refused_with_one_line(text):
 def test_an_all_nan_odometry_stream_fires_a_nan_rule():
     nav_msgs = pytest.importorskip('nav_msgs.msg')
     from cc_log.triggers import RuleTrigger
-    from cc_log.core.window_buffer import Record
+    from cc_log.core.records import Record
     rule = RuleTrigger('odom_nan', '/odom', when='twist.twist.linear.x == nan', type='nav_msgs/Odometry')
     rule.check(nav_msgs.Odometry)
     fires = []
@@ -272,7 +272,7 @@ def test_an_all_nan_odometry_stream_fires_a_nan_rule():
 def test_a_silent_topic_rule_gives_a_topic_time_at_start_up():
     from cc_log.triggers import RuleTrigger
     from cc_log.triggers.rule import STARTUP_GRACE
-    from cc_log.core.window_buffer import Record
+    from cc_log.core.records import Record
     for rule in (RuleTrigger('dead', '/scan', silent='1s'), RuleTrigger('slow', '/scan', min_rate=5, over='1s')):
         fired = []
         for tick in range(0, int((STARTUP_GRACE - 1) * 10)):  # the topic's first message comes late
@@ -295,7 +295,7 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
     import sys
     rosbag = pytest.importorskip('rosbag')
     from cc_log.storage import log_format
-    from cc_log.core.window_buffer import LogWindow, Record, Trigger
+    from cc_log.core.records import LogWindow, Record, Trigger
     hostile = '/odom\x1b]0;owned\x07\x1b[2J\u202e'
     with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
         records = [Record(m.header.stamp.to_sec(), hostile, m) for topic, m, _ in

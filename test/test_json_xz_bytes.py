@@ -18,7 +18,7 @@ from cc_log.storage.bag import bag_reader
 from cc_log.storage import log_format
 from cc_log.core import msg_codec, raw_message
 from cc_log.storage.formats import json_xz
-from cc_log.core.window_buffer import LogWindow, Record
+from cc_log.core.records import LogWindow, Record
 
 REAL = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..', 'shared', 'data', 'real'))
 HUSKY = ('husky_outdoor_2015.bag', ('/husky_velocity_controller/odom', '/imu/data', '/fix'))

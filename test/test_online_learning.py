@@ -12,7 +12,7 @@ from cc_log.features import FeatureConfig
 from cc_log.core.model import AnomalyModel
 from cc_log.core.online_learning import OnlineLearner
 from cc_log.triggers import ClassifierTrigger
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'bench'))
 from learn_online import flag_starts, odometry, slow_model  # noqa: E402  (the bench's runs and counting)

@@ -12,7 +12,8 @@ from cc_log.storage import log_format
 from cc_log.core import msg_codec, raw_message
 from cc_log.features import FeatureConfig, FeatureStream
 from cc_log.core.smart import SmartLogger
-from cc_log.core.window_buffer import RAW_RECORD_OVERHEAD, MemoryCost, Record
+from cc_log.core.records import Record
+from cc_log.core.window_buffer import RAW_RECORD_OVERHEAD, MemoryCost
 
 bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 from geometry_msgs.msg import Twist  # noqa: E402
@@ -241,7 +242,7 @@ def test_a_bag_lz4_window_keeps_the_connection_headers(husky_raw, tmp_path):
 
 
 def test_json_xz_leaves_out_a_kept_message_that_cannot_be_decoded_and_says_so(husky_raw, tmp_path):
-    from cc_log.core.window_buffer import LogWindow, Trigger
+    from cc_log.core.records import LogWindow, Trigger
     records = [r for r in husky_raw if r.topic == ODOM][:5]
     broken = records[2]._replace(raw=records[2].raw[:30])
     window = LogWindow(records[:2] + [broken] + records[3:], [Trigger(records[0].stamp, 'test', None)])

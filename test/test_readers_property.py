@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from cc_log.core import msg_codec
 from cc_log.storage.log_format import Format, read_window, write_window
-from cc_log.core.window_buffer import LogWindow, Record, Trigger
+from cc_log.core.records import LogWindow, Record, Trigger
 
 pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402

@@ -17,7 +17,7 @@ import pytest
 from cc_log.storage import disk_guard, log_format, recovery
 from cc_log.storage.disk_guard import DiskGuard
 from cc_log.storage.log_format import Format, read_window, write_window
-from cc_log.core.window_buffer import LogWindow, Record, Trigger
+from cc_log.core.records import LogWindow, Record, Trigger
 
 rosbag = pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402

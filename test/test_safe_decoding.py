@@ -26,7 +26,7 @@ from cc_log.storage import log_format, recovery
 from cc_log.core import msg_codec, safe_input
 from cc_log.storage.formats import json_xz
 from cc_log.storage.log_format import read_window, write_window
-from cc_log.core.window_buffer import LogWindow, Record
+from cc_log.core.records import LogWindow, Record
 
 rosbag = pytest.importorskip('rosbag')
 import genpy.dynamic  # noqa: E402

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from cc_log import sim
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 HUSKY_ODOM = '/husky_velocity_controller/odom'
 LIMITS = sim.BWIBOT_LIMITS

@@ -13,7 +13,8 @@ from cc_log.core.collector import VectorStream
 from cc_log.features import FeatureConfig, vector_length
 from cc_log.core.smart import FAILED, OPENED, WRITTEN, SmartLogger, replay
 from cc_log.triggers import ClassifierTrigger
-from cc_log.core.window_buffer import Record, WindowBuffer
+from cc_log.core.records import Record
+from cc_log.core.window_buffer import WindowBuffer
 
 bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 

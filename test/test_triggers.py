@@ -9,7 +9,7 @@ from cc_log.features import FeatureConfig
 from cc_log.core.smart import OPENED, WRITTEN, SmartLogger
 from cc_log.triggers import ClassifierTrigger, ManualTrigger, RuleTrigger
 from cc_log.triggers.rule import Condition
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 diagnostic_msgs = pytest.importorskip('diagnostic_msgs.msg')
 from nav_msgs.msg import Odometry  # noqa: E402

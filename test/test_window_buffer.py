@@ -6,7 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from cc_log.core.spans import Span
-from cc_log.core.window_buffer import LogWindow, MemoryCost, Record, WindowBuffer, deep_size
+from cc_log.core.records import LogWindow, Record
+from cc_log.core.window_buffer import MemoryCost, WindowBuffer, deep_size
 
 
 def run(buffer, stamps, anomalies, side=()):

@@ -42,7 +42,7 @@ from cc_log.core.collector import VectorStream  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 from cc_log.msg import AnomalyEvent  # noqa: E402
 from cc_log.srv import TriggerWindow  # noqa: E402
-from cc_log.core.window_buffer import Record  # noqa: E402
+from cc_log.core.records import Record  # noqa: E402
 
 PKG = 'cc_log'
 NODE = 'smart_logger'

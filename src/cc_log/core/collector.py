@@ -29,8 +29,8 @@ from cc_log.core import safe_files
 from cc_log.storage import window_writer
 from cc_log.core.safe_input import brief
 from cc_log.core.spans import MAX_MEGABYTES, Span
-from cc_log.core.window_buffer import (
-    DEFAULT_MAX_BUFFER_MB, LogWindow, MemoryCost, Record, Trigger, budget_bytes, part_bytes)
+from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, MemoryCost, budget_bytes, part_bytes
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']

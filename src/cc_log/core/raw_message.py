@@ -1,6 +1,6 @@
 """Serialized messages: what rospy (``rospy.AnyMsg``) and rosbag (``read_messages(raw=True)``) hand over.
 
-A ``window_buffer.Record`` may carry a message as its serialized bytes (``raw``) and its connection header
+A ``records.Record`` may carry a message as its serialized bytes (``raw``) and its connection header
 (``connection``: a dict with ``type``, ``md5sum``, ``message_definition`` and, live, ``callerid`` and
 ``latching``) with ``msg`` None: the message is decoded only when something reads its fields
 (``decoded(record)``). ``message_class(connection)`` is the class decoding uses: the installed class of

@@ -44,9 +44,9 @@ from cc_log.storage import window_writer
 from cc_log.core.spans import Span
 from cc_log.triggers import (
     DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger, ManualTrigger)
+from cc_log.core.records import Record, records_of
 from cc_log.core.window_buffer import (
-    DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, Record,
-    WindowBuffer, records_of)
+    DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, WindowBuffer)
 
 __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into', 'replay_records',
            'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
@@ -864,7 +864,7 @@ def _batches(records, size=None):
 
 
 def replay_records(logger, records, progress=None, source='the records'):
-    """``replay_into`` of an iterable of ``window_buffer.Record``s (serialized ones go to ``on_raw``, decoded
+    """``replay_into`` of an iterable of ``records.Record``s (serialized ones go to ``on_raw``, decoded
     ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
     benchmarks."""
     out_dir = logger.directory

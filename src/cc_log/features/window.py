@@ -287,7 +287,7 @@ class FeatureStream(object):
         return self.add_row(self.features.row_values_raw(buff, stamp), stamp)
 
     def add_record(self, record, role=None):
-        """A ``window_buffer.Record`` of the first input (``role`` None) or of the input ``role``: read from
+        """A ``records.Record`` of the first input (``role`` None) or of the input ``role``: read from
         its bytes when it has no decoded message, else from the message."""
         if role is None:
             return _only_vector(self.add_records([record], {}))
@@ -300,7 +300,7 @@ class FeatureStream(object):
         return _only_vector(self.add_rows([row], [stamp], [self.features.covers(self.span, stamp)]))
 
     def add_records(self, records, roles):
-        """A batch of ``window_buffer.Record``s in order: those whose topic is in ``roles`` (``{topic: role}``)
+        """A batch of ``records.Record``s in order: those whose topic is in ``roles`` (``{topic: role}``)
         are ``observe``d, the others are of the first input. Each run of consecutive records of the first input
         gets its rows from the set's ``row_block``; then the window takes all rows. Returns a ``WindowBatch``
         (views of the window: use it before the next row)."""

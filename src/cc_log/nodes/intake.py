@@ -3,7 +3,7 @@
 Every topic arrives as ``rospy.AnyMsg``: the serialized bytes and the publisher's connection header
 (type, md5sum, message_definition, callerid, latching). The subscriber callback only puts them on a bounded
 queue (``IntakeQueue``); one feeder thread hands them to the sink in arrival order, draining the queue in
-batches: the whole batch to ``sink.on_records`` as ``window_buffer.Record``s of serialized bytes when the sink
+batches: the whole batch to ``sink.on_records`` as ``records.Record``s of serialized bytes when the sink
 takes batches (``SmartLogger``), else each to ``sink.on_raw(topic, bytes, connection, receipt)`` when it takes
 serialized messages, else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
 message definition ``safe_input.check_definition`` refuses is never decoded (``MessageDecoder``).
@@ -23,7 +23,7 @@ import time
 import rospy
 
 from cc_log.core import raw_message
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 DEFAULT_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
 DEFAULT_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)

@@ -15,7 +15,7 @@ as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, r
   and at ``close``. A closed file is handed to
   ``submit(job)`` as a ``window_writer.Job(write=..., what=CONTEXT)`` (the node's context writer: quota,
   retries, WRITTEN events for the upload hook); without ``submit`` it is finished in the caller's thread.
-- ``add(record)`` takes a ``window_buffer.Record``: with ``raw`` and ``connection`` set (serialized bytes and
+- ``add(record)`` takes a ``records.Record``: with ``raw`` and ``connection`` set (serialized bytes and
   the publisher's connection header) the bytes are written as they came (``rosbag.Bag.write(..., raw=True,
   connection_header=...)``), else the decoded message. ``on_message(topic, msg, stamp, size)`` is the same
   for the intake's sink interface, so ``Tee`` can feed a logger and the track together.
@@ -39,7 +39,7 @@ from cc_log import features as features_mod
 from cc_log.storage import log_format, window_writer
 from cc_log.core import raw_message, safe_files
 from cc_log.storage.formats import bag_lz4
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 __all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PREFIX', 'DEFAULT_TOPICS',
            'DEFAULT_ROTATE', 'BWI_ALIASES']

@@ -120,7 +120,7 @@ class Contents(object):
 
 
 def trigger_name(trigger):
-    """The name of a window_buffer.Trigger: its ``name``, or its reason when it has none."""
+    """The name of a records.Trigger: its ``name``, or its reason when it has none."""
     name = getattr(trigger, 'name', None)
     return str(trigger.reason if name is None else name)
 

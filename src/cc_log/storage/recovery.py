@@ -113,7 +113,7 @@ def _same_bytes(a, b):
 
 
 def _triggers(metadata, first_stamp):
-    from cc_log.core.window_buffer import Trigger
+    from cc_log.core.records import Trigger
     triggers = []
     for trigger in metadata.get('triggers') or []:
         if not isinstance(trigger, dict):
@@ -138,7 +138,7 @@ def _is_context(path):
 def _write_recovered(path, directory, base, fmt, metadata, records):
     """Write ``records`` as ``<base>_recovered<extension>`` in format ``fmt`` with ``metadata`` (of the
     leftover), or as the plain rosbag it was for a context file; return its path."""
-    from cc_log.core.window_buffer import LogWindow
+    from cc_log.core.records import LogWindow
     if _is_context(path):
         from cc_log.offline import export
         names = log_format.final_names(directory, base + RECOVERED_SUFFIX, fmt.EXTENSION)

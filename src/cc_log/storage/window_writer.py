@@ -28,7 +28,7 @@ import time
 
 from cc_log.storage import disk_guard
 from cc_log.storage import log_format
-from cc_log.core.window_buffer import LogWindow
+from cc_log.core.records import LogWindow
 
 __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'WRITTEN', 'FAILED', 'DELETED', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']

@@ -21,7 +21,7 @@ from cc_log.storage.bag import bagio
 from cc_log.core import raw_message
 from cc_log.storage.bag.bag_salvage import (
     MAX_CHUNK_BYTES, OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA, field_u32, lz4_decompress, map_file, read_record)
-from cc_log.core.window_buffer import records_of
+from cc_log.core.records import records_of
 
 __all__ = ['read_raw', 'read_runs', 'MAX_CHUNK_BYTES']
 

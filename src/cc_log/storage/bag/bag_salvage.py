@@ -287,7 +287,7 @@ class _Salvage(object):
 def _window_of(salvage):
     """(metadata, records in the order they were written) of what a salvage decoded."""
     import genpy
-    from cc_log.core.window_buffer import Record
+    from cc_log.core.records import Record
     metadata, records = None, []
     for topic, secs, nsecs, msg, raw, header in salvage.messages:
         if topic == METADATA_TOPIC:

@@ -20,7 +20,7 @@ import rosbag
 
 from cc_log.core import raw_message, safe_input
 from cc_log.features import FeatureStream, stamp_of
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 
 def open_bag(path, skip_index=False):

@@ -31,7 +31,7 @@ import struct
 import zlib
 
 from cc_log.core import msg_codec, raw_message, safe_files, safe_input
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 CODEC = 'bag-lz4'
 RAW_RECORDS = True  # write_window hands records over as they are: serialized bytes are written as bytes

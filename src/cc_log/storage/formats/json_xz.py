@@ -62,7 +62,7 @@ import re
 import numpy
 
 from cc_log.core import msg_codec, raw_message, safe_input
-from cc_log.core.window_buffer import Record
+from cc_log.core.records import Record
 
 CODEC = 'json-xz'
 EXTENSION = '.json.xz'
