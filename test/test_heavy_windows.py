@@ -13,7 +13,8 @@ from cc_log.storage.bag import bag_writer
 from cc_log.core.raw_message import class_header
 from cc_log.core.smart import HEAVY_BYTES, SmartLogger
 from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.window_buffer import TopicLimits, WindowBuffer
+from cc_log.core.options import TopicLimits
+from cc_log.core.window_buffer import WindowBuffer
 
 rosbag = pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -202,7 +203,8 @@ def test_per_topic_pre_and_post_keep_only_their_span_of_a_heavy_topic():
 
 def test_a_topic_memory_cap_holds_outside_windows():
     cost = len(stream(0.1)[-1].raw)
-    buffer = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits={CAMERA: TopicLimits(max_bytes=10 * cost)})
+    limits = {CAMERA: TopicLimits(max_mb=10 * cost / 1e6)}
+    buffer = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits=limits)
     for record in stream(5):
         record = record._replace(cost=len(record.raw))
         buffer.add(record) if record.topic == ODOM else buffer.add_side(record)
@@ -280,28 +282,28 @@ def test_a_writer_that_falls_behind_drops_heavy_frames_counted_never_light_ones(
 # -- configuration -------------------------------------------------------------------------------------------
 
 def test_topic_limits_from_the_configuration_and_from_a_launch_argument():
-    from cc_log.core import config
+    from cc_log.core import config, options
     text = '{camera/image_raw: {pre: 2s, post: 500ms, max_mb: 64}, /scan: {post: 1s}}'
     for value in (text, {'camera/image_raw': {'pre': '2s', 'post': '500ms', 'max_mb': 64}, '/scan': {'post': '1s'}}):
-        limits = config.parse_topic_limits(value)
-        assert limits == {'camera/image_raw': TopicLimits(2.0, 0.5, 64000000), '/scan': TopicLimits(None, 1.0, 0)}
+        limits = options.parse_topic_limits(value)
+        assert limits == {'camera/image_raw': TopicLimits(2.0, 0.5, 64.0), '/scan': TopicLimits(None, 1.0, 0.0)}
     cfg = config.Config.from_dict({'topic_limits': text, 'driving_topic': 'odom'})
     options = cfg.logger_options([], config.global_name)
-    assert options['topic_limits'] == {'/camera/image_raw': TopicLimits(2.0, 0.5, 64000000),
-                                       '/scan': TopicLimits(None, 1.0, 0)}
+    assert options['topic_limits'] == {'/camera/image_raw': TopicLimits(2.0, 0.5, 64.0),
+                                       '/scan': TopicLimits(None, 1.0, 0.0)}
 
 
 @pytest.mark.parametrize('value, error', [
-    ('{camera: {pre: 20}}', 'topic_limits.camera.pre: a duration (e.g. 2s), not a count of messages'),
+    ('{camera: {pre: soon}}', "topic_limits.camera.pre: 'soon' is not a duration"),
     ('{camera: {size: 1}}', "topic_limits.camera: unknown key 'size'"),
     ('[camera]', 'topic_limits: a mapping of topic names to {pre, post, max_mb}, not list'),
     ('{camera: {max_mb: lots}}', 'topic_limits.camera.max_mb'),
     ('{camera: {pre: [1', 'topic_limits: not YAML'),
 ])
 def test_bad_topic_limits_are_one_line_naming_the_key(value, error):
-    from cc_log.core import config
+    from cc_log.core import options
     with pytest.raises(ValueError) as raised:
-        config.parse_topic_limits(value)
+        options.parse_topic_limits(value)
     assert error in str(raised.value) and '\n' not in str(raised.value)
 
 

@@ -128,7 +128,7 @@ def test_a_field_is_checked_against_the_message_type_at_start(text, message):
 @pytest.mark.parametrize('kwargs, message', [
     ({}, 'give exactly one of when, level, arrival, silent, min_rate (got none)'),
     ({'when': 'a > 1', 'arrival': True}, 'got when, arrival'),
-    ({'silent': '10'}, "silent: '10' must be a duration"),
+    ({'silent': '10 min'}, "silent: '10 min' is not a duration"),
     ({'min_rate': -1}, 'min_rate'),
     ({'level': 'BAD'}, "level: 'BAD' is not one of OK, WARN, ERROR, STALE"),
     ({'arrival': True, 'hold_off': 'soon'}, 'hold_off'),

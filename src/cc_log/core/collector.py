@@ -27,62 +27,27 @@ from cc_log.storage import log_format
 from cc_log.core import msg_codec
 from cc_log.core import safe_files
 from cc_log.storage import window_writer
-from cc_log.core.safe_input import brief
-from cc_log.core.spans import MAX_MEGABYTES, Span
+from cc_log.core.options import STRIDE, check_label, get as option
+from cc_log.core.spans import Rotation
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, MemoryCost, budget_bytes, part_bytes
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']
 
-DEFAULT_ROTATE = '60s'
-DEFAULT_STRIDE = 25  # driving messages between feature vectors (4 per second at 100 Hz)
+DEFAULT_ROTATE = option('rotate').default
+DEFAULT_STRIDE = option('stride').default  # driving messages between feature vectors (4 per second at 100 Hz)
 ENOUGH_VECTORS = 200  # offline, without a stride given: a smaller stride when the default gives fewer vectors
-DEFAULT_LABEL = 'nominal'
-DEFAULT_WINDOW = '500'
-DEFAULT_FEATURE_SET = 'motion'
+DEFAULT_LABEL = option('label').default
+DEFAULT_WINDOW = option('window').default
+DEFAULT_FEATURE_SET = option('feature_set').default
 FEATURES_SUBDIRECTORY = 'features'
 JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream counts as restarted
 
-_SIZE = re.compile(r'^\s*([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*(b|kb|mb|gb)\s*$', re.IGNORECASE)  # no backtracking
-_SIZE_FACTORS = {'b': 1, 'kb': 1000, 'mb': 1000 ** 2, 'gb': 1000 ** 3}
-_LABEL = re.compile(r'^[A-Za-z0-9_.-]+$')
 
-
-class Rotation(collections.namedtuple('Rotation', 'span bytes')):
-    """When to start a new file: after ``span`` (messages or seconds) or ``bytes`` raw row-JSON bytes."""
-
-    __slots__ = ()
-
-    @classmethod
-    def parse(cls, value, name='rotate'):
-        """``'6000'`` (messages), ``'60s'`` (duration) or ``'20MB'`` (raw JSON size: B, kB, MB, GB)."""
-        if isinstance(value, cls):
-            return value
-        match = _SIZE.match(str(value))
-        if match:
-            size = float(match.group(1)) * _SIZE_FACTORS[match.group(2).lower()]
-            if not 0 < size <= MAX_MEGABYTES * 1e6:
-                raise ValueError('%s: %s must be positive, at most %gMB' % (name, brief(value), MAX_MEGABYTES))
-            return cls(None, int(size))
-        try:
-            span = Span.parse(value, name)
-        except ValueError:
-            raise ValueError('%s: %s is not a message count (6000), a duration (60s) or a size (20MB)'
-                             % (name, brief(value)))
-        if span.count == 0 or span.seconds == 0:
-            raise ValueError('%s: %s must be positive' % (name, brief(value)))
-        return cls(span, None)
-
-    def __str__(self):
-        return str(self.span) if self.span is not None else '%dB' % self.bytes
-
-
-def check_label(label):
-    """Return ``label`` when it can name a directory, else raise ValueError('label: ...')."""
-    if not isinstance(label, str) or not _LABEL.match(label) or label in ('.', '..'):
-        raise ValueError('label: %s must be letters, digits, ".", "_" or "-"' % brief(label))
-    return label
+def parse_stride(value):
+    """A positive whole number of messages; ValueError('stride: ...') otherwise."""
+    return STRIDE.parse(value, 'stride')
 
 
 class VectorStream(features_mod.FeatureStream):
@@ -103,14 +68,6 @@ def input_roles(config, topics=None):
         raise ValueError('input_topics: the %s feature set reads %d other topic(s) (%s), got %d'
                          % (config.feature_set, len(roles), ', '.join(roles) or 'none', len(topics)))
     return dict(zip(topics, roles))
-
-
-def parse_stride(value):
-    """A positive whole number of messages; ValueError('stride: ...') otherwise."""
-    span = Span.parse(value, 'stride')
-    if span.is_duration or span.count < 1:
-        raise ValueError('stride: %s must be a whole number of messages, at least 1' % brief(value))
-    return span.count
 
 
 class VectorSpec(object):

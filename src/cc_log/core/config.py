@@ -32,34 +32,21 @@ import os
 
 from cc_log import features
 from cc_log.storage import log_format
-from cc_log.storage.formats import json_xz
 from cc_log.core import safe_input
 from cc_log.core.safe_input import brief
 from cc_log.core.model import check_window
-from cc_log.core.spans import Span, megabytes
+from cc_log.core import options
+from cc_log.core.spans import Span
 from cc_log.triggers import get as trigger_kind
 from cc_log.triggers.base import Context, check_name
 from cc_log.triggers.classifier import default_topics
 from cc_log.core.topic_select import TopicSelection
-from cc_log.core.window_buffer import TopicLimits
 
-KEYS = ('topics', 'topic_limits', 'driving_topic', 'format', 'json_xz', 'windows', 'limits', 'collect', 'triggers')
-TOPIC_LIMIT_KEYS = ('pre', 'post', 'max_mb')
-JSON_XZ_KEYS = ('precision',)
-WINDOW_KEYS = ('pre', 'post', 'max')
-LIMIT_KEYS = ('max_disk_mb', 'min_free_mb', 'max_buffer_mb')
-COLLECT_KEYS = ('rotate', 'label', 'stride')
+KEYS = tuple(options.sections())
 COMMON_TRIGGER_KEYS = ('name', 'kind', 'pre', 'post')
-DEFAULT_FEATURE_SET = 'motion'
-DEFAULT_WINDOW = '500'
+DEFAULT_FEATURE_SET = options.get('feature_set').default
+DEFAULT_WINDOW = options.get('window').default
 MAX_FILE_BYTES = 1 << 20
-# Flat node parameters (and cclog options) that override a key of the configuration.
-FLAT = {'pre': ('windows', 'pre'), 'post': ('windows', 'post'), 'max_window': ('windows', 'max'),
-        'max_disk_mb': ('limits', 'max_disk_mb'), 'min_free_mb': ('limits', 'min_free_mb'),
-        'max_buffer_mb': ('limits', 'max_buffer_mb'), 'rotate': ('collect', 'rotate'),
-        'label': ('collect', 'label'), 'stride': ('collect', 'stride'), 'format': ('format',),
-        'topics': ('topics',), 'topic_limits': ('topic_limits',), 'driving_topic': ('driving_topic',),
-        'precision': ('json_xz', 'precision')}
 
 
 def load_file(path):
@@ -88,18 +75,9 @@ def merge(base, override):
 
 
 def with_flat(data, flat):
-    """``data`` with the flat parameters of ``flat`` (``{'pre': '2s', ...}``, see FLAT; None values are
-    ignored) in their places."""
-    override = {}
-    for name, value in flat.items():
-        if value is None:
-            continue
-        path = FLAT[name]
-        if len(path) == 1:
-            override[path[0]] = value
-        else:
-            override.setdefault(path[0], {})[path[1]] = value
-    return merge(data, override)
+    """``data`` with the options of ``flat`` (``{'pre': '2s', ...}``: names of ``options.OPTIONS`` with a
+    configuration key; None values are ignored) at their keys."""
+    return merge(data, options.with_values({}, flat))
 
 
 def with_classifier(data, **values):
@@ -166,37 +144,18 @@ class Config(object):
         return self
 
     def _read(self, data):
-        from cc_log.core.collector import Rotation, check_label, parse_stride
-        _known(data, KEYS, '')
-        entries = topic_list(data.get('topics', ()), 'topics')
+        values = options.read(data)
+        entries = values['topics'] or []
         self.selection = TopicSelection.parse(entries, 'topics')  # names and patterns (*, re:..., !...)
         self.topics = [entry for entry in entries if not TopicSelection.is_pattern(entry)]
-        self.topic_limits = parse_topic_limits(data.get('topic_limits'), 'topic_limits')
-        driving = data.get('driving_topic')
-        if driving is not None and (not isinstance(driving, str) or not driving.strip()):
-            raise ValueError('driving_topic: %s is not a topic name' % brief(driving))
-        self.driving_topic = driving.strip() if driving else None
-        fmt = data.get('format', log_format.formats.DEFAULT)
-        if not isinstance(fmt, str):
-            raise ValueError('format: %s is not a format name (%s)' % (brief(fmt), ', '.join(log_format.Format.ALL)))
-        self.format = log_format.Format.check(fmt)
-        options = _mapping(data.get('json_xz'), 'json_xz', JSON_XZ_KEYS)
-        self.precision = json_xz.check_precision(options.get('precision'), 'json_xz.precision')
+        for name in ('topic_limits', 'format', 'precision', 'pre', 'post', 'max_window', 'max_disk_mb',
+                     'min_free_mb', 'max_buffer_mb'):
+            setattr(self, name, values[name] if values[name] is not None else options.default(name))
+        self.driving_topic = values['driving_topic']
         if self.precision and self.format != log_format.Format.JSON_XZ:
             raise ValueError('json_xz.precision: rounds json-xz windows only (format is %s)' % self.format)
-        windows = _mapping(data.get('windows'), 'windows', WINDOW_KEYS)
-        self.pre = Span.parse(windows.get('pre', '100'), 'windows.pre')
-        self.post = Span.parse(windows.get('post', '100'), 'windows.post')
-        self.max_window = Span.parse(windows.get('max', '100000'), 'windows.max')
-        limits = _mapping(data.get('limits'), 'limits', LIMIT_KEYS)
-        self.max_disk_mb = megabytes(limits.get('max_disk_mb', 0), 'limits.max_disk_mb')
-        self.min_free_mb = megabytes(limits.get('min_free_mb', 0), 'limits.min_free_mb')
-        self.max_buffer_mb = megabytes(limits.get('max_buffer_mb', 256.0), 'limits.max_buffer_mb')
-        collect = _mapping(data.get('collect'), 'collect', COLLECT_KEYS)
-        rotate = collect.get('rotate')
-        self.rotate = None if rotate is None else str(Rotation.parse(rotate, 'collect.rotate'))
-        self.label = None if collect.get('label') is None else check_label(collect['label'])
-        self.stride = None if collect.get('stride') is None else parse_stride(collect['stride'])
+        self.rotate = None if values['rotate'] is None else str(values['rotate'])
+        self.label, self.stride = values['label'], values['stride']  # None: the collector's defaults
         triggers = data.get('triggers', [])
         if not isinstance(triggers, list):
             raise ValueError('triggers: a list of triggers, not %s' % brief(triggers))
@@ -280,68 +239,6 @@ class Config(object):
         return {'precision': self.precision} if self.precision else {}
 
 
-def parse_topic_limits(value, name='topic_limits'):
-    """``{topic: window_buffer.TopicLimits}`` of a mapping ``{topic: {pre: 2s, post: 1s, max_mb: 64}}`` (or its YAML
-    text, as a launch argument gives it): each topic's own seconds before the window's first trigger and after
-    its last (at most the window's) and memory cap outside every window; ValueError('<name>.<topic>: ...')."""
-    if value is None or value == '':
-        return {}
-    if isinstance(value, str):
-        if len(value) > MAX_FILE_BYTES:
-            raise ValueError('%s: longer than %d characters' % (name, MAX_FILE_BYTES))
-        value = safe_input.loads_yaml(value, name)
-    if not isinstance(value, dict):
-        raise ValueError('%s: a mapping of topic names to {pre, post, max_mb}, not %s' % (name, type(value).__name__))
-    limits = {}
-    for topic, entry in value.items():
-        if not isinstance(topic, str) or not topic.strip():
-            raise ValueError('%s: %s is not a topic name' % (name, brief(topic)))
-        where = '%s.%s' % (name, topic)
-        entry = _mapping(entry, where, TOPIC_LIMIT_KEYS)
-        spans = {}
-        for key in ('pre', 'post'):
-            if entry.get(key) is not None:
-                span = Span.parse(entry[key], '%s.%s' % (where, key))
-                if not span.is_duration:
-                    raise ValueError('%s.%s: a duration (e.g. 2s), not a count of messages' % (where, key))
-                spans[key] = span.seconds
-        max_mb = megabytes(entry.get('max_mb', 0), '%s.max_mb' % where)
-        limits[topic.strip()] = TopicLimits(spans.get('pre'), spans.get('post'), int(max_mb * 1000 ** 2))
-    return limits
-
-
-def _known(data, keys, where):
-    if not isinstance(data, dict):
-        raise ValueError('%s: a mapping, not %s' % (where.rstrip('.') or 'configuration', brief(data)))
-    unknown = sorted(brief(key) for key in data if key not in keys)
-    if unknown:
-        raise ValueError('%sunknown key %s (known: %s)' % (where, unknown[0], ', '.join(keys)))
-
-
-def _mapping(value, name, keys):
-    if value is None:
-        return {}
-    _known(value, keys, name + ': ')
-    return value
-
-
-def topic_list(value, name):
-    """Topic names from a list or a space/comma-separated string (duplicates removed); ValueError('<name>: ...')."""
-    if isinstance(value, str):
-        items = value.replace(',', ' ').split()
-    elif isinstance(value, (list, tuple)):
-        items = list(value)
-    else:
-        raise ValueError('%s: %s is not a list of topic names' % (name, brief(value)))
-    out = []
-    for item in items:
-        if not isinstance(item, str) or not item.strip():
-            raise ValueError('%s: %s is not a topic name' % (name, brief(item)))
-        if item.strip() not in out:
-            out.append(item.strip())
-    return out
-
-
 def _check_pre(entry, index, held):
     """A trigger's own ``pre`` may not be longer than ``windows.pre`` (``held``): the logger holds no more."""
     pre = entry.get('pre')
@@ -368,7 +265,7 @@ def _trigger_entry(entry, index):
         check_name(name)
     except ValueError as error:
         raise ValueError('triggers[%d]: %s' % (index, error))
-    _known(entry, COMMON_TRIGGER_KEYS + trigger_kind(kind).config_keys, 'triggers[%d] (%s): ' % (index, name))
+    options.known_keys(entry, COMMON_TRIGGER_KEYS + trigger_kind(kind).config_keys, 'triggers[%d] (%s)' % (index, name))
     if kind == 'classifier' and 'feature_set' in entry:
         try:
             features.get(entry['feature_set'])

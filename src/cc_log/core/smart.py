@@ -234,7 +234,7 @@ class SmartLogger(object):
         watched = set().union(*(trigger.topics for trigger in self.triggers))
         self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self.max_buffer_mb = max_buffer_mb
-        self.topic_limits = dict(topic_limits or {})  # topic -> window_buffer.TopicLimits
+        self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.stamp_tolerance = float(stamp_tolerance)
         if not self.stamp_tolerance > 0:
             raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))

@@ -1,4 +1,11 @@
-"""Window sizes as a message count (``500``) or a duration (``5s``, ``250ms``); byte sizes in MB or with a unit."""
+"""The one grammar of quantities in cc_log: window sizes, durations and byte sizes.
+
+- ``Span.parse``: a message count (``500``) or a duration (``5s``, ``250ms``, ``5m``, ``2h``);
+- ``seconds``: a duration alone (``30``, ``30s``, ``250ms``, ``5m``, ``2h``: a bare number is seconds);
+- ``megabytes``: a byte size in MB: a bare number is MB (or bytes where the option says so, as rosbag's
+  ``--min-space`` does), ``64MB``/``2GB``/``500kB`` are powers of 1000, ``1.5GiB``/``512MiB`` and rosbag's
+  ``1G``/``500M``/``100K`` powers of 1024 (``1G`` is 2^30 bytes everywhere).
+"""
 import collections
 import math
 
@@ -29,7 +36,8 @@ class Span(collections.namedtuple('Span', 'count seconds')):
 
     @classmethod
     def parse(cls, value, name='size'):
-        """Parse ``500``, ``'500'``, ``'5s'``, ``'2.5s'`` or ``'250ms'``; a Span is returned as is.
+        """Parse ``500``, ``'500'``, ``'5s'``, ``'2.5s'``, ``'250ms'``, ``'5m'`` or ``'2h'``; a Span is returned
+        as is.
 
         Raises ValueError naming ``name`` when the value is not a count or duration from 0 to MAX_COUNT
         messages or MAX_SECONDS seconds.
@@ -38,10 +46,9 @@ class Span(collections.namedtuple('Span', 'count seconds')):
             return value
         text = str(value).strip().lower()
         try:
-            if text.endswith('ms'):
-                span = cls.duration(float(text[:-2]) / 1000.0)
-            elif text.endswith('s'):
-                span = cls.duration(float(text[:-1]))
+            seconds = _duration(text)
+            if seconds is not None:
+                span = cls.duration(seconds)
             else:
                 number = float(text)
                 if number != int(number):
@@ -68,27 +75,90 @@ class Span(collections.namedtuple('Span', 'count seconds')):
         return str(self.count)
 
 
-# Byte sizes: a bare number is MB (10^6 bytes), as the ``*_mb`` parameters always took.
+_DURATION_UNITS = (('ms', 1e-3), ('s', 1.0), ('m', 60.0), ('h', 3600.0))  # 'ms' before 'm' and 's'
+
+
+def _duration(text):
+    """Seconds of ``text`` (lower case) ending in a duration unit, None when it has none."""
+    for unit, factor in _DURATION_UNITS:
+        if text.endswith(unit):
+            return float(text[:-len(unit)]) * factor
+    return None
+
+
+def seconds(value, name='duration', positive=False):
+    """Seconds (a float >= 0, > 0 when ``positive``, at most MAX_SECONDS) of a duration: a number of
+    seconds (``30``, ``'30'``) or one with a unit (``'30s'``, ``'250ms'``, ``'5m'``, ``'2h'``). ValueError
+    naming ``name`` otherwise."""
+    number = float('nan')
+    if not isinstance(value, bool) and isinstance(value, (int, float, str)):
+        text = str(value).strip().lower()
+        try:
+            number = _duration(text)
+            number = float(text) if number is None else number
+        except (ValueError, OverflowError):
+            number = float('nan')
+    if not (number > 0 if positive else number >= 0) or not math.isfinite(number):
+        raise ValueError('%s: %s is not a duration %s (30s, 250ms, 5m, 2h; a number is seconds)'
+                         % (name, brief(value), '> 0' if positive else '>= 0'))
+    if number > MAX_SECONDS:
+        raise ValueError('%s: %s is more than %gs' % (name, brief(value), MAX_SECONDS))
+    return number
+
+
+# Byte sizes: a bare number is MB (10^6 bytes), as the ``*_mb`` parameters always took, unless the option
+# says otherwise (``bare``); rosbag's one-letter units are powers of 1024, as rosbag reads them.
 _BYTE_UNITS = {'b': 1e-6, 'kb': 1e-3, 'mb': 1.0, 'gb': 1e3, 'tb': 1e6,
-               'kib': 1024 / 1e6, 'mib': 1024 ** 2 / 1e6, 'gib': 1024 ** 3 / 1e6, 'tib': 1024 ** 4 / 1e6}
+               'kib': 1024 / 1e6, 'mib': 1024 ** 2 / 1e6, 'gib': 1024 ** 3 / 1e6, 'tib': 1024 ** 4 / 1e6,
+               'k': 1024 / 1e6, 'm': 1024 ** 2 / 1e6, 'g': 1024 ** 3 / 1e6, 't': 1024 ** 4 / 1e6}
 
 
-def megabytes(value, name='size'):
-    """MB (10^6 bytes) of a number of MB (``64``, ``'64'``) or a size with a unit (``'64MB'``, ``'2GB'``,
-    ``'500kB'``, ``'1.5GiB'``, ``'100B'``; units case-insensitive), at most MAX_MEGABYTES. ValueError naming
-    ``name`` otherwise."""
+def megabytes(value, name='size', bare='mb'):
+    """MB (10^6 bytes) of a number (of MB; of ``bare``, a unit of _BYTE_UNITS, when given) or a size with a
+    unit (``'64MB'``, ``'2GB'``, ``'500kB'``, ``'1.5GiB'``, ``'1G'``, ``'100B'``; units case-insensitive), at
+    most MAX_MEGABYTES. ValueError naming ``name`` otherwise."""
     number = float('nan')
     if not isinstance(value, bool) and isinstance(value, (int, float, str)):
         text = str(value).strip().lower().replace(' ', '')
         digits = text.rstrip('abcdefghijklmnopqrstuvwxyz')
-        factor = _BYTE_UNITS.get(text[len(digits):], None) if digits != text else 1.0
+        factor = _BYTE_UNITS.get(text[len(digits):] if digits != text else bare, None)
         try:
             number = float(digits) * factor if factor is not None else number
         except (ValueError, OverflowError):
             pass
     if not number >= 0 or not math.isfinite(number):
-        raise ValueError('%s: %s is not a size >= 0 (MB as a number, or 64MB, 2GB, 500kB, 1.5GiB)'
-                         % (name, brief(value)))
+        raise ValueError('%s: %s is not a size >= 0 (%s as a number, or 64MB, 2GB, 500kB, 1.5GiB, 1G)'
+                         % (name, brief(value), (bare or 'mb').upper()))
     if number > MAX_MEGABYTES:
         raise ValueError('%s: %s is more than %gMB' % (name, brief(value), MAX_MEGABYTES))
     return number
+
+
+class Rotation(collections.namedtuple('Rotation', 'span bytes')):
+    """When to start a new file: after ``span`` (messages or a duration) or ``bytes`` raw row-JSON bytes."""
+
+    __slots__ = ()
+
+    @classmethod
+    def parse(cls, value, name='rotate'):
+        """``'6000'`` (messages), ``'60s'``/``'5m'`` (a duration) or a size with a unit (``'20MB'``, ``'1GiB'``);
+        a Rotation is returned as is."""
+        if isinstance(value, cls):
+            return value
+        try:
+            span = Span.parse(value, name)
+        except ValueError:
+            try:
+                size = megabytes(value, name, bare=None) * 1e6
+            except ValueError:
+                raise ValueError('%s: %s is not a message count (6000), a duration (60s) or a size (20MB)'
+                                 % (name, brief(value)))
+            if not size > 0:
+                raise ValueError('%s: %s must be positive' % (name, brief(value)))
+            return cls(None, int(size))
+        if span.count == 0 or span.seconds == 0:
+            raise ValueError('%s: %s must be positive' % (name, brief(value)))
+        return cls(span, None)
+
+    def __str__(self):
+        return str(self.span) if self.span is not None else '%dB' % self.bytes

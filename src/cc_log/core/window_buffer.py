@@ -24,12 +24,6 @@ import sys
 from cc_log.core.records import LogWindow, Trigger
 from cc_log.core.spans import Span
 
-TopicLimits = collections.namedtuple('TopicLimits', 'pre post max_bytes', defaults=(None, None, 0))
-TopicLimits.__doc__ = """What one topic of the windows keeps, where it differs from the window's: ``pre`` and ``post``
-(seconds before the window's first trigger and after its last; None: the window's own, which they can only
-shorten) and ``max_bytes`` (memory its records may take outside every window; 0: no cap of its own)."""
-
-
 DEFAULT_PRE = Span.messages(100)
 DEFAULT_POST = Span.messages(100)
 DEFAULT_MAX_WINDOW = Span.messages(100000)
@@ -185,7 +179,7 @@ class WindowBuffer(object):
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
         self._side = {}                    # topic -> its records (other topics than the driving one), by time
         self._side_bytes = {}              # topic -> memory of its records held
-        self.limits = dict(topic_limits or {})  # topic -> TopicLimits
+        self.limits = dict(topic_limits or {})  # topic -> options.TopicLimits (pre, post, max_mb)
         self._held_elsewhere = held_elsewhere or (lambda: 0)  # bytes of parts handed on and not yet written
         self._open = None                  # window taking driving records
         self._pending = None               # closed window that the next one may still touch
@@ -279,7 +273,7 @@ class WindowBuffer(object):
         """Outside every window: a topic's records older than its own ``pre`` or beyond its own memory cap go
         (counted in ``trimmed``), the oldest first."""
         while side and ((limits.pre is not None and side[0].stamp < clock - limits.pre)
-                        or (limits.max_bytes and self._side_bytes[topic] > limits.max_bytes and len(side) > 1)):
+                        or (limits.max_mb and self._side_bytes[topic] > limits.max_mb * MB and len(side) > 1)):
             self._drop_side(topic)
             self.trimmed += 1
 

@@ -30,6 +30,7 @@ from cc_log.storage import recovery
 from cc_log.storage.directory import LoggingDirectory
 from cc_log.core import window_buffer
 from cc_log.core.spans import Span, megabytes
+from cc_log.core.topic_select import topic_list
 
 EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
@@ -172,7 +173,7 @@ class Params(object):
     def topics(self, name='topics', default=()):
         """Topic names from a YAML list or a space/comma-separated string (duplicates removed)."""
         try:
-            return config.topic_list(self.value(name, default), '~' + name)
+            return topic_list(self.value(name, default), '~' + name)
         except ValueError as error:
             raise ConfigError(str(error))
 

@@ -38,6 +38,7 @@ import sys
 import threading
 import time
 
+from cc_log.core.spans import megabytes, seconds
 from cc_log.nodes import launcher
 from cc_log.storage.directory import LoggingDirectory
 
@@ -68,34 +69,17 @@ EPILOG = """example:
 
 Not supported, refused with one line saying why: -O, --size, --tcpnodelay, --udp, --chunksize,
 --max-splits, --repeat-latched. ROS arguments (__name:=, remappings, _param:=value) work as for any node."""
-_SIZES = {'K': 1 << 10, 'M': 1 << 20, 'G': 1 << 30, 'T': 1 << 40}
-_DURATIONS = {'s': 1.0, 'm': 60.0, 'h': 3600.0}
 
 
 def parse_size(value, name='min-space'):
-    """Bytes of rosbag's ``1G``, ``500M``, ``100K`` or a number of bytes; ValueError('<name>: ...')."""
-    text = str(value).strip().upper().rstrip('B')
-    factor = _SIZES.get(text[-1:], 1)
-    try:
-        number = float(text[:-1] if factor != 1 else text)
-    except ValueError:
-        number = float('nan')
-    if not number >= 0 or number == float('inf'):
-        raise ValueError('%s: %r is not a size (1G, 500M, 100K or bytes)' % (name, value))
-    return number * factor
+    """Bytes of rosbag's ``1G``, ``500M``, ``100K`` (powers of 1024) or a number of bytes, or any size of
+    ``spans.megabytes`` (``2GB``, ``1.5GiB``); ValueError('<name>: ...')."""
+    return round(megabytes(value, name, bare='b') * 1e6)
 
 
 def parse_duration(value, name='duration'):
-    """Seconds of rosbag's ``30``, ``30s``, ``5m`` or ``2h``; ValueError('<name>: ...')."""
-    text = str(value).strip().lower()
-    factor = _DURATIONS.get(text[-1:], None)
-    try:
-        number = float(text[:-1] if factor else text) * (factor or 1.0)
-    except ValueError:
-        number = float('nan')
-    if not number > 0 or number == float('inf'):
-        raise ValueError('%s: %r is not a duration (30, 30s, 5m, 2h)' % (name, value))
-    return number
+    """Seconds of rosbag's ``30``, ``30s``, ``5m`` or ``2h`` (``spans.seconds``, > 0); ValueError('<name>: ...')."""
+    return seconds(value, name, positive=True)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -40,6 +40,7 @@ from cc_log.storage import log_format, window_writer
 from cc_log.core import raw_message, safe_files
 from cc_log.storage.formats import bag_lz4
 from cc_log.core.records import Record
+from cc_log.core.topic_select import topic_list
 
 __all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PREFIX', 'DEFAULT_TOPICS',
            'DEFAULT_ROTATE', 'BWI_ALIASES']
@@ -64,7 +65,6 @@ def parse_topics(value, name='context_topics', aliases=None):
     if isinstance(value, dict):
         entries = [(topic, rate) for topic, rate in value.items()]
     else:
-        from cc_log.core.config import topic_list
         entries = []
         for item in topic_list(value, name):
             match = _ENTRY.match(item)

@@ -33,7 +33,7 @@ import re
 
 from cc_log.core import msg_codec
 from cc_log.core.safe_input import brief
-from cc_log.core.spans import Span
+from cc_log.core.spans import seconds
 from cc_log.triggers.base import Trigger, register
 
 DEFAULT_HOLD_OFF = '5s'
@@ -222,14 +222,14 @@ class RuleTrigger(Trigger):
         self.topic = topic
         self.topics = frozenset([topic])
         self.type = type
-        self.hold_off = _seconds(hold_off, '%s: hold_off' % name)
+        self.hold_off = seconds(hold_off, '%s: hold_off' % name)
         self.error = ''
         self.condition = Condition(when, '%s: when' % name) if when is not None else None
         self.level = parse_level(level, '%s: level' % name) if level is not None else None
         if status is not None and (self.level is None or not isinstance(status, str) or not status):
             raise ValueError('%s: status: a name pattern of a level rule' % name)
         self.status = status
-        self.silent = _seconds(silent, '%s: silent' % name) if silent is not None else None
+        self.silent = seconds(silent, '%s: silent' % name) if silent is not None else None
         self.min_rate = None
         if min_rate is not None:
             if isinstance(min_rate, bool) or not isinstance(min_rate, (int, float)) or not min_rate > 0 \
@@ -237,7 +237,7 @@ class RuleTrigger(Trigger):
                 raise ValueError('%s: min_rate: %s must be a positive number of messages per second'
                                  % (name, brief(min_rate)))
             self.min_rate = float(min_rate)
-        self.over = _seconds(over, '%s: over' % name)
+        self.over = seconds(over, '%s: over' % name)
         self.watches_time = self.silent is not None or self.min_rate is not None
         self._checked = False
         self.reset()
@@ -369,13 +369,6 @@ class RuleTrigger(Trigger):
         result.update((key, value) for key, value in condition.items() if value is not None)
         result['hold_off'] = self.hold_off
         return result
-
-
-def _seconds(value, name):
-    span = Span.parse(value, name)
-    if not span.is_duration:
-        raise ValueError('%s: %s must be a duration (2s, 500ms)' % (name, brief(value)))
-    return span.seconds
 
 
 def _short(value):

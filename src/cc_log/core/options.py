@@ -1,0 +1,384 @@
+"""Every option of cc_log, declared once: name, grammar, default, one line of documentation and where it is set.
+
+An ``Option`` may be
+
+- a key of the configuration file (``key``: ``windows.pre``; the file every mode reads, ``config.Config``),
+- a private parameter of the nodes named in ``nodes`` (``~pre``; ``smart`` is smart_logger.py, ``collect`` is
+  collect_logger.py),
+- a flag of the ``cclog`` commands named in ``commands`` (``--pre``),
+
+and the configuration's checks, the nodes' parameters, the flags and docs/OPTIONS.md all come from here, with
+one grammar per kind of value (``spans``: ``1G`` and ``5m`` mean the same everywhere). A parameter or flag
+overrides the configuration's key.
+
+``TOPIC_OPTIONS`` are per topic: the keys of ``topic_limits`` (``{camera/image_raw: {pre: 2s, max_mb: 64}}``),
+read into one ``TopicLimits`` per topic.
+
+To add an option: declare it here and use it where it acts (a per-topic one: a field of ``TopicLimits``,
+read by the window buffer); a launch file passes it as an ``<arg>`` if it should; ``tools/options_doc.py``
+rewrites docs/OPTIONS.md (a test checks that it is current).
+"""
+import argparse
+import collections
+import math
+import re
+
+from cc_log import features
+from cc_log.core import safe_input
+from cc_log.core.safe_input import brief
+from cc_log.core.spans import Rotation, Span, megabytes, seconds
+from cc_log.core.topic_select import topic_list
+from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE
+from cc_log.storage import formats
+from cc_log.storage.formats import json_xz
+from cc_log.triggers.classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES
+
+SMART, COLLECT, BOTH = ('smart',), ('collect',), ('smart', 'collect')
+MAX_TEXT = 1 << 20   # characters of a YAML value given as text (a launch argument)
+
+
+class Grammar(collections.namedtuple('Grammar', 'parse metavar text')):
+    """How a value is written: ``parse(value, name)`` returns it checked (ValueError('<name>: ...') naming the
+    option), ``metavar`` shows it on a command line, ``text`` in the docs."""
+
+    __slots__ = ()
+
+
+def _choice(values_of):
+    """A grammar of one of the strings ``values_of()`` returns."""
+    def parse(value, name):
+        values = values_of()
+        if not isinstance(value, str) or value not in values:
+            raise ValueError('%s: %s is not one of: %s' % (name, brief(value), ', '.join(values)))
+        return value
+    return parse
+
+
+def _text(value, name):
+    if not isinstance(value, str):
+        raise ValueError('%s: %s is not a string' % (name, brief(value)))
+    return value
+
+
+def _boolean(value, name):
+    text = str(value).strip().lower() if isinstance(value, (str, int)) else None
+    if isinstance(value, bool):
+        return value
+    if text in ('true', '1', 'yes', 'on'):
+        return True
+    if text in ('false', '0', 'no', 'off'):
+        return False
+    raise ValueError('%s: %s is not true or false' % (name, brief(value)))
+
+
+def number(minimum=0.0, maximum=math.inf, integer=False):
+    """A grammar of a finite number from ``minimum`` to ``maximum`` (a whole one when ``integer``)."""
+    def parse(value, name):
+        result = float('nan')
+        if not isinstance(value, bool) and isinstance(value, (int, float, str)):
+            try:
+                result = float(value)
+            except (ValueError, OverflowError):
+                pass
+        if integer and math.isfinite(result) and result != int(result):
+            raise ValueError('%s: %s is not a whole number' % (name, brief(value)))
+        if not math.isfinite(result) or result < minimum:
+            raise ValueError('%s: %s must be a number >= %g' % (name, brief(value), minimum))
+        if result > maximum:
+            raise ValueError('%s: %s must be a number <= %g' % (name, brief(value), maximum))
+        return int(result) if integer else result
+    return parse
+
+
+def _topic(value, name):
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError('%s: %s is not a topic name' % (name, brief(value)))
+    return value.strip()
+
+
+def _stride(value, name):
+    span = Span.parse(value, name)
+    if span.is_duration or span.count < 1:
+        raise ValueError('%s: %s must be a whole number of messages, at least 1' % (name, brief(value)))
+    return span.count
+
+
+_LABEL = re.compile(r'^[A-Za-z0-9_.-]+$')
+
+
+def check_label(label, name='label'):
+    """``label`` when it can name a directory, else ValueError('<name>: ...')."""
+    if not isinstance(label, str) or not _LABEL.match(label) or label in ('.', '..'):
+        raise ValueError('%s: %s must be letters, digits, ".", "_" or "-"' % (name, brief(label)))
+    return label
+
+
+def _text_or_list(value, name):
+    if isinstance(value, str) or (isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value)):
+        return value
+    raise ValueError('%s: %s is not a string or a list of strings' % (name, brief(value)))
+
+
+def _scalar(value, name):
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ValueError('%s: %s is not a string or a number' % (name, brief(value)))
+    return str(value)
+
+
+SPAN = Grammar(Span.parse, 'N|DURATION', 'messages (`100`) or a duration (`2s`, `250ms`, `5m`)')
+DURATION = Grammar(seconds, 'DURATION', 'a duration (`2s`, `250ms`, `5m`, `2h`; a number is seconds)')
+SIZE = Grammar(megabytes, 'SIZE', 'a size: MB (`64`) or with a unit (`64MB`, `2GB`, `1G`, `1.5GiB`)')
+BOOL = Grammar(_boolean, 'BOOL', '`true` or `false`')
+TEXT = Grammar(_text, 'TEXT', 'a string')
+SCALAR = Grammar(_scalar, 'VALUE', 'a string or a number')
+TOPIC = Grammar(_topic, 'TOPIC', 'a topic name')
+TOPICS = Grammar(topic_list, 'TOPICS', 'topic names: a list or a space/comma-separated string')
+STRIDE = Grammar(_stride, 'N', 'a whole number of messages, at least 1')
+LABEL = Grammar(check_label, 'LABEL', 'letters, digits, `.`, `_`, `-`')
+ROTATION = Grammar(Rotation.parse, 'N|DURATION|SIZE', 'messages (`6000`), a duration (`60s`) or a size (`20MB`)')
+FORMAT = Grammar(_choice(formats.names), 'FORMAT', 'a window format: %s' % ', '.join(
+    '`%s`' % name for name in formats.names()))
+PRECISION = Grammar(json_xz.check_precision, 'FIELD=STEP,...',
+                    "field patterns and steps: `{'pose.pose.position.*': 1e-4}` or `'twist.twist.*=1e-5, ...'`")
+RETRIGGER = Grammar(_choice(lambda: RETRIGGER_MODES), 'MODE', ', '.join('`%s`' % m for m in RETRIGGER_MODES))
+FEATURE_SET = Grammar(_choice(features.names), 'SET', 'a feature set: %s' % ', '.join(
+    '`%s`' % name for name in features.names()))
+COMMAND = Grammar(_text_or_list, 'COMMAND', 'an argument list or a string')
+
+
+class Option(collections.namedtuple('Option', 'name key grammar default doc nodes commands')):
+    """One option (see the module docstring): ``key`` is its path in the configuration ('' for none),
+    ``nodes`` and ``commands`` where it is a parameter and a flag."""
+
+    __slots__ = ()
+
+    def parse(self, value, name=None):
+        """``value`` checked by the option's grammar (ValueError naming ``name``, default: the key or name)."""
+        return self.grammar.parse(value, name or self.key or self.name)
+
+    @property
+    def flag(self):
+        """The ``cclog`` flag: ``--max-buffer-mb``."""
+        return '--' + self.name.replace('_', '-')
+
+
+def _option(name, key, grammar, default, doc, nodes=(), commands=()):
+    return Option(name, key, grammar, default, doc, tuple(nodes), tuple(commands))
+
+
+TOPIC_OPTIONS = (
+    _option('pre', 'pre', DURATION, None, "the topic's own time kept before the window's first trigger (at most "
+            "the window's)"),
+    _option('post', 'post', DURATION, None, "the topic's own time kept after the window's last trigger (at most "
+            "the window's)"),
+    _option('max_mb', 'max_mb', SIZE, 0.0, 'memory its messages may take outside every window (0: no cap of its '
+            'own)'),
+)
+
+TopicLimits = collections.namedtuple('TopicLimits', [o.name for o in TOPIC_OPTIONS],
+                                     defaults=[o.default for o in TOPIC_OPTIONS])
+TopicLimits.__doc__ = """What one topic of the windows keeps where it differs from the window's: one field per
+``TOPIC_OPTIONS`` entry (None or 0: the window's own)."""
+
+
+def parse_topic_limits(value, name='topic_limits'):
+    """``{topic: TopicLimits}`` of a mapping ``{topic: {pre: 2s, post: 1s, max_mb: 64}}`` (or its YAML text,
+    as a launch argument gives it); ValueError('<name>.<topic>.<key>: ...')."""
+    if value is None or value == '':
+        return {}
+    if isinstance(value, str):
+        if len(value) > MAX_TEXT:
+            raise ValueError('%s: longer than %d characters' % (name, MAX_TEXT))
+        value = safe_input.loads_yaml(value, name)
+    if not isinstance(value, dict):
+        raise ValueError('%s: a mapping of topic names to {%s}, not %s' % (
+            name, ', '.join(o.key for o in TOPIC_OPTIONS), type(value).__name__))
+    limits = {}
+    for topic, entry in value.items():
+        where = '%s.%s' % (name, _topic(topic, name))
+        if isinstance(entry, TopicLimits):
+            limits[topic.strip()] = entry
+            continue
+        entry = known_keys(entry, [o.key for o in TOPIC_OPTIONS], where)
+        limits[topic.strip()] = TopicLimits(*(
+            o.parse(entry[o.key], '%s.%s' % (where, o.key)) if entry.get(o.key) is not None else o.default
+            for o in TOPIC_OPTIONS))
+    return limits
+
+
+TOPIC_LIMITS = Grammar(parse_topic_limits, 'YAML', 'per topic: {%s} (see below)' % ', '.join(
+    o.key for o in TOPIC_OPTIONS))
+
+OPTIONS = (
+    # the configuration file's keys, in the order the file documents them
+    _option('topics', 'topics', TOPICS, (), 'other topics to keep in the windows: names, `*` (all), '
+            '`re:<regex>`, `!<excluded>`', BOTH),
+    _option('topic_limits', 'topic_limits', TOPIC_LIMITS, {}, "per-topic limits (`TOPIC_OPTIONS`), e.g. "
+            "`{camera/image_raw: {pre: 2s, max_mb: 64}}`", SMART),
+    _option('driving_topic', 'driving_topic', TOPIC, None, "the topic whose messages count `pre` and `post` "
+            "(default: the first trigger's first topic)"),
+    _option('format', 'format', FORMAT, formats.DEFAULT, 'window file format', BOTH, ('replay',)),
+    _option('precision', 'json_xz.precision', PRECISION, {}, 'json-xz only, opt-in lossy: round fields to a step',
+            BOTH, ('replay',)),
+    _option('pre', 'windows.pre', SPAN, str(DEFAULT_PRE), 'kept before an anomaly', SMART, ('replay',)),
+    _option('post', 'windows.post', SPAN, str(DEFAULT_POST), 'kept after the last anomaly', SMART, ('replay',)),
+    _option('max_window', 'windows.max', SPAN, str(DEFAULT_MAX_WINDOW), 'longer windows are handed to the writer '
+            'in parts (one file)', SMART),
+    _option('max_disk_mb', 'limits.max_disk_mb', SIZE, 0.0, 'keep window files within this size by deleting the '
+            'oldest (0: no quota)', BOTH),
+    _option('min_free_mb', 'limits.min_free_mb', SIZE, 0.0, 'below this much free disk, writing pauses and '
+            'windows wait in memory (0: off)', BOTH),
+    _option('max_buffer_mb', 'limits.max_buffer_mb', SIZE, DEFAULT_MAX_BUFFER_MB, 'memory budget of every '
+            'buffered message and the writer queue (0: none)', BOTH, ('replay',)),
+    _option('rotate', 'collect.rotate', ROTATION, '60s', 'collect mode: a new file after this many messages, '
+            'seconds or bytes', COLLECT),
+    _option('label', 'collect.label', LABEL, 'nominal', "collect mode: the feature vectors' label directory",
+            COLLECT),
+    _option('stride', 'collect.stride', STRIDE, 25, 'collect mode: a feature vector every N driving messages',
+            COLLECT),
+    # parameters of the nodes only
+    _option('config', '', TEXT, '', 'the configuration file (these keys; parameters override it)', BOTH),
+    _option('directory', '', TEXT, '', 'where files go (default: ~/.ros/cc_log, then /tmp/cc_log)', BOTH),
+    _option('model', '', TEXT, '', 'model file (cclog learn) of the classifier named `classifier`', SMART),
+    _option('window', '', SPAN, '500', "the feature window (smart mode: checked against the model's)", BOTH),
+    _option('feature_set', '', FEATURE_SET, 'motion', 'the feature set collect mode computes', COLLECT),
+    _option('retrigger', '', RETRIGGER, DEFAULT_RETRIGGER, 'every classifier: `event` (the onset opens a window, '
+            'extended while the newest rows are anomalous), `every` anomalous score, or the `onset` only', SMART),
+    _option('classify_every', '', SPAN, DEFAULT_CLASSIFY_EVERY, 'every classifier: score every N-th message or '
+            'at most once per duration', SMART),
+    _option('recent', '', SCALAR, '', 'every classifier, `event` only: the newest rows that keep an anomaly open '
+            '(default: a quarter of the feature window)', SMART),
+    _option('learn_online', '', BOOL, False, 'every classifier learns nominal online and refits in the '
+            'background (saved beside the model)', SMART),
+    _option('enabled', '', BOOL, True, 'start logging, or start paused (`~enable` service)', SMART),
+    _option('diagnostic_period', '', Grammar(number(0.0, 3600.0), 'SECONDS', 'seconds (0: off, at most 3600)'),
+            1.0, 'seconds of wall time between /diagnostics; 0 turns them off', BOTH),
+    _option('intake_max_messages', '', Grammar(number(1, integer=True), 'N', 'a whole number >= 1'), 20000,
+            'bound of the subscriber queue in messages; beyond it messages are counted as lost', SMART),
+    _option('intake_max_mb', '', SIZE, 64.0, 'bound of the subscriber queue in bytes', SMART),
+    _option('context_topics', '', TOPICS, (), 'topics recorded always, each `topic` or `topic:Hz`, in rotated '
+            'LZ4 bags under `context/`', BOTH),
+    _option('context_rotate', '', DURATION, 600.0, 'seconds of stamps per context file', BOTH),
+    _option('upload_command', '', COMMAND, '', 'run with the path of each closed window or context file', BOTH),
+)
+
+_BY_NAME = dict((o.name, o) for o in OPTIONS)
+
+
+def get(name):
+    """The Option ``name`` (KeyError for none)."""
+    return _BY_NAME[name]
+
+
+def keyed():
+    """The options of the configuration file, in its order."""
+    return [o for o in OPTIONS if o.key]
+
+
+def sections():
+    """``{top-level key: [keys under it]}`` of the configuration file (``[]``: a plain value), with
+    ``triggers`` last."""
+    result = collections.OrderedDict()
+    for option in keyed():
+        top, _, sub = option.key.partition('.')
+        result.setdefault(top, [])
+        if sub:
+            result[top].append(sub)
+    result['triggers'] = []
+    return result
+
+
+def for_node(node):
+    """The options that are parameters of ``node`` (``'smart'`` or ``'collect'``)."""
+    return [o for o in OPTIONS if node in o.nodes]
+
+
+def for_command(command):
+    """The options that are flags of the ``cclog`` command ``command``."""
+    return [o for o in OPTIONS if command in o.commands]
+
+
+def known_keys(data, keys, where):
+    """``data`` when it is a mapping of only ``keys`` (None: ``{}``); ValueError('<where>: ...') otherwise."""
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ValueError('%s: a mapping, not %s' % (where or 'configuration', brief(data)))
+    unknown = sorted(brief(key) for key in data if key not in keys)
+    if unknown:
+        raise ValueError('%sunknown key %s (known: %s)' % (where + ': ' if where else '', unknown[0], ', '.join(keys)))
+    return data
+
+
+def read(data):
+    """``{name: checked value}`` of every configuration key in ``data`` (None where absent: see ``default``);
+    ValueError('<key>: ...') for an unknown key or a bad value."""
+    tree = sections()
+    known_keys(data, list(tree), '')
+    for top, subs in tree.items():
+        if subs:
+            known_keys(data.get(top), subs, top)
+    values = {}
+    for option in keyed():
+        top, _, sub = option.key.partition('.')
+        value = (data.get(top) or {}).get(sub) if sub else data.get(top)
+        values[option.name] = None if value is None else option.parse(value)
+    return values
+
+
+def default(name):
+    """The declared default of option ``name``, checked by its grammar (None stays None)."""
+    option = get(name)
+    return None if option.default is None else option.parse(option.default)
+
+
+def with_values(data, values):
+    """``data`` (not changed) with ``values`` (``{option name: value}``; None: not given) at their keys."""
+    result = dict(data)
+    for name, value in values.items():
+        if value is None:
+            continue
+        top, _, sub = get(name).key.partition('.')
+        if sub:
+            result[top] = dict(result.get(top) or {}, **{sub: value})
+        else:
+            result[top] = value
+    return result
+
+
+def add_flags(parser, command):
+    """Add the flags of ``command``'s options to the argparse ``parser``: each parsed by its grammar, None
+    when not given (the configuration's value, else the default, holds)."""
+    for option in for_command(command):
+        parser.add_argument(option.flag, dest=option.name, metavar=option.grammar.metavar,
+                            type=_argparse_type(option),
+                            help='%s (default: %s)' % (option.doc.replace('%', '%%'), _shown(option.default)))
+
+
+def _argparse_type(option):
+    def parse(text):
+        try:
+            option.parse(text, option.flag)
+        except ValueError as error:
+            raise argparse.ArgumentTypeError(str(error))
+        return text
+    parse.__name__ = option.name
+    return parse
+
+
+def _shown(default):
+    if default in (None, '', (), {}):
+        return 'none'
+    return str(default).lower() if isinstance(default, bool) else str(default)
+
+
+def table(rows):
+    """Markdown rows ``| option | key | parameter | flag | value | default | what |`` of ``rows``."""
+    lines = ['| option | configuration key | node parameter | `cclog` flag | value | default | what |',
+             '|---|---|---|---|---|---|---|']
+    for o in rows:
+        lines.append('| `%s` | %s | %s | %s | %s | %s | %s |' % (
+            o.name, '`%s`' % o.key if o.key else '', ', '.join('`~%s` (%s)' % (o.name, n) for n in o.nodes),
+            ', '.join('`%s` (%s)' % (o.flag, c) for c in o.commands), o.grammar.text, '`%s`' % _shown(o.default),
+            o.doc))
+    return lines
