@@ -129,7 +129,7 @@ class SmartWindowTest(unittest.TestCase):
         code, out, err = fx.finish(fx.start('collect_logger.py', '__name:=collect_logger_bad', '_stride:=[5]',
                                             cwd=cwd))
         self.assertEqual((code, err.strip().count('\n')), (1, 0), err)
-        self.assertIn('~stride: [5] must be a number', err)
+        self.assertIn('~stride: [5] is not a message count', err)
         self.assertEqual(os.listdir(cwd), [])
 
     def test_0_online_learning_refits_beside_the_model_and_reports_it(self):

@@ -29,7 +29,7 @@ from cc_log.core.safe_input import brief
 from cc_log.core.spans import Rotation, Span, megabytes, seconds
 from cc_log.core.topic_select import topic_list
 from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE
-from cc_log.storage import formats
+from cc_log.storage import context_track, formats
 from cc_log.storage.formats import json_xz
 from cc_log.triggers.classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES
 
@@ -90,6 +90,17 @@ def number(minimum=0.0, maximum=math.inf, integer=False):
     return parse
 
 
+def size(minimum=0.0):
+    """A grammar of a byte size in MB (``spans.megabytes``) of at least ``minimum`` MB."""
+    def parse(value, name):
+        result = megabytes(value, name)
+        if result < minimum:
+            raise ValueError('%s: %gMB is below the minimum of %gMB' % (name, result, minimum))
+        return result
+    return Grammar(parse, 'SIZE', 'a size: MB (`64`) or with a unit (`64MB`, `2GB`, `1G`, `1.5GiB`)%s' % (
+        ', at least %gMB' % minimum if minimum else ''))
+
+
 def _topic(value, name):
     if not isinstance(value, str) or not value.strip():
         raise ValueError('%s: %s is not a topic name' % (name, brief(value)))
@@ -127,7 +138,9 @@ def _scalar(value, name):
 
 SPAN = Grammar(Span.parse, 'N|DURATION', 'messages (`100`) or a duration (`2s`, `250ms`, `5m`)')
 DURATION = Grammar(seconds, 'DURATION', 'a duration (`2s`, `250ms`, `5m`, `2h`; a number is seconds)')
-SIZE = Grammar(megabytes, 'SIZE', 'a size: MB (`64`) or with a unit (`64MB`, `2GB`, `1G`, `1.5GiB`)')
+POSITIVE_DURATION = Grammar(lambda value, name: seconds(value, name, positive=True), 'DURATION',
+                            'a duration > 0 (`2s`, `10m`; a number is seconds)')
+SIZE = size()
 BOOL = Grammar(_boolean, 'BOOL', '`true` or `false`')
 TEXT = Grammar(_text, 'TEXT', 'a string')
 SCALAR = Grammar(_scalar, 'VALUE', 'a string or a number')
@@ -255,10 +268,11 @@ OPTIONS = (
             1.0, 'seconds of wall time between /diagnostics; 0 turns them off', BOTH),
     _option('intake_max_messages', '', Grammar(number(1, integer=True), 'N', 'a whole number >= 1'), 20000,
             'bound of the subscriber queue in messages; beyond it messages are counted as lost', SMART),
-    _option('intake_max_mb', '', SIZE, 64.0, 'bound of the subscriber queue in bytes', SMART),
+    _option('intake_max_mb', '', size(0.001), 64.0, 'bound of the subscriber queue in bytes', SMART),
     _option('context_topics', '', TOPICS, (), 'topics recorded always, each `topic` or `topic:Hz`, in rotated '
             'LZ4 bags under `context/`', BOTH),
-    _option('context_rotate', '', DURATION, 600.0, 'seconds of stamps per context file', BOTH),
+    _option('context_rotate', '', POSITIVE_DURATION, context_track.DEFAULT_ROTATE, 'seconds of stamps per context '
+            'file', BOTH),
     _option('upload_command', '', COMMAND, '', 'run with the path of each closed window or context file', BOTH),
 )
 
@@ -352,7 +366,7 @@ def add_flags(parser, command):
     for option in for_command(command):
         parser.add_argument(option.flag, dest=option.name, metavar=option.grammar.metavar,
                             type=_argparse_type(option),
-                            help='%s (default: %s)' % (option.doc.replace('%', '%%'), _shown(option.default)))
+                            help='%s (default: %s)' % (option.doc.replace('%', '%%'), shown(option.default)))
 
 
 def _argparse_type(option):
@@ -366,19 +380,14 @@ def _argparse_type(option):
     return parse
 
 
-def _shown(default):
+def shown(default):
+    """A default as the docs show it."""
     if default in (None, '', (), {}):
         return 'none'
     return str(default).lower() if isinstance(default, bool) else str(default)
 
 
-def table(rows):
-    """Markdown rows ``| option | key | parameter | flag | value | default | what |`` of ``rows``."""
-    lines = ['| option | configuration key | node parameter | `cclog` flag | value | default | what |',
-             '|---|---|---|---|---|---|---|']
-    for o in rows:
-        lines.append('| `%s` | %s | %s | %s | %s | %s | %s |' % (
-            o.name, '`%s`' % o.key if o.key else '', ', '.join('`~%s` (%s)' % (o.name, n) for n in o.nodes),
-            ', '.join('`%s` (%s)' % (o.flag, c) for c in o.commands), o.grammar.text, '`%s`' % _shown(o.default),
-            o.doc))
-    return lines
+def describe(node):
+    """The parameters of ``node`` as ``--help`` shows them: a line each, ``~name (value; default): what``."""
+    return ['  ~%s (%s; default: %s): %s' % (o.name, o.grammar.text.replace('`', ''), shown(o.default),
+                                             o.doc.replace('`', '')) for o in for_node(node)]

@@ -11,28 +11,14 @@ Published topics
   bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
   ``~diagnostic_period`` seconds (wall time).
 
-Parameters (defaults below as module constants; each resolved value is logged once)
-  ``~config`` (string, default: none): the configuration file (``cc_log.core.config``); with classifiers, the
-  vectors of each go to ``<directory>/features/<name>/<label>/`` (``~feature_set`` and ``~window`` are then
-  not used); the parameters below override it.
-  ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): window files go here, vectors into
-  ``<directory>/features/<label>/``; a fallback is a WARN on /diagnostics naming the directory in use.
-  ``~format`` (string, default: json-xz): ``json-xz`` or ``bag-lz4``.
-  ``~precision`` (dict or string, default: none = lossless): json-xz rounding, as the smart node's.
-  ``~rotate`` (string, default: 60s): a new file after this many messages (``6000``), seconds (``60s``) or
-  raw row-JSON bytes (``20MB``).
-  ``~topics`` (list or space-separated string, default: none): other topics to log.
-  ``~label`` (string, default: nominal): label of the feature vectors.
-  ``~window`` (string, default: 500): feature window, messages or seconds.
-  ``~feature_set`` (string, default: motion): a registered feature set (``features.FEATURE_SETS``: motion,
-  raw, imu, command, progress). Its first input is the driving topic (``odom``; ``imu`` for the imu set) and
-  its other inputs are subscribed under their role names (``cmd_vel`` for the command set): remap them.
-  ``~stride`` (int, default: 25): a vector every this many odometry messages.
-  ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
-  ``~max_buffer_mb`` (size, default: 256; 0 = no budget): memory budget of the file being collected; a new
-  file starts when it is reached.
-  ``~max_disk_mb`` (size, default: 0 = no quota), ``~min_free_mb`` (size, default: 0 = off): the disk
-  limits of the smart node, for the window files.
+Parameters
+  every option with a ``collect`` node parameter in docs/OPTIONS.md (declared in ``cc_log.core.options``;
+  ``--help`` lists them with their defaults): ``~config`` (with classifiers, the vectors of each go to
+  ``<directory>/features/<name>/<label>/`` and ``~feature_set``/``~window`` are not used), ``~directory``
+  (vectors into ``<directory>/features/<label>/``), ``~format``, ``~rotate``, ``~topics``, ``~label``,
+  ``~window``, ``~feature_set`` (its first input is the driving topic, ``odom``; its other inputs are
+  subscribed under their role names, e.g. ``cmd_vel``: remap them), ``~stride``, ``~max_buffer_mb`` (a new file
+  starts when it is reached), ``~max_disk_mb``, ``~min_free_mb``. Each resolved value is logged once.
 
 Every parameter is type-checked (one line ``/collect_logger: ~<name>: ...``, exit 1). On start, crash
 leftovers in ``~directory`` are recovered or reported and kept, as the smart node does. Files and vectors
@@ -50,7 +36,7 @@ from cc_log import features
 from cc_log.storage import log_format
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, ConfigError, Diagnostics,
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
     Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.intake import Intake
 from cc_log.nodes.node_extras import NodeExtras
@@ -62,6 +48,7 @@ DEFAULT_LABEL = collector.DEFAULT_LABEL
 DEFAULT_WINDOW = collector.DEFAULT_WINDOW
 DEFAULT_FEATURE_SET = collector.DEFAULT_FEATURE_SET
 DEFAULT_STRIDE = collector.DEFAULT_STRIDE
+OPTIONS_NODE = 'collect'  # its parameters in core.options
 
 
 class CollectNode(object):
@@ -74,23 +61,10 @@ class CollectNode(object):
         self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
                                                                         collector.FEATURES_SUBDIRECTORY))
 
-        def given(reader, name, *args):
-            """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
-            return reader(name, *args) if params.given(name) else None
-
-        cfg = node_config(params, {
-            'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
-            'precision': given(params.value, 'precision', None),
-            'rotate': given(params.scalar, 'rotate', DEFAULT_ROTATE), 'topics': given(params.topics, 'topics'),
-            'label': given(params.scalar, 'label', DEFAULT_LABEL),
-            'stride': given(params.number, 'stride', DEFAULT_STRIDE, 1, True),
-            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB),
-            'max_disk_mb': given(params.megabytes, 'max_disk_mb', 0.0),
-            'min_free_mb': given(params.megabytes, 'min_free_mb', 0.0)})
-        window = given(params.scalar, 'window', DEFAULT_WINDOW) or DEFAULT_WINDOW
-        feature_set = given(params.choice, 'feature_set', DEFAULT_FEATURE_SET, features.FEATURE_SETS) or \
-            DEFAULT_FEATURE_SET
-        period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
+        cfg = node_config(params, params.configuration('collect'))
+        window = str(params.option('window'))
+        feature_set = params.option('feature_set')
+        period = params.option('diagnostic_period')
         options = {'side_topics': None if cfg.selection.dynamic else [rospy.resolve_name(t) for t in cfg.topics],
                    'close_retry': CLOSE_RETRY,
                    'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,

@@ -22,11 +22,12 @@ import time
 
 import rospy
 
+from cc_log.core import options
 from cc_log.core import raw_message
 from cc_log.core.records import Record
 
-DEFAULT_MAX_MESSAGES = 20000  # intake queue bound (messages); beyond, messages are dropped and counted
-DEFAULT_MAX_MB = 64.0         # intake queue bound (MB of serialized messages)
+DEFAULT_MAX_MESSAGES = options.get('intake_max_messages').default  # beyond, messages are dropped and counted
+DEFAULT_MAX_MB = options.get('intake_max_mb').default              # MB of serialized messages
 FEED_BATCH_DELAY = 0.5        # seconds at most the feeder lets messages gather before draining them in a batch
 BATCH_MESSAGES = 1024         # messages that make a batch before the delay is over
 BATCH_BYTES_SHARE = 8         # ... or this share of the queue's byte bound (an eighth)

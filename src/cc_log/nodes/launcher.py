@@ -11,6 +11,8 @@ import importlib
 import os
 import sys
 
+from cc_log.core import options
+
 __all__ = ['choose', 'main', 'run', 'script_main', 'plain']
 
 MODES = ('auto', 'smart', 'collect')
@@ -36,7 +38,9 @@ def script_main(module_name, argv=None):
     returns 0 without starting the node; otherwise ``cc_log.<module_name>.main(argv)``."""
     argv = sys.argv if argv is None else argv
     module = importlib.import_module('cc_log.nodes.' + module_name)
-    if _help(argv, ROS_USAGE, module.__doc__):
+    node = getattr(module, 'OPTIONS_NODE', None)
+    doc = module.__doc__ + ('\nEvery parameter:\n%s\n' % '\n'.join(options.describe(node)) if node else '')
+    if _help(argv, ROS_USAGE, doc):
         return 0
     return module.main(argv)
 

@@ -24,7 +24,7 @@ import diagnostic_updater
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from cc_log.core import config
+from cc_log.core import config, options
 from cc_log.storage import log_format
 from cc_log.storage import recovery
 from cc_log.storage.directory import LoggingDirectory
@@ -35,7 +35,6 @@ from cc_log.core.topic_select import topic_list
 EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
 XMLRPC_INT = 2 ** 31               # XML-RPC integers are 32-bit signed
-DEFAULT_DIAGNOSTIC_PERIOD = 1.0    # seconds between diagnostics (``~diagnostic_period``)
 MAX_DIAGNOSTIC_PERIOD = 3600.0     # longest ``~diagnostic_period`` (a longer wait overflows the thread's timer)
 # Largest values of numeric parameters, where the node's use of them has one (``Params.number``).
 MAXIMA = {'diagnostic_period': MAX_DIAGNOSTIC_PERIOD}
@@ -169,6 +168,23 @@ class Params(object):
             return Span.parse(value, '~' + name)
         except ValueError as error:
             raise ConfigError(str(error))
+
+    def option(self, name):
+        """The parameter of the option ``name`` (``core.options``) checked by its grammar; its declared default
+        when it is not set."""
+        declared = options.get(name)
+        value = self.value(name, declared.default)
+        if value is None or value == '':
+            return declared.default
+        try:
+            return declared.parse(value, '~' + name)
+        except ValueError as error:
+            raise ConfigError(str(error))
+
+    def configuration(self, node):
+        """``{name: checked value}`` of the configuration's options that are parameters of ``node`` (``'smart'``,
+        ``'collect'``) and are set: they override the configuration file's keys."""
+        return dict((o.name, self.option(o.name)) for o in options.for_node(node) if o.key and self.given(o.name))
 
     def topics(self, name='topics', default=()):
         """Topic names from a YAML list or a space/comma-separated string (duplicates removed)."""

@@ -37,8 +37,7 @@ class NodeExtras(object):
         except ValueError as error:
             raise ConfigError(str(error))
         self.rates = dict((rospy.resolve_name(topic), rate) for topic, rate in rates.items())
-        rotate = params.number('context_rotate', context_track.DEFAULT_ROTATE, minimum=1e-3) \
-            if params.given('context_rotate') else context_track.DEFAULT_ROTATE
+        rotate = params.option('context_rotate')
         self.track = self.writer = self.watcher = None
         self.leftovers = []
         if self.rates:

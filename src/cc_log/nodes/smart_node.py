@@ -23,50 +23,13 @@ Services
   after to keep.
   ``~enable`` (std_srvs/SetBool): resume (true) or pause (false) logging.
 
-Parameters (defaults below as module constants; each resolved value is logged once)
-  ``~config`` (string, default: none): the configuration file (``cc_log.core.config``: topics, triggers, windows,
-  format, limits); keys loaded into the node's namespace (``rosparam load``) and the parameters below
-  override it.
-  ``~model`` (string, required without triggers in the configuration): model file from learn mode of the
-  classifier named ``classifier`` (its feature window is used).
-  ``~directory`` (string, default: ~/.ros/cc_log, then /tmp/cc_log): where window files go.
-  ``~format`` (string, default: bag-lz4): ``bag-lz4`` or ``json-xz``.
-  ``~topic_limits`` (dict or YAML string, default: none): per topic, ``pre``, ``post`` (durations, at most the
-  window's) and ``max_mb`` (memory outside every window), e.g. ``{camera/image_raw: {pre: 2s, max_mb: 64}}``.
-  ``~precision`` (dict or string, default: none = lossless): json-xz only, opt-in lossy: round fields to a
-  step, ``{'pose.pose.position.*': 1e-4}`` or ``'pose.pose.position.*=1e-4, twist.twist.*=1e-5'``
-  (configuration key ``json_xz.precision``; recorded in each window's metadata; docs/FORMAT.md).
-  ``~window`` (string, default: the model's): only checked against the model; a mismatch is an error.
-  ``~pre``, ``~post`` (string, default: 100): messages (``100``) or seconds (``2s``) before / after.
-  ``~max_window`` (string, default: 100000): longer windows are written in parts.
-  ``~retrigger`` (string, default: event): ``event``: the onset of an anomaly opens a window, which is then
-  extended only while the newest ``~recent`` rows of the feature window are anomalous (it ends at the
-  anomaly's end + recent + post); ``every`` anomalous score opens or extends a window (the paper's rule); or
-  only the ``onset`` of an anomaly (the score must come back above the threshold before it triggers again).
-  ``~recent`` (string, default: a quarter of the feature window): ``event`` only: the newest rows that decide
-  whether an open anomaly goes on, a count (``5``) or duration (``0.5s``) of the feature window's kind, at
-  most the window; every classifier of the configuration.
-  ``~topics`` (list or space-separated string, default: none): other topics to keep.
-  ``~enabled`` (bool, default: true): start logging, or start paused.
-  ``~diagnostic_period`` (double, default: 1.0): seconds between diagnostics; 0 turns them off.
-  ``~max_disk_mb`` (size, default: 0 = no quota): cc_log window files in ``~directory`` are kept within this
-  many MB (10^6 bytes) by deleting the oldest ones (only cc_log window files); each deletion is logged and
-  counted on /diagnostics.
-  ``~min_free_mb`` (size, default: 0 = off): below this much free space writing stops (ERROR on
-  /diagnostics), windows wait in memory (bounded) and are written when space returns.
-  ``~learn_online`` (bool, default: false): every classifier learns nominal online from the spans no trigger
-  flagged and refits its model in the background, saving it beside the model file (``model.online.json``;
-  configuration keys ``learn_online``, ``learn_every``, ``learn_keep``, ``learn_guard``: cc_log.online_learning);
-  /diagnostics shows the vectors seen, learned and refused, the refits and the last refit's time.
-  ``~classify_every`` (string, default: 50ms): score the feature window on every message (``1``), every N-th
-  (``N``) or at most once per duration (``50ms``: ~20 decisions/s); see smart.DEFAULT_CLASSIFY_EVERY.
-  ``~intake_max_messages`` (int, default: 20000), ``~intake_max_mb`` (size, default: 64): bounds of the
-  intake queue; a message arriving when it is full is dropped and counted (``intake dropped (queue full)``
-  and ``messages lost`` on /diagnostics, WARN): never silently.
-  ``~max_buffer_mb`` (size, default: 256; 0 = no budget): memory budget of every buffered message (all
-  topics, estimated): an open window is written in parts at half of it (the other half is for the part being
-  written), never dropped.
-  A size is a number of MB (10^6 bytes) or a string with a unit: ``64MB``, ``2GB``, ``500kB``, ``1.5GiB``.
+Parameters
+  every option with a ``smart`` node parameter in docs/OPTIONS.md (declared in ``cc_log.core.options``; ``--help``
+  lists them with their defaults): ``~config`` (the configuration file: topics, triggers, windows, format,
+  limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
+  ``~recent``, ``~learn_online``, the windows' ``~pre``, ``~post``, ``~max_window``, ``~topic_limits``, the
+  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb`` and ``~min_free_mb``, ``~directory``, the intake's
+  bounds, the context track and the upload command. Each resolved value is logged once.
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
@@ -97,29 +60,17 @@ from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
 from cc_log.core import drift
 from cc_log.nodes import intake
-from cc_log.storage import log_format
 from cc_log.core import smart
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, DEFAULT_DIAGNOSTIC_PERIOD, DEFAULT_MAX_BUFFER_MB, ConfigError, Diagnostics,
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
     Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.node_extras import NodeExtras
 from cc_log.triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
-DEFAULT_FORMAT = smart.DEFAULT_FORMAT
-DEFAULT_PRE = str(smart.DEFAULT_PRE)
-DEFAULT_POST = str(smart.DEFAULT_POST)
-DEFAULT_MAX_WINDOW = str(smart.DEFAULT_MAX_WINDOW)
-DEFAULT_RETRIGGER = smart.DEFAULT_RETRIGGER
-DEFAULT_TOPICS = ()
-DEFAULT_ENABLED = True
-DEFAULT_MAX_DISK_MB = 0.0
-DEFAULT_MIN_FREE_MB = 0.0
-DEFAULT_CLASSIFY_EVERY = smart.DEFAULT_CLASSIFY_EVERY
-DEFAULT_INTAKE_MAX_MESSAGES = intake.DEFAULT_MAX_MESSAGES  # intake queue bound (messages); beyond, dropped
-DEFAULT_INTAKE_MAX_MB = intake.DEFAULT_MAX_MB                # intake queue bound (MB of serialized messages)
+OPTIONS_NODE = 'smart'  # its parameters in core.options
 TICK_PERIOD = 0.5                    # seconds (ROS time) between ticks for the triggers that watch for silence
 
 
@@ -141,25 +92,11 @@ class SmartNode(object):
         self._event_class = AnomalyEvent
         params = Params()
 
-        def given(reader, name, *args):
-            """The parameter read by ``reader`` when it is set, else None (the configuration's value holds)."""
-            return reader(name, *args) if params.given(name) else None
-        model_path = given(params.text, 'model', '')
-        cfg = node_config(params, {
-            'pre': given(params.span, 'pre', DEFAULT_PRE), 'post': given(params.span, 'post', DEFAULT_POST),
-            'max_window': given(params.span, 'max_window', DEFAULT_MAX_WINDOW),
-            'format': given(params.choice, 'format', DEFAULT_FORMAT, log_format.Format.ALL),
-            'precision': given(params.value, 'precision', None),
-            'topics': given(params.topics, 'topics', DEFAULT_TOPICS),
-            'topic_limits': given(params.value, 'topic_limits', None),
-            'max_disk_mb': given(params.megabytes, 'max_disk_mb', DEFAULT_MAX_DISK_MB),
-            'min_free_mb': given(params.megabytes, 'min_free_mb', DEFAULT_MIN_FREE_MB),
-            'max_buffer_mb': given(params.megabytes, 'max_buffer_mb', DEFAULT_MAX_BUFFER_MB)},
-            {'model': model_path,
-             'retrigger': given(params.choice, 'retrigger', DEFAULT_RETRIGGER, smart.RETRIGGER_MODES),
-             'classify_every': given(params.span, 'classify_every', DEFAULT_CLASSIFY_EVERY),
-             'recent': given(params.scalar, 'recent', ''),
-             'learn_online': given(params.boolean, 'learn_online', False)})
+        def given(name):
+            """The parameter ``name`` when it is set, else None (the configuration's value holds)."""
+            return params.option(name) if params.given(name) else None
+        cfg = node_config(params, params.configuration('smart'), dict(
+            (name, given(name)) for name in ('model', 'retrigger', 'classify_every', 'recent', 'learn_online')))
         if not cfg.triggers:
             raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
         try:
@@ -168,7 +105,7 @@ class SmartNode(object):
         except ValueError as error:
             raise ConfigError(str(error))
         classifiers = [t for t in triggers if isinstance(t, ClassifierTrigger)]
-        window = given(params.span, 'window', '')
+        window = given('window')
         named = [t for t in classifiers if t.name == 'classifier']
         if window is not None and named and window != named[0].config.span:
             raise ConfigError('~window: %s does not match the model\'s window %s (the window is part of '
@@ -178,11 +115,10 @@ class SmartNode(object):
             rospy.loginfo('trigger %s: %s', trigger.name, trigger.describe())
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         self.leftovers = recover_leftovers(self.directory)
-        enabled = params.boolean('enabled', DEFAULT_ENABLED)
-        period = params.number('diagnostic_period', DEFAULT_DIAGNOSTIC_PERIOD)
-        intake_max_messages = params.number('intake_max_messages', DEFAULT_INTAKE_MAX_MESSAGES,
-                                            minimum=1, integer=True)
-        intake_max_mb = params.megabytes('intake_max_mb', DEFAULT_INTAKE_MAX_MB, minimum=0.001)
+        enabled = params.option('enabled')
+        period = params.option('diagnostic_period')
+        intake_max_messages = params.option('intake_max_messages')
+        intake_max_mb = params.option('intake_max_mb')
         try:
             self.logger = smart.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
                                             **options)
