@@ -15,6 +15,7 @@ import rosbag
 import rospy
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from rostest_fixtures import wait_for  # noqa: E402
@@ -34,6 +35,8 @@ class RecordDropinTest(unittest.TestCase):
         cls.context = os.path.join(cls.directory, context_track.SUBDIRECTORY)
         cls.statuses = []
         rospy.Subscriber('/diagnostics', DiagnosticArray, lambda msg: cls.statuses.extend(msg.status))
+        cls.live = []  # BWI's odom_1hz, live: the odometry at 1 Hz
+        rospy.Subscriber('/odom_1hz', Odometry, lambda msg: cls.live.append(msg.header.stamp.to_sec()))
 
     def status(self):
         return [s for s in self.statuses if s.name == 'cc_log: cc_log']
@@ -45,13 +48,18 @@ class RecordDropinTest(unittest.TestCase):
         for path in closed:
             with rosbag.Bag(path) as bag:
                 self.assertEqual(bag.get_compression_info().compression, 'lz4', path)
-                stamps += [msg.header.stamp.to_sec() for _, msg, _ in bag.read_messages(topics=['/odom'])]
+                self.assertNotIn('/odom', bag.get_type_and_topic_info().topics, path)  # BWI's name, as BWI's bags
+                stamps += [msg.header.stamp.to_sec() for _, msg, _ in bag.read_messages(topics=['/odom_1hz'])]
         stamps.sort()
         self.assertGreaterEqual(stamps[-1] - stamps[0], 30.0)
         seconds = [math.floor(stamp) for stamp in stamps]
         self.assertEqual(len(seconds), len(set(seconds)), 'more than one odometry message in a second')
         gaps = [b - a for a, b in zip(stamps, stamps[1:])][1:]  # the first kept may be late in its second
         self.assertTrue(all(0.98 <= gap <= 1.02 for gap in gaps), 'odometry not at 1 Hz: %s' % gaps)
+        live = wait_for(lambda: self.live[1:] if len(self.live) >= 4 else None, 30, 'the live /odom_1hz topic')
+        gaps = [b - a for a, b in zip(live, live[1:])]  # one message per second of stamps (100 Hz: +-10 ms)
+        self.assertEqual(len(live), len(set(math.floor(stamp) for stamp in live)), live)
+        self.assertTrue(all(0.95 <= gap <= 1.05 for gap in gaps), '/odom_1hz not at 1 Hz: %s' % gaps)
         # collect mode (no model at ~model) wrote files, and says why it collects
         files = wait_for(lambda: log_format.window_files(self.directory), 30, 'a collect-mode file')
         messages = [s.message for s in self.status()]

@@ -7,7 +7,9 @@ topic remapped, then this node publishes the run message by message:
 
 1. a run with one injected burst: exactly one window file appears, holding exactly the published
    odometry from ``pre`` before the first anomalous message to ``post`` after the last, plus exactly the
-   IMU messages published in that time span; AnomalyEvents OPENED and WRITTEN are published;
+   IMU messages published in that time span (the IMU is a context topic: recorded always and, at its full
+   rate, in the windows, as BWI's amcl_pose and /diagnostics are); AnomalyEvents OPENED and WRITTEN are
+   published;
 2. ``~trigger``: a manual window of ``pre`` + 1 + ``post`` consecutive published messages;
 3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen.
 """
@@ -66,7 +68,8 @@ class SmartWindowTest(unittest.TestCase):
         cls.odom_pub = rospy.Publisher('husky_odom', Odometry, queue_size=10000)
         cls.imu_pub = rospy.Publisher('imu', Imu, queue_size=10000)
         cls.node = fx.start('smart_logger.py', '__name:=' + NODE, 'odom:=husky_odom', '_model:=' + cls.model_path,
-                            '_directory:=' + cls.out, '_pre:=%d' % PRE, '_post:=%d' % POST, '_topics:=imu',
+                            '_directory:=' + cls.out, '_pre:=%d' % PRE, '_post:=%d' % POST,
+                            '_context_topics:=imu',  # recorded always, and kept in the windows at its full rate
                             '_diagnostic_period:=0.3')
         rospy.wait_for_service('/%s/trigger' % NODE, timeout=30)
         fx.wait_for(lambda: cls.odom_pub.get_num_connections() and cls.imu_pub.get_num_connections(), 20,

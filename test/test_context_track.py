@@ -72,6 +72,19 @@ def test_thins_100hz_odometry_to_exactly_one_message_per_second(tmp_path):
         assert bag.get_compression_info().compression == 'lz4'
 
 
+def test_bwi_odom_1hz_is_stored_under_its_own_name(tmp_path):
+    names = {}
+    rates = parse_topics('odom_1hz amcl_pose', aliases=context_track.BWI_ALIASES, names=names)
+    assert (rates, names) == ({'odom': 1.0, 'amcl_pose': None}, {'odom': 'odom_1hz'})
+    track = ContextTrack(tmp_path, rates, names=names)
+    for i in range(300):
+        track.on_message('odom', odom(1000.0 + i * 0.01), None)
+    track.close()
+    [path] = files(tmp_path)
+    assert [(topic, t) for topic, _, t in read(path)] == [('odom_1hz', 1000.0), ('odom_1hz', 1001.0),
+                                                          ('odom_1hz', 1002.0)]
+
+
 def test_rotates_by_stamps_and_on_a_jump_back(tmp_path):
     track = ContextTrack(tmp_path, {'odom': None}, rotate=10)
     for second in list(range(25)) + [3, 4]:  # 0-9, 10-19, 20-24, then time goes back

@@ -12,16 +12,62 @@ Parameters (private, both nodes)
 The context files have a writer of their own (closing, fsync, naming, retries) whose disk guard and the
 node's count the window and context files together: ``~max_disk_mb`` holds for both, oldest deleted first.
 """
+import math
 import os
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 
+from cc_log.core import raw_message
 from cc_log.storage import context_track, disk_guard, upload, window_writer
 from cc_log.nodes.node_common import ConfigError
 from cc_log.nodes.topic_watch import TopicWatcher
 
-__all__ = ['NodeExtras']
+__all__ = ['NodeExtras', 'context_rates', 'Thinned']
+
+
+def context_rates(params, driving_topic, log=True):
+    """``({topic: Hz or None}, {topic: name stored under})`` of ``~context_topics``, topics resolved; BWI's
+    ``odom_1hz`` is ``driving_topic`` at 1 Hz, stored and republished under the resolved ``odom_1hz``."""
+    names = {}
+    try:
+        rates = context_track.parse_topics(params.value('context_topics', '', log), '~context_topics',
+                                           {'odom_1hz': (driving_topic, 1.0)}, names)
+    except ValueError as error:
+        raise ConfigError(str(error))
+    return (dict((rospy.resolve_name(topic), rate) for topic, rate in rates.items()),
+            dict((rospy.resolve_name(topic), rospy.resolve_name(name)) for topic, name in names.items()))
+
+
+class Thinned(object):
+    """A sink that republishes ``source`` at most ``rate`` times a second of its stamps on ``topic`` (BWI's live
+    ``odom_1hz``), decoded with the class its connection names."""
+
+    def __init__(self, source, topic, rate):
+        self.source, self.topic, self.rate = source, topic, rate
+        self.publisher = None
+        self._slot = None
+
+    def on_raw(self, topic, raw, connection, stamp=None):
+        """Republish the message when it is the first of its slot."""
+        return topic == self.source and self._offer(raw_message.stamp(raw, connection, 0.0 if stamp is None else stamp),
+                                                    lambda: raw_message.decode(raw, connection))
+
+    def on_message(self, topic, msg, stamp=None, size=None):
+        """The same for a decoded message."""
+        return topic == self.source and self._offer(0.0 if stamp is None else stamp, lambda: msg)
+
+    def _offer(self, stamp, message):
+        slot = math.floor(stamp * self.rate)
+        if slot == self._slot:
+            return False
+        self._slot = slot
+        msg = message()
+        if self.publisher is None:
+            self.publisher = rospy.Publisher(self.topic, type(msg), queue_size=10)
+        self.publisher.publish(msg)
+        return True
+
 
 CLOSE_TIMEOUT = 3.0  # seconds the context track may take to close at shutdown, after the windows' 10 s
 
@@ -30,13 +76,12 @@ class NodeExtras(object):
     """The context track and upload hook around a node's ``writer`` (its WindowWriter) in ``directory``."""
 
     def __init__(self, params, writer, directory, driving_topic):
+        self.rates, names = context_rates(params, driving_topic)
         try:
-            aliases = {'odom_1hz': (driving_topic, 1.0)}
-            rates = context_track.parse_topics(params.value('context_topics', ''), '~context_topics', aliases)
             self.hook = upload.UploadHook(params.value('upload_command', ''))
         except ValueError as error:
             raise ConfigError(str(error))
-        self.rates = dict((rospy.resolve_name(topic), rate) for topic, rate in rates.items())
+        self.republisher = Thinned(driving_topic, names[driving_topic], 1.0) if driving_topic in names else None
         rotate = params.option('context_rotate')
         self.track = self.writer = self.watcher = None
         self.leftovers = []
@@ -55,7 +100,8 @@ class NodeExtras(object):
             self.writer.guard.directories.append(writer.directory)
             guard.directories.append(folder)
             self.writer.on_event(self._context_event)
-            self.track = context_track.ContextTrack(directory, self.rates, rotate, submit=self.writer.submit)
+            self.track = context_track.ContextTrack(directory, self.rates, rotate, submit=self.writer.submit,
+                                                    names=names)
             rospy.loginfo('context track: %s into %s', ', '.join(
                 '%s%s' % (topic, ' at %g Hz' % rate if rate else '') for topic, rate in sorted(self.rates.items())),
                 folder)
@@ -82,8 +128,10 @@ class NodeExtras(object):
         return sorted(self.rates)
 
     def sink(self, main):
-        """The intake's sink: ``main`` and the context track."""
-        return context_track.tee(main, self.track) if self.track is not None else main
+        """The intake's sink: ``main``, the context track and the ``odom_1hz`` topic."""
+        if self.track is None and self.republisher is None:
+            return main
+        return context_track.tee(main, self.track, self.republisher)
 
     def _context_event(self, event):
         if event.kind == window_writer.WRITTEN:

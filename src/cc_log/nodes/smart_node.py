@@ -66,7 +66,7 @@ from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
     CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
     Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
-from cc_log.nodes.node_extras import NodeExtras
+from cc_log.nodes.node_extras import NodeExtras, context_rates
 from cc_log.triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
@@ -119,6 +119,9 @@ class SmartNode(object):
         period = params.option('diagnostic_period')
         intake_max_messages = params.option('intake_max_messages')
         intake_max_mb = params.option('intake_max_mb')
+        if options['side_topics'] is not None:  # the context topics at their full rate in the windows too
+            context = context_rates(params, options['driving_topic'], log=False)[0]
+            options['side_topics'] = sorted(set(options['side_topics']).union(context) - {options['driving_topic']})
         try:
             self.logger = smart.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
                                             **options)

@@ -6,7 +6,8 @@ as BWI's ``bwi_logging`` did with ``rosbag record``. ``ContextTrack(directory, r
 
 - ``rates``: ``{topic: Hz or None}`` (``parse_topics('odom:1 amcl_pose /diagnostics')``); a topic with a
   rate keeps at most one message per ``1/Hz`` slot of its stamps (``floor(stamp * Hz)``), so 100 Hz
-  odometry at ``:1`` is exactly one message per second; ``None`` keeps every message.
+  odometry at ``:1`` is exactly one message per second; ``None`` keeps every message. ``names``: ``{topic: name
+  it is stored under}`` (BWI's ``odom_1hz`` holds the driving topic at 1 Hz under that name).
 - files go to ``<directory>/context/cc_log_context_<UTC of the first stamp>.bag`` (LZ4 chunks); the open file
   is ``<name>.tmp-<pid>.<n>`` (``n`` counts the files this process opened, so the name is unique whatever the
   stamps do: a looping bag starts over at the same stamps while the last loop's file is still being closed) and
@@ -58,9 +59,10 @@ _SERIAL = itertools.count()  # the files this process opened: their temporary na
 _ENTRY = re.compile(r'^(?P<topic>[^\s:]+)(?::(?P<rate>[^\s:]+))?$')
 
 
-def parse_topics(value, name='context_topics', aliases=None):
+def parse_topics(value, name='context_topics', aliases=None, names=None):
     """``{topic: Hz or None}`` from ``'odom:1 amcl_pose /diagnostics'`` (or a list of such entries, or a dict);
-    ``aliases`` maps a name to ``(topic, Hz)`` (``BWI_ALIASES``). ValueError('<name>: ...') for a bad entry."""
+    ``aliases`` maps a name to ``(topic, Hz)`` (``BWI_ALIASES``), and ``names`` (a dict, filled) the topic of an
+    alias to the alias, the name it is stored under. ValueError('<name>: ...') for a bad entry."""
     aliases = aliases or {}
     if isinstance(value, dict):
         entries = [(topic, rate) for topic, rate in value.items()]
@@ -74,7 +76,9 @@ def parse_topics(value, name='context_topics', aliases=None):
     rates = {}
     for topic, rate in entries:
         if rate is None and topic in aliases:
-            topic, rate = aliases[topic]
+            alias, (topic, rate) = topic, aliases[topic]
+            if names is not None:
+                names[topic] = alias
         rates[topic] = _rate(rate, '%s: %s' % (name, topic))
     return rates
 
@@ -197,9 +201,11 @@ def _quietly(close):
 class ContextTrack(object):
     """The context track of one logging directory (see the module docstring). Thread-safe."""
 
-    def __init__(self, directory, rates, rotate=DEFAULT_ROTATE, submit=None, retry=RETRY_PERIOD, clock=time.monotonic):
+    def __init__(self, directory, rates, rotate=DEFAULT_ROTATE, submit=None, retry=RETRY_PERIOD, clock=time.monotonic,
+                 names=None):
         self.directory = os.path.join(str(directory), SUBDIRECTORY)
         self.rates = dict(rates)
+        self.names = dict(names or {})  # topic -> the name it is stored under (BWI's odom_1hz), when not its own
         self.rotate = _seconds(rotate, 'context_rotate')
         self.retry = _seconds(retry, 'context_retry')
         self._clock = clock
@@ -268,7 +274,8 @@ class ContextTrack(object):
             try:
                 if self._bag is None:
                     self._bag = _OpenBag(self.directory, record.stamp)
-                self._bag.write(record, time)
+                self._bag.write(record._replace(topic=self.names[record.topic]) if record.topic in self.names
+                                else record, time)
             except Exception as error:  # OSError (disk full), rosbag's, a bad message: the track goes on
                 self._failed('%s: %s' % (record.topic, error or type(error).__name__))
                 self.counts['messages_lost'] += 1
