@@ -27,8 +27,8 @@ def test_every_default_is_valid_in_its_own_grammar(option):
 
 
 def test_the_configuration_file_keys_are_the_declared_ones():
-    assert config.KEYS == ('topics', 'topic_limits', 'driving_topic', 'format', 'json_xz', 'windows', 'limits',
-                           'collect', 'triggers')
+    assert config.KEYS == ('topics', 'topic_limits', 'driving_topic', 'format', 'routes', 'json_xz', 'windows',
+                           'limits', 'collect', 'triggers')
     with pytest.raises(ValueError) as error:
         config.Config.from_dict({'windows': {'pre': '2s', 'size': 3}})
     assert "windows: unknown key 'size' (known: pre, post, max)" in str(error.value)

@@ -148,11 +148,11 @@ class Config(object):
         entries = values['topics'] or []
         self.selection = TopicSelection.parse(entries, 'topics')  # names and patterns (*, re:..., !...)
         self.topics = [entry for entry in entries if not TopicSelection.is_pattern(entry)]
-        for name in ('topic_limits', 'format', 'precision', 'pre', 'post', 'max_window', 'max_disk_mb',
+        for name in ('topic_limits', 'format', 'routes', 'precision', 'pre', 'post', 'max_window', 'max_disk_mb',
                      'min_free_mb', 'max_buffer_mb'):
             setattr(self, name, values[name] if values[name] is not None else options.default(name))
         self.driving_topic = values['driving_topic']
-        if self.precision and self.format != log_format.Format.JSON_XZ:
+        if self.precision and log_format.Format.JSON_XZ not in [self.format] + [r.format for r in self.routes]:
             raise ValueError('json_xz.precision: rounds json-xz windows only (format is %s)' % self.format)
         self.rotate = None if values['rotate'] is None else str(values['rotate'])
         self.label, self.stride = values['label'], values['stride']  # None: the collector's defaults

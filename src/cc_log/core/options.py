@@ -25,6 +25,7 @@ import re
 
 from cc_log import features
 from cc_log.core import safe_input
+from cc_log.core.routes import ROUTE_KEYS, parse_routes
 from cc_log.core.safe_input import brief
 from cc_log.core.spans import Rotation, Span, megabytes, seconds
 from cc_log.core.topic_select import topic_list
@@ -221,6 +222,8 @@ def parse_topic_limits(value, name='topic_limits'):
 
 TOPIC_LIMITS = Grammar(parse_topic_limits, 'YAML', 'per topic: {%s} (see below)' % ', '.join(
     o.key for o in TOPIC_OPTIONS))
+ROUTES = Grammar(lambda value, name: parse_routes(value, formats.names(), name), 'YAML',
+                 'a list of {%s}' % ', '.join(ROUTE_KEYS))
 
 OPTIONS = (
     # the configuration file's keys, in the order the file documents them
@@ -231,6 +234,8 @@ OPTIONS = (
     _option('driving_topic', 'driving_topic', TOPIC, None, "the topic whose messages count `pre` and `post` "
             "(default: the first trigger's first topic)"),
     _option('format', 'format', FORMAT, formats.DEFAULT, 'window file format', BOTH, ('replay',)),
+    _option('routes', 'routes', ROUTES, (), "topic sets written beside the window's file in a format of their own, "
+            "e.g. `[{name: numeric, topics: [odom, imu/data], format: json-xz}]` (`core.routes`)", SMART),
     _option('precision', 'json_xz.precision', PRECISION, {}, 'json-xz only, opt-in lossy: round fields to a step',
             BOTH, ('replay',)),
     _option('pre', 'windows.pre', SPAN, str(DEFAULT_PRE), 'kept before an anomaly', SMART, ('replay',)),

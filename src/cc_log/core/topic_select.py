@@ -158,6 +158,12 @@ class TopicSelection(object):
         self._matched[topic] = selected
         return selected
 
+    def resolved(self, resolve):
+        """The same selection with its names resolved by ``resolve`` (patterns as they are)."""
+        result = TopicSelection()
+        result.__dict__.update(self.__dict__, names=[resolve(name) for name in self.names], _matched={})
+        return result
+
     def select(self, topics):
         """The selected topics of ``topics``, in order."""
         return [topic for topic in topics if self.matches(topic)]

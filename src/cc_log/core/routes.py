@@ -1,0 +1,95 @@
+"""Routes: a window cut once and written as one file per route, each route a topic set in its own format.
+
+A configuration's ``routes`` (``options``)::
+
+    format: bag-lz4                                   # the window's own file: every topic no route takes
+    routes:
+      - {name: numeric, topics: [odom, imu/data, /diagnostics], format: json-xz}
+
+write each window as ``cc_log_<UTC>_<reason>.bag`` (the cameras, the lidar) beside
+``cc_log_<UTC>_<reason>+numeric.json.xz`` (the odometry, the IMU, the diagnostics: ``xz -dc | jq``-readable).
+A topic goes to the first route whose ``topics`` match it (names, ``*``, ``re:``, ``!`` as the configuration's
+``topics``), else to the window's own file. The files of one window share everything before ``+``
+(``SEPARATOR``): ``cclog info``, ``cat``, ``export`` and ``stats`` show them as one window. Pure.
+"""
+import collections
+import re
+
+from cc_log.core.records import LogWindow
+from cc_log.core.safe_input import brief, loads_yaml
+from cc_log.core.topic_select import TopicSelection
+
+SEPARATOR = '+'  # between a window's base name and a route's name in the route's file name
+ROUTE_KEYS = ('name', 'topics', 'format')
+MAX_TEXT = 1 << 20  # characters of routes given as YAML text
+_NAME = re.compile(r'^[A-Za-z0-9-]{1,40}$')
+
+
+class Route(collections.namedtuple('Route', 'name selection format')):
+    """One route: its ``name`` (in its file names), the ``TopicSelection`` of its topics, its ``format``."""
+
+    __slots__ = ()
+
+    def resolved(self, resolve):
+        """The route with its topic names resolved by ``resolve`` (patterns are kept as they are)."""
+        return self._replace(selection=self.selection.resolved(resolve))
+
+
+def parse_routes(value, formats, name='routes'):
+    """``[Route]`` of a list of ``{name, topics, format}`` mappings; ``formats``: the format names there are.
+    ValueError('<name>[i]: ...') naming what is wrong."""
+    if value in (None, '', ()):
+        return []
+    if isinstance(value, str):  # a launch argument: YAML text
+        if len(value) > MAX_TEXT:
+            raise ValueError('%s: longer than %d characters' % (name, MAX_TEXT))
+        value = loads_yaml(value, name)
+    if not isinstance(value, (list, tuple)):
+        raise ValueError('%s: a list of {name, topics, format}, not %s' % (name, brief(value)))
+    routes, names = [], set()
+    for index, entry in enumerate(value):
+        where = '%s[%d]' % (name, index)
+        if isinstance(entry, Route):
+            routes.append(entry)
+            continue
+        if not isinstance(entry, dict):
+            raise ValueError('%s: a mapping {name, topics, format}, not %s' % (where, brief(entry)))
+        unknown = sorted(brief(key) for key in entry if key not in ROUTE_KEYS)
+        if unknown:
+            raise ValueError('%s: unknown key %s (known: %s)' % (where, unknown[0], ', '.join(ROUTE_KEYS)))
+        route_name = entry.get('name')
+        if not isinstance(route_name, str) or not _NAME.match(route_name):
+            raise ValueError('%s: name: %s must be 1 to 40 letters, digits or "-"' % (where, brief(route_name)))
+        if route_name in names:
+            raise ValueError('%s: name %s is used twice' % (where, route_name))
+        names.add(route_name)
+        fmt = entry.get('format')
+        if fmt not in formats:
+            raise ValueError('%s (%s): format: %s is not one of: %s' % (
+                where, route_name, brief(fmt), ', '.join(formats)))
+        topics = entry.get('topics')
+        if not isinstance(topics, (list, tuple)) or not topics:
+            raise ValueError('%s (%s): topics: a list of topic names or patterns, not %s' % (
+                where, route_name, brief(topics)))
+        routes.append(Route(route_name, TopicSelection.parse(list(topics), '%s (%s): topics' % (where, route_name)),
+                            fmt))
+    return routes
+
+
+def split(window, routes):
+    """``[(route or None, LogWindow)]``: ``window``'s records by route (None: the window's own file), each
+    part with the window's triggers, part number, finality and key; a route that takes no record of this window
+    is left out, the window's own part never is (it carries the window's triggers even when empty)."""
+    if not routes:
+        return [(None, window)]
+    by_route = collections.OrderedDict((route, []) for route in routes)
+    own, cache = [], {}
+    for record in window.records:
+        route = cache.get(record.topic, False)
+        if route is False:
+            route = cache[record.topic] = next((r for r in routes if r.selection.matches(record.topic)), None)
+        (own if route is None else by_route[route]).append(record)
+    parts = [(None, LogWindow(own, window.triggers, window.part, window.final, window.key))]
+    parts += [(route, LogWindow(records, window.triggers, window.part, window.final, window.key))
+              for route, records in by_route.items() if records or window.part]
+    return parts
