@@ -319,3 +319,17 @@ def test_collect_rotation_sizes_are_bounded_one_line(value):
     with pytest.raises(ValueError) as error:
         Rotation.parse(value, 'collect.rotate')
     assert one_line(error).startswith('collect.rotate: ')
+
+
+def test_the_intake_overflow_message_says_which_bound_and_what_to_raise():
+    from cc_log.nodes.intake import IntakeQueue, overflow_text
+    queue = IntakeQueue(3, 1000)
+    assert not queue.put('huge', 5000, topic='/camera')  # larger than the whole queue: never fits
+    text = overflow_text(queue, '/camera', 5000)
+    assert 'larger than the whole intake queue' in text and '~intake_max_mb' in text and 'queue full' not in text
+    for _ in range(3):
+        assert queue.put('small', 10, topic='/odom')
+    assert not queue.put('small', 10, topic='/odom')
+    text = overflow_text(queue, '/odom', 10)
+    assert text.startswith('intake queue full (3 of at most 3 messages') and 'falls behind' in text
+    assert '2 in all so far' in text and '\n' not in text

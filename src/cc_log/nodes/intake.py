@@ -104,6 +104,17 @@ class IntakeQueue(object):
         return [item for item, _ in items]
 
 
+def overflow_text(queue, topic, size):
+    """Why a message of ``size`` bytes on ``topic`` did not fit ``queue``, and what to do, in one line."""
+    if size > queue.max_bytes:
+        return ('a message of %d bytes on %s is larger than the whole intake queue (~intake_max_mb %g): dropped; '
+                'raise ~intake_max_mb (%d dropped so far)' % (size, topic, queue.max_bytes / 1e6, queue.overflowed))
+    return ('intake queue full (%d of at most %d messages, %.1f of %g MB queued): the node falls behind its '
+            'topics; %s dropped on %s, %d in all so far' % (queue.qsize(), queue.max_messages, queue.bytes / 1e6,
+                                                            queue.max_bytes / 1e6, 'a message', topic,
+                                                            queue.overflowed))
+
+
 class MessageDecoder(object):
     """Decodes what the intake receives as rospy.AnyMsg (``raw_message.message_class``: the installed class
     of the publisher's type, else one built from the publisher's message definition, which must pass
@@ -209,10 +220,10 @@ class Intake(object):
 
     def _enqueue(self, msg, topic):
         # Cheap: count, note the receipt time and queue the serialized message; the feeder thread does the rest.
-        if not self.queue.put((topic, msg, rospy.get_rostime()), len(getattr(msg, '_buff', b'') or b''), topic=topic):
+        size = len(getattr(msg, '_buff', b'') or b'')
+        if not self.queue.put((topic, msg, rospy.get_rostime()), size, topic=topic):
             self.dropped += 1
-            rospy.logwarn_throttle(10.0, 'intake queue full (%d messages, %d bytes): %d messages dropped so far'
-                                   % (self.queue.max_messages, self.queue.max_bytes, self.queue.overflowed))
+            rospy.logwarn_throttle(10.0, overflow_text(self.queue, topic, size))
 
     def sync(self, timeout=5.0):
         """Wait until every message received before the call has been handed to the sink; False when that
