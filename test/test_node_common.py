@@ -125,6 +125,9 @@ def test_topic_rates_are_messages_per_second_of_wall_time_between_calls():
     assert rates.values({'/odom': 105, '/imu': 0, '/scan': 1}) == [
         ('rate /imu Hz', '0.00'), ('rate /odom Hz', '10.00'), ('rate /scan Hz', '2.00')]
     assert rates.values({'/odom': 110}) == [('rate /odom Hz', '0.00')]  # no time passed: no division by zero
+    now[0] = 104.5
+    assert rates.values({'/camera': 60}, {'/camera': 120 * 10 ** 6}) == [
+        ('rate /camera Hz', '30.00'), ('MB/s /camera', '60.000')]  # bytes too: MB/s (10^6 bytes)
 
 
 def test_the_status_has_the_nodes_level_message_values_and_topic_rates():

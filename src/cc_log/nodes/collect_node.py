@@ -97,7 +97,7 @@ class CollectNode(object):
                              sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
-                                       self.intake.counts)
+                                       self.intake.counts, self.intake.sizes)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
                       self.collector.features_directory, label)

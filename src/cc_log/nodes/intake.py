@@ -51,6 +51,7 @@ class IntakeQueue(object):
         self.overflowed = 0
         self.bytes = 0
         self.received = collections.Counter()
+        self.received_bytes = collections.Counter()
         self._items = collections.deque()
         self._ready = threading.Condition(threading.Lock())
         self._urgent = False  # a forced item is queued: the batch is due now
@@ -68,10 +69,16 @@ class IntakeQueue(object):
         with self._ready:
             return dict(self.received)
 
+    def received_sizes(self):
+        """``{topic: serialized bytes received}`` (those that did not fit too)."""
+        with self._ready:
+            return dict(self.received_bytes)
+
     def put(self, item, size=0, force=False, topic=None):
         with self._ready:
             if topic is not None:
                 self.received[topic] += 1
+                self.received_bytes[topic] += size
             if not force and (len(self._items) >= self.max_messages or self.bytes + size > self.max_bytes):
                 self.overflowed += 1
                 return False
@@ -217,6 +224,10 @@ class Intake(object):
     def counts(self):
         """``{topic: messages received so far}`` (a copy; the rates on /diagnostics)."""
         return self.queue.received_counts()
+
+    def sizes(self):
+        """``{topic: serialized bytes received so far}`` (a copy; the MB/s on /diagnostics)."""
+        return self.queue.received_sizes()
 
     def _enqueue(self, msg, topic):
         # Cheap: count, note the receipt time and queue the serialized message; the feeder thread does the rest.

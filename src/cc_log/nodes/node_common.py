@@ -318,24 +318,30 @@ def free_disk(path):
 
 
 class TopicRates(object):
-    """Messages per second of wall time of each topic since the previous ``values`` call (pure).
+    """Messages and MB per second of wall time of each topic since the previous ``values`` call (pure).
 
-    ``clock``: seconds of wall time (default ``time.monotonic``). ``values(counts)`` takes ``{topic: messages
-    received so far}`` and returns the /diagnostics pairs ``('rate <topic> Hz', '12.50')``, sorted by topic; a
-    topic first seen counts from 0, so its first rate is taken over the whole interval."""
+    ``clock``: seconds of wall time (default ``time.monotonic``). ``values(counts, sizes=None)`` takes ``{topic:
+    messages received so far}`` (and ``{topic: bytes received so far}``) and returns the /diagnostics pairs
+    ``('rate <topic> Hz', '12.50')`` (and ``('MB/s <topic>', '3.200')``), sorted by topic; a topic first seen
+    counts from 0, so its first rate is taken over the whole interval."""
 
     def __init__(self, clock=time.monotonic):
         self._clock = clock
         self._last = clock()
-        self._counts = {}
+        self._counts, self._sizes = {}, {}
 
-    def values(self, counts):
-        """The rate pairs for ``counts`` (see the class)."""
+    def values(self, counts, sizes=None):
+        """The rate pairs for ``counts`` and ``sizes`` (see the class)."""
         now = self._clock()
         elapsed = now - self._last
-        pairs = [('rate %s Hz' % topic, '%.2f' % ((count - self._counts.get(topic, 0)) / elapsed if elapsed else 0.0))
+
+        def per_second(total, before):
+            return (total - before) / elapsed if elapsed else 0.0
+        pairs = [('rate %s Hz' % topic, '%.2f' % per_second(count, self._counts.get(topic, 0)))
                  for topic, count in sorted(counts.items())]
-        self._last, self._counts = now, dict(counts)
+        pairs += [('MB/s %s' % topic, '%.3f' % (per_second(size, self._sizes.get(topic, 0)) / 1e6))
+                  for topic, size in sorted((sizes or {}).items())]
+        self._last, self._counts, self._sizes = now, dict(counts), dict(sizes or {})
         return pairs
 
 
@@ -359,14 +365,15 @@ class Diagnostics(object):
     updater's own ``update()`` schedules on rospy time, so a wall-time thread calls ``force_update()``.
 
     ``status_fn()`` returns ``(level, message, [(key, value), ...])``; ``counts()`` (optional) returns
-    ``{topic: messages received so far}`` (``Intake.counts``), shown as ``rate <topic> Hz`` entries (see
-    ``TopicRates``) after the node's values."""
+    ``{topic: messages received so far}`` (``Intake.counts``) and ``sizes()`` (optional) ``{topic: bytes}``
+    (``Intake.sizes``), shown as ``rate <topic> Hz`` and ``MB/s <topic>`` entries (see ``TopicRates``) after the
+    node's values."""
 
-    def __init__(self, name, period, status_fn, counts=None):
+    def __init__(self, name, period, status_fn, counts=None, sizes=None):
         self.name = name
         self.period = period
         self.status_fn = status_fn
-        self.counts = counts
+        self.counts, self.sizes = counts, sizes
         self.rates = TopicRates()
         self.updater = None
         self._stop = threading.Event()
@@ -382,7 +389,8 @@ class Diagnostics(object):
     def _run(self, stat):
         level, message, values = self.status_fn()
         stat.summary(level, message)
-        for key, value in list(values) + (self.rates.values(self.counts()) if self.counts else []):
+        rates = self.rates.values(self.counts(), self.sizes() if self.sizes else None) if self.counts else []
+        for key, value in list(values) + rates:
             stat.add(key, value)
         return stat
 

@@ -61,6 +61,7 @@ from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from cc_log.core import drift
 from cc_log.nodes import intake
 from cc_log.core import smart
+from cc_log.storage import log_format
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
@@ -131,6 +132,7 @@ class SmartNode(object):
         if self.logger.driving_topic in types and config.installed_class(types[self.logger.driving_topic]) is None:
             raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
         self._refused = 0
+        self._last_trigger = 'none'
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
         self.drift = drift.monitor_classifiers(classifiers)  # the live flag rate against the trained one
@@ -148,7 +150,7 @@ class SmartNode(object):
                          rospy.Service('~enable', SetBool, self._enable)]
         self._ticker = WallTicker(TICK_PERIOD, self._tick)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
-                                       self.intake.counts)
+                                       self.intake.counts, self.intake.sizes)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
                       ', '.join(self.intake.side_topics) or 'no other topics',
                       'enabled' if enabled else 'disabled until ~enable')
@@ -169,6 +171,7 @@ class SmartNode(object):
             rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
         else:
             rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, event.reason, event.score)
+            self._last_trigger = '%s: %s at %s' % (event.trigger, event.reason, log_format.utc_text(event.stamp))
         try:
             self.events.publish(msg)
         except rospy.ROSException:  # shutting down
@@ -233,6 +236,7 @@ class SmartNode(object):
             ('enabled', stats['enabled']),
             ('windows opened', stats['windows_opened']),
             ('windows saved', stats['windows_saved']),
+            ('last trigger', self._last_trigger),
             ('messages seen', stats['messages_seen']),
             ('messages kept', stats['messages_kept']),
             ('messages dropped', stats['messages_dropped']),
