@@ -1,0 +1,128 @@
+"""``cclog info``: what window files hold."""
+import collections
+import os
+
+from cc_log.offline.cli.common import (
+    EXIT_OK, command_help, human_bytes, output_flags, print_json, read_windows, say, size_ratio, stamp_text)
+
+
+def add_parser(subparsers):
+    """The ``cclog info`` sub-parser."""
+    p = subparsers.add_parser('info', **command_help(
+        'windows, spans, counts, sizes, codec, triggers, scores',
+        """
+        Describe window files: time span, messages per topic, size on disk and as row-per-message JSON,
+        codec, the trigger(s) that opened the window with their scores, and the model threshold. PATH is a
+        window file or a directory of them (read in time order).
+        """,
+        """
+          cclog info logs
+          cclog info logs/cc_log_20150521T191138.027Z_classifier.json.xz --json
+        """))
+    p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
+    output_flags(p)
+    return p
+
+
+def run(args):
+    """Windows, time spans, message counts, sizes, codec, trigger and scores of window files."""
+    windows = [_window_summary(path, metadata, records)
+               for path, metadata, records in read_windows(args, args.paths, 'info')]
+    total = collections.OrderedDict([
+        ('windows', len(windows)),
+        ('messages', sum(w['messages'] for w in windows)),
+        ('bytes', sum(w['bytes'] for w in windows)),
+        ('raw_json_bytes', sum(w['raw_json_bytes'] for w in windows)),
+        ('start', min(w['start'] for w in windows) if windows else None),
+        ('end', max(w['end'] for w in windows) if windows else None),
+    ])
+    total['ratio'] = size_ratio(total['raw_json_bytes'], total['bytes'])
+    if args.json:
+        print_json(collections.OrderedDict([('windows', windows), ('total', total)]))
+        return EXIT_OK
+    for w in windows:
+        say(w['path'])
+        say('  codec      %s' % w['codec'])
+        utc = ', from %s' % w['start_utc'] if w['start_utc'] else ''
+        say('  span       %s .. %s  (%.2f s%s)' % (stamp_text(w['start']), stamp_text(w['end']),
+                                                   w['duration'] or 0.0, utc))
+        say('  messages   %d: %s' % (w['messages'], ', '.join('%s %d' % item for item in w['topics'].items())))
+        say('  topic MB   %s (serialized)' % ', '.join(
+            '%s %.2f' % (topic, size / 1e6) for topic, size in sorted(w['topic_bytes'].items(), key=lambda i: -i[1])))
+        if w['dropped']:
+            say('  DROPPED    %d messages the writer could not keep up with: %s' % (
+                sum(w['dropped'].values()), ', '.join('%s %d' % item for item in sorted(w['dropped'].items()))))
+        say('  size       %s (row JSON %s, %s)' % (
+            human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
+            '%.1fx' % w['ratio'] if w['ratio'] else '-'))
+        if w['triggers']:
+            scores = [t['score'] for t in w['triggers'] if t['score'] is not None]
+            say('  trigger    %s, %d trigger(s)%s%s' % (
+                w['reason'], len(w['triggers']),
+                ', scores %.4g .. %.4g' % (min(scores), max(scores)) if scores else '',
+                ', threshold %.4g' % w['threshold'] if isinstance(w['threshold'], (int, float)) else ''))
+        if w['part']:
+            say('  part       %s of a window split at max_window' % w['part'])
+    say('%d window(s), %d messages, %s on disk, %s as row JSON%s' % (
+        total['windows'], total['messages'], human_bytes(total['bytes']), human_bytes(total['raw_json_bytes']),
+        ' (%.1fx)' % total['ratio'] if total['ratio'] else ''))
+    return EXIT_OK
+
+
+def _counts_of(value):
+    """``{topic: count}`` of a metadata entry that should be one (anything else: {})."""
+    if not isinstance(value, dict):
+        return {}
+    return dict((str(key), count) for key, count in value.items()
+                if isinstance(count, int) and not isinstance(count, bool) and count >= 0)
+
+
+def _window_summary(path, metadata, records):
+    """What ``info`` reports about one window file."""
+    from cc_log.core import msg_codec
+    from cc_log.storage.formats import bag_lz4
+    counts = collections.OrderedDict()
+    types = collections.OrderedDict()
+    topic_bytes = collections.OrderedDict()   # serialized (ROS wire) bytes per topic
+    raw = 0
+    for record in records:
+        counts[record.topic] = counts.get(record.topic, 0) + 1
+        types.setdefault(record.topic, record.msg._type)
+        topic_bytes[record.topic] = topic_bytes.get(record.topic, 0) + len(bag_lz4.bag_message(record)[-1])
+        raw += msg_codec.row_json_bytes(record.msg)
+    stamps = [record.stamp for record in records]
+    start = min(stamps) if stamps else None
+    end = max(stamps) if stamps else None
+    size = os.path.getsize(path)
+    triggers = []
+    for trigger in metadata.get('triggers') or []:
+        score = trigger.get('score')
+        if isinstance(score, str):  # non-finite scores are stored as 'NaN' / 'Infinity' strings
+            score = None
+        triggers.append({'stamp': trigger.get('stamp'), 'reason': trigger.get('reason'), 'score': score})
+    scores = [trigger['score'] for trigger in triggers if isinstance(trigger['score'], (int, float))]
+    return collections.OrderedDict([
+        ('path', path),
+        ('codec', metadata.get('codec')),
+        ('start', start),
+        ('end', end),
+        ('duration', (end - start) if stamps else None),
+        ('start_utc', metadata.get('start_utc')),
+        ('messages', len(records)),
+        ('topics', counts),
+        ('types', types),
+        ('topic_bytes', topic_bytes),
+        ('bytes', size),
+        ('raw_json_bytes', raw),
+        ('ratio', size_ratio(raw, size)),
+        ('reason', metadata.get('reason') or (triggers[0]['reason'] if triggers else None)),
+        ('triggers', triggers),
+        ('min_score', min(scores) if scores else None),
+        ('threshold', metadata.get('threshold')),
+        ('driving_topic', metadata.get('driving_topic')),
+        ('part', metadata.get('part', 0)),
+        ('dropped', _counts_of(metadata.get('dropped'))),
+        ('pre', metadata.get('pre')),
+        ('post', metadata.get('post')),
+        ('model', metadata.get('model')),
+    ])

@@ -1,0 +1,49 @@
+"""``cclog recover``: crash leftovers turned back into window files."""
+import os
+
+from cc_log.offline.cli.common import EXIT_OK, EXIT_BAD_INPUT, CommandError, command_help, output_flags, print_json
+
+
+def add_parser(subparsers):
+    """The ``cclog recover`` sub-parser."""
+    p = subparsers.add_parser('recover', **command_help(
+        'turn crash leftovers (*.tmp-<pid>) back into window files',
+        """
+        A logger killed while writing a window leaves cc_log_*.tmp-<pid>. recover gives a complete leftover
+        its final name, rebuilds a cut-off bag-lz4 window from every message it still holds
+        (..._recovered.bag; the leftover is kept as *.unrecovered-<pid> when some of its bytes could not be
+        decoded), removes empty leftovers and duplicates of final files, and reports the rest, which it
+        keeps. The smart node does the same at start. Exit status 1 when anything could not be recovered.
+        """,
+        """
+          cclog recover ~/.ros/cc_log
+          cclog recover ~/.ros/cc_log/cc_log_20150521T191138.027Z_classifier.bag.tmp-4242 --json
+        """))
+    p.add_argument('paths', nargs='+', metavar='DIR|FILE', help='window directories or leftover files')
+    output_flags(p)
+    return p
+
+
+def run(args):
+    """Leftovers of a crash (``cc_log_*.tmp-<pid>``) turned back into window files, or reported."""
+    from cc_log.storage import recovery
+    outcomes = []
+    for path in args.paths:
+        if os.path.isdir(path):
+            outcomes.extend(recovery.recover_directory(path))
+        elif os.path.exists(path):
+            outcomes.append(recovery.recover(path))
+        else:
+            raise CommandError('%s: no such file or directory' % path)
+    if args.json:
+        print_json({'leftovers': [outcome._asdict() for outcome in outcomes]})
+    else:
+        for outcome in outcomes:
+            target = ' -> %s (%d messages)' % (outcome.path, outcome.messages) if outcome.path else ''
+            print('%-13s %s%s: %s' % (outcome.status, outcome.leftover, target, outcome.detail))
+        if not outcomes:
+            print('no leftovers')
+        elif len(outcomes) > 1:
+            print('%d leftovers: %d messages recovered, %d bytes could not be' % (
+                len(outcomes), sum(o.messages for o in outcomes), sum(o.lost_bytes for o in outcomes)))
+    return EXIT_BAD_INPUT if recovery.incomplete(outcomes) else EXIT_OK

@@ -1,0 +1,221 @@
+"""``cclog replay``: the smart logger over bags; ``--sweep`` over several configurations."""
+import collections
+import contextlib
+import copy
+import math
+import os
+import sys
+
+from cc_log.storage import formats
+from cc_log.offline.progress import bar as _bar
+from cc_log.offline.cli.common import (
+    PROG, EXIT_OK, CommandError, command_help, configuration, existing_file, fleet_end, fleet_flags, fleet_rows,
+    fleet_wanted, human_bytes, output_flags, positive_float, print_json, retrigger_modes, run_fleet, size_ratio, span,
+    stamp_text, writable_dir)
+
+
+def add_parser(subparsers):
+    """The ``cclog replay`` sub-parser."""
+    p = subparsers.add_parser('replay', **command_help(
+        'the smart logger over a bag (windows around anomalies)',
+        """
+        Smart mode offline: feed the bag, as fast as it can be read, to the same SmartLogger the live node
+        runs, with the triggers of --config (the YAML file smart_logger.py reads: classifiers, rules) and/or
+        a classifier scoring --topic with --model. Every trigger saves --pre messages before and --post
+        after (counts or durations), with the --side-topic messages of that time span, as window files in
+        OUT; options given override the configuration. --json prints {input_messages, raw_json_bytes,
+        stored_bytes, windows: [{start, end, messages, path}]}; start/end are the header stamps (float
+        seconds) of the first and last message saved. A window that cannot be written (disk full) is retried
+        for a few seconds; then replay stops and exits 1 with one line naming OUT and how many windows and
+        messages were not written.
+        """,
+        """
+          cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
+          cclog replay crash.bag --topic /odom --model model.json --out logs --pre 2s --post 2s --json
+          cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
+          cclog replay run.bag --config robot.yaml --out logs --classify-every 1 --retrigger onset
+        """))
+    p.add_argument('bag', nargs='+', metavar='BAG', help='input bag; several, a directory (its *.bag) or a glob: '
+                   'one Dask task each, windows into OUT/<bag name>/')
+    p.add_argument('--config', metavar='YAML', help='configuration (topics, triggers, windows, format, limits): '
+                   'the file smart_logger.py reads; the options below override it')
+    p.add_argument('--topic', metavar='T', help="driving topic (the model's message type); needed without --config")
+    p.add_argument('--model', metavar='PATH', help='model file (cclog learn) of a classifier on --topic; needed '
+                   'without --config')
+    p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
+    p.add_argument('--pre', type=span('pre'), metavar='N|Ns',
+                   help='messages (100) or seconds (2s) kept before an anomaly (default: 100)')
+    p.add_argument('--post', type=span('post'), metavar='N|Ns',
+                   help='messages or seconds kept after the last anomaly (default: 100)')
+    p.add_argument('--format', choices=formats.names(), help='window file format (default: %s)' % formats.DEFAULT)
+    p.add_argument('--precision', metavar='FIELD=STEP,...',
+                   help="json-xz, lossy (opt-in): round fields to a step, e.g. 'pose.pose.position.*=1e-4,"
+                        "twist.twist.*=1e-5' (recorded in each window's metadata; default: lossless)")
+    p.add_argument('--side-topic', action='append', default=[], metavar='T',
+                   help='another topic to save inside the windows (repeatable)')
+    p.add_argument('--classify-every', type=span('classify-every'), metavar='N|Ns',
+                   help='score every N-th message or at most once per duration (default: 50ms)')
+    p.add_argument('--retrigger', choices=retrigger_modes(),
+                   help='event: the onset opens a window, extended while the newest rows are anomalous; every: '
+                   'every anomalous score extends a window; onset: only the onset (default: event)')
+    p.add_argument('--max-buffer-mb', type=positive_float('max-buffer-mb', zero=True),
+                   metavar='MB', help='memory budget of every message buffered (estimated); a window reaching it '
+                   'is written in parts; 0: none (default: %g)' % _max_buffer_mb())
+    p.add_argument('--sweep', action='append', default=[], metavar='KEY=V1,V2',
+                   help='evaluate every combination of these values (keys: threshold, pre, post, classify_every, '
+                   'retrigger; repeatable) over one reading of each bag: a table of windows, messages kept, bytes '
+                   'stored and, with <bag>.truth.json files, recall and false windows per hour; windows go to '
+                   'OUT/<bag name>/<configuration>/')
+    fleet_flags(p)
+    output_flags(p)
+    return p
+
+
+def run(args):
+    """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read, with the
+    triggers of ``--config`` and/or the classifier of ``--model`` on ``--topic``."""
+    from cc_log.offline import fleet
+    many = fleet_wanted(args, args.bag)
+    if not many:
+        args.bag = existing_file(args.bag[0], 'bag file')
+    if not args.config and (args.topic is None or args.model is None):
+        raise CommandError('replay: give --topic and --model, or --config (a configuration with triggers)')
+    if args.model is not None:
+        existing_file(args.model, 'model file')
+    if args.model is not None and args.topic is None:
+        raise CommandError('replay: --model needs --topic (the topic the model reads)')
+    flat = {'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
+            'precision': args.precision, 'driving_topic': args.topic,
+            'side_topics': [t for t in args.side_topic if t != args.topic],
+            'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
+                           'classify_every': args.classify_every, 'retrigger': args.retrigger}}
+    cfg = configuration(args, copy.deepcopy(flat))
+    if args.sweep:
+        return _sweep(args, flat, many)
+    if many:
+        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
+        with _cut_off_reported(args.out):
+            return _replay_many(args, cfg)
+    with _cut_off_reported(args.out), _bar(args, 'replay') as bar:
+        summary = fleet.replay_one(args.bag, args.out, cfg, bar.set, lambda path: writable_dir(path, 'out'))
+    result = collections.OrderedDict([
+        ('input_messages', summary['input_messages']),
+        ('raw_json_bytes', summary['raw_json_bytes']),
+        ('stored_bytes', summary['stored_bytes']),
+        ('windows', [collections.OrderedDict([('start', w['start']), ('end', w['end']),
+                                              ('messages', w['messages']), ('path', w['path'])])
+                     for w in summary['windows']]),
+        ('drift', [monitor.as_dict() for monitor in summary['drift']]),
+    ])
+    if args.json:
+        print_json(result)
+        return EXIT_OK
+    windows = result['windows']
+    saved = sum(window['messages'] for window in windows)
+    print('%s %s: %d messages in, %d saved in %d window(s) (%s files in %s)'
+          % (args.bag, summary['driving_topic'], result['input_messages'], saved, len(windows), cfg.format, args.out))
+    ratio = size_ratio(result['raw_json_bytes'], result['stored_bytes'])
+    print('  raw row-per-message JSON %s, stored %s%s' % (
+        human_bytes(result['raw_json_bytes']), human_bytes(result['stored_bytes']),
+        ' (%.1fx smaller)' % ratio if ratio else ''))
+    for number, window in enumerate(windows, 1):
+        print('  %3d  %s .. %s  %7.2f s  %6d msgs  %s' % (
+            number, stamp_text(window['start']), stamp_text(window['end']), window['end'] - window['start'],
+            window['messages'], window['path']))
+    for monitor in summary['drift']:
+        print('  %s' % monitor.report())
+    return EXIT_OK
+
+
+def _replay_many(args, cfg):
+    from cc_log.offline import fleet
+    bags = fleet.expand_bags(args.bag)
+    writable_dir(args.out, 'out')
+    outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
+        engine, bags, args.out, cfg, progress=progress))
+    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift'))
+    reports = {}
+    for row in rows:
+        row['windows'] = [collections.OrderedDict((key, w[key]) for key in ('start', 'end', 'messages', 'path'))
+                          for w in row.get('windows', ())]
+        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ()))
+        row['drift'] = [monitor.as_dict() for monitor in row.get('drift', ())]
+    good = [row for row in rows if 'error' not in row]
+    summary['windows'] = sum(len(row['windows']) for row in good)
+    summary['saved_messages'] = sum(w['messages'] for row in good for w in row['windows'])
+    summary['stored_bytes'] = sum(row['stored_bytes'] for row in good)
+    return fleet_end(args, summary, rows, ['%s: %d messages in, %d saved in %d window(s) (%s) -> %s%s' % (
+        row['bag'], row['input_messages'], sum(w['messages'] for w in row['windows']), len(row['windows']),
+        human_bytes(row['stored_bytes']), row['directory'], reports[row['bag']]) for row in good])
+
+
+def _sweep(args, flat, many):
+    """``replay --sweep``: every combination of the --sweep values over one reading of each bag; a table."""
+    from cc_log.offline import fleet
+    from cc_log.core.spans import Span
+    from cc_log.triggers import RETRIGGER_MODES
+    sweeps = []
+    for combination in fleet.parse_sweep(args.sweep):
+        options = copy.deepcopy(flat)
+        for key, value in combination.items():
+            if key in ('pre', 'post', 'classify_every'):
+                Span.parse(value, 'sweep: ' + key)
+                (options if key != 'classify_every' else options['classifier'])[key] = value
+            elif key == 'retrigger':
+                if value not in RETRIGGER_MODES:
+                    raise CommandError('sweep: retrigger: %r is not one of %s' % (value, ', '.join(RETRIGGER_MODES)))
+                options['classifier'][key] = value
+        threshold = combination.get('threshold')
+        if threshold is not None:
+            threshold = _number('sweep: threshold', threshold)
+        cfg = configuration(args, options)
+        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
+        sweeps.append(fleet.Sweep(fleet.sweep_label(combination), cfg, threshold))
+    bags = fleet.expand_bags(args.bag) if many else [args.bag]
+    writable_dir(args.out, 'out')
+    if not many:
+        args.workers = 0
+    outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.sweep_many(
+        engine, bags, args.out, sweeps, progress=progress))
+    rows = fleet_rows(outcomes, ('seconds', 'anomalies', 'rows'))
+    table = fleet.sweep_table([outcome.value for outcome in outcomes if outcome.ok])
+    summary['configurations'] = table
+    width = max([len('configuration')] + [len(line['label']) for line in table])
+    text = ['%-*s %8s %10s %6s %10s %7s %9s' % (width, 'configuration', 'windows', 'kept', 'kept%', 'stored',
+                                                'recall', 'false/h')]
+    for line in table:
+        text.append('%-*s %8d %10d %5.1f%% %10s %7s %9s' % (
+            width, line['label'], line['windows'], line['kept'], 100.0 * line['kept'] / max(line['messages'], 1),
+            human_bytes(line['stored_bytes']), '-' if line['recall'] is None else '%.2f' % line['recall'],
+            '-' if line['false_per_hour'] is None else '%.1f' % line['false_per_hour']))
+    return fleet_end(args, summary, rows, text)
+
+
+def _number(name, value):
+    try:
+        number = float(value)
+    except ValueError:
+        number = float('nan')
+    if not math.isfinite(number):
+        raise CommandError('%s: %r is not a number' % (name, value))
+    return number
+
+
+@contextlib.contextmanager
+def _cut_off_reported(directory):
+    """On Ctrl-C, one line per window file whose writing it cut off (a ``*.tmp-<pid>`` leftover below
+    ``directory``, kept for ``cclog recover``); the windows written before are whole under their final names."""
+    from cc_log.storage import recovery
+    try:
+        yield
+    except KeyboardInterrupt:
+        for root, _, _ in os.walk(directory):
+            for path in recovery.scan(root):
+                sys.stderr.write('%s replay: interrupted while writing %s (cclog recover makes it a window file)\n'
+                                 % (PROG, path))
+        raise
+
+
+def _max_buffer_mb():
+    from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB
+    return DEFAULT_MAX_BUFFER_MB

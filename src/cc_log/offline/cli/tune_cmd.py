@@ -1,0 +1,82 @@
+"""``cclog tune``: a model's threshold (and window, classify rate) for a false-window budget."""
+from cc_log.offline.progress import bar as _bar
+from cc_log.offline.cli.common import (
+    EXIT_OK, CommandError, command_help, existing_file, output_flags, parent_exists, positive_float, print_json,
+    retrigger_modes, span, spans)
+
+
+def add_parser(subparsers):
+    """The ``cclog tune`` sub-parser."""
+    p = subparsers.add_parser('tune', **command_help(
+        'set a model\'s threshold to a false-window budget on nominal bags',
+        """
+        Replay nominal bags through the classifier trigger the smart logger runs (--classify-every,
+        --retrigger), merge its fires into windows (--pre, --post) and lower the model's threshold until
+        the bags give at most --max-false-per-hour windows per hour; then inject one anomaly of every
+        simulator type into the first bag and report which the tuned model still catches. The model
+        written to --out records what it was tuned for (info.tuned). Figures on the tuning bags are
+        in-sample: check on other nominal bags with cclog replay.
+        """,
+        """
+          cclog tune --model model.json --bag nominal.bag --topic /odom --max-false-per-hour 1 --out tuned.json
+        """))
+    p.add_argument('--model', required=True, metavar='PATH', help='the model to tune (not changed)')
+    p.add_argument('--bag', required=True, action='append', metavar='BAG', help='a nominal bag (repeatable)')
+    p.add_argument('--topic', required=True, metavar='T', help="the model's driving topic in the bags")
+    p.add_argument('--max-false-per-hour', required=True, type=positive_float('max-false-per-hour', zero=True),
+                   metavar='N', help='false-window budget')
+    p.add_argument('--out', required=True, metavar='PATH', help='the tuned model file to write')
+    p.add_argument('--pre', type=span('pre'), default='2s', metavar='N|Ns', help='(default: %(default)s)')
+    p.add_argument('--post', type=span('post'), default='2s', metavar='N|Ns', help='(default: %(default)s)')
+    p.add_argument('--classify-every', type=spans('classify_every'), default=['50ms'], metavar='N|Ns[,...]',
+                   help='classify rate, or several to choose from (default: 50ms)')
+    p.add_argument('--windows', type=spans('windows'), default=None, metavar='W[,...]',
+                   help='feature windows to choose from, e.g. 1s,2s,5s (another window than the model\'s is trained '
+                        'on the bags; default: the model\'s)')
+    p.add_argument('--retrigger', choices=retrigger_modes(), default='event', help='(default: %(default)s)')
+    output_flags(p)
+    return p
+
+
+def run(args):
+    """Set a model's threshold, and with several --windows / --classify-every its feature window and classify
+    rate, to a false-window budget on nominal bags (``tuning.choose``); write it to --out."""
+    from cc_log.storage.bag import bagio
+    from cc_log.offline import fleet, tuning
+    from cc_log.core.model import AnomalyModel
+    model = AnomalyModel.load(existing_file(args.model, 'model file'))
+    for bag in args.bag:
+        existing_file(bag, 'bag file')
+        fleet.check_bag_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
+    parent_exists(args.out, 'out')
+    with _bar(args, 'tune').busy():
+        runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]
+        try:
+            model, record = tuning.choose(model, runs, args.topic, args.max_false_per_hour, args.windows,
+                                          args.classify_every, args.pre, args.post, args.retrigger, sources=args.bag)
+        except ValueError as error:
+            raise CommandError(str(error))
+    try:
+        model.save(args.out)
+    except OSError as error:
+        raise CommandError('out: cannot write %s: %s' % (args.out, error.strerror or error))
+    if args.json:
+        print_json(dict(record, out=args.out))
+        return EXIT_OK
+    if len(record['grid']) > 1:
+        for g in record['grid']:
+            print('window %-6s classify every %-6s threshold %-10.4g %6.1f false/h  %d caught, mean latency %s%s' % (
+                g['window'], g['classify_every'], g['threshold'], g['false_per_hour'], len(g['catches']),
+                '%.2f s' % g['mean_latency'] if g['mean_latency'] is not None else '-',
+                ' (trained on the bags)' if g['trained'] else ''))
+        print('chosen: window %s, classify every %s (%s)' % (
+            record['window'], record['classify_every'], record['chosen_by']))
+    print('%.3f h of nominal driving: %d false window(s) at threshold %.4g (%.1f/h), %d at %.4g (%.1f/h; budget '
+          '%g/h, measured on the tuning bags)' % (
+              record['hours'], record['false_windows_before'], record['threshold_before'],
+              record['false_windows_before'] / record['hours'], record['false_windows'], record['threshold'],
+              record['false_per_hour'], record['max_false_per_hour']))
+    print('still caught (one injected anomaly each): %s; missed: %s' % (
+        ', '.join(record['catches']) or 'none', ', '.join(record['misses']) or 'none'))
+    print('%-16s %s' % ('Saved', args.out))
+    return EXIT_OK
