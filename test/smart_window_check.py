@@ -309,7 +309,19 @@ class SmartWindowTest(unittest.TestCase):
         for key in rates[-1]:
             self.assertTrue(all(item[key] >= 0 for item in rates), key)
             self.assertGreater(max(item[key] for item in rates), 0, key)
+        sizes = [float(kv.value) for array in self.diagnostics for status in array.status
+                 if status.name == 'cc_log: %s' % NODE for kv in status.values if kv.key == 'MB/s /husky_odom']
+        self.assertTrue(sizes and max(sizes) > 0, sizes)  # MB per second of each topic too
+        self.assertTrue(status['last trigger'].startswith('manual: manual at '), status['last trigger'])
         self.assertTrue(rospy.ServiceProxy('/%s/enable' % NODE, SetBool)(True).success)
+
+    def test_4_cclog_top_shows_the_node_per_topic(self):
+        code, out, err = fx.finish(fx.start('cclog', 'top', '--once'), 60)
+        self.assertEqual(code, 0, err)
+        lines = out.splitlines()
+        self.assertTrue(any(line.startswith(NODE + '  [') for line in lines), out)
+        header = next(i for i, line in enumerate(lines) if line.split() == ['topic', 'Hz', 'MB/s', 'dropped'])
+        self.assertEqual(sorted(line.split()[0] for line in lines[header + 1:header + 3]), ['/husky_odom', '/imu'])
 
 
 if __name__ == '__main__':

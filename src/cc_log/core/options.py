@@ -36,6 +36,7 @@ from cc_log.triggers.classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER
 
 SMART, COLLECT, BOTH = ('smart',), ('collect',), ('smart', 'collect')
 MAX_TEXT = 1 << 20   # characters of a YAML value given as text (a launch argument)
+MAX_DIAGNOSTIC_PERIOD = 3600.0  # longest ``~diagnostic_period`` (a longer wait overflows the thread's timer)
 
 
 class Grammar(collections.namedtuple('Grammar', 'parse metavar text')):
@@ -269,7 +270,8 @@ OPTIONS = (
     _option('learn_online', '', BOOL, False, 'every classifier learns nominal online and refits in the '
             'background (saved beside the model)', SMART),
     _option('enabled', '', BOOL, True, 'start logging, or start paused (`~enable` service)', SMART),
-    _option('diagnostic_period', '', Grammar(number(0.0, 3600.0), 'SECONDS', 'seconds (0: off, at most 3600)'),
+    _option('diagnostic_period', '', Grammar(number(0.0, MAX_DIAGNOSTIC_PERIOD), 'SECONDS', 'seconds (0: off, at '
+                                             'most %g)' % MAX_DIAGNOSTIC_PERIOD),
             1.0, 'seconds of wall time between /diagnostics; 0 turns them off', BOTH),
     _option('intake_max_messages', '', Grammar(number(1, integer=True), 'N', 'a whole number >= 1'), 20000,
             'bound of the subscriber queue in messages; beyond it messages are counted as lost', SMART),

@@ -500,3 +500,13 @@ def brief(value, limit=BRIEF_CHARS):
     """A repr of ``value`` of at most ``limit`` characters (``...`` where cut), whatever its size."""
     text = _BRIEF.repr(value)
     return text if len(text) <= limit else text[:limit - 3] + '...'
+
+
+# control characters (a terminal escape sequence starts with one) and the bidirectional overrides
+_UNPRINTABLE = re.compile('[\x00-\x1f\x7f-\x9f\u200e\u200f\u202a-\u202e\u2066-\u2069]')
+
+
+def printable(text):
+    """``text`` with control characters shown as ``\\xNN`` / ``\\uNNNN``: names read from files or the network
+    (topics, reasons, paths) never reach a terminal as escape sequences."""
+    return _UNPRINTABLE.sub(lambda found: ascii(found.group())[1:-1], str(text))

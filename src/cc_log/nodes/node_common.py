@@ -14,7 +14,6 @@ diagnostics and the writer's part of their status.
 
 ROS edge (rospy).
 """
-import math
 import os
 import sys
 import threading
@@ -29,15 +28,10 @@ from cc_log.storage import log_format
 from cc_log.storage import recovery
 from cc_log.storage.directory import LoggingDirectory
 from cc_log.core import window_buffer
-from cc_log.core.spans import Span, megabytes
-from cc_log.core.topic_select import topic_list
 
 EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
 XMLRPC_INT = 2 ** 31               # XML-RPC integers are 32-bit signed
-MAX_DIAGNOSTIC_PERIOD = 3600.0     # longest ``~diagnostic_period`` (a longer wait overflows the thread's timer)
-# Largest values of numeric parameters, where the node's use of them has one (``Params.number``).
-MAXIMA = {'diagnostic_period': MAX_DIAGNOSTIC_PERIOD}
 DEFAULT_MAX_BUFFER_MB = window_buffer.DEFAULT_MAX_BUFFER_MB
 CLOSE_TIMEOUT = 10.0               # seconds to wait at shutdown for the last windows to be written: roslaunch
 #                                    sends SIGTERM 15 s after SIGINT (what is not written by then is counted in a
@@ -53,14 +47,10 @@ class ConfigError(ValueError):
 
 def to_bool(name, value):
     """A parameter value as a bool (``true``/``1``/``yes``/``on`` or the opposites); ConfigError otherwise."""
-    if isinstance(value, bool):
-        return value
-    text = str(value).strip().lower() if isinstance(value, (str, int)) else None
-    if text in ('true', '1', 'yes', 'on'):
-        return True
-    if text in ('false', '0', 'no', 'off'):
-        return False
-    raise ConfigError('~%s: %r is not true or false' % (name, value))
+    try:
+        return options.BOOL.parse(value, '~' + name)
+    except ValueError as error:
+        raise ConfigError(str(error))
 
 
 _SETTINGS = []  # [dict] once ``read_settings_only`` was called: the private parameters, not the master's
@@ -112,63 +102,6 @@ class Params(object):
             raise ConfigError('~%s: %r is not a string' % (name, value))
         return value
 
-    def scalar(self, name, default):
-        """A string or a number, as a string (``_rotate:=6000`` arrives as an int)."""
-        value = self.value(name, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-            raise ConfigError('~%s: %r is not a string or a number' % (name, value))
-        return str(value)
-
-    def choice(self, name, default, choices):
-        """One of ``choices`` (strings)."""
-        value = self.text(name, default)
-        if value not in choices:
-            raise ConfigError('~%s: %r is not one of: %s' % (name, value, ', '.join(choices)))
-        return value
-
-    def boolean(self, name, default):
-        """A bool (see ``to_bool``)."""
-        return to_bool(name, self.value(name, default))
-
-    def number(self, name, default, minimum=0.0, integer=False):
-        """A finite number >= ``minimum`` and <= its maximum in MAXIMA, if any (an int when ``integer``); a
-        numeric string is accepted."""
-        value = self.value(name, default)
-        number = float('nan')
-        if not isinstance(value, bool) and isinstance(value, (int, float, str)):
-            try:
-                number = float(value)
-            except (ValueError, OverflowError):
-                pass
-        if integer and math.isfinite(number) and number != int(number):
-            raise ConfigError('~%s: %r is not a whole number' % (name, value))
-        if not math.isfinite(number) or number < minimum:
-            raise ConfigError('~%s: %r must be a number >= %g' % (name, value, minimum))
-        if number > MAXIMA.get(name, math.inf):
-            raise ConfigError('~%s: %r must be a number <= %g' % (name, value, MAXIMA[name]))
-        return int(number) if integer else number
-
-    def megabytes(self, name, default, minimum=0.0):
-        """A byte size in MB >= ``minimum``: a number of MB (``64``) or a size with a unit (``64MB``, ``2GB``,
-        ``500kB``, ``1.5GiB``)."""
-        try:
-            size = megabytes(self.value(name, default), '~' + name)
-        except ValueError as error:
-            raise ConfigError(str(error))
-        if size < minimum:
-            raise ConfigError('~%s: %gMB is below the minimum of %gMB' % (name, size, minimum))
-        return size
-
-    def span(self, name, default):
-        """A message count (``100``) or a duration (``2s``) as a Span."""
-        value = self.value(name, default)
-        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-            raise ConfigError('~%s: %r is not a message count (100) or a duration (2s)' % (name, value))
-        try:
-            return Span.parse(value, '~' + name)
-        except ValueError as error:
-            raise ConfigError(str(error))
-
     def option(self, name):
         """The parameter of the option ``name`` (``core.options``) checked by its grammar; its declared default
         when it is not set."""
@@ -185,13 +118,6 @@ class Params(object):
         """``{name: checked value}`` of the configuration's options that are parameters of ``node`` (``'smart'``,
         ``'collect'``) and are set: they override the configuration file's keys."""
         return dict((o.name, self.option(o.name)) for o in options.for_node(node) if o.key and self.given(o.name))
-
-    def topics(self, name='topics', default=()):
-        """Topic names from a YAML list or a space/comma-separated string (duplicates removed)."""
-        try:
-            return topic_list(self.value(name, default), '~' + name)
-        except ValueError as error:
-            raise ConfigError(str(error))
 
 
 def _too_large(value):

@@ -10,6 +10,8 @@ import collections
 import sys
 import time
 
+from cc_log.core.safe_input import printable
+
 PREFIX = 'cc_log: '   # the name of every cc_log node's DiagnosticStatus
 LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 NODE_KEYS = (('windows opened', 'opened'), ('windows saved', 'saved'), ('last trigger', 'last trigger'),
@@ -44,15 +46,15 @@ def render(statuses):
     lines = []
     for name in sorted(statuses):
         level, message, values = statuses[name]
-        lines.append('%s  [%s] %s' % (name, LEVELS.get(level, level), message))
-        lines.append('  ' + '  '.join('%s %s' % (label, values.get(key, '-')) for key, label in NODE_KEYS))
+        lines.append(printable('%s  [%s] %s' % (name, LEVELS.get(level, level), message)))
+        lines.append(printable('  ' + '  '.join('%s %s' % (label, values.get(key, '-')) for key, label in NODE_KEYS)))
         rows = topics_of(values)
         if rows:
             width = max(len(topic) for topic in rows)
             lines.append('  %-*s %10s %10s %9s' % (width, 'topic', 'Hz', 'MB/s', 'dropped'))
             for topic in sorted(rows):
                 row = rows[topic]
-                lines.append('  %-*s %10s %10s %9s' % (width, topic, row['Hz'], row['MB/s'], row['dropped']))
+                lines.append(printable('  %-*s %10s %10s %9s' % (width, topic, row['Hz'], row['MB/s'], row['dropped'])))
     return lines or ['no cc_log node has published on /diagnostics yet']
 
 

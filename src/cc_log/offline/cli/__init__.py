@@ -26,7 +26,7 @@ import os
 import sys
 
 from cc_log.offline.cli import (cat_cmd, codecs_cmd, collect_cmd, export_cmd, info_cmd, learn_cmd, plot_cmd,
-                                recover_cmd, replay_cmd, simulate_cmd, stats_cmd, tune_cmd)
+                                recover_cmd, replay_cmd, simulate_cmd, stats_cmd, top_cmd, tune_cmd)
 from cc_log.offline.cli.common import (
     PROG, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, INTERRUPT_GRACE, CommandError, Parser, command_help)
 
@@ -34,7 +34,7 @@ __all__ = ['main', 'build_parser', 'COMMANDS', 'CommandError', 'Interrupt', 'INT
 
 # the commands, in the order of ``cclog --help``
 COMMANDS = (collect_cmd, learn_cmd, tune_cmd, replay_cmd, info_cmd, cat_cmd, export_cmd, codecs_cmd, plot_cmd,
-            simulate_cmd, recover_cmd, stats_cmd)
+            simulate_cmd, recover_cmd, stats_cmd, top_cmd)
 
 
 def build_parser():

@@ -5,10 +5,10 @@ import collections
 import json
 import math
 import os
-import re
 import sys
 import textwrap
 
+from cc_log.core.safe_input import printable
 from cc_log.offline import export
 from cc_log.offline.progress import bar as _bar
 
@@ -32,16 +32,6 @@ plain = export.plain
 def print_json(document):
     """``document`` as one line of JSON on stdout."""
     sys.stdout.write(json.dumps(plain(document), allow_nan=False, sort_keys=False) + '\n')
-
-
-# control characters (a terminal escape sequence starts with one) and the bidirectional overrides
-_UNPRINTABLE = re.compile('[\x00-\x1f\x7f-\x9f\u200e\u200f\u202a-\u202e\u2066-\u2069]')
-
-
-def printable(text):
-    """``text`` with control characters shown as ``\\xNN`` / ``\\uNNNN``: names read from files (topics,
-    reasons, paths) never reach the terminal as escape sequences."""
-    return _UNPRINTABLE.sub(lambda found: ascii(found.group())[1:-1], str(text))
 
 
 def say(text):
