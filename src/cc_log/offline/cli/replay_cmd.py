@@ -6,11 +6,11 @@ import math
 import os
 import sys
 
-from cc_log.storage import formats
+from cc_log.core import options
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
     PROG, EXIT_OK, CommandError, command_help, configuration, existing_file, fleet_end, fleet_flags, fleet_rows,
-    fleet_wanted, human_bytes, output_flags, positive_float, print_json, retrigger_modes, run_fleet, size_ratio, span,
+    fleet_wanted, human_bytes, output_flags, print_json, retrigger_modes, run_fleet, size_ratio, span,
     stamp_text, writable_dir)
 
 
@@ -43,14 +43,7 @@ def add_parser(subparsers):
     p.add_argument('--model', metavar='PATH', help='model file (cclog learn) of a classifier on --topic; needed '
                    'without --config')
     p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
-    p.add_argument('--pre', type=span('pre'), metavar='N|Ns',
-                   help='messages (100) or seconds (2s) kept before an anomaly (default: 100)')
-    p.add_argument('--post', type=span('post'), metavar='N|Ns',
-                   help='messages or seconds kept after the last anomaly (default: 100)')
-    p.add_argument('--format', choices=formats.names(), help='window file format (default: %s)' % formats.DEFAULT)
-    p.add_argument('--precision', metavar='FIELD=STEP,...',
-                   help="json-xz, lossy (opt-in): round fields to a step, e.g. 'pose.pose.position.*=1e-4,"
-                        "twist.twist.*=1e-5' (recorded in each window's metadata; default: lossless)")
+    options.add_flags(p, 'replay')  # --format, --precision, --pre, --post, --max-buffer-mb: core.options
     p.add_argument('--side-topic', action='append', default=[], metavar='T',
                    help='another topic to save inside the windows (repeatable)')
     p.add_argument('--classify-every', type=span('classify-every'), metavar='N|Ns',
@@ -58,9 +51,6 @@ def add_parser(subparsers):
     p.add_argument('--retrigger', choices=retrigger_modes(),
                    help='event: the onset opens a window, extended while the newest rows are anomalous; every: '
                    'every anomalous score extends a window; onset: only the onset (default: event)')
-    p.add_argument('--max-buffer-mb', type=positive_float('max-buffer-mb', zero=True),
-                   metavar='MB', help='memory budget of every message buffered (estimated); a window reaching it '
-                   'is written in parts; 0: none (default: %g)' % _max_buffer_mb())
     p.add_argument('--sweep', action='append', default=[], metavar='KEY=V1,V2',
                    help='evaluate every combination of these values (keys: threshold, pre, post, classify_every, '
                    'retrigger; repeatable) over one reading of each bag: a table of windows, messages kept, bytes '
@@ -84,11 +74,10 @@ def run(args):
         existing_file(args.model, 'model file')
     if args.model is not None and args.topic is None:
         raise CommandError('replay: --model needs --topic (the topic the model reads)')
-    flat = {'pre': args.pre, 'post': args.post, 'format': args.format, 'max_buffer_mb': args.max_buffer_mb,
-            'precision': args.precision, 'driving_topic': args.topic,
-            'side_topics': [t for t in args.side_topic if t != args.topic],
-            'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
-                           'classify_every': args.classify_every, 'retrigger': args.retrigger}}
+    flat = dict((option.name, getattr(args, option.name)) for option in options.for_command('replay'))
+    flat.update({'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
+                 'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
+                                'classify_every': args.classify_every, 'retrigger': args.retrigger}})
     cfg = configuration(args, copy.deepcopy(flat))
     if args.sweep:
         return _sweep(args, flat, many)
@@ -214,8 +203,3 @@ def _cut_off_reported(directory):
                 sys.stderr.write('%s replay: interrupted while writing %s (cclog recover makes it a window file)\n'
                                  % (PROG, path))
         raise
-
-
-def _max_buffer_mb():
-    from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB
-    return DEFAULT_MAX_BUFFER_MB
