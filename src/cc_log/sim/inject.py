@@ -10,7 +10,7 @@ import random
 
 from cc_log.sim import anomalies
 from cc_log.sim.anomalies import ANOMALY_TYPES, parse_anomaly_types
-from cc_log.sim.kinematics import BWIBOT_LIMITS, Limits, limit, limit_speed, limit_yaw, wrap
+from cc_log.sim.kinematics import BWIBOT_LIMITS, Limits, integrate, limit, limit_speed, limit_yaw, wrap
 from cc_log.sim.messages import yaw_of
 from cc_log.sim.truth import truth_entry
 
@@ -187,10 +187,7 @@ def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
                 cw = limit_yaw(cw, sw, limits, dt)
             sv, sw = cv, cw
             ov, ow = _with_noise(cv, cw, v[i], w[i], v_s[i], w_s[i])
-            heading = ayaw + 0.5 * ow * dt
-            ax += ov * dt * math.cos(heading)
-            ay += ov * dt * math.sin(heading)
-            ayaw += ow * dt
+            ax, ay, ayaw = integrate(ax, ay, ayaw, ov, ow, dt)
             out[i] = (ax, ay, ayaw, ov, ow)
         i += 1
     if kind == 'localization_jump':
@@ -202,10 +199,7 @@ def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
             sv = limit_speed(v_s[i], sv, limits, dt)
             sw = limit(w_s[i], sw, limits.max_yaw_accel, limits.max_yaw_accel, dt)
             ov, ow = _with_noise(sv, sw, v[i], w[i], v_s[i], w_s[i])
-            heading = ayaw + 0.5 * ow * dt
-            ax += ov * dt * math.cos(heading)
-            ay += ov * dt * math.sin(heading)
-            ayaw += ow * dt
+            ax, ay, ayaw = integrate(ax, ay, ayaw, ov, ow, dt)
             out[i] = (ax, ay, ayaw, ov, ow)
             i += 1
     if i >= n:

@@ -39,3 +39,9 @@ def limit_yaw(target, current, limits, dt):
     """Yaw rate limited in acceleration (max_yaw_accel) and in size (max_yaw_rate)."""
     return clamp(limit(target, current, limits.max_yaw_accel, limits.max_yaw_accel, dt),
                  -limits.max_yaw_rate, limits.max_yaw_rate)
+
+
+def integrate(x, y, yaw, v, w, dt):
+    """The pose (x, y, yaw) after driving at ``v`` m/s and turning at ``w`` rad/s for ``dt`` s (midpoint heading)."""
+    heading = yaw + 0.5 * w * dt
+    return x + v * dt * math.cos(heading), y + v * dt * math.sin(heading), yaw + w * dt

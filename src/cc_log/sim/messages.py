@@ -39,21 +39,17 @@ def yaw_of(q):
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
-_POSE_COVARIANCE = (1e-3, 0.0, 0.0, 0.0, 0.0, 0.0,
-                    0.0, 1e-3, 0.0, 0.0, 0.0, 0.0,
-                    0.0, 0.0, 1e6, 0.0, 0.0, 0.0,
-                    0.0, 0.0, 0.0, 1e6, 0.0, 0.0,
-                    0.0, 0.0, 0.0, 0.0, 1e6, 0.0,
-                    0.0, 0.0, 0.0, 0.0, 0.0, 0.03)
-_TWIST_COVARIANCE = (1e-3, 0.0, 0.0, 0.0, 0.0, 0.0,
-                     0.0, 1e-3, 0.0, 0.0, 0.0, 0.0,
-                     0.0, 0.0, 1e6, 0.0, 0.0, 0.0,
-                     0.0, 0.0, 0.0, 1e6, 0.0, 0.0,
-                     0.0, 0.0, 0.0, 0.0, 1e6, 0.0,
-                     0.0, 0.0, 0.0, 0.0, 0.0, 0.03)
-_IMU_ORIENTATION_COVARIANCE = (2.5e-3, 0.0, 0.0, 0.0, 2.5e-3, 0.0, 0.0, 0.0, 1e-2)
-_IMU_GYRO_COVARIANCE = (2.5e-5, 0.0, 0.0, 0.0, 2.5e-5, 0.0, 0.0, 0.0, 2.5e-5)
-_IMU_ACCEL_COVARIANCE = (2.5e-3, 0.0, 0.0, 0.0, 2.5e-3, 0.0, 0.0, 0.0, 2.5e-3)
+def _diagonal(*variances):
+    """A row-major covariance matrix (tuple) with ``variances`` on its diagonal."""
+    n = len(variances)
+    return tuple(variances[i // n] if i // n == i % n else 0.0 for i in range(n * n))
+
+
+_POSE_COVARIANCE = _diagonal(1e-3, 1e-3, 1e6, 1e6, 1e6, 0.03)   # x, y, z, roll, pitch, yaw
+_TWIST_COVARIANCE = _diagonal(1e-3, 1e-3, 1e6, 1e6, 1e6, 0.03)
+_IMU_ORIENTATION_COVARIANCE = _diagonal(2.5e-3, 2.5e-3, 1e-2)
+_IMU_GYRO_COVARIANCE = _diagonal(2.5e-5, 2.5e-5, 2.5e-5)
+_IMU_ACCEL_COVARIANCE = _diagonal(2.5e-3, 2.5e-3, 2.5e-3)
 _POSE_COVARIANCE_BYTES = struct.pack('<36d', *_POSE_COVARIANCE)
 _TWIST_COVARIANCE_BYTES = struct.pack('<36d', *_TWIST_COVARIANCE)
 _IMU_ORIENTATION_COVARIANCE_BYTES = struct.pack('<9d', *_IMU_ORIENTATION_COVARIANCE)

@@ -30,7 +30,7 @@ from cc_log.sim import anomalies, sensors
 from cc_log.sim.anomalies import MAX_ANOMALY_SECONDS
 from cc_log.sim.config import SimConfig
 from cc_log.sim.floor import FloorPlan, Path
-from cc_log.sim.kinematics import BWIBOT_LIMITS, clamp, limit_speed, limit_yaw, wrap
+from cc_log.sim.kinematics import BWIBOT_LIMITS, clamp, integrate, limit_speed, limit_yaw, wrap
 from cc_log.sim.messages import (ABORTED, ACTIVE, CMD_TOPIC, IMU_ITEM, IMU_TOPIC, ODOM_ITEM, ODOM_TOPIC,
                                  STATUS_TOPIC, SUCCEEDED, TRUTH_TOPIC, goal_status, message, ros_time, twist)
 from cc_log.sim.truth import truth_entry, truth_event
@@ -182,10 +182,7 @@ class Simulator(object):
 
         accel = (v_b - self.v) / dt
         # the true base
-        heading = self.yaw + 0.5 * w_b * dt
-        self.x += v_b * dt * math.cos(heading)
-        self.y += v_b * dt * math.sin(heading)
-        self.yaw += w_b * dt
+        self.x, self.y, self.yaw = integrate(self.x, self.y, self.yaw, v_b, w_b, dt)
         self.distance += abs(v_b) * dt
         self.v, self.w = v_b, w_b
 
@@ -195,10 +192,8 @@ class Simulator(object):
         meas_v = wheel_v * (1.0 + self._scale_v) + noise.gauss(0.0, self._sigma_v)
         meas_w = wheel_w * (1.0 + self._scale_w) + self._bias_w + noise.gauss(0.0, self._sigma_w)
         if plan is None or plan['type'] != 'wheels_slipping':
-            heading = self.odom_yaw + 0.5 * meas_w * dt
-            self.odom_x += meas_v * dt * math.cos(heading)
-            self.odom_y += meas_v * dt * math.sin(heading)
-            self.odom_yaw += meas_w * dt
+            self.odom_x, self.odom_y, self.odom_yaw = integrate(self.odom_x, self.odom_y, self.odom_yaw,
+                                                                meas_v, meas_w, dt)
         px, py, pyaw = self.odom_x, self.odom_y, self.odom_yaw
         if plan is not None and plan['type'] == 'localization_jump':
             dx, dy, dyaw = anomalies.jump_offset(plan, (k - active['start_tick']) * dt)
