@@ -61,7 +61,7 @@ def test_scan_ranges_are_the_distances_to_the_walls_of_the_floor_plan():
     assert beam(-60) == pytest.approx(2.5 / math.sin(math.radians(60)), abs=0.05)
     turned = bwi_sensors().ranges((-5.0, 10.0, math.pi / 2))
     assert turned[240] == pytest.approx(2.5, abs=0.05)               # facing north: the lab's north wall
-    corridor = bwi_sensors().ranges((20.0, 0.0, 0.0))                    # the south corridor, looking east
+    corridor = bwi_sensors().ranges((20.0, 0.0, 0.0))                # the south corridor, looking east
     assert math.isinf(corridor[240]) and corridor[60] == pytest.approx(1.2, abs=0.05)  # east wall: 21.2 m > 20 m
 
 
