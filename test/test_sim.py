@@ -12,6 +12,7 @@ import pytest
 
 from cc_log import sim
 from cc_log.core.records import Record
+from cc_log.sim import kinematics, messages
 
 HUSKY_ODOM = '/husky_velocity_controller/odom'
 LIMITS = sim.BWIBOT_LIMITS
@@ -35,9 +36,9 @@ class Track(object):
             self.t.append(stamp)
             self.x.append(msg.pose.pose.position.x)
             self.y.append(msg.pose.pose.position.y)
-            yaw = sim._yaw_of(msg.pose.pose.orientation)
+            yaw = messages.yaw_of(msg.pose.pose.orientation)
             if self.yaw:
-                yaw = self.yaw[-1] + sim._wrap(yaw - self.yaw[-1])
+                yaw = self.yaw[-1] + kinematics.wrap(yaw - self.yaw[-1])
             self.yaw.append(yaw)
             self.v.append(msg.twist.twist.linear.x)
             self.w.append(msg.twist.twist.angular.z)
@@ -251,8 +252,8 @@ def test_bag_bytes_are_genpy_bytes():
                                             anomaly_types='localization_jump'))
     topics = set()
     while not simulator.done:
-        for topic, stamp, item in simulator._advance():
-            assert sim._serialized(item) == serialize(sim._message(item)), topic
+        for topic, stamp, item in simulator.advance():
+            assert messages.serialized(item) == serialize(messages.message(item)), topic
             topics.add(topic)
     assert topics == {sim.ODOM_TOPIC, sim.IMU_TOPIC, sim.TRUTH_TOPIC}
 

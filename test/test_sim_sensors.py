@@ -1,4 +1,4 @@
-"""The simulated BWIBot's camera and laser scanner (cc_log.sim_sensors): rates, walls, determinism, collisions, bags."""
+"""The simulated BWIBot's camera and laser scanner (cc_log.sim.sensors): rates, walls, determinism, collisions, bags."""
 import hashlib
 import math
 
@@ -6,7 +6,7 @@ import numpy
 import pytest
 
 from cc_log import sim
-from cc_log.sim import sensors as sim_sensors
+from cc_log.sim import sensors
 
 RED = (150, 60)  # a pixel is the obstacle's red when R > 150 and G, B < 60
 
@@ -26,8 +26,8 @@ def collision_run():
     return run(config)
 
 
-def sensors():
-    return sim_sensors.Sensors(sim.FloorPlan.bwi_floor(), seed=0, rate=100.0)
+def bwi_sensors():
+    return sensors.Sensors(sim.FloorPlan.bwi_floor(), seed=0, rate=100.0)
 
 
 def test_the_default_simulator_publishes_no_camera_and_no_scan():
@@ -54,19 +54,19 @@ def test_images_at_15_hz_and_scans_at_10_hz_of_the_right_shape(collision_run):
 
 def test_scan_ranges_are_the_distances_to_the_walls_of_the_floor_plan():
     # the lab is a 5 m box around (-5, 10); its door (1 m wide) opens east onto the west corridor (x <= 1.2)
-    ranges = sensors().ranges((-5.0, 10.0, 0.0))
+    ranges = bwi_sensors().ranges((-5.0, 10.0, 0.0))
     beam = lambda degrees: ranges[int(round((degrees + 120) * 2))]  # noqa: E731
     assert beam(90) == pytest.approx(2.5, abs=0.05) and beam(-90) == pytest.approx(2.5, abs=0.05)
     assert beam(0) == pytest.approx(6.2, abs=0.05)                   # through the door to the corridor's far wall
     assert beam(-60) == pytest.approx(2.5 / math.sin(math.radians(60)), abs=0.05)
-    turned = sensors().ranges((-5.0, 10.0, math.pi / 2))
+    turned = bwi_sensors().ranges((-5.0, 10.0, math.pi / 2))
     assert turned[240] == pytest.approx(2.5, abs=0.05)               # facing north: the lab's north wall
-    corridor = sensors().ranges((20.0, 0.0, 0.0))                    # the south corridor, looking east
+    corridor = bwi_sensors().ranges((20.0, 0.0, 0.0))                # the south corridor, looking east
     assert math.isinf(corridor[240]) and corridor[60] == pytest.approx(1.2, abs=0.05)  # east wall: 21.2 m > 20 m
 
 
 def test_the_image_shows_where_the_robot_is():
-    camera = sensors()
+    camera = bwi_sensors()
     lab = camera.render((-5.0, 10.0, 0.0))
     assert lab.shape == (240, 320, 3) and lab.dtype == numpy.uint8
     moved = camera.render((-4.0, 10.0, 0.0))
@@ -81,7 +81,7 @@ def test_the_same_seed_gives_the_same_frames_and_scans():
 
     def digest(seed):
         items, _ = run(sim.SimConfig(seed=seed, **config))
-        return hashlib.sha256(b''.join(sim._serialized(msg) for topic, _, msg in items
+        return hashlib.sha256(b''.join(sim.serialized(msg) for topic, _, msg in items
                                        if topic in (sim.CAMERA_TOPIC, sim.SCAN_TOPIC))).hexdigest()
     assert digest(1) == digest(1) != digest(2)
 
@@ -107,7 +107,7 @@ def test_simulate_to_bag_writes_the_frames_and_scans(tmp_path):
     config = sim.SimConfig(minutes=0.1, anomalies=0, camera=True, scan=True, seed=4)
     path = str(tmp_path / 'run.bag')
     sim.simulate_to_bag(path, config)
-    expected = [(topic, sim._serialized(msg)) for topic, _, msg in run(sim.SimConfig(**dict(
+    expected = [(topic, sim.serialized(msg)) for topic, _, msg in run(sim.SimConfig(**dict(
         config.to_dict(), anomaly_types=tuple(config.anomaly_types))))[0]]
     with rosbag.Bag(path) as bag:
         info = bag.get_type_and_topic_info().topics

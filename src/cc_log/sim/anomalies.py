@@ -1,0 +1,156 @@
+"""The anomaly kinds and their models, shared by the simulator (``world``) and ``inject``.
+
+Anomalies (``ANOMALY_TYPES``), each a separate event with nominal driving (at least ``gap`` seconds)
+between events:
+
+- ``planning_failure``: the planner oscillates back and forth or spins in place instead of progressing
+  (within the base's limits).
+- ``collision``: the base stops dead (deceleration far above the limit), then stands still for seconds.
+- ``sudden_acceleration``: the base surges (several m/s^2) well above its top speed, then brakes back.
+- ``excessive_twisting``: the yaw rate oscillates with large amplitude (yaw acceleration far above the
+  limit) while the base drives on.
+- ``localization_jump``: the odometry pose jumps (metres, tens of degrees), once or twice, and jumps back
+  at the end, while the twist stays smooth.
+- ``wheels_slipping``: the wheels keep turning (the twist says the base is moving) while the pose does not
+  move.
+
+A model is a plan (``draw_plan``: durations in seconds, so any rate works) and the twist it makes the base
+drive ``tau`` seconds in (``command``; ``jump_offset`` for the pose of a localization jump). The ground truth
+of the anomalies is ``truth``'s.
+"""
+import math
+
+from cc_log.sim.kinematics import BWIBOT_LIMITS
+
+ANOMALY_TYPES = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting',
+                 'localization_jump', 'wheels_slipping')
+MAX_ANOMALY_SECONDS = 10.0   # no anomaly's active phase lasts longer (simulator)
+NEEDS_MOTION = ('collision', 'sudden_acceleration', 'excessive_twisting', 'wheels_slipping')  # start where it drives
+MOVES_BASE = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting')  # change the twist
+
+
+def parse_anomaly_types(value, name='anomaly_types'):
+    """Anomaly types from a list/tuple or a comma-separated string ('all' or '' = every type).
+
+    Returns a tuple; raises ValueError naming ``name`` on an unknown type.
+    """
+    if value is None:
+        return ANOMALY_TYPES
+    if isinstance(value, str):
+        text = value.strip()
+        if text in ('', 'all'):
+            return ANOMALY_TYPES
+        items = [item.strip() for item in text.split(',') if item.strip()]
+    else:
+        items = [str(item).strip() for item in value]
+    if not items:
+        raise ValueError('%s: no anomaly type given (choose from %s)' % (name, ', '.join(ANOMALY_TYPES)))
+    for item in items:
+        if item not in ANOMALY_TYPES:
+            raise ValueError('%s: unknown anomaly type %r (choose from %s)'
+                             % (name, item, ', '.join(ANOMALY_TYPES)))
+    return tuple(items)
+
+
+def draw_plan(kind, rng, v0, scale=None):
+    """Draw the parameters of one anomaly of ``kind`` (durations in seconds, so any rate works).
+
+    ``v0`` is the speed at the start. ``scale``: a robot's nominal envelope (``Limits``); the magnitudes are
+    then the BWIBot's multiplied by the envelope's ratio to ``BWIBOT_LIMITS`` (None: the BWIBot's, unchanged).
+    Returns a dict with at least 'type' and 'duration'.
+    """
+    def ratio(field):
+        return 1.0 if scale is None else float(getattr(scale, field)) / getattr(BWIBOT_LIMITS, field)
+
+    plan = {'type': kind}
+    if kind == 'planning_failure':
+        plan['variant'] = rng.choice(('spin', 'oscillate'))
+        plan['duration'] = rng.uniform(5.0, 9.0)
+        plan['direction'] = rng.choice((-1.0, 1.0))
+        plan['yaw_rate'] = rng.uniform(0.7, 0.95) * ratio('max_yaw_rate')   # within the limit
+        plan['speed'] = rng.uniform(0.2, 0.3) * ratio('max_speed')          # oscillation amplitude
+        plan['period'] = rng.uniform(1.6, 2.4)
+    elif kind == 'collision':
+        plan['stop_time'] = rng.uniform(0.03, 0.06)                     # v0 -> 0 in tens of ms
+        if scale is not None:   # the deceleration of that stop from the BWIBot's top speed, in the robot's ratio
+            decel = BWIBOT_LIMITS.max_speed / plan['stop_time'] * ratio('max_decel')
+            plan['stop_time'] = max(max(v0, 0.0) / decel, 1e-3)
+        plan['duration'] = rng.uniform(3.0, 6.0)
+    elif kind == 'sudden_acceleration':
+        plan['accel'] = rng.uniform(3.0, 5.0) * ratio('max_accel')
+        plan['peak'] = min(max(v0, 0.0) + rng.uniform(0.9, 1.3) * ratio('max_speed'), 2.2 * ratio('max_speed'))
+        plan['rise'] = (plan['peak'] - max(v0, 0.0)) / plan['accel']
+        plan['hold'] = rng.uniform(0.5, 1.0)
+        plan['brake'] = rng.uniform(2.0, 3.0) * ratio('max_decel')
+        plan['duration'] = plan['rise'] + plan['hold'] + plan['peak'] / plan['brake'] + 0.2
+    elif kind == 'excessive_twisting':
+        plan['amplitude'] = rng.uniform(1.5, 2.2) * ratio('max_yaw_rate')   # rad/s on top of the nominal rate
+        plan['frequency'] = rng.uniform(1.0, 1.5)
+        plan['duration'] = rng.randint(4, 7) / plan['frequency']        # whole cycles
+    elif kind == 'localization_jump':
+        plan['duration'] = rng.uniform(2.0, 4.0)
+        jumps = rng.randint(1, 2)
+        offsets = []
+        for index in range(jumps):
+            distance = rng.uniform(0.6, 2.0) * ratio('max_speed')   # 0.6-2 s of top speed
+            bearing = rng.uniform(-math.pi, math.pi)
+            yaw = rng.choice((-1.0, 1.0)) * min(rng.uniform(0.1, 0.45) * ratio('max_yaw_rate'), 0.5 * math.pi)
+            offsets.append((index * plan['duration'] / jumps,
+                            (distance * math.cos(bearing), distance * math.sin(bearing), yaw)))
+        plan['offsets'] = offsets
+    elif kind == 'wheels_slipping':
+        plan['duration'] = rng.uniform(3.0, 6.0)
+    else:
+        raise ValueError('anomaly_types: unknown anomaly type %r' % (kind,))
+    return plan
+
+
+def command(plan, tau, v0, w0, v_nom, w_nom):
+    """The base's twist ``tau`` seconds into an anomaly.
+
+    ``v0, w0``: twist at its start; ``v_nom, w_nom``: what nominal driving would do now. Returns
+    ``(v, w, limited)``; ``limited`` means the command still goes through the base's acceleration limits.
+    """
+    kind = plan['type']
+    if kind == 'planning_failure':
+        if plan['variant'] == 'spin':
+            return 0.0, plan['direction'] * plan['yaw_rate'], True
+        phase = 2.0 * math.pi * tau / plan['period']
+        return (plan['speed'] * math.sin(phase),
+                plan['direction'] * plan['yaw_rate'] * (1.0 if math.cos(phase) >= 0 else -1.0), True)
+    if kind == 'collision':
+        f = max(0.0, 1.0 - tau / plan['stop_time'])
+        return v0 * f, w0 * f, False
+    if kind == 'sudden_acceleration':
+        start = max(v0, 0.0)
+        if tau < plan['rise']:
+            v = start + plan['accel'] * tau
+        elif tau < plan['rise'] + plan['hold']:
+            v = plan['peak']
+        else:
+            v = max(v_nom, plan['peak'] - plan['brake'] * (tau - plan['rise'] - plan['hold']))
+        return v, w_nom, False
+    if kind == 'excessive_twisting':
+        return v_nom, w_nom + plan['amplitude'] * math.sin(2.0 * math.pi * plan['frequency'] * tau), False
+    return v_nom, w_nom, False  # localization_jump, wheels_slipping: the base drives on as commanded
+
+
+def jump_offset(plan, tau):
+    """Pose offset (dx, dy, dyaw) of a localization jump ``tau`` seconds in; None for other types."""
+    if plan['type'] != 'localization_jump':
+        return None
+    current = (0.0, 0.0, 0.0)
+    for at, offset in plan['offsets']:
+        if tau >= at:
+            current = offset
+    return current
+
+
+def schedule_types(types, count, rng):
+    """``count`` anomaly types: seeded shuffles of ``types``, one after another."""
+    order = []
+    while len(order) < count:
+        cycle = list(types)
+        rng.shuffle(cycle)
+        order.extend(cycle)
+    return order[:count]
