@@ -23,7 +23,7 @@ def originals():
     """Serialized records in stamp order: 2 s of the simulated BWIBot with camera and scan, and the Husky's
     odometry and IMU (whose publisher latches) after them."""
     simulator = sim.Simulator(sim.SimConfig(minutes=2.0 / 60, anomalies=0, camera=True, scan=True, seed=2))
-    records = [Record(stamp, topic, msg, 0, sim._serialized(msg)) for topic, stamp, msg in simulator.messages()]
+    records = [Record(stamp, topic, msg, 0, sim.serialized(msg)) for topic, stamp, msg in simulator.messages()]
     husky = list(bag_reader.read_raw(real_data(HUSKY), [ODOM, IMU]))[:200]
     latched = dict(next(r for r in husky if r.topic == IMU).connection, latching='1', callerid='/imu_node')
     shift = records[-1].stamp + 1.0 - husky[0].stamp

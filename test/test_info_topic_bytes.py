@@ -23,7 +23,7 @@ def test_info_gives_the_serialized_bytes_of_each_topic(tmp_path, fmt):
                                       str(tmp_path), fmt)
     expected = {}
     for topic, _, msg in items:
-        expected[topic] = expected.get(topic, 0) + len(sim._serialized(msg))
+        expected[topic] = expected.get(topic, 0) + len(sim.serialized(msg))
     (window,) = json.loads(ok('info', path, '--json'))['windows']
     assert window['topic_bytes'] == expected
     assert expected[sim.CAMERA_TOPIC] == 15 * (320 * 240 * 3 + 52)    # 15 frames: pixels + Image's other fields

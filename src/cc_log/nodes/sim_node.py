@@ -10,7 +10,7 @@ Published topics (relative names: push the node into a namespace or remap them)
   ``cmd_vel`` (geometry_msgs/Twist, the planner's command) and ``move_base/status``
   (actionlib_msgs/GoalStatusArray) when ``~commands`` is true (see ``cc_log.sim``).
   ``camera/image_raw`` (sensor_msgs/Image, rgb8 320x240, 15 Hz) when ``~camera`` is true and ``scan``
-  (sensor_msgs/LaserScan, 10 Hz) when ``~scan`` is true: ray-cast from the simulated pose (``cc_log.sim_sensors``).
+  (sensor_msgs/LaserScan, 10 Hz) when ``~scan`` is true: ray-cast from the simulated pose (``cc_log.sim.sensors``).
   ``sim/anomaly`` (std_msgs/String, JSON): ground truth, one message when an anomaly starts
   ``{"event": "start", "type", "start", "end": null}`` and one when it ends
   ``{"event": "end", "type", "start", "end"}``; stamps are those of the odometry published at that moment.
@@ -135,7 +135,7 @@ class SimNode(object):
         finally:
             if self._open:   # anomalies cut short by the end of the run or shutdown
                 for sim_start, (kind, start) in sorted(self._open.items()):
-                    self.truth.append(sim._truth_entry(kind, start, last if last is not None else start))
+                    self.truth.append(sim.truth_entry(kind, start, last if last is not None else start))
                 self._open.clear()
                 self._write_truth()
         rospy.loginfo('%s: published %d odometry messages, %d anomalies', NODE_NAME, self.published,
@@ -144,11 +144,11 @@ class SimNode(object):
     def _truth_event(self, event, now):
         if event['event'] == 'start':
             self._open[event['start']] = (event['type'], now)
-            entry = sim._truth_entry(event['type'], now, None)
+            entry = sim.truth_entry(event['type'], now, None)
             rospy.loginfo('anomaly %s starts at %.3f', event['type'], now)
         else:
             kind, start = self._open.pop(event['start'], (event['type'], now))
-            entry = sim._truth_entry(kind, start, now)
+            entry = sim.truth_entry(kind, start, now)
             self.truth.append(entry)
             rospy.loginfo('anomaly %s ends at %.3f (%.1f s)', kind, now, now - start)
             self._write_truth()

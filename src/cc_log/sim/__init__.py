@@ -40,7 +40,3 @@ __all__ = [
     'parse_anomaly_types', 'serialized', 'simulate_to_bag', 'truth_entry', 'truth_event', 'truth_path',
     'write_truth',
 ]
-
-# the earlier spellings, still used by the ROS node (sim_node) and tests
-_serialized = serialized
-_truth_entry = truth_entry
