@@ -40,7 +40,7 @@ from cc_log.core.spans import Span, megabytes
 from cc_log.triggers import get as trigger_kind
 from cc_log.triggers.base import Context, check_name
 from cc_log.triggers.classifier import default_topics
-from cc_log.core.topic_select import TopicSelection
+from cc_log.core.topic_select import TopicSelection, topic_list  # noqa: F401  (config.topic_list: node_common)
 from cc_log.core.window_buffer import TopicLimits
 
 KEYS = ('topics', 'topic_limits', 'driving_topic', 'format', 'json_xz', 'windows', 'limits', 'collect', 'triggers')
@@ -323,23 +323,6 @@ def _mapping(value, name, keys):
         return {}
     _known(value, keys, name + ': ')
     return value
-
-
-def topic_list(value, name):
-    """Topic names from a list or a space/comma-separated string (duplicates removed); ValueError('<name>: ...')."""
-    if isinstance(value, str):
-        items = value.replace(',', ' ').split()
-    elif isinstance(value, (list, tuple)):
-        items = list(value)
-    else:
-        raise ValueError('%s: %s is not a list of topic names' % (name, brief(value)))
-    out = []
-    for item in items:
-        if not isinstance(item, str) or not item.strip():
-            raise ValueError('%s: %s is not a topic name' % (name, brief(item)))
-        if item.strip() not in out:
-            out.append(item.strip())
-    return out
 
 
 def _check_pre(entry, index, held):

@@ -30,7 +30,7 @@ except ImportError:  # pragma: no cover
 
 from cc_log.core.safe_input import brief
 
-__all__ = ['TopicSelection', 'ALL', 'REGEX', 'EXCLUDE']
+__all__ = ['TopicSelection', 'topic_list', 'ALL', 'REGEX', 'EXCLUDE']
 
 ALL = '*'
 REGEX = 're:'
@@ -170,3 +170,20 @@ class TopicSelection(object):
         if self.exclude:
             text += ' except ' + ', '.join('re:' + pattern.pattern for pattern in self.exclude)
         return text
+
+
+def topic_list(value, name):
+    """Topic names from a list or a space/comma-separated string (duplicates removed); ValueError('<name>: ...')."""
+    if isinstance(value, str):
+        items = value.replace(',', ' ').split()
+    elif isinstance(value, (list, tuple)):
+        items = list(value)
+    else:
+        raise ValueError('%s: %s is not a list of topic names' % (name, brief(value)))
+    out = []
+    for item in items:
+        if not isinstance(item, str) or not item.strip():
+            raise ValueError('%s: %s is not a topic name' % (name, brief(item)))
+        if item.strip() not in out:
+            out.append(item.strip())
+    return out

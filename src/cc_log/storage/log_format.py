@@ -21,12 +21,13 @@ import os
 import re
 
 from cc_log import __version__
-from cc_log.storage import formats
+from cc_log.storage import formats, payload_check
 from cc_log.core import msg_codec
 from cc_log.core import raw_message
 from cc_log.core import safe_files, safe_input
 
 PREFIX = 'cc_log_'
+CONTEXT_PREFIX = PREFIX + 'context_'  # a context-track file (``context_track``: a plain rosbag, not a window)
 TMP_MARK = safe_files.TMP_MARK
 KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
 FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
@@ -245,9 +246,11 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
     ``metadata`` (JSON-able dict) is added to ``window_metadata``. Records held as serialized bytes are
     decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``), by the format's own
     ``decoded_records`` when it has one (json-xz reads fixed layouts from the bytes); one that cannot be
-    decoded is left out and counted in the metadata's ``undecodable`` and, per topic, ``undecodable_topics``
-    (and added to ``left_out``, a ``collections.Counter``, when given). Raises ValueError for a bad format or
-    an empty window, OSError when the file cannot be written (the temporary file is removed).
+    decoded (or whose bytes are not of its connection's type) is left out and counted in the metadata's
+    ``undecodable`` and, per topic, ``undecodable_topics`` and ``dropped`` (and added to ``left_out``, a
+    ``collections.Counter``, when given); a format writing bytes refuses those whose bytes are not of their
+    connection's type, counted in ``dropped``. Raises ValueError for a bad format or an empty window, OSError
+    when the file cannot be written (the temporary file is removed).
     """
     module = formats.get(fmt)
     if not window.records:
@@ -264,6 +267,7 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
         topics.subtract(record.topic for record in records)
         meta['undecodable'] = undecodable
         meta['undecodable_topics'] = {topic: count for topic, count in topics.items() if count}
+        meta = payload_check.with_dropped(meta, meta['undecodable_topics'])
         if left_out is not None:
             left_out.update(meta['undecodable_topics'])
     base = base or base_name(window)

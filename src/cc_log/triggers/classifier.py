@@ -18,6 +18,7 @@ from cc_log import features
 from cc_log.core import online_learning
 from cc_log.features import FeatureStream
 from cc_log.core.spans import Span
+from cc_log.core.topic_select import topic_list
 from cc_log.triggers.base import Trigger, register
 
 # Which anomalous scores fire:
@@ -45,7 +46,6 @@ DEFAULT_CLASSIFY_EVERY = '50ms'
 def default_topics(topics, feature_set, resolve):
     """The resolved topics of a classifier: ``topics`` (a list or a space-separated string), else the role
     names of its feature set's inputs (``odom``, ``imu``, ``cmd_vel``)."""
-    from cc_log.core.config import topic_list
     if topics is None:
         topics = [role for role, _ in features.get(feature_set).inputs]
     return [resolve(topic) for topic in topic_list(topics, 'topics')]
