@@ -58,17 +58,18 @@ def _score(value):
     return msg_codec.encode_float(float(value))
 
 
-def window_metadata(window, codec, extra=None):
+def window_metadata(window, codec, extra=None, triggers=None):
     """The metadata every window file carries; keys of ``extra`` (JSON-able) are added, overriding.
 
     topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the
     first/last record), start_utc/end_utc, triggers ([{stamp, reason, score, name}]; name only for
     triggers that have one), reasons and names (distinct, in order: every trigger of the window), part (0, or
-    1, 2, ... for a split window), codec, cc_log_version.
+    1, 2, ... for a split window), codec, cc_log_version. ``triggers``: those to say (default: the window's).
     """
     contents = Contents()
     contents.add(window.records)
-    return contents.metadata(window.triggers, getattr(window, 'part', 0), codec, extra)
+    return contents.metadata(window.triggers if triggers is None else triggers, getattr(window, 'part', 0), codec,
+                             extra)
 
 
 class Contents(object):
@@ -238,10 +239,12 @@ def final_names(directory, base, extension):
         counter += 1
 
 
-def write_window(window, directory, fmt, metadata=None, base=None, left_out=None):
+def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
 
     ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
+    ``triggers``: those its metadata says (default: the window's; a part of a window written as a file per part
+    says those that came since the part before it, while its name is the window's first trigger's).
 
     ``metadata`` (JSON-able dict) is added to ``window_metadata``. Records held as serialized bytes are
     decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``), by the format's own
@@ -261,7 +264,7 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
         records, undecodable = getattr(module, 'decoded_records', raw_message.decoded_records)(records)
         if not records:
             raise ValueError('window: none of its %d records can be decoded' % undecodable)
-    meta = window_metadata(window, fmt, metadata)
+    meta = window_metadata(window, fmt, metadata, triggers)
     if undecodable:
         topics = collections.Counter(record.topic for record in window.records)
         topics.subtract(record.topic for record in records)

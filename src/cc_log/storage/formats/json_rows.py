@@ -11,7 +11,6 @@ import operator
 import numpy
 
 from cc_log.core import msg_codec, raw_message
-from cc_log.storage import payload_check
 
 
 # -- columns --------------------------------------------------------------------------------------------
@@ -138,19 +137,14 @@ def all_equal(header_stamps, stamps):
 
 def decoded_records(records):
     """``raw_message.decoded_records`` for this writer: a record of serialized bytes that ``document`` reads
-    in bulk (a ``raw_message.layout`` type whose bytes fit it) stays as it is; the others are decoded. One whose
-    bytes are not exactly a message of its connection's type (``payload_check``), or that cannot be decoded, is
-    left out and counted: ``(records, how many were left out)``."""
-    check = payload_check.PayloadCheck()
+    in bulk (a ``raw_message.layout`` type whose bytes fit it) stays as it is; the others are decoded (those
+    that cannot be are counted)."""
     raws = {}  # class -> indices of its records in bytes
     kept = list(records)
     bad = set()
     classes = {}
     for index, record in enumerate(kept):
         if record.msg is None and record.raw is not None:
-            if check.refused(record):
-                bad.add(index)
-                continue
             try:
                 cls = class_of(record, classes)
             except raw_message.DECODE_ERRORS:
