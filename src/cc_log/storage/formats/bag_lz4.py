@@ -18,8 +18,12 @@ window metadata is a JSON object in one ``std_msgs/String`` message on
   checksum of its own: without it a flipped bit in a message reads back as a different value. ``read``
   refuses a file whose records do not match it (layout 1 files, written before it, are read without it).
 
+A record held as bytes that are not exactly one message of its connection's type (a buggy publisher; two
+types on one topic in a replayed bag: ``payload_check``) is refused, so that rosbag reads every message of the
+file; the refused are counted per topic in the metadata's ``dropped`` (with messages shed before the writer).
+
 The file is the bag rosbag would write for the same messages, byte for byte, written without rosbag
-(``formats.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
+(``bag.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
 (``read``, ``write_record``), so importing cc_log.bag_lz4 costs nothing.
 """
 import collections
