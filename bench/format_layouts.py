@@ -45,7 +45,7 @@ except ImportError:
     sys.path.insert(0, os.path.join(ROOT, 'src'))
     import cc_log
 from cc_log.core import msg_codec  # noqa: E402
-from cc_log.storage.formats import json_xz  # noqa: E402
+from cc_log.storage.formats import json_rows, json_xz  # noqa: E402
 from cc_log.core.records import Record  # noqa: E402
 
 BAGS = [
@@ -143,7 +143,7 @@ def _variant(records, split_arrays, constants):
                         columns['%s[%d]' % (key, index)] = [value[index] for value in values]
         rows = [dict((key, values[i]) for key, values in columns.items()) for i in range(section['count'])]
         if constants:
-            section['constant'], section['columns'] = json_xz._columns(rows)
+            section['constant'], section['columns'] = json_rows.columns_of(rows)
         else:
             section['constant'], section['columns'] = {}, columns
         section['delta'] = [key for key in section.get('delta', ()) if key in section['columns']]
@@ -175,7 +175,7 @@ def binary_floor(records):
     import struct
     columns = {}
     for record in records:
-        for key, value in json_xz._flatten(msg_codec.to_dict(record.msg), '', {}).items():
+        for key, value in json_rows.flatten(msg_codec.to_dict(record.msg), '', {}).items():
             columns.setdefault(key, []).append(value)
     blob = bytearray()
     for key, values in columns.items():

@@ -17,7 +17,7 @@ import pytest
 from cc_log.storage.bag import bag_reader
 from cc_log.storage import log_format
 from cc_log.core import msg_codec, raw_message
-from cc_log.storage.formats import json_xz
+from cc_log.storage.formats import json_deltas, json_xz
 from cc_log.core.records import LogWindow, Record
 
 REAL = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..', 'shared', 'data', 'real'))
@@ -308,9 +308,9 @@ def test_bulk_digits_and_texts():
     decimals = [value for value in decimals if len(value.as_tuple().digits) <= 400]  # what differences holds
     for start in range(0, len(texts), 7):
         part = texts[start:start + rng.randint(1, 30)]
-        assert json_xz._digit_sum(part) == sum(map(json_xz._digits, part)), part
+        assert json_deltas._digit_sum(part) == sum(map(json_deltas._digits, part)), part
     for start in range(0, len(decimals), 7):
         part = decimals[start:start + rng.randint(1, 30)]
-        made = json_xz._decimal_texts(part)
+        made = json_deltas.decimal_texts(part)
         assert made == list(map(json_xz.decimal_text, part)), part
-        assert json_xz._digit_sum(made) == sum(map(json_xz._digits, made)), made
+        assert json_deltas._digit_sum(made) == sum(map(json_deltas._digits, made)), made

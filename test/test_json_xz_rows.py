@@ -12,7 +12,7 @@ from nav_msgs.msg import Odometry
 from std_msgs.msg import Empty, Float32MultiArray, Header
 
 from cc_log.core import msg_codec
-from cc_log.storage.formats import json_xz
+from cc_log.storage.formats import json_rows, json_xz
 from cc_log.core.records import Record
 
 BAGS = ('husky_outdoor_2015.bag', 'f1tenth_DS1.bag', 'icelab_normal_plan.bag', 'alfa_carbonZ_engine_failure.bag')
@@ -21,7 +21,7 @@ PRECISION = {'pose.pose.position.*': 1e-4, 'twist.twist.*': 1e-4, '*orientation*
 
 def genpy_row(msg):
     """The row as the writer made it before ``flat_row``."""
-    return json_xz._flatten(msg_codec.to_dict(msg, short_float32=True), '', {})
+    return json_rows.flatten(msg_codec.to_dict(msg, short_float32=True), '', {})
 
 
 def same_row(a, b):
@@ -46,7 +46,7 @@ def test_rows_and_documents_are_the_same_as_the_genpy_path_on_real_bags(real_bag
     for metadata in ({}, {'precision': PRECISION}):
         fast = json_xz.dumps(json_xz.document(records, metadata))
         with monkeypatch.context() as patch:
-            patch.setattr(json_xz, 'flat_row', genpy_row)
+            patch.setattr(json_rows, 'flat_row', genpy_row)
             slow = json_xz.dumps(json_xz.document(records, metadata))
         assert fast == slow
 

@@ -25,3 +25,110 @@ def test_catkin_lint_reports_nothing(tmp_path):
     result = run([catkin_lint, '-W2', '--quiet', str(package)], str(tmp_path))
     problems = [line for line in result.stdout.splitlines() if line.startswith('cc_log:')]
     assert result.returncode == 0 and not problems, 'catkin_lint -W2:\n' + result.stdout
+
+
+# -- the module graph of src/cc_log ---------------------------------------------------------------------------
+
+PACKAGE = os.path.join(ROOT, 'src', 'cc_log')
+MAX_MODULE_LINES = 600
+#: Modules over MAX_MODULE_LINES today, each to be split (this list is emptied, not grown).
+OVER_MAX_LINES_TODAY = {'offline/fleet.py', 'core/smart.py'}
+
+
+def cc_log_modules():
+    """dotted module name -> path of every module of src/cc_log."""
+    modules = {}
+    for folder, _, files in os.walk(PACKAGE):
+        for name in files:
+            if name.endswith('.py'):
+                path = os.path.join(folder, name)
+                dotted = os.path.relpath(path, os.path.dirname(PACKAGE))[:-3].replace(os.sep, '.')
+                modules[dotted[:-len('.__init__')] if dotted.endswith('.__init__') else dotted] = path
+    return modules
+
+
+def imported_modules(path, modules):
+    """The cc_log modules a module imports, anywhere in it (inside functions too): ``from a.b import c`` is the
+    module a.b.c when there is one, else a.b."""
+    import ast
+    with open(path) as source:
+        tree = ast.parse(source.read(), path)
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module + '.' + alias.name if node.module + '.' + alias.name in modules else node.module
+                     for alias in node.names]
+        else:
+            continue
+        for name in names:
+            while name and name not in modules:
+                name = name.rpartition('.')[0]
+            if name:
+                found.add(name)
+    return found
+
+
+def import_cycles(graph):
+    """The strongly connected components of more than one module (or a module importing itself), sorted."""
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, edges = work[-1]
+            for target in edges:
+                if target not in index:
+                    index[target] = low[target] = len(index)
+                    stack.append(target)
+                    on_stack.add(target)
+                    work.append((target, iter(sorted(graph[target]))))
+                    break
+                if target in on_stack:
+                    low[node] = min(low[node], index[target])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = []
+                    while True:
+                        member = stack.pop()
+                        on_stack.discard(member)
+                        component.append(member)
+                        if member == node:
+                            break
+                    if len(component) > 1 or node in graph[node]:
+                        cycles.append(sorted(component))
+    return sorted(cycles)
+
+
+def test_import_cycles_are_found():
+    assert import_cycles({'a': {'b'}, 'b': {'c'}, 'c': {'a'}, 'd': {'a'}}) == [['a', 'b', 'c']]
+    assert import_cycles({'a': {'b'}, 'b': set()}) == []
+
+
+def test_no_import_cycle_among_cc_log_modules():
+    modules = cc_log_modules()
+    graph = {name: imported_modules(path, modules) - {name} for name, path in modules.items()}
+    cycles = import_cycles(graph)
+    assert not cycles, 'import cycles (counting imports inside functions):\n' + '\n'.join(
+        ', '.join('%s -> %s' % (name, sorted(graph[name] & set(cycle))) for name in cycle) for cycle in cycles)
+
+
+def test_no_module_in_src_cc_log_over_600_lines():
+    over = {}
+    for path in cc_log_modules().values():
+        with open(path) as source:
+            lines = sum(1 for _ in source)
+        if lines > MAX_MODULE_LINES:
+            over[os.path.relpath(path, PACKAGE)] = lines
+    assert set(over) <= OVER_MAX_LINES_TODAY, 'over %d lines: %s' % (
+        MAX_MODULE_LINES, {name: lines for name, lines in over.items() if name not in OVER_MAX_LINES_TODAY})
+    shrunk = OVER_MAX_LINES_TODAY - set(over)
+    assert not shrunk, 'no longer over %d lines, remove from OVER_MAX_LINES_TODAY: %s' % (MAX_MODULE_LINES, shrunk)

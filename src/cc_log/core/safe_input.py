@@ -13,7 +13,7 @@ connection it reads), so a definition is checked here before any class is genera
   refused; length, nesting, the number of types and of fields (genpy's time) and the size of a default
   instance (fixed-size arrays) are bounded.
 - ``check_bag(bag, path)``: every connection and chunk header of an open rosbag, before any message is read
-  (a chunk may not declare more than ``formats.bag_salvage.MAX_CHUNK_BYTES``, nor more than its stored bytes
+  (a chunk may not declare more than ``MAX_CHUNK_BYTES``, nor more than its stored bytes
   can hold: readers allocate what a chunk declares before decompressing it).
 - ``json_loads(text)``: ``json.loads`` after a nesting check (a deeply nested document would raise
   RecursionError inside ``json``).
@@ -128,6 +128,8 @@ def check_bag(bag, source):
         check_connection(connection.topic, connection.datatype, connection.msg_def, source)
 
 
+#: A decompressed chunk larger than this is not decoded (rosbag writes ~768 KiB).
+MAX_CHUNK_BYTES = 1 << 28
 #: Most an LZ4 block can expand (a 255:1 run-length limit), plus a frame's worth of slack.
 LZ4_MAX_RATIO = 256
 LZ4_SLACK = 1 << 16
@@ -137,7 +139,6 @@ def check_chunks(bag, source):
     """Raise ValueError('<source>: ...') for a chunk of an open ``rosbag.Bag`` whose declared (decompressed)
     size is more than MAX_CHUNK_BYTES or more than its stored bytes can hold (uncompressed: exactly them;
     LZ4: 256 times them)."""
-    from cc_log.storage.bag.bag_salvage import MAX_CHUNK_BYTES
     for pos, header in sorted(getattr(bag, '_chunk_headers', {}).items()):
         declared, stored = header.uncompressed_size, header.compressed_size
         most = {'none': stored, 'lz4': stored * LZ4_MAX_RATIO + LZ4_SLACK}.get(header.compression, MAX_CHUNK_BYTES)

@@ -30,7 +30,7 @@ except ImportError:  # pragma: no cover
 
 from cc_log.core.safe_input import brief
 
-__all__ = ['TopicSelection', 'ALL', 'REGEX', 'EXCLUDE']
+__all__ = ['TopicSelection', 'topic_list', 'ALL', 'REGEX', 'EXCLUDE']
 
 ALL = '*'
 REGEX = 're:'

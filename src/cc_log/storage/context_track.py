@@ -37,7 +37,7 @@ import threading
 import time
 
 from cc_log import features as features_mod
-from cc_log.storage import log_format, window_writer
+from cc_log.storage import log_format, recovery, window_writer
 from cc_log.core import raw_message, safe_files
 from cc_log.storage.formats import bag_lz4
 from cc_log.core.records import Record
@@ -47,7 +47,7 @@ __all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PR
            'DEFAULT_ROTATE', 'BWI_ALIASES']
 
 SUBDIRECTORY = 'context'
-PREFIX = log_format.PREFIX + 'context_'
+PREFIX = log_format.CONTEXT_PREFIX
 EXTENSION = '.bag'
 DEFAULT_TOPICS = 'odom:1 amcl_pose /diagnostics'
 DEFAULT_ROTATE = 600.0   # seconds of stamps per file
@@ -151,7 +151,6 @@ class _OpenBag(object):
         if self.path is not None:
             return self.path
         if self._close_error is not None:  # rosbag cannot close twice: what reached the disk is salvaged
-            from cc_log.storage import recovery
             outcome = recovery.recover(self.tmp)
             if not outcome.path:
                 raise RuntimeError('%s: closing failed (%s), %d messages lost: %s'
@@ -367,7 +366,6 @@ def recover(directory):
     a dead process) through ``recovery`` (``formats.bag_salvage``: every message of every complete chunk, and
     of a chunk cut off mid-write, into ``<name>_recovered.bag``; one that holds no message is removed); returns
     ``(recovered paths, [(path, why)] kept)``."""
-    from cc_log.storage import recovery
     recovered, kept = [], []
     for outcome in recovery.recover_directory(os.path.join(str(directory), SUBDIRECTORY)):
         if outcome.path and outcome.status != recovery.DUPLICATE:

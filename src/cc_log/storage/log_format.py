@@ -21,12 +21,13 @@ import os
 import re
 
 from cc_log import __version__
-from cc_log.storage import formats
+from cc_log.storage import formats, payload_check
 from cc_log.core import msg_codec
 from cc_log.core import raw_message
 from cc_log.core import safe_files, safe_input
 
 PREFIX = 'cc_log_'
+CONTEXT_PREFIX = PREFIX + 'context_'  # a context-track file (``context_track``: a plain rosbag, not a window)
 TMP_MARK = safe_files.TMP_MARK
 KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
 FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
@@ -57,17 +58,18 @@ def _score(value):
     return msg_codec.encode_float(float(value))
 
 
-def window_metadata(window, codec, extra=None):
+def window_metadata(window, codec, extra=None, triggers=None):
     """The metadata every window file carries; keys of ``extra`` (JSON-able) are added, overriding.
 
     topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the
     first/last record), start_utc/end_utc, triggers ([{stamp, reason, score, name}]; name only for
     triggers that have one), reasons and names (distinct, in order: every trigger of the window), part (0, or
-    1, 2, ... for a split window), codec, cc_log_version.
+    1, 2, ... for a split window), codec, cc_log_version. ``triggers``: those to say (default: the window's).
     """
     contents = Contents()
     contents.add(window.records)
-    return contents.metadata(window.triggers, getattr(window, 'part', 0), codec, extra)
+    return contents.metadata(window.triggers if triggers is None else triggers, getattr(window, 'part', 0), codec,
+                             extra)
 
 
 class Contents(object):
@@ -237,17 +239,21 @@ def final_names(directory, base, extension):
         counter += 1
 
 
-def write_window(window, directory, fmt, metadata=None, base=None, left_out=None):
+def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
 
     ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
+    ``triggers``: those its metadata says (default: the window's; a part of a window written as a file per part
+    says those that came since the part before it, while its name is the window's first trigger's).
 
     ``metadata`` (JSON-able dict) is added to ``window_metadata``. Records held as serialized bytes are
     decoded here (the writer thread) unless the format writes bytes (``RAW_RECORDS``), by the format's own
     ``decoded_records`` when it has one (json-xz reads fixed layouts from the bytes); one that cannot be
-    decoded is left out and counted in the metadata's ``undecodable`` and, per topic, ``undecodable_topics``
-    (and added to ``left_out``, a ``collections.Counter``, when given). Raises ValueError for a bad format or
-    an empty window, OSError when the file cannot be written (the temporary file is removed).
+    decoded (or whose bytes are not of its connection's type) is left out and counted in the metadata's
+    ``undecodable`` and, per topic, ``undecodable_topics`` and ``dropped`` (and added to ``left_out``, a
+    ``collections.Counter``, when given); a format writing bytes refuses those whose bytes are not of their
+    connection's type, counted in ``dropped``. Raises ValueError for a bad format or an empty window, OSError
+    when the file cannot be written (the temporary file is removed).
     """
     module = formats.get(fmt)
     if not window.records:
@@ -258,12 +264,13 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
         records, undecodable = getattr(module, 'decoded_records', raw_message.decoded_records)(records)
         if not records:
             raise ValueError('window: none of its %d records can be decoded' % undecodable)
-    meta = window_metadata(window, fmt, metadata)
+    meta = window_metadata(window, fmt, metadata, triggers)
     if undecodable:
         topics = collections.Counter(record.topic for record in window.records)
         topics.subtract(record.topic for record in records)
         meta['undecodable'] = undecodable
         meta['undecodable_topics'] = {topic: count for topic, count in topics.items() if count}
+        meta = payload_check.with_dropped(meta, meta['undecodable_topics'])
         if left_out is not None:
             left_out.update(meta['undecodable_topics'])
     base = base or base_name(window)

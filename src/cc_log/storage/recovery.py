@@ -39,6 +39,7 @@ import time
 
 from cc_log.storage import formats, log_format
 from cc_log.core import msg_codec, safe_files
+from cc_log.core.records import LogWindow, Trigger
 
 __all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
            'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']
@@ -113,7 +114,6 @@ def _same_bytes(a, b):
 
 
 def _triggers(metadata, first_stamp):
-    from cc_log.core.records import Trigger
     triggers = []
     for trigger in metadata.get('triggers') or []:
         if not isinstance(trigger, dict):
@@ -131,14 +131,12 @@ def _triggers(metadata, first_stamp):
 
 def _is_context(path):
     """Whether ``path`` is a context-track file (a plain rosbag, not a window)."""
-    from cc_log.storage import context_track  # which imports this module
-    return os.path.basename(path).startswith(context_track.PREFIX)
+    return os.path.basename(path).startswith(log_format.CONTEXT_PREFIX)
 
 
 def _write_recovered(path, directory, base, fmt, metadata, records):
     """Write ``records`` as ``<base>_recovered<extension>`` in format ``fmt`` with ``metadata`` (of the
     leftover), or as the plain rosbag it was for a context file; return its path."""
-    from cc_log.core.records import LogWindow
     if _is_context(path):
         from cc_log.offline import export
         names = log_format.final_names(directory, base + RECOVERED_SUFFIX, fmt.EXTENSION)

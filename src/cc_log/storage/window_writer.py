@@ -115,6 +115,7 @@ class WindowWriter(object):
         self.cpu_seconds = 0.0            # CPU time of the writer thread writing (decoding, compressing, disk)
         self._streams_parts = log_format.streams(self.format)  # a window's parts go into one file
         self._streams = {}                # window key -> its log_format.WindowFile being written (writer thread)
+        self._triggers_said = {}          # window key -> its triggers in the files of its parts written so far
         self._queue = queue.Queue()
         self._thread = None
         if background:
@@ -326,10 +327,20 @@ class WindowWriter(object):
             del self._streams[window.key]
             job.whole = stream.summary
             return path, nbytes
+        parted = bool(window.part) and window.key is not None
         if not window.records:  # the end of a window written as files of its parts: nothing more to write
+            if parted and window.final:
+                self._triggers_said.pop(window.key, None)
             return None, 0
+        # a part's file says the triggers that came since the part before it (a part's window holds all of them)
+        triggers = window.triggers[self._triggers_said.get(window.key, 0):] if parted else None
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
-        path, nbytes = log_format.write_window(window, self.directory, self.format, job.metadata, left_out=left_out)
+        path, nbytes = log_format.write_window(window, self.directory, self.format, job.metadata, left_out=left_out,
+                                               triggers=triggers)
+        if parted and window.final:
+            self._triggers_said.pop(window.key, None)
+        elif parted:
+            self._triggers_said[window.key] = len(window.triggers)
         if left_out:
             with self._lock:
                 self._counts['messages_lost'] += sum(left_out.values())

@@ -1,7 +1,7 @@
 """A rosbag 2.0 reader for replay and collect that walks the chunks itself (edge module: imports rosbag).
 
 ``read_raw(path, topics)`` yields the same ``Record(bag time, topic, None, 0, bytes, connection)`` as rosbag's
-``read_messages(raw=True)`` in the same order, without rosbag's per-message Python: ``bagio.open_bag`` opens
+``read_messages(raw=True)`` in the same order, without rosbag's per-message Python: ``bag_open.open_bag`` opens
 the bag with ``skip_index`` (connections, chunk infos and chunk headers only, with ``bagio``'s checks: the
 definitions are checked before any message is read); the index data records after each chunk are read with
 numpy (time, offset per message), the order is rosbag's (a stable merge of the connections' indexes by time);
@@ -17,10 +17,11 @@ import itertools
 
 import numpy as np
 
-from cc_log.storage.bag import bagio
+from cc_log.storage.bag import bag_open
 from cc_log.core import raw_message
+from cc_log.storage.bag.bag_format import OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA
 from cc_log.storage.bag.bag_salvage import (
-    MAX_CHUNK_BYTES, OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA, field_u32, lz4_decompress, map_file, read_record)
+    MAX_CHUNK_BYTES, field_u32, lz4_decompress, map_file, read_record)
 from cc_log.core.records import records_of
 
 __all__ = ['read_raw', 'read_runs', 'MAX_CHUNK_BYTES']
@@ -39,7 +40,7 @@ class _Damaged(Exception):
 
 
 def read_raw(path, topics):
-    """``bagio.read_raw`` (same records, same order, same errors) read by walking the chunks."""
+    """``bag_open.read_raw`` (same records, same order, same errors) read by walking the chunks."""
     yield from itertools.chain.from_iterable(read_runs(path, topics))
 
 
@@ -47,18 +48,18 @@ def read_runs(path, topics):
     """``read_raw``'s records as lists of consecutive records (those of one chunk, at most RECORDS_BLOCK)."""
     if isinstance(topics, str):
         topics = [topics]
-    bag = bagio.open_bag(path, skip_index=True)
+    bag = bag_open.open_bag(path, skip_index=True)
     try:
         if not _plain(bag):
             reader = None
         else:
             for topic in topics:
-                bagio.check_topic(bag, topic)
+                bag_open.check_topic(bag, topic)
             reader = _Reader(bag, path, topics)
     finally:
         bag.close()
     if reader is None:  # an encrypted bag: rosbag decrypts it
-        yield list(bagio.read_raw(path, topics))
+        yield list(bag_open.read_raw(path, topics))
         return
     yield from reader.records()
 

@@ -10,9 +10,12 @@ import os
 import struct
 
 from cc_log.core import msg_codec, raw_message, safe_input
-from cc_log.storage.formats.bag_lz4 import MAGIC, METADATA_TOPIC, bag_stamp
+from cc_log.core.records import Record
+from cc_log.storage.bag.bag_format import (
+    MAGIC, METADATA_TOPIC, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_FILE_HEADER, OP_INDEX_DATA, OP_MSG_DATA,
+    bag_stamp)
 
-MAX_CHUNK_BYTES = 1 << 28  # a decompressed chunk larger than this is not decoded (rosbag writes ~768 KiB)
+MAX_CHUNK_BYTES = safe_input.MAX_CHUNK_BYTES
 
 Salvaged = collections.namedtuple('Salvaged', 'metadata records decoded undecoded cut problems headers_only')
 Salvaged.__doc__ = """What a file cut off mid-write still holds.
@@ -52,7 +55,6 @@ def map_file(path, follow=True):
 
 # -- reading a rosbag 2.0 file cut off mid-write ------------------------------------------------------------
 
-OP_MSG_DATA, OP_FILE_HEADER, OP_INDEX_DATA, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION = 2, 3, 4, 5, 6, 7  # record ops
 _U32 = struct.Struct('<I')
 _LZ4_MAGIC = b'\x04\x22\x4d\x18'
 _LZ4_STEP = 1 << 16  # compressed bytes decompressed at a time (bounds what one step can expand to)
@@ -287,7 +289,6 @@ class _Salvage(object):
 def _window_of(salvage):
     """(metadata, records in the order they were written) of what a salvage decoded."""
     import genpy
-    from cc_log.core.records import Record
     metadata, records = None, []
     for topic, secs, nsecs, msg, raw, header in salvage.messages:
         if topic == METADATA_TOPIC:

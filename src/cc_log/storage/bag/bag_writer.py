@@ -14,9 +14,8 @@ import bz2
 import io
 import struct
 
-from cc_log.storage.formats.bag_lz4 import MAGIC
-from cc_log.storage.bag.bag_salvage import (
-    OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_FILE_HEADER, OP_INDEX_DATA, OP_MSG_DATA)
+from cc_log.storage.bag.bag_format import (
+    MAGIC, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_FILE_HEADER, OP_INDEX_DATA, OP_MSG_DATA)
 
 CHUNK_THRESHOLD = 768 * 1024  # rosbag's default: a chunk is closed once it holds more uncompressed bytes
 FILE_HEADER_LENGTH = 4096     # rosbag pads the bag header record's header to this many bytes

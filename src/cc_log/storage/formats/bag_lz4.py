@@ -18,20 +18,27 @@ window metadata is a JSON object in one ``std_msgs/String`` message on
   checksum of its own: without it a flipped bit in a message reads back as a different value. ``read``
   refuses a file whose records do not match it (layout 1 files, written before it, are read without it).
 
+A record held as bytes that are not exactly one message of its connection's type (a buggy publisher; two
+types on one topic in a replayed bag: ``payload_check``) is refused, so that rosbag reads every message of the
+file; the refused are counted per topic in the metadata's ``dropped`` (with messages shed before the writer).
+
 The file is the bag rosbag would write for the same messages, byte for byte, written without rosbag
-(``formats.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
+(``bag.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
 (``read``, ``write_record``), so importing cc_log.bag_lz4 costs nothing.
 """
+import collections
 import io
 import itertools
 import json
-import math
 import os
 import struct
 import zlib
 
 from cc_log.core import msg_codec, raw_message, safe_files, safe_input
 from cc_log.core.records import Record
+from cc_log.storage import payload_check
+from cc_log.storage.bag import bag_salvage, bag_writer
+from cc_log.storage.bag.bag_format import MAGIC, METADATA_TOPIC, bag_stamp  # noqa: F401  (bag_lz4.MAGIC, ...)
 
 CODEC = 'bag-lz4'
 RAW_RECORDS = True  # write_window hands records over as they are: serialized bytes are written as bytes
@@ -41,22 +48,7 @@ EXTENSION = '.bag'
 #: fragmentation across the receiving threads; bench/memory_live.py --format bag-lz4).
 PART_FACTOR = 4.0
 LAYOUT_VERSION = 3  # 2: the layout holds the records' crc32; 3: computed records first (written a part at a time)
-MAGIC = b'#ROSBAG V2.0\n'
-METADATA_TOPIC = '/cc_log/metadata'
 _STRING_DEFINITION = 'string data\n'
-
-
-def bag_stamp(stamp):
-    """Float seconds -> (secs, nsecs) of a bag time, nanoseconds rounded to nearest; ValueError for negative or
-    not finite."""
-    stamp = float(stamp)
-    if not math.isfinite(stamp) or stamp < 0:
-        raise ValueError('stamp %r cannot be a bag time (must be finite and >= 0)' % stamp)
-    secs = int(math.floor(stamp))
-    nsecs = int(round((stamp - secs) * 1e9))
-    if nsecs >= 1000000000:
-        secs, nsecs = secs + 1, nsecs - 1000000000
-    return secs, nsecs
 
 
 def write(target, records, metadata):
@@ -66,7 +58,6 @@ def write(target, records, metadata):
     if isinstance(target, (str, bytes, os.PathLike)):
         with os.fdopen(safe_files.create(target), 'w+b') as stream:
             return write(stream, records, metadata)
-    from cc_log.storage.bag import bag_writer
     bag_writer.write_bag(target, *bag_messages(records, metadata))
 
 
@@ -81,7 +72,10 @@ def bag_messages(records, metadata):
     if not records:
         raise ValueError('window: has no records')
     layout = _Layout()
-    layout.add(records)
+    records = layout.add(records)
+    if not records:
+        raise ValueError('window: none of its records is of its connection\'s type (%d refused)'
+                         % sum(layout.refused.values()))
     headers = dict(layout.headers)
     metadata_message = (METADATA_TOPIC,) + layout.first + (layout.metadata_data(metadata),)
     return itertools.chain([metadata_message], map(bag_message, records)), headers
@@ -101,9 +95,15 @@ class _Layout(object):
         self.stamps = []    # every record's stamp (float s), in window order
         self.crc = 0        # of the records (``records_crc``), so far
         self.first = None   # the earliest bag time
+        self.refused = collections.Counter()  # topic -> records refused (bytes not of their connection's type)
+        self._check = payload_check.PayloadCheck()
 
     def add(self, records):
-        """Take the next records of the window (checked: the reserved topic, bag times, one type per topic)."""
+        """Take the next records of the window (checked: the reserved topic, bag times, one type per topic);
+        return those to write: a record whose bytes are not a message of its connection's type is refused
+        (``payload_check``), counted by topic in ``refused`` (the metadata's ``dropped``)."""
+        records, refused = self._check.split(records)
+        self.refused.update(refused)
         for record in records:
             if record.topic == METADATA_TOPIC:
                 raise ValueError('topic %s: reserved for the window metadata' % METADATA_TOPIC)
@@ -121,15 +121,16 @@ class _Layout(object):
         self.keys.extend(keys)
         self.stamps.extend(record.stamp for record in records)
         self.crc = _records_crc(self.crc, rank, ((record.topic, record.stamp, _data(record)) for record in records))
+        return records
 
     def state(self):
         """What ``restore`` needs to forget the records added after this call."""
         return (dict(self.headers), dict(self._sources), dict(self._rank), len(self.keys), self.exact, self.crc,
-                self.first)
+                self.first, collections.Counter(self.refused))
 
     def restore(self, state):
         """Back to ``state`` (of ``state()``)."""
-        headers, sources, rank, count, self.exact, self.crc, self.first = state
+        headers, sources, rank, count, self.exact, self.crc, self.first, self.refused = state
         self.headers, self._sources, self._rank = headers, sources, rank
         del self.keys[count:]
         del self.stamps[count:]
@@ -151,7 +152,7 @@ class _Layout(object):
     def metadata_data(self, metadata, final=True):
         """The serialized std_msgs/String of the window metadata; ``final``: with the layout of every record
         added (else a provisional one, without it, written first by a stream)."""
-        meta = dict(metadata or {})
+        meta = payload_check.with_dropped(metadata or {}, self.refused)
         meta.setdefault('codec', CODEC)
         meta['layout'] = LAYOUT_VERSION
         if final:
@@ -167,7 +168,6 @@ class WindowStream(object):
     the same part may be appended again."""
 
     def __init__(self, stream):
-        from cc_log.storage.bag import bag_writer
         self.bag = bag_writer.BagStream(stream)
         self._layout = _Layout()
         self.count = 0
@@ -180,9 +180,9 @@ class WindowStream(object):
         bag.mark()
         saved = layout.state()
         try:
-            layout.add(records)
+            records = layout.add(records)
             headers = layout.headers
-            if self.count == 0:
+            if self.count == 0 and records:
                 bag.write(METADATA_TOPIC, *layout.first, layout.metadata_data(metadata, final=False),
                           headers[METADATA_TOPIC])
             write = bag.write
@@ -311,7 +311,6 @@ def encoder(records, metadata):
 
 def salvage(path):
     """What a bag cut off mid-write still holds (``bag_salvage.Salvaged``); ValueError when it is no rosbag."""
-    from cc_log.storage.bag import bag_salvage
     return bag_salvage.salvage(path)
 
 

@@ -46,23 +46,21 @@ for all its messages at once (numpy views at the fields' offsets), writing the s
 messages. Other types, and messages genpy reads differently (not UTF-8, a time's nanoseconds beyond a second),
 are decoded.
 
-Pure: no rospy, no rosbag.
+Rows and columns (``flat_row``, a section's values read from the bytes) are ``json_rows``'s; the differences
+(``DELTA_GAIN``, ``differences``) and the rounding (``check_precision``) are ``json_deltas``'s; this module makes
+the document and its text, compresses it, and reads it back. Pure: no rospy, no rosbag.
 """
-import base64
 import decimal
-import fnmatch
-import functools
 import json
 import lzma
-import math
-import operator
 import os
-import re
-
-import numpy
 
 from cc_log.core import msg_codec, raw_message, safe_input
 from cc_log.core.records import Record
+from cc_log.storage.formats.json_deltas import (  # noqa: F401  (json_xz.check_precision, ...: the format's API)
+    Deltas, check_precision, decimal_text, decimal_texts, differences, max_errors, rounder, sums)
+from cc_log.storage.formats.json_rows import (  # noqa: F401  (json_xz.flat_row, json_xz.decoded_records)
+    all_equal, class_of, decoded_records, flat_row, section_values, split_columns, unflatten)
 
 CODEC = 'json-xz'
 EXTENSION = '.json.xz'
@@ -86,22 +84,6 @@ FILTER_OPTIONS = {'mf': lzma.MF_HC3, 'nice_len': 48, 'depth': 8, 'lc': 1, 'pb': 
 
 HEADER_STAMP = 'header.stamp'
 
-#: A float column is delta-coded when its differences have at most this share of its values' significant
-#: digits, and at most REPEATS_SHARE of its values repeat an earlier value that is not the one just before.
-#: Measured on the Husky odometry (docs/FORMAT.md): positions (0.80 of the digits) compress 25% smaller,
-#: angular velocity (0.87) 3.5%, linear velocity (0.84) 1% larger; orientations (0.53, but a third of their
-#: values recur) 15% larger.
-DELTA_GAIN = 0.87
-REPEATS_SHARE = 0.1
-#: Float columns longer than twice SAMPLE are first tried on their first SAMPLE values: beyond SAMPLE_GAIN of
-#: the digits there, the column stays plain (the Husky positions: 0.88-0.91 on their first 50 values).
-SAMPLE = 50
-SAMPLE_GAIN = 0.97
-#: Decimal arithmetic for differences: exact for any double's shortest text (at most 17 digits, exponents
-#: -324..308) and any difference of two; a document needing more is refused (decimal.Inexact).
-_EXACT = decimal.Context(prec=400, Emin=-999, Emax=999,
-                         traps=[decimal.Inexact, decimal.Overflow, decimal.InvalidOperation])
-
 #: Largest document (decompressed bytes) and file read. A window holds at most ``max_window`` (100,000)
 #: driving messages: about 200 bytes each in the column layout (Husky odometry + IMU), at most ~2 kB when
 #: every field changes, so 20-200 MB; 1 GiB is well above, and an xz bomb stops there.
@@ -113,464 +95,6 @@ ONE_PASS_BYTES = 64 << 20
 DECODER_MEMORY = 256 << 20
 
 
-# -- columns --------------------------------------------------------------------------------------------
-
-def _flatten(row, prefix, out):
-    for name, value in row.items():
-        if isinstance(value, dict) and value:
-            _flatten(value, prefix + name + '.', out)
-        else:
-            out[prefix + name] = value
-    return out
-
-
-def _unflatten(flat):
-    row = {}
-    for key, value in flat.items():
-        node = row
-        parts = key.split('.')
-        for part in parts[:-1]:
-            node = node.setdefault(part, {})
-        node[parts[-1]] = value
-    return row
-
-
-_ROW_MAKERS = {}  # message class -> function(msg) -> flat row
-
-
-def flat_row(msg):
-    """``_flatten(msg_codec.to_dict(msg, short_float32=True))``, the same dict (keys, order, values) made by
-    a function compiled once per message class: one getter and one encoder per leaf field."""
-    cls = type(msg)
-    make = _ROW_MAKERS.get(cls)
-    if make is None:
-        fields = _leaf_fields(msg, '', [])
-        make = _ROW_MAKERS[cls] = lambda message: {key: encode(get(message)) for key, get, encode in fields}
-    return make(msg)
-
-
-def _same_value(value):
-    return value
-
-
-def _float(value):
-    return msg_codec.encode_float(float(value))
-
-
-def _float64s(values):
-    values = list(map(float, values))
-    return values if all(map(math.isfinite, values)) else [msg_codec.encode_float(value) for value in values]
-
-
-def _float32(value):
-    return msg_codec.encode_float(msg_codec.short_float32(float(value)))
-
-
-def _leaf_fields(msg, prefix, out):
-    """``(dotted key, attribute getter, encoder)`` of every leaf of ``msg`` as ``_flatten(to_dict(msg))``
-    lists them; arrays and empty messages are leaves (as in ``to_dict``)."""
-    for name, slot_type in zip(msg.__slots__, msg._slot_types):
-        key = prefix + name
-        base, is_array, _ = msg_codec.split_type(slot_type)
-        value = getattr(msg, name)
-        if is_array and base == 'float64':
-            encode = _float64s
-        elif is_array:
-            encode = functools.partial(msg_codec.encode_value, slot_type=slot_type, short=True)
-        elif base in msg_codec.TIME_TYPES:
-            out.append((key + '.secs', operator.attrgetter(key + '.secs'), int))
-            out.append((key + '.nsecs', operator.attrgetter(key + '.nsecs'), int))
-            continue
-        elif base in msg_codec.FLOAT_TYPES:
-            encode = _float32 if base == 'float32' else _float
-        elif base in msg_codec.PRIMITIVE_TYPES:
-            encode = _same_value
-        elif getattr(value, '__slots__', None):
-            _leaf_fields(value, key + '.', out)
-            continue
-        else:
-            encode = functools.partial(msg_codec.to_dict, short_float32=True)
-        out.append((key, operator.attrgetter(key), encode))
-    return out
-
-
-def _same(value, first, first_repr):
-    """Whether two JSON values are the same text: ``==`` alone takes 0 for 0.0, False or -0.0."""
-    return value == first and repr(value) == first_repr
-
-
-def _columns(rows):
-    """Split flat rows into (constant, columns), keys in the order of the first row."""
-    return _split_columns(dict((key, [row[key] for row in rows]) for key in rows[0]))
-
-
-def _split_columns(values, same=()):
-    """Split ``{key: one value per message}`` into (constant, columns), keys in order; the keys in ``same``
-    are known to hold the same value (its very object) in every message."""
-    constant, columns = {}, {}
-    for key, column in values.items():
-        first = column[0]
-        if len(column) > 1 and key in same:
-            constant[key] = first
-            continue
-        if len(column) > 1 and column.count(first) == len(column):  # count: a quick no; _same: the text
-            first_repr = repr(first)
-            if all(_same(value, first, first_repr) for value in column[1:]):
-                constant[key] = first
-                continue
-        columns[key] = column
-    return constant, columns
-
-
-def _header_stamp(msg):
-    header = getattr(msg, 'header', None)
-    stamp = getattr(header, 'stamp', None)
-    return stamp.to_sec() if stamp is not None and hasattr(stamp, 'to_sec') else None
-
-
-def _all_equal(header_stamps, stamps):
-    """Whether every record's stamp equals its header stamp (``header_stamps``: a list, or an array)."""
-    if isinstance(header_stamps, numpy.ndarray) and all(type(stamp) is float for stamp in stamps):
-        return bool((header_stamps == numpy.array(stamps)).all())
-    return all(header == stamp for header, stamp in zip(list(header_stamps), stamps))
-
-
-def decoded_records(records):
-    """``raw_message.decoded_records`` for this writer: a record of serialized bytes that ``document`` reads
-    in bulk (a ``raw_message.layout`` type whose bytes fit it) stays as it is; the others are decoded (those
-    that cannot be are counted)."""
-    raws = {}  # class -> indices of its records in bytes
-    kept = list(records)
-    bad = set()
-    classes = {}
-    for index, record in enumerate(kept):
-        if record.msg is None and record.raw is not None:
-            try:
-                cls = _class_of(record, classes)
-            except raw_message.DECODE_ERRORS:
-                bad.add(index)
-                continue
-            raws.setdefault(cls, []).append(index)
-    for cls, indices in raws.items():
-        fields = raw_message.layout(cls)
-        if fields is not None:
-            indices = [indices[rest] for rest in raw_message.blocks(fields, [kept[i].raw for i in indices])[1]]
-        for index in indices:
-            try:
-                kept[index] = raw_message.decoded(kept[index])
-            except raw_message.DECODE_ERRORS:
-                bad.add(index)
-    return [record for index, record in enumerate(kept) if index not in bad], len(bad)
-
-
-def _class_of(record, classes):
-    """The class of a record's message (``raw_message.message_class`` of its connection when it has no message),
-    ``classes``: a cache by connection object (records of one connection share it)."""
-    if record.msg is not None:
-        return type(record.msg)
-    cls = classes.get(id(record.connection))
-    if cls is None:
-        cls = classes[id(record.connection)] = raw_message.message_class(record.connection)
-    return cls
-
-
-def _section_values(recs):
-    """``({key: one value per record}, keys holding the same value in every record, header stamps)`` of a
-    section's records, as ``flat_row`` makes them: records of serialized bytes of a ``raw_message.layout`` type
-    read column by column from their bytes (one numpy view per field; a field with the same bytes in every
-    message read once), the others (and messages genpy reads differently) decoded, row by row."""
-    classes = {}
-    raw = [index for index, record in enumerate(recs) if record.msg is None]
-    cls = _class_of(recs[raw[0]], classes) if raw else None
-    fields = raw_message.layout(cls) if cls is not None else None
-    if fields is None or any(_class_of(recs[index], classes) is not cls for index in raw):
-        recs = [raw_message.decoded(record) for record in recs]
-        raw, fields = [], None
-    rows = {}  # index -> flat row, of the records not read from the bytes
-    blocks = []
-    if fields is not None:
-        blocks, rest = raw_message.blocks(fields, [recs[index].raw for index in raw])
-        positions = numpy.array(raw, dtype=numpy.intp)
-        blocks = [block._replace(rows=positions[block.rows]) for block in blocks]
-        rows.update((raw[index], flat_row(raw_message.decoded(recs[raw[index]]).msg)) for index in rest)
-    rows.update((index, flat_row(record.msg)) for index, record in enumerate(recs) if record.msg is not None)
-    keys = [field.key for field in fields] if fields is not None else list(rows[0])
-    if fields is not None and rows and list(next(iter(rows.values()))) != keys:
-        return _section_values([raw_message.decoded(record) for record in recs])
-    values, same = {}, ()
-    for block in blocks:
-        whole = len(block.rows) == len(recs)
-        try:
-            if whole:
-                same = _same_fields(block, fields)
-                first = block._replace(rows=block.rows[:1], table=block.table[:1])
-                columns = [_block_values(first, field) * len(recs) if field.key in same else
-                           _block_values(block, field) for field in fields]
-            else:
-                columns = [_block_values(block, field) for field in fields]
-        except UnicodeDecodeError:  # genpy replaces what is not UTF-8: its row
-            rows.update((index, flat_row(raw_message.decoded(recs[index]).msg)) for index in block.rows.tolist())
-            same = ()
-            continue
-        if whole:
-            values = dict(zip(keys, columns))
-            break
-        for key, column in zip(keys, columns):
-            target = values.setdefault(key, [None] * len(recs))
-            for index, value in zip(block.rows.tolist(), column):
-                target[index] = value
-    if rows and not values:
-        values = dict((key, [None] * len(recs)) for key in keys)
-    for index, row in rows.items():
-        for key in keys:
-            values[key][index] = row[key]
-    if fields is None or 'header.stamp.secs' not in keys or not _is_time(cls, 'header.stamp'):
-        return values, same, [_header_stamp(record.msg) if record.msg is not None else None for record in recs]
-    secs = numpy.array(values['header.stamp.secs'], dtype=numpy.float64)
-    return values, same, secs + numpy.array(values['header.stamp.nsecs'], dtype=numpy.float64) / 1e9
-
-
-def _same_fields(block, fields):
-    """The keys of the fields whose bytes are the same in every message of ``block``."""
-    equal = (block.table == block.table[0]).all(axis=0)
-    same = set()
-    for field in fields:
-        offset = block.offsets[field.key]
-        start, size = (offset[0], offset[1]) if field.base == 'string' else (offset, field.size)
-        if equal[start:start + size].all():
-            same.add(field.key)
-    return same
-
-
-def _is_time(cls, dotted):
-    """Whether the field ``dotted`` of ``cls`` is a time or a duration (its value has ``to_sec``)."""
-    value = cls()
-    for name in dotted.split('.'):
-        value = getattr(value, name, None)
-    return hasattr(value, 'to_sec')
-
-
-def _block_values(block, field):
-    """The values of ``field`` of the messages of a ``raw_message.Block``, each as ``flat_row`` writes it."""
-    if field.base == 'string':
-        data = block.bytes_column(field)
-        if (data == data[0]).all():
-            return [data[0].tobytes().decode('utf-8')] * len(data)
-        return [row.tobytes().decode('utf-8') for row in data]
-    if field.count and field.base in msg_codec.BYTES_TYPES:
-        return [base64.b64encode(row.tobytes()).decode('ascii') for row in block.bytes_column(field)]
-    array = block.column(field)
-    if field.count is None:
-        array = array[:, 0]
-    if field.base == 'bool':
-        return array.astype(bool).tolist()
-    values = array.tolist()
-    if field.base == 'float32':
-        return [_float32(value) for value in values] if field.count is None else \
-            [[_float32(value) for value in row] for row in values]
-    if field.base == 'float64' and not numpy.isfinite(array).all():
-        return list(map(_float if field.count is None else _float64s, values))
-    return values
-
-
-# -- differences ----------------------------------------------------------------------------------------
-
-def _is_int(value):
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _is_plain_float(value):
-    """A finite float that is not -0.0 (whose sign a sum of differences does not keep)."""
-    return isinstance(value, float) and math.isfinite(value) and not (value == 0.0 and math.copysign(1.0, value) < 0)
-
-
-def decimal_text(value):
-    """The JSON text of a Decimal: ``0``, else the shorter of plain and scientific notation, no trailing
-    zeros."""
-    if not value:
-        return '0'
-    value = value.normalize(_EXACT)
-    scientific = str(value)
-    if 'E' not in scientific:
-        return scientific  # plain already, as format(value, 'f') writes it
-    plain = format(value, 'f')
-    return plain if len(plain) <= len(scientific) else scientific
-
-
-def differences(values, choose=True):
-    """``values`` as their first value and differences (ints, or Decimals for floats), or None when they
-    are not all integers or all finite floats (no -0.0), or (``choose``) when the plain column is likely
-    smaller (integers: not shorter as text; floats: see DELTA_GAIN, REPEATS_SHARE and SAMPLE)."""
-    if len(values) < 3:
-        return None
-    if set(map(type, values)) == {int} or all(_is_int(value) for value in values):
-        deltas = values[:1] + [b - a for a, b in zip(values, values[1:])]
-        return deltas if not choose or len(str(deltas)) < len(str(values)) else None
-    if not _plain_floats(values):
-        return None
-    if choose and len(values) > 2 * SAMPLE and _digit_share(values[:SAMPLE])[0] > SAMPLE_GAIN:
-        return None  # decided on a sample: noisy columns (IMU axes) are not worth the decimal arithmetic
-    texts = list(map(repr, values))
-    if choose:  # the repeats first: they are cheaper to count than the digits
-        adjacent = sum(1 for a, b in zip(texts, texts[1:]) if a == b)
-        if len(texts) - len(set(texts)) - adjacent > REPEATS_SHARE * len(texts):
-            return None
-    share, deltas = _digit_share(values, texts)
-    return None if choose and share > DELTA_GAIN else deltas
-
-
-def _plain_floats(values):
-    """``all(_is_plain_float(value) for value in values)``, in bulk for a list of floats."""
-    if set(map(type, values)) != {float}:
-        return all(_is_plain_float(value) for value in values)
-    return all(map(math.isfinite, values)) and (0.0 not in values or all(map(_is_plain_float, values)))
-
-
-def _digit_share(values, texts=None):
-    """(significant digits of the differences / of the values, the differences); (inf, None) when they
-    cannot be computed exactly. ``texts``: ``repr`` of the values, if already made. The differences are a
-    ``_Deltas`` list: their texts (``decimal_text``) are kept for ``dumps``."""
-    texts = list(map(repr, values)) if texts is None else texts
-    exact = list(map(decimal.Decimal, texts))
-    try:
-        deltas = _Deltas(exact[:1] + list(map(_EXACT.subtract, exact[1:], exact)))
-    except decimal.DecimalException:
-        return math.inf, None
-    deltas.texts = _decimal_texts(deltas)
-    return _digit_sum(deltas.texts) / max(1, _digit_sum(texts)), deltas
-
-
-class _Deltas(list):
-    """Differences (Decimals) with their ``texts``."""
-
-    texts = None
-
-
-_NORMALIZED = operator.methodcaller('normalize', _EXACT)
-
-
-def _decimal_texts(values):
-    """``decimal_text`` of each of the Decimals ``values``, in bulk: ``str`` of the normalized value is that
-    text unless it is scientific (then the shorter of the two notations) or ``-0``."""
-    texts = list(map(str, map(_NORMALIZED, values)))
-    if '-0' in texts or 'E' in ''.join(texts):
-        texts = [decimal_text(value) if 'E' in text or text == '-0' else text for value, text in zip(values, texts)]
-    return texts
-
-
-_EXPONENT = re.compile('[eE][-+]?[0-9]+')
-
-
-def _digit_sum(texts):
-    """``sum(map(_digits, texts))`` counted over the joined texts, exponents left out: every digit, less the
-    zeros that lead a number (``0.00``...) and the texts that are ``0``."""
-    joined = ',' + ',,'.join(texts) + ','  # every text between its own two commas
-    if 'e' in joined or 'E' in joined:
-        joined = _EXPONENT.sub('', joined)  # the mantissa's digits count
-    joined = joined.replace(',-', ',')
-    count = len(joined) - joined.count(',') - joined.count('.') - joined.count(',0,')
-    lead = ',0.'
-    leading = joined.count(lead)
-    while leading:
-        count -= leading
-        lead += '0'
-        leading = joined.count(lead)
-    return count
-
-
-def _digits(text):
-    """Significant digits of a number's text (what LZMA pays for: leading zeros and the exponent are cheap)."""
-    return len(text.lower().split('e')[0].lstrip('-').replace('.', '').lstrip('0'))
-
-
-def _sums(values, key):
-    """The values of a delta column (first value, then differences) added up; floats exact in decimal."""
-    if not values or not all(_is_int(value) or isinstance(value, decimal.Decimal) for value in values):
-        raise ValueError('delta column %s: holds something other than numbers' % key)
-    total = values[0]
-    out = [total]
-    try:
-        for delta in values[1:]:
-            exact = isinstance(total, decimal.Decimal) or isinstance(delta, decimal.Decimal)
-            total = _EXACT.add(total, delta) if exact else total + delta
-            out.append(total)
-    except decimal.DecimalException:
-        raise ValueError('delta column %s: differences do not add up exactly' % key)
-    return out
-
-
-# -- precision (lossy) ----------------------------------------------------------------------------------
-
-_ROUNDING = decimal.Context(prec=60, rounding=decimal.ROUND_HALF_EVEN)
-
-
-def check_precision(precision, name='precision'):
-    """``{field pattern: step}`` with every step a finite number > 0, else ValueError('<name>: ...').
-    ``precision`` is such a mapping, None (no rounding) or text ``'pattern=step, pattern=step'`` (a node
-    parameter, a command-line option)."""
-    if precision is None:
-        return {}
-    if isinstance(precision, str):
-        items = [item.strip() for item in precision.split(',') if item.strip()]
-        if not all(item.count('=') == 1 for item in items):
-            raise ValueError('%s: %r is not "pattern=step, pattern=step, ..."' % (name, precision))
-        precision = dict((pattern.strip(), step.strip()) for pattern, step in (item.split('=') for item in items))
-    if not isinstance(precision, dict):
-        raise ValueError('%s: a mapping of field patterns to steps (e.g. {"pose.pose.position.*": 1e-4}), '
-                         'not %r' % (name, precision))
-    checked = {}
-    for pattern, step in precision.items():
-        if not isinstance(pattern, str) or not pattern:
-            raise ValueError('%s: %r is not a field pattern' % (name, pattern))
-        if isinstance(step, str):
-            try:
-                step = float(step)
-            except ValueError:
-                pass
-        if isinstance(step, bool) or not isinstance(step, (int, float)) or not 0 < step < float('inf'):
-            raise ValueError('%s: %s: step %r is not a number > 0' % (name, pattern, step))
-        checked[pattern] = float(step)
-    return checked
-
-
-def _rounder(precision):
-    """A function ``(key, value) -> value`` rounding the floats of fields matching ``precision``."""
-    steps = [(pattern, decimal.Decimal(repr(step))) for pattern, step in check_precision(precision).items()]
-    chosen = {}
-
-    def round_value(value, step):
-        if isinstance(value, list):
-            return [round_value(item, step) for item in value]
-        if not isinstance(value, float) or not math.isfinite(value):
-            return value
-        count = _ROUNDING.divide(decimal.Decimal(repr(value)), step).to_integral_value(decimal.ROUND_HALF_EVEN)
-        return float(_ROUNDING.multiply(count, step)) + 0.0  # + 0.0: no -0.0
-
-    def rounded(key, value):
-        if key not in chosen:
-            chosen[key] = next((step for pattern, step in steps if fnmatch.fnmatchcase(key, pattern)), None)
-        step = chosen[key]
-        return value if step is None else round_value(value, step)
-    return rounded
-
-
-def max_errors(records, back):
-    """``{topic: {field: largest absolute difference}}`` of every float field (array elements included)
-    between ``records`` and ``back`` (the same messages read back, e.g. after rounding); non-finite values
-    must stay the same (else the error is ``inf``)."""
-    errors = {}
-    for a, b in zip(records, back):
-        topic = errors.setdefault(a.topic, {})
-        flat_b = _flatten(msg_codec.to_dict(b.msg), '', {})
-        for key, value in _flatten(msg_codec.to_dict(a.msg), '', {}).items():
-            pairs = zip(value, flat_b[key]) if isinstance(value, list) else [(value, flat_b[key])]
-            for old, new in pairs:
-                if isinstance(old, float) or isinstance(new, float):
-                    error = abs(new - old) if math.isfinite(old) else (0.0 if repr(old) == repr(new) else math.inf)
-                    topic[key] = max(topic.get(key, 0.0), error)
-    return errors
-
-
 def document(records, metadata, delta=differences):
     """The JSON document (a dict) of a window's records and its metadata; ``metadata['precision']`` (if any)
     rounds fields (module docstring). Delta columns of floats hold Decimals: write it with ``dumps``.
@@ -580,13 +104,13 @@ def document(records, metadata, delta=differences):
         raise ValueError('window: has no records')
     meta = dict(metadata or {})
     precision = check_precision(meta.get('precision'), 'precision')
-    rounded = _rounder(precision) if precision else None
+    rounded = rounder(precision) if precision else None
     sections = []
     index = {}
     order = []
     classes = {}
     for record in records:
-        msg = _class_of(record, classes)
+        msg = class_of(record, classes)
         if record.topic not in index:
             index[record.topic] = len(sections)
             sections.append({'topic': record.topic, 'type': msg._type, 'md5sum': msg._md5sum,
@@ -602,11 +126,11 @@ def document(records, metadata, delta=differences):
     topics = []
     for section in sections:
         recs = section.pop('records')
-        values, same, header_stamps = _section_values(recs)
+        values, same, header_stamps = section_values(recs)
         if rounded is not None:
             values = dict((key, [rounded(key, column[0])] * len(column) if key in same else
                            [rounded(key, value) for value in column]) for key, column in values.items())
-        constant, columns = _split_columns(values, same)
+        constant, columns = split_columns(values, same)
         delta_keys = []
         for key, values in columns.items():
             deltas = delta(values)
@@ -614,7 +138,7 @@ def document(records, metadata, delta=differences):
                 columns[key] = deltas
                 delta_keys.append(key)
         stamps = [record.stamp for record in recs]
-        if _all_equal(header_stamps, stamps):
+        if all_equal(header_stamps, stamps):
             stamps = HEADER_STAMP
         else:
             stamps = [msg_codec.encode_float(float(stamp)) for stamp in stamps]
@@ -661,7 +185,7 @@ def dumps(doc):
 
 def _column_text(values):
     if values and isinstance(values[0], decimal.Decimal):  # the first as written (8.0, not 8), then differences
-        texts = values.texts if isinstance(values, _Deltas) else _decimal_texts(values)
+        texts = values.texts if isinstance(values, Deltas) else decimal_texts(values)
         return '[%s]' % ','.join([str(values[0])] + texts[1:])
     return _json(values)
 
@@ -854,7 +378,7 @@ def _section_records(section):
         if not isinstance(values, list) or len(values) != count:
             raise ValueError('column %s does not hold %d values' % (key, count))
         if key in delta:
-            values = _sums(values, key)
+            values = sums(values, key)
         columns[key] = _floats(values)
     cls = msg_codec.message_class(msg_type, definition)
     if section.get('md5sum') not in (None, cls._md5sum):
@@ -876,7 +400,7 @@ def _section_records(section):
         for key, values in columns.items():
             flat[key] = values[i]
         try:
-            msg = msg_codec.from_dict(_unflatten(flat), msg_type, definition)
+            msg = msg_codec.from_dict(unflatten(flat), msg_type, definition)
         except ValueError as error:
             raise ValueError('message %d: %s' % (i, error))
         if stamps == HEADER_STAMP:
