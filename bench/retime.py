@@ -1,5 +1,5 @@
 """Slower copies of nominal driving: the same paths driven with stops and slow stretches (a bench experiment of
-``bench/detection_runs.py --slowed N [--braking B]``; not adopted, docs/RESULTS.md "Sixth round").
+``bench/detection_runs.py --slowed N [--braking B]``; not adopted, docs/RESULTS.md "Every real run with odometry").
 
 A robot that drove a path nominally may drive it slower, stop on it and start again: that is nominal too. A
 short training run often never does (a few minutes of cruising), and a one-class model then flags the robot's

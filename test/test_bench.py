@@ -88,7 +88,7 @@ def test_slowed_copies_keep_the_path_and_the_twist_lag():
     records = detection_runs.load('husky_outdoor_2015', '/husky_velocity_controller/odom', None)
     first, _ = detection_runs.split(records, 0.5)
     lag = retime.twist_lag([r.stamp for r in first], [retime.state(r.msg) for r in first])
-    assert 0.4 <= lag <= 0.6  # the Husky's twist lags its pose by ~0.5 s (docs/RESULTS.md "Sixth round")
+    assert 0.4 <= lag <= 0.6  # the Husky's twist lags its pose by ~0.5 s (docs/RESULTS.md, real runs)
     copy = retime.slowed(first, seed=0, braking=1.0)
     assert len(copy) > len(first)  # the same path, slower
     speeds = [abs(r.msg.twist.twist.linear.x) for r in copy]
