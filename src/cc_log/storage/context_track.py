@@ -41,6 +41,7 @@ from cc_log.storage import log_format, recovery, window_writer
 from cc_log.core import raw_message, safe_files
 from cc_log.storage.formats import bag_lz4
 from cc_log.core.records import Record
+from cc_log.core.spans import seconds
 from cc_log.core.topic_select import topic_list
 
 __all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PREFIX', 'DEFAULT_TOPICS',
@@ -93,16 +94,6 @@ def _rate(value, name):
     if not rate > 0 or not math.isfinite(rate):
         raise ValueError('%s: rate %r must be a positive number of Hz' % (name, value))
     return rate
-
-
-def _seconds(value, name):
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        number = float('nan')
-    if not number > 0 or not math.isfinite(number):
-        raise ValueError('%s: %r must be a positive number of seconds' % (name, value))
-    return number
 
 
 def file_name(stamp):
@@ -205,8 +196,8 @@ class ContextTrack(object):
         self.directory = os.path.join(str(directory), SUBDIRECTORY)
         self.rates = dict(rates)
         self.names = dict(names or {})  # topic -> the name it is stored under (BWI's odom_1hz), when not its own
-        self.rotate = _seconds(rotate, 'context_rotate')
-        self.retry = _seconds(retry, 'context_retry')
+        self.rotate = seconds(rotate, 'context_rotate', positive=True)
+        self.retry = seconds(retry, 'context_retry', positive=True)
         self._clock = clock
         self._retry_at = None  # clock before which no file is opened again after a failed write
         self._submit = submit

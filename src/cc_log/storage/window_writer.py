@@ -29,6 +29,7 @@ import time
 from cc_log.storage import disk_guard
 from cc_log.storage import log_format
 from cc_log.core.records import LogWindow
+from cc_log.core.spans import seconds
 
 __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'WRITTEN', 'FAILED', 'DELETED', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
@@ -98,9 +99,9 @@ class WindowWriter(object):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
         self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb)
-        self.retry_period = _seconds(retry_period, 'retry_period', positive=True)
-        self.give_up_after = None if give_up_after is None else _seconds(give_up_after, 'give_up_after')
-        self.close_retry = _seconds(close_retry, 'close_retry')
+        self.retry_period = seconds(retry_period, 'retry_period', positive=True)
+        self.give_up_after = None if give_up_after is None else seconds(give_up_after, 'give_up_after')
+        self.close_retry = seconds(close_retry, 'close_retry')
         self.max_held_messages = int(max_held_messages)
         self._held = collections.deque()  # jobs that failed, oldest first (writer thread only)
         self._held_weight = 0
@@ -407,14 +408,3 @@ class WindowWriter(object):
     def _emit(self, event):
         for callback in self._callbacks:
             callback(event)
-
-
-def _seconds(value, name, positive=False):
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        number = float('nan')
-    if not (number > 0 if positive else number >= 0) or number == float('inf'):
-        raise ValueError('%s: %r must be %s seconds' % (name, value, 'a positive number of' if positive
-                                                        else 'a number >= 0 of'))
-    return number

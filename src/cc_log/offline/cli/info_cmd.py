@@ -50,7 +50,7 @@ def run(args):
         say('  topic MB   %s (serialized)' % ', '.join(
             '%s %.2f' % (topic, size / 1e6) for topic, size in sorted(w['topic_bytes'].items(), key=lambda i: -i[1])))
         if w['dropped']:
-            say('  DROPPED    %d messages the writer could not keep up with: %s' % (
+            say('  DROPPED    %d messages not in the file (the writer fell behind; payloads not of their type): %s' % (
                 sum(w['dropped'].values()), ', '.join('%s %d' % item for item in sorted(w['dropped'].items()))))
         say('  size       %s (row JSON %s, %s)' % (
             human_bytes(w['bytes']), human_bytes(w['raw_json_bytes']),
