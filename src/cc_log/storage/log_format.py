@@ -16,11 +16,13 @@ systems without hard links), and the directory is fsynced (``safe_files.AtomicFi
 (``temporary_files``).
 """
 import collections
+import heapq
 import datetime
 import os
 import re
 
 from cc_log import __version__
+from cc_log.core import routes
 from cc_log.storage import formats, payload_check
 from cc_log.core import msg_codec
 from cc_log.core import raw_message
@@ -203,6 +205,48 @@ def window_files(directory):
             if name.startswith(PREFIX) and TMP_MARK not in name and _extension(name)]
 
 
+def window_key(path):
+    """What the files of one window share: the path without its format's extension, up to a route's name
+    (``<window>+<route>.<ext>``, ``core.routes``)."""
+    directory, name = os.path.split(path)
+    module = formats.by_extension(name)
+    stem = name[:-len(module.EXTENSION)] if module else name
+    return os.path.join(directory, stem.split(routes.SEPARATOR, 1)[0])
+
+
+def window_sets(paths):
+    """``[[path, ...]]``: ``paths`` grouped by window (``window_key``) in order of first appearance, each window's
+    other files from its directory added, its own file (no route) first."""
+    sets, listed = collections.OrderedDict(), {}
+    for path in paths:
+        key = window_key(path)
+        directory = os.path.dirname(path)
+        if directory not in listed:  # each directory listed once: {window key: its files}
+            listed[directory] = collections.defaultdict(list)
+            for name in window_files(directory or '.'):
+                sibling = os.path.join(directory, os.path.basename(name))
+                listed[directory][window_key(sibling)].append(sibling)
+        files = sets.setdefault(key, [])
+        for candidate in [path] + listed[directory].get(key, []):
+            if candidate not in files:
+                files.append(candidate)
+    return [sorted(files, key=lambda p: routes.SEPARATOR in os.path.basename(p)) for files in sets.values()]
+
+
+def read_window_set(paths):
+    """``(metadata, records)`` of a window written as several files (``window_sets``): the metadata of its first
+    file with ``files`` (every path) and ``counts``/``topics``/``count`` of them all; records of every file in
+    stamp order. ValueError as ``read_window``."""
+    metadata, records = read_window(paths[0])
+    if len(paths) == 1:
+        return metadata, records
+    parts = [records] + [read_window(path)[1] for path in paths[1:]]
+    merged = list(heapq.merge(*parts, key=lambda record: record.stamp))
+    counts = collections.Counter(record.topic for record in merged)
+    metadata = dict(metadata, files=list(paths), counts=dict(counts), topics=list(counts), count=len(merged))
+    return metadata, merged
+
+
 def kept_leftovers(directory):
     """Leftovers kept after a partial recovery (``cc_log_*.unrecovered-<pid>``), sorted: bytes no reader
     could decode, left for a person to look at."""
@@ -299,8 +343,9 @@ class WindowFile(object):
 
     SUMMED = ('dropped', 'undecodable')
 
-    def __init__(self, directory, fmt):
+    def __init__(self, directory, fmt, suffix=''):
         self.directory = directory
+        self.suffix = suffix  # after the window's base name: a route's file (``core.routes``)
         self.format = formats.check(fmt)
         self._module = formats.get(fmt)
         self._target = self._stream = None
@@ -314,7 +359,7 @@ class WindowFile(object):
         """Write the records of the next part (OSError, ValueError: nothing of it was written; try again)."""
         if self._stream is None:
             ensure_directory(self.directory)
-            base, extension = base_name(window, part=0), self._module.EXTENSION
+            base, extension = base_name(window, part=0) + self.suffix, self._module.EXTENSION
             target = safe_files.AtomicFile(os.path.join(self.directory, base + extension),
                                            names=final_names(self.directory, base, extension), keep=True)
             stream = target.__enter__()

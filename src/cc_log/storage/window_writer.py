@@ -28,6 +28,7 @@ import time
 
 from cc_log.storage import disk_guard
 from cc_log.storage import log_format
+from cc_log.core import routes
 from cc_log.core.records import LogWindow
 from cc_log.core.spans import seconds
 
@@ -56,11 +57,14 @@ next; kept: for FAILED, True when the job is held in memory and retried, False w
 class Job(object):
     """One file for the writer: ``window`` (a LogWindow) with ``metadata`` for ``log_format.write_window``, or
     ``write``, a function that writes another file and returns its path. ``what`` names the kind of file
-    (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events."""
+    (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events. ``fmt`` and
+    ``route``: the window's file of a route (``core.routes``) in that format, named ``<window's name>+<route>``
+    (None: the writer's format, the window's own file)."""
 
-    __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole')
+    __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole',
+                 'fmt', 'route')
 
-    def __init__(self, window=None, metadata=None, write=None, what=None, tag=None):
+    def __init__(self, window=None, metadata=None, write=None, what=None, tag=None, fmt=None, route=None):
         if (window is None) == (write is None):
             raise ValueError('job: give either a window or a write function')
         self.window = window
@@ -73,6 +77,12 @@ class Job(object):
         self.whole = None       # a window written a part at a time, as a whole, once its file is finished
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent
+        self.fmt, self.route = fmt, route
+
+    @property
+    def stream_key(self):
+        """The window file this job's part belongs to: the window's key and the route."""
+        return (self.window.key, self.route)
 
     @property
     def weight(self):
@@ -114,9 +124,8 @@ class WindowWriter(object):
         self.last_deleted = ''
         self._closed = False
         self.cpu_seconds = 0.0            # CPU time of the writer thread writing (decoding, compressing, disk)
-        self._streams_parts = log_format.streams(self.format)  # a window's parts go into one file
-        self._streams = {}                # window key -> its log_format.WindowFile being written (writer thread)
-        self._triggers_said = {}          # window key -> its triggers in the files of its parts written so far
+        self._streams = {}                # (window key, route) -> its log_format.WindowFile being written
+        self._triggers_said = {}          # (window key, route) -> its triggers in the files of its parts so far
         self._queue = queue.Queue()
         self._thread = None
         if background:
@@ -218,8 +227,9 @@ class WindowWriter(object):
     def _finish(self):
         self._wait_held(self.close_retry)
         self._retry_held(final=True)
-        for key, stream in list(self._streams.items()):  # a window whose last part never came: finished as it is
-            self._write(Job(LogWindow([], stream.triggers, 1, True, key), stream.metadata))
+        for (key, route), stream in list(self._streams.items()):  # a window whose last part never came
+            self._write(Job(LogWindow([], stream.triggers, 1, True, key), stream.metadata, fmt=stream.format,
+                            route=route))
 
     def _wait_held(self, seconds):
         """Retry held jobs every retry_period for up to ``seconds`` or until none is held."""
@@ -317,31 +327,35 @@ class WindowWriter(object):
         window = job.window
         if window is None:
             return job.write(), 0
-        if window.part and window.key is not None and self._streams_parts:
-            stream = self._streams.get(window.key)
+        fmt, key = job.fmt or self.format, job.stream_key
+        suffix = routes.SEPARATOR + job.route if job.route else ''
+        if window.part and window.key is not None and log_format.streams(fmt):
+            stream = self._streams.get(key)
             if stream is None:
-                stream = self._streams[window.key] = log_format.WindowFile(self.directory, self.format)
+                if not window.records:  # a route none of whose topics came yet: no file
+                    return None, 0
+                stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix)
             if not window.final:
                 stream.append(window, job.metadata)
                 return None, 0
             path, nbytes = stream.finish(window, job.metadata)
-            del self._streams[window.key]
+            del self._streams[key]
             job.whole = stream.summary
             return path, nbytes
         parted = bool(window.part) and window.key is not None
         if not window.records:  # the end of a window written as files of its parts: nothing more to write
             if parted and window.final:
-                self._triggers_said.pop(window.key, None)
+                self._triggers_said.pop(key, None)
             return None, 0
         # a part's file says the triggers that came since the part before it (a part's window holds all of them)
-        triggers = window.triggers[self._triggers_said.get(window.key, 0):] if parted else None
+        triggers = window.triggers[self._triggers_said.get(key, 0):] if parted else None
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
-        path, nbytes = log_format.write_window(window, self.directory, self.format, job.metadata, left_out=left_out,
-                                               triggers=triggers)
+        path, nbytes = log_format.write_window(window, self.directory, fmt, job.metadata, left_out=left_out,
+                                               triggers=triggers, base=log_format.base_name(window) + suffix)
         if parted and window.final:
-            self._triggers_said.pop(window.key, None)
+            self._triggers_said.pop(key, None)
         elif parted:
-            self._triggers_said[window.key] = len(window.triggers)
+            self._triggers_said[key] = len(window.triggers)
         if left_out:
             with self._lock:
                 self._counts['messages_lost'] += sum(left_out.values())
@@ -390,11 +404,11 @@ class WindowWriter(object):
 
     def _lose(self, job, error):
         window = job.window
-        stream = self._streams.get(window.key) if window is not None and window.key is not None else None
+        stream = self._streams.get(job.stream_key) if window is not None and window.key is not None else None
         if stream is not None:
             stream.lose(window, job.metadata)
             if window.final:  # what was written stays in its temporary file, for recovery at the next start
-                del self._streams[window.key]
+                del self._streams[job.stream_key]
                 stream.abandon()
         with self._lock:
             self._counts['jobs_queued'] -= 1

@@ -210,13 +210,15 @@ def window_paths(paths):
 
 
 def read_windows(args, paths, label):
-    """Yield ``(path, metadata, records)`` of every window file named by ``paths``, with a progress bar."""
+    """Yield ``(path, metadata, records)`` of every window named by ``paths``, with a progress bar: a window
+    written as several files (routes) is read as one (``log_format.read_window_set``; ``path``: its own file,
+    ``metadata['files']``: all of them)."""
     from cc_log.storage import log_format
-    files = window_paths(paths)
-    with _bar(args, label, len(files)) as bar:
-        for path in files:
-            metadata, records = log_format.read_window(path)
-            yield path, metadata, records
+    sets = log_format.window_sets(window_paths(paths))
+    with _bar(args, label, len(sets)) as bar:
+        for files in sets:
+            metadata, records = log_format.read_window_set(files)
+            yield files[0], metadata, records
             bar.update()
 
 

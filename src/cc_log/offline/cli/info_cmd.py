@@ -42,6 +42,8 @@ def run(args):
         return EXIT_OK
     for w in windows:
         say(w['path'])
+        if len(w['files']) > 1:
+            say('  routes     %s' % ', '.join(os.path.basename(name) for name in w['files'][1:]))
         say('  codec      %s' % w['codec'])
         utc = ', from %s' % w['start_utc'] if w['start_utc'] else ''
         say('  span       %s .. %s  (%.2f s%s)' % (stamp_text(w['start']), stamp_text(w['end']),
@@ -93,7 +95,7 @@ def _window_summary(path, metadata, records):
     stamps = [record.stamp for record in records]
     start = min(stamps) if stamps else None
     end = max(stamps) if stamps else None
-    size = os.path.getsize(path)
+    size = sum(os.path.getsize(name) for name in metadata.get('files', [path]))  # every file of the window
     triggers = []
     for trigger in metadata.get('triggers') or []:
         score = trigger.get('score')
@@ -103,6 +105,7 @@ def _window_summary(path, metadata, records):
     scores = [trigger['score'] for trigger in triggers if isinstance(trigger['score'], (int, float))]
     return collections.OrderedDict([
         ('path', path),
+        ('files', metadata.get('files', [path])),  # a window with routes: its own file and one per route
         ('codec', metadata.get('codec')),
         ('start', start),
         ('end', end),
