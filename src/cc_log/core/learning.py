@@ -146,7 +146,16 @@ def _refuse(name):
 
 # -- training -----------------------------------------------------------------------------------------
 
-def _peak_rss_mb():
+def peak_rss_mb():
+    """Peak resident memory of this process (MB): VmHWM (ru_maxrss of a spawned process may include its parent's:
+    Linux carries the high-water mark across exec)."""
+    try:
+        with open('/proc/self/status') as stream:
+            for line in stream:
+                if line.startswith('VmHWM:'):
+                    return int(line.split()[1]) / 1024.0
+    except (IOError, OSError, ValueError, IndexError):
+        pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
@@ -310,7 +319,7 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
         else int(model.kernel['components'].shape[0]),
         'held_out_score_min': float(np.min(held_scores)), 'held_out_score_median': float(np.median(held_scores)),
         'held_out_flagged': int(np.sum(held_scores < threshold)),
-        'train_seconds': time.time() - started, 'peak_rss_mb': _peak_rss_mb(),
+        'train_seconds': time.time() - started, 'peak_rss_mb': peak_rss_mb(),
     })
     model.info = {key: value for key, value in info.items() if key != 'grid'}
     return model, info

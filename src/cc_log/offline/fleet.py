@@ -16,7 +16,6 @@ import collections
 import glob
 import logging
 import os
-import resource
 import time
 
 import numpy as np
@@ -138,15 +137,9 @@ def _guarded(function, item):
 
 
 def peak_rss_mb():
-    """Peak resident memory of this process (MB): VmHWM (ru_maxrss of a spawned process may include its parent's)."""
-    try:
-        with open('/proc/self/status') as stream:
-            for line in stream:
-                if line.startswith('VmHWM:'):
-                    return int(line.split()[1]) / 1024.0
-    except (IOError, OSError, ValueError, IndexError):
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    """Peak resident memory of this process (MB): ``learning.peak_rss_mb``."""
+    from cc_log.core import learning
+    return learning.peak_rss_mb()
 
 
 class Engine(object):
