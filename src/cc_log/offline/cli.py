@@ -389,11 +389,11 @@ def _vector_dir(path):
 
 def _sweep(args, flat, many):
     """``replay --sweep``: every combination of the --sweep values over one reading of each bag; a table."""
-    from cc_log.offline import fleet
+    from cc_log.offline import fleet, replay, sweep
     from cc_log.core.spans import Span
     from cc_log.triggers import RETRIGGER_MODES
     sweeps = []
-    for combination in fleet.parse_sweep(args.sweep):
+    for combination in sweep.parse_sweep(args.sweep):
         options = copy.deepcopy(flat)
         for key, value in combination.items():
             if key in ('pre', 'post', 'classify_every'):
@@ -407,16 +407,16 @@ def _sweep(args, flat, many):
         if threshold is not None:
             threshold = _number('sweep: threshold', threshold)
         cfg = _configuration(args, options)
-        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
-        sweeps.append(fleet.Sweep(fleet.sweep_label(combination), cfg, threshold))
+        replay.replay_setup(cfg)  # a bad configuration is one line before any bag
+        sweeps.append(sweep.Sweep(sweep.sweep_label(combination), cfg, threshold))
     bags = fleet.expand_bags(args.bag) if many else [args.bag]
     _writable_dir(args.out, 'out')
     if not many:
         args.workers = 0
-    outcomes, summary = _run_fleet(args, 'replay', lambda engine, progress: fleet.sweep_many(
+    outcomes, summary = _run_fleet(args, 'replay', lambda engine, progress: sweep.sweep_many(
         engine, bags, args.out, sweeps, progress=progress))
     rows = _fleet_rows(outcomes, ('seconds', 'anomalies', 'rows'))
-    table = fleet.sweep_table([outcome.value for outcome in outcomes if outcome.ok])
+    table = sweep.sweep_table([outcome.value for outcome in outcomes if outcome.ok])
     summary['configurations'] = table
     width = max([len('configuration')] + [len(line['label']) for line in table])
     text = ['%-*s %8s %10s %6s %10s %7s %9s' % (width, 'configuration', 'windows', 'kept', 'kept%', 'stored',
@@ -441,15 +441,15 @@ def _number(name, value):
 
 def _learn_many(args):
     """Train over every vector directory of --train (partitions) on the engine: ``(model, info)``."""
-    from cc_log.offline import fleet, learn_main
+    from cc_log.offline import fleet, learn_main, partition_learning
     from cc_log.core import learning
     directories = fleet.expand_vector_dirs(args.train)
     with _engine(args) as engine:
-        if args.method == fleet.STREAM_METHOD:
-            model, info = fleet.train_streamed(engine, fleet.load_partition, directories, nu=args.nu,
-                                               gamma=args.gamma)
+        if args.method == partition_learning.STREAM_METHOD:
+            model, info = partition_learning.train_streamed(engine, partition_learning.load_partition, directories,
+                                                            nu=args.nu, gamma=args.gamma)
         else:
-            vectors, config, worker_rss = fleet.gather_vectors(engine, directories)
+            vectors, config, worker_rss = partition_learning.gather_vectors(engine, directories)
             nominal, anomalous = learn_main.split_labels(vectors)
             if nominal is None:
                 raise CommandError('train: %s have no %s/ vectors' % (' '.join(args.train), learn_main.NOMINAL))
@@ -586,12 +586,12 @@ def cmd_tune(args):
     """Set a model's threshold, and with several --windows / --classify-every its feature window and classify
     rate, to a false-window budget on nominal bags (``tuning.choose``); write it to --out."""
     from cc_log.storage.bag import bagio
-    from cc_log.offline import fleet, tuning
+    from cc_log.offline import replay, tuning
     from cc_log.core.model import AnomalyModel
     model = AnomalyModel.load(_existing_file(args.model, 'model file'))
     for bag in args.bag:
         _existing_file(bag, 'bag file')
-        fleet.check_bag_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
+        replay.check_bag_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
     _parent_exists(args.out, 'out')
     with _bar(args, 'tune').busy():
         runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]
@@ -644,7 +644,7 @@ def _configuration(args, flat):
 def cmd_replay(args):
     """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read, with the
     triggers of ``--config`` and/or the classifier of ``--model`` on ``--topic``."""
-    from cc_log.offline import fleet
+    from cc_log.offline import replay
     many = _fleet_wanted(args, args.bag)
     if not many:
         args.bag = _existing_file(args.bag[0], 'bag file')
@@ -663,11 +663,11 @@ def cmd_replay(args):
     if args.sweep:
         return _sweep(args, flat, many)
     if many:
-        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
+        replay.replay_setup(cfg)  # a bad configuration is one line before any bag
         with _cut_off_reported(args.out):
             return _replay_many(args, cfg)
     with _cut_off_reported(args.out), _bar(args, 'replay') as bar:
-        summary = fleet.replay_one(args.bag, args.out, cfg, bar.set, lambda path: _writable_dir(path, 'out'))
+        summary = replay.replay_one(args.bag, args.out, cfg, bar.set, lambda path: _writable_dir(path, 'out'))
     result = collections.OrderedDict([
         ('input_messages', summary['input_messages']),
         ('raw_json_bytes', summary['raw_json_bytes']),
