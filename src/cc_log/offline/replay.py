@@ -12,7 +12,7 @@ Edge module: ``bagio``/``bag_reader`` (and so rosbag) are imported when a bag is
 import itertools
 import operator
 
-from cc_log.core import raw_message, smart
+from cc_log.core import raw_message, smart, trigger_topics
 from cc_log.storage import window_writer
 
 __all__ = ['replay_one', 'replay_setup', 'replay', 'replay_into', 'replay_records', 'check_bag_topics',
@@ -33,7 +33,7 @@ def _options(cfg):
     from cc_log.core import config as config_mod
     from cc_log.core.model import AnomalyModel
     triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
-    return cfg.logger_options(triggers), smart.topic_types(triggers)
+    return cfg.logger_options(triggers), trigger_topics.topic_types(triggers)
 
 
 def _selected(cfg, options, types, bag):
