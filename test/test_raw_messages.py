@@ -303,3 +303,14 @@ def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_
     assert batched.total == one.total > 0 and batched._types == one._types  # (the samples decoded by total)
     sampled = one._types[records[0].connection['type']]
     assert 0 < sampled[2] < sampled[1]  # sampled after the first 20, not every message
+
+
+def test_the_row_json_estimate_decodes_its_samples_when_asked_not_when_noted(husky_raw):
+    from cc_log.core.raw_json import RawJsonEstimate
+    raws, connections = [r.raw for r in husky_raw[:300]], [r.connection for r in husky_raw[:300]]
+    lazy, eager = RawJsonEstimate(), RawJsonEstimate(pending_bytes=0)  # eager: decoded as soon as noted
+    lazy.count_all(raws, connections)
+    eager.count_all(raws, connections)
+    assert all(entry[2] == entry[3] == 0 for entry in lazy._types.values())  # nothing decoded on the message path
+    assert all(entry[2] > 0 for entry in eager._types.values())
+    assert lazy.total == eager.total > 0 and lazy._types == eager._types
