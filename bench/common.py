@@ -193,11 +193,12 @@ def window_vectors(records, topic, config, stride=1):
 
 def smart_replay(model, records, driving_topic, directory, side_topics=(), fmt='json-xz', pre='100',
                  post='100', retrigger='every', triggers=()):
-    """Feed records (decoded or serialized) to a SmartLogger through ``smart_logger.replay_records``, the
+    """Feed records (decoded or serialized) to a SmartLogger through ``offline.replay.replay_records``, the
     replay of ``cclog replay``; return a dict: stats (SmartLogger.stats()), windows [{start, end, messages,
     path, bytes, triggers: [stamps]}]. ``triggers``: more triggers beside ``model``'s classifier."""
     from cc_log.storage import log_format
-    from cc_log.core.smart import SmartLogger, replay_records
+    from cc_log.core.smart import SmartLogger
+    from cc_log.offline.replay import replay_records
     logger = SmartLogger(model, directory, fmt, pre, post, driving_topic=driving_topic,
                          side_topics=tuple(side_topics), retrigger=retrigger, triggers=triggers)
     windows = replay_records(logger, records)['windows']

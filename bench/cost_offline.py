@@ -9,7 +9,7 @@ For each bag, in the same process and alternating (read, replay, read, replay, .
 machine load:
 - read: ``rosbag.Bag.read_messages`` of the topics, touching each message (the baseline: what any Python
   tool pays to get the messages);
-- replay: ``smart_logger.replay`` (what ``cclog replay`` runs: ``bag_reader`` + features + classifier in
+- replay: ``offline.replay.replay`` (what ``cclog replay`` runs: ``bag_reader`` + features + classifier in
   batches + windows written as json-xz, or ``--format bag-lz4``, by the background writer, waiting for every
   window to be written).
 Throughput is messages / process CPU seconds (user + system, all threads) and messages / wall seconds;
@@ -43,7 +43,7 @@ import rosbag  # noqa: E402
 from cc_log.core import learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
-from cc_log.core.smart import replay  # noqa: E402
+from cc_log.offline.replay import replay  # noqa: E402
 
 
 def plain_read(path, topics):
@@ -58,7 +58,10 @@ STAGES = (  # (stage, substrings of the file names whose functions' own time cou
     ('bag read', ('/cc_log/storage/bag/bag_reader.py', '/cc_log/storage/bag/bagio.py')),
     ('features', ('/cc_log/features/',)),
     ('classifier', ('/cc_log/core/model.py', '/cc_log/triggers/classifier.py', '/sklearn/', '/numpy/', '/scipy/')),
-    ('window buffer, triggers', ('/cc_log/core/window_buffer.py', '/cc_log/core/smart.py', '/cc_log/triggers/')),
+    ('window buffer, triggers', ('/cc_log/core/window_buffer.py', '/cc_log/core/smart.py', '/cc_log/triggers/',
+                                 '/cc_log/core/stamp_clock.py', '/cc_log/core/window_prep.py',
+                                 '/cc_log/core/trigger_topics.py', '/cc_log/core/smart_events.py',
+                                 '/cc_log/core/raw_json.py', '/cc_log/offline/replay.py')),
     ('writer (decode, json-xz, disk)', ('/cc_log/', 'lzma', 'json', '/genpy/', '_Odometry', '_Imu', 'dynamic')),
     ('bag read', ('/rosbag/', 'bz2', 'lz4', '/roslz4/')),
 )
@@ -77,7 +80,8 @@ def profile(path, topics, model_path, out, name, top, fmt='json-xz'):
     import cProfile
     import pstats
     from cc_log.core.model import AnomalyModel
-    from cc_log.core.smart import SmartLogger, replay_into
+    from cc_log.core.smart import SmartLogger
+    from cc_log.offline.replay import replay_into
     logger = SmartLogger(AnomalyModel.load(model_path), out, fmt=fmt, driving_topic=topics[0],
                          side_topics=tuple(topics[1:]), background=False)
     profiler = cProfile.Profile()

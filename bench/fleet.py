@@ -22,10 +22,11 @@ array for array.
 
 Learning: partitions of the same runs' vectors at ``--learn-stride`` (vectors of the time an anomaly of the
 truth file, plus the window, reaches are left out), 80 % of the runs to train, 20 % held out:
-``fleet.train_streamed`` (scaler from moments, Nystroem components from a sample, ``SGDOneClassSVM.partial_fit``
-over the partitions) on 1 and 2 workers, and ``learning.train`` 'auto' (the exact SVM on an even subsample of
-DEFAULT_MAX_EXACT vectors, all vectors gathered in one process); the false-positive rate of both on the held-out
-runs, with its 95 % Hoeffding bound. Peak memory (VmHWM): of every worker and of the gathering process.
+``partition_learning.train_streamed`` (scaler from moments, Nystroem components from a sample,
+``SGDOneClassSVM.partial_fit`` over the partitions) on 1 and 2 workers, and ``learning.train`` 'auto' (the exact
+SVM on an even subsample of DEFAULT_MAX_EXACT vectors, all vectors gathered in one process); the false-positive
+rate of both on the held-out runs, with its 95 % Hoeffding bound. Peak memory (VmHWM): of every worker and of the
+gathering process.
 """
 import argparse
 import filecmp
@@ -44,7 +45,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.offline import fleet  # noqa: E402
+from cc_log.offline import fleet, partition_learning  # noqa: E402
 from cc_log.core import learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
@@ -201,7 +202,7 @@ def learning_rows(bags, stride, workers_list):
     for workers in workers_list:
         with fleet.Engine(workers) as engine:
             with common.Timer() as timer:
-                model, info = fleet.train_streamed(engine, partition_of_run, [(p, stride) for p in train])
+                model, info = partition_learning.train_streamed(engine, partition_of_run, [(p, stride) for p in train])
             every = sorted(engine.client.run(fleet.peak_rss_mb).values())  # VmHWM of every worker process
         fp = false_positive_rate(model, held_X)
         rows.append(['streamed Nystroem + SGD partial_fit (%d partitions)' % info['partitions'], workers,

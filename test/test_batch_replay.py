@@ -12,7 +12,8 @@ from cc_log.core import learning, raw_message
 from cc_log.storage import log_format
 from cc_log import sim
 from cc_log.features import FeatureConfig
-from cc_log.core.smart import SmartLogger, replay_into
+from cc_log.core.smart import SmartLogger
+from cc_log.offline.replay import replay_into
 from cc_log.triggers.classifier import scores_of
 from cc_log.triggers.rule import RuleTrigger
 

@@ -155,7 +155,8 @@ def test_the_demos_configuration_keeps_every_event_of_its_run_whole(tmp_path):
     import yaml
     from cc_log.core import config, learning
     from cc_log import sim
-    from cc_log.core.smart import SmartLogger, replay_records
+    from cc_log.core.smart import SmartLogger
+    from cc_log.offline.replay import replay_records
     from cc_log.core.records import Record
     demo.prepare_out(str(tmp_path))
     model_path = demo.train(str(tmp_path), demo.DEFAULT_TRAIN_MINUTES, demo.DEFAULT_SEED, demo.DEFAULT_WINDOW,

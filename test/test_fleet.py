@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from cc_log.offline import fleet
+from cc_log.offline import fleet, partition_learning, sweep
 from cc_log.core import learning
 from cc_log.storage import log_format
 
@@ -185,19 +185,19 @@ def test_workers_and_scheduler_exclude_each_other_and_dask_is_installed_by_dev_s
 
 
 def test_sweep_values_make_every_combination_and_bad_keys_are_one_line():
-    combinations = fleet.parse_sweep(['threshold=0,0.1', 'pre=100,2s,5s'])
+    combinations = sweep.parse_sweep(['threshold=0,0.1', 'pre=100,2s,5s'])
     assert len(combinations) == 6
-    assert fleet.sweep_label(combinations[1]) == 'threshold=0,pre=2s'
+    assert sweep.sweep_label(combinations[1]) == 'threshold=0,pre=2s'
     for bad, text in (('nu=0.1', 'expected KEY=V1,V2'), ('pre', 'expected KEY=V1,V2'), ('pre=', 'pre: no value')):
         with pytest.raises(ValueError, match=text):
-            fleet.parse_sweep([bad])
+            sweep.parse_sweep([bad])
     with pytest.raises(ValueError, match='pre is given twice'):
-        fleet.parse_sweep(['pre=1', 'pre=2'])
+        sweep.parse_sweep(['pre=1', 'pre=2'])
 
 
 def test_whole_partitions_are_held_out_from_five_on():
-    assert fleet.partition_roles(4, 0.2) == ['split'] * 4
-    roles = fleet.partition_roles(40, 0.2)
+    assert partition_learning.partition_roles(4, 0.2) == ['split'] * 4
+    roles = partition_learning.partition_roles(40, 0.2)
     assert roles.count('held') == 8 and roles[0] == 'train' and roles[-1] == 'train'
 
 

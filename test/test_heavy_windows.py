@@ -11,7 +11,8 @@ from cc_log.storage import log_format, recovery
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.bag import bag_writer
 from cc_log.core.raw_message import class_header
-from cc_log.core.smart import HEAVY_BYTES, SmartLogger
+from cc_log.core.smart import SmartLogger
+from cc_log.core.window_prep import HEAVY_BYTES
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.core.options import TopicLimits
 from cc_log.core.window_buffer import WindowBuffer

@@ -267,7 +267,7 @@ def test_replay_reads_serialized_messages_and_a_truncated_one_is_one_line(tmp_pa
     from cc_log.triggers import RuleTrigger
     rule = RuleTrigger('fast', '/odom', when='twist.twist.linear.x > 1')  # reads a field: decodes every message
     logger = SmartLogger(None, str(tmp_path / 'out'), triggers=[rule], driving_topic='/odom', background=False)
-    from cc_log.core.smart import replay_into
+    from cc_log.offline.replay import replay_into
     with pytest.raises(ValueError, match=r'cut\.bag: a message of /odom cannot be decoded'):
         replay_into(logger, bag)
 
@@ -292,7 +292,7 @@ def test_stamps_of_a_batch_are_each_message_s_stamp_with_and_without_headers(hus
 
 
 def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_raw):
-    from cc_log.core.smart import RawJsonEstimate
+    from cc_log.core.raw_json import RawJsonEstimate
     one, batched = RawJsonEstimate(every=7, first=20), RawJsonEstimate(every=7, first=20)
     records = husky_raw[:400]
     for record in records:
@@ -300,6 +300,17 @@ def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_
     for start in range(0, len(records), 33):  # batches of both types mixed, across the first/every bounds
         part = records[start:start + 33]
         batched.count_all([r.raw for r in part], [r.connection for r in part])
-    assert batched._types == one._types and batched.total == one.total > 0
+    assert batched.total == one.total > 0 and batched._types == one._types  # (the samples decoded by total)
     sampled = one._types[records[0].connection['type']]
     assert 0 < sampled[2] < sampled[1]  # sampled after the first 20, not every message
+
+
+def test_the_row_json_estimate_decodes_its_samples_when_asked_not_when_noted(husky_raw):
+    from cc_log.core.raw_json import RawJsonEstimate
+    raws, connections = [r.raw for r in husky_raw[:300]], [r.connection for r in husky_raw[:300]]
+    lazy, eager = RawJsonEstimate(), RawJsonEstimate(pending_bytes=0)  # eager: decoded as soon as noted
+    lazy.count_all(raws, connections)
+    eager.count_all(raws, connections)
+    assert all(entry[2] == entry[3] == 0 for entry in lazy._types.values())  # nothing decoded on the message path
+    assert all(entry[2] > 0 for entry in eager._types.values())
+    assert lazy.total == eager.total > 0 and lazy._types == eager._types

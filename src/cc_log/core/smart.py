@@ -1,7 +1,7 @@
 """Smart mode: keep only the messages around what the triggers find.
 
 ``SmartLogger`` is the one implementation behind the live node (``smart_node``) and offline replay
-(``replay``, used by ``cclog replay``). Feed it every message with ``on_message``; it runs a list of
+(``offline.replay``, ``cclog replay``). Feed it every message with ``on_message``; it runs a list of
 triggers (``triggers``: classifiers, rules, the manual trigger) over the records of their topics:
 
 - a trigger's Fire opens (or extends) a logging window of ``pre`` messages before and ``post`` after the
@@ -13,12 +13,13 @@ triggers (``triggers``: classifiers, rules, the manual trigger) over the records
   written at the start of every window, as ``rosbag record`` keeps them.
 
 Messages come decoded (``on_message``) or as their serialized bytes with their connection header
-(``on_records``, a batch of them, what the live intake and ``replay`` hand over; ``on_raw``, one): the
+(``on_records``, a batch of them, what the live intake and offline replay hand over; ``on_raw``, one): the
 classifiers take a batch at once (rows, vectors, one scoring call), then the window logic runs record by
 record with their Fires known. Serialized messages are buffered as bytes and decoded only
 when a trigger reads a field (a feature set reads its fixed layouts straight from the bytes) and, for
 json-xz, in the writer thread, only for the messages kept. The row-JSON bytes of messages not decoded
-are estimated from a sample (``RawJsonEstimate``).
+are estimated from a sample (``raw_json.RawJsonEstimate``) decoded when ``stats()`` is asked, not on the
+message path.
 
 Completed windows go to the ``window_writer.WindowWriter`` (shared with collect mode), whose background
 thread calls ``log_format.write_window``, so compression and disk writes never run on the message path and
@@ -27,11 +28,11 @@ disk limits. All buffered messages together are bounded by ``max_buffer_mb`` (an
 in parts at half of it). ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear when a window
 opens, is written or fails to be written, and when the quota deletes an old window file.
 
-Pure: no rospy (``replay`` imports ``bagio``, and so rosbag, only when called).
+Pure: no rospy. The parts it runs: ``stamp_clock`` (the one clock of the stamps), ``window_prep`` (windows
+thinned under overload, latched messages first), ``smart_events`` (Event), ``trigger_topics``.
 """
 import collections
 import itertools
-import math
 import operator
 import threading
 import time
@@ -40,6 +41,11 @@ from cc_log import features as features_mod
 from cc_log.storage import log_format
 from cc_log.core import msg_codec
 from cc_log.core import raw_message
+from cc_log.core import smart_events, window_prep
+from cc_log.core.raw_json import RawJsonEstimate
+from cc_log.core.smart_events import DELETED, FAILED, OPENED, WRITTEN, Event
+from cc_log.core.stamp_clock import StampClock
+from cc_log.core.trigger_topics import TriggerViews, check_triggers, topic_types
 from cc_log.storage import window_writer
 from cc_log.core.spans import Span
 from cc_log.triggers import (
@@ -48,47 +54,18 @@ from cc_log.core.records import Record, records_of
 from cc_log.core.window_buffer import (
     DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, WindowBuffer)
 
-__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'replay', 'replay_into', 'replay_records',
-           'DEFAULT_FORMAT', 'DEFAULT_PRE', 'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
+__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
+           'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
            'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
 DEFAULT_FORMAT = log_format.formats.DEFAULT
 DEFAULT_DRIVING_TOPIC = 'odom'
 
-PROGRESS_EVERY = 1000  # replay: messages between progress callbacks
-JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to measure its row-JSON bytes ...
-JSON_SAMPLE_FIRST = 256  # ... after the first this many of each type, which all are
-REPLAY_BATCH = 256      # replay: records fed to the logger at a time (``on_records``); the writer's losses are
-#                         looked at after each batch
-_TOPIC, _RAW, _CONNECTION, _STAMP, _MSG = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp', 'msg'))
-_TYPE = operator.itemgetter('type')
-LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
-HEAVY_BYTES = 64 * 1024  # a message this large (an image, a cloud, a scan) may be dropped when the writer falls behind
+_TOPIC, _RAW, _CONNECTION, _STAMP = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp'))
 DEFAULT_STAMP_TOLERANCE = 5.0  # seconds a header stamp may differ from the message's arrival (else: its arrival)
-
-OPENED = 'opened'
-WRITTEN = 'written'
-FAILED = 'failed'
-DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (path, bytes)
 
 DEFAULT_RETRY_PERIOD = window_writer.DEFAULT_RETRY_PERIOD        # seconds between attempts at held windows
 DEFAULT_MAX_HELD_MESSAGES = window_writer.DEFAULT_MAX_HELD_MESSAGES  # unwritten messages kept in memory
-
-Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error trigger',
-                               defaults=('',))
-Event.__doc__ = """What happened to a logging window.
-
-kind: OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED (writing it failed;
-``error`` says why: once when a disk problem first keeps the window in memory to be retried, and again if it
-is lost for good) or DELETED (``path``, an old window file, was deleted to stay within max_disk_mb; stamp,
-start and end are None). stamp: of the message that triggered (the first trigger of the window for WRITTEN
-and FAILED). trigger: the name of that trigger ('classifier', 'manual', a rule's name...); reason: its
-reason ('classifier' for classifiers, a rule's condition, a manual request's text); score: the lowest
-classifier score of the window's triggers (NaN when none); threshold: of the classifier that fired (else
-of the first classifier; NaN without one). start, end: header stamps (float s) of the first and last
-message (end is None for OPENED). messages, path, bytes: the window's message count (all topics), file and
-size on disk (0, '' and 0 until WRITTEN).
-"""
 
 
 class _Stats(object):
@@ -102,71 +79,6 @@ class _Stats(object):
         self.fires_dropped = 0       # Fires before any driving message (no window to keep yet)
         self.messages_refused = 0    # a message type other than the topic's (first seen / the model's)
         self.last_refused = ''
-
-
-class RawJsonEstimate(object):
-    """Row-JSON bytes of serialized messages without decoding them all: per message type, the row-JSON
-    bytes per serialized byte of the first ``first`` messages and of every ``every``-th one after them, times
-    the serialized bytes of them all (exact up to ``first`` messages of a type); not thread-safe."""
-
-    def __init__(self, every=JSON_SAMPLE_EVERY, first=JSON_SAMPLE_FIRST):
-        self.every = int(every)
-        self.first = int(first)
-        self._counter = msg_codec.RowJsonCounter()
-        self._types = {}  # type -> [messages, serialized bytes, sampled serialized bytes, sampled JSON bytes]
-
-    def count(self, raw, connection):
-        """Note one message (its bytes and connection header)."""
-        entry = self._types.get(connection['type'])
-        if entry is None:
-            entry = self._types[connection['type']] = [0, 0, 0, 0]
-        if entry[0] < self.first or entry[0] % self.every == 0:
-            try:
-                json_bytes = self._counter.count(raw_message.decode(raw, connection))
-            except raw_message.DECODE_ERRORS:
-                json_bytes = None
-            if json_bytes is not None:
-                entry[2] += len(raw)
-                entry[3] += json_bytes
-        entry[0] += 1
-        entry[1] += len(raw)
-
-    def count_all(self, raws, connections):
-        """``count`` of each message in turn (``raws`` and their ``connections``), looking each type up once."""
-        if len(raws) <= 4:  # a live batch: the bookkeeping of a batch would cost more than it saves
-            for raw, connection in zip(raws, connections):
-                self.count(raw, connection)
-            return
-        types = list(map(_TYPE, connections))
-        for msg_type in dict.fromkeys(types):
-            if types.count(msg_type) == len(types):
-                places = range(len(raws))
-            else:
-                places = list(itertools.compress(range(len(raws)), map(msg_type.__eq__, types)))
-            entry = self._types.get(msg_type)
-            if entry is None:
-                entry = self._types[msg_type] = [0, 0, 0, 0]
-            seen = entry[0]
-            first = range(min(max(self.first - seen, 0), len(places)))  # the first of the type: all sampled
-            start = max(seen, self.first)
-            every = range(start + (-start) % self.every - seen, len(places), self.every)  # then every every-th
-            for k in itertools.chain(first, every):
-                raw = raws[places[k]]
-                try:
-                    json_bytes = self._counter.count(raw_message.decode(raw, connections[places[k]]))
-                except raw_message.DECODE_ERRORS:
-                    json_bytes = None
-                if json_bytes is not None:
-                    entry[2] += len(raw)
-                    entry[3] += json_bytes
-            entry[0] += len(places)
-            entry[1] += sum(map(len, map(raws.__getitem__, places)))
-
-    @property
-    def total(self):
-        """Estimated row-JSON bytes of every message noted."""
-        return int(round(sum(json_bytes * size / sampled for _, size, sampled, json_bytes in self._types.values()
-                             if sampled)))
 
 
 class SmartLogger(object):
@@ -215,7 +127,7 @@ class SmartLogger(object):
                                                  classify_every=classify_every, retrigger=retrigger))
         if not any(isinstance(trigger, ManualTrigger) for trigger in triggers):
             triggers.append(ManualTrigger())
-        self.triggers = _check_triggers(triggers)
+        self.triggers = check_triggers(triggers)
         self.classifiers = [t for t in self.triggers if isinstance(t, ClassifierTrigger)]
         self.manual = [t for t in self.triggers if isinstance(t, ManualTrigger)][0]
         primary = self.classifiers[0] if self.classifiers else None
@@ -239,24 +151,21 @@ class SmartLogger(object):
         if not self.stamp_tolerance > 0:
             raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))
         self._restamped = collections.Counter()  # topic -> messages whose header stamp was off the clock
-        self._clock_offset = 0.0                 # the driving topic's header stamps minus their arrival
+        self._clock = StampClock(driving_topic, self.stamp_tolerance)
         self._shed = collections.Counter()       # topic -> messages of windows dropped under overload
         self.writer = None
         self._expected = topic_types(self.triggers)  # topic -> the type its triggers read
         self._types = {}  # other topics -> their message type (the first seen)
-        self._by_topic = collections.defaultdict(list)
-        for trigger in self.triggers:
-            for topic in trigger.topics:
-                self._by_topic[topic].append(trigger)
+        self._trigger_views = TriggerViews(self.triggers)  # what the triggers of each topic see of its records
+        self._by_topic = self._trigger_views.by_topic
         self._timed = [trigger for trigger in self.triggers if trigger.watches_time]
         self._batched = [trigger for trigger in self.triggers if trigger.batched and not trigger.watches_time]
-        self._decode = {}  # (topic, id(connection)) -> (connection, whether a trigger of the topic reads fields)
         self._accepted = {}  # (id(connection), topic) -> connection: its messages are wanted and of the topic's type
         self._lock = threading.RLock()
         self._stats = _Stats()
         self._raw = msg_codec.RowJsonCounter()
-        self._raw_estimate = RawJsonEstimate()
-        self._latched = {}  # latched topic -> the last LATCHED_KEPT records of it
+        self._raw_estimate = RawJsonEstimate()  # decodes its samples when stats() asks, not on the message path
+        self._latched = window_prep.Latched()
         self._cost = MemoryCost()
         self._callbacks = []
         self._enabled = bool(enabled)
@@ -378,47 +287,14 @@ class SmartLogger(object):
             raise raw_message.UndecodableRecord(places[error.index], error.topic, error.error)
 
     def _on_clock(self, stamps, arrivals, topics):
-        """The stamps that place messages in windows. The driving topic's header stamps set the clock: its
-        offset from the arrival (receipt or bag time) of each of its messages (0 before the first; a bag played
-        without its clock keeps its own stamps). Any other message whose header stamp is more than
-        ``stamp_tolerance`` from its arrival on that clock is placed at that arrival instead, and counted
-        (``stats()['restamped_by_topic']``): a sensor stamping by another clock (wall time next to a bag's, a
-        camera without time sync, a stamp in the future) can neither stretch a window nor hold others back."""
-        tolerance, driving, offset = self.stamp_tolerance, self.driving_topic, self._clock_offset
-        if not stamps:
-            return stamps
-        differences = list(map(operator.sub, stamps, arrivals))
-        if all(arrivals) and max(differences) - min(differences) <= tolerance \
-                and offset - tolerance <= min(differences) and max(differences) <= offset + tolerance:
-            # every stamp within the tolerance of the clock and of each other: none is off, whatever the driving
-            # messages among them set the clock to (the common case, checked without a Python step per message)
-            if driving in topics:
-                self._clock_offset = differences[len(topics) - 1 - topics[::-1].index(driving)]
-            return stamps
-        restamped = None
-        for k, (stamp, arrival, topic) in enumerate(zip(stamps, arrivals, topics)):
-            if not arrival:  # the clock has not started (use_sim_time before /clock)
-                continue
-            if topic == driving:
-                offset = stamp - arrival
-            elif not -tolerance <= stamp - arrival - offset <= tolerance:
-                if restamped is None:
-                    stamps, restamped = list(stamps), []
-                stamps[k] = arrival + offset
-                restamped.append(topic)
-        self._clock_offset = offset
+        """The stamps that place messages in windows (``stamp_clock.StampClock``); those of messages whose header
+        stamp is more than ``stamp_tolerance`` off the driving topic's clock are their arrival, and counted
+        (``stats()['restamped_by_topic']``)."""
+        stamps, restamped = self._clock.place(stamps, arrivals, topics)
         if restamped:
             with self._stats.lock:
                 self._restamped.update(restamped)
         return stamps
-
-    def _needs_message(self, record, triggers):
-        """Whether a trigger reads fields of ``record``'s messages (memoised per topic and connection)."""
-        key = (record.topic, id(record.connection))
-        known = self._decode.get(key)
-        if known is None or known[0] is not record.connection:
-            known = self._decode[key] = (record.connection, any(t.needs_message(record) for t in triggers))
-        return known[1]
 
     def _check_open(self, name):
         if self._closed:
@@ -437,7 +313,7 @@ class SmartLogger(object):
         ``connections``: of the records, when known."""
         topics = list(map(_TOPIC, records)) if topics is None else topics
         connections = list(map(_CONNECTION, records)) if connections is None else connections
-        views, error = self._views(records, topics, connections)
+        views, error = self._trigger_views.views(records, topics, connections)
         if error is not None:
             error = raw_message.UndecodableRecord(len(views), records[len(views)].topic, error)
             records = records[:len(views)]
@@ -453,10 +329,10 @@ class SmartLogger(object):
                 ahead[trigger] = iter(trigger.on_records(mine))
         driving = self.driving_topic
         by_topic = self._by_topic
-        timed, latched, fire = self._timed, self._latched_of(connections), self._fire
+        timed, latched, fire = self._timed, window_prep.any_latched(connections), self._fire
         for record, view, topic in zip(records, views, topics):
             if latched and raw_message.is_latched(record.connection):
-                self._latched.setdefault(topic, collections.deque(maxlen=LATCHED_KEPT)).append(record)
+                self._latched.note(topic, record)
             if topic == driving:
                 done = self._buffer.add(record)
                 if done:
@@ -477,30 +353,6 @@ class SmartLogger(object):
                     fire(fires)
         if error is not None:
             raise error
-
-    @staticmethod
-    def _latched_of(connections):
-        """Whether any of ``connections`` latches."""
-        distinct = dict(zip(map(id, connections), connections)).values()
-        return any(raw_message.is_latched(connection) for connection in distinct)
-
-    def _views(self, records, topics, connections):
-        """``(the records as the triggers see them: decoded where a trigger of the topic reads fields, the
-        error decoding one)``; the views stop before a record that cannot be decoded."""
-        by_topic = self._by_topic
-        firsts = dict(zip(zip(map(id, connections), topics), records))  # one record of each connection and topic
-        if not any(record.msg is None and topic in by_topic and self._needs_message(record, by_topic[topic])
-                   for (_, topic), record in firsts.items()):
-            return records, None
-        views = list(records)
-        for k, record in enumerate(records):
-            triggers = by_topic.get(record.topic)
-            if record.msg is None and triggers and self._needs_message(record, triggers):
-                try:
-                    views[k] = raw_message.decoded(record)  # before buffering: one that cannot be decoded is not kept
-                except raw_message.DECODE_ERRORS as error:
-                    return views[:k], error
-        return views, None
 
     def tick(self, stamp):
         """Message time has reached ``stamp`` (float s) although no message came: lets the triggers that watch
@@ -571,7 +423,7 @@ class SmartLogger(object):
             buffered_bytes = self._buffer.buffered_bytes
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
-            raw_estimate = self._raw_estimate.total
+        raw_estimate = self._raw_estimate.total  # its samples decoded here, off the message path
         written = self.writer.stats()
         triggers = {trigger.name: trigger.stats() for trigger in self.triggers}
         classified = [triggers[trigger.name] for trigger in self.classifiers]
@@ -684,62 +536,21 @@ class SmartLogger(object):
 
     def _complete(self, windows):
         """Hand completed windows to the writer, each with the latched messages at its start, thinned first when
-        the writer has fallen so far behind that it would not fit in the memory budget (``_within_budget``)."""
+        the writer's queue, the buffer, the window and room for the next part together pass the memory budget
+        (``window_prep.thin``; an idle writer keeps up: the part is already held). What is dropped is counted
+        per topic (``stats()['shed_by_topic']``) and said in the window's metadata."""
         for window in windows:
-            window, shed = self._within_budget(window)
+            budget, queued = self._buffer.max_buffer_bytes, self._bytes_queued()
+            shed = {}
+            if budget and queued:
+                shed = window_prep.thin(window, budget - self._buffer.part_limit - self._buffer.buffered_bytes - queued)
+                with self._stats.lock:
+                    self._shed.update(shed)
             metadata = self._metadata(window)
             if shed:
                 metadata['dropped'] = shed
-            self.writer.submit(window_writer.Job(self._with_latched(window), metadata))
-
-    def _within_budget(self, window):
-        """``(window, {topic: messages dropped})``: when the writer's queue, the buffer, this window and room for
-        the next part together pass the memory budget, the window's heavy messages (``HEAVY_BYTES`` or more:
-        images, clouds, scans) are thinned evenly, over the window, until it fits; light ones (odometry, IMU,
-        diagnostics) are always kept.
-        What is dropped is counted per topic (``stats()['shed_by_topic']``) and said in the window's metadata."""
-        budget, queued = self._buffer.max_buffer_bytes, self._bytes_queued()
-        if not budget or not window.records or not queued:  # (an idle writer keeps up: the part is already held)
-            return window, {}
-        cost = sum(record.cost for record in window.records)
-        room = budget - self._buffer.part_limit - self._buffer.buffered_bytes - queued  # and room for the next
-        if cost <= room:
-            return window, {}
-        heavy = [record.cost >= HEAVY_BYTES for record in window.records]
-        heavy_bytes = sum(record.cost for record, big in zip(window.records, heavy) if big)
-        if not heavy_bytes:
-            return window, {}
-        keep = max(0.0, min(1.0, (room - (cost - heavy_bytes)) / float(heavy_bytes)))
-        kept, shed, share = [], collections.Counter(), 0.0
-        for record, big in zip(window.records, heavy):
-            if big:
-                share += keep
-                if share < 1.0:
-                    shed[record.topic] += 1
-                    continue
-                share -= 1.0
-            kept.append(record)
-        with self._stats.lock:
-            self._shed.update(shed)
-        window.records = kept
-        return window, dict(shed)
-
-    def _with_latched(self, window):
-        """``window`` with, first, the newest message of each latched topic from before its start (not one it
-        holds), restamped at its start, as ``rosbag record`` writes latched messages when it subscribes (in the
-        first part of a window whose parts go into one file)."""
-        if not self._latched or not window.records or (window.part > 1 and log_format.streams(self.format)):
-            return window
-        held = set(id(record) for record in window.records)
-        start = window.start
-        first = []
-        for topic in sorted(self._latched):
-            before = [record for record in self._latched[topic] if record.stamp <= start and id(record) not in held]
-            if before:
-                first.append(before[-1]._replace(stamp=start))
-        if first:
-            window.records[:0] = first
-        return window
+            window = self._latched.first_in(window, log_format.streams(self.format))
+            self.writer.submit(window_writer.Job(window, metadata))
 
     def _metadata(self, window):
         """Smart-mode metadata added to log_format's (which already holds triggers, names, part, counts)."""
@@ -762,150 +573,9 @@ class SmartLogger(object):
     # -- writer events --------------------------------------------------------------------------------
 
     def _written(self, event):
-        """A WindowWriter event as this logger's Event."""
-        if event.kind == window_writer.DELETED:
-            self._emit(Event(DELETED, None, 'max_disk_mb', float('nan'), self.threshold, None, None, 0, event.path,
-                             0, event.error))
-            return
-        window, metadata = event.job.window, event.job.metadata
-        scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
-        start, end = (window.start, window.end) if len(window) else (None, None)  # (the end of a window in parts)
-        first = window.triggers[0].stamp if window.triggers else start
-        kind = WRITTEN if event.kind == window_writer.WRITTEN else FAILED
-        self._emit(Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
-                         self._threshold_of(metadata['trigger']), start, end, len(window), event.path,
-                         event.bytes, event.error, metadata['trigger']))
+        """A WindowWriter event, told as this logger's Event."""
+        self._emit(smart_events.from_writer(event, self._threshold_of))
 
     def _emit(self, event):
         for callback in self._callbacks:
             callback(event)
-
-
-def _check_triggers(triggers):
-    """The triggers, each a ``triggers.Trigger`` with a name of its own; ValueError('triggers: ...')."""
-    seen = set()
-    for trigger in triggers:
-        name = getattr(trigger, 'name', None)
-        if not hasattr(trigger, 'on_record') or not hasattr(trigger, 'topics'):
-            raise ValueError('triggers: %r is not a trigger' % (trigger,))
-        if name in seen:
-            raise ValueError('triggers: two triggers are named %r' % name)
-        seen.add(name)
-    return list(triggers)
-
-
-def topic_types(triggers):
-    """``{topic: type}`` the triggers read; ValueError('topics: ...') when two read one topic as two types."""
-    types, owners = {}, {}
-    for trigger in triggers:
-        for topic, kind in trigger.topic_types().items():
-            if types.setdefault(topic, kind) != kind:
-                raise ValueError('topics: %s is %s for trigger %s and %s for trigger %s'
-                                 % (topic, types[topic], owners[topic], kind, trigger.name))
-            owners.setdefault(topic, trigger.name)
-    return types
-
-
-def replay(bag_path, topic, model_path, out_dir, pre=DEFAULT_PRE, post=DEFAULT_POST, fmt=DEFAULT_FORMAT,
-           side_topics=(), max_window=DEFAULT_MAX_WINDOW, progress=None, retrigger=DEFAULT_RETRIGGER,
-           classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB,
-           retry_seconds=None, triggers=(), input_topics=None):
-    """Run the smart logger over a bag as fast as it can be read; return a summary dict:
-
-    ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
-    'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
-    message saved). ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``);
-    ``triggers``, ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``,
-    called every PROGRESS_EVERY messages and at the end. A window that cannot be written (disk full...) is
-    retried for ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops.
-    Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag cannot be read or a
-    window cannot be written (naming ``out_dir`` and what was not written).
-    """
-    from cc_log.core.model import AnomalyModel
-    model = AnomalyModel.load(model_path) if model_path else None
-    retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
-    logger = SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
-                         max_window=max_window, retrigger=retrigger, classify_every=classify_every,
-                         max_buffer_mb=max_buffer_mb, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
-                         give_up_after=retry_seconds, close_retry=retry_seconds, triggers=triggers,
-                         input_topics=input_topics)
-    return replay_into(logger, bag_path, progress)
-
-
-def replay_into(logger, bag_path, progress=None):
-    """Feed every message of the bag that ``logger`` keeps or watches (its driving topic, side topics and
-    trigger topics; every topic when its side topics are None) to it as serialized bytes (``on_raw``, the
-    path of the live node), close it, and return ``replay``'s summary; the same errors."""
-    from cc_log.storage.bag import bag_reader, bagio  # rosbag: imported here so the module stays pure
-    if logger.side_topics is None:
-        bag = bagio.open_bag(bag_path)
-        try:
-            topics = sorted(bagio.topics_of(bag))
-        finally:
-            bag.close()
-    else:
-        topics = [logger.driving_topic] + sorted(logger.side_topics)
-    records = itertools.chain.from_iterable(bag_reader.read_runs(bag_path, topics))  # no Python call per record
-    return replay_records(logger, records, progress, bag_path)
-
-
-def _batches(records, size=None):
-    """Lists of up to ``size`` (REPLAY_BATCH) consecutive records, each all serialized or all decoded."""
-    stream = iter(records)
-    while True:
-        batch = list(itertools.islice(stream, size or REPLAY_BATCH))
-        if not batch:
-            return
-        if list(map(_MSG, batch)).count(None) in (0, len(batch)):
-            yield batch
-            continue
-        for _, run in itertools.groupby(batch, key=lambda record: record.msg is None):
-            yield list(run)
-
-
-def replay_records(logger, records, progress=None, source='the records'):
-    """``replay_into`` of an iterable of ``records.Record``s (serialized ones go to ``on_raw``, decoded
-    ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
-    benchmarks."""
-    out_dir = logger.directory
-    windows = []
-
-    def collect(event):
-        if event.kind == WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
-                            'path': event.path})
-    logger.on_event(collect)
-    count, stopped = 0, False
-    try:
-        for batch in _batches(records):
-            try:
-                if batch[0].msg is None:
-                    logger.on_records(batch)
-                else:
-                    for record in batch:
-                        logger.on_message(record.topic, record.msg, record.stamp)
-            except raw_message.UndecodableRecord as error:
-                raise ValueError('%s: a message of %s cannot be decoded (%s)' % (source, error.topic, error.error))
-            except raw_message.DECODE_ERRORS as error:
-                raise ValueError('%s: a message cannot be decoded (%s)' % (source, error))
-            before, count = count, count + len(batch)
-            if progress is not None and count // PROGRESS_EVERY != before // PROGRESS_EVERY:
-                progress(count)
-            if logger.writer.lost:
-                stopped = True  # a window is lost: stop reading, say so below
-                break
-        if progress is not None:
-            progress(count)
-    finally:
-        logger.close()
-    stats = logger.stats()
-    if stats['messages_lost']:
-        raise OSError('%s: %d window(s) (%d messages) not written: %s; %d window(s) written%s' % (
-            out_dir, stats['windows_lost'], stats['messages_lost'], stats['last_error'], stats['windows_saved'],
-            '; replay stopped after %d messages of %s' % (count, source) if stopped else ''))
-    return {
-        'input_messages': stats['messages_seen'],
-        'raw_json_bytes': stats['raw_json_bytes'],
-        'stored_bytes': stats['stored_bytes'],
-        'windows': sorted(windows, key=lambda window: window['start']),
-    }

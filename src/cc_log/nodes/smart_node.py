@@ -60,8 +60,8 @@ from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
 from cc_log.core import drift
 from cc_log.nodes import intake
-from cc_log.core import smart
 from cc_log.storage import log_format
+from cc_log.core import smart, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
@@ -128,7 +128,7 @@ class SmartNode(object):
                                             **options)
         except ValueError as error:
             raise ConfigError('~%s' % error)
-        types = smart.topic_types(triggers)
+        types = trigger_topics.topic_types(triggers)
         if self.logger.driving_topic in types and config.installed_class(types[self.logger.driving_topic]) is None:
             raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
         self._refused = 0

@@ -6,11 +6,8 @@ task's result comes back in the order of its inputs, whatever the order they fin
 is one line naming its bag, and the others' results are kept. Each bag writes into its own subdirectory of the
 output directory (``output_names``), so results do not depend on where or in which order tasks ran.
 
-Learning reads vector directories as partitions: ``gather_vectors`` brings them into this process (the
-exact model, identical to the one-process path); ``train_streamed`` never holds more than one batch here: the
-scaler from per-partition moments, Nystroem components from an even sample of every partition, then
-``SGDOneClassSVM.partial_fit`` on batches drawn from every partition, and the threshold from held-out
-partitions (or blocks).
+The task of a bag: ``collect_one`` here, ``replay.replay_one`` (the one replay of ``cclog replay``), and
+``sweep.sweep_one``; learning over vector directories as partitions is ``partition_learning``.
 """
 import collections
 import glob
@@ -18,15 +15,9 @@ import logging
 import os
 import time
 
-import numpy as np
-
 BAG_SUFFIX = '.bag'
 DASK_MISSING = ('Dask is not installed (the fleet commands run on it): apt-get install python3-dask '
                 'python3-distributed, or ./dev.sh setup')
-STREAM_EPOCHS = 5          # passes of partial_fit over every partition
-STREAM_METHOD = 'stream'   # learn --method of train_streamed
-STREAM_BATCH_ROWS = 20000  # vectors of one partial_fit batch: what this process holds at a time
-HELD_PARTITIONS_FROM = 5   # from this many partitions on, whole partitions are held out for the threshold
 
 Outcome = collections.namedtuple('Outcome', 'item ok value')
 Outcome.__doc__ = 'What one task gave: ``value`` is its result when ``ok``, else the one-line error naming ``item``.'
@@ -278,206 +269,13 @@ def collect_one(bag_path, out_dir, specs, label, stride, single=True):
     return result
 
 
-def replay_setup(cfg, bag_path=None):
-    """The logger options, topic types and topics (driving first) of a replay with configuration ``cfg``; topic
-    patterns (``*``, ``re:``, ``!``) select among the topics of ``bag_path`` (none without a bag)."""
-    from cc_log.core import config as config_mod
-    from cc_log.core import smart
-    from cc_log.core.model import AnomalyModel
-    triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
-    options = cfg.logger_options(triggers)
-    if options['side_topics'] is None:
-        options['side_topics'] = bag_topics(bag_path, cfg.selection.select) if bag_path else []
-    types = smart.topic_types(triggers)
-    topics = [options['driving_topic']] + [t for t in sorted(set(options['side_topics']).union(types))
-                                           if t != options['driving_topic']]
-    return options, types, topics
-
-
-def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None):
-    """The smart logger of configuration ``cfg`` over one bag into ``out_dir`` (``smart.replay_into``);
-    its summary plus ``driving_topic``, ``format``, ``messages`` and ``drift`` (a ``drift.DriftMonitor`` of each
-    classifier). ``progress(done, total)``; ``make_dir(path)`` creates ``out_dir`` once the bag is checked
-    (default: ``safe_files.make_dirs``)."""
-    from cc_log.core import drift, safe_files, smart
-    options, types, topics = replay_setup(cfg, bag_path)
-    total = check_bag_topics(bag_path, topics, types)
-    (make_dir or safe_files.make_dirs)(out_dir)
-    logger = _offline_logger(out_dir, options)
-    monitors = drift.monitor_classifiers(logger.classifiers)
-    summary = smart.replay_into(logger, bag_path, None if progress is None
-                                else (lambda done: progress(done, total)))
-    summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total, drift=monitors)
-    return summary
-
-
-def bag_topics(bag_path, select):
-    """``select(sorted topics of the bag)``."""
-    from cc_log.storage.bag import bagio
-    bag = bagio.open_bag(bag_path)
-    try:
-        return select(sorted(bagio.topics_of(bag)))
-    finally:
-        bag.close()
-
-
-def check_bag_topics(bag_path, topics, types):
-    """A readable bag holding ``topics`` of the ``types`` given (``{topic: type}``); how many messages they have."""
-    from cc_log.storage.bag import bagio
-    bag = bagio.open_bag(bag_path)
-    try:
-        for topic in topics:
-            bagio.check_topic(bag, topic, types.get(topic))
-        return bag.get_message_count(topics)
-    finally:
-        bag.close()
-
-
-def _offline_logger(out_dir, options):
-    from cc_log.core import smart
-    from cc_log.storage import window_writer
-    retry = window_writer.OFFLINE_RETRY_SECONDS
-    return smart.SmartLogger(None, out_dir, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
-                             give_up_after=retry, close_retry=retry, **options)
-
-
-# -- sweep: several configurations over one reading of each bag --------------------------------------------
-
-SWEEP_KEYS = ('threshold', 'pre', 'post', 'classify_every', 'retrigger')
-
-Sweep = collections.namedtuple('Sweep', 'label cfg threshold')
-Sweep.__doc__ = ('One configuration of a sweep: its label (``pre=2s,threshold=0.1``), its Config and its threshold '
-                 '(None: the model\'s).')
-
-
-def parse_sweep(values):
-    """``['pre=100,2s', 'threshold=0,0.05']`` -> the product ``[{'pre': '100', 'threshold': '0'}, ...]`` in order;
-    ValueError('sweep: ...') for an unknown key, a missing ``=`` or a key given twice."""
-    import itertools
-    axes = collections.OrderedDict()
-    for value in values:
-        key, sep, options = value.partition('=')
-        key = key.strip().replace('-', '_')
-        if not sep or key not in SWEEP_KEYS:
-            raise ValueError('sweep: %r: expected KEY=V1,V2,... with KEY one of %s' % (value, ', '.join(SWEEP_KEYS)))
-        if key in axes:
-            raise ValueError('sweep: %s is given twice' % key)
-        axes[key] = [item.strip() for item in options.split(',') if item.strip()]
-        if not axes[key]:
-            raise ValueError('sweep: %s: no value' % key)
-    return [collections.OrderedDict(zip(axes, combination)) for combination in itertools.product(*axes.values())]
-
-
-def sweep_label(combination):
-    """``pre=2s,threshold=0.1`` (a directory name too: ``/`` cannot occur in the values)."""
-    return ','.join('%s=%s' % item for item in combination.items()) or 'default'
-
-
-def _thresholded(triggers, threshold):
-    if threshold is not None:
-        for trigger in triggers:
-            if getattr(trigger, 'model', None) is not None:
-                trigger.model.threshold = trigger.threshold = float(threshold)
-    return triggers
-
-
-def _window_recorder(windows):
-    from cc_log.core import smart
-
-    def record(event):
-        if event.kind == smart.WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages})
-    return record
-
-
-def _overlaps(window, span):
-    return window['start'] <= span['end'] and window['end'] >= span['start']
-
-
-def sweep_one(bag_path, out_dir, sweeps):
-    """Every configuration of ``sweeps`` (Sweeps) over one reading of a bag, windows into ``out_dir/<label>/``.
-    Returns ``{'messages', 'seconds' (driving topic span), 'anomalies' (truth file) or None, 'rows': [{'label',
-    'windows', 'kept', 'stored_bytes', 'recalled', 'false_windows'}]}``: an anomaly of ``<bag>.truth.json``
-    is recalled when a window overlaps it; a window overlapping none is false."""
-    from cc_log.storage.bag import bagio
-    from cc_log import sim
-    runs, topics, total = [], set(), 0
-    for entry in sweeps:
-        options, types, wanted = replay_setup(entry.cfg, bag_path)
-        _thresholded(options['triggers'], entry.threshold)
-        total = max(total, check_bag_topics(bag_path, wanted, types))
-        logger = _offline_logger(os.path.join(out_dir, entry.label), options)
-        windows = []
-        logger.on_event(_window_recorder(windows))
-        runs.append((entry, logger, frozenset(wanted), windows))
-        topics.update(wanted)
-    driving = runs[0][1].driving_topic
-    first = last = None
-    try:
-        for record in bagio.read_messages(bag_path, sorted(topics)):
-            if record.topic == driving:
-                first = record.stamp if first is None else first
-                last = record.stamp
-            for _, logger, wanted, _ in runs:
-                if record.topic in wanted:
-                    logger.on_message(record.topic, record.msg, record.stamp)
-    finally:
-        for _, logger, _, _ in runs:
-            logger.close()
-    truth_file = sim.truth_path(bag_path)
-    truth = sim.load_truth(truth_file) if os.path.exists(truth_file) else None
-    rows = []
-    for entry, logger, _, windows in runs:
-        stats = logger.stats()
-        if stats['messages_lost']:
-            raise OSError('%s: %d window(s) (%d messages) not written: %s' % (
-                os.path.join(out_dir, entry.label), stats['windows_lost'], stats['messages_lost'],
-                stats['last_error']))
-        rows.append({'label': entry.label, 'windows': len(windows), 'kept': sum(w['messages'] for w in windows),
-                     'stored_bytes': stats['stored_bytes'],
-                     'recalled': None if truth is None else sum(any(_overlaps(w, a) for w in windows) for a in truth),
-                     'false_windows': None if truth is None else sum(not any(_overlaps(w, a) for a in truth)
-                                                                     for w in windows)})
-    return {'messages': total, 'seconds': (last - first) if first is not None else 0.0,
-            'anomalies': None if truth is None else len(truth), 'rows': rows}
-
-
-def _sweep_task(job):
-    return sweep_one(job.path, job.out, job.args[0])
-
-
-def sweep_many(engine, bags, out_dir, sweeps, progress=None):
-    """``sweep_one`` of every bag into ``out_dir/<output name>/``; Outcomes in the order of ``bags``."""
-    return engine.run(_sweep_task, jobs(bags, out_dir, sweeps), progress)
-
-
-def sweep_table(results):
-    """Per configuration over the bags' ``sweep_one`` results: ``[{'label', 'windows', 'kept', 'messages',
-    'stored_bytes', 'recall', 'false_per_hour'}]`` (recall and false windows per hour: None without a truth
-    file for every bag)."""
-    with_truth = results and all(r['anomalies'] is not None for r in results)
-    hours = sum(r['seconds'] for r in results) / 3600.0
-    anomalies = sum(r['anomalies'] or 0 for r in results)
-    table = []
-    for index, row in enumerate(results[0]['rows'] if results else ()):
-        rows = [r['rows'][index] for r in results]
-        line = collections.OrderedDict([
-            ('label', row['label']), ('windows', sum(r['windows'] for r in rows)),
-            ('kept', sum(r['kept'] for r in rows)), ('messages', sum(r['messages'] for r in results)),
-            ('stored_bytes', sum(r['stored_bytes'] for r in rows)), ('recall', None), ('false_per_hour', None)])
-        if with_truth:
-            line['recall'] = sum(r['recalled'] for r in rows) / float(anomalies) if anomalies else None
-            line['false_per_hour'] = sum(r['false_windows'] for r in rows) / hours if hours else None
-        table.append(line)
-    return table
-
-
 def _collect_task(job):
     return collect_one(job.path, job.out, *job.args)
 
 
 def _replay_task(job):
-    return replay_one(job.path, job.out, job.args[0])
+    from cc_log.offline import replay
+    return replay.replay_one(job.path, job.out, job.args[0])
 
 
 class Job(collections.namedtuple('Job', 'name path out args')):
@@ -495,7 +293,7 @@ def collect_many(engine, bags, out_dir, specs, label, stride, single=True, progr
 
 
 def replay_many(engine, bags, out_dir, cfg, progress=None):
-    """``replay_one`` of every bag into ``out_dir/<output name>/``; Outcomes in the order of ``bags``."""
+    """``replay.replay_one`` of every bag into ``out_dir/<output name>/``; Outcomes in the order of ``bags``."""
     return engine.run(_replay_task, jobs(bags, out_dir, cfg), progress)
 
 
@@ -531,185 +329,5 @@ def failures(outcomes):
     return [outcome.value for outcome in outcomes if not outcome.ok]
 
 
-# -- learning over partitions -----------------------------------------------------------------------------
-
-def load_partition(directory):
-    """A vector directory as a partition: ``{'vectors': {label: 2-D array}, 'config': FeatureConfig,
-    'messages': vectors, 'peak_rss_mb': of the process}``."""
-    from cc_log.core import learning
-    vectors, config = learning.load_vectors(directory)
-    return {'vectors': vectors, 'config': config, 'messages': sum(len(v) for v in vectors.values()),
-            'peak_rss_mb': peak_rss_mb()}
-
-
-def _check_configs(outcomes):
-    config, first = None, None
-    for outcome in outcomes:
-        if config is None:
-            config, first = outcome.value['config'], outcome.item
-        elif outcome.value['config'] != config:
-            raise ValueError('%s: config %s differs from %s in %s' % (
-                outcome.item, outcome.value['config'].to_dict(), config.to_dict(), first))
-    return config
-
-
-def gather_vectors(engine, directories, progress=None):
-    """Load every vector directory as a task and join them here, partition after partition: ``(vectors,
-    config, peak_rss_mb)`` as ``learning.load_vectors`` gives for one directory (peak: the largest of the
-    loading processes). ValueError naming the first directory that cannot be read (and how many could not)."""
-    outcomes = engine.run(load_partition, directories, progress)
-    bad = failures(outcomes)
-    if bad:
-        raise ValueError('%s%s' % (bad[0], ' (and %d other directories)' % (len(bad) - 1) if len(bad) > 1 else ''))
-    config = _check_configs(outcomes)
-    labels = sorted(set(label for outcome in outcomes for label in outcome.value['vectors']))
-    vectors = {label: np.concatenate([o.value['vectors'][label] for o in outcomes if label in o.value['vectors']])
-               for label in labels}
-    return vectors, config, max(o.value['peak_rss_mb'] for o in outcomes)
-
-
-class _Load(collections.namedtuple('_Load', 'load item role')):
-    """One partition to make (a named tuple: Dask would take a plain ``(function, ...)`` tuple for a task)."""
-
-
-def _load_with_role(job):
-    partition = job.load(job.item)
-    partition['role'] = job.role
-    return partition
-
-
-def partition_roles(count, holdout):
-    """``'held'`` for about ``holdout`` of ``count`` partitions spread over them (the threshold then sees runs
-    the model never saw), ``'train'`` for the others; with fewer than HELD_PARTITIONS_FROM partitions every one
-    is ``'split'`` into time blocks as ``learning.split_blocks`` cuts one."""
-    if count < HELD_PARTITIONS_FROM:
-        return ['split'] * count
-    held = set(min(count - 1, int((k + 0.5) * count / max(1, int(round(holdout * count)))))
-               for k in range(max(1, int(round(holdout * count)))))
-    return ['held' if index in held else 'train' for index in range(count)]
-
-
-def _nominal_split(partition, holdout, blocks):
-    from cc_log.core import learning
-    X = partition['vectors'].get('nominal')
-    role = partition.get('role', 'split')
-    if X is None or len(X) < 4:
-        return np.empty((0, 0)), np.empty((0, 0))
-    if role != 'split':
-        empty = X[:0]
-        return (X, empty) if role == 'train' else (empty, X)
-    train_index, held_index = learning.split_blocks(len(X), holdout, blocks)
-    return X[train_index], X[held_index]
-
-
-def _moments(partition, holdout, blocks):
-    X, _ = _nominal_split(partition, holdout, blocks)
-    if not len(X):
-        return 0, 0.0, 0.0
-    return len(X), X.sum(axis=0), np.square(X).sum(axis=0)
-
-
-def _sample(partition, holdout, blocks, count):
-    X, _ = _nominal_split(partition, holdout, blocks)
-    return X[np.linspace(0, len(X) - 1, min(count, len(X))).astype(int)] if len(X) else X
-
-
-def _held_scores(partition, holdout, blocks, model):
-    _, held = _nominal_split(partition, holdout, blocks)
-    return model.scores(held) if len(held) else np.empty(0)
-
-
-def _batch_rows(partition, holdout, blocks, seed, index, batches):
-    """Batch ``index`` of ``batches`` of a partition's training rows, shuffled with ``seed``."""
-    X = _nominal_split(partition, holdout, blocks)[0]
-    return X[np.random.RandomState(seed).permutation(len(X))[index::batches]] if len(X) else X
-
-
-def _partition_rss(partition):
-    return peak_rss_mb()  # of the process holding the partition
-
-
-def train_streamed(engine, load, items, nu=None, gamma=None, components=None, epochs=STREAM_EPOCHS, seed=0,
-                   holdout=None, blocks=None, batch_rows=STREAM_BATCH_ROWS, progress=None):
-    """Train a ``nystroem-sgd`` model over partitions without holding them all in one process.
-
-    ``load(item)`` makes one partition (``load_partition``'s dict) where it runs; it stays there. The scaler
-    comes from the partitions' moments, the Nystroem components from an even sample of every partition's
-    training blocks, the linear one-class SVM from ``SGDOneClassSVM.partial_fit`` on batches of about
-    ``batch_rows`` vectors, each a shuffled share of every partition (``epochs`` passes), the threshold
-    (``learning.nominal_threshold``) from the scores of held-out vectors: whole partitions (``partition_roles``),
-    or with few partitions every partition's held-out blocks. Returns ``(AnomalyModel, info)``;
-    ``info['peak_rss_mb']`` is this process's, ``info['worker_peak_rss_mb']`` the largest of the partitions' processes.
-    """
-    from sklearn.kernel_approximation import Nystroem
-    from sklearn.linear_model import SGDOneClassSVM
-    from cc_log.core import learning
-    from cc_log.features import vector_names
-    from cc_log.core.model import AnomalyModel
-    started = time.time()
-    holdout = learning.DEFAULT_HOLDOUT if holdout is None else holdout
-    blocks = learning.DEFAULT_BLOCKS if blocks is None else blocks
-    components = learning.NYSTROEM_COMPONENTS if components is None else components
-    handles = engine.place(_load_with_role, [_Load(load, item, role)
-                                             for item, role in zip(items, partition_roles(len(items), holdout))])
-    configs = engine.each(_partition_config, handles)
-    config = _check_configs([Outcome(item, True, {'config': c}) for item, c in zip(items, configs)])
-    moments = engine.each(_moments, handles, holdout, blocks)
-    count = sum(m[0] for m in moments)
-    if count < 10:
-        raise ValueError('nominal: need at least 10 training vectors over all partitions, got %d' % count)
-    total = sum(m[1] for m in moments if m[0])
-    squares = sum(m[2] for m in moments if m[0])
-    mean = total / count
-    scale = np.sqrt(np.maximum(squares / count - mean ** 2, 0.0))
-    scale[scale < 10 * np.finfo(float).eps] = 1.0  # constant columns, as StandardScaler
-    dimension = len(mean)
-    nu = learning.DEFAULT_NU if nu is None else float(nu)
-    gamma = learning.DEFAULT_GAMMA_FACTOR / dimension if gamma is None else float(gamma)
-    per_partition = int(np.ceil(4.0 * components / len(handles)))
-    sample = np.concatenate([s for s in engine.each(_sample, handles, holdout, blocks, per_partition) if len(s)])
-    sample = (sample - mean) / scale
-    chosen = sample[np.random.RandomState(seed).permutation(len(sample))[:components]]
-    nystroem = Nystroem(kernel='rbf', gamma=gamma, n_components=len(chosen), random_state=seed).fit(chosen)
-    sgd = SGDOneClassSVM(nu=nu, random_state=seed, learning_rate='optimal')
-    # every batch takes a share of every partition (one run after another would pull the model to the last)
-    batches = max(1, int(np.ceil(count / float(batch_rows))))
-    for epoch in range(epochs):
-        for index in range(batches):
-            parts = [rows for rows in engine.each(_batch_rows, handles, holdout, blocks, seed + epoch, index, batches)
-                     if len(rows)]
-            if parts:
-                rows = np.concatenate(parts)
-                sgd.partial_fit(nystroem.transform((rows - mean) / scale))
-            if progress is not None:
-                progress(epoch * batches + index + 1, epochs * batches, None)
-    names = vector_names(config)
-    kernel = {'components': nystroem.components_, 'normalization': nystroem.normalization_,
-              'coef': sgd.coef_.ravel(), 'offset': float(np.ravel(sgd.offset_)[0]), 'gamma': gamma}
-    model = AnomalyModel(config, mean, scale, 'nystroem-sgd', kernel, 0.0, names)
-    held = np.concatenate(engine.each(_held_scores, handles, holdout, blocks, model))
-    threshold = learning.nominal_threshold(held)
-    model.threshold = float(threshold)
-    info = {'method': 'nystroem-sgd-streamed', 'requested_method': STREAM_METHOD, 'partitions': len(handles),
-            'vectors_train': int(count), 'vectors_held_out': int(len(held)), 'vectors_nominal': int(count + len(held)),
-            'vectors_anomalous': 0, 'features': dimension, 'config': config.to_dict(), 'nu': nu, 'gamma': gamma,
-            'components': int(len(chosen)), 'epochs': epochs, 'batches': batches, 'threshold': float(threshold),
-            'threshold_rule': 'held-out nominal: q%g - %g * (median - q%g)' % (
-                learning.DEFAULT_QUANTILE, learning.DEFAULT_MARGIN, learning.DEFAULT_QUANTILE),
-            'held_out_flagged': int(np.sum(held < threshold)),
-            'held_out_score_min': float(np.min(held)) if len(held) else None,
-            'held_out_score_median': float(np.median(held)) if len(held) else None,
-            'train_seconds': time.time() - started, 'peak_rss_mb': peak_rss_mb(),
-            'worker_peak_rss_mb': max(engine.each(_partition_rss, handles))}
-    model.info = {key: value for key, value in info.items() if value is not None}
-    return model, info
-
-
-def _partition_config(partition):
-    return partition['config']
-
-
 __all__ = ['Engine', 'Outcome', 'Meter', 'expand_bags', 'expand_vector_dirs', 'output_names', 'collect_one',
-           'collect_many', 'replay_one', 'replay_many', 'replay_setup', 'parse_sweep', 'sweep_one', 'sweep_many',
-           'sweep_table', 'Sweep', 'gather_vectors', 'train_streamed',
-           'load_partition', 'failures']
+           'collect_many', 'replay_many', 'jobs', 'failures', 'peak_rss_mb']

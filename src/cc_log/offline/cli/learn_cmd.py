@@ -83,15 +83,15 @@ def run(args):
 
 def _learn_many(args):
     """Train over every vector directory of --train (partitions) on the engine: ``(model, info)``."""
-    from cc_log.offline import fleet, learn_main
+    from cc_log.offline import fleet, learn_main, partition_learning
     from cc_log.core import learning
     directories = fleet.expand_vector_dirs(args.train)
     with fleet_engine(args) as engine:
-        if args.method == fleet.STREAM_METHOD:
-            model, info = fleet.train_streamed(engine, fleet.load_partition, directories, nu=args.nu,
-                                               gamma=args.gamma)
+        if args.method == partition_learning.STREAM_METHOD:
+            model, info = partition_learning.train_streamed(engine, partition_learning.load_partition, directories,
+                                                            nu=args.nu, gamma=args.gamma)
         else:
-            vectors, config, worker_rss = fleet.gather_vectors(engine, directories)
+            vectors, config, worker_rss = partition_learning.gather_vectors(engine, directories)
             nominal, anomalous = learn_main.split_labels(vectors)
             if nominal is None:
                 raise CommandError('train: %s have no %s/ vectors' % (' '.join(args.train), learn_main.NOMINAL))

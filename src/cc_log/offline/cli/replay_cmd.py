@@ -64,7 +64,7 @@ def add_parser(subparsers):
 def run(args):
     """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read, with the
     triggers of ``--config`` and/or the classifier of ``--model`` on ``--topic``."""
-    from cc_log.offline import fleet
+    from cc_log.offline import replay
     many = fleet_wanted(args, args.bag)
     if not many:
         args.bag = existing_file(args.bag[0], 'bag file')
@@ -82,11 +82,11 @@ def run(args):
     if args.sweep:
         return _sweep(args, flat, many)
     if many:
-        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
+        replay.replay_setup(cfg)  # a bad configuration is one line before any bag
         with _cut_off_reported(args.out):
             return _replay_many(args, cfg)
     with _cut_off_reported(args.out), _bar(args, 'replay') as bar:
-        summary = fleet.replay_one(args.bag, args.out, cfg, bar.set, lambda path: writable_dir(path, 'out'))
+        summary = replay.replay_one(args.bag, args.out, cfg, bar.set, lambda path: writable_dir(path, 'out'))
     result = collections.OrderedDict([
         ('input_messages', summary['input_messages']),
         ('raw_json_bytes', summary['raw_json_bytes']),
@@ -140,11 +140,11 @@ def _replay_many(args, cfg):
 
 def _sweep(args, flat, many):
     """``replay --sweep``: every combination of the --sweep values over one reading of each bag; a table."""
-    from cc_log.offline import fleet
+    from cc_log.offline import fleet, replay, sweep
     from cc_log.core.spans import Span
     from cc_log.triggers import RETRIGGER_MODES
     sweeps = []
-    for combination in fleet.parse_sweep(args.sweep):
+    for combination in sweep.parse_sweep(args.sweep):
         options = copy.deepcopy(flat)
         for key, value in combination.items():
             if key in ('pre', 'post', 'classify_every'):
@@ -158,16 +158,16 @@ def _sweep(args, flat, many):
         if threshold is not None:
             threshold = _number('sweep: threshold', threshold)
         cfg = configuration(args, options)
-        fleet.replay_setup(cfg)  # a bad configuration is one line before any bag
-        sweeps.append(fleet.Sweep(fleet.sweep_label(combination), cfg, threshold))
+        replay.replay_setup(cfg)  # a bad configuration is one line before any bag
+        sweeps.append(sweep.Sweep(sweep.sweep_label(combination), cfg, threshold))
     bags = fleet.expand_bags(args.bag) if many else [args.bag]
     writable_dir(args.out, 'out')
     if not many:
         args.workers = 0
-    outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.sweep_many(
+    outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: sweep.sweep_many(
         engine, bags, args.out, sweeps, progress=progress))
     rows = fleet_rows(outcomes, ('seconds', 'anomalies', 'rows'))
-    table = fleet.sweep_table([outcome.value for outcome in outcomes if outcome.ok])
+    table = sweep.sweep_table([outcome.value for outcome in outcomes if outcome.ok])
     summary['configurations'] = table
     width = max([len('configuration')] + [len(line['label']) for line in table])
     text = ['%-*s %8s %10s %6s %10s %7s %9s' % (width, 'configuration', 'windows', 'kept', 'kept%', 'stored',

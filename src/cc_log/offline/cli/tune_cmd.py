@@ -42,12 +42,12 @@ def run(args):
     """Set a model's threshold, and with several --windows / --classify-every its feature window and classify
     rate, to a false-window budget on nominal bags (``tuning.choose``); write it to --out."""
     from cc_log.storage.bag import bagio
-    from cc_log.offline import fleet, tuning
+    from cc_log.offline import replay, tuning
     from cc_log.core.model import AnomalyModel
     model = AnomalyModel.load(existing_file(args.model, 'model file'))
     for bag in args.bag:
         existing_file(bag, 'bag file')
-        fleet.check_bag_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
+        replay.check_bag_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
     parent_exists(args.out, 'out')
     with _bar(args, 'tune').busy():
         runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]

@@ -1,0 +1,221 @@
+"""Replay: one recorded bag through the smart logger (``core.smart.SmartLogger``) as fast as it can be read.
+
+``replay_one(bag, out, cfg)`` is ``cclog replay`` of one bag and the fleet's task per bag: the logger of a
+configuration (``replay_setup``: its triggers, options and the topics to read), the bag opened once to select,
+check and count those topics (``bagio.open_bag`` without its per-message index), then its records read by
+``bag_reader`` and fed in batches (``replay_records``); the summary says what came in, what was kept and, per
+classifier, whether its flag rate drifted (``drift.DriftMonitor``). ``replay`` does the same from a model file
+and options, ``replay_into`` for a logger already built (benchmarks, tests).
+
+Edge module: ``bagio``/``bag_reader`` (and so rosbag) are imported when a bag is read.
+"""
+import itertools
+import operator
+
+from cc_log.core import raw_message, smart, trigger_topics
+from cc_log.storage import window_writer
+
+__all__ = ['replay_one', 'replay_setup', 'replay', 'replay_into', 'replay_records', 'check_bag_topics',
+           'offline_logger', 'open_bag', 'checked_count',
+           'PROGRESS_EVERY', 'REPLAY_BATCH']
+
+PROGRESS_EVERY = 1000  # messages between progress callbacks
+REPLAY_BATCH = 256     # records fed to the logger at a time (``on_records``); the writer's losses are looked at
+#                        after each batch
+_MSG = operator.attrgetter('msg')
+
+
+# -- the logger of a configuration --------------------------------------------------------------------------
+
+def _options(cfg):
+    """``(SmartLogger keyword arguments, {topic: type} the triggers read)`` of ``cfg``, its triggers built (model
+    files loaded); ``side_topics`` is None while topic patterns wait for a bag's topics."""
+    from cc_log.core import config as config_mod
+    from cc_log.core.model import AnomalyModel
+    triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
+    return cfg.logger_options(triggers), trigger_topics.topic_types(triggers)
+
+
+def _selected(cfg, options, types, bag):
+    """``(options, types, topics)``: the side topics the patterns of ``cfg`` select among the topics of ``bag``
+    (an open bag; none without one) and the topics to read, driving first."""
+    if options['side_topics'] is None:
+        from cc_log.storage.bag import bagio
+        options['side_topics'] = cfg.selection.select(sorted(bagio.topics_of(bag))) if bag is not None else []
+    driving = options['driving_topic']
+    topics = [driving] + [t for t in sorted(set(options['side_topics']).union(types)) if t != driving]
+    return options, types, topics
+
+
+def replay_setup(cfg, bag=None):
+    """The logger options, topic types and topics (driving first) of a replay with configuration ``cfg``; topic
+    patterns (``*``, ``re:``, ``!``) select among the topics of ``bag`` (an open bag, ``bagio.open_bag``; none
+    without one). ValueError for a bad configuration, ModelError for a bad model."""
+    options, types = _options(cfg)
+    return _selected(cfg, options, types, bag)
+
+
+def open_bag(bag_path):
+    """The bag opened for its topics and counts (``bagio.open_bag``'s checks; its per-message index is left to
+    ``bag_reader``, which reads the records)."""
+    from cc_log.storage.bag import bagio
+    return bagio.open_bag(bag_path, skip_index=True)
+
+
+def checked_count(bag, topics, types):
+    """How many messages ``topics`` have in the open ``bag``; ValueError when one is missing or not of its type
+    in ``types`` (``{topic: type}``)."""
+    from cc_log.storage.bag import bagio
+    for topic in topics:
+        bagio.check_topic(bag, topic, types.get(topic))
+    return bag.get_message_count(topics)
+
+
+def check_bag_topics(bag_path, topics, types):
+    """A readable bag holding ``topics`` of the ``types`` given (``{topic: type}``); how many messages they have."""
+    bag = open_bag(bag_path)
+    try:
+        return checked_count(bag, topics, types)
+    finally:
+        bag.close()
+
+
+def offline_logger(out_dir, options):
+    """A SmartLogger of ``options`` (``replay_setup``'s) writing into ``out_dir`` with the offline retries."""
+    retry = window_writer.OFFLINE_RETRY_SECONDS
+    return smart.SmartLogger(None, out_dir, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
+                             give_up_after=retry, close_retry=retry, **options)
+
+
+def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None):
+    """The smart logger of configuration ``cfg`` over one bag into ``out_dir``: ``replay``'s summary plus
+    ``driving_topic``, ``format``, ``messages`` and ``drift`` (a ``drift.DriftMonitor`` of each classifier).
+    ``progress(done, total)``; ``make_dir(path)`` creates ``out_dir`` once the bag is checked (default:
+    ``safe_files.make_dirs``)."""
+    from cc_log.core import drift, safe_files
+    options, types = _options(cfg)
+    bag = open_bag(bag_path)
+    try:
+        options, types, topics = _selected(cfg, options, types, bag)
+        total = checked_count(bag, topics, types)
+    finally:
+        bag.close()
+    (make_dir or safe_files.make_dirs)(out_dir)
+    logger = offline_logger(out_dir, options)
+    monitors = drift.monitor_classifiers(logger.classifiers)
+    summary = replay_records(logger, _records(bag_path, topics),
+                             None if progress is None else (lambda done: progress(done, total)), bag_path)
+    summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total, drift=monitors)
+    return summary
+
+
+# -- feeding a logger ---------------------------------------------------------------------------------------
+
+def _records(bag_path, topics):
+    """The serialized records of ``topics`` in bag order (``bag_reader``: no Python call per record)."""
+    from cc_log.storage.bag import bag_reader  # rosbag: imported here
+    return itertools.chain.from_iterable(bag_reader.read_runs(bag_path, topics))
+
+
+def replay(bag_path, topic, model_path, out_dir, pre=smart.DEFAULT_PRE, post=smart.DEFAULT_POST,
+           fmt=smart.DEFAULT_FORMAT, side_topics=(), max_window=smart.DEFAULT_MAX_WINDOW, progress=None,
+           retrigger=smart.DEFAULT_RETRIGGER, classify_every=smart.DEFAULT_CLASSIFY_EVERY,
+           max_buffer_mb=smart.DEFAULT_MAX_BUFFER_MB, retry_seconds=None, triggers=(), input_topics=None):
+    """Run the smart logger over a bag as fast as it can be read; return a summary dict:
+
+    ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
+    'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
+    message saved). ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``);
+    ``triggers``, ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``,
+    called every PROGRESS_EVERY messages and at the end. A window that cannot be written (disk full...) is
+    retried for ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops.
+    Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag cannot be read or a
+    window cannot be written (naming ``out_dir`` and what was not written).
+    """
+    from cc_log.core.model import AnomalyModel
+    model = AnomalyModel.load(model_path) if model_path else None
+    retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
+    logger = smart.SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
+                               max_window=max_window, retrigger=retrigger, classify_every=classify_every,
+                               max_buffer_mb=max_buffer_mb, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
+                               give_up_after=retry_seconds, close_retry=retry_seconds, triggers=triggers,
+                               input_topics=input_topics)
+    return replay_into(logger, bag_path, progress)
+
+
+def replay_into(logger, bag_path, progress=None):
+    """Feed every message of the bag that ``logger`` keeps or watches (its driving topic, side topics and
+    trigger topics; every topic when its side topics are None) to it as serialized bytes (``on_records``, the
+    path of the live node), close it, and return ``replay``'s summary; the same errors."""
+    if logger.side_topics is None:
+        bag = open_bag(bag_path)
+        try:
+            from cc_log.storage.bag import bagio
+            topics = sorted(bagio.topics_of(bag))
+        finally:
+            bag.close()
+    else:
+        topics = [logger.driving_topic] + sorted(logger.side_topics)
+    return replay_records(logger, _records(bag_path, topics), progress, bag_path)
+
+
+def _batches(records, size=None):
+    """Lists of up to ``size`` (REPLAY_BATCH) consecutive records, each all serialized or all decoded."""
+    stream = iter(records)
+    while True:
+        batch = list(itertools.islice(stream, size or REPLAY_BATCH))
+        if not batch:
+            return
+        if list(map(_MSG, batch)).count(None) in (0, len(batch)):
+            yield batch
+            continue
+        for _, run in itertools.groupby(batch, key=lambda record: record.msg is None):
+            yield list(run)
+
+
+def replay_records(logger, records, progress=None, source='the records'):
+    """``replay_into`` of an iterable of ``records.Record``s (serialized ones go to ``on_records``, decoded
+    ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
+    benchmarks."""
+    out_dir = logger.directory
+    windows = []
+
+    def collect(event):
+        if event.kind == smart.WRITTEN:
+            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
+                            'path': event.path})
+    logger.on_event(collect)
+    count, stopped = 0, False
+    try:
+        for batch in _batches(records):
+            try:
+                if batch[0].msg is None:
+                    logger.on_records(batch)
+                else:
+                    for record in batch:
+                        logger.on_message(record.topic, record.msg, record.stamp)
+            except raw_message.UndecodableRecord as error:
+                raise ValueError('%s: a message of %s cannot be decoded (%s)' % (source, error.topic, error.error))
+            except raw_message.DECODE_ERRORS as error:
+                raise ValueError('%s: a message cannot be decoded (%s)' % (source, error))
+            before, count = count, count + len(batch)
+            if progress is not None and count // PROGRESS_EVERY != before // PROGRESS_EVERY:
+                progress(count)
+            if logger.writer.lost:
+                stopped = True  # a window is lost: stop reading, say so below
+                break
+        if progress is not None:
+            progress(count)
+    finally:
+        logger.close()
+    stats = logger.stats()
+    if stats['messages_lost']:
+        raise OSError('%s: %d window(s) (%d messages) not written: %s; %d window(s) written%s' % (
+            out_dir, stats['windows_lost'], stats['messages_lost'], stats['last_error'], stats['windows_saved'],
+            '; replay stopped after %d messages of %s' % (count, source) if stopped else ''))
+    return {
+        'input_messages': stats['messages_seen'],
+        'raw_json_bytes': stats['raw_json_bytes'],
+        'stored_bytes': stats['stored_bytes'],
+        'windows': sorted(windows, key=lambda window: window['start']),
+    }
