@@ -1,10 +1,20 @@
 """Routes (cc_log.core.routes): a window cut once into one file per route, each route a topic set in its own
 format; the configuration declares them; bad routes are one line naming the entry."""
-import pytest
+import contextlib
+import io
+import json
+import os
 
+import pytest
+import rosbag
+import yaml
+
+from cc_log import sim
 from cc_log.core import config
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.core.routes import parse_routes, split
+from cc_log.offline import cli
+from cc_log.storage import log_format
 
 FORMATS = ('bag-lz4', 'json-xz')
 NUMERIC = {'name': 'numeric', 'topics': ['/odom', 're:/imu/.*'], 'format': 'json-xz'}
@@ -58,3 +68,64 @@ def test_json_xz_precision_may_round_a_routed_topic_set():
     assert [route.format for route in cfg.routes] == ['json-xz'] and cfg.precision
     with pytest.raises(ValueError, match='rounds json-xz windows only'):
         config.Config.from_dict({'format': 'bag-lz4', 'json_xz': {'precision': {'a': 0.1}}})
+
+
+# -- end to end: cclog replay writes a window as one bag-lz4 file and one json-xz file per route ------------
+
+def replayed(tmp_path, windows):
+    """A simulated run (camera, scan, odometry, IMU) replayed with a window every 10 s and the numeric route;
+    the output directory."""
+    from cc_log.offline import cli
+    bag = str(tmp_path / 'run.bag')
+    sim.simulate_to_bag(bag, sim.SimConfig(seed=3, minutes=0.5, anomalies=0, imu=True, camera=True, scan=True))
+    cfg = tmp_path / 'routes.yaml'
+    cfg.write_text(yaml.safe_dump({
+        'driving_topic': sim.ODOM_TOPIC, 'topics': ['*'], 'windows': windows,
+        'format': 'bag-lz4', 'routes': [{'name': 'numeric', 'topics': [sim.ODOM_TOPIC, sim.IMU_TOPIC],
+                                         'format': 'json-xz'}],
+        'triggers': [{'name': 'every10s', 'kind': 'periodic', 'every': '10s'}]}))
+    out = tmp_path / 'out'
+    assert cli.main(['replay', bag, '--config', str(cfg), '--out', str(out)]) == 0
+    return str(out)
+
+
+def test_a_replayed_window_is_one_bag_and_one_json_xz_file_read_as_one(tmp_path):
+    out = replayed(tmp_path, {'pre': '2s', 'post': '2s'})
+    files = log_format.window_files(out)
+    own = [f for f in files if '+' not in os.path.basename(f)]
+    routed = [f for f in files if os.path.basename(f).endswith('+numeric.json.xz')]
+    assert own and len(routed) == len(own) == len(files) / 2  # each window: its bag and its route's file
+    for path in own:
+        with rosbag.Bag(path) as reader:  # the heavy topics, as rosbag reads them
+            topics = set(reader.get_type_and_topic_info().topics)
+        assert {sim.CAMERA_TOPIC, sim.SCAN_TOPIC} <= topics and not topics & {sim.ODOM_TOPIC, sim.IMU_TOPIC}
+    metadata, records = log_format.read_window(routed[0])
+    assert set(metadata['topics']) == {sim.ODOM_TOPIC, sim.IMU_TOPIC} and metadata['route'] == 'numeric'
+    # every reader sees a window's files as one window
+    [files_of_first] = [s for s in log_format.window_sets([routed[0]])]
+    assert files_of_first == [own[0], routed[0]]
+    metadata, records = log_format.read_window_set(files_of_first)
+    assert set(metadata['topics']) == {sim.ODOM_TOPIC, sim.IMU_TOPIC, sim.CAMERA_TOPIC, sim.SCAN_TOPIC}
+    assert [r.stamp for r in records] == sorted(r.stamp for r in records)
+    text = io.StringIO()
+    with contextlib.redirect_stdout(text):
+        assert cli.main(['info', out, '--json']) == 0
+    info = json.loads(text.getvalue())
+    assert info['total']['windows'] == len(own)
+    assert info['windows'][0]['files'] == files_of_first
+    assert info['total']['bytes'] == sum(os.path.getsize(f) for f in files)
+
+
+def test_a_window_in_parts_is_still_one_window_with_its_route_files(tmp_path):
+    out = replayed(tmp_path, {'pre': '2s', 'post': '2s', 'max': 150})  # parts of 150 odometry messages
+    files = log_format.window_files(out)
+    own = [f for f in files if '+' not in os.path.basename(f)]
+    parts = [f for f in files if '+numeric_part' in os.path.basename(f)]
+    assert own and len(parts) > len(own)  # one bag per window (parts appended), a json-xz file per part
+    sets = log_format.window_sets(files)
+    assert len(sets) == len(own) and all(s[0] in own and len(s) > 2 for s in sets)
+    for files_of_one in sets:
+        metadata, records = log_format.read_window_set(files_of_one)
+        assert {sim.ODOM_TOPIC, sim.CAMERA_TOPIC} <= set(metadata['topics'])
+        stamps = [r.stamp for r in records if r.topic == sim.ODOM_TOPIC]
+        assert stamps == sorted(set(stamps))  # no odometry message twice, none out of order

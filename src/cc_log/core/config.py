@@ -232,7 +232,8 @@ class Config(object):
                 'side_topics': None if self.selection.dynamic else [resolve(t) for t in self.topics],
                 'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb,
                 'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers, 'format_options': self.format_options(),
-                'topic_limits': dict((resolve(topic), limits) for topic, limits in self.topic_limits.items())}
+                'topic_limits': dict((resolve(topic), limits) for topic, limits in self.topic_limits.items()),
+                'routes': [route.resolved(resolve) for route in self.routes]}
 
     def format_options(self):
         """What the window format is told in each window's metadata: ``{'precision': ...}`` when set."""

@@ -76,6 +76,14 @@ def parse_routes(value, formats, name='routes'):
     return routes
 
 
+def metadata(window_metadata, route):
+    """The metadata of ``route``'s file of a window: the window's, with the route named and what was dropped
+    said once, in the window's own file."""
+    result = dict(window_metadata, route=route.name)
+    result.pop('dropped', None)
+    return result
+
+
 def split(window, routes):
     """``[(route or None, LogWindow)]``: ``window``'s records by route (None: the window's own file), each
     part with the window's triggers, part number, finality and key; a route that takes no record of this window

@@ -41,7 +41,7 @@ from cc_log import features as features_mod
 from cc_log.storage import log_format
 from cc_log.core import msg_codec
 from cc_log.core import raw_message
-from cc_log.core import smart_events, window_prep
+from cc_log.core import routes as routes_mod, smart_events, window_prep
 from cc_log.core.raw_json import RawJsonEstimate
 from cc_log.core.smart_events import DELETED, FAILED, OPENED, WRITTEN, Event
 from cc_log.core.stamp_clock import StampClock
@@ -103,7 +103,8 @@ class SmartLogger(object):
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
     half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
     byte of a part; see ``WindowBuffer``).
-    format_options: keys added to every window's metadata that the format reads (json-xz: ``precision``).
+    format_options: keys added to every window's metadata that the format reads (json-xz: ``precision``);
+    routes: ``core.routes.Route``s: topic sets written beside the window's own file in a format of their own.
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -114,7 +115,7 @@ class SmartLogger(object):
                  enabled=True, background=True, retrigger=DEFAULT_RETRIGGER, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
-                 close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None,
+                 close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
                  stamp_tolerance=DEFAULT_STAMP_TOLERANCE):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
@@ -147,6 +148,8 @@ class SmartLogger(object):
         self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self.max_buffer_mb = max_buffer_mb
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
+        self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
+        self._bases = {}  # window key -> the base name of its files, while it is handed on in parts (routes)
         self.stamp_tolerance = float(stamp_tolerance)
         if not self.stamp_tolerance > 0:
             raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))
@@ -550,7 +553,16 @@ class SmartLogger(object):
             if shed:
                 metadata['dropped'] = shed
             window = self._latched.first_in(window, log_format.streams(self.format))
-            self.writer.submit(window_writer.Job(window, metadata))
+            if not self.routes:
+                self.writer.submit(window_writer.Job(window, metadata))
+                continue
+            base = self._bases.pop(window.key, None) or log_format.base_name(window, 0)  # all its files' name
+            if window.part and not window.final:
+                self._bases[window.key] = base
+            for route, part in routes_mod.split(window, self.routes):  # one file per route (core.routes)
+                self.writer.submit(window_writer.Job(part, metadata, base=base) if route is None else window_writer.Job(
+                    part, routes_mod.metadata(metadata, route), what=window_writer.ROUTE, fmt=route.format,
+                    route=route.name, base=base))
 
     def _metadata(self, window):
         """Smart-mode metadata added to log_format's (which already holds triggers, names, part, counts)."""

@@ -343,9 +343,10 @@ class WindowFile(object):
 
     SUMMED = ('dropped', 'undecodable')
 
-    def __init__(self, directory, fmt, suffix=''):
+    def __init__(self, directory, fmt, suffix='', base=None):
         self.directory = directory
         self.suffix = suffix  # after the window's base name: a route's file (``core.routes``)
+        self.base = base      # the window's base name (None: its first part's)
         self.format = formats.check(fmt)
         self._module = formats.get(fmt)
         self._target = self._stream = None
@@ -359,7 +360,7 @@ class WindowFile(object):
         """Write the records of the next part (OSError, ValueError: nothing of it was written; try again)."""
         if self._stream is None:
             ensure_directory(self.directory)
-            base, extension = base_name(window, part=0) + self.suffix, self._module.EXTENSION
+            base, extension = (self.base or base_name(window, part=0)) + self.suffix, self._module.EXTENSION
             target = safe_files.AtomicFile(os.path.join(self.directory, base + extension),
                                            names=final_names(self.directory, base, extension), keep=True)
             stream = target.__enter__()

@@ -40,6 +40,7 @@ FAILED = 'failed'
 DELETED = 'deleted'
 WINDOW = 'window'  # Job.what of a window file
 CONTEXT = 'context'  # Job.what of a closed context-track file (counted in the quota like a window)
+ROUTE = 'route'  # Job.what of a route's file of a window (core.routes): the window is counted once, by its own
 
 DEFAULT_RETRY_PERIOD = 2.0         # seconds between attempts to write held jobs
 DEFAULT_MAX_HELD_MESSAGES = 50000  # messages of unwritten windows kept in memory; beyond, the oldest go
@@ -58,13 +59,14 @@ class Job(object):
     """One file for the writer: ``window`` (a LogWindow) with ``metadata`` for ``log_format.write_window``, or
     ``write``, a function that writes another file and returns its path. ``what`` names the kind of file
     (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events. ``fmt`` and
-    ``route``: the window's file of a route (``core.routes``) in that format, named ``<window's name>+<route>``
-    (None: the writer's format, the window's own file)."""
+    ``route``: the window's file of a route (``core.routes``) in that format, named ``<base>+<route>``; ``base``:
+    the window's file name without extension, the same for all its files (None: ``log_format.base_name``)."""
 
     __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole',
-                 'fmt', 'route')
+                 'fmt', 'route', 'base')
 
-    def __init__(self, window=None, metadata=None, write=None, what=None, tag=None, fmt=None, route=None):
+    def __init__(self, window=None, metadata=None, write=None, what=None, tag=None, fmt=None, route=None,
+                 base=None):
         if (window is None) == (write is None):
             raise ValueError('job: give either a window or a write function')
         self.window = window
@@ -77,7 +79,7 @@ class Job(object):
         self.whole = None       # a window written a part at a time, as a whole, once its file is finished
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent
-        self.fmt, self.route = fmt, route
+        self.fmt, self.route, self.base = fmt, route, base
 
     @property
     def stream_key(self):
@@ -334,7 +336,7 @@ class WindowWriter(object):
             if stream is None:
                 if not window.records:  # a route none of whose topics came yet: no file
                     return None, 0
-                stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix)
+                stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix, job.base)
             if not window.final:
                 stream.append(window, job.metadata)
                 return None, 0
@@ -350,8 +352,9 @@ class WindowWriter(object):
         # a part's file says the triggers that came since the part before it (a part's window holds all of them)
         triggers = window.triggers[self._triggers_said.get(key, 0):] if parted else None
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
+        base = None if job.base is None else job.base + suffix + ('_part%d' % window.part if window.part else '')
         path, nbytes = log_format.write_window(window, self.directory, fmt, job.metadata, left_out=left_out,
-                                               triggers=triggers, base=log_format.base_name(window) + suffix)
+                                               triggers=triggers, base=base)
         if parted and window.final:
             self._triggers_said.pop(key, None)
         elif parted:
