@@ -72,7 +72,27 @@ def test_json_xz_precision_may_round_a_routed_topic_set():
 
 # -- end to end: cclog replay writes a window as one bag-lz4 file and one json-xz file per route ------------
 
-def replayed(tmp_path, windows):
+def test_a_window_only_triggers_with_keep_opened_holds_only_their_topics():
+    from cc_log.core import window_prep
+    records = [Record(100.0 + i, topic, None, 10) for i, topic in enumerate(['/odom', '/camera', '/scan', '/diag'])]
+    bumper = LogWindow(list(records), [Trigger(101.0, 'pressed', None, 'bumper')])
+    keep = {'bumper': frozenset(['/camera']), 'silent': frozenset(['/diag'])}
+    assert [r.topic for r in window_prep.restrict(bumper, keep, '/odom').records] == ['/odom', '/camera']
+    both = LogWindow(list(records), [Trigger(101.0, 'pressed', None, 'bumper'),
+                                     Trigger(102.0, 'quiet', None, 'silent')])
+    assert [r.topic for r in window_prep.restrict(both, keep, '/odom').records] == ['/odom', '/camera', '/diag']
+    other = LogWindow(list(records), [Trigger(101.0, 'pressed', None, 'bumper'), Trigger(102.0, 'x', 0.1, 'motion')])
+    assert len(window_prep.restrict(other, keep, '/odom').records) == 4  # another trigger: every topic
+    cfg = config.Config.from_dict({'driving_topic': 'odom', 'triggers': [
+        {'name': 'bumper', 'kind': 'rule', 'topic': 'bumper', 'arrival': True, 'keep': 'camera/image_raw scan'}]})
+    assert cfg.logger_options(cfg.build_triggers(None, lambda _: None))['keep'] == {
+        'bumper': frozenset(['/camera/image_raw', '/scan'])}
+    with pytest.raises(ValueError, match=r'triggers\[0\] \(bumper\): keep: 5 is not a list of topic names'):
+        config.Config.from_dict({'triggers': [{'name': 'bumper', 'kind': 'rule', 'topic': 'b', 'arrival': True,
+                                               'keep': 5}]})
+
+
+def replayed(tmp_path, windows, keep=None):
     """A simulated run (camera, scan, odometry, IMU) replayed with a window every 10 s and the numeric route;
     the output directory."""
     from cc_log.offline import cli
@@ -83,7 +103,8 @@ def replayed(tmp_path, windows):
         'driving_topic': sim.ODOM_TOPIC, 'topics': ['*'], 'windows': windows,
         'format': 'bag-lz4', 'routes': [{'name': 'numeric', 'topics': [sim.ODOM_TOPIC, sim.IMU_TOPIC],
                                          'format': 'json-xz'}],
-        'triggers': [{'name': 'every10s', 'kind': 'periodic', 'every': '10s'}]}))
+        'triggers': [dict({'name': 'every10s', 'kind': 'periodic', 'every': '10s'},
+                          **({'keep': keep} if keep else {}))]}))
     out = tmp_path / 'out'
     assert cli.main(['replay', bag, '--config', str(cfg), '--out', str(out)]) == 0
     return str(out)
@@ -129,3 +150,10 @@ def test_a_window_in_parts_is_still_one_window_with_its_route_files(tmp_path):
         assert {sim.ODOM_TOPIC, sim.CAMERA_TOPIC} <= set(metadata['topics'])
         stamps = [r.stamp for r in records if r.topic == sim.ODOM_TOPIC]
         assert stamps == sorted(set(stamps))  # no odometry message twice, none out of order
+
+
+def test_a_trigger_that_keeps_the_camera_keeps_no_scan(tmp_path):
+    out = replayed(tmp_path, {'pre': '2s', 'post': '2s'}, keep=[sim.CAMERA_TOPIC])
+    for files in log_format.window_sets(log_format.window_files(out)):
+        metadata, _ = log_format.read_window_set(files)
+        assert set(metadata['topics']) == {sim.ODOM_TOPIC, sim.CAMERA_TOPIC}, metadata['topics']

@@ -40,10 +40,10 @@ from cc_log.core.spans import Span
 from cc_log.triggers import get as trigger_kind
 from cc_log.triggers.base import Context, check_name
 from cc_log.triggers.classifier import default_topics
-from cc_log.core.topic_select import TopicSelection
+from cc_log.core.topic_select import TopicSelection, topic_list
 
 KEYS = tuple(options.sections())
-COMMON_TRIGGER_KEYS = ('name', 'kind', 'pre', 'post')
+COMMON_TRIGGER_KEYS = ('name', 'kind', 'pre', 'post', 'keep')
 DEFAULT_FEATURE_SET = options.get('feature_set').default
 DEFAULT_WINDOW = options.get('window').default
 MAX_FILE_BYTES = 1 << 20
@@ -181,7 +181,7 @@ class Config(object):
         context = Context(load_model, message_class, resolve)
         built = []
         for entry in self.triggers:
-            options = dict((key, value) for key, value in entry.items() if key not in ('name', 'kind', 'index'))
+            options = dict((key, value) for key, value in entry.items() if key not in ('name', 'kind', 'index', 'keep'))
             try:
                 built.append(trigger_kind(entry['kind']).from_config(entry['name'], options, context))
             except ValueError as error:
@@ -233,7 +233,9 @@ class Config(object):
                 'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb,
                 'max_buffer_mb': self.max_buffer_mb, 'triggers': triggers, 'format_options': self.format_options(),
                 'topic_limits': dict((resolve(topic), limits) for topic, limits in self.topic_limits.items()),
-                'routes': [route.resolved(resolve) for route in self.routes]}
+                'routes': [route.resolved(resolve) for route in self.routes],
+                'keep': dict((entry['name'], frozenset(resolve(topic) for topic in entry['keep']))
+                             for entry in self.triggers if 'keep' in entry)}
 
     def format_options(self):
         """What the window format is told in each window's metadata: ``{'precision': ...}`` when set."""
@@ -274,4 +276,6 @@ def _trigger_entry(entry, index):
             raise ValueError('triggers[%d] (%s): %s' % (index, name, error))
     checked = dict(entry)
     checked.update(name=name, kind=kind, index=index)
+    if 'keep' in entry:  # the topics a window opened only by such triggers keeps, besides the driving topic
+        checked['keep'] = topic_list(entry['keep'], 'triggers[%d] (%s): keep' % (index, name))
     return checked

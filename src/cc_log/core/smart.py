@@ -104,7 +104,8 @@ class SmartLogger(object):
     half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
     byte of a part; see ``WindowBuffer``).
     format_options: keys added to every window's metadata that the format reads (json-xz: ``precision``);
-    routes: ``core.routes.Route``s: topic sets written beside the window's own file in a format of their own.
+    routes: ``core.routes.Route``s: topic sets written beside the window's own file in a format of their own;
+    keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those (``window_prep.restrict``).
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -116,6 +117,7 @@ class SmartLogger(object):
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
                  close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
+                 keep=None,
                  stamp_tolerance=DEFAULT_STAMP_TOLERANCE):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
@@ -150,6 +152,7 @@ class SmartLogger(object):
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
         self._bases = {}  # window key -> the base name of its files, while it is handed on in parts (routes)
+        self.keep = dict(keep or {})  # trigger name -> the topics its windows keep (window_prep.restrict)
         self.stamp_tolerance = float(stamp_tolerance)
         if not self.stamp_tolerance > 0:
             raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))
@@ -552,7 +555,8 @@ class SmartLogger(object):
             metadata = self._metadata(window)
             if shed:
                 metadata['dropped'] = shed
-            window = self._latched.first_in(window, log_format.streams(self.format))
+            window = window_prep.restrict(self._latched.first_in(window, log_format.streams(self.format)), self.keep,
+                                          self.driving_topic)
             if not self.routes:
                 self.writer.submit(window_writer.Job(window, metadata))
                 continue

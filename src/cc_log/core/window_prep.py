@@ -6,7 +6,7 @@ import collections
 
 from cc_log.core import raw_message
 
-__all__ = ['thin', 'Latched', 'any_latched', 'HEAVY_BYTES', 'LATCHED_KEPT']
+__all__ = ['thin', 'restrict', 'Latched', 'any_latched', 'HEAVY_BYTES', 'LATCHED_KEPT']
 
 HEAVY_BYTES = 64 * 1024  # a message this large (an image, a cloud, a scan) may be dropped when the writer falls behind
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
@@ -37,6 +37,18 @@ def thin(window, room):
         kept.append(record)
     window.records = kept
     return dict(shed)
+
+
+def restrict(window, keep, driving_topic):
+    """``window`` with only ``driving_topic`` and the topics its triggers keep, when each of its triggers has
+    its own ``keep`` set (``{trigger name: topics}``; a window any other trigger opened or extended keeps every
+    topic): a collision keeps the cameras, a silent topic only the diagnostics."""
+    names = set(trigger.name or trigger.reason for trigger in window.triggers)
+    if not keep or not names or not names <= set(keep):
+        return window
+    topics = set().union(*(keep[name] for name in names)) | {driving_topic}
+    window.records = [record for record in window.records if record.topic in topics]
+    return window
 
 
 def any_latched(connections):
