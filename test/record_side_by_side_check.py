@@ -5,7 +5,8 @@ Starts two `record` processes without a name (rosbag's anonymous ``record_<id>``
 ``__name:=record_fixed`` (whose namespace holds leftovers of an earlier run, set by the .test file), waits
 (for conditions) until each has written a file, and checks: distinct ``/record_*`` nodes all alive, none of
 them has a parameter on the master (the leftovers are the only ones under ``/record_fixed`` and were not
-read: no subscription of their topics), and each exits 0 on SIGINT leaving the master as it found it.
+read: no subscription of their topics), and each exits 0 on SIGINT leaving the master as it found it; then two
+smart-mode recorders (a configuration of their own, no model) side by side, each writing windows of its topics.
 """
 import os
 import sys
@@ -67,6 +68,33 @@ class RecordSideBySideTest(unittest.TestCase):
             self.assertEqual(code, 0, err[-2000:])
         for node in nodes:  # nothing set on exit either
             self.assertEqual(params_under(node), LEFTOVERS if node == '/record_fixed' else [], node)
+
+    def test_smart_recorders_side_by_side(self):
+        """Two smart-mode recorders (one per sensor group, a window every 4 s each: no model needed) run side by
+        side, each writes its own windows of its own topics, and each exits 0 on SIGINT."""
+        directory = os.path.join(rospy.get_param('~directory'), 'smart')
+        os.makedirs(directory)
+        config = os.path.join(directory, 'periodic.yaml')
+        with open(config, 'w') as stream:
+            stream.write('driving_topic: odom\nwindows: {pre: 1s, post: 1s}\n'
+                         'triggers: [{name: every4s, kind: periodic, every: 4s}]\n')
+        folders = [os.path.join(directory, name) for name in ('odom', 'imu')]
+        before = set(record_nodes())
+        processes = [start('record', topic, '-o', folder + '/', '--mode', 'smart', '--config', config)
+                     for topic, folder in zip(('/odom', '/imu/data'), folders)]
+        try:
+            for folder in folders:
+                wait_for(lambda: len(log_format.window_files(folder)) >= 2, 60, 'two smart windows in %s' % folder)
+            self.assertEqual([p.poll() for p in processes], [None, None])
+            self.assertEqual(len(set(record_nodes()) - before), 2, record_nodes())
+            for folder, topic in zip(folders, ('/odom', '/imu/data')):
+                metadata, _ = log_format.read_window(log_format.window_files(folder)[0])
+                self.assertEqual(metadata['trigger'], 'every4s')
+                self.assertEqual(sorted(metadata['topics']), sorted({'/odom', topic}))
+        finally:
+            results = [stop(process) for process in processes]
+        for code, _, err in results:
+            self.assertEqual(code, 0, err[-2000:])
 
 
 if __name__ == '__main__':

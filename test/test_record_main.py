@@ -112,3 +112,12 @@ def test_node_scripts_print_help_without_starting(script):
     assert done.returncode == 0, done.stderr[-500:]
     assert done.stdout.startswith('usage: rosrun cc_log %s ' % script) and '``' not in done.stdout
     assert 'Parameters' in done.stdout or 'parameters' in done.stdout
+
+
+def test_a_configuration_with_its_own_triggers_gets_no_default_model(tmp_path):
+    config = tmp_path / 'periodic.yaml'
+    config.write_text('driving_topic: odom\ntriggers: [{name: every2s, kind: periodic, every: 2s}]\n')
+    module, params, _, _, _ = parse(['/odom', '--mode', 'smart', '--config', str(config)])
+    assert module == 'smart_node' and 'model' not in params  # (the default model would add a classifier)
+    module, params, _, _, _ = parse(['/odom', '--model', str(tmp_path / 'none.json')])
+    assert params['model'] == str(tmp_path / 'none.json')

@@ -120,7 +120,8 @@ def _parser():
                         help='publish the directory on begin_write (std_msgs/String, latched) once recording')
     for flags, dest, nargs in REFUSED_FLAGS:
         parser.add_argument(*flags, dest=dest, nargs=nargs, action=_Refuse, help=argparse.SUPPRESS)
-    parser.add_argument('--model', default=DEFAULT_MODEL, help='model file: smart windows when it exists')
+    parser.add_argument('--model', help='model file: smart windows when it exists (default: %s, unless --config '
+                        'names the triggers)' % DEFAULT_MODEL)
     parser.add_argument('--config', default='', help='configuration file (YAML)')
     parser.add_argument('--mode', default='auto', choices=launcher.MODES)
     parser.add_argument('--context', default='', metavar='TOPICS', help='context track: "odom:1 amcl_pose"')
@@ -150,6 +151,8 @@ def parse(argv, subscriptions=None):
         raise ValueError('no topics given: TOPIC ..., -a, -e REGEX ... or --node NODE (or --config)')
     if args.split and args.duration is None:
         raise ValueError('--split needs --duration (cc_log does not split by --size)')
+    if args.model is None and not args.config:  # the default model; a configuration names its own triggers
+        args.model = DEFAULT_MODEL
     module, note = launcher.choose(args.mode, args.model, args.config)
     if args.split and module == 'smart_node' and not args.context:
         raise ValueError('--split: smart mode writes one file per anomaly window; --split --duration splits '
