@@ -8,6 +8,7 @@ import struct
 import numpy as np
 import pytest
 
+from cc_log import errors
 from cc_log.core import learning, raw_message
 from cc_log.storage import log_format
 from cc_log import sim
@@ -198,7 +199,7 @@ def test_a_record_that_cannot_be_decoded_stops_a_batch_after_the_records_before_
     rule = RuleTrigger('fast', topic=sim.ODOM_TOPIC, when='twist.twist.linear.x > 100')  # reads the fields
     logger = SmartLogger(None, str(tmp_path), driving_topic=sim.ODOM_TOPIC, background=False, triggers=[rule])
     broken = records[:20] + [records[20]._replace(raw=records[20].raw[:30])] + records[21:]
-    with pytest.raises(raw_message.UndecodableRecord) as caught:
+    with pytest.raises(errors.UndecodableRecord) as caught:
         logger.on_records(broken)
     assert caught.value.index == 20 and caught.value.topic == sim.ODOM_TOPIC
     assert logger.stats()['messages_buffered'] == 20

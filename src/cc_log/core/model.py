@@ -21,6 +21,7 @@ import numpy as np
 from cc_log.core import safe_input
 from cc_log.core.safe_input import brief
 from cc_log.features import FeatureConfig, vector_length
+from cc_log.errors import ModelError
 
 FORMAT = 'cc_log-model'
 VERSION = 1
@@ -33,10 +34,6 @@ SCORE_BLOCK = 32  # vectors scored at a time by score_each (bounds its block of 
 MAX_WINDOW_COUNT = 100000
 MAX_WINDOW_SECONDS = 3600.0
 MAX_GAMMA = 1e6
-
-
-class ModelError(ValueError):
-    """A model file or model use that is not valid: the message names the file and what is wrong."""
 
 
 class AnomalyModel(object):

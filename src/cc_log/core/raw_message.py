@@ -30,15 +30,6 @@ _HEADER_STAMP = functools.partial(_STAMP.unpack_from, offset=4)
 DECODE_ERRORS = (genpy.DeserializationError, ValueError, TypeError, struct.error, IndexError, KeyError)
 
 
-class UndecodableRecord(ValueError):
-    """A record of a batch that a trigger must read but cannot be decoded: ``index`` (its place in the batch;
-    the records before it were taken), ``topic``, ``error`` (the decoding error)."""
-
-    def __init__(self, index, topic, error):
-        super(UndecodableRecord, self).__init__('%s: a message cannot be decoded (%s)' % (topic, error))
-        self.index, self.topic, self.error = index, topic, error
-
-
 _CLASSES = {}      # (type, md5sum, definition) -> class
 _HAS_HEADER = {}   # (type, definition) -> bool
 

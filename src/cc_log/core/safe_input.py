@@ -35,6 +35,7 @@ import os
 import re
 import reprlib
 import stat
+from cc_log.errors import UnsafeDefinition
 
 __all__ = ['UnsafeDefinition', 'check_definition', 'check_connection', 'check_bag', 'check_type_name',
            'check_json_depth', 'json_loads', 'open_input', 'check_regular', 'load_yaml', 'brief',
@@ -82,10 +83,6 @@ _STRING_STOP = re.compile(r'\\.|"""', re.S)  # CPython's tokenizer: a backslash 
 
 
 # -- message definitions -----------------------------------------------------------------------------------
-
-class UnsafeDefinition(ValueError):
-    """A message definition refused by ``check_definition`` (the message says where and why)."""
-
 
 def check_type_name(msg_type):
     """Raise ValueError unless ``msg_type`` is ``package/Name`` (ASCII identifiers)."""

@@ -37,6 +37,7 @@ import operator
 import threading
 import time
 
+from cc_log import errors
 from cc_log import features as features_mod
 from cc_log.storage import log_format
 from cc_log.core import msg_codec
@@ -238,7 +239,7 @@ class SmartLogger(object):
         ``raw_message.decode``) when a trigger needs it decoded and it cannot be."""
         try:
             self.on_records([Record(time.time() if stamp is None else stamp, topic, None, 0, raw, connection)])
-        except raw_message.UndecodableRecord as error:
+        except errors.UndecodableRecord as error:
             raise error.error from None
 
     def on_records(self, records):
@@ -246,7 +247,7 @@ class SmartLogger(object):
         they came (``stamp``: receipt or bag time, float s, used when the message has no header stamp): the same
         as ``on_raw`` of each in turn, with less work per message (a classifier scores every vector of the
         batch in one call). A record a trigger must read that cannot be decoded raises
-        ``raw_message.UndecodableRecord`` (its ``index`` in ``records``: those before it were taken)."""
+        ``errors.UndecodableRecord`` (its ``index`` in ``records``: those before it were taken)."""
         with self._lock:
             self._check_open('on_records')
             topics = list(map(_TOPIC, records))
@@ -289,8 +290,8 @@ class SmartLogger(object):
         taken = records_of(stamps, topics, itertools.repeat(None), costs, raws, connections)
         try:
             self._take_all(taken, topics, connections)
-        except raw_message.UndecodableRecord as error:
-            raise raw_message.UndecodableRecord(places[error.index], error.topic, error.error)
+        except errors.UndecodableRecord as error:
+            raise errors.UndecodableRecord(places[error.index], error.topic, error.error)
 
     def _on_clock(self, stamps, arrivals, topics):
         """The stamps that place messages in windows (``stamp_clock.StampClock``); those of messages whose header
@@ -321,7 +322,7 @@ class SmartLogger(object):
         connections = list(map(_CONNECTION, records)) if connections is None else connections
         views, error = self._trigger_views.views(records, topics, connections)
         if error is not None:
-            error = raw_message.UndecodableRecord(len(views), records[len(views)].topic, error)
+            error = errors.UndecodableRecord(len(views), records[len(views)].topic, error)
             records = records[:len(views)]
             topics, connections = topics[:len(views)], connections[:len(views)]
         present = set(topics)

@@ -22,6 +22,7 @@ import time
 
 import rospy
 
+from cc_log import errors
 from cc_log.core import options
 from cc_log.core import raw_message
 from cc_log.core.records import Record
@@ -314,7 +315,7 @@ class Intake(object):
             try:
                 self.sink.on_records(records)
                 return
-            except raw_message.UndecodableRecord as error:
+            except errors.UndecodableRecord as error:
                 self.dropped += 1
                 rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (error.topic, error.error))
                 records = records[error.index + 1:]

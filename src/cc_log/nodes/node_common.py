@@ -28,6 +28,7 @@ from cc_log.storage import log_format
 from cc_log.storage import recovery
 from cc_log.storage.directory import LoggingDirectory
 from cc_log.core import window_buffer
+from cc_log.errors import ConfigError
 
 EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
@@ -37,10 +38,6 @@ CLOSE_TIMEOUT = 10.0               # seconds to wait at shutdown for the last wi
 #                                    sends SIGTERM 15 s after SIGINT (what is not written by then is counted in a
 #                                    last log line; a window file cut off is recovered at the next start)
 CLOSE_RETRY = 5.0                  # seconds held windows are retried at shutdown before they count as lost
-
-
-class ConfigError(ValueError):
-    """Bad configuration: the message is one line naming the parameter."""
 
 
 # -- parameters -------------------------------------------------------------------------------------------

@@ -12,6 +12,7 @@ Edge module: ``bagio``/``bag_reader`` (and so rosbag) are imported when a bag is
 import itertools
 import operator
 
+from cc_log import errors
 from cc_log.core import raw_message, smart, trigger_topics
 from cc_log.storage import window_writer
 
@@ -194,7 +195,7 @@ def replay_records(logger, records, progress=None, source='the records'):
                 else:
                     for record in batch:
                         logger.on_message(record.topic, record.msg, record.stamp)
-            except raw_message.UndecodableRecord as error:
+            except errors.UndecodableRecord as error:
                 raise ValueError('%s: a message of %s cannot be decoded (%s)' % (source, error.topic, error.error))
             except raw_message.DECODE_ERRORS as error:
                 raise ValueError('%s: a message cannot be decoded (%s)' % (source, error))

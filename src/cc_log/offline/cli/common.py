@@ -11,6 +11,7 @@ import textwrap
 from cc_log.core.safe_input import printable
 from cc_log.offline import export
 from cc_log.offline.progress import bar as _bar
+from cc_log.errors import CommandError
 
 PROG = 'cclog'
 EXIT_OK = 0
@@ -18,10 +19,6 @@ EXIT_BAD_INPUT = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 INTERRUPT_GRACE = 0.5  # seconds Ctrl-C leaves a command to finish what it is writing before it stops anyway
-
-
-class CommandError(ValueError):
-    """Bad input found by a command itself (the message is the one line printed)."""
 
 
 # -- output -----------------------------------------------------------------------------------------------
