@@ -50,6 +50,7 @@ Rows and columns (``flat_row``, a section's values read from the bytes) are ``js
 (``DELTA_GAIN``, ``differences``) and the rounding (``check_precision``) are ``json_deltas``'s; this module makes
 the document and its text, compresses it, and reads it back. Pure: no rospy, no rosbag.
 """
+import codecs
 import decimal
 import json
 import lzma
@@ -304,6 +305,87 @@ def read(path, stream=None):
             raise ValueError('%s: larger than %d bytes: not a cc_log window' % (path, MAX_DOCUMENT_BYTES))
         stream.seek(0)
         return decode(stream.read(), path)
+
+
+#: The start of every document cc_log writes (``dumps``): its metadata comes first.
+METADATA_START = '{"metadata":'
+#: Decompressed bytes ``read_metadata`` reads before it first looks for the end of the metadata (then twice as
+#: many each time it is not whole yet).
+METADATA_STEP = 16 << 10
+
+
+def read_metadata(path, stream=None):
+    """``(metadata, None)`` of a ``.json.xz`` window file, decompressing only the start of its document, as far
+    as the metadata goes (the document starts with it: ``{"metadata": {...}, "topics": ...``); a document that
+    does not start so is read whole (``read``). ValueError('<path>: ...') as ``read`` says it for what it reads
+    (not xz, corrupt, cut off before the end of the metadata, not JSON, nested too deep, an unknown layout,
+    beyond MAX_DOCUMENT_BYTES); what follows the metadata is not read (damage there, or a file cut off after the
+    metadata, is not seen: the xz check of the whole stream is ``read``'s). No message counts (the metadata's
+    ``counts`` are the window's)."""
+    with (stream or safe_input.open_input(path)) as stream:
+        if os.fstat(stream.fileno()).st_size > MAX_DOCUMENT_BYTES:
+            raise ValueError('%s: larger than %d bytes: not a cc_log window' % (path, MAX_DOCUMENT_BYTES))
+        stream.seek(0)
+        if stream.read(len(MAGIC)) != MAGIC:
+            raise ValueError('%s: not an xz file' % path)
+        stream.seek(0)
+        metadata = _leading_metadata(stream, path)
+        if metadata is None:  # not a document as cc_log writes it: read whole
+            stream.seek(0)
+            return decode(stream.read(), path)[0], None
+    metadata = _floats(metadata)
+    if metadata.get('layout') not in LAYOUTS:
+        raise ValueError('%s: json-xz layout %r is not supported (this cc_log reads layouts %s)'
+                         % (path, metadata.get('layout'), ', '.join(str(number) for number in LAYOUTS)))
+    return metadata, None
+
+
+def _leading_metadata(stream, path):
+    """The metadata object at the start of the xz-compressed document of ``stream`` (parsed as ``decode`` parses
+    it), decompressing as little as needed; None when the document does not start with METADATA_START."""
+    decompressor = lzma.LZMADecompressor(format=lzma.FORMAT_XZ, memlimit=DECODER_MEMORY)
+    text = codecs.getincrementaldecoder('utf-8')()
+    parts, size, look_at = [], 0, METADATA_STEP
+    parser = json.JSONDecoder(parse_float=_parse_decimal)
+    while True:
+        block = stream.read(1 << 16) if decompressor.needs_input else b''
+        ended = decompressor.eof or (decompressor.needs_input and not block)
+        if not ended:
+            try:
+                part = decompressor.decompress(block, max_length=1 << 16)
+                parts.append(text.decode(part))
+            except lzma.LZMAError as error:
+                raise ValueError('%s: corrupt or truncated xz data (%s)' % (path, error))
+            except UnicodeDecodeError as error:
+                raise ValueError('%s: not a JSON document (%s)' % (path, error))
+            size += len(part)
+            if size > MAX_DOCUMENT_BYTES:
+                raise ValueError('%s: decompresses to more than %d bytes (the limit of a window document)'
+                                 % (path, MAX_DOCUMENT_BYTES))
+        if size < look_at and not ended:
+            continue
+        look_at = 2 * size
+        document = ''.join(parts)
+        parts = [document]
+        if not document.startswith(METADATA_START[:len(document)]):
+            return None
+        try:
+            safe_input.check_json_depth(document)
+            metadata = parser.raw_decode(document, len(METADATA_START))[0]
+        except json.JSONDecodeError as error:  # not whole yet, or not JSON
+            if not ended:
+                continue
+            if not decompressor.eof:
+                raise ValueError('%s: corrupt or truncated xz data (Compressed data ended before the '
+                                 'end-of-stream marker was reached)' % path)
+            raise ValueError('%s: not a JSON document (%s)' % (path, error))
+        except RecursionError:
+            raise ValueError('%s: not a JSON document (JSON nested too deeply)' % path)
+        except ValueError as error:
+            raise ValueError('%s: not a JSON document (%s)' % (path, error))
+        if not isinstance(metadata, dict):
+            raise ValueError('%s: not a cc_log json-xz window (needs "metadata" and "topics")' % path)
+        return metadata
 
 
 def _parse_decimal(text):
