@@ -309,8 +309,8 @@ def read(path, stream=None):
 
 #: The start of every document cc_log writes (``dumps``): its metadata comes first.
 METADATA_START = '{"metadata":'
-#: Decompressed bytes ``read_metadata`` reads before it first looks for the end of the metadata (then twice as
-#: many each time it is not whole yet).
+#: Decompressed bytes ``read_metadata`` takes at a time; it looks for the end of the metadata after the first
+#: of them, then each time it holds twice as many as when it last looked.
 METADATA_STEP = 16 << 10
 
 
@@ -352,7 +352,7 @@ def _leading_metadata(stream, path):
         ended = decompressor.eof or (decompressor.needs_input and not block)
         if not ended:
             try:
-                part = decompressor.decompress(block, max_length=1 << 16)
+                part = decompressor.decompress(block, max_length=METADATA_STEP)
                 parts.append(text.decode(part))
             except lzma.LZMAError as error:
                 raise ValueError('%s: corrupt or truncated xz data (%s)' % (path, error))
