@@ -235,7 +235,10 @@ def test_the_json_xz_metadata_is_read_from_the_start_of_a_large_document(tmp_pat
 def test_read_metadata_refuses_bad_files_in_one_line(tmp_path, fmt):
     path, _ = log_format.write_window(window(40), str(tmp_path), fmt)
     data = open(path, 'rb').read()
-    cases = {'empty': b'', 'garbage': b'not a window at all', 'magic only': data[:16], 'cut': data[:200]}
+    cases = {'empty': b'', 'garbage': b'not a window at all', 'magic only': data[:16], 'cut': data[:200],
+             'no index' if fmt == 'bag-lz4' else 'corrupt': data[:13] + b'\0' * 40 + data[53:]}
+    if fmt == 'bag-lz4':
+        cases['cut in the messages'] = data[:len(data) // 2]  # its index is gone
     for name, content in cases.items():
         bad = str(tmp_path / ('bad_%s' % name.replace(' ', '_') + os.path.splitext(path)[1]))
         with open(bad, 'wb') as stream:
@@ -243,8 +246,16 @@ def test_read_metadata_refuses_bad_files_in_one_line(tmp_path, fmt):
         with pytest.raises(ValueError) as raised:
             log_format.read_metadata(bad)
         assert str(raised.value).startswith(bad + ': ') and '\n' not in str(raised.value), name
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError) as whole:
             log_format.read_window(bad)
+        assert str(raised.value) == str(whole.value), name  # read_window's words
+    if fmt == 'json-xz':  # cut after its metadata: the metadata is read (read_window sees the cut)
+        cut = str(tmp_path / 'cut_after_metadata.json.xz')
+        with open(cut, 'wb') as stream:
+            stream.write(data[:len(data) * 3 // 4])
+        assert log_format.read_metadata(cut) == log_format.read_metadata(path)
+        with pytest.raises(ValueError, match='corrupt or truncated xz data'):
+            log_format.read_window(cut)
     os.mkfifo(str(tmp_path / 'fifo.bag'))
     with pytest.raises(ValueError, match='is a FIFO'):
         log_format.read_metadata(str(tmp_path / 'fifo.bag'))

@@ -376,11 +376,20 @@ def read_metadata(path, stream=None):
     index, and ``counts`` ({topic: messages}) from the index's chunk infos. Only the chunks holding a metadata
     message are decompressed (the first, or for a file written a part at a time the last, which holds nothing
     else); the other messages are not read, so damage to them is not seen (``read`` checks them against the
-    layout's crc32). ValueError('<path>: <what is wrong>') as ``bag_open.open_bag`` says it (also for an unsafe
-    message definition) or as ``read`` says a missing or bad metadata message."""
-    from cc_log.storage.bag import bag_open, bag_reader
+    layout's crc32). A bag that cannot be read so (damaged, unindexed, no metadata there, an unsafe message
+    definition) is read by ``read``: the same ValueError('<path>: <what is wrong>')."""
     if stream is not None:
         stream.close()  # the bag is opened by its path (bag_open checks it again)
+    try:
+        return _indexed_metadata(path)
+    except ValueError:
+        metadata, records = read(path)
+        return metadata, dict(collections.Counter(record.topic for record in records))
+
+
+def _indexed_metadata(path):
+    """``read_metadata`` from the index and the chunks holding the metadata; ValueError when it cannot be."""
+    from cc_log.storage.bag import bag_open, bag_reader
     bag = bag_open.open_bag(path, skip_index=True)
     try:
         topics = {connection.id: connection.topic for connection in bag._connections.values()}
@@ -392,14 +401,11 @@ def read_metadata(path, stream=None):
         bag.close()
     metadata = None
     if counts.pop(METADATA_TOPIC, 0):
-        try:
-            for run in bag_reader.read_runs(path, [METADATA_TOPIC]):
-                for record in run:
-                    metadata = _chosen(metadata, _metadata(_string_data(record.raw)))
-        except _BadMetadata as error:
-            raise ValueError('%s: bad metadata JSON on %s (%s)' % (path, METADATA_TOPIC, error))
+        for run in bag_reader.read_runs(path, [METADATA_TOPIC]):
+            for record in run:
+                metadata = _chosen(metadata, _metadata(_string_data(record.raw)))
     if not isinstance(metadata, dict) or not isinstance(metadata.get('bag'), dict):
-        raise ValueError('%s: not a cc_log window (no metadata on %s)' % (path, METADATA_TOPIC))
+        raise ValueError('no metadata')
     del metadata['bag']
     return metadata, dict(counts)
 

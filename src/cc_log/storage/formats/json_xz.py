@@ -317,11 +317,11 @@ METADATA_STEP = 16 << 10
 def read_metadata(path, stream=None):
     """``(metadata, None)`` of a ``.json.xz`` window file, decompressing only the start of its document, as far
     as the metadata goes (the document starts with it: ``{"metadata": {...}, "topics": ...``); a document that
-    does not start so is read whole (``read``). ValueError('<path>: ...') as ``read`` says it for what it reads
-    (not xz, corrupt, cut off before the end of the metadata, not JSON, nested too deep, an unknown layout,
-    beyond MAX_DOCUMENT_BYTES); what follows the metadata is not read (damage there, or a file cut off after the
-    metadata, is not seen: the xz check of the whole stream is ``read``'s). No message counts (the metadata's
-    ``counts`` are the window's)."""
+    does not start so, whose metadata goes on beyond ONE_PASS_BYTES, or whose start is not as ``read`` reads it
+    (corrupt, cut off before the end of the metadata, not JSON, nested too deep) is read whole, by ``read``: the
+    same ValueError('<path>: ...'), and a bomb refused in the same bounded memory. What follows the metadata is
+    not read (damage there, or a file cut off after the metadata, is not seen: the xz check of the whole stream is
+    ``read``'s). No message counts (the metadata's ``counts`` are the window's)."""
     with (stream or safe_input.open_input(path)) as stream:
         if os.fstat(stream.fileno()).st_size > MAX_DOCUMENT_BYTES:
             raise ValueError('%s: larger than %d bytes: not a cc_log window' % (path, MAX_DOCUMENT_BYTES))
@@ -329,8 +329,8 @@ def read_metadata(path, stream=None):
         if stream.read(len(MAGIC)) != MAGIC:
             raise ValueError('%s: not an xz file' % path)
         stream.seek(0)
-        metadata = _leading_metadata(stream, path)
-        if metadata is None:  # not a document as cc_log writes it: read whole
+        metadata = _leading_metadata(stream)
+        if metadata is None:  # not a document as cc_log writes it, or not whole: read whole (read's errors)
             stream.seek(0)
             return decode(stream.read(), path)[0], None
     metadata = _floats(metadata)
@@ -340,9 +340,11 @@ def read_metadata(path, stream=None):
     return metadata, None
 
 
-def _leading_metadata(stream, path):
+def _leading_metadata(stream):
     """The metadata object at the start of the xz-compressed document of ``stream`` (parsed as ``decode`` parses
-    it), decompressing as little as needed; None when the document does not start with METADATA_START."""
+    it), decompressing as little as needed; None when the document does not start with METADATA_START, its
+    metadata does not end within ONE_PASS_BYTES, or what is read of it is not what ``decode`` reads (corrupt,
+    cut off, not UTF-8 or JSON, nested too deep: ``decode`` says what)."""
     decompressor = lzma.LZMADecompressor(format=lzma.FORMAT_XZ, memlimit=DECODER_MEMORY)
     text = codecs.getincrementaldecoder('utf-8')()
     parts, size, look_at = [], 0, METADATA_STEP
@@ -354,16 +356,13 @@ def _leading_metadata(stream, path):
             try:
                 part = decompressor.decompress(block, max_length=METADATA_STEP)
                 parts.append(text.decode(part))
-            except lzma.LZMAError as error:
-                raise ValueError('%s: corrupt or truncated xz data (%s)' % (path, error))
-            except UnicodeDecodeError as error:
-                raise ValueError('%s: not a JSON document (%s)' % (path, error))
+            except (lzma.LZMAError, UnicodeDecodeError):
+                return None
             size += len(part)
-            if size > MAX_DOCUMENT_BYTES:
-                raise ValueError('%s: decompresses to more than %d bytes (the limit of a window document)'
-                                 % (path, MAX_DOCUMENT_BYTES))
-        if size < look_at and not ended:
-            continue
+            if size > ONE_PASS_BYTES:
+                return None  # metadata that large (or a bomb): read whole, in the bounded memory of ``decompress``
+            if size < look_at:
+                continue
         look_at = 2 * size
         document = ''.join(parts)
         parts = [document]
@@ -372,20 +371,13 @@ def _leading_metadata(stream, path):
         try:
             safe_input.check_json_depth(document)
             metadata = parser.raw_decode(document, len(METADATA_START))[0]
-        except json.JSONDecodeError as error:  # not whole yet, or not JSON
-            if not ended:
-                continue
-            if not decompressor.eof:
-                raise ValueError('%s: corrupt or truncated xz data (Compressed data ended before the '
-                                 'end-of-stream marker was reached)' % path)
-            raise ValueError('%s: not a JSON document (%s)' % (path, error))
-        except RecursionError:
-            raise ValueError('%s: not a JSON document (JSON nested too deeply)' % path)
-        except ValueError as error:
-            raise ValueError('%s: not a JSON document (%s)' % (path, error))
-        if not isinstance(metadata, dict):
-            raise ValueError('%s: not a cc_log json-xz window (needs "metadata" and "topics")' % path)
-        return metadata
+        except json.JSONDecodeError:  # not whole yet, or not JSON
+            if ended:
+                return None
+            continue
+        except (ValueError, RecursionError):
+            return None
+        return metadata if isinstance(metadata, dict) else None
 
 
 def _parse_decimal(text):
