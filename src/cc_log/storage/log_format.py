@@ -118,8 +118,10 @@ class Contents(object):
                 entry[1] = stamp
             elif stamp > entry[2]:
                 entry[2] = stamp
-            if self._summary:
+            if seen < JSON_SAMPLE_FIRST or seen % JSON_SAMPLE_EVERY == 0 or record.raw is None:
                 self._measure(entry, record, seen < JSON_SAMPLE_FIRST or seen % JSON_SAMPLE_EVERY == 0)
+            else:  # the live path: bytes, not sampled
+                entry[0] += len(record.raw)
         if records:
             self.count += len(records)
             if self.start is None:
@@ -128,6 +130,8 @@ class Contents(object):
 
     def _measure(self, entry, record, sampled):
         """Add a record's serialized bytes (and, when ``sampled``, its row-JSON bytes) to its topic's entry."""
+        if not self._summary:
+            return
         msg = record.msg
         try:
             size = len(record.raw) if record.raw is not None else _serialized_length(msg)
