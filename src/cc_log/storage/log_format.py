@@ -118,8 +118,9 @@ class Contents(object):
                 entry[1] = stamp
             elif stamp > entry[2]:
                 entry[2] = stamp
-            if seen < JSON_SAMPLE_FIRST or seen % JSON_SAMPLE_EVERY == 0 or record.raw is None:
-                self._measure(entry, record, seen < JSON_SAMPLE_FIRST or seen % JSON_SAMPLE_EVERY == 0)
+            sampled = seen < JSON_SAMPLE_FIRST or seen % JSON_SAMPLE_EVERY == 0
+            if sampled or record.raw is None:
+                self._measure(entry, record, sampled)
             else:  # the live path: bytes, not sampled
                 entry[0] += len(record.raw)
         if records:
@@ -127,6 +128,10 @@ class Contents(object):
             if self.start is None:
                 self.start = records[0].stamp
             self.end = records[-1].stamp
+
+    def no_summary(self):
+        """Leave the summary out of the metadata (and do not measure the records for it)."""
+        self._summary = False
 
     def _measure(self, entry, record, sampled):
         """Add a record's serialized bytes (and, when ``sampled``, its row-JSON bytes) to its topic's entry."""
@@ -470,8 +475,9 @@ class WindowFile(object):
 
     def _metadata(self, window, metadata):
         contents = self._contents
-        if not contents.count:  # the first part: what the provisional metadata says
+        if not contents.count:  # the first part: what the provisional metadata says (no summary: the final says it)
             contents = Contents()
+            contents.no_summary()
             contents.add(window.records)
         meta = contents.metadata(window.triggers, 0, self.format, metadata)
         meta.update(self._summed)
