@@ -46,6 +46,8 @@ for all its messages at once (numpy views at the fields' offsets), writing the s
 messages. Other types, and messages genpy reads differently (not UTF-8, a time's nanoseconds beyond a second),
 are decoded.
 
+``read_metadata`` decompresses only the start of a document, as far as its metadata goes (``cclog info``).
+
 Rows and columns (``flat_row``, a section's values read from the bytes) are ``json_rows``'s; the differences
 (``DELTA_GAIN``, ``differences``) and the rounding (``check_precision``) are ``json_deltas``'s; this module makes
 the document and its text, compresses it, and reads it back. Pure: no rospy, no rosbag.
