@@ -18,7 +18,9 @@
   bytes per message (record header and index entry), uncompressed.
 
 ``since`` / ``until``: float seconds (stamps) bounding what is counted; files are read only when their span
-overlaps. Unreadable files are skipped and listed in ``skipped`` ([path, why]). Pure apart from rosbag.
+overlaps. A window file written by this cc_log is not read past its metadata (``log_format.read_metadata``: its
+summary holds the per-topic figures); an older one is read whole. Unreadable files are skipped and listed in
+``skipped`` ([path, why]). Pure apart from rosbag.
 """
 import collections
 import io
@@ -146,12 +148,17 @@ def _context(directory, since, until, odom, skipped):
 
 
 def _windows(directory, since, until, skipped):
-    """Windows by trigger, per-topic figures (every message of a window), bytes, first/last stamps."""
+    """Windows by trigger, per-topic figures (every message of a window), bytes, first/last stamps. A window's
+    figures come from its metadata's summary (``log_format.summary_of``: its messages are not read) when it
+    holds one, else from its records."""
     by_trigger, seen = collections.Counter(), set()
     topics, stored, stamps = _Topics(), 0, []
     for path in log_format.window_files(str(directory)):
         try:
-            metadata, records = log_format.read_window(path)
+            metadata = log_format.read_metadata(path)
+            summary = log_format.summary_of(metadata)
+            if summary is None:  # a file of an older cc_log: its records
+                metadata, records = log_format.read_window(path)
         except ValueError as error:
             skipped.append([path, str(error)])
             continue
@@ -165,6 +172,12 @@ def _windows(directory, since, until, skipped):
             seen.add(key)
             for name in metadata.get('names') or ['window']:
                 by_trigger[name] += 1
+        if summary is not None:
+            for topic, (first_stamp, last_stamp) in summary.topic_spans.items():
+                topics.count[topic] += summary.counts[topic]
+                topics.bytes[topic] += summary.topic_bytes[topic]
+                topics.seconds[topic] += last_stamp - first_stamp
+            continue
         spans = collections.defaultdict(list)
         for record in records:
             spans[record.topic].append(record.stamp)

@@ -2,7 +2,9 @@
 
 ``write_window(window, directory, fmt, metadata)`` writes one LogWindow in a format of ``formats``
 (``json-xz``: pure, ``formats.json_xz``; ``bag-lz4``: a rosbag, ``formats.bag_lz4``, rosbag imported only
-when that format is written or read); ``read_window(path)`` reads any of them by its magic bytes. Files are
+when that format is written or read); ``read_window(path)`` reads any of them by its magic bytes, and
+``read_metadata(path)`` only its metadata, whose summary (``summary_of``: messages, serialized bytes and
+first/last stamps per topic, row JSON bytes) tells ``cclog info`` and ``stats`` what they report. Files are
 named by the UTC time of their first stamp and the first trigger reason, so names sort by time::
 
     cc_log_20150521T191138.027Z_classifier.json.xz
@@ -18,6 +20,8 @@ systems without hard links), and the directory is fsynced (``safe_files.AtomicFi
 import collections
 import heapq
 import datetime
+import io
+import math
 import os
 import re
 
@@ -66,7 +70,9 @@ def window_metadata(window, codec, extra=None, triggers=None):
     topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the
     first/last record), start_utc/end_utc, triggers ([{stamp, reason, score, name}]; name only for
     triggers that have one), reasons and names (distinct, in order: every trigger of the window), part (0, or
-    1, 2, ... for a split window), codec, cc_log_version. ``triggers``: those to say (default: the window's).
+    1, 2, ... for a split window), codec, cc_log_version, and the summary ``cclog info`` and ``stats`` read
+    instead of the messages (``SUMMARY_KEYS``, see ``Contents``). ``triggers``: those to say (default: the
+    window's).
     """
     contents = Contents()
     contents.add(window.records)
@@ -74,26 +80,106 @@ def window_metadata(window, codec, extra=None, triggers=None):
                              extra)
 
 
+#: Metadata keys of the summary of a window's records (``Contents``): what ``cclog info`` and ``cclog stats`` read
+#: instead of decoding every message. Present only when they describe the records in the file (``read_metadata``).
+SUMMARY_KEYS = ('topic_bytes', 'topic_spans', 'raw_json_bytes')
+#: The row-JSON bytes of a topic's records are measured on its first JSON_SAMPLE_FIRST records and then on one in
+#: JSON_SAMPLE_EVERY (each decoded if held as bytes); the rest are scaled by their serialized bytes.
+JSON_SAMPLE_FIRST = 32
+JSON_SAMPLE_EVERY = 64
+
+
 class Contents(object):
-    """What the metadata says of a window's records (types, counts, span), gathered a part at a time."""
+    """What the metadata says of a window's records, gathered a part at a time: types, counts, span, and the
+    summary (``SUMMARY_KEYS``): per topic the serialized bytes (``topic_bytes``: of each record's bytes, or of its
+    message serialized) and the first and last stamps (``topic_spans``: [min, max]), and ``raw_json_bytes``, the
+    row-per-message JSON bytes of the records (``msg_codec.row_json_bytes``) estimated per topic from a sample
+    (``JSON_SAMPLE_FIRST``, ``JSON_SAMPLE_EVERY``): exact for a topic of at most JSON_SAMPLE_FIRST records, else
+    the sampled records' JSON bytes per serialized byte times the topic's serialized bytes."""
 
     def __init__(self):
         self.types, self.counts = {}, {}
         self.count = 0
         self.start = self.end = None
+        self._sizes = {}  # topic -> [serialized bytes, min stamp, max stamp, sampled records, bytes, JSON bytes]
+        self._summary = True  # False once a record could not be measured (no summary is written)
+        self._json = None  # msg_codec.RowJsonCounter, made when first needed
 
     def add(self, records):
         """Take the next records of the window, in window order."""
-        types, counts = self.types, self.counts
+        types, counts, sizes = self.types, self.counts, self._sizes
         for record in records:
-            if record.topic not in types:
-                types[record.topic] = raw_message.type_of(record)
-            counts[record.topic] = counts.get(record.topic, 0) + 1
+            topic, stamp = record.topic, record.stamp
+            if topic not in types:
+                types[topic] = raw_message.type_of(record)
+                sizes[topic] = [0, stamp, stamp, 0, 0, 0]
+            seen = counts.get(topic, 0)
+            counts[topic] = seen + 1
+            entry = sizes[topic]
+            if stamp < entry[1]:
+                entry[1] = stamp
+            elif stamp > entry[2]:
+                entry[2] = stamp
+            sampled = seen < JSON_SAMPLE_FIRST or seen % JSON_SAMPLE_EVERY == 0
+            if sampled or record.raw is None:
+                self._measure(entry, record, sampled)
+            else:  # the live path: bytes, not sampled
+                entry[0] += len(record.raw)
         if records:
             self.count += len(records)
             if self.start is None:
                 self.start = records[0].stamp
             self.end = records[-1].stamp
+
+    def no_summary(self):
+        """Leave the summary out of the metadata (and do not measure the records for it)."""
+        self._summary = False
+
+    def _measure(self, entry, record, sampled):
+        """Add a record's serialized bytes (and, when ``sampled``, its row-JSON bytes) to its topic's entry."""
+        if not self._summary:
+            return
+        msg = record.msg
+        try:
+            size = len(record.raw) if record.raw is not None else _serialized_length(msg)
+        except Exception:  # a message genpy cannot serialize: the format fails on it; no summary
+            self._summary = False
+            return
+        entry[0] += size
+        if not sampled:
+            return
+        try:
+            if msg is None:
+                msg = raw_message.decoded(record).msg
+        except raw_message.DECODE_ERRORS:
+            return  # not measured: the format leaves such a record out, and its file keeps no summary
+        if self._json is None:
+            self._json = msg_codec.RowJsonCounter()
+        try:
+            json_bytes = self._json.count(msg)
+        except Exception:  # a value row JSON cannot hold: no summary
+            self._summary = False
+            return
+        entry[3] += 1
+        entry[4] += size
+        entry[5] += json_bytes
+
+    def summary(self):
+        """The summary's metadata entries (``SUMMARY_KEYS``; {} when a record could not be measured)."""
+        spans = [stamp for entry in self._sizes.values() for stamp in entry[1:3]]
+        if not self._summary or not all(math.isfinite(stamp) for stamp in spans):
+            return {}
+        raw = 0.0
+        for topic, (size, _, _, sampled, sampled_bytes, json_bytes) in self._sizes.items():
+            if sampled == self.counts[topic]:
+                raw += json_bytes
+            elif sampled_bytes:
+                raw += json_bytes * size / float(sampled_bytes)
+            elif sampled:
+                raw += json_bytes * self.counts[topic] / float(sampled)
+        return {'topic_bytes': {topic: entry[0] for topic, entry in self._sizes.items()},
+                'topic_spans': {topic: [float(entry[1]), float(entry[2])] for topic, entry in self._sizes.items()},
+                'raw_json_bytes': int(round(raw))}
 
     def metadata(self, triggers, part, codec, extra=None):
         """``window_metadata`` of the records taken."""
@@ -119,8 +205,15 @@ class Contents(object):
             'codec': codec,
             'cc_log_version': __version__,
         }
+        meta.update(self.summary())
         meta.update(extra or {})
         return meta
+
+
+def _serialized_length(msg):
+    buffer = io.BytesIO()
+    msg.serialize(buffer)
+    return buffer.tell()
 
 
 def trigger_name(trigger):
@@ -131,6 +224,10 @@ def trigger_name(trigger):
 
 def _is_number(value):
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_count(value):
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
 def _is_score(value):
@@ -149,6 +246,11 @@ _METADATA_TYPES = (  # key, test, what it must be (keys a reader uses; each may 
     ('types', lambda v: isinstance(v, dict) and all(isinstance(t, str) for t in v.values()),
      'an object of strings'),
     ('counts', lambda v: isinstance(v, dict) and all(_is_number(n) for n in v.values()), 'an object of counts'),
+    ('topic_bytes', lambda v: isinstance(v, dict) and all(_is_count(n) for n in v.values()), 'an object of counts'),
+    ('topic_spans', lambda v: isinstance(v, dict) and all(
+        isinstance(span, list) and len(span) == 2 and all(_is_number(t) for t in span) for span in v.values()),
+     'an object of [first, last] stamps'),
+    ('raw_json_bytes', lambda v: _is_count(v), 'a count'),
     ('triggers', lambda v: isinstance(v, list) and all(
         isinstance(t, dict) and _is_number(t.get('stamp')) and isinstance(t.get('reason', ''), str)
         and _is_score(t.get('score')) and isinstance(t.get('name', ''), str) for t in v),
@@ -315,6 +417,8 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
         meta['undecodable'] = undecodable
         meta['undecodable_topics'] = {topic: count for topic, count in topics.items() if count}
         meta = payload_check.with_dropped(meta, meta['undecodable_topics'])
+        for key in SUMMARY_KEYS:  # of the window's records, not of those in the file
+            meta.pop(key, None)
         if left_out is not None:
             left_out.update(meta['undecodable_topics'])
     base = base or base_name(window)
@@ -417,8 +521,9 @@ class WindowFile(object):
 
     def _metadata(self, window, metadata):
         contents = self._contents
-        if not contents.count:  # the first part: what the provisional metadata says
+        if not contents.count:  # the first part: what the provisional metadata says (no summary: the final says it)
             contents = Contents()
+            contents.no_summary()
             contents.add(window.records)
         meta = contents.metadata(window.triggers, 0, self.format, metadata)
         meta.update(self._summed)
@@ -446,6 +551,64 @@ def read_window(path):
     is not a regular file (a FIFO), metadata of the wrong types (``check_metadata``) or an unsafe message
     definition (``safe_input.check_definition``).
     """
+    return _read(path, 'read')
+
+
+def read_metadata(path):
+    """The metadata of a window file without its messages, as ``read_window`` gives it, by the format's
+    ``read_metadata`` (bag-lz4: the metadata message and the index; json-xz: the start of the document).
+
+    Its summary (``SUMMARY_KEYS``; ``summary_of``) is kept only when it describes the records in the file: the
+    file's messages per topic (bag-lz4: from its index) are the metadata's ``counts``, and no record was left out
+    at writing (``undecodable``). The messages are not read: what ``read_window`` finds wrong in them (a damaged
+    chunk, records that do not match their checksum, a file cut off after its metadata) is not seen. Raises
+    ValueError as ``read_window`` for what it reads.
+    """
+    metadata, counts = _read(path, 'read_metadata')
+    if counts is None:
+        counts = metadata.get('counts') if not metadata.get('undecodable') else None
+    if counts != metadata.get('counts'):
+        for key in SUMMARY_KEYS:
+            metadata.pop(key, None)
+    return metadata
+
+
+WindowSummary = collections.namedtuple('WindowSummary', 'counts types topic_bytes topic_spans raw_json_bytes')
+WindowSummary.__doc__ = """What a window file's metadata says of its records (``summary_of``): per topic, in order of
+first appearance, ``counts`` (messages), ``types``, ``topic_bytes`` (serialized bytes) and ``topic_spans`` ((first,
+last) stamp), and ``raw_json_bytes`` (their row-per-message JSON, estimated: ``Contents``)."""
+
+
+def summary_of(metadata):
+    """The ``WindowSummary`` of a window's metadata (``read_metadata``'s), or None when it does not hold one (a
+    file of a cc_log before it, one with records left out, metadata whose topics do not agree)."""
+    if not all(key in metadata for key in SUMMARY_KEYS + ('topics', 'types', 'counts')):
+        return None
+    topics = metadata['topics']
+    if not all(set(topics) == set(metadata[key]) for key in ('types', 'counts', 'topic_bytes', 'topic_spans')):
+        return None
+    if len(set(topics)) != len(topics) or not all(_is_count(metadata['counts'][topic]) for topic in topics):
+        return None
+    return WindowSummary(*(collections.OrderedDict((topic, metadata[key][topic]) for topic in topics)
+                           for key in ('counts', 'types', 'topic_bytes')),
+                         collections.OrderedDict((topic, tuple(metadata['topic_spans'][topic])) for topic in topics),
+                         metadata['raw_json_bytes'])
+
+
+def merged_summary(summaries):
+    """One ``WindowSummary`` of the files of one window (its own and its routes')."""
+    if len(summaries) == 1:
+        return summaries[0]
+    fields = [collections.OrderedDict() for _ in range(4)]
+    for summary in summaries:
+        for merged, part in zip(fields, summary[:4]):
+            merged.update(part)
+    return WindowSummary(*fields, raw_json_bytes=sum(summary.raw_json_bytes for summary in summaries))
+
+
+def _read(path, reader):
+    """What the ``reader`` function ('read' or 'read_metadata') of the file's format gives, by its magic bytes,
+    its metadata checked; ValueError as ``read_window``."""
     try:
         stream = safe_input.open_input(path)
     except OSError as error:
@@ -457,13 +620,13 @@ def read_window(path):
         except OSError as error:
             raise ValueError('%s: cannot read (%s)' % (path, error.strerror or error))
         module = formats.by_magic(head)
-        metadata, records = module.read(path, stream) if module else (None, None)
-    if records is not None:
+        found = getattr(module, reader)(path, stream) if module else None
+    if found is not None:
         try:
-            check_metadata(metadata)
+            check_metadata(found[0])
         except ValueError as error:
             raise ValueError('%s: %s' % (path, error))
-        return metadata, records
+        return found
     fmt = _extension(path)
     if not head:
         raise ValueError('%s: empty file' % path)

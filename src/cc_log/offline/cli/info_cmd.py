@@ -2,8 +2,9 @@
 import collections
 import os
 
+from cc_log.offline import progress
 from cc_log.offline.cli.common import (
-    EXIT_OK, command_help, human_bytes, output_flags, print_json, read_windows, say, size_ratio, stamp_text)
+    EXIT_OK, command_help, human_bytes, output_flags, print_json, say, size_ratio, stamp_text, window_paths)
 
 
 def add_parser(subparsers):
@@ -13,21 +14,24 @@ def add_parser(subparsers):
         """
         Describe window files: time span, messages per topic, size on disk and as row-per-message JSON,
         codec, the trigger(s) that opened the window with their scores, and the model threshold. PATH is a
-        window file or a directory of them (read in time order).
+        window file or a directory of them (read in time order). The figures of a file written by this cc_log
+        come from its metadata, without reading its messages (its row JSON size is then an estimate from a
+        sample of its messages); --full reads and counts every message (older files always are).
         """,
         """
           cclog info logs
           cclog info logs/cc_log_20150521T191138.027Z_classifier.json.xz --json
         """))
     p.add_argument('paths', nargs='+', metavar='PATH', help='window file or directory')
+    p.add_argument('--full', action='store_true',
+                   help='read every message: exact counts, sizes and row JSON bytes, and the files checked whole')
     output_flags(p)
     return p
 
 
 def run(args):
     """Windows, time spans, message counts, sizes, codec, trigger and scores of window files."""
-    windows = [_window_summary(path, metadata, records)
-               for path, metadata, records in read_windows(args, args.paths, 'info')]
+    windows = list(_summaries(args))
     total = collections.OrderedDict([
         ('windows', len(windows)),
         ('messages', sum(w['messages'] for w in windows)),
@@ -79,8 +83,29 @@ def _counts_of(value):
                 if isinstance(count, int) and not isinstance(count, bool) and count >= 0)
 
 
+def _summaries(args):
+    """What ``info`` reports about each window of ``args.paths`` (a window with routes: its files as one): from
+    its metadata's summaries when they hold one (``log_format.summary_of``) and --full is not given, else from its
+    records."""
+    from cc_log.storage import log_format
+    sets = log_format.window_sets(window_paths(args.paths))
+    with progress.bar(args, 'info', len(sets)) as meter:
+        for files in sets:
+            summaries = []
+            if not args.full:
+                metadatas = [log_format.read_metadata(path) for path in files]
+                summaries = [log_format.summary_of(metadata) for metadata in metadatas]
+            if not summaries or None in summaries:
+                metadata, records = log_format.read_window_set(files)
+                yield _window_summary(files[0], metadata, records)
+            else:
+                metadata = dict(metadatas[0], files=files) if len(files) > 1 else metadatas[0]
+                yield _metadata_summary(files[0], metadata, log_format.merged_summary(summaries))
+            meter.update()
+
+
 def _window_summary(path, metadata, records):
-    """What ``info`` reports about one window file."""
+    """What ``info`` reports about one window file, counted from its records."""
     from cc_log.core import msg_codec
     from cc_log.storage.formats import bag_lz4
     counts = collections.OrderedDict()
@@ -93,8 +118,21 @@ def _window_summary(path, metadata, records):
         topic_bytes[record.topic] = topic_bytes.get(record.topic, 0) + len(bag_lz4.bag_message(record)[-1])
         raw += msg_codec.row_json_bytes(record.msg)
     stamps = [record.stamp for record in records]
-    start = min(stamps) if stamps else None
-    end = max(stamps) if stamps else None
+    return _described(path, metadata, counts, types, topic_bytes, raw,
+                      (min(stamps), max(stamps)) if stamps else (None, None))
+
+
+def _metadata_summary(path, metadata, summary):
+    """What ``info`` reports about one window file, from its metadata's summary (a ``log_format.WindowSummary``)."""
+    spans = summary.topic_spans.values()
+    return _described(path, metadata, summary.counts, summary.types, summary.topic_bytes, summary.raw_json_bytes,
+                      (min(span[0] for span in spans), max(span[1] for span in spans)) if spans else (None, None))
+
+
+def _described(path, metadata, counts, types, topic_bytes, raw, span):
+    """``info``'s entry of a window file: its records' ``counts``, ``types`` and ``topic_bytes`` per topic, their
+    row JSON bytes ``raw`` and (first, last) stamp ``span``, with what its ``metadata`` says."""
+    start, end = span
     size = sum(os.path.getsize(name) for name in metadata.get('files', [path]))  # every file of the window
     triggers = []
     for trigger in metadata.get('triggers') or []:
@@ -109,9 +147,9 @@ def _window_summary(path, metadata, records):
         ('codec', metadata.get('codec')),
         ('start', start),
         ('end', end),
-        ('duration', (end - start) if stamps else None),
+        ('duration', (end - start) if start is not None else None),
         ('start_utc', metadata.get('start_utc')),
-        ('messages', len(records)),
+        ('messages', sum(counts.values())),
         ('topics', counts),
         ('types', types),
         ('topic_bytes', topic_bytes),

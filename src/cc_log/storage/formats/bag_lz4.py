@@ -24,7 +24,7 @@ file; the refused are counted per topic in the metadata's ``dropped`` (with mess
 
 The file is the bag rosbag would write for the same messages, byte for byte, written without rosbag
 (``bag.bag_writer``). Edge module: rosbag is imported inside the functions that read or append with it
-(``read``, ``write_record``), so importing cc_log.bag_lz4 costs nothing.
+(``read``, ``read_metadata``, ``write_record``), so importing cc_log.bag_lz4 costs nothing.
 """
 import collections
 import io
@@ -342,9 +342,7 @@ def read(path, stream=None):
                 for topic, raw, time, header in bag.read_messages(raw=True, return_connection_header=True):
                     # raw: (type, serialized bytes, md5sum, position, class)
                     if topic == METADATA_TOPIC:
-                        found = _metadata(_deserialized(raw[4], raw[1]).data)
-                        if metadata is None or (isinstance(found, dict) and 'bag' in found):
-                            metadata = found  # a stream's final metadata after its provisional one
+                        metadata = _chosen(metadata, _metadata(_deserialized(raw[4], raw[1]).data))
                         continue
                     if topic not in headers:
                         headers[topic], classes[topic] = header, raw[4]
@@ -370,6 +368,61 @@ def read(path, stream=None):
                                  record.raw, connections[record.topic]) for record in records]
     except Exception as error:  # genpy raises struct.error, DeserializationError, UnicodeDecodeError, ...
         raise ValueError('%s: corrupt bag (%s: %s)' % (path, type(error).__name__, error))
+
+
+def read_metadata(path, stream=None):
+    """``(metadata, counts)`` of a bag-lz4 window file without reading its messages: the metadata message
+    (``read``'s metadata, its ``"bag"`` layout taken out) from the chunk(s) holding it, found by the bag's
+    index, and ``counts`` ({topic: messages}) from the index's chunk infos. Only the chunks holding a metadata
+    message are decompressed (the first, or for a file written a part at a time the last, which holds nothing
+    else); the other messages are not read, so damage to them is not seen (``read`` checks them against the
+    layout's crc32). A bag that cannot be read so (damaged, unindexed, no metadata there, an unsafe message
+    definition) is read by ``read``: the same ValueError('<path>: <what is wrong>')."""
+    if stream is not None:
+        stream.close()  # the bag is opened by its path (bag_open checks it again)
+    try:
+        return _indexed_metadata(path)
+    except ValueError:
+        metadata, records = read(path)
+        return metadata, dict(collections.Counter(record.topic for record in records))
+
+
+def _indexed_metadata(path):
+    """``read_metadata`` from the index and the chunks holding the metadata; ValueError when it cannot be."""
+    from cc_log.storage.bag import bag_open, bag_reader
+    bag = bag_open.open_bag(path, skip_index=True)
+    try:
+        topics = {connection.id: connection.topic for connection in bag._connections.values()}
+        counts = collections.Counter()
+        for info in bag._chunks:
+            for connection, count in info.connection_counts.items():
+                counts[topics.get(connection)] += count
+    finally:
+        bag.close()
+    metadata = None
+    if counts.pop(METADATA_TOPIC, 0):
+        for run in bag_reader.read_runs(path, [METADATA_TOPIC]):
+            for record in run:
+                metadata = _chosen(metadata, _metadata(_string_data(record.raw)))
+    if not isinstance(metadata, dict) or not isinstance(metadata.get('bag'), dict):
+        raise ValueError('no metadata')
+    del metadata['bag']
+    return metadata, dict(counts)
+
+
+def _chosen(metadata, found):
+    """The metadata of a window after a metadata message ``found``: a stream's final metadata (with its layout)
+    after its provisional one, else the first."""
+    if metadata is None or (isinstance(found, dict) and 'bag' in found):
+        return found
+    return metadata
+
+
+def _string_data(data):
+    """The text of a serialized std_msgs/String (its length, then UTF-8); _BadMetadata when it is not one."""
+    if len(data) < 4 or struct.unpack_from('<I', data)[0] != len(data) - 4:
+        raise _BadMetadata('not a std_msgs/String')
+    return bytes(data[4:])
 
 
 def _deserialized(cls, data):

@@ -46,10 +46,13 @@ for all its messages at once (numpy views at the fields' offsets), writing the s
 messages. Other types, and messages genpy reads differently (not UTF-8, a time's nanoseconds beyond a second),
 are decoded.
 
+``read_metadata`` decompresses only the start of a document, as far as its metadata goes (``cclog info``).
+
 Rows and columns (``flat_row``, a section's values read from the bytes) are ``json_rows``'s; the differences
 (``DELTA_GAIN``, ``differences``) and the rounding (``check_precision``) are ``json_deltas``'s; this module makes
 the document and its text, compresses it, and reads it back. Pure: no rospy, no rosbag.
 """
+import codecs
 import decimal
 import json
 import lzma
@@ -304,6 +307,79 @@ def read(path, stream=None):
             raise ValueError('%s: larger than %d bytes: not a cc_log window' % (path, MAX_DOCUMENT_BYTES))
         stream.seek(0)
         return decode(stream.read(), path)
+
+
+#: The start of every document cc_log writes (``dumps``): its metadata comes first.
+METADATA_START = '{"metadata":'
+#: Decompressed bytes ``read_metadata`` takes at a time; it looks for the end of the metadata after the first
+#: of them, then each time it holds twice as many as when it last looked.
+METADATA_STEP = 16 << 10
+
+
+def read_metadata(path, stream=None):
+    """``(metadata, None)`` of a ``.json.xz`` window file, decompressing only the start of its document, as far
+    as the metadata goes (the document starts with it: ``{"metadata": {...}, "topics": ...``); a document that
+    does not start so, whose metadata goes on beyond ONE_PASS_BYTES, or whose start is not as ``read`` reads it
+    (corrupt, cut off before the end of the metadata, not JSON, nested too deep) is read whole, by ``read``: the
+    same ValueError('<path>: ...'), and a bomb refused in the same bounded memory. What follows the metadata is
+    not read (damage there, or a file cut off after the metadata, is not seen: the xz check of the whole stream is
+    ``read``'s). No message counts (the metadata's ``counts`` are the window's)."""
+    with (stream or safe_input.open_input(path)) as stream:
+        if os.fstat(stream.fileno()).st_size > MAX_DOCUMENT_BYTES:
+            raise ValueError('%s: larger than %d bytes: not a cc_log window' % (path, MAX_DOCUMENT_BYTES))
+        stream.seek(0)
+        if stream.read(len(MAGIC)) != MAGIC:
+            raise ValueError('%s: not an xz file' % path)
+        stream.seek(0)
+        metadata = _leading_metadata(stream)
+        if metadata is None:  # not a document as cc_log writes it, or not whole: read whole (read's errors)
+            stream.seek(0)
+            return decode(stream.read(), path)[0], None
+    metadata = _floats(metadata)
+    if metadata.get('layout') not in LAYOUTS:
+        raise ValueError('%s: json-xz layout %r is not supported (this cc_log reads layouts %s)'
+                         % (path, metadata.get('layout'), ', '.join(str(number) for number in LAYOUTS)))
+    return metadata, None
+
+
+def _leading_metadata(stream):
+    """The metadata object at the start of the xz-compressed document of ``stream`` (parsed as ``decode`` parses
+    it), decompressing as little as needed; None when the document does not start with METADATA_START, its
+    metadata does not end within ONE_PASS_BYTES, or what is read of it is not what ``decode`` reads (corrupt,
+    cut off, not UTF-8 or JSON, nested too deep: ``decode`` says what)."""
+    decompressor = lzma.LZMADecompressor(format=lzma.FORMAT_XZ, memlimit=DECODER_MEMORY)
+    text = codecs.getincrementaldecoder('utf-8')()
+    parts, size, look_at = [], 0, METADATA_STEP
+    parser = json.JSONDecoder(parse_float=_parse_decimal)
+    while True:
+        block = stream.read(1 << 16) if decompressor.needs_input else b''
+        ended = decompressor.eof or (decompressor.needs_input and not block)
+        if not ended:
+            try:
+                part = decompressor.decompress(block, max_length=METADATA_STEP)
+                parts.append(text.decode(part))
+            except (lzma.LZMAError, UnicodeDecodeError):
+                return None
+            size += len(part)
+            if size > ONE_PASS_BYTES:
+                return None  # metadata that large (or a bomb): read whole, in the bounded memory of ``decompress``
+            if size < look_at:
+                continue
+        look_at = 2 * size
+        document = ''.join(parts)
+        parts = [document]
+        if not document.startswith(METADATA_START[:len(document)]):
+            return None
+        try:
+            safe_input.check_json_depth(document)
+            metadata = parser.raw_decode(document, len(METADATA_START))[0]
+        except json.JSONDecodeError:  # not whole yet, or not JSON
+            if ended:
+                return None
+            continue
+        except (ValueError, RecursionError):
+            return None
+        return metadata if isinstance(metadata, dict) else None
 
 
 def _parse_decimal(text):
