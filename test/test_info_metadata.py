@@ -1,5 +1,5 @@
 """``cclog info`` and ``cclog stats`` read a window's metadata, not its messages: the writer records a summary of the
-records in every window's metadata (``log_format.Contents``), ``log_format.read_metadata`` reads it without the
+records in every window's metadata (``window_info.Contents``), ``log_format.read_metadata`` reads it without the
 messages, and both commands report from it what they report from the records (``--full``: the recount), falling
 back to the records for files without one."""
 import collections
@@ -14,7 +14,7 @@ from cc_log.core import msg_codec, raw_message
 from cc_log.core.raw_message import class_header
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.offline import cli, stats
-from cc_log.storage import log_format
+from cc_log.storage import log_format, window_info
 from cc_log.storage.formats import bag_lz4, json_xz
 
 rosbag = pytest.importorskip('rosbag')
@@ -148,7 +148,7 @@ def test_a_window_written_a_part_at_a_time_has_the_summary_of_all_its_parts(tmp_
     stream.append(window(5, part=1), {'dropped': {IMU: 1}})
     stream.append(window(5, T0 + 1, part=2), None)
     path, _ = stream.finish(window(5, T0 + 2, part=3), None)
-    summary = log_format.summary_of(log_format.read_metadata(path))
+    summary = window_info.summary_of(log_format.read_metadata(path))
     assert summary.counts == {ODOM: 15, IMU: 15}
     assert summary.topic_spans[ODOM] == (T0, pytest.approx(T0 + 2.4))
     assert info(capsys, path) == info(capsys, path, '--full')
@@ -159,14 +159,14 @@ def test_a_window_written_a_part_at_a_time_has_the_summary_of_all_its_parts(tmp_
 @pytest.mark.parametrize('fmt', FORMATS)
 def test_a_file_of_an_older_cc_log_is_read_whole(tmp_path, monkeypatch, capsys, fmt):
     recs = window(4).records
-    metadata = log_format.window_metadata(window(4), fmt)
-    for key in log_format.SUMMARY_KEYS:
+    metadata = window_info.window_metadata(window(4), fmt)
+    for key in window_info.SUMMARY_KEYS:
         del metadata[key]
     module = bag_lz4 if fmt == 'bag-lz4' else json_xz
     path = str(tmp_path / ('cc_log_old' + module.EXTENSION))
     with open(path, 'wb') as stream:
         module.encoder(recs if fmt == 'bag-lz4' else raw_message.decoded_records(recs)[0], metadata)(stream)
-    assert log_format.summary_of(log_format.read_metadata(path)) is None
+    assert window_info.summary_of(log_format.read_metadata(path)) is None
     decodes = Decodes(monkeypatch)
     assert info(capsys, path) == info(capsys, path, '--full')
     assert decodes.calls['row_json_bytes'] == 2 * 8  # both read every message
@@ -178,7 +178,7 @@ def test_records_refused_by_bag_lz4_leave_the_file_without_a_summary(tmp_path, c
     path, _ = log_format.write_window(LogWindow(recs, []), str(tmp_path), 'bag-lz4')
     metadata = log_format.read_metadata(path)
     assert metadata['counts'] == {ODOM: 5, IMU: 5} and metadata['dropped'] == {ODOM: 1}
-    assert log_format.summary_of(metadata) is None and 'topic_bytes' not in metadata
+    assert window_info.summary_of(metadata) is None and 'topic_bytes' not in metadata
     fast = info(capsys, path)
     assert fast == info(capsys, path, '--full') and fast['windows'][0]['topics'] == {ODOM: 4, IMU: 5}
 
@@ -188,8 +188,8 @@ def test_records_json_xz_cannot_decode_leave_the_file_without_a_summary(tmp_path
     recs[3] = recs[3]._replace(raw=recs[3].raw[:10])  # cut: cannot be decoded
     path, _ = log_format.write_window(LogWindow(recs, []), str(tmp_path), 'json-xz')
     metadata = log_format.read_metadata(path)
-    assert metadata['undecodable'] == 1 and log_format.summary_of(metadata) is None
-    assert not set(log_format.SUMMARY_KEYS) & set(metadata)
+    assert metadata['undecodable'] == 1 and window_info.summary_of(metadata) is None
+    assert not set(window_info.SUMMARY_KEYS) & set(metadata)
 
 
 # -- read_metadata: what read_window gives, and its errors ------------------------------------------------------
@@ -199,7 +199,7 @@ def test_read_metadata_is_read_windows_metadata(tmp_path, fmt):
     path, _ = log_format.write_window(window(40), str(tmp_path), fmt, metadata={'pre': '2 s', 'model': 'm.pkl'})
     metadata, recs = log_format.read_window(path)
     assert log_format.read_metadata(path) == metadata
-    summary = log_format.summary_of(metadata)
+    summary = window_info.summary_of(metadata)
     assert list(summary.counts) == [ODOM, IMU] and summary.types == {ODOM: 'nav_msgs/Odometry', IMU: 'sensor_msgs/Imu'}
     for topic in (ODOM, IMU):
         mine = [record for record in recs if record.topic == topic]
@@ -262,7 +262,7 @@ def test_read_metadata_refuses_bad_files_in_one_line(tmp_path, fmt):
 
 
 def test_bad_metadata_types_are_refused_as_read_window_refuses_them(tmp_path):
-    metadata = log_format.window_metadata(window(2), 'bag-lz4')
+    metadata = window_info.window_metadata(window(2), 'bag-lz4')
     metadata['topic_bytes'] = {ODOM: 'many'}
     path = str(tmp_path / 'cc_log_bad.bag')
     bag_lz4.write(path, window(2).records, metadata)
@@ -279,7 +279,7 @@ def test_stats_from_metadata_is_stats_from_the_records(tmp_path, monkeypatch):
     decodes = Decodes(monkeypatch)
     fast = stats.run_stats(str(tmp_path))
     assert decodes.calls == {}
-    monkeypatch.setattr(log_format, 'summary_of', lambda metadata: None)  # as for files of an older cc_log
+    monkeypatch.setattr(window_info, 'summary_of', lambda metadata: None)  # as for files of an older cc_log
     full = stats.run_stats(str(tmp_path))
     assert decodes.calls['_deserialized'] > 0 and fast == full
     assert fast['windows'] == 6 and fast['topics'][ODOM]['rate_hz'] == pytest.approx(10.0, rel=0.05)

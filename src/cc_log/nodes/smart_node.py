@@ -60,7 +60,7 @@ from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
 from cc_log.core import drift
 from cc_log.nodes import intake
-from cc_log.storage import log_format
+from cc_log.storage import window_info
 from cc_log.core import smart, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
@@ -171,7 +171,7 @@ class SmartNode(object):
             rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
         else:
             rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, event.reason, event.score)
-            self._last_trigger = '%s: %s at %s' % (event.trigger, event.reason, log_format.utc_text(event.stamp))
+            self._last_trigger = '%s: %s at %s' % (event.trigger, event.reason, window_info.utc_text(event.stamp))
         try:
             self.events.publish(msg)
         except rospy.ROSException:  # shutting down

@@ -28,7 +28,7 @@ import math
 import os
 
 from cc_log.storage.bag import bagio
-from cc_log.storage import context_track, log_format
+from cc_log.storage import context_track, log_format, window_info
 
 __all__ = ['run_stats', 'odometry_summary', 'parse_time', 'format_text', 'MOVING_SPEED', 'MAX_GAP', 'ROSBAG_OVERHEAD']
 
@@ -149,14 +149,14 @@ def _context(directory, since, until, odom, skipped):
 
 def _windows(directory, since, until, skipped):
     """Windows by trigger, per-topic figures (every message of a window), bytes, first/last stamps. A window's
-    figures come from its metadata's summary (``log_format.summary_of``: its messages are not read) when it
+    figures come from its metadata's summary (``window_info.summary_of``: its messages are not read) when it
     holds one, else from its records."""
     by_trigger, seen = collections.Counter(), set()
     topics, stored, stamps = _Topics(), 0, []
     for path in log_format.window_files(str(directory)):
         try:
             metadata = log_format.read_metadata(path)
-            summary = log_format.summary_of(metadata)
+            summary = window_info.summary_of(metadata)
             if summary is None:  # a file of an older cc_log: its records
                 metadata, records = log_format.read_window(path)
         except ValueError as error:
@@ -222,7 +222,7 @@ def run_stats(directory, since=None, until=None, odom=None):
     stored = context_bytes + window_bytes
     result = collections.OrderedDict([
         ('directory', directory), ('start', start), ('end', end),
-        ('start_utc', log_format.utc_text(start)), ('end_utc', log_format.utc_text(end)),
+        ('start_utc', window_info.utc_text(start)), ('end_utc', window_info.utc_text(end)),
         ('hours', hours), ('odometry_topic', odom), ('odometry_samples', motion['samples']),
         ('distance_m', motion['distance_m']), ('moving_s', motion['moving_s']), ('stopped_s', motion['stopped_s']),
         ('gap_s', motion['gap_s']), ('windows', window_count), ('windows_by_trigger', dict(by_trigger)),

@@ -85,22 +85,22 @@ def _counts_of(value):
 
 def _summaries(args):
     """What ``info`` reports about each window of ``args.paths`` (a window with routes: its files as one): from
-    its metadata's summaries when they hold one (``log_format.summary_of``) and --full is not given, else from its
+    its metadata's summaries when they hold one (``window_info.summary_of``) and --full is not given, else from its
     records."""
-    from cc_log.storage import log_format
+    from cc_log.storage import log_format, window_info
     sets = log_format.window_sets(window_paths(args.paths))
     with progress.bar(args, 'info', len(sets)) as meter:
         for files in sets:
             summaries = []
             if not args.full:
                 metadatas = [log_format.read_metadata(path) for path in files]
-                summaries = [log_format.summary_of(metadata) for metadata in metadatas]
+                summaries = [window_info.summary_of(metadata) for metadata in metadatas]
             if not summaries or None in summaries:
                 metadata, records = log_format.read_window_set(files)
                 yield _window_summary(files[0], metadata, records)
             else:
                 metadata = dict(metadatas[0], files=files) if len(files) > 1 else metadatas[0]
-                yield _metadata_summary(files[0], metadata, log_format.merged_summary(summaries))
+                yield _metadata_summary(files[0], metadata, window_info.merged_summary(summaries))
             meter.update()
 
 
@@ -123,7 +123,7 @@ def _window_summary(path, metadata, records):
 
 
 def _metadata_summary(path, metadata, summary):
-    """What ``info`` reports about one window file, from its metadata's summary (a ``log_format.WindowSummary``)."""
+    """What ``info`` reports about one window file, from its metadata's summary (a ``window_info.WindowSummary``)."""
     spans = summary.topic_spans.values()
     return _described(path, metadata, summary.counts, summary.types, summary.topic_bytes, summary.raw_json_bytes,
                       (min(span[0] for span in spans), max(span[1] for span in spans)) if spans else (None, None))
