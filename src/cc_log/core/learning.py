@@ -13,8 +13,9 @@ chosen so that every anomalous vector is flagged (recall 100%) with the fewest h
 
 A day of "nominal" driving may hold anomalies. Before all that, ``train`` scores every nominal vector with a
 model fitted on the other blocks of the day (TRIM_FOLDS contiguous blocks), drops the ``trim`` share
-(DEFAULT_TRIM, 1 %; 0: none) that scores lowest (the most outlying) and goes on with the rest; ``info['trimmed']`` counts them and ``info['trimmed_spans']`` says where they were (stamps when given).
-The model records the range its kept vectors cover (``coverage``, read by ``drift.DriftMonitor``).
+(DEFAULT_TRIM, 1 %; 0: none) that scores lowest (the most outlying) and goes on with the rest;
+``info['trimmed']`` counts them and ``info['trimmed_spans']`` says where they were (stamps when given). The
+model records the range its kept vectors cover (``coverage``, read by ``drift.DriftMonitor``).
 
 scikit-learn is imported inside ``train`` only: scoring never needs it.
 """
@@ -273,7 +274,7 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     if method == 'auto' and len(X_train) > max_exact:
         X_train = X_train[np.linspace(0, len(X_train) - 1, max_exact).astype(int)]
         subsampled = True
-    info = {'method': fit_method, 'requested_method': method, 'vectors_nominal': len(X),
+    info = {'method': fit_method, 'requested_method': method, 'vectors_nominal': len(kept) + trimmed['trimmed'],
             'vectors_train': len(X_train), 'vectors_held_out': len(X_held), 'subsampled': subsampled,
             'vectors_anomalous': 0 if A is None else len(A), 'features': dimension,
             'config': config.to_dict()}
