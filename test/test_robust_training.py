@@ -3,6 +3,7 @@ the drift monitor's warning when driving leaves it, and ``cclog tune`` saying wh
 import copy
 import json
 import math
+import os
 from types import SimpleNamespace as NS
 
 import numpy as np
@@ -17,7 +18,7 @@ from cc_log.offline import tuning
 from cc_log.offline.cli.tune_cmd import tune_lines
 from cc_log.triggers import ClassifierTrigger
 
-from test_cli import ok
+from test_cli import ok, ok_json
 
 CONFIG = FeatureConfig('motion', '2s')
 D = vector_length(CONFIG)
@@ -73,11 +74,58 @@ def test_cclog_learn_reports_what_it_trimmed(tmp_path):
     [line] = [line for line in out.splitlines() if line.startswith('Trimmed')]
     assert line == 'Trimmed          10 of 400 nominal vectors, the most outlying (trim 2.5%): 1 span(s): ' \
         '1012.0-1012.9 s (10)', line
-    assert 'Trimmed          4 of 400 nominal vectors' in ok('learn', '--train', tmp_path / 'train', '--model',
-                                                            tmp_path / 'default.json')
+    out = ok('learn', '--train', tmp_path / 'train', '--model', tmp_path / 'default.json')
+    assert 'Trimmed          4 of 400 nominal vectors' in out
     out = ok('learn', '--train', tmp_path / 'train', '--model', tmp_path / 'all.json', '--trim', '0')
     assert 'Trimmed          none (trim 0' in out
     assert json.loads((tmp_path / 'all.json').read_text())['info']['trimmed'] == 0
+
+
+# -- 2. rule-flagged spans are not nominal ----------------------------------------------------------------------
+
+RULES = """
+driving_topic: /odom
+windows: {pre: 2s, post: 2s}
+triggers:
+  - name: motion
+    kind: classifier
+    model: %s
+    feature_set: motion
+    window: 1s
+    topics: [/odom]
+  - name: events
+    kind: rule
+    topic: /sim/anomaly
+    arrival: true
+    pre: 1s
+    post: 2s
+"""
+
+
+def test_cclog_collect_with_rules_keeps_no_vector_of_a_span_a_rule_fired_on(tmp_path):
+    bag = str(tmp_path / 'day.bag')
+    sim.simulate_to_bag(bag, sim.SimConfig(rate=20.0, seed=3, minutes=1.5, anomalies=2,
+                                           anomaly_types='collision,sudden_acceleration'))
+    truth = sim.load_truth(sim.truth_path(bag))
+    plain = tmp_path / 'plain.yaml'
+    plain.write_text(RULES.split('  - name: events')[0] % (tmp_path / 'none.json'))
+    rules = tmp_path / 'rules.yaml'
+    rules.write_text(RULES % (tmp_path / 'none.json'))
+    every = ok_json('collect', bag, '--config', plain, '--out', tmp_path / 'every', '--stride', '2')
+    assert every['flagged'] is None
+    kept = ok_json('collect', bag, '--config', rules, '--out', tmp_path / 'kept', '--stride', '2')
+    flagged = kept['flagged']
+    # the rule fires at each event's start message (and at an end message past its 5 s hold-off): 1 s before, 2 after
+    assert flagged['rules'] == ['events'] and len(flagged['spans']) >= 2
+    for event in truth:
+        assert [event['start'] - 1.0, event['start'] + 2.0, ['events']] in flagged['spans']
+    stamps = sorted(float(name[:-5]) for name in os.listdir(str(tmp_path / 'kept' / 'motion' / 'nominal')))
+    assert flagged['removed']['motion'] == every['sets']['motion']['vectors'] - len(stamps) > 0
+    for start, end, _ in flagged['spans']:  # no kept window [stamp - 1 s, stamp] touches a span
+        assert not any(stamp >= start and stamp - 1.0 <= end for stamp in stamps)
+    text = ok('collect', bag, '--config', rules, '--out', tmp_path / 'text', '--stride', '2')
+    assert '%d vector(s) not kept as nominal: their window overlaps %d span(s) where rules (events) fired: ' % (
+        flagged['removed']['motion'], len(flagged['spans'])) in text
 
 
 # -- 3. coverage -----------------------------------------------------------------------------------------------
