@@ -12,8 +12,9 @@ and give a threshold that is far too tight. With anomalous examples, ``nu``, ``g
 chosen so that every anomalous vector is flagged (recall 100%) with the fewest held-out nominal ones.
 
 A day of "nominal" driving may hold anomalies. Before all that, ``train`` scores every nominal vector with a
-model fitted on the other blocks of the day (TRIM_FOLDS contiguous blocks), drops the ``trim`` share
-(DEFAULT_TRIM, 1 %; 0: none) that scores lowest (the most outlying) and goes on with the rest;
+model fitted on the other blocks of the day (TRIM_FOLDS contiguous blocks), drops at most the ``trim`` share
+(DEFAULT_TRIM, 1 %; 0: none) that scores lowest (the most outlying), of those beyond Tukey's far-out fence
+(TRIM_FENCE interquartile ranges below the lower quartile), and goes on with the rest;
 ``info['trimmed']`` counts them and ``info['trimmed_spans']`` says where they were (stamps when given). The
 model records the range its kept vectors cover (``coverage``, read by ``drift.DriftMonitor``).
 
@@ -44,6 +45,7 @@ NU_GRID = (0.005, 0.02, 0.05, 0.1)
 GAMMA_FACTOR_GRID = (0.1, 0.25, 0.5, 1.0, 2.0)
 DEFAULT_TRIM = 0.01            # share of the most outlying nominal vectors dropped before the real fit
 MAX_TRIM = 0.5
+TRIM_FENCE = 3.0               # ... and only those more than this many interquartile ranges below the lower quartile
 TRIM_FOLDS = 4                 # contiguous blocks, each scored by a fit on the others, to find what to trim
 MAX_TRIMMED_SPANS = 20         # spans of trimmed vectors listed in info (the rest counted)
 STOPPED_SPEED = 0.05           # m/s: a window whose largest |v| is below this counts as stopped (coverage)
@@ -229,11 +231,11 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     standardised vectors) default to DEFAULT_NU and DEFAULT_GAMMA_FACTOR / n_features, or are chosen on a
     grid when anomalous vectors are given and they are None. ``method``: 'exact' (OneClassSVM on all
     training vectors), 'nystroem' (Nystroem + SGDOneClassSVM), 'auto' (exact; above ``max_exact`` training
-    vectors, on an even subsample in time). ``trim``: the share of nominal vectors scoring lowest on a first
-    fit over all of them that is dropped before everything else (0: none); ``stamps`` (one per nominal vector)
-    name where they were in ``info['trimmed_spans']``. ``info`` holds the figures of the run (sizes, parameters,
-    trimming, threshold calibration, training seconds, peak memory); the model's ``coverage`` the range of the
-    kept nominal vectors (``coverage``).
+    vectors, on an even subsample in time). ``trim``: the largest share of nominal vectors dropped before
+    everything else, the lowest scoring by fits over the other blocks and beyond TRIM_FENCE (0: none);
+    ``stamps`` (one per nominal vector) name where they were in ``info['trimmed_spans']``. ``info`` holds the
+    figures of the run (sizes, parameters, trimming, threshold calibration, training seconds, peak memory); the
+    model's ``coverage`` the range of the kept nominal vectors (``coverage``).
     """
     started = time.time()
     config = config if config is not None else FeatureConfig()
@@ -344,8 +346,8 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
 def _trim(X, stamps, trim, config, nu, gamma, fit_method, max_exact, names, seed):
     """``(kept indices, info entries)``: score each of TRIM_FOLDS contiguous blocks of ``X`` with a model fitted on
     the others (an even subsample above ``max_exact`` for the exact SVM; a model scoring its own training
-    vectors would see a run of anomalous windows as a mode of its own), drop the ``trim`` share scoring lowest;
-    the entries count them and list their spans."""
+    vectors would see a run of anomalous windows as a mode of its own), drop at most the ``trim`` share scoring
+    lowest, of those beyond the far-out fence; the entries count them and list their spans."""
     count = int(round(trim * len(X)))
     entries = {'trim': float(trim), 'trimmed': 0, 'trimmed_spans': [], 'trimmed_by': 'stamp' if stamps is not None
                else 'index'}
@@ -361,7 +363,16 @@ def _trim(X, stamps, trim, config, nu, gamma, fit_method, max_exact, names, seed
             sample = sample[np.linspace(0, len(sample) - 1, max_exact).astype(int)]
         fitted, _ = _fit(sample, config, first_nu, first_gamma, fit_method, names, seed)
         scores[start:end] = fitted.scores(X[start:end])
-    dropped = np.sort(np.argsort(scores, kind='stable')[:count])
+    # at most ``count``, and only those "far out" below the bulk of these scores (Tukey's outer fence, TRIM_FENCE
+    # interquartile ranges below the lower quartile): a clean day loses little, anomalies far below the rest go
+    low, high = np.quantile(scores, (0.25, 0.75))
+    cut = low - TRIM_FENCE * (high - low)
+    lowest = np.argsort(scores, kind='stable')[:count]
+    dropped = np.sort(lowest[scores[lowest] < cut])
+    count = len(dropped)
+    entries['trim_cut'] = float(cut)
+    if not count:
+        return np.arange(len(X)), entries
     mask = np.ones(len(X), dtype=bool)
     mask[dropped] = False
     spans = []  # [first, last, vectors] of runs of consecutive dropped vectors
