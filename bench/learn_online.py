@@ -57,7 +57,7 @@ def slow_model(rate):
     slow, _ = odometry(sim.SimConfig(rate=rate, seed=21, minutes=6, anomalies=0), SLOW)
     stream = FeatureStream(FEATURE, every='100ms')
     vectors = [v for v in (stream.add(msg, stamp) for stamp, msg in slow) if v is not None]
-    return learning.train(np.array(vectors), config=FEATURE, trim=0)[0]  # a clean simulated day, as measured
+    return learning.train(np.array(vectors), config=FEATURE)[0]
 
 
 def main(argv=None):

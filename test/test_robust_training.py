@@ -42,7 +42,8 @@ def test_trimming_keeps_a_dirty_days_anomaly_out_of_nominal_and_says_where_it_wa
     untrimmed, info = learning.train(X, config=CONFIG, stamps=stamps, trim=0)
     assert info['trimmed'] == 0 and info['trimmed_spans'] == []
     assert np.sum(untrimmed.scores(anomalous) < untrimmed.threshold) == 0  # learnt as nominal
-    model, info = learning.train(X, config=CONFIG, stamps=stamps)
+    assert learning.train(X, config=CONFIG, stamps=stamps)[1]['trimmed'] == 0  # train trims only when asked
+    model, info = learning.train(X, config=CONFIG, stamps=stamps, trim=learning.DEFAULT_TRIM)
     assert info['trim'] == learning.DEFAULT_TRIM == 0.01 and info['trimmed'] == 10
     assert info['vectors_nominal'] == 1000 and info['vectors_train'] + info['vectors_held_out'] == 990
     [[start, end, count]] = info['trimmed_spans']
@@ -52,7 +53,7 @@ def test_trimming_keeps_a_dirty_days_anomaly_out_of_nominal_and_says_where_it_wa
     text = learning.format_report(learning.evaluate(model, X[:100], anomalous), info)
     assert 'Trimmed          10 of 1000 nominal vectors, the most outlying (trim 1%): 1 span(s): 30.0-30.9 s (10)' \
         in text
-    without_stamps = learning.train(X, config=CONFIG)[1]
+    without_stamps = learning.train(X, config=CONFIG, trim=0.01)[1]
     assert without_stamps['trimmed_by'] == 'index' and without_stamps['trimmed_spans'] == [[300, 309, 10]]
 
 

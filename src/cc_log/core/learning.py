@@ -13,8 +13,9 @@ chosen so that every anomalous vector is flagged (recall 100%) with the fewest h
 
 A day of "nominal" driving may hold anomalies. Before all that, ``train`` scores every nominal vector with a
 model fitted on the other blocks of the day (TRIM_FOLDS contiguous blocks), drops at most the ``trim`` share
-(DEFAULT_TRIM, 1 %; 0: none) that scores lowest (the most outlying), of those beyond Tukey's far-out fence
-(TRIM_FENCE interquartile ranges below the lower quartile), and goes on with the rest;
+(``cclog learn``: DEFAULT_TRIM, 1 %; ``train`` alone: 0, none) that scores lowest (the most outlying), of
+those beyond Tukey's far-out fence (TRIM_FENCE interquartile ranges below the lower quartile), and goes on with
+the rest;
 ``info['trimmed']`` counts them and ``info['trimmed_spans']`` says where they were (stamps when given). The
 model records the range its kept vectors cover (``coverage``, read by ``drift.DriftMonitor``).
 
@@ -43,7 +44,7 @@ DEFAULT_MAX_EXACT = 20000       # above this many training vectors: 'auto' subsa
 NYSTROEM_COMPONENTS = 300
 NU_GRID = (0.005, 0.02, 0.05, 0.1)
 GAMMA_FACTOR_GRID = (0.1, 0.25, 0.5, 1.0, 2.0)
-DEFAULT_TRIM = 0.01            # share of the most outlying nominal vectors dropped before the real fit
+DEFAULT_TRIM = 0.01            # cclog learn's share of the most outlying nominal vectors dropped (train: 0)
 MAX_TRIM = 0.5
 TRIM_FENCE = 3.0               # ... and only those more than this many interquartile ranges below the lower quartile
 TRIM_FOLDS = 4                 # contiguous blocks, each scored by a fit on the others, to find what to trim
@@ -223,7 +224,7 @@ def nominal_threshold(scores, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN):
 
 def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='auto',
           holdout=DEFAULT_HOLDOUT, blocks=DEFAULT_BLOCKS, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN,
-          max_exact=DEFAULT_MAX_EXACT, names=None, seed=0, trim=DEFAULT_TRIM, stamps=None):
+          max_exact=DEFAULT_MAX_EXACT, names=None, seed=0, trim=0.0, stamps=None):
     """Train a one-class SVM; return ``(AnomalyModel, info)``.
 
     ``nominal`` (and ``anomalous``) are 2-D arrays of window vectors in time order. ``config`` is the
@@ -232,7 +233,8 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     grid when anomalous vectors are given and they are None. ``method``: 'exact' (OneClassSVM on all
     training vectors), 'nystroem' (Nystroem + SGDOneClassSVM), 'auto' (exact; above ``max_exact`` training
     vectors, on an even subsample in time). ``trim``: the largest share of nominal vectors dropped before
-    everything else, the lowest scoring by fits over the other blocks and beyond TRIM_FENCE (0: none);
+    everything else, the lowest scoring by fits over the other blocks and beyond TRIM_FENCE (default 0: none;
+    ``cclog learn`` passes DEFAULT_TRIM);
     ``stamps`` (one per nominal vector) name where they were in ``info['trimmed_spans']``. ``info`` holds the
     figures of the run (sizes, parameters, trimming, threshold calibration, training seconds, peak memory); the
     model's ``coverage`` the range of the kept nominal vectors (``coverage``).

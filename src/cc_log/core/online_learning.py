@@ -120,8 +120,7 @@ class OnlineLearner(object):
     def _refit(self, vectors):
         started = time.time()
         try:
-            # no trimming: every vector was guarded (nothing near a flag), and the rare ones are the new manoeuvres
-            model, info = learning.train(vectors, config=self.model.config, trim=0)
+            model, info = learning.train(vectors, config=self.model.config)
             model.info['online'] = {'support_vectors_kept': len(self._support),
                                     'reservoir': len(vectors) - len(self._support), 'learned': self._arrived,
                                     'refit': self.refits + 1, 'seconds': time.time() - started}
