@@ -10,10 +10,13 @@ file under ``<directory>/features/<label>/`` with ``learning.write_vector`` — 
 mode. Files and vectors go through the ``window_writer.WindowWriter`` smart mode uses (background thread,
 held in memory and retried on a disk problem, quota, free-space floor).
 
-``collect_bag`` computes the same vectors from a bag (``cclog collect``), through the same writer.
+``collect_bag`` computes the same vectors from a bag (``cclog collect``), through the same writer. With a
+configuration's rules, ``rule_spans`` finds where they fire in the bag and ``drop_flagged`` removes the vectors
+whose window overlaps one (with the rule's pre/post): a day with aborts and collisions is not all nominal.
 
 Pure: no rospy (``collect_bag`` imports ``bagio``, and so rosbag, only when called).
 """
+import bisect
 import collections
 import functools
 import os
@@ -356,6 +359,77 @@ def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WI
     result.update(vectors=first[0], directory=first[1],
                   stride=result['strides'][computed[0][0]] if computed else stride)
     return result
+
+
+RULE_EXCLUDED_KINDS = ('classifier', 'periodic')  # triggers that say nothing about a span being anomalous
+
+
+def rule_triggers(triggers):
+    """The triggers of ``triggers`` that flag anomalies by rule (aborts, collisions, bumper, diagnostics errors):
+    every kind but the classifiers (their model is what is being trained) and periodic samples."""
+    return [trigger for trigger in triggers if trigger.kind not in RULE_EXCLUDED_KINDS]
+
+
+def rule_spans(bag_path, triggers, pre, post, rate):
+    """``[(start, end, [names])]``: the merged spans of message time (seconds) ``triggers`` fire on over a bag,
+    each fire widened by its trigger's ``pre``/``post`` (else the logger's ``pre``/``post``: Spans; a count of
+    messages is read at ``rate`` messages per second). Topics the bag lacks are left out."""
+    from cc_log.storage.bag import bagio  # rosbag: imported here so the module stays pure
+    bag = bagio.open_bag(bag_path)
+    try:
+        present = set(bagio.topics_of(bag))
+    finally:
+        bag.close()
+    types = {}
+    for trigger in triggers:
+        types.update(trigger.topic_types())
+    topics = sorted(set().union(*(trigger.topics for trigger in triggers)) & present) if triggers else []
+    timed = [trigger for trigger in triggers if trigger.watches_time]
+
+    def seconds(span, default):
+        span = default if span is None else span
+        return span.seconds if span.is_duration else span.count / float(rate)
+
+    fired = []
+    if topics:
+        for record in bagio.read_messages(bag_path, topics, dict((t, types[t]) for t in topics if t in types)):
+            for trigger in triggers:
+                found = list(trigger.on_record(record)) if record.topic in trigger.topics else []
+                if trigger in timed:
+                    found += trigger.on_time(record.stamp)
+                fired += [(record.stamp - seconds(fire.pre, pre), record.stamp + seconds(fire.post, post), fire.name)
+                          for fire in found]
+    spans = []
+    for start, end, name in sorted(fired):
+        if spans and start <= spans[-1][1]:
+            spans[-1][1] = max(spans[-1][1], end)
+            spans[-1][2].add(name)
+        else:
+            spans.append([start, end, {name}])
+    return [(start, end, sorted(names)) for start, end, names in spans]
+
+
+def drop_flagged(directory, label, spans, window_seconds):
+    """Remove the vector files of ``directory/<label>/`` whose feature window ``[stamp - window_seconds, stamp]``
+    overlaps one of ``spans`` (``rule_spans``): they are not nominal. Returns how many were removed."""
+    folder = os.path.join(directory, label)
+    if not spans or not os.path.isdir(folder):
+        return 0
+    starts = [start for start, _, _ in spans]
+    removed = 0
+    for name in os.listdir(folder):
+        if not name.endswith('.json') or safe_files.TMP_MARK in name:
+            continue
+        try:
+            stamp = float(name[:-len('.json')])
+        except ValueError:
+            continue
+        # the last span starting at or before the stamp: spans are merged, so it also ends last among those
+        index = bisect.bisect_right(starts, stamp) - 1
+        if index >= 0 and spans[index][1] >= stamp - window_seconds:
+            os.unlink(os.path.join(folder, name))
+            removed += 1
+    return removed
 
 
 _VECTOR_LEFTOVER = re.compile(r'^.+\.json%s(\d+)(\.\d+)?$' % re.escape(safe_files.TMP_MARK))

@@ -21,12 +21,24 @@ same as JSON values.
 calibration's target (``learning.DEFAULT_QUANTILE``, 0.2 %: the threshold sits below that quantile of the
 held-out scores), which is also used when the model file does not say.
 
+Coverage: a model file trained by this version records the range its nominal training vectors cover
+(``learning.coverage``: the largest speed |v| and yaw rate |w| of a window and the share of windows stopped for
+the odometry sets, every feature's range for the others). Given it (``coverage=model.coverage`` with the model's
+``config``), the monitor also takes each decision's vector (``observe(stamp, anomalous, vector)``) and says
+where the driving leaves that range, beyond a tolerance of COVERAGE_TOLERANCE of the trained spread: ``status()``
+warns while at least ``min_rate`` of the last span lies beyond (or is stopped ``min_rate`` more often than in
+training), and ``report()`` adds, for a whole run, e.g. ``coverage: training covers |v| <= 0.60 m/s; this run
+reaches 1.30 m/s (35% of decisions beyond)``. A model without it (older files) is judged on the flag rate alone.
+
 Remedies (``REMEDIES``): online adaptation (``learn_online: true``, opt-in: ``online_learning``), a periodic
 trigger collecting nominal samples to retrain from (``kind: periodic``), retraining on this robot's nominal
 driving (``cclog learn``). Pure: no rospy.
 """
 import collections
 
+import numpy as np
+
+from cc_log.core import learning
 from cc_log.core.learning import DEFAULT_QUANTILE
 
 OK, WARN = 0, 1  # diagnostic_msgs/DiagnosticStatus levels
@@ -36,6 +48,8 @@ DEFAULT_MIN_RATE = 0.2    # ... and at least this share (a long true anomaly fil
 REMEDIES = ('learn_online: true on the classifier (online adaptation, opt-in), a periodic trigger '
             '(kind: periodic, every: 10min) to collect nominal samples to retrain from, or retrain '
             '(cclog learn) on nominal driving of this robot and place')
+COVERAGE_TOLERANCE = 0.1  # a value is beyond the training range when past it by this share of the trained spread
+SHOWN_FEATURES = 3        # features named in a coverage line (per-feature coverage)
 
 
 def trained_rate(model):
@@ -69,7 +83,7 @@ class DriftMonitor(object):
     ValueError('<parameter>: ...') for a bad parameter."""
 
     def __init__(self, trained_rate, span=DEFAULT_SPAN, factor=DEFAULT_FACTOR, min_rate=DEFAULT_MIN_RATE,
-                 settle=None, name='classifier'):
+                 settle=None, name='classifier', coverage=None, config=None):
         for key, value, low, high in (('trained_rate', trained_rate, 0.0, 1.0), ('span', span, 0.0, None),
                                       ('factor', factor, 0.0, None), ('min_rate', min_rate, 0.0, 1.0)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > low \
@@ -82,7 +96,9 @@ class DriftMonitor(object):
         if not 0.0 <= self.settle <= self.span:
             raise ValueError('settle: %s must be between 0 and span (%g s)' % (repr(settle)[:40], self.span))
         self.limit = min(1.0, max(float(factor) * self.trained_rate, float(min_rate)))
+        self.min_rate = float(min_rate)
         self.name = name
+        self.coverage = None if coverage is None or config is None else Coverage(coverage, config)
         self.began = None        # message time of the first decision
         self.first_drift = None  # message time drift was first reported
         self.peak = None         # the highest share flagged over a judged span (None: never judged)
@@ -90,12 +106,15 @@ class DriftMonitor(object):
 
     def reset(self):
         """Forget the decisions (time went back, or the logger restarted); ``first_drift`` and ``peak`` stay."""
-        self._decisions = collections.deque()  # (stamp, anomalous)
+        self._decisions = collections.deque()  # (stamp, anomalous, beyond coverage, stopped)
         self._flagged = 0
+        self._beyond = 0
+        self._stopped = 0
         self._start = None  # stamp of the first decision since the reset
 
-    def observe(self, stamp, anomalous):
-        """One decision of the classifier at message time ``stamp`` (float s); ``anomalous``: bool."""
+    def observe(self, stamp, anomalous, vector=None):
+        """One decision of the classifier at message time ``stamp`` (float s); ``anomalous``: bool; ``vector``: the
+        feature vector decided on (for the coverage; None: not known)."""
         decisions = self._decisions
         if decisions and stamp < decisions[-1][0] - 1.0:
             self.reset()  # time went back (another run): start again
@@ -104,10 +123,18 @@ class DriftMonitor(object):
             self._start = stamp
             self.began = stamp if self.began is None else self.began
         anomalous = bool(anomalous)
-        decisions.append((stamp, anomalous))
+        beyond = stopped = False
+        if self.coverage is not None and vector is not None:
+            beyond, stopped = self.coverage.observe(vector)
+        decisions.append((stamp, anomalous, beyond, stopped))
         self._flagged += anomalous
+        self._beyond += beyond
+        self._stopped += stopped
         while decisions and decisions[0][0] < stamp - self.span:
-            self._flagged -= decisions.popleft()[1]
+            _, old_flag, old_beyond, old_stopped = decisions.popleft()
+            self._flagged -= old_flag
+            self._beyond -= old_beyond
+            self._stopped -= old_stopped
         if self.judged:
             share = self.share
             self.peak = share if self.peak is None else max(self.peak, share)
@@ -132,6 +159,20 @@ class DriftMonitor(object):
         return self._flagged / float(len(self._decisions)) if self._decisions else 0.0
 
     @property
+    def outside(self):
+        """The coverage line when at least ``min_rate`` of the last span lies beyond the training range (or is
+        stopped that much more often than in training), else None."""
+        if self.coverage is None or not self.judged or not self._decisions:
+            return None
+        count = float(len(self._decisions))
+        beyond, stopped = self._beyond / count, self._stopped / count
+        trained_stopped = self.coverage.stopped_share
+        if beyond < self.min_rate and (trained_stopped is None or stopped < trained_stopped + self.min_rate):
+            return None
+        return self.coverage.text(beyond_share=beyond, stopped_share=stopped, of='the last %s' % duration_text(
+            round(self.covered)))
+
+    @property
     def drifting(self):
         """Whether the share over the last span is drift now."""
         return self.judged and self.share >= self.limit
@@ -144,13 +185,24 @@ class DriftMonitor(object):
                 duration_text(self.covered), duration_text(self.settle))
         flagged = '%s flagged %s of the last %s %s' % (self.name, percent(self.share),
                                                        duration_text(round(self.covered)), trained)
+        outside = self.outside
         if self.drifting:
-            return WARN, 'drift: %s: this robot drives unlike its training data; remedies: %s' % (flagged, REMEDIES)
+            return WARN, 'drift: %s: this robot drives unlike its training data%s; remedies: %s' % (
+                flagged, ' (%s)' % outside if outside else '', REMEDIES)
+        if outside:
+            return WARN, 'drift: %s, but the driving leaves the training data: %s; remedies: %s' % (
+                flagged, outside, REMEDIES)
         return OK, 'drift: none: %s' % flagged
 
     def report(self):
         """One line on a whole run: when drift was first reported (after the first decision) and the highest share
         flagged, with the remedies; or that there was none, or too few decisions to say."""
+        line = self._rate_report()
+        if self.coverage is not None:
+            line += '; ' + self.coverage.report()
+        return line
+
+    def _rate_report(self):
         trained = '(trained: %s)' % percent(self.trained_rate)
         if self.first_drift is not None:
             return ('drift: from %s into the run %s flagged up to %s of %s %s: this robot drives unlike its '
@@ -168,7 +220,110 @@ class DriftMonitor(object):
         return collections.OrderedDict([
             ('name', self.name), ('trained_rate', self.trained_rate), ('limit', self.limit), ('span', self.span),
             ('drift', self.first_drift is not None), ('first_drift', self.first_drift), ('peak', self.peak),
-            ('share', self.share if self.judged else None)])
+            ('share', self.share if self.judged else None),
+            ('coverage', None if self.coverage is None else self.coverage.as_dict())])
+
+
+class Coverage(object):
+    """A model's ``coverage`` (``learning.coverage``) against the vectors of a run: per quantity the value
+    reached and how many decisions lay beyond the trained range (COVERAGE_TOLERANCE of the trained spread past
+    it; the odometry quantities only above it), and how many windows were stopped."""
+
+    def __init__(self, coverage, config):
+        known = dict((name, (unit, function, upper)) for name, unit, function, upper
+                     in learning.coverage_quantities(config))
+        self.entries = [entry for entry in coverage.get('quantities', ()) if entry.get('name') in known]
+        self.functions = [known[entry['name']][1] for entry in self.entries]
+        self.upper = np.array([known[entry['name']][2] for entry in self.entries], dtype=bool)
+        names = learning.vector_names(config)
+        self.columns = None  # per-feature coverage: the vector's own columns, read at once
+        if self.entries and not self.upper.any():
+            self.columns = np.array([names.index(entry['name']) for entry in self.entries])
+        low = np.array([entry['min'] for entry in self.entries], dtype=float)
+        high = np.array([entry['max'] for entry in self.entries], dtype=float)
+        tolerance = COVERAGE_TOLERANCE * np.maximum(high - low, np.maximum(0.1 * np.abs(high), 1e-9))
+        self.low = np.where(self.upper, -np.inf, low - tolerance)
+        self.high = high + tolerance
+        self.stopped_share = coverage.get('stopped_share')
+        self.stopped_speed = coverage.get('stopped_speed', learning.STOPPED_SPEED)
+        self.decisions = 0
+        self.stopped = 0
+        self.beyond = np.zeros(len(self.entries), dtype=int)
+        self.beyond_any = 0
+        self.reached_high = np.full(len(self.entries), -np.inf)
+        self.reached_low = np.full(len(self.entries), np.inf)
+
+    def observe(self, vector):
+        """``(beyond the range, stopped)`` of one decision's vector, counted for the run."""
+        X = np.asarray(vector, dtype=float).reshape(1, -1)
+        if self.columns is not None:
+            values = X[0, self.columns]
+        else:
+            values = np.array([function(X)[0] for function in self.functions]) if self.functions else np.zeros(0)
+        self.reached_high = np.maximum(self.reached_high, values)
+        self.reached_low = np.minimum(self.reached_low, values)
+        outside = (values > self.high) | (values < self.low)
+        self.beyond += outside
+        self.decisions += 1
+        beyond = bool(outside.any())
+        self.beyond_any += beyond
+        stopped = bool(self.stopped_share is not None and len(values) and values[0] < self.stopped_speed)
+        self.stopped += stopped
+        return beyond, stopped
+
+    def _range(self, index):
+        entry, unit = self.entries[index], self.entries[index].get('unit', '')
+        unit = ' ' + unit if unit else ''
+        if self.upper[index]:
+            return '%s <= %.3g%s' % (entry['name'], entry['max'], unit), '%.3g%s' % (self.reached_high[index], unit)
+        reached = self.reached_high[index] if self.reached_high[index] > self.high[index] else self.reached_low[index]
+        return ('%s in [%.3g, %.3g]%s' % (entry['name'], entry['min'], entry['max'], unit),
+                '%.3g%s' % (reached, unit))
+
+    def text(self, beyond_share=None, stopped_share=None, of='decisions'):
+        """One line on where the run leaves the range: the quantities beyond it (the most often beyond first,
+        at most SHOWN_FEATURES of them) and the share stopped when it exceeds training's; '' when neither."""
+        parts = []
+        order = [i for i in np.argsort(-self.beyond, kind='stable') if self.beyond[i]]
+        if order:
+            ranges = [self._range(i) for i in order[:SHOWN_FEATURES]]
+            parts.append('training covers %s; this run reaches %s' % (
+                ', '.join(covered for covered, _ in ranges), ', '.join(reached for _, reached in ranges)))
+            if len(self.entries) > 2:
+                parts[-1] += ' (%d of %d features beyond)' % (len(order), len(self.entries))
+            if beyond_share is not None:
+                parts[-1] += ' (%s of %s beyond)' % (percent(beyond_share), of)
+        if self.stopped_share is not None and stopped_share is not None and self.decisions \
+                and stopped_share > self.stopped_share + 1e-12:
+            parts.append('training was stopped %s of the time, this run %s' % (
+                percent(self.stopped_share), percent(stopped_share)))
+        return '; '.join(parts)
+
+    def report(self):
+        """``coverage: ...`` on the whole run: what ``text`` says with the run's shares, or that it stayed
+        within the training range (or that no vector was seen)."""
+        if not self.decisions:
+            return 'coverage: no decision to compare with the training range'
+        run_stopped = self.stopped / float(self.decisions)
+        stopped = run_stopped if self.stopped_share is not None and \
+            run_stopped >= self.stopped_share + DEFAULT_MIN_RATE / 2 else None
+        text = self.text(self.beyond_any / float(self.decisions), stopped)
+        if text:
+            return 'coverage: ' + text
+        return 'coverage: within the training range (%s)' % ', '.join(
+            self._range(i)[0] for i in range(min(len(self.entries), SHOWN_FEATURES)))
+
+    def as_dict(self):
+        """The run against the range, as JSON values."""
+        return collections.OrderedDict([
+            ('decisions', self.decisions), ('beyond', self.beyond_any),
+            ('quantities', [collections.OrderedDict([
+                ('name', entry['name']), ('unit', entry.get('unit', '')), ('min', entry['min']), ('max', entry['max']),
+                ('reached_min', float(self.reached_low[i]) if self.decisions else None),
+                ('reached_max', float(self.reached_high[i]) if self.decisions else None),
+                ('beyond', int(self.beyond[i]))]) for i, entry in enumerate(self.entries)]),
+            ('stopped_share', self.stopped_share),
+            ('run_stopped_share', self.stopped / float(self.decisions) if self.decisions else None)])
 
 
 def monitor_classifiers(classifiers, **options):
@@ -176,7 +331,9 @@ def monitor_classifiers(classifiers, **options):
     (added to the trigger's ``observers``); returns the monitors in order."""
     monitors = []
     for trigger in classifiers:
-        monitor = DriftMonitor(trained_rate(trigger.model), name=trigger.name, **options)
+        monitor = DriftMonitor(trained_rate(trigger.model), name=trigger.name,
+                               coverage=getattr(trigger.model, 'coverage', None), config=trigger.model.config,
+                               **options)
         trigger.observers.append(monitor.observe)
         monitors.append(monitor)
     return monitors

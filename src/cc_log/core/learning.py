@@ -11,6 +11,14 @@ sliding-window vectors share most of their rows, so a random hold-out would scor
 and give a threshold that is far too tight. With anomalous examples, ``nu``, ``gamma`` and the threshold are
 chosen so that every anomalous vector is flagged (recall 100%) with the fewest held-out nominal ones.
 
+A day of "nominal" driving may hold anomalies. Before all that, ``train`` scores every nominal vector with a
+model fitted on the other blocks of the day (TRIM_FOLDS contiguous blocks), drops at most the ``trim`` share
+(``cclog learn``: DEFAULT_TRIM, 1 %; ``train`` alone: 0, none) that scores lowest (the most outlying), of
+those beyond Tukey's far-out fence (TRIM_FENCE interquartile ranges below the lower quartile), and goes on with
+the rest;
+``info['trimmed']`` counts them and ``info['trimmed_spans']`` says where they were (stamps when given). The
+model records the range its kept vectors cover (``coverage``, read by ``drift.DriftMonitor``).
+
 scikit-learn is imported inside ``train`` only: scoring never needs it.
 """
 import collections
@@ -36,6 +44,13 @@ DEFAULT_MAX_EXACT = 20000       # above this many training vectors: 'auto' subsa
 NYSTROEM_COMPONENTS = 300
 NU_GRID = (0.005, 0.02, 0.05, 0.1)
 GAMMA_FACTOR_GRID = (0.1, 0.25, 0.5, 1.0, 2.0)
+DEFAULT_TRIM = 0.01            # cclog learn's share of the most outlying nominal vectors dropped (train: 0)
+MAX_TRIM = 0.5
+TRIM_FENCE = 3.0               # ... and only those more than this many interquartile ranges below the lower quartile
+TRIM_FOLDS = 4                 # contiguous blocks, each scored by a fit on the others, to find what to trim
+MAX_TRIMMED_SPANS = 20         # spans of trimmed vectors listed in info (the rest counted)
+STOPPED_SPEED = 0.05           # m/s: a window whose largest |v| is below this counts as stopped (coverage)
+COVERAGE_QUANTILES = (0.01, 0.99)
 MIN_VECTORS = 10               # fewer nominal vectors cannot be split into training and held-out blocks
 METHODS = ('auto', 'exact', 'nystroem')
 
@@ -218,7 +233,7 @@ def nominal_threshold(scores, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN):
 
 def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='auto',
           holdout=DEFAULT_HOLDOUT, blocks=DEFAULT_BLOCKS, quantile=DEFAULT_QUANTILE, margin=DEFAULT_MARGIN,
-          max_exact=DEFAULT_MAX_EXACT, names=None, seed=0):
+          max_exact=DEFAULT_MAX_EXACT, names=None, seed=0, trim=0.0, stamps=None):
     """Train a one-class SVM; return ``(AnomalyModel, info)``.
 
     ``nominal`` (and ``anomalous``) are 2-D arrays of window vectors in time order. ``config`` is the
@@ -226,8 +241,12 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     standardised vectors) default to DEFAULT_NU and DEFAULT_GAMMA_FACTOR / n_features, or are chosen on a
     grid when anomalous vectors are given and they are None. ``method``: 'exact' (OneClassSVM on all
     training vectors), 'nystroem' (Nystroem + SGDOneClassSVM), 'auto' (exact; above ``max_exact`` training
-    vectors, on an even subsample in time). ``info`` holds the figures of the run (sizes, parameters,
-    threshold calibration, training seconds, peak memory).
+    vectors, on an even subsample in time). ``trim``: the largest share of nominal vectors dropped before
+    everything else, the lowest scoring by fits over the other blocks and beyond TRIM_FENCE (default 0: none;
+    ``cclog learn`` passes DEFAULT_TRIM);
+    ``stamps`` (one per nominal vector) name where they were in ``info['trimmed_spans']``. ``info`` holds the
+    figures of the run (sizes, parameters, trimming, threshold calibration, training seconds, peak memory); the
+    model's ``coverage`` the range of the kept nominal vectors (``coverage``).
     """
     started = time.time()
     config = config if config is not None else FeatureConfig()
@@ -253,17 +272,26 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
             raise ValueError('anomalous: need a finite 2-D array of %d columns' % dimension)
     if names is None:
         names = vector_names(config)
+    if isinstance(trim, bool) or not isinstance(trim, (int, float)) or not 0 <= trim < MAX_TRIM:
+        raise ValueError('trim: %r must be a share from 0 to below %g' % (trim, MAX_TRIM))
+    if stamps is not None:
+        stamps = np.asarray(stamps, dtype=float)
+        if stamps.shape != (len(X),):
+            raise ValueError('stamps: %d stamps for %d nominal vectors' % (stamps.size, len(X)))
+    fit_method = 'nystroem' if method == 'nystroem' else 'exact'
+    kept, trimmed = _trim(X, stamps, trim, config, nu, gamma, fit_method, max_exact, names, seed)
+    X = X[kept]
     train_index, held_index = split_blocks(len(X), holdout, blocks)
     X_train, X_held = X[train_index], X[held_index]
-    fit_method = 'nystroem' if method == 'nystroem' else 'exact'
     subsampled = False
     if method == 'auto' and len(X_train) > max_exact:
         X_train = X_train[np.linspace(0, len(X_train) - 1, max_exact).astype(int)]
         subsampled = True
-    info = {'method': fit_method, 'requested_method': method, 'vectors_nominal': len(X),
+    info = {'method': fit_method, 'requested_method': method, 'vectors_nominal': len(kept) + trimmed['trimmed'],
             'vectors_train': len(X_train), 'vectors_held_out': len(X_held), 'subsampled': subsampled,
             'vectors_anomalous': 0 if A is None else len(A), 'features': dimension,
             'config': config.to_dict()}
+    info.update(trimmed)
 
     candidates = []
     if A is not None and (nu is None or gamma is None):
@@ -322,7 +350,118 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
         'train_seconds': time.time() - started, 'peak_rss_mb': peak_rss_mb(),
     })
     model.info = {key: value for key, value in info.items() if key != 'grid'}
+    model.coverage = coverage(X, config)
     return model, info
+
+
+def _trim(X, stamps, trim, config, nu, gamma, fit_method, max_exact, names, seed):
+    """``(kept indices, info entries)``: score each of TRIM_FOLDS contiguous blocks of ``X`` with a model fitted on
+    the others (an even subsample above ``max_exact`` for the exact SVM; a model scoring its own training
+    vectors would see a run of anomalous windows as a mode of its own), drop at most the ``trim`` share scoring
+    lowest, of those beyond the far-out fence; the entries count them and list their spans."""
+    count = int(round(trim * len(X)))
+    entries = {'trim': float(trim), 'trimmed': 0, 'trimmed_spans': [], 'trimmed_by': 'stamp' if stamps is not None
+               else 'index'}
+    if count < 1 or len(X) - count < MIN_VECTORS:
+        return np.arange(len(X)), entries
+    first_nu = DEFAULT_NU if nu is None else float(nu)
+    first_gamma = DEFAULT_GAMMA_FACTOR / X.shape[1] if gamma is None else float(gamma)
+    scores = np.empty(len(X))
+    edges = np.linspace(0, len(X), TRIM_FOLDS + 1).astype(int)
+    for start, end in zip(edges[:-1], edges[1:]):
+        sample = np.concatenate((X[:start], X[end:]))
+        if fit_method == 'exact' and len(sample) > max_exact:
+            sample = sample[np.linspace(0, len(sample) - 1, max_exact).astype(int)]
+        fitted, _ = _fit(sample, config, first_nu, first_gamma, fit_method, names, seed)
+        scores[start:end] = fitted.scores(X[start:end])
+    # at most ``count``, and only those "far out" below the bulk of these scores (Tukey's outer fence, TRIM_FENCE
+    # interquartile ranges below the lower quartile): a clean day loses little, anomalies far below the rest go
+    low, high = np.quantile(scores, (0.25, 0.75))
+    cut = low - TRIM_FENCE * (high - low)
+    lowest = np.argsort(scores, kind='stable')[:count]
+    dropped = np.sort(lowest[scores[lowest] < cut])
+    count = len(dropped)
+    entries['trim_cut'] = float(cut)
+    if not count:
+        return np.arange(len(X)), entries
+    mask = np.ones(len(X), dtype=bool)
+    mask[dropped] = False
+    spans = []  # [first, last, vectors] of runs of consecutive dropped vectors
+    for index in dropped:
+        if spans and index == spans[-1][1] + 1:
+            spans[-1][1] = index
+            spans[-1][2] += 1
+        else:
+            spans.append([index, index, 1])
+    if len(spans) > MAX_TRIMMED_SPANS:
+        spans = sorted(sorted(spans, key=lambda span: -span[2])[:MAX_TRIMMED_SPANS])
+    where = stamps if stamps is not None else np.arange(len(X))
+    entries.update(trimmed=count, trimmed_spans=[[float(where[a]) if stamps is not None else int(a),
+                                                  float(where[b]) if stamps is not None else int(b), int(n)]
+                                                 for a, b, n in spans],
+                   trimmed_spans_listed=len(spans), trimmed_spans_total=_runs(dropped))
+    return np.flatnonzero(mask), entries
+
+
+def _runs(indices):
+    """How many runs of consecutive numbers sorted ``indices`` hold."""
+    return int(len(indices) and 1 + np.sum(np.diff(indices) > 1))
+
+
+# -- coverage: the range of interpretable quantities the training vectors cover ------------------------------
+
+def _absmax(columns):
+    return lambda X: np.max(np.abs(X[:, columns]), axis=1)
+
+
+def _raw_speed(vx, vy, vz):
+    return lambda X: np.max(np.sqrt(X[:, vx] ** 2 + X[:, vy] ** 2 + X[:, vz] ** 2), axis=1)
+
+
+def coverage_quantities(config):
+    """``[(name, unit, function of a 2-D array of vectors -> 1-D values, upper_only)]`` of ``config``'s vectors:
+    for the odometry sets (motion, command, progress, raw) the largest speed ``|v|`` and yaw rate ``|w|`` of each
+    window (upper bounds only; a window is stopped when its ``|v|`` is below STOPPED_SPEED); for the others
+    every feature of the vector (both bounds)."""
+    names = vector_names(config)
+    column = {name: index for index, name in enumerate(names)}
+
+    def columns(*wanted):
+        return [column[name] for name in wanted]
+
+    speed = yaw = None
+    if 'max(speed)' in column and 'max(wz)' in column:
+        speed, yaw = _absmax(columns('max(speed)')), _absmax(columns('min(wz)', 'max(wz)'))
+    elif 'max(v)' in column and 'max(w)' in column:
+        speed, yaw = _absmax(columns('min(v)', 'max(v)')), _absmax(columns('min(w)', 'max(w)'))
+    elif 'max_speed' in column and 'max_yaw_rate' in column:
+        speed, yaw = _absmax(columns('max_speed')), _absmax(columns('max_yaw_rate'))
+    elif 'vx[0]' in column and 'wz[0]' in column:
+        rows = sorted(int(name[3:-1]) for name in column if name.startswith('vx['))
+        speed = _raw_speed(*[[column['%s[%d]' % (axis, i)] for i in rows] for axis in ('vx', 'vy', 'vz')])
+        yaw = _absmax([column['wz[%d]' % i] for i in rows])
+    if speed is not None:
+        return [('|v|', 'm/s', speed, True), ('|w|', 'rad/s', yaw, True)]
+    return [(name, '', (lambda index: lambda X: X[:, index])(index), False) for index, name in enumerate(names)]
+
+
+def coverage(vectors, config):
+    """The training range of ``coverage_quantities`` over ``vectors`` (2-D): ``{"quantities": [{"name", "unit",
+    "min", "max", "q01", "q99"}], "vectors": n}``, with ``"stopped_share"`` (the share of stopped windows) and
+    ``"stopped_speed"`` for the odometry sets. Stored in the model file; ``drift.DriftMonitor`` compares live
+    vectors with it."""
+    X = np.asarray(vectors, dtype=float)
+    quantities = coverage_quantities(config)
+    result = {'quantities': [], 'vectors': int(len(X))}
+    for name, unit, function, _ in quantities:
+        values = function(X)
+        low, high = np.quantile(values, COVERAGE_QUANTILES)
+        result['quantities'].append({'name': name, 'unit': unit, 'min': float(np.min(values)),
+                                     'max': float(np.max(values)), 'q01': float(low), 'q99': float(high)})
+    if quantities[0][0] == '|v|':
+        result['stopped_share'] = float(np.mean(quantities[0][2](X) < STOPPED_SPEED))
+        result['stopped_speed'] = STOPPED_SPEED
+    return result
 
 
 def _score_floor(model):
@@ -375,4 +514,22 @@ def format_report(report, info=None):
             lines.append('%-16s %s, nu=%g, gamma=%.4g, %s vectors (%s held out), threshold %.4g' % (
                 'Model', info['method'], info.get('nu', float('nan')), info.get('gamma', float('nan')),
                 info.get('vectors_train', '?'), info.get('vectors_held_out', '?'), info.get('threshold', 0.0)))
+        if 'trimmed' in info:
+            lines.append(trim_text(info))
     return '\n'.join(lines)
+
+
+def trim_text(info):
+    """The line on what training left out: ``Trimmed  12 of 5000 nominal vectors (trim 1%), 3 spans:
+    1700000012.0-1700000014.5 s (11), ...`` or that trimming was off."""
+    if not info.get('trim'):
+        return '%-16s none (trim 0: every nominal vector trained)' % 'Trimmed'
+    spans = info.get('trimmed_spans') or []
+    stamped = info.get('trimmed_by') == 'stamp'
+    shown = ', '.join(('%.1f-%.1f s' if stamped else 'vectors %d-%d') % (a, b) + ' (%d)' % n
+                      for a, b, n in spans[:5])
+    more = info.get('trimmed_spans_total', len(spans)) - min(5, len(spans))
+    return '%-16s %d of %d nominal vectors, the most outlying (trim %g%%): %d span(s)%s%s' % (
+        'Trimmed', info['trimmed'], info.get('vectors_nominal', 0), 100.0 * info['trim'],
+        info.get('trimmed_spans_total', len(spans)), (': ' + shown) if shown else '',
+        ' and %d more' % more if more > 0 else '')

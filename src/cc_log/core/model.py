@@ -11,7 +11,9 @@ Two kernel models, both trained by ``learning.train`` with scikit-learn and kept
 Scores follow scikit-learn's ``decision_function``: lower is more anomalous; a vector is anomalous when
 ``score < threshold``. The file is JSON ``{"format": "cc_log-model", "version": 1, ...}``: loading never
 executes code (no pickle, no joblib), and anything but a well-formed model raises
-``ModelError('<path>: <what is wrong>')``.
+``ModelError('<path>: <what is wrong>')``. The optional ``"coverage"`` (``learning.coverage``: the range of
+speed, yaw rate and time stopped, or of every feature, its nominal training vectors cover) is absent from
+older files.
 """
 import json
 import math
@@ -41,10 +43,12 @@ class AnomalyModel(object):
 
     ``kernel`` holds the arrays of ``kind``: for ``ocsvm`` ``support_vectors`` (n, d), ``dual_coef`` (n,),
     ``intercept``, ``gamma``; for ``nystroem-sgd`` ``components`` (m, d), ``normalization`` (m, m),
-    ``coef`` (m,), ``offset``, ``gamma``. ``info`` is a free dict of JSON values (training figures).
+    ``coef`` (m,), ``offset``, ``gamma``. ``info`` is a free dict of JSON values (training figures);
+    ``coverage`` None or ``learning.coverage``'s dict.
     """
 
-    def __init__(self, config, mean, scale, kind, kernel, threshold, names=None, info=None, source='<model>'):
+    def __init__(self, config, mean, scale, kind, kernel, threshold, names=None, info=None, source='<model>',
+                 coverage=None):
         if not isinstance(config, FeatureConfig):
             raise ModelError('%s: config: expected a FeatureConfig, got %s' % (source, type(config).__name__))
         self.config = config
@@ -59,6 +63,7 @@ class AnomalyModel(object):
             self.info = json.loads(json.dumps(dict(info or {}), allow_nan=False, default=_plain))
         except (TypeError, ValueError) as error:
             raise ModelError('%s: info must hold finite JSON values only (%s)' % (source, error))
+        self.coverage = check_coverage(coverage, source)
         _validate(self, source)
         self._prepare()
 
@@ -132,7 +137,7 @@ class AnomalyModel(object):
 
     def to_dict(self):
         """The JSON document of the model."""
-        return {
+        document = {
             'format': FORMAT,
             'version': VERSION,
             'config': self.config.to_dict(),
@@ -144,6 +149,9 @@ class AnomalyModel(object):
             'names': self.names,
             'info': self.info,
         }
+        if self.coverage is not None:
+            document['coverage'] = self.coverage
+        return document
 
     def save(self, path):
         """Write the model atomically (``<path>.tmp-<pid>``, fsync, rename over ``path``: a link there is
@@ -228,7 +236,34 @@ class AnomalyModel(object):
         info = document.get('info') or {}
         if not isinstance(info, dict):
             raise ModelError('%s: info must be an object' % path)
-        return cls(config, mean, scale, kind, kernel, threshold, names, info, source=path)
+        return cls(config, mean, scale, kind, kernel, threshold, names, info, source=path,
+                   coverage=document.get('coverage'))
+
+
+def check_coverage(coverage, path='<model>'):
+    """``coverage`` (None, or ``{"quantities": [{"name", "unit", "min", "max", ...}], "stopped_share"?, ...}``)
+    as plain JSON values; ModelError naming ``path`` and the key when it is anything else."""
+    if coverage is None:
+        return None
+    try:
+        coverage = json.loads(json.dumps(coverage, allow_nan=False, default=_plain))
+    except (TypeError, ValueError) as error:
+        raise ModelError('%s: coverage must hold finite JSON values only (%s)' % (path, error))
+    quantities = coverage.get('quantities') if isinstance(coverage, dict) else None
+    if not isinstance(quantities, list) or not quantities:
+        raise ModelError('%s: coverage: "quantities" must be a non-empty list' % path)
+    for index, entry in enumerate(quantities):
+        where = 'coverage.quantities[%d]' % index
+        if not isinstance(entry, dict) or not isinstance(entry.get('name'), str) \
+                or not isinstance(entry.get('unit', ''), str):
+            raise ModelError('%s: %s must be an object with a "name" and a "unit"' % (path, where))
+        low = _number(entry.get('min'), path, where + '.min')
+        if _number(entry.get('max'), path, where + '.max') < low:
+            raise ModelError('%s: %s: max is below min' % (path, where))
+    share = coverage.get('stopped_share')
+    if share is not None and not 0.0 <= _number(share, path, 'coverage.stopped_share') <= 1.0:
+        raise ModelError('%s: coverage.stopped_share must be between 0 and 1' % path)
+    return coverage
 
 
 def _plain(value):

@@ -56,7 +56,7 @@ def _save(model, model_path):
         raise ValueError('model: cannot write %s: %s' % (model_path, error.strerror or error))
 
 
-def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAULT_METHOD):
+def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAULT_METHOD, trim=learning.DEFAULT_TRIM):
     """Train on ``train_dir`` and save to ``model_path``, validate on ``validate_dir``; either may be None
     (train only; or evaluate the model at ``model_path``). Returns ``(model, report or None, info)``; raises
     ValueError('<what>: ...')."""
@@ -77,7 +77,7 @@ def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAU
     folder = os.path.dirname(os.path.abspath(model_path))
     if not os.path.isdir(folder):
         raise ValueError('model: directory %s does not exist' % folder)
-    train_vectors, config = learning.load_vectors(train_dir)
+    train_vectors, config, stamps = learning.load_vectors(train_dir, with_stamps=True)
     if validate_dir is not None:
         if validate_config != config:
             raise ValueError('validate: vectors of %s were computed with %s, the training ones with %s'
@@ -86,7 +86,8 @@ def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAU
     nominal, anomalous = split_labels(train_vectors)
     if nominal is None:
         raise ValueError('train: %s has no %s/ vectors' % (train_dir, NOMINAL))
-    model, info = learning.train(nominal, anomalous, config, nu=nu, gamma=gamma, method=method)
+    model, info = learning.train(nominal, anomalous, config, nu=nu, gamma=gamma, method=method, trim=trim,
+                                 stamps=stamps[NOMINAL])
     report = learning.evaluate(model, *split_labels(validate_vectors)) if validate_dir is not None else None
     _save(model, model_path)
     return model, report, dict(info, model=model_path, train=train_dir, validate=validate_dir)

@@ -9,6 +9,12 @@ first run and reports which the tuned threshold still catches (a fire between on
 window; the latency is the first such fire's delay after onset). The result goes into
 ``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out nominal runs give the honest rate.
 
+It never loses an event without saying so: recall is measured on those injected anomalies at the model's own
+threshold, at the tuned one and along a curve of CURVE_POINTS thresholds (false windows per hour against events
+caught, ``curve``); ``lost`` names the types the tuned threshold no longer catches, and ``keep_recall_*`` the
+lowest threshold that still catches every type the model's own threshold catches (found by binary search like
+the budget's) with its false windows. With ``keep_recall`` that threshold is the one chosen, budget or not.
+
 ``choose(model, runs, topic, max_false_per_hour, windows, rates)`` also picks the feature window and the
 classify rate: for every window of a small grid and every classify rate it tunes the threshold as above, then
 keeps the setting that meets the budget and catches the most injected types, with the smallest mean latency
@@ -32,6 +38,7 @@ DEFAULT_PRE = DEFAULT_POST = '2s'
 DEFAULT_RETRIGGER = 'event'
 DEFAULT_CLASSIFY_EVERY = '50ms'
 TRAIN_EVERY = '100ms'   # one training vector per this much of the nominal runs (a model of another window)
+CURVE_POINTS = 8        # thresholds of the false-windows-against-recall curve (plus the model's and the chosen)
 
 
 def _seconds(span, rate, name):
@@ -78,9 +85,11 @@ def step_scores(model, records, topic, classify_every=DEFAULT_CLASSIFY_EVERY):
 
 
 def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_POST,
-         classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, sources=None):
+         classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, sources=None, keep_recall=False):
     """Lower ``model.threshold`` (in place) until the nominal ``runs`` give at most ``max_false_per_hour``
-    windows per hour; return the record stored in ``model.info['tuned']`` (see the module docstring)."""
+    windows per hour (with ``keep_recall``: to the lowest threshold that still catches every injected type the
+    model's own threshold catches); return the record stored in ``model.info['tuned']`` (see the module
+    docstring)."""
     if not (max_false_per_hour >= 0):
         raise ValueError('max_false_per_hour: %r must be zero or positive' % (max_false_per_hour,))
     runs = [[r for r in run if r.topic == topic] for run in runs]
@@ -99,9 +108,9 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
     before = model.threshold
     start = false_windows(before)
     threshold, count = before, start
+    scores = np.concatenate([step_scores(model, run, topic, classify_every) for run in runs])
+    candidates = np.unique(scores[scores < before])  # ascending: each lowers the threshold below a score
     if count > allowed:
-        scores = np.concatenate([step_scores(model, run, topic, classify_every) for run in runs])
-        candidates = np.unique(scores[scores < before])  # ascending: each lowers the threshold below a score
         lo, hi = 0, len(candidates)   # threshold just below candidates[i]; i = 0: below every nominal score
         while lo < hi:
             middle = (lo + hi) // 2
@@ -117,10 +126,22 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
             if count <= allowed or lo == 0:
                 break
             lo -= 1
+    injected = injections(model, runs[0], topic)
+
+    def caught_at(value):
+        return [kind for kind, delay in caught_in(model, injected, topic, value, classify_every, retrigger).items()
+                if delay is not None]
+
+    reference = caught_at(before)  # what the model's own threshold catches: every event to keep
+    keep, keep_count = _keep_recall(candidates, before, start, reference, caught_at, false_windows)
+    budget_threshold, budget_count = threshold, count
+    if keep_recall:
+        threshold, count = keep, keep_count
     model.threshold = threshold
-    found = detections(model, runs[0], topic, classify_every, retrigger)
+    found = caught_in(model, injected, topic, threshold, classify_every, retrigger)
     caught = [kind for kind, delay in found.items() if delay is not None]
     latencies = [found[kind] for kind in caught]
+    curve = _curve(candidates, [before, threshold, keep, budget_threshold], caught_at, false_windows, hours)
     record = collections.OrderedDict([
         ('max_false_per_hour', float(max_false_per_hour)), ('hours', hours), ('bags', list(sources or [])),
         ('topic', topic), ('pre', str(Span.parse(pre, 'pre'))), ('post', str(Span.parse(post, 'post'))),
@@ -129,29 +150,90 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
         ('false_windows', count), ('false_per_hour', count / hours if hours else 0.0),
         ('catches', caught), ('misses', [kind for kind, delay in found.items() if delay is None]),
         ('latencies', dict((kind, found[kind]) for kind in caught)),
-        ('mean_latency', float(np.mean(latencies)) if latencies else None)])
+        ('mean_latency', float(np.mean(latencies)) if latencies else None),
+        ('injected', sum(1 for entry in injected if entry[1] is not None)), ('caught_before', reference),
+        ('lost', [kind for kind in reference if kind not in caught]), ('keep_recall', bool(keep_recall)),
+        ('keep_recall_threshold', keep), ('keep_recall_false_windows', keep_count),
+        ('keep_recall_false_per_hour', keep_count / hours if hours else 0.0),
+        ('budget_threshold', budget_threshold), ('budget_false_windows', budget_count), ('curve', curve)])
     model.info = dict(model.info, tuned=record)
     return record
+
+
+def _keep_recall(candidates, before, start, reference, caught_at, false_windows):
+    """``(threshold, false windows)``: the lowest threshold (just below a nominal score) that still catches every
+    type of ``reference``, by binary search over ``candidates`` (ascending), checked as the budget's is."""
+    def keeps(value):
+        found = caught_at(value)
+        return all(kind in found for kind in reference)
+
+    lo, hi = 0, len(candidates)  # find the first candidate whose threshold just below it keeps every event
+    while lo < hi:
+        middle = (lo + hi) // 2
+        if keeps(_below(candidates[middle])):
+            hi = middle
+        else:
+            lo = middle + 1
+    while lo < len(candidates) and not keeps(_below(candidates[lo])):  # recall is not monotonic either
+        lo += 1
+    if lo >= len(candidates):
+        return before, start
+    value = _below(candidates[lo])
+    return value, false_windows(value)
+
+
+def _curve(candidates, extra, caught_at, false_windows, hours):
+    """``[{threshold, false_windows, false_per_hour, caught}]``, highest threshold first: CURVE_POINTS thresholds
+    spread evenly over the range of the nominal scores below the model's threshold, and ``extra``."""
+    values = set(extra)
+    if len(candidates):  # evenly over the score range (quantiles would crowd at the model's score floor)
+        targets = np.linspace(candidates[0], candidates[-1], CURVE_POINTS)
+        values.update(_below(candidates[min(len(candidates) - 1, int(i))])
+                      for i in np.searchsorted(candidates, targets))
+    curve = []
+    for value in sorted(values, reverse=True):
+        count = false_windows(value)
+        curve.append(collections.OrderedDict([
+            ('threshold', value), ('false_windows', count), ('false_per_hour', count / hours if hours else 0.0),
+            ('caught', caught_at(value))]))
+    return curve
+
+
+def injections(model, run, topic, seed=0):
+    """``[(type, the run with one anomaly of it injected, its truth entry, reach)]`` of ``detections``: one per
+    simulator type that fits into ``run`` (reach: the feature window in seconds)."""
+    span = model.config.span
+    reach = span.seconds if span.is_duration else span.count / _rate(run)
+    out = []
+    for kind in sim.ANOMALY_TYPES:
+        try:
+            injected, truth = sim.inject_anomalies(run, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+        except ValueError:
+            out.append((kind, None, None, reach))
+            continue
+        out.append((kind, injected, truth[0], reach))
+    return out
+
+
+def caught_in(model, injected, topic, threshold, classify_every=DEFAULT_CLASSIFY_EVERY,
+              retrigger=DEFAULT_RETRIGGER):
+    """``detections`` of ``injections`` at ``threshold``."""
+    found = collections.OrderedDict()
+    for kind, run, entry, reach in injected:
+        if run is None:
+            found['%s (no room)' % kind] = None
+            continue
+        hits = [t for t in fires(model, run, topic, threshold, classify_every, retrigger)
+                if entry['start'] <= t <= entry['end'] + reach]
+        found[kind] = hits[0] - entry['start'] if hits else None
+    return found
 
 
 def detections(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
     """``{type: seconds from onset to the first fire within [onset, end + feature window], or None}``: one
     anomaly of every simulator type injected into ``run`` at a time (a type that does not fit into the run is
     None under the key ``'<type> (no room)'``)."""
-    span = model.config.span
-    reach = span.seconds if span.is_duration else span.count / _rate(run)
-    found = collections.OrderedDict()
-    for kind in sim.ANOMALY_TYPES:
-        try:
-            injected, truth = sim.inject_anomalies(run, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
-        except ValueError:
-            found['%s (no room)' % kind] = None
-            continue
-        entry = truth[0]
-        hits = [t for t in fires(model, injected, topic, model.threshold, classify_every, retrigger)
-                if entry['start'] <= t <= entry['end'] + reach]
-        found[kind] = hits[0] - entry['start'] if hits else None
-    return found
+    return caught_in(model, injections(model, run, topic, seed), topic, model.threshold, classify_every, retrigger)
 
 
 def catches(model, run, topic, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, seed=0):
@@ -188,11 +270,11 @@ def model_for(model, runs, topic, window, every=TRAIN_EVERY):
 
 
 def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_CLASSIFY_EVERY,), pre=DEFAULT_PRE,
-           post=DEFAULT_POST, retrigger=DEFAULT_RETRIGGER, sources=None):
+           post=DEFAULT_POST, retrigger=DEFAULT_RETRIGGER, sources=None, keep_recall=False):
     """Tune every feature window in ``windows`` (default: the model's) with every classify rate in ``rates``;
     return ``(model, record)`` of the chosen setting (see the module docstring). ``record`` is ``tune``'s with
     ``window``, ``chosen_by`` and ``grid`` (a summary of every setting) added; it is the model's
-    ``info['tuned']``."""
+    ``info['tuned']``. ``keep_recall``: as ``tune``'s."""
     windows = [model.config.window] if not windows else list(windows)
     configs = [FeatureConfig(model.config.feature_set, window, model.config.topic_type) for window in windows]
     train_runs = tune_runs = runs
@@ -204,7 +286,8 @@ def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_
         base = model_for(model, train_runs, topic, config.window)
         for rate in rates:
             candidate = copy.deepcopy(base)
-            record = tune(candidate, tune_runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources)
+            record = tune(candidate, tune_runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources,
+                          keep_recall)
             meets = record['false_per_hour'] <= max_false_per_hour + 1e-9
             key = (meets, len(record['catches']), -(record['mean_latency'] if record['catches'] else float('inf')),
                    -record['false_windows'])
@@ -212,7 +295,8 @@ def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_
                 ('window', candidate.config.window), ('classify_every', record['classify_every']),
                 ('trained', candidate.config != model.config), ('threshold', record['threshold']),
                 ('false_windows', record['false_windows']), ('false_per_hour', record['false_per_hour']),
-                ('meets_budget', meets), ('catches', record['catches']), ('mean_latency', record['mean_latency'])]))
+                ('meets_budget', meets), ('catches', record['catches']), ('mean_latency', record['mean_latency']),
+                ('lost', record['lost']), ('keep_recall_false_per_hour', record['keep_recall_false_per_hour'])]))
             if best is None or key > best[0]:
                 best = (key, candidate, record)
     _, chosen, record = best

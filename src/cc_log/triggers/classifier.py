@@ -109,7 +109,8 @@ class ClassifierTrigger(Trigger):
             raise ValueError('classify_every: 0 messages; use 1 to classify every message')
         self.recent = recent_span(self.config.span, recent, name)
         self.learner = learner  # an online_learning.OnlineLearner, or None (no online learning)
-        self.observers = []  # callables (stamp, anomalous) told every decision, e.g. drift.DriftMonitor.observe
+        # callables (stamp, anomalous, vector) told every decision, e.g. drift.DriftMonitor.observe
+        self.observers = []
         self.calls = 0
         self.seconds = 0.0
         self.max_seconds = 0.0
@@ -169,7 +170,7 @@ class ClassifierTrigger(Trigger):
         if self.learner is not None:
             self.learner.flag(record.stamp) if anomalous else self.learner.offer(record.stamp, batch.vectors[k])
         for observe in self.observers:
-            observe(record.stamp, anomalous)
+            observe(record.stamp, anomalous, batch.vectors[k])
         if anomalous:
             self.anomalous += 1
             if not self._armed and self.retrigger == 'event':

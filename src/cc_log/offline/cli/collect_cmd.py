@@ -17,9 +17,13 @@ def add_parser(subparsers):
         """
         Collect mode from a bag: run the features over the driving topic (nav_msgs/Odometry) and write one
         feature vector file per --stride messages into DIR/<label>/, as the collect node does live. Those
-        directories are what `cclog learn --train` reads; label a run "nominal" or after its anomaly. A
-        vector that cannot be written (disk full) is retried for a few seconds; then collect exits 1 with one
-        line naming DIR/<label> and how many vectors were not written.
+        directories are what `cclog learn --train` reads; label a run "nominal" or after its anomaly. With
+        --config, the configuration's rules (aborts, collisions, bumper, diagnostics errors; not its
+        classifiers or periodic triggers) are run over the bag too, and a vector whose feature window
+        overlaps a span a rule fired on (widened by the rule's pre/post) is not kept: it is not nominal. The
+        count and the spans are reported (one bag; not over several). A vector that cannot be written (disk
+        full) is retried for a few seconds; then collect exits 1 with one line naming DIR/<label> and how
+        many vectors were not written.
         """,
         """
           cclog collect husky.bag --topic /husky_velocity_controller/odom --out train
@@ -74,6 +78,7 @@ def run(args):
         return _collect_many(args, specs, label, stride)
     with _leftovers_removed([args.out]), _bar(args, 'collect') as bar:
         result = _call(fleet.collect_one, bar, args.bag, args.out, specs, label, stride, single=not args.config)
+        flagged = _drop_rule_flagged(args.bag, args.out, cfg, specs, label) if args.config else None
     first = specs[0][1]
     summary = collections.OrderedDict([
         ('bag', args.bag), ('topic', specs[0][2][0]), ('label', label), ('window', first.window),
@@ -85,6 +90,7 @@ def run(args):
                                             ('topics', topics), ('vectors', result['sets'][name][0]),
                                             ('directory', result['sets'][name][1])]))
             for name, config, topics in specs)
+        summary['flagged'] = flagged
     if args.json:
         print_json(summary)
     else:
@@ -93,12 +99,58 @@ def run(args):
             print('%d feature vectors (%s features, window %s, every %s messages) from %s %s -> %s'
                   % (count, config.feature_set, config.window, result['strides'][name if args.config else ''],
                      args.bag, ' '.join(topics), directory))
+        if flagged is not None:
+            print(_flagged_text(flagged))
     for name, config, topics in specs:
         if not result['sets'][name if args.config else ''][0]:
             sys.stderr.write('%s collect: warning: no vector%s: %s never filled a whole feature window of %s\n'
                              % (PROG, ' for ' + name if args.config else '', topics[0],
                                 config.window + ('' if config.span.is_duration else ' messages')))
     return EXIT_OK
+
+
+def _drop_rule_flagged(bag, out, cfg, specs, label):
+    """Run the rules of ``cfg`` over ``bag`` and remove the vectors of every set whose window overlaps a span
+    they fired on; ``{'rules': names, 'spans': [[start, end, names]], 'removed': {set: count}}``, or None when
+    the configuration has no rule."""
+    import copy
+    from cc_log.core import collector, config as config_mod
+    from cc_log.core.model import AnomalyModel
+    from cc_log.storage.bag import bagio
+    rules_only = copy.copy(cfg)
+    rules_only.triggers = [entry for entry in cfg.triggers if entry['kind'] not in collector.RULE_EXCLUDED_KINDS]
+    if not rules_only.triggers:
+        return None
+    try:
+        triggers = rules_only.build_triggers(AnomalyModel.load, config_mod.installed_class)
+        handle = bagio.open_bag(bag)
+        try:
+            driving = specs[0][2][0]
+            count = handle.get_message_count([driving])
+            seconds = max(handle.get_end_time() - handle.get_start_time(), 1e-9)
+        finally:
+            handle.close()
+        rate = max(count, 1) / seconds
+        spans = collector.rule_spans(bag, triggers, cfg.pre, cfg.post, rate)
+    except ValueError as error:
+        raise CommandError(str(error))
+    removed = collections.OrderedDict()
+    for name, config, _ in specs:
+        span = config.span
+        window = span.seconds if span.is_duration else span.count / rate
+        removed[name] = collector.drop_flagged(os.path.join(out, name), label, spans, window)
+    return collections.OrderedDict([('rules', [t.name for t in triggers]),
+                                    ('spans', [[start, end, names] for start, end, names in spans]),
+                                    ('removed', removed)])
+
+
+def _flagged_text(flagged):
+    """One line: how many vectors the rules' spans removed, and the first spans."""
+    spans = flagged['spans']
+    shown = ', '.join('%.1f-%.1f s (%s)' % (start, end, ' '.join(names)) for start, end, names in spans[:5])
+    return '%d vector(s) not kept as nominal: their window overlaps %d span(s) where rules (%s) fired%s%s' % (
+        sum(flagged['removed'].values()), len(spans), ', '.join(flagged['rules']), ': ' + shown if shown else '',
+        ' and %d more' % (len(spans) - 5) if len(spans) > 5 else '')
 
 
 def _collect_many(args, specs, label, stride):

@@ -33,9 +33,29 @@ def add_parser(subparsers):
     p.add_argument('--method', default='auto', choices=('auto', 'exact', 'nystroem', 'stream'),
                    help='exact OneClassSVM, Nystroem + SGD, auto, or stream: Nystroem + SGD partial_fit over the '
                    'directories, never all vectors in one process (default: %(default)s)')
+    p.add_argument('--trim', type=_trim, default=None, metavar='SHARE',
+                   help='drop this share of the most outlying nominal vectors before training, for a day of '
+                   '"nominal" driving that held anomalies; 0 keeps all (default: %g)' % _default_trim())
     fleet_flags(p)
     output_flags(p)
     return p
+
+
+def _default_trim():
+    from cc_log.core.learning import DEFAULT_TRIM
+    return DEFAULT_TRIM
+
+
+def _trim(text):
+    from cc_log.core.learning import MAX_TRIM
+    try:
+        value = float(text)
+    except ValueError:
+        value = float('nan')
+    if not 0 <= value < MAX_TRIM:
+        import argparse
+        raise argparse.ArgumentTypeError('trim: %s is not a share from 0 to below %g' % (text, MAX_TRIM))
+    return value
 
 
 def run(args):
@@ -58,7 +78,7 @@ def run(args):
                 report = learn_main.learn(None, args.test, args.model)[1] if args.test is not None else None
             else:
                 model, report, info = learn_main.learn(args.train, args.test, args.model, args.nu, args.gamma,
-                                                       args.method)
+                                                       args.method, trim=_chosen_trim(args))
         except ValueError as error:
             if isinstance(error, CommandError):
                 raise
@@ -96,11 +116,15 @@ def _learn_many(args):
             if nominal is None:
                 raise CommandError('train: %s have no %s/ vectors' % (' '.join(args.train), learn_main.NOMINAL))
             model, info = learning.train(nominal, anomalous, config, nu=args.nu, gamma=args.gamma,
-                                         method=args.method)
+                                         method=args.method, trim=_chosen_trim(args))
             info['worker_peak_rss_mb'] = worker_rss
         info['partitions'] = len(directories)
         info['engine'] = engine.describe()
     return model, info
+
+
+def _chosen_trim(args):
+    return _default_trim() if args.trim is None else args.trim
 
 
 def _vector_dir(path):
@@ -113,7 +137,9 @@ def _report_dict(report):
 
 
 def _training_text(info):
-    """What training alone (no --test) can tell: the model, its threshold, the held-out nominal check."""
+    """What training alone (no --test) can tell: the model, its threshold, the held-out nominal check, what was
+    trimmed."""
+    from cc_log.core import learning
     lines = ['%-16s %s, nu=%g, gamma=%.4g, %s nominal vectors (%s held out), %s anomalous' % (
         'Model', info['method'], info['nu'], info['gamma'], info['vectors_nominal'], info['vectors_held_out'],
         info['vectors_anomalous']),
@@ -122,6 +148,8 @@ def _training_text(info):
             'Held out', info['held_out_flagged'], info['vectors_held_out']),
         '%-16s %.2f s' % ('Training time', info['train_seconds']),
         '%-16s %.0f MB (process peak RSS)' % ('Peak memory', info['peak_rss_mb'])]
+    if 'trimmed' in info:  # not with --method stream
+        lines.insert(3, learning.trim_text(info))
     return '\n'.join(lines)
 
 

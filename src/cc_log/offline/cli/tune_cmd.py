@@ -13,12 +13,18 @@ def add_parser(subparsers):
         Replay nominal bags through the classifier trigger the smart logger runs (--classify-every,
         --retrigger), merge its fires into windows (--pre, --post) and lower the model's threshold until
         the bags give at most --max-false-per-hour windows per hour; then inject one anomaly of every
-        simulator type into the first bag and report which the tuned model still catches. The model
-        written to --out records what it was tuned for (info.tuned). Figures on the tuning bags are
-        in-sample: check on other nominal bags with cclog replay.
+        simulator type into the first bag and report which the tuned model still catches. It prints the
+        false windows per hour against the injected events caught over a range of thresholds, and says on
+        the chosen line when that threshold loses an event the model's own threshold catches, and what
+        the best threshold keeping every event gives; --keep-recall chooses that threshold instead (the
+        fewest false windows that keep every event, budget or not). The model written to --out records
+        what it was tuned for (info.tuned). Figures on the tuning bags are in-sample: check on other
+        nominal bags with cclog replay.
         """,
         """
           cclog tune --model model.json --bag nominal.bag --topic /odom --max-false-per-hour 1 --out tuned.json
+          cclog tune --model model.json --bag nominal.bag --topic /odom --max-false-per-hour 1 --keep-recall \
+              --out tuned.json
         """))
     p.add_argument('--model', required=True, metavar='PATH', help='the model to tune (not changed)')
     p.add_argument('--bag', required=True, action='append', metavar='BAG', help='a nominal bag (repeatable)')
@@ -34,6 +40,10 @@ def add_parser(subparsers):
                    help='feature windows to choose from, e.g. 1s,2s,5s (another window than the model\'s is trained '
                         'on the bags; default: the model\'s)')
     p.add_argument('--retrigger', choices=retrigger_modes(), default='event', help='(default: %(default)s)')
+    p.add_argument('--keep-recall', action='store_true',
+                   help='choose the threshold with the fewest false windows that still catches every injected event '
+                   'the model\'s own threshold catches, even above the budget (default: the budget decides, and '
+                   'the events it loses are named)')
     output_flags(p)
     return p
 
@@ -53,7 +63,8 @@ def run(args):
         runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]
         try:
             model, record = tuning.choose(model, runs, args.topic, args.max_false_per_hour, args.windows,
-                                          args.classify_every, args.pre, args.post, args.retrigger, sources=args.bag)
+                                          args.classify_every, args.pre, args.post, args.retrigger, sources=args.bag,
+                                          keep_recall=args.keep_recall)
         except ValueError as error:
             raise CommandError(str(error))
     try:
@@ -65,8 +76,9 @@ def run(args):
         return EXIT_OK
     if len(record['grid']) > 1:
         for g in record['grid']:
-            print('window %-6s classify every %-6s threshold %-10.4g %6.1f false/h  %d caught, mean latency %s%s' % (
+            print('window %-6s classify every %-6s threshold %-10.4g %6.1f false/h  %d caught%s, mean latency %s%s' % (
                 g['window'], g['classify_every'], g['threshold'], g['false_per_hour'], len(g['catches']),
+                ' (%d lost)' % len(g['lost']) if g['lost'] else '',
                 '%.2f s' % g['mean_latency'] if g['mean_latency'] is not None else '-',
                 ' (trained on the bags)' if g['trained'] else ''))
         print('chosen: window %s, classify every %s (%s)' % (
@@ -78,5 +90,39 @@ def run(args):
               record['false_per_hour'], record['max_false_per_hour']))
     print('still caught (one injected anomaly each): %s; missed: %s' % (
         ', '.join(record['catches']) or 'none', ', '.join(record['misses']) or 'none'))
+    for line in tune_lines(record):
+        print(line)
     print('%-16s %s' % ('Saved', args.out))
     return EXIT_OK
+
+
+def tune_lines(record):
+    """The false-windows-per-hour against recall curve of ``tuning.tune``'s record, then the chosen line: its
+    recall, the events it loses and what the best threshold keeping every event gives."""
+    reference = record['caught_before']
+    total = len(reference)
+    lines = ['false windows per hour against injected events caught (of the %d the model\'s own threshold '
+             'catches; %d injected):' % (total, record['injected'])]
+    for point in record['curve']:
+        kept = sum(1 for kind in reference if kind in point['caught'])
+        marks = [name for name, value in (('model', record['threshold_before']), ('chosen', record['threshold']),
+                                          ('keeps every event', record['keep_recall_threshold']))
+                 if value == point['threshold']]
+        lines.append('  threshold %-12.6g %7.1f false/h  recall %d/%d%s' % (
+            point['threshold'], point['false_per_hour'], kept, total, '  <- ' + ', '.join(marks) if marks else ''))
+    kept = total - len(record['lost'])
+    chosen = 'chosen: threshold %.6g, %.1f false/h, recall %d/%d' % (
+        record['threshold'], record['false_per_hour'], kept, total)
+    if record['lost']:
+        chosen += (': %d event(s) lost at this threshold (%s); the best threshold keeping every event (%.6g) gives '
+                   '%.1f/h (--keep-recall)' % (len(record['lost']), ', '.join(record['lost']),
+                                               record['keep_recall_threshold'], record['keep_recall_false_per_hour']))
+    elif record['false_per_hour'] > record['max_false_per_hour'] + 1e-9:
+        chosen += ': every event kept, above the budget of %g/h' % record['max_false_per_hour']
+        if record['keep_recall'] and record['budget_threshold'] != record['threshold']:
+            chosen += ' (the budget alone: threshold %.6g, %d false window(s), fewer events)' % (
+                record['budget_threshold'], record['budget_false_windows'])
+    else:
+        chosen += ': every event kept'
+    lines.append(chosen)
+    return lines
