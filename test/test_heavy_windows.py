@@ -71,6 +71,17 @@ def feed(logger, records, trigger_at=None, before=2.0, after=2.0, batch=16):
             trigger_at = None
 
 
+def one_window(tmp_path, records, trigger_at, before, after):
+    """``(logger, (metadata, records))``: ``records`` through a bag-lz4 logger of ODOM and CAMERA (1 s pre/post) with
+    a manual window at ``trigger_at``, closed, and its one window file read."""
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, side_topics=[CAMERA],
+                         background=False)
+    feed(logger, records, trigger_at=trigger_at, before=before, after=after)
+    logger.close()
+    path, = log_format.window_files(str(tmp_path))
+    return logger, log_format.read_window(path)
+
+
 def bag_counts(path):
     with rosbag.Bag(path) as bag:
         return dict((topic, info.message_count) for topic, info in bag.get_type_and_topic_info().topics.items())
@@ -217,12 +228,7 @@ def test_a_topic_memory_cap_holds_outside_windows():
 @pytest.mark.parametrize('offset', [1.2e9, -3.0e7, 30.0])  # wall clock next to a 2015 bag, far behind, 30 s ahead
 def test_a_topic_on_another_clock_neither_stretches_nor_empties_the_window(offset, tmp_path):
     records = stream(8, camera_clock=offset)
-    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, side_topics=[CAMERA],
-                         background=False)
-    feed(logger, records, trigger_at=T0 + 4.0, before=1.0, after=1.0)
-    logger.close()
-    path, = log_format.window_files(str(tmp_path))
-    metadata, kept = log_format.read_window(path)
+    logger, (metadata, kept) = one_window(tmp_path, records, T0 + 4.0, 1.0, 1.0)
     assert metadata['end'] - metadata['start'] <= 2.2  # pre + post, not the distance between the clocks
     assert 55 <= metadata['counts'][CAMERA] <= 65  # the camera's 2 s, by arrival
     stats = logger.stats()
@@ -232,12 +238,7 @@ def test_a_topic_on_another_clock_neither_stretches_nor_empties_the_window(offse
 def test_a_bag_played_without_its_clock_keeps_its_own_stamps(tmp_path):
     """Every topic stamped 11 years before it arrives (``rosbag play`` without ``--clock``): one clock, the bag's."""
     records = [r._replace(stamp=r.stamp + 3.5e8) for r in stream(6, camera_clock=0.0)]  # arrival: now-ish
-    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, side_topics=[CAMERA],
-                         background=False)
-    feed(logger, records, trigger_at=T0 + 3.5e8 + 3.0, before=1.0, after=1.0)
-    logger.close()
-    path, = log_format.window_files(str(tmp_path))
-    metadata, kept = log_format.read_window(path)
+    logger, (metadata, kept) = one_window(tmp_path, records, T0 + 3.5e8 + 3.0, 1.0, 1.0)
     assert T0 + 1.9 <= metadata['start'] <= T0 + 2.2 and metadata['end'] - metadata['start'] <= 2.1  # header stamps
     assert logger.stats()['messages_restamped'] == 0 and 55 <= metadata['counts'][CAMERA] <= 65
 
@@ -336,11 +337,6 @@ def test_a_manual_window_asks_for_at_most_a_day(before, after, tmp_path):
 def test_a_window_still_open_at_the_end_keeps_the_frames_after_the_last_odometry(tmp_path):
     records = stream(3)
     records.append(Record(T0 + 3.01, CAMERA, None, 0, serialized(image(T0 + 3.01)), CONNECTIONS[CAMERA]))
-    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, side_topics=[CAMERA],
-                         background=False)
-    feed(logger, records, trigger_at=T0 + 1.0, before=0.5, after=60.0)
-    logger.close()
-    path, = log_format.window_files(str(tmp_path))
-    metadata, kept = log_format.read_window(path)
+    logger, (metadata, kept) = one_window(tmp_path, records, T0 + 1.0, 0.5, 60.0)
     assert kept[-1].topic == CAMERA and kept[-1].stamp == pytest.approx(T0 + 3.01)
     assert metadata['counts'][CAMERA] == sum(1 for r in records if r.topic == CAMERA and r.stamp >= metadata['start'])

@@ -26,12 +26,12 @@ from cc_log.nodes.topic_watch import TopicWatcher
 __all__ = ['NodeExtras', 'context_rates', 'Thinned']
 
 
-def context_rates(params, driving_topic, log=True):
+def context_rates(params, driving_topic):
     """``({topic: Hz or None}, {topic: name stored under})`` of ``~context_topics``, topics resolved; BWI's
     ``odom_1hz`` is ``driving_topic`` at 1 Hz, stored and republished under the resolved ``odom_1hz``."""
     names = {}
     try:
-        rates = context_track.parse_topics(params.value('context_topics', '', log), '~context_topics',
+        rates = context_track.parse_topics(params.value('context_topics', ''), '~context_topics',
                                            {'odom_1hz': (driving_topic, 1.0)}, names)
     except ValueError as error:
         raise ConfigError(str(error))
@@ -75,8 +75,8 @@ CLOSE_TIMEOUT = 3.0  # seconds the context track may take to close at shutdown, 
 class NodeExtras(object):
     """The context track and upload hook around a node's ``writer`` (its WindowWriter) in ``directory``."""
 
-    def __init__(self, params, writer, directory, driving_topic):
-        self.rates, names = context_rates(params, driving_topic)
+    def __init__(self, params, writer, directory, driving_topic, context=None):
+        self.rates, names = context or context_rates(params, driving_topic)  # (``context``: read already)
         try:
             self.hook = upload.UploadHook(params.value('upload_command', ''))
         except ValueError as error:

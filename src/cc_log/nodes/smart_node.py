@@ -120,9 +120,9 @@ class SmartNode(object):
         period = params.option('diagnostic_period')
         intake_max_messages = params.option('intake_max_messages')
         intake_max_mb = params.option('intake_max_mb')
-        if options['side_topics'] is not None:  # the context topics at their full rate in the windows too
-            context = context_rates(params, options['driving_topic'], log=False)[0]
-            options['side_topics'] = sorted(set(options['side_topics']).union(context) - {options['driving_topic']})
+        context = context_rates(params, options['driving_topic'])  # the context track's topics ...
+        if options['side_topics'] is not None:  # ... at their full rate in the windows too
+            options['side_topics'] = sorted(set(options['side_topics']).union(context[0]) - {options['driving_topic']})
         try:
             self.logger = smart.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
                                             **options)
@@ -139,7 +139,7 @@ class SmartNode(object):
         self.learners = [(t.name, t.learner) for t in classifiers if t.learner is not None]
         if self.learners:
             self.logger.on_event(self._flag_learners)
-        self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic)
+        self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic, context)
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
                                            {self.logger.driving_topic}),
