@@ -117,6 +117,16 @@ def test_side_topics_are_saved_in_the_window_time_span():
     assert windows[0].topics == ['/odom', '/side']
 
 
+def test_a_duration_window_keeps_side_records_up_to_its_edges_not_only_between_driving_records():
+    # Driving records every 0.1 s, the trigger at 1.0 s, pre 0.45 s, post 0.45 s: the window's span is
+    # [0.55, 1.45]; its first and last driving records are 0.6 and 1.4, side records at 0.57 and 1.43 belong to it.
+    side = [(0.52, 'before'), (0.57, 'first'), (1.03, 'middle'), (1.43, 'last'), (1.48, 'after')]
+    windows = run(WindowBuffer(pre='0.45s', post='0.45s'), [round(0.1 * i, 1) for i in range(30)], {10}, side)
+    assert len(windows) == 1
+    assert indices(windows[0]) == [6, 7, 8, 9, 10, 11, 12, 13, 14]
+    assert [r.msg for r in windows[0].records if r.topic == '/side'] == ['first', 'middle', 'last']
+
+
 def test_long_anomaly_is_split_at_max_window_without_loss():
     windows = run(WindowBuffer(pre=2, post=2, max_window=5), [float(i) for i in range(30)], set(range(5, 20)))
     assert [w.part for w in windows] == [1, 2, 3, 4]

@@ -115,9 +115,10 @@ class _OpenWindow(object):
 
     _keys = itertools.count(1)
 
-    def __init__(self, records, trigger, post):
+    def __init__(self, records, trigger, post, since):
         self.key = next(self._keys)
         self.records = list(records)
+        self.since = since     # first stamp of its time span (side records from here on belong to it)
         self.triggers = []
         self.part = 0
         self.continued = False  # a part was written: side records after it belong to the next part
@@ -305,9 +306,11 @@ class WindowBuffer(object):
             self._open.records.extend(self._ring)
             self._open.extend(trigger, post)
         else:
-            if pre is not None:
-                self._trim_ring(Span.parse(pre, 'pre'))
-            self._open = _OpenWindow(self._ring, trigger, post)
+            pre = self.pre if pre is None else Span.parse(pre, 'pre')
+            if pre is not self.pre:
+                self._trim_ring(pre)
+            since = min(trigger.stamp - pre.seconds if pre.is_duration else trigger.stamp, self._ring[0].stamp)
+            self._open = _OpenWindow(self._ring, trigger, post, since)
         self._ring.clear()
         return self._split(self._open)
 
@@ -423,14 +426,16 @@ class WindowBuffer(object):
         return done
 
     def _prune_side(self):
-        """Drop records of other topics older than every driving record still held (or, outside every window,
-        than their topic's own ``pre``)."""
+        """Drop records of other topics older than the span of the window that may still take them (outside
+        every window: older than ``pre`` before the newest driving record, or than their topic's own ``pre``)."""
         if self._pending is not None and self._pending.records:
-            oldest = self._pending.records[0].stamp
+            oldest = self._pending.since
         elif self._open is not None and self._open.records:
-            oldest = self._open.records[0].stamp
+            oldest = self._open.since
         elif self._ring:
             oldest = self._ring[0].stamp
+            if self.pre.is_duration:  # a window opened now reaches back pre seconds, past its first driving record
+                oldest = min(oldest, self._clock - self.pre.seconds)
         else:
             return
         free = self._open is None and self._pending is None
@@ -448,8 +453,10 @@ class WindowBuffer(object):
         A topic with its own ``pre`` or ``post`` (``limits``) keeps only what lies within them of the window's
         first and last trigger."""
         records = window.records if records is None else records
-        start = records[0].stamp if records and not getattr(window, 'continued', False) else float('-inf')
+        start = float('-inf') if window.continued else window.since
         end = float('inf') if everything else records[-1].stamp
+        if final and window.until is not None:
+            end = max(end, window.until)  # its span ends at the post of its last trigger, not at a driving record
         cost = sum(record.cost for record in records)
         side = []
         triggers = window.triggers
