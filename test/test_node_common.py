@@ -144,3 +144,40 @@ def test_the_status_has_the_nodes_level_message_values_and_topic_rates():
     assert [key for key, _ in values[2:]] == ['rate /odom Hz'] and float(values[2][1]) > 0
     diagnostics.publish()  # off: nothing, no error
     diagnostics.stop()
+
+
+REUSE_PROBE = r'''
+import resource, sys, threading
+sys.path[:0] = %r
+if sys.argv[1] == 'reuse':
+    from cc_log.nodes import node_common
+    assert node_common.reuse_freed_memory()
+def faults_of_a_burst():
+    # As a node's subscriber threads do: buffers of a camera frame's size made on one thread, held a while,
+    # freed on another; the page faults of the last of several such bursts.
+    held = []
+    def receive():
+        held.extend(bytearray(921600) for _ in range(60))
+    for _ in range(4):
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        thread = threading.Thread(target=receive)
+        thread.start()
+        thread.join()
+        del held[:]
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+print(faults_of_a_burst())
+'''
+
+
+def test_freed_message_buffers_are_reused_instead_of_mapped_again():
+    import subprocess
+    import sys
+
+    def faults(mode):
+        out = subprocess.run([sys.executable, '-c', REUSE_PROBE % (sys.path,), mode], stdout=subprocess.PIPE,
+                             universal_newlines=True, check=True).stdout
+        return int(out.split()[-1])
+    pages = 60 * 921600 // 4096  # the burst's buffers in 4 kB pages
+    default, reused = faults('default'), faults('reuse')
+    assert default > pages / 2  # glibc hands the burst back and maps it again: a fault per page
+    assert reused < pages / 10
