@@ -151,7 +151,7 @@ def _windows(directory, since, until, skipped):
     """Windows by trigger, per-topic figures (every message of a window), bytes, first/last stamps. A window's
     figures come from its metadata's summary (``window_info.summary_of``: its messages are not read) when it
     holds one, else from its records."""
-    by_trigger, seen = collections.Counter(), set()
+    by_trigger, seen = collections.Counter(), {}  # window -> the trigger names counted
     topics, stored, stamps = _Topics(), 0, []
     for path in log_format.window_files(str(directory)):
         try:
@@ -167,11 +167,12 @@ def _windows(directory, since, until, skipped):
         stored += os.path.getsize(path)
         stamps += [metadata['start'], metadata['end']]
         first = metadata['triggers'][0]['stamp'] if metadata['triggers'] else metadata['start']
-        key = (first, tuple(metadata.get('names') or ()))  # the parts of a split window are one window
-        if key not in seen:
-            seen.add(key)
-            for name in metadata.get('names') or ['window']:
-                by_trigger[name] += 1
+        names = metadata.get('names') or ['window']
+        # the parts of a window (and the files of one split at split_mb, each naming the triggers so far) are one
+        key = log_format.window_key(path) if metadata.get('split') else (first, tuple(names))
+        counted = seen.setdefault(key, set())
+        by_trigger.update(name for name in names if name not in counted)
+        counted.update(names)
         if summary is not None:
             for topic, (first_stamp, last_stamp) in summary.topic_spans.items():
                 topics.count[topic] += summary.counts[topic]
