@@ -162,14 +162,14 @@ def merged_metadata(metadatas, paths):
     """The metadata of a window written as several files (``paths``, as ``window_sets`` orders them, and their
     ``metadatas``): that of the last file of its first group (its own file, or its last split: it names every
     trigger), with ``files``, the messages (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the
-    summed ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own) for a split window, and a
-    summary (``SUMMARY_KEYS``) when every file has one."""
+    summed ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own written) for a split
+    window, and a summary (``SUMMARY_KEYS``) when every file has one."""
     first = _file_order(paths[0])[:2]
     own = [meta for meta, path in zip(metadatas, paths) if _file_order(path)[:2] == first]
     result = dict(own[-1], files=list(paths))
     result.pop('split', None)
-    if any(split_number(path) for path in paths):
-        result['splits'] = len(own)
+    if any(split_number(path) for path in paths):  # the files written (older ones may be gone: max_disk_mb)
+        result['splits'] = own[-1].get('splits', len(own))
     counts, types = collections.Counter(), {}
     for meta in metadatas:
         counts.update(meta.get('counts') or {})
