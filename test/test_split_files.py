@@ -143,8 +143,8 @@ def test_a_split_window_with_a_route_is_one_window_to_info_cat_and_stats(tmp_pat
     assert metadata['counts'] == {CAMERA: 50, ODOM: 25} and metadata['splits'] == 3
     assert [r.stamp for r in records] == sorted(r.stamp for r in records)
     assert [r.raw for r in records if r.topic == CAMERA] == [r.raw for k in range(5) for r in frames(k)]
-    assert [r.msg.pose.pose.position.x for r in records if r.topic == ODOM] == [k + i / 5.0 for k in range(5)
-                                                                               for i in range(5)]
+    positions = [r.msg.pose.pose.position.x for r in records if r.topic == ODOM]
+    assert positions == [k + i / 5.0 for k in range(5) for i in range(5)]
     text = io.StringIO()
     with contextlib.redirect_stdout(text):
         assert cli.main(['info', directory, '--json']) == 0
