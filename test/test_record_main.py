@@ -34,6 +34,23 @@ def test_rosbag_record_flags_map_onto_the_node_parameters(tmp_path):
     assert params['intake_max_mb'] == record_main.UNLIMITED_MB and params['model'] == str(model)
 
 
+def test_split_size_is_rosbags_mb_and_splits_smart_windows(tmp_path):
+    model = tmp_path / 'model.json'
+    model.write_text('{}')
+    module, params, _, stop, _ = parse(['/odom', '/camera/image_raw', '--split', '--size', '100', '--model',
+                                        str(model)])
+    assert module == 'smart_node' and stop == {} and 'rotate' not in params and 'context_rotate' not in params
+    assert params['split_mb'] == pytest.approx(100 * 2 ** 20 / 1e6)  # rosbag record's MB: 1048576 bytes
+    for size, megabytes in (('1G', 2 ** 30 / 1e6), ('500MB', 500.0), ('2.5', 2.5 * 2 ** 20 / 1e6)):
+        assert record_main.parse_split_size(size) == pytest.approx(megabytes)
+    _, params, _, _, _ = parse(['/odom', '--split', '--size', '64', '--duration', '10m', '--context', 'odom:1',
+                                '--model', str(model)])
+    assert params['split_mb'] == pytest.approx(64 * 2 ** 20 / 1e6) and params['context_rotate'] == 600.0
+    from cc_log.core import options  # the node reads it as its own option
+    assert options.get('split_mb').parse(params['split_mb']) == pytest.approx(params['split_mb'])
+    assert 'split_mb' in [option.name for option in options.for_node('smart')]
+
+
 def test_without_a_model_it_collects_and_says_why(tmp_path):
     module, params, note, stop, publish = parse(['-e', '/scan.*', '/imu/.*', '-o', 'out/', '--duration', '20',
                                                  '--model', str(tmp_path / 'none.json'), '--context',
@@ -53,8 +70,11 @@ def test_without_a_model_it_collects_and_says_why(tmp_path):
     (['/odom', '-O', 'run.bag'], '-O: cc_log writes one file per window'),
     (['/odom', '-o', '/data/run'], '-o: cc_log names its files cc_log_<UTC>_<reason>, not PREFIX_<date>.bag: '
                                    'give a directory with its trailing / (-o /data/)'),
-    (['/odom', '--split', '--size', '20'], '--size: cc_log cannot split by bytes on disk'),
-    (['/odom', '--split', '--duration', '5', '--mode', 'smart'], '--split: smart mode writes one file per'),
+    (['/odom', '--split', '--size', '20'], '--size: collect mode rotates its files with --split --duration'),
+    (['/odom', '--size', '20', '--mode', 'smart'], '--size: without --split rosbag stops at SIZE'),
+    (['/odom', '--split', '--size', '0', '--mode', 'smart'], '--size: 0 must be a size > 0'),
+    (['/odom', '--split', '--size', 'big', '--mode', 'smart'], '--size: '),
+    (['/odom', '--split', '--duration', '5', '--mode', 'smart'], '--split --duration: smart mode writes one file per'),
     (['/odom', '--tcpnodelay'], '--tcpnodelay: not supported'),
     (['/odom', '--udp'], '--udp: not supported'),
     (['/odom', '--chunksize', '768'], '--chunksize: not supported'),

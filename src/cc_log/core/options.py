@@ -249,6 +249,9 @@ OPTIONS = (
             'windows wait in memory (0: off)', BOTH),
     _option('max_buffer_mb', 'limits.max_buffer_mb', SIZE, DEFAULT_MAX_BUFFER_MB, 'memory budget of every '
             'buffered message and the writer queue (0: none)', BOTH, ('replay',)),
+    _option('split_mb', 'limits.split_mb', SIZE, 0.0, "a window's file is closed and a new one begun once it holds "
+            "this many MB, at the next part (`.001`, `.002`, ... before the extension; bag-lz4 and any format written "
+            "a part at a time); 0: never split", SMART, ('replay',)),
     _option('rotate', 'collect.rotate', ROTATION, '60s', 'collect mode: a new file after this many messages, '
             'seconds or bytes', COLLECT),
     _option('label', 'collect.label', LABEL, 'nominal', "collect mode: the feature vectors' label directory",

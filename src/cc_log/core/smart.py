@@ -44,7 +44,7 @@ from cc_log.core import msg_codec
 from cc_log.core import raw_message
 from cc_log.core import routes as routes_mod, smart_events, window_prep
 from cc_log.core.raw_json import RawJsonEstimate
-from cc_log.core.smart_events import DELETED, FAILED, OPENED, WRITTEN, Event
+from cc_log.core.smart_events import DELETED, FAILED, OPENED, SPLIT, WRITTEN, Event
 from cc_log.core.stamp_clock import StampClock
 from cc_log.core.trigger_topics import TriggerViews, check_triggers, topic_types
 from cc_log.storage import window_writer
@@ -55,7 +55,7 @@ from cc_log.core.records import Record, records_of
 from cc_log.core.window_buffer import (
     DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, WindowBuffer)
 
-__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
+__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
            'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
            'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
@@ -103,10 +103,11 @@ class SmartLogger(object):
     lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
     half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
-    byte of a part; see ``WindowBuffer``).
-    format_options: keys added to every window's metadata that the format reads (json-xz: ``precision``);
-    routes: ``core.routes.Route``s: topic sets written beside the window's own file in a format of their own;
-    keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those (``window_prep.restrict``).
+    byte of a part; see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
+    reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
+    in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those
+    (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
+    many MB (0: never).
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -118,8 +119,7 @@ class SmartLogger(object):
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
                  close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
-                 keep=None,
-                 stamp_tolerance=DEFAULT_STAMP_TOLERANCE):
+                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -182,7 +182,7 @@ class SmartLogger(object):
         self.writer = window_writer.WindowWriter(
             self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
             max_held_messages=max_held_messages, background=background, give_up_after=give_up_after,
-            close_retry=close_retry, name='cc_log window writer')
+            close_retry=close_retry, split_mb=split_mb, name='cc_log window writer')
         self.guard = self.writer.guard
         self.retry_period = self.writer.retry_period
         self.writer.on_event(self._written)

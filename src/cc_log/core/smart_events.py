@@ -5,28 +5,29 @@ import math
 
 from cc_log.storage import window_writer
 
-__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'from_writer']
+__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer']
 
 OPENED = 'opened'
 WRITTEN = 'written'
 FAILED = 'failed'
 DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (path, bytes)
+SPLIT = 'split'  # a file of a window still being written finished at split_mb (path, bytes)
 
 Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error trigger',
                                defaults=('',))
 Event.__doc__ = """What happened to a logging window.
 
 kind: OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED (writing it failed;
-``error`` says why: once when a disk problem first keeps the window in memory to be retried, and again if it
-is lost for good) or DELETED (``path``, an old window file, was deleted to stay within max_disk_mb; stamp,
-start and end are None). stamp: of the message that triggered (the first trigger of the window for WRITTEN
-and FAILED). trigger: the name of that trigger ('classifier', 'manual', a rule's name...); reason: its
-reason ('classifier' for classifiers, a rule's condition, a manual request's text); score: the lowest
-classifier score of the window's triggers (NaN when none); threshold: of the classifier that fired (else
-of the first classifier; NaN without one). start, end: header stamps (float s) of the first and last
-message (end is None for OPENED). messages, path, bytes: the window's message count (all topics), file and
-size on disk (0, '' and 0 until WRITTEN).
-"""
+``error`` says why: once when a disk problem first keeps the window in memory to be retried, and again if it is
+lost for good), SPLIT (``path``, a file of a window still being written, was finished at split_mb: the window
+goes on in the next; start, end, messages: of the part that began it) or DELETED (``path``, an old window file,
+was deleted to stay within max_disk_mb; stamp, start and end are None). stamp: of the message that triggered
+(the first trigger of the window for WRITTEN and FAILED). trigger: the name of that trigger ('classifier',
+'manual', a rule's name...); reason: its reason ('classifier' for classifiers, a rule's condition, a manual
+request's text); score: the lowest classifier score of the window's triggers (NaN when none); threshold: of the
+classifier that fired (else of the first classifier; NaN without one). start, end: header stamps (float s) of
+the first and last message (end is None for OPENED). messages, path, bytes: the window's message count (all
+topics), file and size on disk (0, '' and 0 until WRITTEN)."""
 
 
 def from_writer(event, threshold_of):
@@ -39,7 +40,7 @@ def from_writer(event, threshold_of):
     scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
     start, end = (window.start, window.end) if len(window) else (None, None)  # (the end of a window in parts)
     first = window.triggers[0].stamp if window.triggers else start
-    kind = WRITTEN if event.kind == window_writer.WRITTEN else FAILED
+    kind = {window_writer.WRITTEN: WRITTEN, window_writer.SPLIT: SPLIT}.get(event.kind, FAILED)
     return Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
                  threshold_of(metadata['trigger']), start, end, len(window), event.path,
                  event.bytes, event.error, metadata['trigger'])

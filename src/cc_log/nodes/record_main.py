@@ -16,7 +16,11 @@ configuration, else collect mode, saying why) in a ``Plan``. Mapping:
 - ``--split --duration D`` (``30``, ``30s``, ``5m``, ``2h``): a new file every D, collect mode's ``~rotate``
   and the context track's ``~context_rotate`` (smart mode without ``--context`` refuses it: its files are
   the anomaly windows); ``--duration D`` without ``--split``: stop after D, as rosbag; ``-l NUM``: stop once
-  each named topic had NUM messages (``Watch``); ``--size`` is refused (cc_log cannot cut by bytes on disk);
+  each named topic had NUM messages (``Watch``);
+- ``--split --size SIZE`` (rosbag's MB of 1048576 bytes: ``100``; or with a unit: ``1G``, ``500MB``): smart mode's
+  ``~split_mb``: a window's file goes on in a new one (``<name>.002.bag``, ...) once it holds SIZE, at the next
+  part of the window; refused in collect mode (its files rotate with ``--split --duration``) and without
+  ``--split`` (rosbag then stops at SIZE; cc_log does not);
 - ``-L/--min-space SIZE`` (``1G``, ``500M``, ``100K``, bytes; rosbag's default 1G): ``~min_free_mb``;
 - ``-b/--buffsize MB`` (0: no limit): ``~intake_max_mb``;
 - ``-p/--publish``: the directory on ``begin_write`` once the node has subscribed (``Watch``);
@@ -42,7 +46,7 @@ from cc_log.core.spans import megabytes, seconds
 from cc_log.nodes import launcher
 from cc_log.storage.directory import LoggingDirectory
 
-__all__ = ['parse', 'node_params', 'main', 'parse_size', 'parse_duration', 'Plan', 'Watch']
+__all__ = ['parse', 'node_params', 'main', 'parse_size', 'parse_split_size', 'parse_duration', 'Plan', 'Watch']
 
 DEFAULT_MODEL = '~/.ros/cc_log/model.json'
 DEFAULT_MIN_SPACE = '1G'
@@ -50,8 +54,6 @@ UNLIMITED_MB = 1e6  # -b 0 (rosbag: an infinite buffer)
 REFUSED = {
     'output_name': 'cc_log writes one file per window or split, named cc_log_<UTC>_<reason>, never one file of '
                    'a given name: give a directory with -o DIRECTORY/',
-    'size': 'cc_log cannot split by bytes on disk (it cuts files before compressing them): use --split '
-            '--duration, or _rotate:=20MB for raw message bytes',
     'tcpnodelay': 'not supported: cc_log subscribes without TCP_NODELAY (its windows are cut by message stamps, '
                   'not arrival times)',
     'udp': 'not supported: cc_log subscribes over TCPROS only',
@@ -66,15 +68,27 @@ DESCRIPTION = "rosbag record's flags in front of the cc_log nodes: smart windows
     "model, else collect mode."
 EPILOG = """example:
   rosrun cc_log record /odom /imu/data -o /data/ --split --duration 10m -L 2G --model model.json
+  rosrun cc_log record -a -o /data/ --split --size 1024 --config robot.yaml   # window files of about 1 GiB
 
-Not supported, refused with one line saying why: -O, --size, --tcpnodelay, --udp, --chunksize,
---max-splits, --repeat-latched. ROS arguments (__name:=, remappings, _param:=value) work as for any node."""
+Not supported, refused with one line saying why: -O, --size without --split, --split --size in collect mode,
+--tcpnodelay, --udp, --chunksize, --max-splits, --repeat-latched.
+ROS arguments (__name:=, remappings, _param:=value) work as for any node."""
 
 
 def parse_size(value, name='min-space'):
     """Bytes of rosbag's ``1G``, ``500M``, ``100K`` (powers of 1024) or a number of bytes, or any size of
     ``spans.megabytes`` (``2GB``, ``1.5GiB``); ValueError('<name>: ...')."""
     return round(megabytes(value, name, bare='b') * 1e6)
+
+
+def parse_split_size(value, name='--size'):
+    """MB (10^6 bytes, ``~split_mb``) of rosbag record's ``--size``: a bare number is MB of 1048576 bytes, as
+    rosbag reads it (``100``: 104.8576), or any size of ``spans.megabytes`` (``1G``, ``500MB``); > 0.
+    ValueError('<name>: ...')."""
+    size = megabytes(value, name, bare='mib')
+    if not size > 0:
+        raise ValueError('%s: %s must be a size > 0' % (name, value))
+    return size
 
 
 def parse_duration(value, name='duration'):
@@ -107,8 +121,10 @@ def _parser():
     parser.add_argument('-O', '--output-name', metavar='NAME', nargs=1, action=_Refuse, help=argparse.SUPPRESS)
     parser.add_argument('--lz4', action='store_true', help='LZ4 (cc_log writes LZ4 bags in any case)')
     parser.add_argument('-j', '--bz2', action='store_true', help='accepted; cc_log writes LZ4')
-    parser.add_argument('--split', action='store_true', help='with --duration: a new file every DURATION')
-    parser.add_argument('--size', nargs=1, action=_Refuse, help=argparse.SUPPRESS)
+    parser.add_argument('--split', action='store_true', help='with --duration: a new file every DURATION; with '
+                        '--size: a window goes on in a new file once its file holds SIZE')
+    parser.add_argument('--size', metavar='SIZE', help='with --split (smart mode): split window files at SIZE MB '
+                        '(1048576 bytes, as rosbag), or 1G, 500MB, ...')
     parser.add_argument('--duration', metavar='DURATION',
                         help='30, 30s, 5m, 2h: with --split, a new file every DURATION; without, stop after it')
     parser.add_argument('-l', '--limit', type=int, metavar='NUM', help='stop once each TOPIC has NUM messages')
@@ -149,14 +165,21 @@ def parse(argv, subscriptions=None):
                                            for topic in found]
     if not (args.all or args.topics or args.config):
         raise ValueError('no topics given: TOPIC ..., -a, -e REGEX ... or --node NODE (or --config)')
-    if args.split and args.duration is None:
-        raise ValueError('--split needs --duration (cc_log does not split by --size)')
+    if args.split and args.duration is None and args.size is None:
+        raise ValueError('--split needs --duration or --size')
+    if args.size is not None and not args.split:
+        raise ValueError('--size: without --split rosbag stops at SIZE; cc_log does not stop at a size: --split '
+                         '--size SIZE splits window files at SIZE')
     if args.model is None and not args.config:  # the default model; a configuration names its own triggers
         args.model = DEFAULT_MODEL
     module, note = launcher.choose(args.mode, args.model, args.config)
-    if args.split and module == 'smart_node' and not args.context:
-        raise ValueError('--split: smart mode writes one file per anomaly window; --split --duration splits '
-                         'collect mode\'s files (--mode collect) or the context track (--context TOPICS)')
+    if args.split and args.duration is not None and module == 'smart_node' and not args.context:
+        raise ValueError('--split --duration: smart mode writes one file per anomaly window; --split --duration '
+                         'splits collect mode\'s files (--mode collect) or the context track (--context TOPICS); '
+                         '--split --size splits window files at a size')
+    if args.size is not None and module == 'collect_node':
+        raise ValueError('--size: collect mode rotates its files with --split --duration (or _rotate:=20MB of raw '
+                         'message bytes); --split --size splits the windows of smart mode (--model, --config)')
     stop = {}
     if args.duration is not None and not args.split:
         stop['seconds'] = parse_duration(args.duration)
@@ -183,9 +206,11 @@ def node_params(args):
             raise ValueError('-o: cc_log names its files cc_log_<UTC>_<reason>, not PREFIX_<date>.bag: give a '
                              'directory with its trailing / (-o %s/)' % directory)
         params['directory'] = os.path.abspath(args.output_prefix)
-    if args.split:
+    if args.split and args.duration is not None:
         params['rotate'] = '%gs' % parse_duration(args.duration)
         params['context_rotate'] = parse_duration(args.duration)
+    if args.split and args.size is not None:
+        params['split_mb'] = parse_split_size(args.size)
     if args.buffsize is not None:
         if args.buffsize < 0:
             raise ValueError('buffsize: %r must be a number of MB >= 0 (0: no limit)' % args.buffsize)

@@ -159,6 +159,10 @@ class SmartNode(object):
         if event.kind == smart.DELETED:
             rospy.logwarn('window file deleted (~max_disk_mb): %s', event.path)
             return
+        if event.kind == smart.SPLIT:
+            rospy.loginfo('window file closed at ~split_mb: %s (%d bytes); the window goes on in the next',
+                          event.path, event.bytes)
+            return
         kind = {smart.OPENED: self._event_class.OPENED, smart.WRITTEN: self._event_class.WRITTEN,
                 smart.FAILED: self._event_class.FAILED}[event.kind]
         msg = self._event_class(event=kind, trigger=event.trigger, reason=event.reason, score=event.score,

@@ -151,9 +151,11 @@ def _windows(directory, since, until, skipped):
     """Windows by trigger, per-topic figures (every message of a window), bytes, first/last stamps. A window's
     figures come from its metadata's summary (``window_info.summary_of``: its messages are not read) when it
     holds one, else from its records."""
-    by_trigger, seen = collections.Counter(), set()
+    by_trigger, seen = collections.Counter(), {}  # window -> the trigger names counted
     topics, stored, stamps = _Topics(), 0, []
-    for path in log_format.window_files(str(directory)):
+    files = log_format.window_files(str(directory))
+    grouped = dict((path, tuple(group)) for group in log_format.window_sets(files) for path in group)
+    for path in files:
         try:
             metadata = log_format.read_metadata(path)
             summary = window_info.summary_of(metadata)
@@ -167,11 +169,12 @@ def _windows(directory, since, until, skipped):
         stored += os.path.getsize(path)
         stamps += [metadata['start'], metadata['end']]
         first = metadata['triggers'][0]['stamp'] if metadata['triggers'] else metadata['start']
-        key = (first, tuple(metadata.get('names') or ()))  # the parts of a split window are one window
-        if key not in seen:
-            seen.add(key)
-            for name in metadata.get('names') or ['window']:
-                by_trigger[name] += 1
+        names = metadata.get('names') or []
+        group = grouped.get(path, ())  # a window's files (routes, split at split_mb) and the parts of one are one
+        key = group if len(group) > 1 else (first, tuple(names))
+        counted = seen.setdefault(key, set())
+        by_trigger.update(name for name in names if name not in counted)
+        counted.update(names)
         if summary is not None:
             for topic, (first_stamp, last_stamp) in summary.topic_spans.items():
                 topics.count[topic] += summary.counts[topic]
@@ -185,6 +188,9 @@ def _windows(directory, since, until, skipped):
             topics.bytes[record.topic] += _serialized_size(record.msg)
         for topic, times in spans.items():
             topics.seconds[topic] += max(times) - min(times)
+    untriggered = sum(1 for counted in seen.values() if not counted)
+    if untriggered:
+        by_trigger['window'] += untriggered
     return by_trigger, len(seen), topics, stored, stamps
 
 

@@ -10,6 +10,7 @@ named by the UTC time of their first stamp and the first trigger reason, so name
     cc_log_20150521T191138.027Z_classifier.json.xz
     cc_log_20150521T191138.027Z_classifier_part2.json.xz   (second part of a split window)
     cc_log_20150521T191138.027Z_classifier_1.json.xz       (a file of that name existed already)
+    cc_log_20150521T191138.027Z_classifier.002.bag         (the second file of a window split at split_mb)
 
 A file is written as ``<final name>.tmp-<pid>``, flushed and fsynced, moved to a final name that does not
 exist yet (hard link then unlink, so a file is never overwritten even by another process; rename on file
@@ -28,7 +29,7 @@ from cc_log.storage import formats, payload_check
 from cc_log.core import raw_message
 from cc_log.core import safe_files, safe_input
 from cc_log.storage.window_info import (
-    SUMMARY_KEYS, Contents, check_metadata, trigger_name, window_metadata)
+    SUMMARY_KEYS, Contents, check_metadata, merged_summary, summary_of, trigger_name, utc_text, window_metadata)
 
 PREFIX = 'cc_log_'
 CONTEXT_PREFIX = PREFIX + 'context_'  # a context-track file (``context_track``: a plain rosbag, not a window)
@@ -73,6 +74,35 @@ def _extension(path):
     return module.CODEC if module else None
 
 
+#: A window's file number N (1, 2, ...) once it is split at ``split_mb``: ``<base>[+<route>].<N, 3 digits>``.
+#: Base names hold no other ``.<digits>`` at their end (trigger and route names are ``[A-Za-z0-9-]``).
+_SPLIT = re.compile(r'\.([0-9]+)$')
+
+
+def split_suffix(number):
+    """What follows a window's name (and route) in the name of its file ``number`` (1, 2, ...): ``.002``."""
+    return '.%03d' % number
+
+
+def _stem(name):
+    module = formats.by_extension(name)
+    return name[:-len(module.EXTENSION)] if module else name
+
+
+def split_number(path):
+    """The number of a window's file split at ``split_mb`` (``<base>.002.bag``: 2); 0 for a file never split."""
+    match = _SPLIT.search(_stem(os.path.basename(path)))
+    return int(match.group(1)) if match else 0
+
+
+def _file_order(path):
+    """Where a file goes among its window's (``window_sets``): the window's own first, then each route, each
+    of them by split number."""
+    stem = _stem(os.path.basename(path))
+    _, separator, route = stem.partition(routes.SEPARATOR)
+    return (bool(separator), _SPLIT.sub('', route), split_number(path))
+
+
 def window_files(directory):
     """Final window files in ``directory`` (paths, sorted by name, hence by time); ``*.tmp-*`` ignored."""
     try:
@@ -85,16 +115,14 @@ def window_files(directory):
 
 def window_key(path):
     """What the files of one window share: the path without its format's extension, up to a route's name
-    (``<window>+<route>.<ext>``, ``core.routes``)."""
+    (``<window>+<route>.<ext>``, ``core.routes``) or its split number (``<window>.002.<ext>``, ``split_number``)."""
     directory, name = os.path.split(path)
-    module = formats.by_extension(name)
-    stem = name[:-len(module.EXTENSION)] if module else name
-    return os.path.join(directory, stem.split(routes.SEPARATOR, 1)[0])
+    return os.path.join(directory, _SPLIT.sub('', _stem(name).split(routes.SEPARATOR, 1)[0]))
 
 
 def window_sets(paths):
     """``[[path, ...]]``: ``paths`` grouped by window (``window_key``) in order of first appearance, each window's
-    other files from its directory added, its own file (no route) first."""
+    other files from its directory added, its own file (no route) first, the files of a split window in order."""
     sets, listed = collections.OrderedDict(), {}
     for path in paths:
         key = window_key(path)
@@ -108,21 +136,70 @@ def window_sets(paths):
         for candidate in [path] + listed[directory].get(key, []):
             if candidate not in files:
                 files.append(candidate)
-    return [sorted(files, key=lambda p: routes.SEPARATOR in os.path.basename(p)) for files in sets.values()]
+    return [sorted(files, key=_file_order) for files in sets.values()]
 
 
 def read_window_set(paths):
-    """``(metadata, records)`` of a window written as several files (``window_sets``): the metadata of its first
-    file with ``files`` (every path) and ``counts``/``topics``/``count`` of them all; records of every file in
-    stamp order. ValueError as ``read_window``."""
+    """``(metadata, records)`` of a window written as several files (``window_sets``: routes, split files): the
+    metadata of them all (``merged_metadata``) with ``counts``/``topics``/``count`` of the records read, and the
+    records: those of the files of the window's own file or of one route in file order (split files follow each
+    other), those of different routes merged in stamp order. ValueError as ``read_window``."""
     metadata, records = read_window(paths[0])
     if len(paths) == 1:
         return metadata, records
-    parts = [records] + [read_window(path)[1] for path in paths[1:]]
-    merged = list(heapq.merge(*parts, key=lambda record: record.stamp))
+    metadatas, groups = [metadata], collections.OrderedDict([(_file_order(paths[0])[:2], records)])
+    for path in paths[1:]:
+        found, more = read_window(path)
+        metadatas.append(found)
+        groups.setdefault(_file_order(path)[:2], []).extend(more)
+    merged = list(heapq.merge(*groups.values(), key=lambda record: record.stamp)) if len(groups) > 1 else records
     counts = collections.Counter(record.topic for record in merged)
-    metadata = dict(metadata, files=list(paths), counts=dict(counts), topics=list(counts), count=len(merged))
+    metadata = dict(merged_metadata(metadatas, paths), counts=dict(counts), topics=list(counts), count=len(merged))
     return metadata, merged
+
+
+def merged_metadata(metadatas, paths):
+    """The metadata of a window written as several files (``paths``, as ``window_sets`` orders them, and their
+    ``metadatas``): that of the last file of its first group (its own file, or its last split: it names every
+    trigger), with ``files``, the messages (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the
+    summed ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own written) for a split
+    window, and a summary (``SUMMARY_KEYS``) when every file has one."""
+    first = _file_order(paths[0])[:2]
+    own = [meta for meta, path in zip(metadatas, paths) if _file_order(path)[:2] == first]
+    result = dict(own[-1], files=list(paths))
+    result.pop('split', None)
+    if any(split_number(path) for path in paths):  # the files written (older ones may be gone: max_disk_mb)
+        result['splits'] = own[-1].get('splits', len(own))
+    counts, types = collections.Counter(), {}
+    for meta in metadatas:
+        counts.update(meta.get('counts') or {})
+        types.update(meta.get('types') or {})
+    result.update(counts=dict(counts), count=sum(counts.values()), topics=list(counts), types=types)
+    for key, pick in (('start', min), ('end', max)):
+        stamps = [meta[key] for meta in metadatas if key in meta]
+        if stamps:
+            result[key] = pick(stamps)
+            result[key + '_utc'] = utc_text(result[key])
+    for key in ('dropped', 'undecodable_topics'):  # per topic
+        summed = collections.Counter()
+        for meta in metadatas:
+            summed.update(meta[key] if isinstance(meta.get(key), dict) else {})
+        result.pop(key, None)
+        if summed:
+            result[key] = dict(summed)
+    for key in ('undecodable', 'lost'):  # in all
+        total = sum(meta[key] for meta in metadatas if isinstance(meta.get(key), int))
+        result.pop(key, None)
+        if total:
+            result[key] = total
+    summaries = [summary_of(meta) for meta in metadatas]
+    for key in SUMMARY_KEYS:
+        result.pop(key, None)
+    if None not in summaries:
+        summary = merged_summary(summaries)
+        result.update(topic_bytes=dict(summary.topic_bytes), raw_json_bytes=summary.raw_json_bytes,
+                      topic_spans=dict((topic, list(span)) for topic, span in summary.topic_spans.items()))
+    return result
 
 
 def kept_leftovers(directory):
@@ -219,38 +296,91 @@ class WindowFile(object):
     it is finished (a crash leaves a leftover that ``recovery`` salvages), then gets its final name as
     ``write_window``'s files do. ``summary``: the window as a whole (triggers, start, end, its length) once a part
     was appended. Metadata counters that every part carries (``SUMMED``) are summed over the parts; ``lost``:
-    messages of parts that could not be written (said in the metadata)."""
+    messages of parts that could not be written (said in the metadata).
+
+    ``split_bytes`` (0: never): before a part, a file holding at least that many bytes is finished and the part
+    begins a new one; the files are then ``<base>.001<ext>``, ``<base>.002<ext>``, ... (``split_suffix``), each
+    a complete file whose metadata says its own messages, ``split`` (its number) and ``window_start``, the last
+    also ``splits`` and ``window_end``; each holds at least ``split_bytes`` (but the last) and at most one part
+    more. ``take_closed()`` gives the ``(path, bytes)`` of the files finished so by ``append``."""
 
     SUMMED = ('dropped', 'undecodable')
 
-    def __init__(self, directory, fmt, suffix='', base=None):
+    def __init__(self, directory, fmt, suffix='', base=None, split_bytes=0):
         self.directory = directory
         self.suffix = suffix  # after the window's base name: a route's file (``core.routes``)
         self.base = base      # the window's base name (None: its first part's)
         self.format = formats.check(fmt)
+        self.split_bytes = int(split_bytes or 0)
         self._module = formats.get(fmt)
-        self._target = self._stream = None
-        self._contents = Contents()
-        self._summed = {}
+        self._target = self._stream = self._file = None
+        self._name = None     # base name and suffix of every file of the window (fixed by its first part)
+        self._chosen = None   # the first free name of a split window's files (``_final_names``)
+        self._split = False   # a file was finished at split_bytes: every file is named as a split
+        self.number = 1       # of the file being written
+        self._closed = []     # (path, bytes) of the files finished before the window's end (``take_closed``)
+        self._contents = Contents()  # the whole window
+        self._in_file = Contents()   # the records of the file being written
+        self._summed = {}     # of the parts in the file being written
         self.triggers = []
         self.metadata = None  # of the last part
-        self.lost = 0
+        self.lost = 0         # messages of parts of the file being written that could not be written
 
     def append(self, window, metadata=None):
         """Write the records of the next part (OSError, ValueError: nothing of it was written; try again)."""
+        if self._stream is not None and self.split_bytes and window.records and self._in_file.count \
+                and os.fstat(self._file.fileno()).st_size >= self.split_bytes:
+            self._close_split()
         if self._stream is None:
-            ensure_directory(self.directory)
-            base, extension = (self.base or base_name(window, part=0)) + self.suffix, self._module.EXTENSION
-            target = safe_files.AtomicFile(os.path.join(self.directory, base + extension),
-                                           names=final_names(self.directory, base, extension), keep=True)
-            stream = target.__enter__()
-            self._target, self._stream = target, self._module.WindowStream(stream)
+            self._open(window)
         if window.records:
-            first = self._contents.count == 0
+            first = self._in_file.count == 0
             self._stream.append(window.records, self._metadata(window, metadata) if first else None)
             self._contents.add(window.records)
+            self._in_file.add(window.records)
         self._sum(metadata)
         self.triggers, self.metadata = list(window.triggers), metadata
+
+    def _open(self, window):
+        ensure_directory(self.directory)
+        if self._name is None:
+            self._name = (self.base or base_name(window, part=0)) + self.suffix
+        extension = self._module.EXTENSION
+        path = self._name + (split_suffix(self.number) if self.number > 1 else '') + extension
+        target = safe_files.AtomicFile(os.path.join(self.directory, path), names=self._final_names(extension),
+                                       keep=True)
+        self._file = target.__enter__()
+        self._target, self._stream = target, self._module.WindowStream(self._file)
+        self._in_file, self._summed, self.lost = Contents(), {}, 0
+
+    def _final_names(self, extension):
+        """The names the file being written may take when it is finished (read then: a window's first file is
+        named as a split once a second one began). A split window's files share the first free name
+        (``<base>``, ``<base>_1``, ...: ``final_names``) that its first file took; a name another window's files
+        have, split or not, is not taken."""
+        number, directory, split = self.number, self.directory, self._split
+        if self._chosen is not None:
+            yield from final_names(directory, self._chosen + split_suffix(number), extension)
+            return
+        for candidate in final_names(directory, self._name, ''):
+            if os.path.lexists(candidate + (extension if split else split_suffix(1) + extension)):
+                continue  # another window of that name, split or not: its files would be taken for this one's
+            self._chosen = os.path.basename(candidate)
+            yield candidate + (split_suffix(number) if split else '') + extension
+
+    def _close_split(self):
+        """Finish the file being written (its number said) before the next part begins a new one."""
+        self._split = True
+        try:
+            self._closed.append(self._close(self.triggers, self.metadata, {'split': self.number}))
+        finally:
+            if self._target is None:  # finished, or left for recovery: the next part begins the next file
+                self.number += 1
+
+    def take_closed(self):
+        """``[(path, bytes)]`` of the files finished at ``split_bytes`` since the last call."""
+        closed, self._closed = self._closed, []
+        return closed
 
     def lose(self, window, metadata=None):
         """A part that could not be written: counted in the file's metadata."""
@@ -261,11 +391,21 @@ class WindowFile(object):
     def finish(self, window, metadata=None):
         """Append the last part, write the metadata, close the file and give it its final name: (path, bytes)."""
         self.append(window, metadata)
-        if not self._contents.count:
+        if not self._in_file.count:
             self.discard()
             raise ValueError('window: has no records')
-        self._stream.finish(self._metadata(window, metadata))
-        target, self._target = self._target, None
+        split = {}
+        if self.number > 1:
+            split = {'split': self.number, 'splits': self.number, 'window_end': float(self._contents.end)}
+        return self._close(window.triggers, metadata, split)
+
+    def _close(self, triggers, metadata, split):
+        """Write the final metadata of the file being written (``split``: its keys of a split window), close it
+        and give it its final name: (path, bytes)."""
+        if split:
+            split['window_start'] = float(self._contents.start)
+        self._stream.finish(dict(self._file_metadata(triggers, metadata), **split))
+        target, self._target, self._stream = self._target, None, None
         try:
             target.__exit__(None, None, None)
         except OSError as error:
@@ -276,13 +416,13 @@ class WindowFile(object):
     def abandon(self):
         """Stop writing; the unfinished file stays under its temporary name, a leftover for ``recovery``."""
         if self._target is not None:
-            target, self._target = self._target, None
+            target, self._target, self._stream = self._target, None, None
             target.abandon()
 
     def discard(self):
         """Remove the unfinished file (nothing of it is kept)."""
         if self._target is not None:
-            target, self._target = self._target, None
+            target, self._target, self._stream = self._target, None, None
             target.__exit__(ValueError, ValueError('discarded'), None)
 
     @property
@@ -296,12 +436,18 @@ class WindowFile(object):
                 self._summed.setdefault(key, {})[topic] = self._summed.get(key, {}).get(topic, 0) + count
 
     def _metadata(self, window, metadata):
-        contents = self._contents
-        if not contents.count:  # the first part: what the provisional metadata says (no summary: the final says it)
-            contents = Contents()
-            contents.no_summary()
-            contents.add(window.records)
+        """The provisional metadata of a file, written with its first part (no summary: the final says it)."""
+        contents = Contents()
+        contents.no_summary()
+        contents.add(window.records)
         meta = contents.metadata(window.triggers, 0, self.format, metadata)
+        if self.number > 1:
+            meta.update(split=self.number, window_start=float(self._contents.start))
+        return meta
+
+    def _file_metadata(self, triggers, metadata):
+        """The final metadata of the file being written: its records, the window's triggers so far."""
+        meta = self._in_file.metadata(triggers, 0, self.format, metadata)
         meta.update(self._summed)
         if self.lost:
             meta['lost'] = self.lost

@@ -75,8 +75,9 @@ class UploadHook(object):
         return bool(self.command)
 
     def on_event(self, event):
-        """A WindowWriter event: run the command for each window or context file written."""
-        if event.kind == window_writer.WRITTEN and event.job is not None and event.path and \
+        """A WindowWriter event: run the command for each window or context file written (a window split at
+        split_mb: each of its files)."""
+        if event.kind in (window_writer.WRITTEN, window_writer.SPLIT) and event.job is not None and event.path and \
                 event.job.what in (window_writer.WINDOW, window_writer.CONTEXT):
             self.run(event.path)
 

@@ -195,6 +195,10 @@ def _is_score(value):
 _METADATA_TYPES = (  # key, test, what it must be (keys a reader uses; each may be absent)
     ('count', lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, 'a count'),
     ('part', lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0, 'a count'),
+    ('split', _is_count, 'a count'),
+    ('splits', _is_count, 'a count'),
+    ('window_start', _is_number, 'a number'),
+    ('window_end', _is_number, 'a number'),
     ('start', _is_number, 'a number'),
     ('end', _is_number, 'a number'),
     ('threshold', lambda v: v is None or _is_number(v), 'a number'),
@@ -253,11 +257,18 @@ def summary_of(metadata):
 
 
 def merged_summary(summaries):
-    """One ``WindowSummary`` of the files of one window (its own and its routes')."""
+    """One ``WindowSummary`` of the files of one window (its own and its routes', its split files): messages and
+    bytes per topic summed, spans from the first first stamp to the last last one."""
     if len(summaries) == 1:
         return summaries[0]
-    fields = [collections.OrderedDict() for _ in range(4)]
+    counts, types, topic_bytes, spans = (collections.OrderedDict() for _ in range(4))
     for summary in summaries:
-        for merged, part in zip(fields, summary[:4]):
-            merged.update(part)
-    return WindowSummary(*fields, raw_json_bytes=sum(summary.raw_json_bytes for summary in summaries))
+        types.update(summary.types)
+        for topic, count in summary.counts.items():
+            counts[topic] = counts.get(topic, 0) + count
+            topic_bytes[topic] = topic_bytes.get(topic, 0) + summary.topic_bytes[topic]
+            first, last = summary.topic_spans[topic]
+            old = spans.get(topic, (first, last))
+            spans[topic] = (min(old[0], first), max(old[1], last))
+    return WindowSummary(counts, types, topic_bytes, spans,
+                         raw_json_bytes=sum(summary.raw_json_bytes for summary in summaries))

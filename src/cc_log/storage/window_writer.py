@@ -15,9 +15,14 @@ writes them in order, on a background thread (``background=True``) or in the cal
 - ``give_up_after`` (offline commands): a job still failing that many seconds after its first failure is
   lost instead of held. ``close`` writes what is queued, then retries held jobs for up to ``close_retry``
   seconds; what is still unwritten then is lost.
+- ``split_mb`` (0: off): a window written a part at a time (a format with a ``WindowStream``) goes on in a new
+  file at the first part after its file reached that size (``log_format.WindowFile``), as ``rosbag record
+  --split --size`` does; each file finished so before the window's end is a SPLIT event and counts against the
+  quota as a window file does. A window written at once (json-xz, a window never handed on in parts) is one file.
 - every outcome is an event ``WriterEvent(kind, job, path, bytes, error, kept)``: WRITTEN, FAILED (``kept``
-  True: held and retried, said once per job; False: lost for good, always said) and DELETED (a window file
-  deleted by the quota: ``path``, ``bytes``); and a counter in ``stats()``.
+  True: held and retried, said once per job; False: lost for good, always said), SPLIT (a file of a window
+  finished at ``split_mb``: ``path``, ``bytes``; the job of the part that began the next file) and DELETED (a
+  window file deleted by the quota: ``path``, ``bytes``); and a counter in ``stats()``.
 
 Pure: no rospy.
 """
@@ -30,14 +35,15 @@ from cc_log.storage import disk_guard
 from cc_log.storage import log_format
 from cc_log.core import routes
 from cc_log.core.records import LogWindow
-from cc_log.core.spans import seconds
+from cc_log.core.spans import megabytes, seconds
 
-__all__ = ['WindowWriter', 'Job', 'WriterEvent', 'WRITTEN', 'FAILED', 'DELETED', 'DEFAULT_RETRY_PERIOD',
+__all__ = ['WindowWriter', 'Job', 'WriterEvent', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
 
 WRITTEN = 'written'
 FAILED = 'failed'
 DELETED = 'deleted'
+SPLIT = 'split'  # a file of a window finished at split_mb, the window going on in the next
 WINDOW = 'window'  # Job.what of a window file
 CONTEXT = 'context'  # Job.what of a closed context-track file (counted in the quota like a window)
 ROUTE = 'route'  # Job.what of a route's file of a window (core.routes): the window is counted once, by its own
@@ -99,7 +105,8 @@ class WindowWriter(object):
     (0: off); retry_period: seconds between attempts for held jobs; max_held_messages: bound of held
     jobs; background: write on a thread (True) or in the caller's (False: ``submit`` writes, and with
     ``give_up_after`` it waits for a failing job to be written or lost); give_up_after: seconds after which
-    a failing job is lost (None: held until ``close``); close_retry: seconds ``close`` keeps retrying.
+    a failing job is lost (None: held until ``close``); close_retry: seconds ``close`` keeps retrying;
+    split_mb: the size at which a window written a part at a time goes on in a new file (0: never).
 
     Thread-safe: ``submit``, ``stats`` and ``close`` may be called from any thread. Bad values raise
     ``ValueError('<parameter>: ...')``.
@@ -107,13 +114,14 @@ class WindowWriter(object):
 
     def __init__(self, directory, fmt=log_format.Format.JSON_XZ, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES, background=True,
-                 give_up_after=None, close_retry=0.0, name='cc_log window writer'):
+                 give_up_after=None, close_retry=0.0, split_mb=0, name='cc_log window writer'):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
         self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb)
         self.retry_period = seconds(retry_period, 'retry_period', positive=True)
         self.give_up_after = None if give_up_after is None else seconds(give_up_after, 'give_up_after')
         self.close_retry = seconds(close_retry, 'close_retry')
+        self.split_bytes = int(megabytes(split_mb, 'split_mb') * disk_guard.MB)
         self.max_held_messages = int(max_held_messages)
         self._held = collections.deque()  # jobs that failed, oldest first (writer thread only)
         self._held_weight = 0
@@ -184,15 +192,16 @@ class WindowWriter(object):
     def stats(self):
         """Counters (a dict): jobs_queued, messages_queued, bytes_queued (waiting, held included: the memory their
         records take), windows_saved,
-        messages_kept, stored_bytes, written ({what: files}), jobs_lost, messages_lost, write_errors,
-        write_retries, last_error, jobs_held, messages_held, disk_paused, windows_deleted, bytes_deleted,
-        last_deleted, queue_depth."""
+        messages_kept, stored_bytes, written ({what: files}), split_files (finished at split_mb), jobs_lost,
+        messages_lost, write_errors, write_retries, last_error, jobs_held, messages_held, disk_paused,
+        windows_deleted, bytes_deleted, last_deleted, queue_depth."""
         with self._lock:
             result = {key: self._counts[key] for key in (
                 'jobs_queued', 'messages_queued', 'bytes_queued', 'messages_kept', 'stored_bytes', 'jobs_lost',
                 'messages_lost', 'write_errors', 'write_retries', 'jobs_held', 'messages_held', 'windows_deleted')}
             result['written'] = dict(self._written)
             result['windows_saved'] = self._written[WINDOW]
+            result['split_files'] = self._counts['split_files']
             result['last_error'] = self.last_error
             result['last_deleted'] = self.last_deleted
         result['bytes_deleted'] = self.guard.deleted_bytes
@@ -336,11 +345,16 @@ class WindowWriter(object):
             if stream is None:
                 if not window.records:  # a route none of whose topics came yet: no file
                     return None, 0
-                stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix, job.base)
-            if not window.final:
-                stream.append(window, job.metadata)
-                return None, 0
-            path, nbytes = stream.finish(window, job.metadata)
+                stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix, job.base,
+                                                                    self.split_bytes)
+            try:
+                if not window.final:
+                    stream.append(window, job.metadata)
+                    return None, 0
+                path, nbytes = stream.finish(window, job.metadata)
+            finally:
+                for closed in stream.take_closed():
+                    self._split_file(job, *closed)
             del self._streams[key]
             job.whole = stream.summary
             return path, nbytes
@@ -383,6 +397,14 @@ class WindowWriter(object):
         self._emit(WriterEvent(WRITTEN, job, path, nbytes, '', False))
         if job.window is not None or job.what == CONTEXT:
             self._quota(keep=path)
+
+    def _split_file(self, job, path, nbytes):
+        """A file of a window finished at split_mb: counted, said (SPLIT) and within the quota."""
+        with self._lock:
+            self._counts['stored_bytes'] += nbytes
+            self._counts['split_files'] += 1
+        self._emit(WriterEvent(SPLIT, job, path, nbytes, '', False))
+        self._quota(keep=path)
 
     def _make_room(self, job):
         """Lack of space: delete the oldest window files beyond the quota, with room for ``job``; whether any

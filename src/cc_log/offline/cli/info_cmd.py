@@ -47,7 +47,8 @@ def run(args):
     for w in windows:
         say(w['path'])
         if len(w['files']) > 1:
-            say('  routes     %s' % ', '.join(os.path.basename(name) for name in w['files'][1:]))
+            split = ' (split at split_mb: %d files of its own)' % w['splits'] if w['splits'] else ''
+            say('  files      %s%s' % (', '.join(os.path.basename(name) for name in w['files'][1:]), split))
         say('  codec      %s' % w['codec'])
         utc = ', from %s' % w['start_utc'] if w['start_utc'] else ''
         say('  span       %s .. %s  (%.2f s%s)' % (stamp_text(w['start']), stamp_text(w['end']),
@@ -84,7 +85,7 @@ def _counts_of(value):
 
 
 def _summaries(args):
-    """What ``info`` reports about each window of ``args.paths`` (a window with routes: its files as one): from
+    """What ``info`` reports about each window of ``args.paths`` (a window with routes or split: its files as one): from
     its metadata's summaries when they hold one (``window_info.summary_of``) and --full is not given, else from its
     records."""
     from cc_log.storage import log_format, window_info
@@ -99,7 +100,7 @@ def _summaries(args):
                 metadata, records = log_format.read_window_set(files)
                 yield _window_summary(files[0], metadata, records)
             else:
-                metadata = dict(metadatas[0], files=files) if len(files) > 1 else metadatas[0]
+                metadata = log_format.merged_metadata(metadatas, files) if len(files) > 1 else metadatas[0]
                 yield _metadata_summary(files[0], metadata, window_info.merged_summary(summaries))
             meter.update()
 
@@ -162,6 +163,7 @@ def _described(path, metadata, counts, types, topic_bytes, raw, span):
         ('threshold', metadata.get('threshold')),
         ('driving_topic', metadata.get('driving_topic')),
         ('part', metadata.get('part', 0)),
+        ('splits', metadata.get('splits', 0)),  # files of its own, split at split_mb (0: one)
         ('dropped', _counts_of(metadata.get('dropped'))),
         ('pre', metadata.get('pre')),
         ('post', metadata.get('post')),
