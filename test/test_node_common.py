@@ -147,25 +147,30 @@ def test_the_status_has_the_nodes_level_message_values_and_topic_rates():
 
 
 REUSE_PROBE = r'''
-import resource, sys, threading
+import queue, resource, sys, threading
 sys.path[:0] = %r
 if sys.argv[1] == 'reuse':
     from cc_log.nodes import node_common
     assert node_common.reuse_freed_memory()
-def faults_of_a_burst():
-    # As a node's subscriber threads do: buffers of a camera frame's size made on one thread, held a while,
-    # freed on another; the page faults of the last of several such bursts.
-    held = []
-    def receive():
-        held.extend(bytearray(921600) for _ in range(60))
+# As a node does: a subscriber thread receives camera frames, another thread frees them once written; the page
+# faults of receiving the last of four such bursts.
+bursts, freed, faults = queue.Queue(), queue.Queue(), []
+def receive():
     for _ in range(4):
+        freed.get()
         before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-        thread = threading.Thread(target=receive)
-        thread.start()
-        thread.join()
-        del held[:]
-    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
-print(faults_of_a_burst())
+        burst = [bytearray(921600) for _ in range(40)]
+        faults.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+        bursts.put(burst)
+        del burst
+receiver = threading.Thread(target=receive)
+receiver.start()
+freed.put(None)
+for _ in range(4):
+    del bursts.get()[:]
+    freed.put(None)
+receiver.join()
+print(faults[-1])
 '''
 
 
@@ -177,7 +182,7 @@ def test_freed_message_buffers_are_reused_instead_of_mapped_again():
         out = subprocess.run([sys.executable, '-c', REUSE_PROBE % (sys.path,), mode], stdout=subprocess.PIPE,
                              universal_newlines=True, check=True).stdout
         return int(out.split()[-1])
-    pages = 60 * 921600 // 4096  # the burst's buffers in 4 kB pages
+    pages = 40 * 921600 // 4096  # the burst's buffers in 4 kB pages
     default, reused = faults('default'), faults('reuse')
     assert default > pages / 2  # glibc hands the burst back and maps it again: a fault per page
     assert reused < pages / 10
