@@ -250,7 +250,8 @@ def report(r, injections):
         r['robot'], r['setting'], r['rate'], r['train_s'] / 60.0, r['reach']))
     for line in r['lines']:
         print('  ' + line.replace('\n', '\n  '))
-    print('  envelope of the training driving: %s' % ', '.join('%s %.2f' % kv for kv in r['envelope']._asdict().items()))
+    print('  envelope of the training driving: %s' % ', '.join(
+        '%s %.2f' % kv for kv in r['envelope']._asdict().items()))
     rows = []
     total_false = total_hours = 0.0
     for row in r['runs']:
@@ -333,7 +334,7 @@ def main(argv=None):
                   % args.train_minutes,
                   ['data: %s (bench/HELDOUT_SOURCES.md: sources, licences, sha256)' % ', '.join(
                       '%s %s' % (os.path.basename(p), common.sha12(p)) for robot in robots
-                      for p in heldout_data.runs(robot, args.data)[:(args.mrclam_robots if robot == 'mrclam' else None)]),
+                      for p in heldout_data.runs(robot, args.data)[:args.mrclam_robots if robot == 'mrclam' else None]),
                    'seeds %s, injection %s, settings %s' % (seeds, injections, args.settings)])
     for robot in robots:
         runs = load_runs(robot, args.data, args.mrclam_robots)
