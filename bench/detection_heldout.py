@@ -1,0 +1,353 @@
+#!/usr/bin/env python3
+"""Detection on held-out public robots, as a user runs it: cclog collect / learn on the first 20 minutes of a
+robot's driving, cclog replay of the rest with and without the simulator's anomalies injected; drift at a place
+change, with and without online learning.
+
+    /usr/bin/python3 bench/heldout_data.py                       # the bags (once; bench/HELDOUT_SOURCES.md)
+    nice -n 10 /usr/bin/python3 bench/detection_heldout.py       # every robot, both settings, seeds 0 1 2
+    /usr/bin/python3 bench/detection_heldout.py --robots tuc --settings 2s --seeds 0 --no-drift   # quick
+
+Robots (bench/heldout_data.py): ``tuc`` (indoor robot, 10 Hz: corridor 37.8 min, then a lecture hall 23.1 min),
+``smartloc`` (a car in city traffic, 5 Hz: Berlin 24.6 min, then Frankfurt 31 min), ``mrclam`` (iRobot Create,
+~66 Hz: robot 1's 24.8 min, then robots 2.. of the same kind, ``--mrclam-robots``).
+
+Per robot: its runs in order; the first ``--train-minutes`` (20) of driving, summed over runs, are cut into bags
+and go through ``cclog collect`` (one directory per piece, the default stride) and ``cclog learn`` (its defaults:
+trim 1 %); the rest of every run is replayed by ``cclog replay --json`` (classify every 50 ms, retrigger event):
+
+- without injection: every window is false (false windows per hour, per replayed run);
+- with ``sim.inject_anomalies`` (all six types, one each, per seed, into each replayed run; ``--injection``:
+  ``robot`` = at the run's robot's own scale, ``sim.nominal_envelope`` of the training driving, or ``bwibot`` =
+  the simulator's magnitudes): caught = a classifier trigger (read from the window files) in [onset, end +
+  feature window]; latency = first such trigger - onset (target <= 0.5 s); span kept = the share of [onset,
+  end] inside saved windows (target >= 95 %); false windows = windows with no trigger near an event; kept /
+  ideal = odometry messages in saved windows / those within [onset - 2 s, end + 2 s] of an event (target <=
+  1.5x).
+
+Settings (``--settings``): ``defaults`` = exactly the CLI's (feature window 500 messages, pre/post 100 messages);
+``2s`` = docs/DETECTION.md's recommendation for ~10 Hz robots (window 2 s, pre/post 2 s, the ideal's margin).
+
+Drift (``--no-drift`` skips): the robot's rest, the same place first and then the new place (``DRIFT_FROM``:
+the lecture hall, Frankfurt), replayed as one bag by ``cclog replay`` (its drift monitor: is drift reported
+within 2 min of the switch?) and again with ``learn_online: true`` (a ``--config`` whose classifier learns
+online, the defaults learn_every 2000, guard 10 s): false windows per hour in each 5 min after the switch and
+from 10 min after it on (target <= 2/h). Offline, refits run in a background thread while the replay runs much
+faster than real time, so a refit lands later in message time than it would live.
+"""
+import argparse
+import collections
+import contextlib
+import io
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+import heldout_data  # noqa: E402
+
+from cc_log import sim  # noqa: E402
+from cc_log.offline import cli  # noqa: E402
+from cc_log.storage import log_format  # noqa: E402
+from cc_log.storage.bag import bagio  # noqa: E402
+
+TOPIC = heldout_data.TOPIC
+MARGIN = 2.0            # s each side of an event: issue 31's ideal
+LATENCY = 0.5
+MIN_SPAN_KEPT = 0.95
+SETTINGS = collections.OrderedDict([
+    ('defaults', {}),                                                   # the CLI's own defaults
+    ('2s', {'window': '2s', 'pre': '2s', 'post': '2s'}),              # docs/DETECTION.md, ~10 Hz robots
+])
+DRIFT_FROM = {'tuc': 'tuc_lecture_hall', 'smartloc': 'smartloc_frankfurt_main_tower', 'mrclam': None}
+BLOCK = 300.0           # s: false windows per block after the switch
+
+
+def quiet_cli(argv):
+    """``cclog ARGV`` in this process; (status, stdout text)."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        status = cli.main(argv)
+    if status:
+        raise RuntimeError('cclog %s: exit %s\n%s' % (' '.join(argv), status, out.getvalue()))
+    return out.getvalue()
+
+
+def load_runs(robot, data, mrclam_robots):
+    runs = [(os.path.basename(p)[:-4], list(bagio.read_messages(p, [TOPIC]))) for p in heldout_data.runs(robot, data)]
+    if robot == 'mrclam':
+        runs = runs[:mrclam_robots]
+    return runs
+
+
+def split(runs, seconds):
+    """(training pieces, rest pieces): lists of (run name, records), the first ``seconds`` of driving summed over
+    runs train, the rest of the run that crosses the cut and every later run are replayed."""
+    train, rest, left = [], [], seconds
+    for name, records in runs:
+        duration = records[-1].stamp - records[0].stamp
+        if left <= 0:
+            rest.append((name, records))
+        elif duration <= left:
+            train.append((name, records))
+            left -= duration
+        else:
+            cut = records[0].stamp + left
+            train.append((name, [r for r in records if r.stamp < cut]))
+            rest.append((name, [r for r in records if r.stamp >= cut]))
+            left = 0
+    return train, rest
+
+
+def learn(train, setting, tmp):
+    """``cclog collect`` of every training piece and ``cclog learn`` of them all; (model path, the lines)."""
+    dirs, lines = [], []
+    for k, (name, records) in enumerate(train):
+        bag = os.path.join(tmp, 'train%d.bag' % k)
+        common.write_bag(bag, records)
+        out = os.path.join(tmp, 'vectors%d' % k)
+        argv = ['collect', bag, '--topic', TOPIC, '--out', out]
+        if 'window' in setting:
+            argv += ['--window', setting['window']]
+        lines.append(quiet_cli(argv).strip())
+        if os.path.isdir(os.path.join(out, 'nominal')):
+            dirs.append(out)
+    model = os.path.join(tmp, 'model.json')
+    lines.append(quiet_cli(['learn', '--train'] + dirs + ['--model', model]).strip().splitlines()[0])
+    return model, lines
+
+
+def replay(records, model, setting, tmp, tag, config=None):
+    """``cclog replay --json`` of ``records`` written as a bag; (windows with their trigger stamps, drift)."""
+    bag = os.path.join(tmp, tag + '.bag')
+    common.write_bag(bag, records)
+    out = os.path.join(tmp, tag)
+    argv = ['replay', bag, '--topic', TOPIC, '--model', model, '--out', out, '--json']
+    for key in ('pre', 'post'):
+        if key in setting:
+            argv += ['--' + key, setting[key]]
+    if config:
+        argv += ['--config', config]
+    result = json.loads(quiet_cli(argv))
+    for window in result['windows']:
+        meta, _ = log_format.read_window(window['path'])
+        window['triggers'] = [t['stamp'] for t in meta.get('triggers', [])]
+    shutil.rmtree(out, ignore_errors=True)
+    os.remove(bag)
+    return result['windows'], result['drift']
+
+
+def span_kept(entry, windows):
+    """The share of [start, end] of an event inside saved windows."""
+    length = entry['end'] - entry['start']
+    covered = sum(max(0.0, min(w['end'], entry['end']) - max(w['start'], entry['start'])) for w in windows)
+    return min(1.0, covered / length) if length > 0 else 1.0
+
+
+def rate_of(records):
+    """Messages per second on average (irregular sources: MRCLAM steps 10-40 ms)."""
+    return (len(records) - 1) / (records[-1].stamp - records[0].stamp)
+
+
+def reach_of(setting, rate):
+    """The feature window in seconds (a trigger up to this long after an event's end still belongs to it)."""
+    window = setting.get('window', '500')
+    return float(window[:-1]) if window.endswith('s') else int(window) / rate
+
+
+def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, drift):
+    setting = SETTINGS[setting_name]
+    train, rest = split(runs, train_seconds)
+    started = time.time()
+    model, lines = learn(train, setting, tmp)
+    first = [r for _, records in train for r in records]
+    envelope = sim.nominal_envelope(first, TOPIC)
+    rate = rate_of(first)
+    reach = reach_of(setting, rate)
+    out = {'robot': robot, 'setting': setting_name, 'lines': lines, 'rate': rate, 'reach': reach,
+           'train_s': sum(r[-1].stamp - r[0].stamp for _, r in train), 'runs': [], 'events': [],
+           'envelope': envelope}
+    for name, records in rest:
+        hours = (records[-1].stamp - records[0].stamp) / 3600.0
+        windows, _ = replay(records, model, setting, tmp, 'nominal-' + name)
+        row = {'run': name, 'hours': hours, 'false_nominal': len(windows), 'injected': {}}
+        for injection in injections:
+            scale = dict(scale=envelope, limits=envelope) if injection == 'robot' else {}
+            kept = need = false = 0
+            for seed in seeds:
+                try:
+                    injected, truth = sim.inject_anomalies(records, sim.ANOMALY_TYPES, seed=seed, topic=TOPIC,
+                                                           **scale)
+                except ValueError as error:
+                    row['injected'][injection] = 'not injected: %s' % error
+                    break
+                windows, _ = replay(injected, model, setting, tmp, 'inj-%s-%s-%d' % (name, injection, seed))
+                matches, f = common.match_anomalies(truth, windows, reach)
+                false += f
+                k, n = common.kept_messages(injected, TOPIC, windows, truth, MARGIN, MARGIN)
+                kept, need = kept + k, need + n
+                for m, entry in zip(matches, truth):
+                    out['events'].append(dict(m, run=name, injection=injection, seed=seed,
+                                              span=span_kept(entry, windows)))
+            else:
+                row['injected'][injection] = {'false': false, 'kept': kept, 'need': need, 'hours': hours * len(seeds)}
+        out['runs'].append(row)
+    if drift and DRIFT_FROM.get(robot):
+        out['drift'] = drift_test(robot, rest, model, setting, tmp)
+    out['seconds'] = time.time() - started
+    return out
+
+
+def drift_test(robot, rest, model, setting, tmp):
+    """The rest replayed as one bag, the place change at DRIFT_FROM: drift report and false windows after the
+    switch, without and with online learning."""
+    names = [name for name, _ in rest]
+    switch_run = names.index(DRIFT_FROM[robot])
+    records = [r for _, recs in rest for r in recs]
+    switch = rest[switch_run][1][0].stamp
+    end = records[-1].stamp
+    config = os.path.join(tmp, 'online.yaml')
+    with open(config, 'w') as stream:
+        stream.write('triggers:\n  - {name: classifier, kind: classifier, learn_online: true}\n')
+    result = {'switch_after_s': switch - records[0].stamp, 'after_s': end - switch}
+    for label, cfg in (('plain', None), ('online', config)):
+        local = os.path.join(tmp, 'drift-' + label)
+        os.makedirs(local, exist_ok=True)
+        shutil.copy(model, os.path.join(local, 'model.json'))
+        windows, monitors = replay(records, os.path.join(local, 'model.json'), setting, local, 'drift', cfg)
+        starts = np.array([w['start'] for w in windows])
+        blocks = []
+        t = switch
+        while t < end:
+            blocks.append(int(((starts >= t) & (starts < min(t + BLOCK, end))).sum()))
+            t += BLOCK
+        late = (starts >= switch + 600.0).sum()
+        late_hours = max(end - switch - 600.0, 0.0) / 3600.0
+        before = (starts < switch).sum()
+        monitor = monitors[0] if monitors else {}
+        first = monitor.get('first_drift')
+        result[label] = {
+            'before': int(before), 'before_hours': (switch - records[0].stamp) / 3600.0, 'blocks': blocks,
+            'late': int(late), 'late_rate': late / late_hours if late_hours else float('nan'),
+            'drift': monitor.get('drift'), 'first_drift_after_switch': None if first is None else first - switch,
+            'first_drift_into_replay': None if first is None else first - records[0].stamp,
+            'peak': monitor.get('peak'), 'online': label == 'online' and os.path.exists(
+                os.path.join(local, 'model.online.json'))}
+    return result
+
+
+def pct(a, b):
+    return '%d/%d' % (a, b) if b else '-'
+
+
+def report(r, injections):
+    print('## %s, setting %s: %.1f Hz, trained on %.1f min, feature window %.2f s' % (
+        r['robot'], r['setting'], r['rate'], r['train_s'] / 60.0, r['reach']))
+    for line in r['lines']:
+        print('  ' + line.replace('\n', '\n  '))
+    print('  envelope of the training driving: %s' % ', '.join(
+        '%s %.2f' % kv for kv in r['envelope']._asdict().items()))
+    rows = []
+    total_false = total_hours = 0.0
+    for row in r['runs']:
+        cells = [row['run'], '%.1f' % (row['hours'] * 60), row['false_nominal'],
+                 '%.1f' % (row['false_nominal'] / row['hours'])]
+        total_false += row['false_nominal']
+        total_hours += row['hours']
+        for injection in injections:
+            inj = row['injected'].get(injection)
+            if isinstance(inj, dict):
+                cells += ['%.1f' % (inj['false'] / inj['hours']), '%.2fx' % (inj['kept'] / float(inj['need']))]
+            else:
+                cells += [inj or '-', '-']
+        rows.append(cells)
+    headers = ['replayed run', 'min', 'false windows', 'false/h']
+    for injection in injections:
+        headers += ['false/h injected (%s)' % injection, 'kept/ideal (%s)' % injection]
+    common.table(headers, rows)
+    print('all replayed: %d false windows in %.2f h = %.1f/h (target <= 1/h)' % (
+        total_false, total_hours, total_false / total_hours if total_hours else 0.0))
+    for injection in injections:
+        events = [e for e in r['events'] if e['injection'] == injection]
+        if not events:
+            continue
+        rows = []
+        for kind in sim.ANOMALY_TYPES + ('all',):
+            ev = [e for e in events if kind in ('all', e['type'])]
+            caught = [e for e in ev if e['caught']]
+            delays = [e['delay'] for e in caught]
+            spans = [e['span'] for e in ev]
+            rows.append([kind, pct(len(caught), len(ev)),
+                         sum(1 for d in delays if d <= LATENCY), '%.2f' % np.median(delays) if delays else '-',
+                         '%.2f' % max(delays) if delays else '-', '%.0f%%' % (100 * np.median(spans)),
+                         '%.0f%%' % (100 * min(spans)), pct(sum(1 for s in spans if s >= MIN_SPAN_KEPT), len(ev))])
+        common.table(['type', 'caught', 'within %gs' % LATENCY, 'median latency s', 'worst latency s',
+                      'median span kept', 'least span kept', '>= 95% kept'], rows,
+                     'injection %s (every replayed run, seeds together):' % injection)
+        kept = sum(row['injected'][injection]['kept'] for row in r['runs']
+                   if isinstance(row['injected'].get(injection), dict))
+        need = sum(row['injected'][injection]['need'] for row in r['runs']
+                   if isinstance(row['injected'].get(injection), dict))
+        if need:
+            print('kept/ideal over every injected run (%s): %d/%d = %.2fx (target <= 1.5x)' % (
+                injection, kept, need, kept / float(need)))
+    drift = r.get('drift')
+    if drift:
+        print('drift: place change %.1f min into the replay, %.1f min after it' % (
+            drift['switch_after_s'] / 60.0, drift['after_s'] / 60.0))
+        for label in ('plain', 'online'):
+            d = drift[label]
+            print('  %-6s before the switch %d windows (%.1f/h); drift reported %s; false windows per 5 min after the '
+                  'switch %s; from 10 min after it on %d = %.1f/h (target <= 2/h)%s' % (
+                      label, d['before'], d['before'] / d['before_hours'] if d['before_hours'] else 0.0,
+                      'never' if not d['drift'] else '%.0f s into the replay, %.0f s %s the switch (peak %.0f%%)' % (
+                          d['first_drift_into_replay'], abs(d['first_drift_after_switch']),
+                          'after' if d['first_drift_after_switch'] >= 0 else 'BEFORE', 100 * (d['peak'] or 0)),
+                      d['blocks'], d['late'], d['late_rate'],
+                      '; online model written' if d['online'] else ''))
+    print('(%.0f s)\n' % r['seconds'])
+    sys.stdout.flush()
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--data', default=heldout_data.OUT, help='the bags of heldout_data.py (default %s)'
+                        % heldout_data.OUT)
+    parser.add_argument('--robots', default=','.join(heldout_data.ORDER))
+    parser.add_argument('--settings', default=','.join(SETTINGS))
+    parser.add_argument('--seeds', default='0,1,2')
+    parser.add_argument('--injection', default='robot,bwibot', help='robot, bwibot or both (default both)')
+    parser.add_argument('--train-minutes', type=float, default=20.0)
+    parser.add_argument('--mrclam-robots', type=int, default=2, help='MRCLAM robots replayed (1-5, default 2)')
+    parser.add_argument('--no-drift', action='store_true')
+    args = parser.parse_args(argv)
+    seeds = [int(s) for s in args.seeds.split(',')]
+    injections = args.injection.split(',')
+    robots = args.robots.split(',')
+    started = time.time()
+    common.header('Held-out public robots: cclog collect/learn on the first %g min, replay of the rest'
+                  % args.train_minutes,
+                  ['data: %s (bench/HELDOUT_SOURCES.md: sources, licences, sha256)' % ', '.join(
+                      '%s %s' % (os.path.basename(p), common.sha12(p)) for robot in robots
+                      for p in heldout_data.runs(robot, args.data)[:args.mrclam_robots if robot == 'mrclam' else None]),
+                   'seeds %s, injection %s, settings %s' % (seeds, injections, args.settings)])
+    for robot in robots:
+        runs = load_runs(robot, args.data, args.mrclam_robots)
+        for setting in args.settings.split(','):
+            tmp = tempfile.mkdtemp(prefix='cc_log_heldout_')
+            try:
+                report(evaluate(robot, runs, setting, seeds, injections, tmp, args.train_minutes * 60.0,
+                                not args.no_drift), injections)
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+    print('total %.0f s' % (time.time() - started))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
