@@ -172,7 +172,7 @@ class SmartLogger(object):
         self._stats = _Stats()
         self._raw = msg_codec.RowJsonCounter()
         self._raw_estimate = RawJsonEstimate()  # decodes its samples when stats() asks, not on the message path
-        self._latched = window_prep.Latched()
+        self._latched, self._unsaid = window_prep.Latched(), window_prep.CarriedDrops()
         self._cost = MemoryCost()
         self._callbacks = []
         self._enabled = bool(enabled)
@@ -545,7 +545,7 @@ class SmartLogger(object):
         """Hand completed windows to the writer, each with the latched messages at its start, thinned first when
         the writer's queue, the buffer, the window and room for the next part together pass the memory budget
         (``window_prep.thin``; an idle writer keeps up: the part is already held). What is dropped is counted
-        per topic (``stats()['shed_by_topic']``) and said in the window's metadata."""
+        per topic (``stats()['shed_by_topic']``) and said in the window's metadata (``CarriedDrops``)."""
         for window in windows:
             budget, queued = self._buffer.max_buffer_bytes, self._bytes_queued()
             shed = {}
@@ -553,11 +553,11 @@ class SmartLogger(object):
                 shed = window_prep.thin(window, budget - self._buffer.part_limit - self._buffer.buffered_bytes - queued)
                 with self._stats.lock:
                     self._shed.update(shed)
-            metadata = self._metadata(window)
-            if shed:
-                metadata['dropped'] = shed
             window = window_prep.restrict(self._latched.first_in(window, log_format.streams(self.format)), self.keep,
                                           self.driving_topic)
+            metadata, shed = self._metadata(window), self._unsaid.said(window, shed)  # an emptied part's: the next's
+            if shed:
+                metadata['dropped'] = shed
             if not self.routes:
                 self.writer.submit(window_writer.Job(window, metadata))
                 continue

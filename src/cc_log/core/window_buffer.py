@@ -109,6 +109,19 @@ def budget_bytes(max_buffer_mb, name='max_buffer_mb'):
     return int(number * MB)
 
 
+def _slices(records, limit):
+    """``records`` cut into consecutive lists of at most ``limit`` bytes of cost each (at least one record each)."""
+    piece, cost = [], 0
+    for record in records:
+        if piece and cost + record.cost > limit:
+            yield piece
+            piece, cost = [], 0
+        piece.append(record)
+        cost += record.cost
+    if piece:
+        yield piece
+
+
 class _OpenWindow(object):
     """A window still collecting driving records (open) or waiting to learn whether the next one touches
     it (pending)."""
@@ -385,10 +398,14 @@ class WindowBuffer(object):
             return done
         window = self._open
         if window is not None and self._bytes > self._part_bytes and (window.records or any(self._side.values())):
-            # Written in parts, as max_window splits: what the window holds now, with every side record held.
+            # Written in parts, as max_window splits: what the window holds now, with every side record held,
+            # in parts of at most part_limit (a pre-buffer larger than that, at a window's start, goes on as several
+            # parts: the writer frees each one as it is written, so the next parts of the window fit the budget).
             window.part = max(window.part, 1)
-            done.append(self._emit(window, everything=True, final=False))
-            window.part += 1
+            whole = self._emit(window, everything=True, final=False)
+            for records in _slices(whole.records, self._part_bytes):
+                done.append(LogWindow(records, whole.triggers, window.part, False, window.key))
+                window.part += 1
             window.records = []
             window.continued = True
         if self._over_budget() and self._pending is not None:

@@ -6,7 +6,7 @@ import collections
 
 from cc_log.core import raw_message
 
-__all__ = ['thin', 'restrict', 'Latched', 'any_latched', 'HEAVY_BYTES', 'LATCHED_KEPT']
+__all__ = ['thin', 'CarriedDrops', 'restrict', 'Latched', 'any_latched', 'HEAVY_BYTES', 'LATCHED_KEPT']
 
 HEAVY_BYTES = 64 * 1024  # a message this large (an image, a cloud, a scan) may be dropped when the writer falls behind
 LATCHED_KEPT = 4        # messages remembered per latched topic (the newest before a window's start is written)
@@ -37,6 +37,23 @@ def thin(window, room):
         kept.append(record)
     window.records = kept
     return dict(shed)
+
+
+class CarriedDrops(object):
+    """What ``thin`` dropped from a part it left empty (no file is written for an empty part) goes in the metadata
+    of the window's next part, so that every drop is said in a file: ``said(window, shed)`` -> the counts to write
+    with ``window`` (``{}`` for an empty part that is not the window's last)."""
+
+    def __init__(self):
+        self._held = {}  # window key -> Counter of drops not said yet
+
+    def said(self, window, shed):
+        counts = self._held.pop(window.key, collections.Counter())
+        counts.update(shed)
+        if not window.records and not window.final:
+            self._held[window.key] = counts
+            return {}
+        return dict(counts)
 
 
 def restrict(window, keep, driving_topic):
