@@ -127,6 +127,24 @@ def test_a_duration_window_keeps_side_records_up_to_its_edges_not_only_between_d
     assert [r.msg for r in windows[0].records if r.topic == '/side'] == ['first', 'middle', 'last']
 
 
+def test_a_part_written_for_the_budget_takes_no_side_record_beyond_the_window():
+    # A window in parts (a small budget) ends at 1.45 s; a side record stamped 1.47 s that came before the driving
+    # record of 1.5 s is not the window's, whichever part goes out while it is held.
+    buffer = WindowBuffer(pre='0.45s', post='0.45s', max_buffer_mb=300 / 1e6)  # a part at every message
+    windows = []
+    for i in range(30):
+        stamp = round(0.1 * i, 1)
+        if stamp == 1.5:
+            windows += buffer.add_side(Record(1.47, '/side', 'after', 100))
+        windows += buffer.add_side(Record(stamp + 0.01, '/side', stamp, 100))
+        windows += buffer.add(Record(stamp, '/odom', i, 100))
+        if i == 10:
+            windows += buffer.trigger('test')
+    windows += buffer.flush()
+    side = [r.msg for w in windows for r in w.records if r.topic == '/side']
+    assert 'after' not in side and side[-1] == 1.4 and len(windows) > 2  # (the budget trimmed the pre-buffer)
+
+
 def test_long_anomaly_is_split_at_max_window_without_loss():
     windows = run(WindowBuffer(pre=2, post=2, max_window=5), [float(i) for i in range(30)], set(range(5, 20)))
     assert [w.part for w in windows] == [1, 2, 3, 4]

@@ -471,9 +471,11 @@ class WindowBuffer(object):
         first and last trigger."""
         records = window.records if records is None else records
         start = float('-inf') if window.continued else window.since
-        end = float('inf') if everything else records[-1].stamp
-        if final and window.until is not None:
+        end = records[-1].stamp if records else float('-inf')
+        if window.until is not None and (final or everything):
             end = max(end, window.until)  # its span ends at the post of its last trigger, not at a driving record
+        elif everything:
+            end = float('inf')
         cost = sum(record.cost for record in records)
         side = []
         triggers = window.triggers
