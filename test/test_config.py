@@ -235,7 +235,7 @@ def test_the_example_configuration_is_valid(tmp_path):
                                                  'bumper', 'scan_dead']
     specs = cfg.feature_specs()
     assert [(name, c.feature_set, c.window, topics) for name, c, topics in specs] == [
-        ('motion', 'motion', '500', ['/odom']), ('stuck', 'command', '2s', ['/odom', '/cmd_vel']),
+        ('motion', 'motion', config.DEFAULT_WINDOW, ['/odom']), ('stuck', 'command', '2s', ['/odom', '/cmd_vel']),
         ('shock', 'imu', '1s', ['/imu/data'])]
     rules = Config.from_dict({'triggers': [dict((k, v) for k, v in t.items() if k != 'index')
                                            for t in cfg.triggers if t['kind'] == 'rule']})

@@ -237,7 +237,7 @@ def test_feature_config_round_trip_and_validation():
     config = FeatureConfig('motion', '5000ms', 'nav_msgs/Odometry')
     assert config.window == '5s' and config.span == Span.duration(5.0)
     assert FeatureConfig.from_dict(config.to_dict()) == config
-    assert FeatureConfig() == FeatureConfig('motion', '500', 'nav_msgs/Odometry')
+    assert FeatureConfig() == FeatureConfig('motion', '2s', 'nav_msgs/Odometry')  # a duration: any rate
     for bad in ({'feature_set': 'motion'}, {'feature_set': 'fancy', 'window': '5s', 'topic_type': 'nav_msgs/Odometry'},
                 {'feature_set': 'motion', 'window': 'soon', 'topic_type': 'nav_msgs/Odometry'},
                 {'feature_set': 'motion', 'window': '0', 'topic_type': 'nav_msgs/Odometry'},

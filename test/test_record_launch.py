@@ -61,4 +61,4 @@ def test_smart_launch_has_the_context_upload_and_quota_args():
 
 
 def test_collect_launch_window_is_a_duration():
-    assert params(launch='collect.launch')['/collect_logger/window'] == '5s'
+    assert params(launch='collect.launch')['/collect_logger/window'] == '2s'

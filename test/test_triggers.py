@@ -421,6 +421,8 @@ def test_a_trigger_pre_longer_than_the_logger_holds_is_refused_with_one_line():
         'before a trigger: raise windows.pre (and give shorter triggers their own pre)')
     Config.from_dict({'windows': {'pre': '10s'}, 'triggers': [entry]})
     Config.from_dict({'windows': {'pre': '100'}, 'triggers': [entry]})  # messages and seconds: not comparable
+    assert str(Config.from_dict({'triggers': [entry]}).pre) == '10s'  # not given: the longest a trigger asks for
+    assert str(Config.from_dict({'triggers': [dict(entry, pre='1s')]}).pre) == '2s'  # ... or the default
 
 
 # -- the periodic trigger -----------------------------------------------------------------------------------

@@ -167,7 +167,11 @@ class Config(object):
                 raise ValueError('triggers[%d]: name %s is used twice' % (index, brief(checked['name'])))
             names.add(checked['name'])
             self.triggers.append(checked)
-            _check_pre(checked, index, self.pre)
+        if values['pre'] is None:  # not given: the default, or the longest pre a trigger asks for
+            self.pre = max([self.pre] + [_pre_of(entry) for entry in self.triggers if _pre_of(entry)],
+                           key=lambda span: (span.is_duration == self.pre.is_duration, span.seconds or span.count))
+        for index, entry in enumerate(self.triggers):
+            _check_pre(entry, index, self.pre)
 
     # -- what the modes build from it -----------------------------------------------------------------
 
@@ -243,13 +247,18 @@ class Config(object):
         return {'precision': self.precision} if self.precision else {}
 
 
+def _pre_of(entry):
+    """A trigger's own ``pre`` (a Span), or None."""
+    pre = entry.get('pre')
+    return None if pre in (None, '') else Span.parse(pre, 'triggers[%d] (%s): pre' % (entry['index'], entry['name']))
+
+
 def _check_pre(entry, index, held):
     """A trigger's own ``pre`` may not be longer than ``windows.pre`` (``held``): the logger holds no more."""
-    pre = entry.get('pre')
-    if pre in (None, ''):
+    span = _pre_of(entry)
+    if span is None:
         return
     where = 'triggers[%d] (%s): pre' % (index, entry['name'])
-    span = Span.parse(pre, where)
     if span.is_duration == held.is_duration and (span.seconds or span.count) > (held.seconds or held.count):
         raise ValueError('%s: %s is longer than windows.pre %s, the most the logger holds before a trigger: raise '
                          'windows.pre (and give shorter triggers their own pre)' % (where, span, held))

@@ -239,7 +239,8 @@ OPTIONS = (
             "e.g. `[{name: numeric, topics: [odom, imu/data], format: json-xz}]` (`core.routes`)", SMART),
     _option('precision', 'json_xz.precision', PRECISION, {}, 'json-xz only, opt-in lossy: round fields to a step',
             BOTH, ('replay',)),
-    _option('pre', 'windows.pre', SPAN, str(DEFAULT_PRE), 'kept before an anomaly', SMART, ('replay',)),
+    _option('pre', 'windows.pre', SPAN, str(DEFAULT_PRE), 'kept before an anomaly (not given: the default, or the '
+            'longest `pre` of a trigger in the configuration)', SMART, ('replay',)),
     _option('post', 'windows.post', SPAN, str(DEFAULT_POST), 'kept after the last anomaly', SMART, ('replay',)),
     _option('max_window', 'windows.max', SPAN, str(DEFAULT_MAX_WINDOW), 'longer windows are handed to the writer '
             'in parts (one file)', SMART),
@@ -262,7 +263,8 @@ OPTIONS = (
     _option('config', '', TEXT, '', 'the configuration file (these keys; parameters override it)', BOTH),
     _option('directory', '', TEXT, '', 'where files go (default: ~/.ros/cc_log, then /tmp/cc_log)', BOTH),
     _option('model', '', TEXT, '', 'model file (cclog learn) of the classifier named `classifier`', SMART),
-    _option('window', '', SPAN, '500', "the feature window (smart mode: checked against the model's)", BOTH),
+    _option('window', '', SPAN, features.DEFAULT_WINDOW, "the feature window (smart mode: checked against the "
+            "model's)", BOTH),
     _option('feature_set', '', FEATURE_SET, 'motion', 'the feature set collect mode computes', COLLECT),
     _option('retrigger', '', RETRIGGER, DEFAULT_RETRIGGER, 'every classifier: `event` (the onset opens a window, '
             'extended while the newest rows are anomalous), `every` anomalous score, or the `onset` only', SMART),

@@ -24,8 +24,8 @@ import sys
 from cc_log.core.records import LogWindow, Trigger
 from cc_log.core.spans import Span
 
-DEFAULT_PRE = Span.messages(100)
-DEFAULT_POST = Span.messages(100)
+DEFAULT_PRE = Span.parse('2s')   # durations: the same margin at any rate (100 messages: 1 s at 100 Hz, 20 s at 5 Hz)
+DEFAULT_POST = Span.parse('2s')
 DEFAULT_MAX_WINDOW = Span.messages(100000)
 DEFAULT_JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the buffer resets
 DEFAULT_MAX_BUFFER_MB = 256.0      # memory budget of everything buffered (MB = 10^6 bytes); 0: none

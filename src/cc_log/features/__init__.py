@@ -27,7 +27,8 @@ from cc_log.features import command  # noqa: F401
 from cc_log.features import progress  # noqa: F401
 from cc_log.features import dynamics  # noqa: F401
 from cc_log.features.base import (
-    CLIP, DEFAULT_MAX_DT, DEFAULT_MIN_DT, STATISTICS, FeatureConfig, FeatureSet, get, names, register, stamp_of)
+    CLIP, DEFAULT_MAX_DT, DEFAULT_MIN_DT, DEFAULT_WINDOW, STATISTICS, FeatureConfig, FeatureSet, get, names, register,
+    stamp_of)
 from cc_log.features.motion import MOTION_COLUMNS
 from cc_log.features.raw import RAW_COLUMNS
 from cc_log.features.window import (
@@ -44,6 +45,6 @@ def OdometryFeatures(config=None, **kwargs):
     return config.feature(config, **kwargs)
 
 
-__all__ = ['FEATURE_SETS', 'MOTION_COLUMNS', 'RAW_COLUMNS', 'STATISTICS', 'CLIP', 'DEFAULT_MAX_DT',
-           'DEFAULT_MIN_DT', 'FeatureConfig', 'FeatureSet', 'FeatureStream', 'FeatureWindow', 'OdometryFeatures',
+__all__ = ['FEATURE_SETS', 'MOTION_COLUMNS', 'RAW_COLUMNS', 'STATISTICS', 'CLIP', 'DEFAULT_MAX_DT', 'DEFAULT_MIN_DT',
+           'DEFAULT_WINDOW', 'FeatureConfig', 'FeatureSet', 'FeatureStream', 'FeatureWindow', 'OdometryFeatures',
            'columns', 'get', 'names', 'register', 'stamp_of', 'vector_length', 'vector_names', 'window_vector']

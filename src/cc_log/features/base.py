@@ -60,6 +60,9 @@ def _parse_window(value):
     return span
 
 
+DEFAULT_WINDOW = '2s'  # a duration: the same span of driving at any rate (500 messages: 5 s at 100 Hz, 100 s at 5 Hz)
+
+
 class FeatureConfig(collections.namedtuple('FeatureConfig', 'feature_set window topic_type')):
     """What a model was trained on: feature set, feature window (``'500'`` or ``'5s'``), and the message type
     of the set's first input (None: the set's own).
@@ -70,7 +73,7 @@ class FeatureConfig(collections.namedtuple('FeatureConfig', 'feature_set window 
 
     __slots__ = ()
 
-    def __new__(cls, feature_set='motion', window='500', topic_type=None):
+    def __new__(cls, feature_set='motion', window=DEFAULT_WINDOW, topic_type=None):
         feature = get(feature_set)
         span = _parse_window(window)
         expected = feature.inputs[0][1]

@@ -40,7 +40,7 @@ def add_parser(subparsers):
     p.add_argument('--label', help='label directory (default: nominal; anything but '
                    '"nominal" counts as anomalous)')
     p.add_argument('--window', type=span('window'), metavar='N|Ns',
-                   help='feature window: messages (500) or seconds (5s) (default: 500)')
+                   help='feature window: seconds (2s) or messages (500) (default: %s)' % _feature_window())
     p.add_argument('--stride', type=non_negative_int('stride', 1), metavar='N',
                    help='a vector every N driving messages (default: %d, or smaller so that a short bag '
                    'still gives about 200 vectors)' % _collect_stride())
@@ -183,6 +183,11 @@ def _collect_stride():
     except ImportError:
         return 25
     return DEFAULT_STRIDE
+
+
+def _feature_window():
+    from cc_log.features import DEFAULT_WINDOW
+    return DEFAULT_WINDOW
 
 
 def _feature_sets():
