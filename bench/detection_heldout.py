@@ -52,6 +52,7 @@ import common  # noqa: E402
 import heldout_data  # noqa: E402
 
 from cc_log import sim  # noqa: E402
+from cc_log.features import DEFAULT_WINDOW  # noqa: E402
 from cc_log.offline import cli  # noqa: E402
 from cc_log.storage import log_format  # noqa: E402
 from cc_log.storage.bag import bagio  # noqa: E402
@@ -156,7 +157,7 @@ def rate_of(records):
 
 def reach_of(setting, rate):
     """The feature window in seconds (a trigger up to this long after an event's end still belongs to it)."""
-    window = setting.get('window', '500')
+    window = setting.get('window', DEFAULT_WINDOW)
     return float(window[:-1]) if window.endswith('s') else int(window) / rate
 
 
