@@ -121,34 +121,3 @@ def test_a_refit_learns_new_manoeuvres_and_still_catches_anomalies(tmp_path):
         assert any(entry['start'] <= s <= entry['end'] + 1.0 for s in starts), (entry, starts)
     saved = json.loads(open(online_learning.online_path(path)).read())
     assert saved['info']['online']['refit'] == stats['refits']
-
-
-def test_a_refit_adds_the_live_driving_to_what_was_learnt_instead_of_replacing_it(tmp_path):
-    """The model file keeps a sample of its training vectors; a refit on a reservoir of live driving that shows one
-    narrow part of it (the robot standing, or in one corridor, for the first minutes) still scores the whole
-    training region nominal, and keeps the sample for the next restart. Refitted on the support vectors alone
-    (what older files keep), most of what was learnt is forgotten."""
-    rng = np.random.RandomState(3)
-    trained = rng.normal(size=(1000, 13))
-    model, _ = learning.train(trained, config=FeatureConfig('progress', '1s'))
-    assert model.sample.shape == (learning.SAMPLE_SIZE, 13)
-    path = tmp_path / 'model.json'
-    model.save(str(path))
-    loaded = AnomalyModel.load(str(path))
-    assert np.array_equal(loaded.sample, model.sample)
-    narrow = rng.normal(size=(2000, 13)) * 0.1  # the first minutes: one manoeuvre only
-
-    def refit(model):
-        learner = OnlineLearner(model, every=1500, keep=1500, guard='1s', background=False)
-        for step, vector in enumerate(narrow):
-            learner.offer(0.1 * step, vector)
-        assert learner.stats()['refits'] == 1
-        return learner.take()
-    again = rng.normal(size=(500, 13))  # more of the original driving
-    refitted = refit(loaded)
-    assert np.array_equal(refitted.sample, model.sample)
-    assert np.mean(refitted.scores(again) < refitted.threshold) < 0.05
-    assert np.mean(refitted.scores(narrow[-300:]) < refitted.threshold) < 0.05
-    loaded.sample = None  # a model file without its sample: the support vectors only
-    forgetful = refit(loaded)
-    assert np.mean(forgetful.scores(again) < forgetful.threshold) > 0.5

@@ -52,7 +52,6 @@ MAX_TRIMMED_SPANS = 20         # spans of trimmed vectors listed in info (the re
 STOPPED_SPEED = 0.05           # m/s: a window whose largest |v| is below this counts as stopped (coverage)
 COVERAGE_QUANTILES = (0.01, 0.99)
 MIN_VECTORS = 10               # fewer nominal vectors cannot be split into training and held-out blocks
-SAMPLE_SIZE = 1000             # training vectors a model keeps for online learning (AnomalyModel.sample)
 METHODS = ('auto', 'exact', 'nystroem')
 
 Report = collections.namedtuple('Report', 'total tp fp fn tn precision recall')
@@ -352,17 +351,7 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     })
     model.info = {key: value for key, value in info.items() if key != 'grid'}
     model.coverage = coverage(X, config)
-    model.sample = training_sample(X)
     return model, info
-
-
-def training_sample(X, size=SAMPLE_SIZE):
-    """At most ``size`` of the nominal vectors ``X``, evenly spaced in time: what a model keeps of its training
-    data (``AnomalyModel.sample``) so that online learning refits on them beside the live ones."""
-    X = np.asarray(X, dtype=float)
-    if len(X) <= size:
-        return X.copy()
-    return X[np.linspace(0, len(X) - 1, size).astype(int)]
 
 
 def _trim(X, stamps, trim, config, nu, gamma, fit_method, max_exact, names, seed):

@@ -12,9 +12,8 @@ Scores follow scikit-learn's ``decision_function``: lower is more anomalous; a v
 ``score < threshold``. The file is JSON ``{"format": "cc_log-model", "version": 1, ...}``: loading never
 executes code (no pickle, no joblib), and anything but a well-formed model raises
 ``ModelError('<path>: <what is wrong>')``. The optional ``"coverage"`` (``learning.coverage``: the range of
-speed, yaw rate and time stopped, or of every feature, its nominal training vectors cover) and ``"sample"``
-(``learning.training_sample``: at most ``MAX_SAMPLE`` of its nominal training vectors, unscaled, what online
-learning refits on beside the live ones) are absent from older files.
+speed, yaw rate and time stopped, or of every feature, its nominal training vectors cover) is absent from
+older files.
 """
 import json
 import math
@@ -29,7 +28,6 @@ from cc_log.errors import ModelError
 FORMAT = 'cc_log-model'
 VERSION = 1
 KINDS = ('ocsvm', 'nystroem-sgd')
-MAX_SAMPLE = 5000  # training vectors a model file may keep (``sample``)
 #: Largest model file read: an ``ocsvm`` model of 20,000 support vectors of 200 features is ~80 MB of JSON.
 MAX_MODEL_BYTES = 1 << 30
 SCORE_BLOCK = 32  # vectors scored at a time by score_each (bounds its block of distances to the centres)
@@ -46,11 +44,11 @@ class AnomalyModel(object):
     ``kernel`` holds the arrays of ``kind``: for ``ocsvm`` ``support_vectors`` (n, d), ``dual_coef`` (n,),
     ``intercept``, ``gamma``; for ``nystroem-sgd`` ``components`` (m, d), ``normalization`` (m, m),
     ``coef`` (m,), ``offset``, ``gamma``. ``info`` is a free dict of JSON values (training figures);
-    ``coverage`` None or ``learning.coverage``'s dict; ``sample`` None or (k, d) training vectors, unscaled.
+    ``coverage`` None or ``learning.coverage``'s dict.
     """
 
     def __init__(self, config, mean, scale, kind, kernel, threshold, names=None, info=None, source='<model>',
-                 coverage=None, sample=None):
+                 coverage=None):
         if not isinstance(config, FeatureConfig):
             raise ModelError('%s: config: expected a FeatureConfig, got %s' % (source, type(config).__name__))
         self.config = config
@@ -66,7 +64,6 @@ class AnomalyModel(object):
         except (TypeError, ValueError) as error:
             raise ModelError('%s: info must hold finite JSON values only (%s)' % (source, error))
         self.coverage = check_coverage(coverage, source)
-        self.sample = None if sample is None else np.asarray(sample, dtype=float)
         _validate(self, source)
         self._prepare()
 
@@ -154,8 +151,6 @@ class AnomalyModel(object):
         }
         if self.coverage is not None:
             document['coverage'] = self.coverage
-        if self.sample is not None:
-            document['sample'] = self.sample.tolist()
         return document
 
     def save(self, path):
@@ -241,11 +236,8 @@ class AnomalyModel(object):
         info = document.get('info') or {}
         if not isinstance(info, dict):
             raise ModelError('%s: info must be an object' % path)
-        sample = document.get('sample')
-        if sample is not None:
-            sample = _array(sample, 2, path, 'sample')
         return cls(config, mean, scale, kind, kernel, threshold, names, info, source=path,
-                   coverage=document.get('coverage'), sample=sample)
+                   coverage=document.get('coverage'))
 
 
 def check_coverage(coverage, path='<model>'):
@@ -382,8 +374,3 @@ def _validate(model, path):
             raise bad('kernel.coef has shape %s, expected (%d,)' % (coef.shape, m))
     if model.names is not None and len(model.names) != dimension:
         raise bad('names has %d entries, expected %d' % (len(model.names), dimension))
-    sample = model.sample
-    if sample is not None and (sample.ndim != 2 or sample.shape[1] != dimension or not 0 < len(sample) <= MAX_SAMPLE
-                               or not np.all(np.isfinite(sample))):
-        raise bad('sample must be 1 to %d finite rows of %d features, got shape %s'
-                  % (MAX_SAMPLE, dimension, sample.shape))

@@ -7,10 +7,8 @@ time has passed after it; a flag within ``guard`` of it (before or after) drops 
 flagged span is ever learned (``guard`` should cover the feature window and the logger's pre and post). The
 vectors that pass go into a bounded reservoir (``keep`` vectors, a uniform sample of all of them, kept in time
 order). Every ``every`` new vectors the model is refitted in a background thread with ``learning.train`` (the
-same scaling, kernel and held-out threshold as learn mode) on what the original model keeps of its training
-data (its ``sample``, up to ``learning.SAMPLE_SIZE`` training vectors; the support vectors of a file without
-one) followed by the reservoir, so that a refit adds the live driving to what was learnt instead of replacing
-it; each refitted model keeps the original's sample; the classifier takes the new model at its
+same scaling, kernel and held-out threshold as learn mode) on the original model's support vectors (what the
+model file keeps of its training data) followed by the reservoir; the classifier takes the new model at its
 next message (``take()``), and it is saved to ``online_path(model file)``, beside the original, which is never
 written (an atomic write: a crash mid-save leaves the previous file whole). A failed refit keeps the model in
 use and says why in ``stats()['last_error']``.
@@ -41,10 +39,7 @@ def online_path(path):
 
 
 def training_support(model):
-    """The training vectors the model keeps, unscaled: its ``sample``, else (older files) its support vectors or
-    Nystroem components."""
-    if model.sample is not None:
-        return model.sample
+    """The training vectors the model keeps (support vectors, or the Nystroem components), unscaled."""
     centres = model.kernel['support_vectors' if model.kind == 'ocsvm' else 'components']
     return np.asarray(centres, dtype=float) * model.scale + model.mean
 
@@ -126,8 +121,7 @@ class OnlineLearner(object):
         started = time.time()
         try:
             model, info = learning.train(vectors, config=self.model.config)
-            model.sample = self._support
-            model.info['online'] = {'training_vectors_kept': len(self._support),
+            model.info['online'] = {'support_vectors_kept': len(self._support),
                                     'reservoir': len(vectors) - len(self._support), 'learned': self._arrived,
                                     'refit': self.refits + 1, 'seconds': time.time() - started}
             if self.save_path is not None:
