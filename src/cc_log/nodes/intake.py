@@ -32,6 +32,8 @@ DEFAULT_MAX_MB = options.get('intake_max_mb').default              # MB of seria
 FEED_BATCH_DELAY = 0.5        # seconds at most the feeder lets messages gather before draining them in a batch
 BATCH_MESSAGES = 1024         # messages that make a batch before the delay is over
 BATCH_BYTES_SHARE = 8         # ... or this share of the queue's byte bound (an eighth)
+RECEIVE_BYTES = 1 << 20       # bytes rospy reads from a topic's socket at a time (its default, 64 kB, takes a
+#                               camera frame in 15 reads, each a pass of rospy's Python receive loop)
 
 
 class IntakeQueue(object):
@@ -214,7 +216,7 @@ class Intake(object):
     def _subscribe(self, resolved):
         self.queue.listen(resolved)  # its rate is 0 until its first message
         self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
-                                                      queue_size=None)
+                                                      queue_size=None, buff_size=RECEIVE_BYTES)
         return resolved
 
     @property
