@@ -13,6 +13,7 @@ import sys
 import pytest
 
 from cc_log.storage import formats, log_format
+from cc_log.core.raw_message import serialized
 from cc_log.core import msg_codec
 from cc_log.storage.formats import json_xz
 from cc_log.storage.log_format import Format, read_window, write_window
@@ -59,12 +60,6 @@ def copy_msg(msg):
     buffer = io.BytesIO()
     msg.serialize(buffer)
     return type(msg)().deserialize(buffer.getvalue())
-
-
-def serialized(msg):
-    buffer = io.BytesIO()
-    msg.serialize(buffer)
-    return buffer.getvalue()
 
 
 def assert_same_records(written, read):

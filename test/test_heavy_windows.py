@@ -10,7 +10,7 @@ from conftest import cclog
 from cc_log.storage import log_format, recovery
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.bag import bag_writer
-from cc_log.core.raw_message import class_header
+from cc_log.core.raw_message import class_header, serialized
 from cc_log.core.smart import SmartLogger
 from cc_log.core.window_prep import HEAVY_BYTES
 from cc_log.core.records import LogWindow, Record, Trigger
@@ -23,12 +23,6 @@ from sensor_msgs.msg import Image  # noqa: E402
 
 T0 = 1432235498.0
 ODOM, CAMERA, LIDAR = '/odom', '/camera/image_raw', '/velodyne_points'
-
-
-def serialized(msg):
-    buff = io.BytesIO()
-    msg.serialize(buff)
-    return buff.getvalue()
 
 
 def odometry(stamp):

@@ -3,7 +3,6 @@ records in every window's metadata (``window_info.Contents``), ``log_format.read
 messages, and both commands report from it what they report from the records (``--full``: the recount), falling
 back to the records for files without one."""
 import collections
-import io
 import json
 import os
 import time
@@ -11,7 +10,7 @@ import time
 import pytest
 
 from cc_log.core import msg_codec, raw_message
-from cc_log.core.raw_message import class_header
+from cc_log.core.raw_message import class_header, serialized
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.offline import cli, stats
 from cc_log.storage import log_format, window_info
@@ -27,12 +26,6 @@ ODOM, IMU = '/odom', '/imu'
 ODOM_CONNECTION = dict(class_header(ODOM, Odometry), callerid='/odometry', latching='0')
 IMU_CONNECTION = dict(class_header(IMU, Imu), callerid='/imu_node', latching='0')
 FORMATS = ('bag-lz4', 'json-xz')
-
-
-def serialized(msg):
-    buff = io.BytesIO()
-    msg.serialize(buff)
-    return buff.getvalue()
 
 
 def odometry(stamp, k):

@@ -6,7 +6,6 @@ odometry + IMU + /fix, F1/10, ICE-lab, the Pioneer laser + /tf, ALFA) and on cra
 float32 fields, changing frame ids, empty arrays, unicode and non-UTF-8 strings, repeated stamps, out-of-range
 nanoseconds, truncated messages), lossless and with ``precision``."""
 import hashlib
-import io
 import lzma
 import math
 import os
@@ -15,6 +14,7 @@ import struct
 import pytest
 
 from cc_log.storage.bag import bag_reader
+from cc_log.core.raw_message import serialized
 from cc_log.storage import log_format
 from cc_log.core import msg_codec, raw_message
 from cc_log.storage.formats import json_deltas, json_xz
@@ -60,12 +60,6 @@ def real_windows():
 
 def connection(cls):
     return {'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}
-
-
-def serialized(msg):
-    buff = io.BytesIO()
-    msg.serialize(buff)
-    return buff.getvalue()
 
 
 CUSTOM = 'cc_log_test/Fields'

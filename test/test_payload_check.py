@@ -1,12 +1,11 @@
 """A message whose bytes are not of its connection's type (a buggy publisher, two types on one topic in a
 replayed bag) is refused where its window file is written: the file stays readable by rosbag, and the refused
 messages are counted per topic in the window metadata's ``dropped`` (``cclog info`` says them)."""
-import io
 
 import pytest
 
 from conftest import cclog
-from cc_log.core.raw_message import class_header
+from cc_log.core.raw_message import class_header, serialized
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.storage import log_format, payload_check
 
@@ -18,12 +17,6 @@ from std_msgs.msg import Empty, String  # noqa: E402
 
 T0 = 1432235498.0
 ODOM, IMU = '/odom', '/imu'
-
-
-def serialized(msg):
-    buff = io.BytesIO()
-    msg.serialize(buff)
-    return buff.getvalue()
 
 
 def odometry(k):

@@ -1,13 +1,13 @@
 """Messages kept as serialized bytes: features from the bytes, lazy decoding, bag-lz4 from the bytes with the
 connection headers, latched topics at the start of every window, the memory cost of a buffered record."""
 import collections
-import io
 import os
 import tracemalloc
 
 import pytest
 
 from cc_log import features
+from cc_log.core.raw_message import serialized
 from cc_log.storage import log_format
 from cc_log.core import msg_codec, raw_message
 from cc_log.features import FeatureConfig, FeatureStream
@@ -31,12 +31,6 @@ def connection_of(cls, latching='0', callerid='/robot'):
     """A live connection header of a publisher of ``cls``."""
     return {'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text,
             'callerid': callerid, 'latching': latching}
-
-
-def serialized(msg):
-    buffer = io.BytesIO()
-    msg.serialize(buffer)
-    return buffer.getvalue()
 
 
 @pytest.fixture(scope='module')

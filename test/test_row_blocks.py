@@ -2,13 +2,13 @@
 ``covers`` flags and state as ``row_values(_raw)`` message by message, on every real bag and on crafted blocks
 with repeated stamps, gaps, backwards time, non-finite fields, bad quaternions, clipped and overflowing values,
 cut messages and changing frame ids, wherever the blocks are cut."""
-import io
 import math
 
 import numpy as np
 import pytest
 
 from cc_log import features
+from cc_log.core.raw_message import serialized
 from cc_log.core import raw_message
 from cc_log.features import FeatureConfig
 
@@ -77,12 +77,6 @@ def compare(name, items, stamps, raw, cuts, window='20'):
     assert (bits(np.concatenate(got)) == bits(expected)).all(), name
     assert got_covered == expected_covered
     return counting.calls
-
-
-def serialized(msg):
-    buffer = io.BytesIO()
-    msg.serialize(buffer)
-    return buffer.getvalue()
 
 
 def odometry(p, q, v, w, frame='odom', child='base_link'):

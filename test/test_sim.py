@@ -1,6 +1,5 @@
 """The simulated BWIBot (cc_log.sim): determinism, nominal limits, anomaly signatures, bags, injection."""
 import hashlib
-import io
 import json
 import math
 import os
@@ -11,6 +10,7 @@ import time
 import pytest
 
 from cc_log import sim
+from cc_log.core.raw_message import serialized
 from cc_log.core.records import Record
 from cc_log.sim import kinematics, messages
 
@@ -20,11 +20,6 @@ LIMITS = sim.BWIBOT_LIMITS
 
 # ---------------------------------------------------------------------------------------------------------
 # helpers
-
-def serialize(msg):
-    buffer = io.BytesIO()
-    msg.serialize(buffer)
-    return buffer.getvalue()
 
 
 class Track(object):
@@ -232,7 +227,7 @@ def _all_bytes(config):
     digest = hashlib.sha256()
     simulator = sim.Simulator(config)
     for topic, stamp, msg in simulator.messages():
-        digest.update(topic.encode() + repr(stamp).encode() + serialize(msg))
+        digest.update(topic.encode() + repr(stamp).encode() + serialized(msg))
     return digest.hexdigest(), simulator.truth
 
 
@@ -253,7 +248,7 @@ def test_bag_bytes_are_genpy_bytes():
     topics = set()
     while not simulator.done:
         for topic, stamp, item in simulator.advance():
-            assert messages.serialized(item) == serialize(messages.message(item)), topic
+            assert messages.serialized(item) == serialized(messages.message(item)), topic
             topics.add(topic)
     assert topics == {sim.ODOM_TOPIC, sim.IMU_TOPIC, sim.TRUTH_TOPIC}
 
@@ -417,17 +412,17 @@ def odom_track(records, topic):
 
 
 def test_inject_into_real_husky_odometry(husky_records):
-    before = [serialize(r.msg) for r in husky_records]
+    before = [serialized(r.msg) for r in husky_records]
     out, truth = sim.inject_anomalies(husky_records, sim.ANOMALY_TYPES, seed=0, topic=HUSKY_ODOM)
-    assert [serialize(r.msg) for r in husky_records] == before          # the input is untouched
+    assert [serialized(r.msg) for r in husky_records] == before          # the input is untouched
     assert len(out) == len(husky_records)
     assert [e['type'] for e in truth] == list(sim.ANOMALY_TYPES)
     changed = 0
     for original, record, data in zip(husky_records, out, before):
         assert (record.stamp, record.topic) == (original.stamp, original.topic)
         if record.topic != HUSKY_ODOM or not any(e['start'] <= record.stamp < e['end'] for e in truth):
-            assert serialize(record.msg) == data                     # unchanged outside the anomalies
-        elif serialize(record.msg) != data:
+            assert serialized(record.msg) == data                     # unchanged outside the anomalies
+        elif serialized(record.msg) != data:
             changed += 1
             assert record.msg.header == original.msg.header
     assert changed > 100
@@ -441,7 +436,7 @@ def test_inject_into_real_husky_odometry(husky_records):
     for entry in truth:
         position = next(i for i, (o, r) in enumerate(odom) if r.stamp == entry['end'])
         assert odom[position][1].msg is odom[position][0].msg
-        assert serialize(odom[position - 1][1].msg) != serialize(odom[position - 1][0].msg)
+        assert serialized(odom[position - 1][1].msg) != serialized(odom[position - 1][0].msg)
 
 
 def test_inject_is_deterministic_and_seeded(husky_records):
@@ -449,7 +444,7 @@ def test_inject_is_deterministic_and_seeded(husky_records):
     again = sim.inject_anomalies(husky_records, ['collision', 'localization_jump'], seed=3)
     other = sim.inject_anomalies(husky_records, ['collision', 'localization_jump'], seed=4)
     assert first[1] == again[1] != other[1]
-    assert [serialize(r.msg) for r in first[0]] == [serialize(r.msg) for r in again[0]]
+    assert [serialized(r.msg) for r in first[0]] == [serialized(r.msg) for r in again[0]]
     assert first[1][0]['type'] == 'collision'
 
 
@@ -508,7 +503,7 @@ def test_inject_at_the_robot_scale(husky_records, kind, field, quantity):
     """A scale twice the BWIBot's in one quantity doubles the anomaly's magnitude in it; None is the BWIBot's."""
     base = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM)
     same = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=None)
-    assert [serialize(r.msg) for r in base[0]] == [serialize(r.msg) for r in same[0]]
+    assert [serialized(r.msg) for r in base[0]] == [serialized(r.msg) for r in same[0]]
     doubled = sim.BWIBOT_LIMITS._replace(**{quantity: 2.0 * getattr(sim.BWIBOT_LIMITS, quantity)})
     unlimited = sim.Limits(*(10.0 * x for x in sim.BWIBOT_LIMITS))   # the return to the recording is not the test
     one = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=sim.BWIBOT_LIMITS,

@@ -13,7 +13,7 @@ import yaml
 
 from cc_log import sim
 from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.raw_message import class_header
+from cc_log.core.raw_message import class_header, serialized
 from cc_log.offline import cli
 from cc_log.offline.stats import run_stats
 from cc_log.storage import log_format, window_writer
@@ -29,12 +29,6 @@ FRAMES = 10         # frames per part
 FRAME_BYTES = 30000  # random pixels: LZ4 cannot shrink them, so a part is ~300 kB on disk
 TRIGGERS = [Trigger(T0 + 0.5, 'collision', -2.0, 'bumper')]
 METADATA = {'reason': 'collision', 'trigger': 'bumper'}
-
-
-def serialized(msg):
-    buff = io.BytesIO()
-    msg.serialize(buff)
-    return buff.getvalue()
 
 
 def frames(k):

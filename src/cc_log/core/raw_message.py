@@ -6,8 +6,8 @@ A ``records.Record`` may carry a message as its serialized bytes (``raw``) and i
 (``decoded(record)``). ``message_class(connection)`` is the class decoding uses: the installed class of
 the type when its md5sum matches, else one built from the connection's definition, which must pass
 ``safe_input.check_definition`` first (genpy runs the code it generates); a refused definition is a
-ValueError naming the type. ``stamp(raw, connection, fallback)`` reads the header stamp straight from the
-bytes of a type whose first field is a ``std_msgs/Header``.
+ValueError naming the type; ``serialized(msg)`` is the other way, a message's bytes. ``stamp(raw, connection,
+fallback)`` reads the header stamp straight from the bytes of a type whose first field is a ``std_msgs/Header``.
 
 ``layout(cls)`` and ``blocks(fields, raws)`` find where each field lies in the bytes of many messages at
 once (numpy views instead of a genpy decode per message: the json-xz writer).
@@ -16,6 +16,7 @@ Pure: roslib, genpy and numpy, no rospy.
 """
 import collections
 import functools
+import io
 import struct
 
 import genpy
@@ -60,6 +61,13 @@ def message_class(connection):
             cls = msg_codec.message_class(msg_type, definition)
         _CLASSES[key] = cls
     return cls
+
+
+def serialized(msg):
+    """The serialized bytes of a message object (what ``decode`` reads back)."""
+    buff = io.BytesIO()
+    msg.serialize(buff)
+    return buff.getvalue()
 
 
 def decode(raw, connection):

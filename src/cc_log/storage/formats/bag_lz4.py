@@ -27,7 +27,6 @@ The file is the bag rosbag would write for the same messages, byte for byte, wri
 (``read``, ``read_metadata``, ``write_record``), so importing cc_log.bag_lz4 costs nothing.
 """
 import collections
-import io
 import itertools
 import json
 import os
@@ -157,7 +156,7 @@ class _Layout(object):
         meta['layout'] = LAYOUT_VERSION
         if final:
             meta['bag'] = self.layout()
-        return _serialized(_string_class()(data=json.dumps(meta, allow_nan=False, separators=(',', ':'))))
+        return raw_message.serialized(_string_class()(data=json.dumps(meta, allow_nan=False, separators=(',', ':'))))
 
 
 class WindowStream(object):
@@ -253,7 +252,7 @@ def _held_raw(record):
 
 def _data(record):
     """The serialized bytes of a record (serialized now when it holds a decoded message)."""
-    return record.raw if _held_raw(record) else _serialized(record.msg)
+    return record.raw if _held_raw(record) else raw_message.serialized(record.msg)
 
 
 def records_crc(topics, headers, records, layout=LAYOUT_VERSION):
@@ -284,12 +283,6 @@ def _records_crc(crc, rank, records):
 
 
 _RECORD_HEAD = struct.Struct('<IdI')  # topic number, stamp, length of the serialized bytes
-
-
-def _serialized(msg):
-    buff = io.BytesIO()
-    msg.serialize(buff)
-    return buff.getvalue()
 
 
 def write_record(bag, record, time):
