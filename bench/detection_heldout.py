@@ -143,6 +143,11 @@ def replay(records, model, setting, tmp, tag, config=None):
     return result['windows'], result['drift']
 
 
+def drifted(monitors):
+    """Whether a replay's drift monitor reported drift."""
+    return int(bool(monitors and monitors[0].get('drift')))
+
+
 def span_kept(entry, windows):
     """The share of [start, end] of an event inside saved windows."""
     length = entry['end'] - entry['start']
@@ -175,11 +180,12 @@ def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, d
            'envelope': envelope}
     for name, records in rest:
         hours = (records[-1].stamp - records[0].stamp) / 3600.0
-        windows, _ = replay(records, model, setting, tmp, 'nominal-' + name)
-        row = {'run': name, 'hours': hours, 'false_nominal': len(windows), 'injected': {}}
+        windows, monitors = replay(records, model, setting, tmp, 'nominal-' + name)
+        row = {'run': name, 'hours': hours, 'false_nominal': len(windows), 'injected': {},
+               'drift_nominal': drifted(monitors)}
         for injection in injections:
             scale = dict(scale=envelope, limits=envelope) if injection == 'robot' else {}
-            kept = need = false = 0
+            kept = need = false = drifts = 0
             for seed in seeds:
                 try:
                     injected, truth = sim.inject_anomalies(records, sim.ANOMALY_TYPES, seed=seed, topic=TOPIC,
@@ -187,7 +193,8 @@ def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, d
                 except ValueError as error:
                     row['injected'][injection] = 'not injected: %s' % error
                     break
-                windows, _ = replay(injected, model, setting, tmp, 'inj-%s-%s-%d' % (name, injection, seed))
+                windows, monitors = replay(injected, model, setting, tmp, 'inj-%s-%s-%d' % (name, injection, seed))
+                drifts += drifted(monitors)
                 matches, f = common.match_anomalies(truth, windows, reach)
                 false += f
                 k, n = common.kept_messages(injected, TOPIC, windows, truth, MARGIN, MARGIN)
@@ -196,7 +203,8 @@ def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, d
                     out['events'].append(dict(m, run=name, injection=injection, seed=seed,
                                               span=span_kept(entry, windows)))
             else:
-                row['injected'][injection] = {'false': false, 'kept': kept, 'need': need, 'hours': hours * len(seeds)}
+                row['injected'][injection] = {'false': false, 'kept': kept, 'need': need, 'hours': hours * len(seeds),
+                                              'drift': drifts, 'replays': len(seeds)}
         out['runs'].append(row)
     if drift and DRIFT_FROM.get(robot):
         out['drift'] = drift_test(robot, rest, model, setting, tmp)
@@ -257,19 +265,21 @@ def report(r, injections):
     total_false = total_hours = 0.0
     for row in r['runs']:
         cells = [row['run'], '%.1f' % (row['hours'] * 60), row['false_nominal'],
-                 '%.1f' % (row['false_nominal'] / row['hours'])]
+                 '%.1f' % (row['false_nominal'] / row['hours']), 'yes' if row['drift_nominal'] else 'no']
         total_false += row['false_nominal']
         total_hours += row['hours']
         for injection in injections:
             inj = row['injected'].get(injection)
             if isinstance(inj, dict):
-                cells += ['%.1f' % (inj['false'] / inj['hours']), '%.2fx' % (inj['kept'] / float(inj['need']))]
+                cells += ['%.1f' % (inj['false'] / inj['hours']), '%.2fx' % (inj['kept'] / float(inj['need'])),
+                          '%d/%d' % (inj['drift'], inj['replays'])]
             else:
-                cells += [inj or '-', '-']
+                cells += [inj or '-', '-', '-']
         rows.append(cells)
-    headers = ['replayed run', 'min', 'false windows', 'false/h']
+    headers = ['replayed run', 'min', 'false windows', 'false/h', 'drift reported']
     for injection in injections:
-        headers += ['false/h injected (%s)' % injection, 'kept/ideal (%s)' % injection]
+        headers += ['false/h injected (%s)' % injection, 'kept/ideal (%s)' % injection,
+                    'drift reported (%s)' % injection]
     common.table(headers, rows)
     print('all replayed: %d false windows in %.2f h = %.1f/h (target <= 1/h)' % (
         total_false, total_hours, total_false / total_hours if total_hours else 0.0))

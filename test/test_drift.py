@@ -75,12 +75,39 @@ def test_a_few_true_anomalies_are_not_drift_and_time_going_back_starts_again():
     assert DriftMonitor(0.002).report() == 'drift: not judged: 0 s of classifier\'s decisions, 1 min needed'
 
 
+def test_many_short_episodes_are_drift_even_when_the_share_is_small():
+    """A new place flags a second here and there: 4 separate episodes within 2 min (3 % of the decisions) are
+    drift; the same flags a second apart (one episode of an event) are not, nor are 3 episodes."""
+    def episodes(monitor, start, count, apart):
+        for k in range(count):
+            decisions(monitor, start + k * apart, apart - 1.0, 0.0)
+            decisions(monitor, start + (k + 1) * apart - 1.0, 1.0, 1.0)  # one flagged second
+
+    new_place = DriftMonitor(0.002, name='motion')
+    decisions(new_place, 0.0, 200.0, 0.0)
+    episodes(new_place, 200.0, 3, drift.EPISODE_GAP + 5.0)
+    assert new_place.status()[0] == OK and new_place.first_drift is None  # three are not drift
+    episodes(new_place, 200.0 + 3 * (drift.EPISODE_GAP + 5.0), 1, drift.EPISODE_GAP + 5.0)
+    level, message = new_place.status()
+    assert new_place.share < new_place.limit and level == WARN and new_place.flag_episodes == 4
+    assert message.startswith('drift: motion flagged 3.3% of the last 2 min (trained: 0.2%) in 4 separate episodes: '
+                              'this robot drives unlike its training data')
+    assert new_place.first_drift == pytest.approx(200.0 + 4 * (drift.EPISODE_GAP + 5.0) - 1.0, abs=0.1)
+    assert 'in up to 4 separate episodes' in new_place.report()
+    assert new_place.as_dict()['peak_episodes'] == 4
+    one_event = DriftMonitor(0.002)
+    decisions(one_event, 0.0, 200.0, 0.0)
+    episodes(one_event, 200.0, 8, drift.EPISODE_GAP - 1.0)  # flags closer than the gap: one episode
+    assert one_event.status()[0] == OK and one_event.flag_episodes == 1 and one_event.first_drift is None
+
+
 @pytest.mark.parametrize('kwargs, message', [
     ({'trained_rate': 0.0}, 'trained_rate: 0.0 must be a number > 0 and <= 1'),
     ({'trained_rate': 'x' * 100}, 'trained_rate: ' + repr('x' * 100)[:40] + ' must be a number > 0 and <= 1'),
     ({'trained_rate': 0.01, 'span': -1}, 'span: -1 must be a number > 0'),
     ({'trained_rate': 0.01, 'settle': 500}, 'settle: 500 must be between 0 and span (120 s)'),
-    ({'trained_rate': 0.01, 'min_rate': 2}, 'min_rate: 2 must be a number > 0 and <= 1')])
+    ({'trained_rate': 0.01, 'min_rate': 2}, 'min_rate: 2 must be a number > 0 and <= 1'),
+    ({'trained_rate': 0.01, 'episodes': 1}, 'episodes: 1 must be a whole number >= 2')])
 def test_bad_parameters_are_one_line_naming_them(kwargs, message):
     with pytest.raises(ValueError) as error:
         DriftMonitor(**kwargs)

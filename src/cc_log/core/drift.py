@@ -6,8 +6,12 @@ speed, a car that is "always anomalous"): every window is then an "anomaly" and 
 scored, anomalous or nominal, at its message time) and keeps the share flagged over a sliding ``span`` of
 message time (default 2 min). It reports drift when that share is far above the model's own rate of flagged
 nominal samples (``trained_rate``): at least ``factor`` times it and at least ``min_rate``, judged once the
-decisions cover ``settle`` seconds (default: half the span). ``status()`` gives ``(level, message)``: the
-level of ``diagnostic_msgs/DiagnosticStatus`` (``OK`` 0, ``WARN`` 1) and one line, e.g.
+decisions cover ``settle`` seconds (default: half the span); or when the flags of the span fall into
+``episodes`` (default 4) or more separate episodes (flagged decisions more than EPISODE_GAP apart): a model
+calibrated for about one false window an hour that opens four in two minutes no longer fits the driving, even
+when each episode is short (a new place flags a second here and there; one long true anomaly is one episode).
+``status()`` gives ``(level, message)``: the level of ``diagnostic_msgs/DiagnosticStatus`` (``OK`` 0, ``WARN``
+1) and one line, e.g.
 
     drift: classifier flagged 62% of the last 2 min (trained: 0.2%): this robot drives unlike its training
     data; remedies: ...
@@ -45,6 +49,8 @@ OK, WARN = 0, 1  # diagnostic_msgs/DiagnosticStatus levels
 DEFAULT_SPAN = 120.0      # seconds of message time the live share is computed over
 DEFAULT_FACTOR = 10.0     # drift: the live share is at least this many times the trained rate ...
 DEFAULT_MIN_RATE = 0.2    # ... and at least this share (a long true anomaly fills a few % of 2 min, not 20 %)
+DEFAULT_EPISODES = 4      # ... or the flags of the span fall into this many separate episodes
+EPISODE_GAP = 7.0        # seconds without a flagged decision that separate two episodes
 REMEDIES = ('learn_online: true on the classifier (online adaptation, opt-in), a periodic trigger '
             '(kind: periodic, every: 10min) to collect nominal samples to retrain from, or retrain '
             '(cclog learn) on nominal driving of this robot and place')
@@ -83,7 +89,7 @@ class DriftMonitor(object):
     ValueError('<parameter>: ...') for a bad parameter."""
 
     def __init__(self, trained_rate, span=DEFAULT_SPAN, factor=DEFAULT_FACTOR, min_rate=DEFAULT_MIN_RATE,
-                 settle=None, name='classifier', coverage=None, config=None):
+                 settle=None, name='classifier', coverage=None, config=None, episodes=DEFAULT_EPISODES):
         for key, value, low, high in (('trained_rate', trained_rate, 0.0, 1.0), ('span', span, 0.0, None),
                                       ('factor', factor, 0.0, None), ('min_rate', min_rate, 0.0, 1.0)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > low \
@@ -97,17 +103,23 @@ class DriftMonitor(object):
             raise ValueError('settle: %s must be between 0 and span (%g s)' % (repr(settle)[:40], self.span))
         self.limit = min(1.0, max(float(factor) * self.trained_rate, float(min_rate)))
         self.min_rate = float(min_rate)
+        if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 2:
+            raise ValueError('episodes: %s must be a whole number >= 2' % repr(episodes)[:40])
+        self.episodes = episodes
         self.name = name
         self.coverage = None if coverage is None or config is None else Coverage(coverage, config)
         self.began = None        # message time of the first decision
         self.first_drift = None  # message time drift was first reported
         self.peak = None         # the highest share flagged over a judged span (None: never judged)
+        self.peak_episodes = 0   # the most episodes that began within a judged span
         self.reset()
 
     def reset(self):
         """Forget the decisions (time went back, or the logger restarted); ``first_drift`` and ``peak`` stay."""
-        self._decisions = collections.deque()  # (stamp, anomalous, beyond coverage, stopped)
+        self._decisions = collections.deque()  # (stamp, anomalous, beyond coverage, stopped, starts an episode)
         self._flagged = 0
+        self._onsets = 0         # episodes that began within the span
+        self._last_flag = None   # stamp of the last flagged decision
         self._beyond = 0
         self._stopped = 0
         self._start = None  # stamp of the first decision since the reset
@@ -126,19 +138,25 @@ class DriftMonitor(object):
         beyond = stopped = False
         if self.coverage is not None and vector is not None:
             beyond, stopped = self.coverage.observe(vector)
-        decisions.append((stamp, anomalous, beyond, stopped))
+        onset = anomalous and (self._last_flag is None or stamp - self._last_flag > EPISODE_GAP)
+        if anomalous:
+            self._last_flag = stamp
+        decisions.append((stamp, anomalous, beyond, stopped, onset))
         self._flagged += anomalous
         self._beyond += beyond
         self._stopped += stopped
+        self._onsets += onset
         while decisions and decisions[0][0] < stamp - self.span:
-            _, old_flag, old_beyond, old_stopped = decisions.popleft()
+            _, old_flag, old_beyond, old_stopped, old_onset = decisions.popleft()
             self._flagged -= old_flag
             self._beyond -= old_beyond
             self._stopped -= old_stopped
+            self._onsets -= old_onset
         if self.judged:
             share = self.share
             self.peak = share if self.peak is None else max(self.peak, share)
-            if share >= self.limit and self.first_drift is None:
+            self.peak_episodes = max(self.peak_episodes, self._onsets)
+            if self.drifting and self.first_drift is None:
                 self.first_drift = stamp
 
     @property
@@ -173,9 +191,14 @@ class DriftMonitor(object):
             round(self.covered)))
 
     @property
+    def flag_episodes(self):
+        """Separate episodes of flagged decisions that began within the last span."""
+        return self._onsets
+
+    @property
     def drifting(self):
-        """Whether the share over the last span is drift now."""
-        return self.judged and self.share >= self.limit
+        """Whether the last span is drift now: its share flagged, or its episodes of flags."""
+        return self.judged and (self.share >= self.limit or self._onsets >= self.episodes)
 
     def status(self):
         """``(level, message)``: WARN with the explanation and remedies while drifting, else OK."""
@@ -185,6 +208,8 @@ class DriftMonitor(object):
                 duration_text(self.covered), duration_text(self.settle))
         flagged = '%s flagged %s of the last %s %s' % (self.name, percent(self.share),
                                                        duration_text(round(self.covered)), trained)
+        if self._onsets >= self.episodes:
+            flagged += ' in %d separate episodes' % self._onsets
         outside = self.outside
         if self.drifting:
             return WARN, 'drift: %s: this robot drives unlike its training data%s; remedies: %s' % (
@@ -205,9 +230,11 @@ class DriftMonitor(object):
     def _rate_report(self):
         trained = '(trained: %s)' % percent(self.trained_rate)
         if self.first_drift is not None:
-            return ('drift: from %s into the run %s flagged up to %s of %s %s: this robot drives unlike its '
+            episodes = ', in up to %d separate episodes' % self.peak_episodes if self.peak_episodes > 1 else ''
+            return ('drift: from %s into the run %s flagged up to %s of %s %s%s: this robot drives unlike its '
                     'training data; remedies: %s' % (duration_text(self.first_drift - self.began), self.name,
-                                                     percent(self.peak), duration_text(self.span), trained, REMEDIES))
+                                                     percent(self.peak), duration_text(self.span), trained, episodes,
+                                                     REMEDIES))
         if self.peak is None:
             return 'drift: not judged: %s of %s\'s decisions, %s needed%s' % (
                 duration_text(self.covered), self.name, duration_text(self.settle),
@@ -220,6 +247,7 @@ class DriftMonitor(object):
         return collections.OrderedDict([
             ('name', self.name), ('trained_rate', self.trained_rate), ('limit', self.limit), ('span', self.span),
             ('drift', self.first_drift is not None), ('first_drift', self.first_drift), ('peak', self.peak),
+            ('peak_episodes', self.peak_episodes), ('episodes', self.episodes),
             ('share', self.share if self.judged else None),
             ('coverage', None if self.coverage is None else self.coverage.as_dict())])
 
