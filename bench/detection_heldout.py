@@ -105,8 +105,9 @@ def split(runs, seconds):
     return train, rest
 
 
-def learn(train, setting, tmp):
-    """``cclog collect`` of every training piece and ``cclog learn`` of them all; (model path, the lines)."""
+def learn(train, setting, tmp, stride=None):
+    """``cclog collect`` of every training piece (``--stride`` when given) and ``cclog learn`` of them all; (model
+    path, the lines)."""
     dirs, lines = [], []
     for k, (name, records) in enumerate(train):
         bag = os.path.join(tmp, 'train%d.bag' % k)
@@ -115,6 +116,8 @@ def learn(train, setting, tmp):
         argv = ['collect', bag, '--topic', TOPIC, '--out', out]
         if 'window' in setting:
             argv += ['--window', setting['window']]
+        if stride:
+            argv += ['--stride', str(stride)]
         lines.append(quiet_cli(argv).strip())
         if os.path.isdir(os.path.join(out, 'nominal')):
             dirs.append(out)
@@ -166,11 +169,11 @@ def reach_of(setting, rate):
     return float(window[:-1]) if window.endswith('s') else int(window) / rate
 
 
-def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, drift):
+def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, drift, stride=None):
     setting = SETTINGS[setting_name]
     train, rest = split(runs, train_seconds)
     started = time.time()
-    model, lines = learn(train, setting, tmp)
+    model, lines = learn(train, setting, tmp, stride)
     first = [r for _, records in train for r in records]
     envelope = sim.nominal_envelope(first, TOPIC)
     rate = rate_of(first)
@@ -336,6 +339,7 @@ def main(argv=None):
     parser.add_argument('--train-minutes', type=float, default=20.0)
     parser.add_argument('--mrclam-robots', type=int, default=2, help='MRCLAM robots replayed (1-5, default 2)')
     parser.add_argument('--no-drift', action='store_true')
+    parser.add_argument('--stride', type=int, help="cclog collect's --stride (default: its own)")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     injections = args.injection.split(',')
@@ -353,7 +357,7 @@ def main(argv=None):
             tmp = tempfile.mkdtemp(prefix='cc_log_heldout_')
             try:
                 report(evaluate(robot, runs, setting, seeds, injections, tmp, args.train_minutes * 60.0,
-                                not args.no_drift), injections)
+                                not args.no_drift, args.stride), injections)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
     print('total %.0f s' % (time.time() - started))
