@@ -6,6 +6,7 @@ change, with and without online learning.
     /usr/bin/python3 bench/heldout_data.py                       # the bags (once; bench/HELDOUT_SOURCES.md)
     nice -n 10 /usr/bin/python3 bench/detection_heldout.py       # every robot, both settings, seeds 0 1 2
     /usr/bin/python3 bench/detection_heldout.py --robots tuc --settings 2s --seeds 0 --no-drift   # quick
+    /usr/bin/python3 bench/detection_heldout.py --injection robot --seeds 0 --no-drift --explain  # what was flagged
 
 Robots (bench/heldout_data.py): ``tuc`` (indoor robot, 10 Hz: corridor 37.8 min, then a lecture hall 23.1 min),
 ``smartloc`` (a car in city traffic, 5 Hz: Berlin 24.6 min, then Frankfurt 31 min), ``mrclam`` (iRobot Create,
@@ -22,7 +23,8 @@ trim 1 %); the rest of every run is replayed by ``cclog replay --json`` (classif
   feature window]; latency = first such trigger - onset (target <= 0.5 s); span kept = the share of [onset,
   end] inside saved windows (target >= 95 %); false windows = windows with no trigger near an event; kept /
   ideal = odometry messages in saved windows / those within [onset - 2 s, end + 2 s] of an event (target <=
-  1.5x).
+  1.5x); event length = end - onset: the anomaly, the return to the recorded twist and the blend back onto the
+  recorded track (at most 0.8 m/s faster or slower than recorded whatever the robot: tens of seconds on the car).
 
 Settings (``--settings``): ``defaults`` = exactly the CLI's (feature window 500 messages, pre/post 100 messages);
 ``2s`` = docs/DETECTION.md's recommendation for ~10 Hz robots (window 2 s, pre/post 2 s, the ideal's margin).
@@ -67,6 +69,7 @@ SETTINGS = collections.OrderedDict([
 ])
 DRIFT_FROM = {'tuc': 'tuc_lecture_hall', 'smartloc': 'smartloc_frankfurt_main_tower', 'mrclam': None}
 BLOCK = 300.0           # s: false windows per block after the switch
+EXPLAIN = 1.5           # s each side of a false window's trigger that --explain describes
 
 
 def quiet_cli(argv):
@@ -146,6 +149,28 @@ def replay(records, model, setting, tmp, tag, config=None):
     return result['windows'], result['drift']
 
 
+def speed_steps(records):
+    """(stamps, |dv/dt| between consecutive messages) of the reported forward speed: the steps the features see."""
+    t = np.array([r.stamp for r in records])
+    v = np.array([r.msg.twist.twist.linear.x for r in records])
+    dt = np.diff(t)
+    ok = dt > 1e-3
+    return t[1:][ok], np.abs(np.diff(v)[ok] / dt[ok])
+
+
+def what_was_flagged(records, windows, steps):
+    """Per window of a nominal replay: (first trigger into the run s, speed range and largest speed step within
+    EXPLAIN s of it); ``steps`` = speed_steps(records)."""
+    t0, (at, step) = records[0].stamp, steps
+    out = []
+    for window in windows:
+        trigger = (window['triggers'] or [window['start']])[0]
+        near = [r.msg.twist.twist.linear.x for r in records if abs(r.stamp - trigger) <= EXPLAIN]
+        close = step[np.abs(at - trigger) <= EXPLAIN]
+        out.append((trigger - t0, min(near), max(near), float(close.max()) if len(close) else 0.0))
+    return out
+
+
 def drifted(monitors):
     """Whether a replay's drift monitor reported drift."""
     return int(bool(monitors and monitors[0].get('drift')))
@@ -178,14 +203,16 @@ def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, d
     envelope = sim.nominal_envelope(first, TOPIC)
     rate = rate_of(first)
     reach = reach_of(setting, rate)
+    trained_steps = np.concatenate([speed_steps(records)[1] for _, records in train])
     out = {'robot': robot, 'setting': setting_name, 'lines': lines, 'rate': rate, 'reach': reach,
            'train_s': sum(r[-1].stamp - r[0].stamp for _, r in train), 'runs': [], 'events': [],
-           'envelope': envelope}
+           'envelope': envelope,
+           'trained_steps': (float(np.quantile(trained_steps, 0.999)), float(trained_steps.max()))}
     for name, records in rest:
         hours = (records[-1].stamp - records[0].stamp) / 3600.0
         windows, monitors = replay(records, model, setting, tmp, 'nominal-' + name)
         row = {'run': name, 'hours': hours, 'false_nominal': len(windows), 'injected': {},
-               'drift_nominal': drifted(monitors)}
+               'drift_nominal': drifted(monitors), 'flagged': what_was_flagged(records, windows, speed_steps(records))}
         for injection in injections:
             scale = dict(scale=envelope, limits=envelope) if injection == 'robot' else {}
             kept = need = false = drifts = 0
@@ -204,7 +231,7 @@ def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, d
                 kept, need = kept + k, need + n
                 for m, entry in zip(matches, truth):
                     out['events'].append(dict(m, run=name, injection=injection, seed=seed,
-                                              span=span_kept(entry, windows)))
+                                              span=span_kept(entry, windows), length=entry['end'] - entry['start']))
             else:
                 row['injected'][injection] = {'false': false, 'kept': kept, 'need': need, 'hours': hours * len(seeds),
                                               'drift': drifts, 'replays': len(seeds)}
@@ -257,7 +284,7 @@ def pct(a, b):
     return '%d/%d' % (a, b) if b else '-'
 
 
-def report(r, injections):
+def report(r, injections, explain=False):
     print('## %s, setting %s: %.1f Hz, trained on %.1f min, feature window %.2f s' % (
         r['robot'], r['setting'], r['rate'], r['train_s'] / 60.0, r['reach']))
     for line in r['lines']:
@@ -286,6 +313,12 @@ def report(r, injections):
     common.table(headers, rows)
     print('all replayed: %d false windows in %.2f h = %.1f/h (target <= 1/h)' % (
         total_false, total_hours, total_false / total_hours if total_hours else 0.0))
+    if explain:
+        print('what the false windows flagged (speed within %g s of the trigger; training speed steps |dv/dt|: '
+              '99.9th percentile %.2f, largest %.2f m/s^2):' % ((EXPLAIN,) + r['trained_steps']))
+        for row in r['runs']:
+            for at, low, high, step in row['flagged']:
+                print('  %s %.1f s: v %.2f..%.2f m/s, largest step %.2f m/s^2' % (row['run'], at, low, high, step))
     for injection in injections:
         events = [e for e in r['events'] if e['injection'] == injection]
         if not events:
@@ -299,9 +332,10 @@ def report(r, injections):
             rows.append([kind, pct(len(caught), len(ev)),
                          sum(1 for d in delays if d <= LATENCY), '%.2f' % np.median(delays) if delays else '-',
                          '%.2f' % max(delays) if delays else '-', '%.0f%%' % (100 * np.median(spans)),
-                         '%.0f%%' % (100 * min(spans)), pct(sum(1 for s in spans if s >= MIN_SPAN_KEPT), len(ev))])
+                         '%.0f%%' % (100 * min(spans)), pct(sum(1 for s in spans if s >= MIN_SPAN_KEPT), len(ev)),
+                         '%.1f' % np.median([e['length'] for e in ev])])
         common.table(['type', 'caught', 'within %gs' % LATENCY, 'median latency s', 'worst latency s',
-                      'median span kept', 'least span kept', '>= 95% kept'], rows,
+                      'median span kept', 'least span kept', '>= 95% kept', 'median event s'], rows,
                      'injection %s (every replayed run, seeds together):' % injection)
         kept = sum(row['injected'][injection]['kept'] for row in r['runs']
                    if isinstance(row['injected'].get(injection), dict))
@@ -340,6 +374,7 @@ def main(argv=None):
     parser.add_argument('--mrclam-robots', type=int, default=2, help='MRCLAM robots replayed (1-5, default 2)')
     parser.add_argument('--no-drift', action='store_true')
     parser.add_argument('--stride', type=int, help="cclog collect's --stride (default: its own)")
+    parser.add_argument('--explain', action='store_true', help='describe the driving around every false window')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     injections = args.injection.split(',')
@@ -357,7 +392,7 @@ def main(argv=None):
             tmp = tempfile.mkdtemp(prefix='cc_log_heldout_')
             try:
                 report(evaluate(robot, runs, setting, seeds, injections, tmp, args.train_minutes * 60.0,
-                                not args.no_drift, args.stride), injections)
+                                not args.no_drift, args.stride), injections, args.explain)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
     print('total %.0f s' % (time.time() - started))
