@@ -505,13 +505,27 @@ def test_inject_at_the_robot_scale(husky_records, kind, field, quantity):
     same = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=None)
     assert [serialized(r.msg) for r in base[0]] == [serialized(r.msg) for r in same[0]]
     doubled = sim.BWIBOT_LIMITS._replace(**{quantity: 2.0 * getattr(sim.BWIBOT_LIMITS, quantity)})
-    unlimited = sim.Limits(*(10.0 * x for x in sim.BWIBOT_LIMITS))   # the return to the recording is not the test
+    # the return to the recording is not the test: unbounded, and the blend back onto the track at the BWIBot's pace
+    unlimited = sim.Limits(*(10.0 * x for x in sim.BWIBOT_LIMITS))._replace(max_speed=sim.BWIBOT_LIMITS.max_speed)
     one = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=sim.BWIBOT_LIMITS,
                                limits=unlimited)
     two = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=doubled, limits=unlimited)
     assert one[1][0]['start'] == two[1][0]['start']
     ratio = deviation(husky_records, two[0], two[1], field) / deviation(husky_records, one[0], one[1], field)
     assert 1.7 < ratio < 2.3
+
+
+def test_the_blend_back_onto_the_track_is_at_the_robots_own_pace(husky_records):
+    """The injected pose gets back onto the recorded track at most 0.8 limits.max_speed faster than recorded: a
+    car's envelope (10x the BWIBot's speed) takes a tenth of the time a BWIBot's would for the same offset."""
+    def lengths(limits):
+        _, truth = sim.inject_anomalies(husky_records, ['wheels_slipping'], seed=2, topic=HUSKY_ODOM, limits=limits)
+        return truth[0]['end'] - truth[0]['start']
+    slow = lengths(sim.BWIBOT_LIMITS._replace(max_speed=0.1))
+    bwibot = lengths(sim.BWIBOT_LIMITS)
+    fast = lengths(sim.BWIBOT_LIMITS._replace(max_speed=10.0))
+    assert slow > bwibot > fast  # the slipping itself lasts the same; the blend is what differs
+    assert fast < 6.0 + 2.5 < slow  # slipping lasts 3-6 s, then the shortest blend (2 s) give or take a message
 
 
 def test_collision_at_the_robot_scale_brakes_by_its_deceleration(husky_records):

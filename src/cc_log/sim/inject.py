@@ -15,7 +15,9 @@ from cc_log.sim.messages import yaw_of
 from cc_log.sim.truth import truth_entry
 
 _MOVING = 0.3                # m/s: the base counts as driving
-_CATCH_UP = 0.8              # m/s: peak extra speed with which injected odometry gets back onto the recording
+# The peak extra speed with which injected odometry gets back onto the recording, a share of limits.max_speed
+# (0.8 m/s for the BWIBot's 1 m/s: a return at the robot's own scale, not the BWIBot's on every robot).
+_CATCH_UP = 0.8
 
 
 def _moving_average(values, half):
@@ -48,7 +50,8 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
     Inside an anomaly the twist follows the model plus the recording's own noise (the residual of the
     recorded twist around its 0.5 s moving average, scaled down when the model is slower), and the pose is
     integrated from that twist; then the base gets back to the recorded speed within its limits and the
-    pose blends smoothly back onto the recorded track (at most ~0.8 m/s faster or slower than recorded),
+    pose blends smoothly back onto the recorded track (at most 0.8 ``limits.max_speed`` faster or slower than recorded:
+    0.8 m/s for the BWIBot, 8.7 m/s for a car whose envelope reaches 10.9 m/s),
     so every message from ``end`` on is the recorded one. Modified messages are copies; the input is not changed.
 
     ``scale``: the recorded robot's nominal envelope (a ``Limits``, e.g. ``nominal_envelope`` of its nominal
@@ -210,8 +213,8 @@ def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
         return out, i
     dx, dy = out[last][0] - x[last], out[last][1] - y[last]
     dyaw = wrap(out[last][2] - yaw[last])
-    # smoothstep blend: peak extra speed 1.5 * distance / span <= _CATCH_UP, peak extra yaw rate <= 0.6 rad/s
-    span = max(2.0, 1.5 * math.hypot(dx, dy) / _CATCH_UP, 2.5 * abs(dyaw))
+    # smoothstep blend: peak extra speed 1.5 * distance / span <= the catch-up speed, peak extra yaw rate <= 0.6 rad/s
+    span = max(2.0, 1.5 * math.hypot(dx, dy) / (_CATCH_UP * limits.max_speed), 2.5 * abs(dyaw))
     t_b = t[last]
     while i < n and t[i] - t_b < span:
         u = (t[i] - t_b) / span
