@@ -268,6 +268,7 @@ def drift_test(robot, rest, model, setting, tmp):
         late = (starts >= switch + 600.0).sum()
         late_hours = max(end - switch - 600.0, 0.0) / 3600.0
         before = (starts < switch).sum()
+        kept_after = sum(max(0.0, w['end'] - max(w['start'], switch)) for w in windows) / (end - switch)
         monitor = monitors[0] if monitors else {}
         first = monitor.get('first_drift')
         result[label] = {
@@ -275,7 +276,7 @@ def drift_test(robot, rest, model, setting, tmp):
             'late': int(late), 'late_rate': late / late_hours if late_hours else float('nan'),
             'drift': monitor.get('drift'), 'first_drift_after_switch': None if first is None else first - switch,
             'first_drift_into_replay': None if first is None else first - records[0].stamp,
-            'peak': monitor.get('peak'), 'online': label == 'online' and os.path.exists(
+            'peak': monitor.get('peak'), 'kept_after': kept_after, 'online': label == 'online' and os.path.exists(
                 os.path.join(local, 'model.online.json'))}
     return result
 
@@ -357,7 +358,8 @@ def report(r, injections, explain=False):
                           d['first_drift_into_replay'], abs(d['first_drift_after_switch']),
                           'after' if d['first_drift_after_switch'] >= 0 else 'BEFORE', 100 * (d['peak'] or 0)),
                       d['blocks'], d['late'], d['late_rate'],
-                      '; online model written' if d['online'] else ''))
+                      '; online model written' if d['online'] else '')
+                  + '; %.0f%% of the time after the switch inside windows' % (100 * d['kept_after']))
     print('(%.0f s)\n' % r['seconds'])
     sys.stdout.flush()
 

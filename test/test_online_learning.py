@@ -24,6 +24,71 @@ def small_model(dimension=13, seed=0):
     return model
 
 
+def test_a_refit_only_widens_what_the_original_finds_nominal():
+    """WidenedModel: anomalous only where the original and the refit both are; batches score as single vectors."""
+    rng = np.random.RandomState(1)
+    original = small_model()
+    refit, _ = learning.train(rng.normal(loc=6.0, size=(200, 13)), config=original.config)  # a new place only
+    here, there, far = np.zeros(13), np.full(13, 6.0), np.full(13, -9.0)
+    assert not original.is_anomalous(here)[0] and refit.is_anomalous(here)[0]
+    assert original.is_anomalous(there)[0] and not refit.is_anomalous(there)[0]
+    assert original.is_anomalous(far)[0] and refit.is_anomalous(far)[0]
+    widened = online_learning.WidenedModel(original, refit)
+    assert [widened.is_anomalous(v)[0] for v in (here, there, far)] == [False, False, True]
+    assert widened.score_each([here, there, far]) == [widened.is_anomalous(v)[1] for v in (here, there, far)]
+    trigger = ClassifierTrigger('classifier', original, ['/odom'], learner=OnlineLearner(original, background=False))
+    trigger.learner._ready = refit
+    trigger._take_learned()
+    assert isinstance(trigger.model, online_learning.WidenedModel) and trigger.threshold == 0.0
+    assert trigger.model.original is original and trigger.model.refit is refit
+
+
+def test_in_drift_the_classifiers_own_flags_are_learned_and_other_triggers_still_guard():
+    """While the drift monitor reports drift (and ADAPT_HOLD after) the classifier's own flags are the new place's
+    driving: its anomalous vectors are offered and its flags ignored; a rule's flag still keeps its span out."""
+    model = small_model()
+    learner = OnlineLearner(model, every=10 ** 6, keep=1000, guard='2s')
+    drifting = [False]
+    learner.drifting = lambda: drifting[0]
+    assert not learner.adapting_at(0.0)
+    learner.flag(1.0, own=True)          # not in drift: the classifier's flag guards
+    learner.offer(2.0, np.zeros(13))
+    assert learner.refused == 1
+    drifting[0] = True
+    assert learner.adapting_at(10.0)
+    drifting[0] = False
+    assert learner.adapting_at(10.0 + online_learning.ADAPT_HOLD) and not learner.adapting_at(
+        10.5 + online_learning.ADAPT_HOLD)
+    learner.adapting_at(11.0 + online_learning.ADAPT_HOLD)
+    drifting[0] = True
+    start = 20.0 + online_learning.ADAPT_HOLD
+    for step in range(100):            # 10 s, every one flagged by the classifier itself
+        stamp = start + 0.1 * step
+        assert learner.adapting_at(stamp)
+        learner.flag(stamp, own=True)
+        if step == 50:
+            learner.flag(stamp)        # a rule: nothing within 2 s of it is learned
+        learner.offer(stamp, np.full(13, stamp))
+    learner.offer(start + 20.0, np.zeros(13))  # flushes what waited the guard
+    learned = sorted(vector[0] for _, vector in learner._reservoir)
+    assert learned and all(abs(s - (start + 5.0)) > 2.0 for s in learned)
+    assert len(learned) == sum(1 for step in range(100) if abs(0.1 * step - 5.0) > 2.0 + 1e-9)
+
+
+def test_a_classifier_in_drift_offers_its_anomalous_vectors(tmp_path):
+    """The trigger offers what it flags while its learner adapts (drift.monitor_classifiers wires the monitor)."""
+    from cc_log.core import drift
+    model, _ = slow_model(20.0), None
+    learner = OnlineLearner(model, every=10 ** 6, keep=5000, guard='1s', background=False)
+    trigger = ClassifierTrigger('classifier', model, '/odom', classify_every='100ms', learner=learner)
+    monitor, = drift.monitor_classifiers([trigger])
+    fast, _ = odometry(sim.SimConfig(rate=20.0, seed=22, minutes=4, anomalies=0))   # full speed: flagged often
+    for stamp, msg in fast:
+        trigger.on_record(Record(stamp, '/odom', msg))
+    assert monitor.first_drift is not None and learner.adapted > 0
+    assert learner.stats()['vectors_adapted'] == learner.adapted
+
+
 def test_nothing_from_around_a_flag_is_learned():
     """Vectors within guard (2 s) of a flag, before or after it, never reach the reservoir; the others all do."""
     model = small_model()

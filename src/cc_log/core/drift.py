@@ -356,12 +356,15 @@ class Coverage(object):
 
 def monitor_classifiers(classifiers, **options):
     """A DriftMonitor for each ``triggers.ClassifierTrigger`` (its model's trained rate), fed by its decisions
-    (added to the trigger's ``observers``); returns the monitors in order."""
+    (added to the trigger's ``observers``) and told to its online learner (``drifting``); returns the monitors in
+    order."""
     monitors = []
     for trigger in classifiers:
         monitor = DriftMonitor(trained_rate(trigger.model), name=trigger.name,
                                coverage=getattr(trigger.model, 'coverage', None), config=trigger.model.config,
                                **options)
         trigger.observers.append(monitor.observe)
+        if getattr(trigger, 'learner', None) is not None:
+            trigger.learner.drifting = (lambda m: lambda: m.drifting)(monitor)  # online learning adapts in drift
         monitors.append(monitor)
     return monitors

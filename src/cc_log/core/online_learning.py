@@ -4,7 +4,10 @@ Off by default; a classifier's ``learn_online: true`` (the smart node's ``~learn
 classifier offers each vector it scored nominal (``offer(stamp, vector)``) and reports every anomalous score,
 and the node every window opened by any trigger (``flag(stamp)``). A vector waits until ``guard`` of message
 time has passed after it; a flag within ``guard`` of it (before or after) drops it, so nothing from around a
-flagged span is ever learned (``guard`` should cover the feature window and the logger's pre and post). The
+flagged span is ever learned (``guard`` should cover the feature window and the logger's pre and post).
+Except in drift: while ``drifting()`` (set by ``drift.monitor_classifiers``: the classifier's drift monitor
+reports drift) the classifier's own flags (``flag(stamp, own=True)``) are the new place's driving, not events,
+and its anomalous vectors are offered too; flags of other triggers (rules, manual) still guard. The
 vectors that pass go into a bounded reservoir (``keep`` vectors, a uniform sample of all of them, kept in time
 order). Every ``every`` new vectors the model is refitted in a background thread with ``learning.train`` (the
 same scaling, kernel and held-out threshold as learn mode) on the original model's support vectors (what the
@@ -12,6 +15,11 @@ model file keeps of its training data) followed by the reservoir; the classifier
 next message (``take()``), and it is saved to ``online_path(model file)``, beside the original, which is never
 written (an atomic write: a crash mid-save leaves the previous file whole). A failed refit keeps the model in
 use and says why in ``stats()['last_error']``.
+
+The classifier scores with ``WidenedModel(original, refit)``: a vector is anomalous only when the original model
+and the latest refit both say so. Online learning thus only ever widens what counts as nominal: in a new place
+the refit stops the flood, and where the original fitted, a refit dominated by the last minutes of driving cannot
+flag what the original did not (measured on the held-out tuc robot: docs/DETECTION.md).
 
 Pure: numpy and learning; no rospy.
 """
@@ -29,6 +37,7 @@ from cc_log.core.spans import Span
 DEFAULT_EVERY = 2000    # new nominal vectors between refits
 DEFAULT_KEEP = 5000     # vectors in the reservoir
 DEFAULT_GUARD = '10s'   # message time around a flag whose vectors are never learned
+ADAPT_HOLD = 300.0      # s of message time the learner goes on adapting after drift was last reported
 ONLINE_MARK = '.online'
 
 
@@ -71,9 +80,24 @@ class OnlineLearner(object):
         self.seen = self.refused = self.refits = 0
         self.last_refit = None                # wall time of the last refit that finished
         self.last_error = None
+        self.drifting = None                  # callable: the classifier's drift monitor reports drift (or None)
+        self.adapted = 0                      # vectors offered while adapting that the model had flagged
+        self.adapting = False                 # learning the classifier's own flags (``adapting_at``)
+        self._adapt_until = -float('inf')
 
-    def flag(self, stamp):
-        """Something was flagged at ``stamp``: vectors within ``guard`` of it are never learned (thread-safe)."""
+    def adapting_at(self, stamp):
+        """Whether the classifier's own flags are learned at ``stamp``: while its drift monitor reports drift and
+        ADAPT_HOLD after (else adaptation would stop just below the drift limit, with the new place half learned)."""
+        if self.drifting is not None and self.drifting():
+            self._adapt_until = stamp + ADAPT_HOLD
+        self.adapting = stamp <= self._adapt_until
+        return self.adapting
+
+    def flag(self, stamp, own=False):
+        """Something was flagged at ``stamp``: vectors within ``guard`` of it are never learned (thread-safe);
+        ``own``: by this classifier (its anomalous score or a window it opened), ignored while ``adapting``."""
+        if own and self.adapting:
+            return
         with self._lock:
             self._last_flag = max(self._last_flag, stamp)
             while self._pending and self._pending[-1][0] >= stamp - self.guard:
@@ -113,7 +137,8 @@ class OnlineLearner(object):
         if len(self._reservoir) < self.keep:
             self._reservoir.append((self._arrived, vector))
         else:
-            slot = self._rng.randrange(self._arrived)
+            # in drift the newest driving displaces the old at once (the place changed); else a uniform sample
+            slot = self._rng.randrange(self.keep if self.adapting else self._arrived)
             if slot < self.keep:
                 self._reservoir[slot] = (self._arrived, vector)
 
@@ -160,7 +185,34 @@ class OnlineLearner(object):
         with self._lock:
             return {'vectors_seen': self.seen, 'vectors_learned': self._arrived, 'vectors_refused': self.refused,
                     'reservoir': len(self._reservoir), 'refits': self.refits, 'last_refit': self.last_refit,
-                    'refitting': self._thread is not None, 'last_error': self.last_error}
+                    'refitting': self._thread is not None, 'last_error': self.last_error,
+                    'adapting': self.adapting, 'vectors_adapted': self.adapted}
+
+
+class WidenedModel(object):
+    """The original model and a refit of it as one model: anomalous only when both are (module docstring).
+
+    ``score`` is the larger of the two scores' distances above their thresholds (``threshold`` 0), so a vector is
+    anomalous (``score < 0``) exactly when each model finds it below its own threshold."""
+
+    threshold = 0.0
+
+    def __init__(self, original, refit):
+        self.original, self.refit = original, refit
+        self.config = original.config
+        self.info = refit.info
+
+    def score_each(self, vectors):
+        """The combined score of each vector of a list (each model's ``score_each``, so batches score as one)."""
+        first = self.original.score_each(vectors)
+        second = self.refit.score_each(vectors)
+        low, high = self.original.threshold, self.refit.threshold
+        return [max(a - low, b - high) for a, b in zip(first, second)]
+
+    def is_anomalous(self, vector):
+        """``(score < 0, score)``."""
+        value = self.score_each([vector])[0]
+        return value < self.threshold, value
 
 
 def _count(value, name, minimum):

@@ -184,8 +184,8 @@ class SmartNode(object):
     def _flag_learners(self, event):
         """Online learning: nothing from around a window any trigger opened is learned."""
         if event.kind == smart.OPENED:
-            for _, learner in self.learners:
-                learner.flag(event.stamp)
+            for name, learner in self.learners:
+                learner.flag(event.stamp, own=event.trigger == name)
 
     def _trigger(self, request):
         self.intake.sync()  # the messages received before the call are fed: the window is around the newest

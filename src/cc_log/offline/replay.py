@@ -82,10 +82,16 @@ def check_bag_topics(bag_path, topics, types):
 
 
 def offline_logger(out_dir, options):
-    """A SmartLogger of ``options`` (``replay_setup``'s) writing into ``out_dir`` with the offline retries."""
+    """A SmartLogger of ``options`` (``replay_setup``'s) writing into ``out_dir`` with the offline retries. Online
+    learning refits in the replay's own thread: a refit lands at the message it was due, as on a robot (where it
+    takes about a second), not minutes of message time later while a background thread races a fast replay."""
     retry = window_writer.OFFLINE_RETRY_SECONDS
-    return smart.SmartLogger(None, out_dir, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
-                             give_up_after=retry, close_retry=retry, **options)
+    logger = smart.SmartLogger(None, out_dir, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
+                               give_up_after=retry, close_retry=retry, **options)
+    for trigger in logger.classifiers:
+        if getattr(trigger, 'learner', None) is not None:
+            trigger.learner.background = False
+    return logger
 
 
 def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None):

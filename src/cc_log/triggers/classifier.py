@@ -91,6 +91,7 @@ class ClassifierTrigger(Trigger):
         if retrigger not in RETRIGGER_MODES:
             raise ValueError('retrigger: %r is not one of %s' % (retrigger, ', '.join(RETRIGGER_MODES)))
         self.model = model
+        self.original = model  # the model file's (online learning: refits only widen it, online_learning)
         self.config = model.config
         self.threshold = float(model.threshold)
         self.retrigger = retrigger
@@ -168,7 +169,7 @@ class ClassifierTrigger(Trigger):
         anomalous = score < self.threshold
         fires = []
         if self.learner is not None:
-            self.learner.flag(record.stamp) if anomalous else self.learner.offer(record.stamp, batch.vectors[k])
+            self._learn(record.stamp, anomalous, batch.vectors[k])
         for observe in self.observers:
             observe(record.stamp, anomalous, batch.vectors[k])
         if anomalous:
@@ -184,6 +185,18 @@ class ClassifierTrigger(Trigger):
                 self._nominal_rows = batch.rows(k)
         return fires
 
+    def _learn(self, stamp, anomalous, vector):
+        """Online learning: a nominal vector is offered, an anomalous one flags (while the learner adapts to a
+        drift, it is offered too: ``online_learning``)."""
+        learner = self.learner
+        adapting = learner.adapting_at(stamp)
+        if anomalous:
+            if not adapting:
+                learner.flag(stamp, own=True)
+                return
+            learner.adapted += 1
+        learner.offer(stamp, vector)
+
     def _score_recent(self, window_rows, recent):
         """``(anomalous, score)`` of the newest ``recent`` rows in place of the newest rows of the last window
         scored nominal (of the whole feature window ``window_rows`` when there is none)."""
@@ -197,7 +210,8 @@ class ClassifierTrigger(Trigger):
         """Online learning: take a refitted model when one is ready."""
         model = self.learner.take()
         if model is not None:
-            self.model, self.threshold = model, float(model.threshold)
+            self.model = online_learning.WidenedModel(self.original, model)
+            self.threshold = self.model.threshold
 
     def stats(self):
         result = super(ClassifierTrigger, self).stats()
