@@ -161,6 +161,8 @@ class SmartWindowTest(unittest.TestCase):
             status = values()
             self.assertGreater(int(status['classifier: online vectors learned']), 20)
             self.assertEqual(status['classifier: online last error'], 'none')
+            self.assertIn(status['classifier: online adapting to drift'], ('yes', 'no'))
+            self.assertGreaterEqual(int(status['classifier: online vectors learned from its own flags (drift)']), 0)
             self.assertNotEqual(status['classifier: online last refit'], 'never')
             refitted = os.path.join(self.tmp, 'learn.online.json')
             self.assertTrue(os.path.exists(refitted))

@@ -286,6 +286,8 @@ class SmartNode(object):
             values += [('%s: online vectors seen' % name, online['vectors_seen']),
                        ('%s: online vectors learned' % name, online['vectors_learned']),
                        ('%s: online vectors refused (near a flag)' % name, online['vectors_refused']),
+                       ('%s: online vectors learned from its own flags (drift)' % name, online['vectors_adapted']),
+                       ('%s: online adapting to drift' % name, 'yes' if online['adapting'] else 'no'),
                        ('%s: online refits' % name, online['refits']),
                        ('%s: online last refit' % name, time.strftime('%Y-%m-%d %H:%M:%S', time.localtime(last))
                         if last else 'never'),
