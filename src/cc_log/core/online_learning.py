@@ -104,10 +104,12 @@ class OnlineLearner(object):
                 self._pending.pop()
                 self.refused += 1
 
-    def offer(self, stamp, vector):
-        """A vector scored nominal at ``stamp`` (message time, increasing); starts a refit when due."""
+    def offer(self, stamp, vector, flagged=False):
+        """A vector scored nominal at ``stamp`` (message time, increasing), or ``flagged`` while adapting; starts a
+        refit when due."""
         with self._lock:
             self.seen += 1
+            self.adapted += flagged
             if stamp - self._last_flag <= self.guard:
                 self.refused += 1
                 return

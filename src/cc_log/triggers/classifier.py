@@ -189,13 +189,11 @@ class ClassifierTrigger(Trigger):
         """Online learning: a nominal vector is offered, an anomalous one flags (while the learner adapts to a
         drift, it is offered too: ``online_learning``)."""
         learner = self.learner
-        adapting = learner.adapting_at(stamp)
-        if anomalous:
-            if not adapting:
-                learner.flag(stamp, own=True)
-                return
-            learner.adapted += 1
-        learner.offer(stamp, vector)
+        adapting = learner.adapting_at(stamp)  # every decision: the reservoir follows the state too
+        if anomalous and not adapting:
+            learner.flag(stamp, own=True)
+        else:
+            learner.offer(stamp, vector, flagged=anomalous)
 
     def _score_recent(self, window_rows, recent):
         """``(anomalous, score)`` of the newest ``recent`` rows in place of the newest rows of the last window
