@@ -164,10 +164,21 @@ class SmartWindowTest(unittest.TestCase):
             self.assertIn(status['classifier: online adapting to drift'], ('yes', 'no'))
             self.assertGreaterEqual(int(status['classifier: online vectors learned from its own flags (drift)']), 0)
             self.assertNotEqual(status['classifier: online last refit'], 'never')
+            self.assertEqual(status['classifier: online resumed'], 'no')
             refitted = os.path.join(self.tmp, 'learn.online.json')
             self.assertTrue(os.path.exists(refitted))
             with open(model_path, 'rb') as stream:
                 self.assertEqual(stream.read(), original)  # the original model is never written
+        finally:
+            code, _, err = fx.stop(node)
+        self.assertEqual(code, 0, err[-2000:])
+        # restarted, the node goes on from the refit it saved (widening the original, which stays untouched)
+        node = fx.start('smart_logger.py', '__name:=' + name, '_config:=' + config,
+                        '_directory:=' + os.path.join(self.tmp, 'learn_windows'), '_diagnostic_period:=0.2')
+        try:
+            fx.wait_for(lambda: values().get('classifier: online resumed', '').startswith('resumed from '), 30,
+                        'the restarted node to resume its refit')
+            self.assertIn(refitted, values()['classifier: online resumed'])
         finally:
             code, _, err = fx.stop(node)
         self.assertEqual(code, 0, err[-2000:])

@@ -130,6 +130,49 @@ def test_the_reservoir_is_bounded_and_a_refit_is_saved_beside_the_model(tmp_path
     assert learner.take() is not None and learner.take() is None
 
 
+def test_a_restarted_classifier_resumes_the_refit_of_its_own_model_only(tmp_path):
+    """A node restarted with learn_online goes on from the refit it saved: the classifier scores with the original
+    widened by it at its first message, and the refit's training vectors seed the reservoir. A refit of another
+    model (retrained since), a damaged file or ``learn_resume: false`` start afresh, saying why."""
+    path = str(tmp_path / 'model.json')
+    small_model().save(path)
+    first = OnlineLearner(AnomalyModel.load(path), online_learning.online_path(path), every=150, keep=100,
+                          guard='1s', background=False)
+    rng = np.random.RandomState(2)
+    for step in range(200):
+        first.offer(0.1 * step, rng.normal(loc=3.0, size=13))   # a new place: refitted once
+    assert first.stats()['refits'] == 1
+
+    def build(options):
+        entry = dict({'name': 'c', 'kind': 'classifier', 'model': path, 'topics': ['/odom'], 'learn_online': True},
+                     **options)
+        trigger, = config.Config.from_dict({'triggers': [entry]}).build_triggers(AnomalyModel.load, lambda t: None)
+        return trigger
+
+    trigger = build({})
+    assert trigger.learner.resumed.startswith('resumed from %s (its refit 1' % online_learning.online_path(path))
+    assert trigger.describe()['online'] == trigger.learner.resumed
+    assert trigger.learner.stats()['reservoir'] == len(online_learning.training_support(first.take()))
+    trigger._take_learned()
+    assert isinstance(trigger.model, online_learning.WidenedModel) and trigger.model.original is not None
+    there = np.full(13, 3.0)
+    assert trigger.original.is_anomalous(there)[0] and not trigger.model.is_anomalous(there)[0]
+
+    fresh = build({'learn_resume': False})
+    assert fresh.learner.resumed is None and fresh.learner.stats()['reservoir'] == 0
+    assert fresh.describe()['online'] == 'learning online from scratch'
+
+    small_model(seed=5).save(path)                            # retrained: the saved refit widens another model
+    assert build({}).learner.resumed == ('not resumed: %s widens another model (replaced at the next refit)'
+                                         % online_learning.online_path(path))
+    with open(online_learning.online_path(path), 'w') as stream:
+        stream.write('{"format": "cc_log')
+    assert build({}).learner.resumed.startswith('not resumed: %s: not a cc_log model' %
+                                                online_learning.online_path(path))
+    with pytest.raises(ValueError, match="learn_resume: 'no' must be true or false$"):
+        build({'learn_resume': 'no'})
+
+
 def test_bad_learning_options_are_named():
     model = small_model()
     for key, value, text in (('learn_online', 'yes', 'learn_online: '), ('learn_every', 0, 'learn_every: '),

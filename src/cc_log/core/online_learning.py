@@ -24,6 +24,7 @@ flag what the original did not (measured on the held-out tuc robot: docs/DETECTI
 Pure: numpy and learning; no rospy.
 """
 import collections
+import hashlib
 import os
 import random
 import threading
@@ -47,6 +48,15 @@ def online_path(path):
     return root + ONLINE_MARK + (ext or '.json')
 
 
+def fingerprint(model):
+    """A short digest of what ``model`` scores with (scaling, kernel arrays, threshold): a refit names the original
+    it widens by it."""
+    digest = hashlib.sha256()
+    for part in [model.mean, model.scale] + [model.kernel[key] for key in sorted(model.kernel)] + [model.threshold]:
+        digest.update(np.ascontiguousarray(part, dtype=float).tobytes())
+    return digest.hexdigest()[:16]
+
+
 def training_support(model):
     """The training vectors the model keeps (support vectors, or the Nystroem components), unscaled."""
     centres = model.kernel['support_vectors' if model.kind == 'ocsvm' else 'components']
@@ -68,6 +78,8 @@ class OnlineLearner(object):
         self.every, self.keep, self.guard = every, keep, guard.seconds
         self.background = background
         self._support = training_support(model)
+        self._original = fingerprint(model)
+        self.resumed = None                   # a line: the earlier run's refit resumed, or why not (``resume``)
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
         self._pending = collections.deque()   # (stamp, vector) younger than guard
@@ -148,7 +160,7 @@ class OnlineLearner(object):
         started = time.time()
         try:
             model, info = learning.train(vectors, config=self.model.config)
-            model.info['online'] = {'support_vectors_kept': len(self._support),
+            model.info['online'] = {'original': self._original, 'support_vectors_kept': len(self._support),
                                     'reservoir': len(vectors) - len(self._support), 'learned': self._arrived,
                                     'refit': self.refits + 1, 'seconds': time.time() - started}
             if self.save_path is not None:
@@ -163,6 +175,32 @@ class OnlineLearner(object):
                 self.last_error = '%s: %s' % (type(error).__name__, error)
         finally:
             self._thread = None
+
+    def resume(self, load):
+        """Go on from the refit an earlier run saved at ``save_path`` (``load(path)``: the model, or ValueError): when
+        it widens this same model, the classifier takes it at its first message and its training vectors seed the
+        reservoir (the next refit keeps what was learned). Returns ``resumed``: a line saying so, or why it was not
+        resumed (it is then replaced at the next refit); None without such a file."""
+        path = self.save_path
+        if path is None or not os.path.exists(path):
+            return None
+        try:
+            refit = load(path)
+        except ValueError as error:
+            self.resumed = 'not resumed: %s' % error
+            return self.resumed
+        online = refit.info.get('online') if isinstance(refit.info.get('online'), dict) else {}
+        if online.get('original') != self._original or refit.config.to_dict() != self.model.config.to_dict():
+            self.resumed = 'not resumed: %s widens another model (replaced at the next refit)' % path
+            return self.resumed
+        with self._lock:
+            self._ready = refit
+            for vector in training_support(refit):
+                self._absorb(vector)
+            self._new = 0
+        self.resumed = 'resumed from %s (its refit %s, %s vectors learned then)' % (
+            path, online.get('refit', '?'), online.get('learned', '?'))
+        return self.resumed
 
     def take(self):
         """The refitted model once it is ready (then None until the next one)."""
@@ -188,7 +226,7 @@ class OnlineLearner(object):
             return {'vectors_seen': self.seen, 'vectors_learned': self._arrived, 'vectors_refused': self.refused,
                     'reservoir': len(self._reservoir), 'refits': self.refits, 'last_refit': self.last_refit,
                     'refitting': self._thread is not None, 'last_error': self.last_error,
-                    'adapting': self.adapting, 'vectors_adapted': self.adapted}
+                    'adapting': self.adapting, 'vectors_adapted': self.adapted, 'resumed': self.resumed}
 
 
 class WidenedModel(object):
@@ -223,14 +261,20 @@ def _count(value, name, minimum):
     return value
 
 
-def from_options(model, path, options):
+def from_options(model, path, options, load=None):
     """The OnlineLearner of a classifier entry's ``learn_*`` keys (popped from ``options``), or None when
-    ``learn_online`` is not true. ``path``: the model file (the refitted model goes beside it)."""
+    ``learn_online`` is not true. ``path``: the model file (the refitted model goes beside it); ``load``: the
+    model reader, to resume the refit an earlier run saved (``learn_resume``, default true; ``resume``)."""
     enabled = options.pop('learn_online', False)
+    keep_learned = options.pop('learn_resume', True)
     keys = dict((key[len('learn_'):], options.pop(key)) for key in ('learn_every', 'learn_keep', 'learn_guard')
                 if key in options)
-    if not isinstance(enabled, bool):
-        raise ValueError('learn_online: %r must be true or false' % (enabled,))
+    for key, value in (('learn_online', enabled), ('learn_resume', keep_learned)):
+        if not isinstance(value, bool):
+            raise ValueError('%s: %r must be true or false' % (key, value))
     if not enabled:
         return None
-    return OnlineLearner(model, online_path(path), **keys)
+    learner = OnlineLearner(model, online_path(path), **keys)
+    if keep_learned and load is not None:
+        learner.resume(load)
+    return learner

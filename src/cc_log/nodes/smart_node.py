@@ -289,6 +289,7 @@ class SmartNode(object):
                        ('%s: online vectors learned from its own flags (drift)' % name, online['vectors_adapted']),
                        ('%s: online adapting to drift' % name, 'yes' if online['adapting'] else 'no'),
                        ('%s: online refits' % name, online['refits']),
+                       ('%s: online resumed' % name, online['resumed'] or 'no'),
                        ('%s: online last refit' % name, time.strftime('%Y-%m-%d %H:%M:%S', time.localtime(last))
                         if last else 'never'),
                        ('%s: online last error' % name, online['last_error'] or 'none')]

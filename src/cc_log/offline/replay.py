@@ -112,7 +112,9 @@ def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None):
     monitors = drift.monitor_classifiers(logger.classifiers)
     summary = replay_records(logger, _records(bag_path, topics),
                              None if progress is None else (lambda done: progress(done, total)), bag_path)
-    summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total, drift=monitors)
+    summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total, drift=monitors,
+                   online=[{'classifier': t.name, 'resumed': t.learner.resumed} for t in logger.classifiers
+                           if getattr(t, 'learner', None) is not None])
     return summary
 
 

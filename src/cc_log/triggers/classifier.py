@@ -61,7 +61,7 @@ class ClassifierTrigger(Trigger):
 
     kind = 'classifier'
     config_keys = ('model', 'topics', 'feature_set', 'window', 'classify_every', 'retrigger', 'recent',
-                   'learn_online', 'learn_every', 'learn_keep', 'learn_guard')
+                   'learn_online', 'learn_every', 'learn_keep', 'learn_guard', 'learn_resume')
 
     @classmethod
     def from_config(cls, name, options, context):
@@ -82,7 +82,7 @@ class ClassifierTrigger(Trigger):
                 raise ValueError('%s: %s does not match the model\'s %s (it is part of the model; leave it out)'
                                  % (key, value, getattr(model.config, key)))
         topics = default_topics(options.pop('topics', None), model.config.feature_set, context.resolve)
-        learner = online_learning.from_options(model, os.path.expanduser(path), options)
+        learner = online_learning.from_options(model, os.path.expanduser(path), options, context.load_model)
         return cls(name, model, topics, learner=learner, **options)
 
     def __init__(self, name, model, topics, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER,
@@ -225,6 +225,8 @@ class ClassifierTrigger(Trigger):
                       classify_every=str(self.classify_every), retrigger=self.retrigger)
         if self.retrigger == 'event':
             result['recent'] = str(self.recent)
+        if self.learner is not None:
+            result['online'] = self.learner.resumed or 'learning online from scratch'
         return result
 
 

@@ -95,6 +95,7 @@ def run(args):
                                               ('messages', w['messages']), ('path', w['path'])])
                      for w in summary['windows']]),
         ('drift', [monitor.as_dict() for monitor in summary['drift']]),
+        ('online', summary['online']),
     ])
     if args.json:
         print_json(result)
@@ -113,6 +114,8 @@ def run(args):
             window['messages'], window['path']))
     for monitor in summary['drift']:
         print('  %s' % monitor.report())
+    for learner in summary['online']:
+        print('  %s: online learning %s' % (learner['classifier'], learner['resumed'] or 'started afresh'))
     return EXIT_OK
 
 
