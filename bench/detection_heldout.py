@@ -33,8 +33,10 @@ Drift (``--no-drift`` skips): the robot's rest, the same place first and then th
 the lecture hall, Frankfurt), replayed as one bag by ``cclog replay`` (its drift monitor: is drift reported
 within 2 min of the switch?) and again with ``learn_online: true`` (a ``--config`` whose classifier learns
 online, the defaults learn_every 2000, guard 10 s): false windows per hour in each 5 min after the switch and
-from 10 min after it on (target <= 2/h). Offline, refits run in a background thread while the replay runs much
-faster than real time, so a refit lands later in message time than it would live.
+from 10 min after it on (target <= 2/h); then, per seed, the six anomalies injected into the new place from 10 min
+after the switch on (at the scale of the training driving and of the new place's first 10 min), replayed the same
+two ways: what is still caught once online learning has adapted (it learns the new place's own flags). ``cclog
+replay`` refits in its own thread: a refit lands at the message it was due, as on a robot.
 """
 import argparse
 import collections
@@ -69,6 +71,7 @@ SETTINGS = collections.OrderedDict([
 ])
 DRIFT_FROM = {'tuc': 'tuc_lecture_hall', 'smartloc': 'smartloc_frankfurt_main_tower', 'mrclam': None}
 BLOCK = 300.0           # s: false windows per block after the switch
+ADAPTED = 600.0         # s after the switch: events injected from then on test the adapted model
 EXPLAIN = 1.5           # s each side of a false window's trigger that --explain describes
 
 
@@ -237,14 +240,16 @@ def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, d
                                               'drift': drifts, 'replays': len(seeds)}
         out['runs'].append(row)
     if drift and DRIFT_FROM.get(robot):
-        out['drift'] = drift_test(robot, rest, model, setting, tmp)
+        out['drift'] = drift_test(robot, rest, model, setting, tmp, seeds, envelope, reach)
     out['seconds'] = time.time() - started
     return out
 
 
-def drift_test(robot, rest, model, setting, tmp):
+def drift_test(robot, rest, model, setting, tmp, seeds, envelope, reach):
     """The rest replayed as one bag, the place change at DRIFT_FROM: drift report and false windows after the
-    switch, without and with online learning."""
+    switch, without and with online learning; then, per seed, the six anomalies injected into the new place from
+    ADAPTED s after the switch on, at the scale of the training driving and at that of the new place's first
+    ADAPTED s: what each still catches once online learning has adapted."""
     names = [name for name, _ in rest]
     switch_run = names.index(DRIFT_FROM[robot])
     records = [r for _, recs in rest for r in recs]
@@ -254,6 +259,8 @@ def drift_test(robot, rest, model, setting, tmp):
     with open(config, 'w') as stream:
         stream.write('triggers:\n  - {name: classifier, kind: classifier, learn_online: true}\n')
     result = {'switch_after_s': switch - records[0].stamp, 'after_s': end - switch}
+    learned = [r for r in records if switch <= r.stamp < switch + ADAPTED]   # what online learning adapted to
+    scales = [('the training', envelope), ('the new place', sim.nominal_envelope(learned, TOPIC))]
     for label, cfg in (('plain', None), ('online', config)):
         local = os.path.join(tmp, 'drift-' + label)
         os.makedirs(local, exist_ok=True)
@@ -277,8 +284,37 @@ def drift_test(robot, rest, model, setting, tmp):
             'drift': monitor.get('drift'), 'first_drift_after_switch': None if first is None else first - switch,
             'first_drift_into_replay': None if first is None else first - records[0].stamp,
             'peak': monitor.get('peak'), 'kept_after': kept_after, 'online': label == 'online' and os.path.exists(
-                os.path.join(local, 'model.online.json'))}
+                os.path.join(local, 'model.online.json')),
+            'adapted': [(scale, injected_after(records, switch, model, setting, os.path.join(local, 'scale%d' % k),
+                                               cfg, seeds, limits, reach))
+                        for k, (scale, limits) in enumerate(scales)]}
     return result
+
+
+def injected_after(records, switch, model, setting, tmp, config, seeds, envelope, reach):
+    """Events caught among those injected into ``records`` from ADAPTED s after ``switch`` on at the scale of
+    ``envelope`` (one replay per seed, the model copied afresh into ``tmp``, a new directory: no refit of another
+    replay is resumed): {'events', 'caught', 'fast', 'spans', 'missed' (per type)} or {'error'}."""
+    before = [r for r in records if r.stamp < switch + ADAPTED]
+    after = [r for r in records if r.stamp >= switch + ADAPTED]
+    out = {'events': 0, 'caught': 0, 'fast': 0, 'spans': 0, 'missed': collections.Counter()}
+    os.makedirs(tmp)
+    for seed in seeds:
+        try:
+            injected, truth = sim.inject_anomalies(after, sim.ANOMALY_TYPES, seed=seed, topic=TOPIC,
+                                                   scale=envelope, limits=envelope)
+        except ValueError as error:
+            return {'error': str(error)}
+        fresh = os.path.join(tmp, 'adapted-%d.json' % seed)
+        shutil.copy(model, fresh)
+        windows, _ = replay(before + injected, fresh, setting, tmp, 'adapted-%d' % seed, config)
+        matches, _ = common.match_anomalies(truth, windows, reach)
+        out['events'] += len(truth)
+        out['caught'] += sum(m['caught'] for m in matches)
+        out['fast'] += sum(m['caught'] and m['delay'] <= LATENCY for m in matches)
+        out['spans'] += sum(span_kept(entry, windows) >= MIN_SPAN_KEPT for entry in truth)
+        out['missed'].update(m['type'] for m in matches if not m['caught'])
+    return out
 
 
 def pct(a, b):
@@ -360,6 +396,13 @@ def report(r, injections, explain=False):
                       d['blocks'], d['late'], d['late_rate'],
                       '; online model written' if d['online'] else '')
                   + '; %.0f%% of the time after the switch inside windows' % (100 * d['kept_after']))
+            for scale, a in d['adapted']:
+                print('         events injected into the new place from %.0f min after the switch on, at the scale '
+                      'of %s: %s' % (ADAPTED / 60.0, scale, 'not injected: %s' % a['error'] if 'error' in a else
+                                     'caught %d/%d, within %.1f s %d, >= %.0f%% of the span kept %d; missed: %s' % (
+                                         a['caught'], a['events'], LATENCY, a['fast'], 100 * MIN_SPAN_KEPT, a['spans'],
+                                         ', '.join('%s %d' % item for item in sorted(a['missed'].items()))
+                                         or 'none')))
     print('(%.0f s)\n' % r['seconds'])
     sys.stdout.flush()
 

@@ -51,9 +51,10 @@ DEFAULT_FACTOR = 10.0     # drift: the live share is at least this many times th
 DEFAULT_MIN_RATE = 0.2    # ... and at least this share (a long true anomaly fills a few % of 2 min, not 20 %)
 DEFAULT_EPISODES = 4      # ... or the flags of the span fall into this many separate episodes
 EPISODE_GAP = 7.0        # seconds without a flagged decision that separate two episodes
-REMEDIES = ('learn_online: true on the classifier (online adaptation, opt-in), a periodic trigger '
-            '(kind: periodic, every: 10min) to collect nominal samples to retrain from, or retrain '
-            '(cclog learn) on nominal driving of this robot and place')
+REMEDIES = ('learn_online: true on the classifier (online adaptation, opt-in; it learns this place\'s unusual '
+            'driving too: keep rules for collisions and aborts), a periodic trigger (kind: periodic, every: 10min) '
+            'to collect nominal samples to retrain from, or retrain (cclog learn) on nominal driving of this robot '
+            'and place')
 COVERAGE_TOLERANCE = 0.1  # a value is beyond the training range when past it by this share of the trained spread
 SHOWN_FEATURES = 3        # features named in a coverage line (per-feature coverage)
 
