@@ -165,6 +165,9 @@ def test_a_restarted_classifier_resumes_the_refit_of_its_own_model_only(tmp_path
     small_model(seed=5).save(path)                            # retrained: the saved refit widens another model
     assert build({}).learner.resumed == ('not resumed: %s widens another model (replaced at the next refit)'
                                          % online_learning.online_path(path))
+    small_model(seed=6).save(online_learning.online_path(path))   # a model file, not a refit
+    assert build({}).learner.resumed == ('not resumed: %s names no original model (saved by an older cc_log or not '
+                                         'a refit)' % online_learning.online_path(path))
     with open(online_learning.online_path(path), 'w') as stream:
         stream.write('{"format": "cc_log')
     assert build({}).learner.resumed.startswith('not resumed: %s: not a cc_log model' %

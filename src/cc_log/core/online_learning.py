@@ -190,7 +190,10 @@ class OnlineLearner(object):
             self.resumed = 'not resumed: %s' % error
             return self.resumed
         online = refit.info.get('online') if isinstance(refit.info.get('online'), dict) else {}
-        if online.get('original') != self._original or refit.config.to_dict() != self.model.config.to_dict():
+        if 'original' not in online:
+            self.resumed = 'not resumed: %s names no original model (saved by an older cc_log or not a refit)' % path
+            return self.resumed
+        if online['original'] != self._original or refit.config.to_dict() != self.model.config.to_dict():
             self.resumed = 'not resumed: %s widens another model (replaced at the next refit)' % path
             return self.resumed
         with self._lock:
