@@ -158,6 +158,12 @@ def test_a_restarted_classifier_resumes_the_refit_of_its_own_model_only(tmp_path
     there = np.full(13, 3.0)
     assert trigger.original.is_anomalous(there)[0] and not trigger.model.is_anomalous(there)[0]
 
+    document = json.loads(open(online_learning.online_path(path)).read())
+    document['info']['online']['refit'] = 'x' * 500          # only numbers are shown of what the file says
+    with open(online_learning.online_path(path), 'w') as stream:
+        json.dump(document, stream)
+    assert '(its refit ?, ' in build({}).learner.resumed
+
     fresh = build({'learn_resume': False})
     assert fresh.learner.resumed is None and fresh.learner.stats()['reservoir'] == 0
     assert fresh.describe()['online'] == 'learning online from scratch'

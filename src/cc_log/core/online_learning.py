@@ -201,8 +201,8 @@ class OnlineLearner(object):
             for vector in training_support(refit):
                 self._absorb(vector)
             self._new = 0
-        self.resumed = 'resumed from %s (its refit %s, %s vectors learned then)' % (
-            path, online.get('refit', '?'), online.get('learned', '?'))
+        counts = [online.get(key) if isinstance(online.get(key), int) else '?' for key in ('refit', 'learned')]
+        self.resumed = 'resumed from %s (its refit %s, %s vectors learned then)' % tuple([path] + counts)
         return self.resumed
 
     def take(self):
