@@ -296,3 +296,22 @@ def cpu_seconds(pid):
     with open('/proc/%d/stat' % pid) as stream:
         fields = stream.read().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / float(os.sysconf('SC_CLK_TCK'))
+
+
+def test_a_fleet_replay_learning_online_learns_from_each_bag_alone(replayed, cluster):
+    """With learn_online every bag learns on its own, its refit in its own directory (nothing beside the model
+    shared by parallel workers, nothing resumed): one process and the cluster keep the same windows."""
+    root = replayed[0]
+    config = root / 'learn.yaml'
+    config.write_text('triggers:\n  - {name: classifier, kind: classifier, learn_online: true, learn_every: 100, '
+                      'learn_guard: 1s}\n')
+    args = (root / 'bags', '--topic', '/odom', '--model', root / 'model.json', '--config', config)
+    one = ok_json('replay', *args, '--out', root / 'learn-one', '--workers', 0)
+    dask = ok_json('replay', *args, '--out', root / 'learn-dask', '--scheduler', cluster)
+    assert not os.path.exists(str(root / 'model.online.json'))
+    for out, result in (('learn-one', one), ('learn-dask', dask)):
+        assert result['failed'] == 0
+        for name in ('robot1__run', 'robot2__run', 'robot3__run'):
+            assert os.path.exists(str(root / out / name / 'model.online.json')), (out, name)
+    assert [len(row['windows']) for row in one['bags']] == [len(row['windows']) for row in dask['bags']]
+    assert [row['online'] for row in one['bags']] == [[{'classifier': 'classifier', 'resumed': None}]] * 3

@@ -178,11 +178,12 @@ class Config(object):
     def _where(self, entry):
         return '%s: triggers[%d] (%s)' % (self.source, entry['index'], entry['name'])
 
-    def build_triggers(self, load_model, message_class, resolve=global_name):
+    def build_triggers(self, load_model, message_class, resolve=global_name, online_dir=None):
         """The Trigger objects of smart mode. ``load_model(path)``: a model (raising ValueError naming the
         file); ``message_class(type)``: the class of a message type, or None when it is not installed;
-        ``resolve(topic)``: a topic's full name. ValueError naming the trigger for anything wrong."""
-        context = Context(load_model, message_class, resolve)
+        ``resolve(topic)``: a topic's full name; ``online_dir``: where online learning keeps its refits (None:
+        beside the model files). ValueError naming the trigger for anything wrong."""
+        context = Context(load_model, message_class, resolve, online_dir)
         built = []
         for entry in self.triggers:
             options = dict((key, value) for key, value in entry.items() if key not in ('name', 'kind', 'index', 'keep'))

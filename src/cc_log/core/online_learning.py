@@ -264,10 +264,11 @@ def _count(value, name, minimum):
     return value
 
 
-def from_options(model, path, options, load=None):
+def from_options(model, path, options, load=None, directory=None):
     """The OnlineLearner of a classifier entry's ``learn_*`` keys (popped from ``options``), or None when
     ``learn_online`` is not true. ``path``: the model file (the refitted model goes beside it); ``load``: the
-    model reader, to resume the refit an earlier run saved (``learn_resume``, default true; ``resume``)."""
+    model reader, to resume the refit an earlier run saved there (``learn_resume``, default true; ``resume``).
+    ``directory``: a run's own directory instead (a bag of a fleet replay): refits go there, none is resumed."""
     enabled = options.pop('learn_online', False)
     keep_learned = options.pop('learn_resume', True)
     keys = dict((key[len('learn_'):], options.pop(key)) for key in ('learn_every', 'learn_keep', 'learn_guard')
@@ -277,7 +278,8 @@ def from_options(model, path, options, load=None):
             raise ValueError('%s: %r must be true or false' % (key, value))
     if not enabled:
         return None
-    learner = OnlineLearner(model, online_path(path), **keys)
-    if keep_learned and load is not None:
+    saved = online_path(path) if directory is None else os.path.join(directory, os.path.basename(online_path(path)))
+    learner = OnlineLearner(model, saved, **keys)
+    if keep_learned and load is not None and directory is None:
         learner.resume(load)
     return learner

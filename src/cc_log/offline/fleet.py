@@ -275,7 +275,7 @@ def _collect_task(job):
 
 def _replay_task(job):
     from cc_log.offline import replay
-    return replay.replay_one(job.path, job.out, job.args[0])
+    return replay.replay_one(job.path, job.out, job.args[0], online_dir=job.out)  # bags learn independently
 
 
 class Job(collections.namedtuple('Job', 'name path out args')):
@@ -293,7 +293,9 @@ def collect_many(engine, bags, out_dir, specs, label, stride, single=True, progr
 
 
 def replay_many(engine, bags, out_dir, cfg, progress=None):
-    """``replay.replay_one`` of every bag into ``out_dir/<output name>/``; Outcomes in the order of ``bags``."""
+    """``replay.replay_one`` of every bag into ``out_dir/<output name>/``; Outcomes in the order of ``bags``.
+    Classifiers that learn online learn from each bag alone, their refits in its directory: the bags run in
+    parallel, so none may resume another's refit or share a file with it."""
     return engine.run(_replay_task, jobs(bags, out_dir, cfg), progress)
 
 

@@ -28,12 +28,13 @@ _MSG = operator.attrgetter('msg')
 
 # -- the logger of a configuration --------------------------------------------------------------------------
 
-def _options(cfg):
+def _options(cfg, online_dir=None):
     """``(SmartLogger keyword arguments, {topic: type} the triggers read)`` of ``cfg``, its triggers built (model
-    files loaded); ``side_topics`` is None while topic patterns wait for a bag's topics."""
+    files loaded; refits of online learning in ``online_dir``, None: beside the models); ``side_topics`` is None
+    while topic patterns wait for a bag's topics."""
     from cc_log.core import config as config_mod
     from cc_log.core.model import AnomalyModel
-    triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class)
+    triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class, online_dir=online_dir)
     return cfg.logger_options(triggers), trigger_topics.topic_types(triggers)
 
 
@@ -94,13 +95,14 @@ def offline_logger(out_dir, options):
     return logger
 
 
-def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None):
+def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None, online_dir=None):
     """The smart logger of configuration ``cfg`` over one bag into ``out_dir``: ``replay``'s summary plus
     ``driving_topic``, ``format``, ``messages`` and ``drift`` (a ``drift.DriftMonitor`` of each classifier).
     ``progress(done, total)``; ``make_dir(path)`` creates ``out_dir`` once the bag is checked (default:
-    ``safe_files.make_dirs``)."""
+    ``safe_files.make_dirs``); ``online_dir``: where online learning saves its refits, resuming none (None:
+    beside the model files, resuming the refit found there, as on a robot)."""
     from cc_log.core import drift, safe_files
-    options, types = _options(cfg)
+    options, types = _options(cfg, online_dir)
     bag = open_bag(bag_path)
     try:
         options, types, topics = _selected(cfg, options, types, bag)

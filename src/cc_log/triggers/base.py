@@ -18,9 +18,10 @@ from cc_log.core.registry import Registry
 from cc_log.core.safe_input import brief
 from cc_log.core.spans import Span
 
-Context = collections.namedtuple('Context', 'load_model message_class resolve')
+Context = collections.namedtuple('Context', 'load_model message_class resolve online_dir', defaults=(None,))
 Context.__doc__ = """What building a trigger from a configuration may need: ``load_model(path)`` (a model; ValueError
-naming the file), ``message_class(type)`` (an installed class or None), ``resolve(topic)`` (a full name)."""
+naming the file), ``message_class(type)`` (an installed class or None), ``resolve(topic)`` (a full name),
+``online_dir`` (where classifiers learning online keep their refits; None: beside their model files)."""
 
 Fire = collections.namedtuple('Fire', 'name reason score pre post', defaults=(None, None))
 Fire.__doc__ = """A trigger's decision to keep a window: its name, a reason (text), a score (float; NaN when none),

@@ -82,7 +82,8 @@ class ClassifierTrigger(Trigger):
                 raise ValueError('%s: %s does not match the model\'s %s (it is part of the model; leave it out)'
                                  % (key, value, getattr(model.config, key)))
         topics = default_topics(options.pop('topics', None), model.config.feature_set, context.resolve)
-        learner = online_learning.from_options(model, os.path.expanduser(path), options, context.load_model)
+        learner = online_learning.from_options(model, os.path.expanduser(path), options, context.load_model,
+                                               context.online_dir)
         return cls(name, model, topics, learner=learner, **options)
 
     def __init__(self, name, model, topics, classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER,

@@ -125,7 +125,7 @@ def _replay_many(args, cfg):
     writable_dir(args.out, 'out')
     outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
         engine, bags, args.out, cfg, progress=progress))
-    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift'))
+    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online'))
     reports = {}
     for row in rows:
         row['windows'] = [collections.OrderedDict((key, w[key]) for key in ('start', 'end', 'messages', 'path'))
