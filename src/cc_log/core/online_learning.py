@@ -1,10 +1,11 @@
 """Online learning of nominal: refit a classifier's model from the vectors of spans no trigger flagged.
 
 Off by default; a classifier's ``learn_online: true`` (the smart node's ``~learn_online``) turns it on. The
-classifier offers each vector it scored nominal (``offer(stamp, vector)``) and reports every anomalous score,
-and the node every window opened by any trigger (``flag(stamp)``). A vector waits until ``guard`` of message
-time has passed after it; a flag within ``guard`` of it (before or after) drops it, so nothing from around a
-flagged span is ever learned (``guard`` should cover the feature window and the logger's pre and post).
+classifier tells every decision (``observe(stamp, vector, anomalous)``: a nominal vector is offered, an
+anomalous score flags), and the node every window opened by any trigger (``flag(stamp)``). A vector waits
+until ``guard`` of message time has passed after it; a flag within ``guard`` of it (before or after) drops it,
+so nothing from around a flagged span is ever learned (``guard`` should cover the feature window and the
+logger's pre and post).
 Except in drift: while ``drifting()`` (set by ``drift.monitor_classifiers``: the classifier's drift monitor
 reports drift) the classifier's own flags (``flag(stamp, own=True)``) are the new place's driving, not events,
 and its anomalous vectors are offered too; flags of other triggers (rules, manual) still guard. The
@@ -104,6 +105,15 @@ class OnlineLearner(object):
             self._adapt_until = stamp + ADAPT_HOLD
         self.adapting = stamp <= self._adapt_until
         return self.adapting
+
+    def observe(self, stamp, vector, anomalous):
+        """One decision of the classifier: a nominal vector is offered, an anomalous one flags; while adapting to
+        drift (``adapting_at``, asked at every decision: the reservoir follows the state too) both are offered."""
+        adapting = self.adapting_at(stamp)
+        if anomalous and not adapting:
+            self.flag(stamp, own=True)
+        else:
+            self.offer(stamp, vector, flagged=anomalous)
 
     def flag(self, stamp, own=False):
         """Something was flagged at ``stamp``: vectors within ``guard`` of it are never learned (thread-safe);

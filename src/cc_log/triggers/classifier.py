@@ -170,7 +170,7 @@ class ClassifierTrigger(Trigger):
         anomalous = score < self.threshold
         fires = []
         if self.learner is not None:
-            self._learn(record.stamp, anomalous, batch.vectors[k])
+            self.learner.observe(record.stamp, batch.vectors[k], anomalous)
         for observe in self.observers:
             observe(record.stamp, anomalous, batch.vectors[k])
         if anomalous:
@@ -185,16 +185,6 @@ class ClassifierTrigger(Trigger):
             if self.retrigger == 'event':
                 self._nominal_rows = batch.rows(k)
         return fires
-
-    def _learn(self, stamp, anomalous, vector):
-        """Online learning: a nominal vector is offered, an anomalous one flags (while the learner adapts to a
-        drift, it is offered too: ``online_learning``)."""
-        learner = self.learner
-        adapting = learner.adapting_at(stamp)  # every decision: the reservoir follows the state too
-        if anomalous and not adapting:
-            learner.flag(stamp, own=True)
-        else:
-            learner.offer(stamp, vector, flagged=anomalous)
 
     def _score_recent(self, window_rows, recent):
         """``(anomalous, score)`` of the newest ``recent`` rows in place of the newest rows of the last window
