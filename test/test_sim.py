@@ -420,22 +420,26 @@ def test_inject_into_real_husky_odometry(husky_records):
     changed = 0
     for original, record, data in zip(husky_records, out, before):
         assert (record.stamp, record.topic) == (original.stamp, original.topic)
-        if record.topic != HUSKY_ODOM or not any(e['start'] <= record.stamp < e['end'] for e in truth):
-            assert serialized(record.msg) == data                     # unchanged outside the anomalies
+        if record.topic != HUSKY_ODOM or record.stamp < truth[0]['start']:
+            assert serialized(record.msg) == data                     # unchanged before the first anomaly
+        elif not inside(record.stamp, truth):
+            assert record.msg.header == original.msg.header           # after one: the recording, carried on
+            assert record.msg.twist == original.msg.twist
         elif serialized(record.msg) != data:
             changed += 1
             assert record.msg.header == original.msg.header
     assert changed > 100
+    check_carried_on(odom_track(husky_records, HUSKY_ODOM), odom_track(out, HUSKY_ODOM), truth)
     for before_entry, after_entry in zip(truth, truth[1:]):
         assert after_entry['start'] - before_entry['end'] >= 20.0
     track = odom_track(out, HUSKY_ODOM)
     for entry in truth:
         check_signature(track, entry, limits=sim.BWIBOT_LIMITS)
-    # the message at `end` is the first unchanged one; the one before it was changed
+    # the message at `end` is the first with the recorded twist again; the one before it was changed
     odom = [(o, r) for o, r in zip(husky_records, out) if r.topic == HUSKY_ODOM]
     for entry in truth:
         position = next(i for i, (o, r) in enumerate(odom) if r.stamp == entry['end'])
-        assert odom[position][1].msg is odom[position][0].msg
+        assert odom[position][1].msg.twist == odom[position][0].msg.twist
         assert serialized(odom[position - 1][1].msg) != serialized(odom[position - 1][0].msg)
 
 
@@ -458,8 +462,9 @@ def test_inject_into_simulated_100hz(tmp_path):
         check_signature(track, entry)
     check_nominal(track, truth, pad=0.0)
     for original, record in zip(records, out):
-        if not any(e['start'] <= record.stamp < e['end'] for e in truth):
+        if record.stamp < truth[0]['start'] or record.topic != sim.ODOM_TOPIC:
             assert record is original
+    check_carried_on(odom_track(records, sim.ODOM_TOPIC), track, truth)
 
 
 def test_inject_refuses_what_does_not_fit(husky_records):
@@ -515,17 +520,40 @@ def test_inject_at_the_robot_scale(husky_records, kind, field, quantity):
     assert 1.7 < ratio < 2.3
 
 
-def test_the_blend_back_onto_the_track_is_at_the_robots_own_pace(husky_records):
-    """The injected pose gets back onto the recorded track at most 0.8 limits.max_speed faster than recorded: a
-    car's envelope (10x the BWIBot's speed) takes a tenth of the time a BWIBot's would for the same offset."""
-    def lengths(limits):
-        _, truth = sim.inject_anomalies(husky_records, ['wheels_slipping'], seed=2, topic=HUSKY_ODOM, limits=limits)
-        return truth[0]['end'] - truth[0]['start']
-    slow = lengths(sim.BWIBOT_LIMITS._replace(max_speed=0.1))
-    bwibot = lengths(sim.BWIBOT_LIMITS)
-    fast = lengths(sim.BWIBOT_LIMITS._replace(max_speed=10.0))
-    assert slow > bwibot > fast  # the slipping itself lasts the same; the blend is what differs
-    assert fast < 6.0 + 2.5 < slow  # slipping lasts 3-6 s, then the shortest blend (2 s) give or take a message
+def body_steps(track, i):
+    """(forward, sideways, turn) of the step from message i-1 to i, in the frame of the mean heading."""
+    heading = 0.5 * (track.yaw[i - 1] + track.yaw[i])
+    dx, dy = track.x[i] - track.x[i - 1], track.y[i] - track.y[i - 1]
+    return (math.cos(heading) * dx + math.sin(heading) * dy, -math.sin(heading) * dx + math.cos(heading) * dy,
+            track.yaw[i] - track.yaw[i - 1])
+
+
+def check_carried_on(recorded, injected, truth):
+    """Outside the anomalies the base makes the recording's own steps (its pose moved rigidly, nothing else)."""
+    for i in range(1, len(recorded)):
+        if not inside(injected.t[i - 1], truth) and not inside(injected.t[i], truth):
+            assert body_steps(injected, i) == pytest.approx(body_steps(recorded, i), abs=1e-9), i
+
+
+@pytest.mark.parametrize('kind', ['planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting',
+                                  'wheels_slipping'])
+def test_an_injected_base_never_slides_sideways(husky_records, kind):
+    """Odometry is integrated from the twist: the injected base moves along its heading (no sideways step beyond
+    the recording's own), and after the anomaly the recording carries on from where the base was left, instead
+    of the pose sliding back onto the recorded track (which the features saw as a sideways velocity error)."""
+    recorded = odom_track(husky_records, HUSKY_ODOM)
+    envelope = sim.nominal_envelope(husky_records, HUSKY_ODOM)
+    out, truth = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=envelope,
+                                      limits=envelope)
+    injected = odom_track(out, HUSKY_ODOM)
+    dt = [injected.t[i] - injected.t[i - 1] for i in range(1, len(injected))]
+    own = max(abs(body_steps(recorded, i)[1]) / dt[i - 1] for i in range(1, len(recorded)) if dt[i - 1] > 0)
+    slide = max(abs(body_steps(injected, i)[1]) / dt[i - 1] for i in range(1, len(injected)) if dt[i - 1] > 0)
+    assert slide <= own + 1e-3
+    inside_steps = [i for i in range(1, len(injected)) if inside(injected.t[i], truth)]
+    assert any(body_steps(injected, i) != body_steps(recorded, i) for i in inside_steps)  # the anomaly is there
+    check_carried_on(recorded, injected, truth)
+    assert (injected.x[-1], injected.y[-1]) != (recorded.x[-1], recorded.y[-1])  # carried, not blended back
 
 
 def test_collision_at_the_robot_scale_brakes_by_its_deceleration(husky_records):

@@ -10,14 +10,11 @@ import random
 
 from cc_log.sim import anomalies
 from cc_log.sim.anomalies import ANOMALY_TYPES, parse_anomaly_types
-from cc_log.sim.kinematics import BWIBOT_LIMITS, Limits, integrate, limit, limit_speed, limit_yaw, wrap
+from cc_log.sim.kinematics import BWIBOT_LIMITS, Limits, integrate, limit, limit_speed, limit_yaw
 from cc_log.sim.messages import yaw_of
 from cc_log.sim.truth import truth_entry
 
 _MOVING = 0.3                # m/s: the base counts as driving
-# The peak extra speed with which injected odometry gets back onto the recording, a share of limits.max_speed
-# (0.8 m/s for the BWIBot's 1 m/s: a return at the robot's own scale, not the BWIBot's on every robot).
-_CATCH_UP = 0.8
 
 
 def _moving_average(values, half):
@@ -33,11 +30,6 @@ def _moving_average(values, half):
     return out
 
 
-def _smoothstep_parts(u):
-    """(s, ds/du) of the smoothstep 3u^2 - 2u^3."""
-    return u * u * (3.0 - 2.0 * u), 6.0 * u * (1.0 - u)
-
-
 def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20.0, gap=20.0,
                      limits=BWIBOT_LIMITS, scale=None):
     """Put the simulator's anomaly models into a recorded odometry stream.
@@ -49,16 +41,20 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
 
     Inside an anomaly the twist follows the model plus the recording's own noise (the residual of the
     recorded twist around its 0.5 s moving average, scaled down when the model is slower), and the pose is
-    integrated from that twist; then the base gets back to the recorded speed within its limits and the
-    pose blends smoothly back onto the recorded track (at most 0.8 ``limits.max_speed`` faster or slower than recorded:
-    0.8 m/s for the BWIBot, 8.7 m/s for a car whose envelope reaches 10.9 m/s),
-    so every message from ``end`` on is the recorded one. Modified messages are copies; the input is not changed.
+    integrated from that twist (the mean twist of each step, turned by half the step's turn: a wheeled base's
+    odometry, which never moves sideways); then the base gets back to the recorded twist within ``limits`` and
+    the anomaly ends (``end``). From there on the recording goes on from where the anomaly left the base: every
+    later pose is the recorded one moved rigidly (turned about z and shifted) so that it continues the injected
+    track, as a robot's integrated odometry carries an offset; the twist is the recorded one. The motion the
+    features see after ``end`` is the recording's (every feature set but ``raw`` is the same wherever the robot
+    is and whichever way it faces), and there is no sideways slide back onto the recorded track. Messages
+    before the first anomaly are the input's own; modified messages are copies; the input is not changed.
 
     ``scale``: the recorded robot's nominal envelope (a ``Limits``, e.g. ``nominal_envelope`` of its nominal
     driving) to inject anomalies at its own scale: every magnitude (deceleration of a collision, acceleration
     and extra speed of a surge, twisting amplitude, jump distance and turn, a planning failure's rates) is the
     BWIBot's times the envelope's ratio to ``BWIBOT_LIMITS``; slipping holds the pose whatever the scale. None
-    (default): the BWIBot's magnitudes in m/s and rad/s. ``limits`` still bounds the return to the recording.
+    (default): the BWIBot's magnitudes in m/s and rad/s. ``limits`` bounds the return to the recorded twist.
 
     Returns ``(records, truth)``: a new list of records and [{'type', 'start', 'end'}]. Raises ValueError
     when the anomalies do not fit into the stream.
@@ -95,7 +91,8 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
         raise ValueError('types: %d anomalies with warmup %g s and gap %g s do not fit into %.1f s of odometry'
                          % (len(types), warmup, gap, duration))
 
-    new = {}   # index in odom -> (x, y, yaw, v, w)
+    recorded = (list(x), list(y), list(yaw))
+    new = {}   # index in odom -> (x, y, yaw, v, w); x, y, yaw: the recorded track, carried by each anomaly
     truth = []
     earliest = t[0] + warmup
     index_of = lambda stamp, lo=0: next((i for i in range(lo, n) if t[i] >= stamp), n)  # noqa: E731
@@ -116,17 +113,26 @@ def inject_anomalies(records, types=ANOMALY_TYPES, seed=0, topic=None, warmup=20
             raise ValueError('types: %s at %.1f s does not end before the odometry does'
                              % (kind, t[i0] - t[0]))
         new.update(modified)
+        if kind != 'localization_jump' and end - 1 in modified:
+            _carry(modified[end - 1], end - 1, x, y, yaw)
         truth.append(truth_entry(kind, t[i0], t[end]))
         earliest = t[end] + gap
 
     out = list(records)
-    for i, (nx, ny, nyaw, nv, nw) in sorted(new.items()):
+    x0, y0, yaw0 = recorded
+    for i in range(n):
+        if i in new:
+            nx, ny, nyaw, nv, nw = new[i]
+        elif (x[i], y[i], yaw[i]) != (x0[i], y0[i], yaw0[i]):
+            nx, ny, nyaw, nv, nw = x[i], y[i], yaw[i], v[i], w[i]
+        else:
+            continue
         record = odom[i]
         msg = copy.deepcopy(record.msg)
         pose = msg.pose.pose
         pose.position.x, pose.position.y = nx, ny
         q = pose.orientation
-        half_turn = 0.5 * (nyaw - yaw[i])
+        half_turn = 0.5 * (nyaw - yaw0[i])
         c, s = math.cos(half_turn), math.sin(half_turn)       # rotate the recorded orientation about z
         q.x, q.y, q.z, q.w = c * q.x - s * q.y, c * q.y + s * q.x, c * q.z + s * q.w, c * q.w - s * q.z
         msg.twist.twist.linear.x = nv
@@ -158,6 +164,17 @@ def nominal_envelope(records, topic=None, floor=0.1):
     return Limits(*(max(value, floor * bound) for value, bound in zip(found, BWIBOT_LIMITS)))
 
 
+def _carry(pose, last, x, y, yaw):
+    """Move the track after index ``last`` rigidly (in place) so that it goes on from ``pose`` (x, y, yaw) where
+    the recorded track went on from its own pose at ``last``."""
+    px, py, pyaw = x[last], y[last], yaw[last]
+    turn = pose[2] - pyaw
+    c, s = math.cos(turn), math.sin(turn)
+    for j in range(last + 1, len(x)):
+        dx, dy = x[j] - px, y[j] - py
+        x[j], y[j], yaw[j] = pose[0] + c * dx - s * dy, pose[1] + s * dx + c * dy, yaw[j] + turn
+
+
 def _with_noise(cv, cw, v, w, v_s, w_s):
     """The model's twist plus the recording's own noise (its residual around the moving average), scaled
     down when the model moves slower than the recording (a base at rest reads no wheel noise)."""
@@ -166,13 +183,24 @@ def _with_noise(cv, cw, v, w, v_s, w_s):
 
 
 def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
-    """One anomaly from index i0: {index: (x, y, yaw, v, w)} and the index of the first unchanged message."""
+    """One anomaly from index i0: {index: (x, y, yaw, v, w)} and the index of the first message after it (the
+    twist back to the recorded one)."""
     kind = plan['type']
     n = len(t)
     out = {}
-    ax, ay, ayaw = x[i0 - 1], y[i0 - 1], yaw[i0 - 1]     # the pose the anomaly starts from
+    pose = (x[i0 - 1], y[i0 - 1], yaw[i0 - 1])           # the pose the anomaly starts from
+    last = (v[i0 - 1], w[i0 - 1])                          # the twist of the message before
     v0, w0 = v_s[i0], w_s[i0]
     sv, sw = v_s[i0 - 1], w_s[i0 - 1]                     # smooth (noise-free) twist of the model
+
+    def drive(i, ov, ow):
+        """The message i drives at (ov, ow): its pose after the step from the message before."""
+        nonlocal pose, last
+        dt = max(t[i] - t[i - 1], 0.0)
+        pose = integrate(pose[0], pose[1], pose[2], 0.5 * (last[0] + ov), 0.5 * (last[1] + ow), dt)
+        last = (ov, ow)
+        out[i] = pose + (ov, ow)
+
     i = i0
     # the anomaly itself
     while i < n and t[i] - t[i0] < plan['duration']:
@@ -182,47 +210,21 @@ def _inject_one(plan, i0, t, x, y, yaw, v, w, v_s, w_s, limits):
             dx, dy, dyaw = anomalies.jump_offset(plan, tau)
             out[i] = (x[i] + dx, y[i] + dy, yaw[i] + dyaw, v[i], w[i])
         elif kind == 'wheels_slipping':
-            out[i] = (ax, ay, ayaw, v[i], w[i])
+            out[i] = pose + (v[i], w[i])
         else:
             cv, cw, limited = anomalies.command(plan, tau, v0, w0, v_s[i], w_s[i])
             if limited:
                 cv = limit_speed(cv, sv, limits, dt)
                 cw = limit_yaw(cw, sw, limits, dt)
             sv, sw = cv, cw
-            ov, ow = _with_noise(cv, cw, v[i], w[i], v_s[i], w_s[i])
-            ax, ay, ayaw = integrate(ax, ay, ayaw, ov, ow, dt)
-            out[i] = (ax, ay, ayaw, ov, ow)
+            drive(i, *_with_noise(cv, cw, v[i], w[i], v_s[i], w_s[i]))
         i += 1
-    if kind == 'localization_jump':
-        return out, i
     if kind in anomalies.MOVES_BASE:
         # back to the recorded twist within the base's limits
         while i < n and (abs(sv - v_s[i]) > 0.02 or abs(sw - w_s[i]) > 0.05) and t[i] - t[i0] < plan['duration'] + 10.0:
             dt = max(t[i] - t[i - 1], 0.0)
             sv = limit_speed(v_s[i], sv, limits, dt)
             sw = limit(w_s[i], sw, limits.max_yaw_accel, limits.max_yaw_accel, dt)
-            ov, ow = _with_noise(sv, sw, v[i], w[i], v_s[i], w_s[i])
-            ax, ay, ayaw = integrate(ax, ay, ayaw, ov, ow, dt)
-            out[i] = (ax, ay, ayaw, ov, ow)
+            drive(i, *_with_noise(sv, sw, v[i], w[i], v_s[i], w_s[i]))
             i += 1
-    if i >= n:
-        return out, n
-    # blend the pose back onto the recorded track, starting from index i (twist: recorded + the blend's)
-    last = i - 1
-    if last not in out:
-        return out, i
-    dx, dy = out[last][0] - x[last], out[last][1] - y[last]
-    dyaw = wrap(out[last][2] - yaw[last])
-    # smoothstep blend: peak extra speed 1.5 * distance / span <= the catch-up speed, peak extra yaw rate <= 0.6 rad/s
-    span = max(2.0, 1.5 * math.hypot(dx, dy) / (_CATCH_UP * limits.max_speed), 2.5 * abs(dyaw))
-    t_b = t[last]
-    while i < n and t[i] - t_b < span:
-        u = (t[i] - t_b) / span
-        s, ds = _smoothstep_parts(u)
-        keep = 1.0 - s
-        nyaw = yaw[i] + keep * dyaw
-        ex, ey = -dx * ds / span, -dy * ds / span           # extra world velocity of the blend
-        out[i] = (x[i] + keep * dx, y[i] + keep * dy, nyaw,
-                  v[i] + ex * math.cos(nyaw) + ey * math.sin(nyaw), w[i] - dyaw * ds / span)
-        i += 1
-    return out, i
+    return out, min(i, n)
