@@ -156,3 +156,24 @@ def test_training_17512_vectors_is_fast_and_small():
     ny, ny_info = train(X, config=CONFIG, method='nystroem')
     assert ny.kind == 'nystroem-sgd' and ny_info['train_seconds'] <= 10.0
     assert evaluate(ny, X[:2000], None).fp <= 0.05 * 2000
+
+
+def test_a_column_that_varied_by_rounding_alone_does_not_make_rounding_anomalous():
+    """Odometry whose pose is integrated from its own twist has a sideways pose error of ~4e-15 m/s: scaled by that
+    spread, the rounding of coordinates further from the origin (1e-10) would be 1e5 standard deviations. Its
+    scale is MIN_SCALE instead; a constant column keeps scikit-learn's 1.0; a real change still counts."""
+    X = nominal_stream(600)
+    rng = np.random.default_rng(1)
+    X[:, 3] = rng.normal(scale=5e-15, size=len(X))
+    X[:, 4] = 0.0
+    model, _ = train(X, config=CONFIG)
+    assert model.scale[3] == learning.MIN_SCALE and model.scale[4] == 1.0
+    assert learning.feature_scale([3e-15, 0.0, 0.2]).tolist() == [learning.MIN_SCALE, 1.0, 0.2]
+    typical = X[len(X) // 2].copy()
+    assert not model.is_anomalous(typical)[0]
+    rounded = typical.copy()
+    rounded[3] += 1e-10
+    assert not model.is_anomalous(rounded)[0]
+    slide = typical.copy()
+    slide[3] += 0.05   # a sideways pose error of 5 cm/s on a robot that never had one
+    assert model.is_anomalous(slide)[0]

@@ -52,6 +52,7 @@ MAX_TRIMMED_SPANS = 20         # spans of trimmed vectors listed in info (the re
 STOPPED_SPEED = 0.05           # m/s: a window whose largest |v| is below this counts as stopped (coverage)
 COVERAGE_QUANTILES = (0.01, 0.99)
 MIN_VECTORS = 10               # fewer nominal vectors cannot be split into training and held-out blocks
+MIN_SCALE = 1e-5               # feature units (m/s, m/s^2, rad/s ...): a smaller spread is rounding, not driving
 METHODS = ('auto', 'exact', 'nystroem')
 
 Report = collections.namedtuple('Report', 'total tp fp fn tn precision recall')
@@ -200,12 +201,23 @@ class _Fitted(object):
         return self.model.scores(X)
 
 
+def feature_scale(std):
+    """The scale that standardises features of standard deviations ``std``: 1.0 for a constant column (as
+    scikit-learn's StandardScaler), at least MIN_SCALE for the others. A column that varied by float rounding
+    alone (odometry whose pose is integrated from its own twist: a sideways pose error of 1e-15 m/s) would
+    otherwise make a rounding difference tens of thousands of standard deviations: anomalous wherever the robot
+    drives a little differently, e.g. from coordinates further from the origin."""
+    std = np.array(std, dtype=float)
+    std[std < 10 * np.finfo(float).eps] = 1.0
+    return np.maximum(std, MIN_SCALE)
+
+
 def _fit(X, config, nu, gamma, method, names, seed):
     from sklearn.preprocessing import StandardScaler
     scaler = StandardScaler().fit(X)
-    Z = scaler.transform(X)
     mean = scaler.mean_
-    scale = scaler.scale_  # sklearn uses 1.0 for constant columns
+    scaler.scale_ = scale = feature_scale(scaler.scale_)
+    Z = (X - mean) / scale
     if method == 'nystroem':
         from sklearn.kernel_approximation import Nystroem
         from sklearn.linear_model import SGDOneClassSVM

@@ -146,8 +146,7 @@ def train_streamed(engine, load, items, nu=None, gamma=None, components=None, ep
     total = sum(m[1] for m in moments if m[0])
     squares = sum(m[2] for m in moments if m[0])
     mean = total / count
-    scale = np.sqrt(np.maximum(squares / count - mean ** 2, 0.0))
-    scale[scale < 10 * np.finfo(float).eps] = 1.0  # constant columns, as StandardScaler
+    scale = learning.feature_scale(np.sqrt(np.maximum(squares / count - mean ** 2, 0.0)))
     dimension = len(mean)
     nu = learning.DEFAULT_NU if nu is None else float(nu)
     gamma = learning.DEFAULT_GAMMA_FACTOR / dimension if gamma is None else float(gamma)
