@@ -107,6 +107,41 @@ def test_durations_with_irregular_stamps():
     assert [indices(w) for w in windows] == [[4, 5, 6, 7, 8]]  # 0.9 <= t <= 2.4
 
 
+def test_a_later_trigger_with_a_longer_pre_reaches_back_before_the_window_start():
+    """A classifier opens a window with its short pre; a goal abort inside it asks for 5 s before itself: the
+    window reaches back into what the buffer held when it opened (its own pre: 6 s), side topics too; a count
+    pre the same; once a part of the window is written, nothing more."""
+    side = [(1.5, 'old'), (3.5, 'early'), (8.5, 'near'), (11.0, 'inside')]
+    for pre, post, abort_pre, first in (('6s', '2s', '5s', 7), (6, 2, 5, 7)):
+        buffer = WindowBuffer(pre=pre, post=post)
+        held = list(side)
+        out = []
+        for index in range(30):
+            stamp = float(index)
+            while held and held[0][0] <= stamp:
+                out += buffer.add_side(Record(held[0][0], '/side', held.pop(0)[1]))
+            out += buffer.add(Record(stamp, '/odom', index))
+            if index == 10:
+                out += buffer.trigger('classifier', -1.0, 'classifier', pre=Span.parse('1s' if post == '2s' else 1))
+            if index == 12:
+                out += buffer.trigger('abort', float('nan'), 'abort', pre=Span.parse(abort_pre))
+        out += buffer.flush()
+        assert [indices(w) for w in out] == [list(range(first, 15))]
+        assert [r.msg for r in out[0].records if r.topic == '/side'] == ['near', 'inside']
+        assert buffer.buffered_messages == 7   # the pre buffer after the window: nothing of its start held on
+    # nothing held before the start: no reach back; a part written: none either
+    buffer = WindowBuffer(pre='6s', post='2s', max_window=4)
+    out = []
+    for index in range(30):
+        out += buffer.add(Record(float(index), '/odom', index))
+        if index == 10:
+            out += buffer.trigger('classifier', -1.0, pre=Span.parse('1s'))
+        if index == 13:
+            out += buffer.trigger('abort', -1.0, pre=Span.parse('5s'))
+    out += buffer.flush()
+    assert sorted(i for w in out for i in indices(w)) == list(range(9, 16))
+
+
 def test_side_topics_are_saved_in_the_window_time_span():
     side = [(0.5, 'a'), (8.5, 'b'), (9.9, 'c'), (12.5, 'd'), (18.0, 'e')]
     windows = run(WindowBuffer(pre=2, post=2), [float(i) for i in range(20)], {10}, side)

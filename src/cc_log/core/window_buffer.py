@@ -1,9 +1,11 @@
 """The window buffer of smart mode.
 
 It holds the *logging windows* of the driving topic (the topic whose messages count ``pre`` and ``post``):
-on a trigger at message i, messages i-pre ... i+post are kept. A trigger inside an open window extends it,
-and two windows that touch or overlap become one, so no message is written twice and none inside a window
-is skipped. Messages of other topics are buffered by time and saved in the windows whose time span holds
+on a trigger at message i, messages i-pre ... i+post are kept. A trigger inside an open window extends it
+(and reaches back before its start when its own pre is longer than the one that opened it: a goal abort after a
+classifier's flag; the buffer holds its pre of driving messages for that until the window's first part is
+written), and two windows that touch or overlap become one, so no message is written twice and none inside a
+window is skipped. Messages of other topics are buffered by time and saved in the windows whose time span holds
 them. (The feature window the classifiers score is ``features.FeatureWindow``.)
 
 Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
@@ -128,16 +130,24 @@ class _OpenWindow(object):
 
     _keys = itertools.count(1)
 
-    def __init__(self, records, trigger, post, since):
+    def __init__(self, records, trigger, post, since, before=()):
         self.key = next(self._keys)
         self.records = list(records)
         self.since = since     # first stamp of its time span (side records from here on belong to it)
+        # driving records of the pre buffer before its start, held until its first part is written: a later
+        # trigger with a longer pre reaches back into them (a goal abort after a classifier's short pre)
+        self.before = list(before)
         self.triggers = []
         self.part = 0
         self.continued = False  # a part was written: side records after it belong to the next part
         self.remaining = 0     # messages still to take after the last trigger (count post)
         self.until = None      # last stamp to take (duration post)
         self.extend(trigger, post)
+
+    @property
+    def reach(self):
+        """The first stamp a trigger with a longer pre may still reach back to (side records from here on)."""
+        return min(self.since, self.before[0].stamp) if self.before else self.since
 
     def extend(self, trigger, post):
         """Add a trigger; the window takes what the longest post of its triggers still asks for."""
@@ -223,7 +233,7 @@ class WindowBuffer(object):
         held = len(self._ring) + sum(map(len, self._side.values()))
         for window in (self._open, self._pending):
             if window is not None:
-                held += len(window.records)
+                held += len(window.records) + len(window.before)
         return held
 
     def add(self, record):
@@ -301,8 +311,9 @@ class WindowBuffer(object):
         """Mark the last driving record: open a window around it or extend the open one.
 
         ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the
-        buffer's). A ``pre`` longer than the buffer's gets what the buffer holds (its ``pre``); a window that
-        is open or may still merge keeps what it has. Returns the windows this completes: only parts of a
+        buffer's). A ``pre`` longer than the buffer's gets what the buffer holds (its ``pre``). A trigger with
+        a longer ``pre`` than the one that opened the window reaches back as far as the buffer held when it
+        opened, until a part of the window is written. Returns the windows this completes: only parts of a
         window that reached max_window, since a new window either extends the open one or merges with the
         pending one (a pending window is completed as soon as a message after it leaves the pre buffer).
         """
@@ -310,22 +321,55 @@ class WindowBuffer(object):
             raise ValueError('trigger: no message has been added yet')
         trigger = Trigger(self._clock, reason, score, name)
         post = self.post if post is None else Span.parse(post, 'post')
+        pre = self.pre if pre is None else Span.parse(pre, 'pre')
         if self._open is not None:
             self._open.extend(trigger, post)
+            self._reach_back(self._open, pre)
             return []
         if self._pending is not None:
             # Every record after the pending window is still in the ring: the new window touches it.
             self._open, self._pending = self._pending, None
             self._open.records.extend(self._ring)
             self._open.extend(trigger, post)
+            self._reach_back(self._open, pre)
         else:
-            pre = self.pre if pre is None else Span.parse(pre, 'pre')
-            if pre is not self.pre:
-                self._trim_ring(pre)
+            before = self._older_than(pre) if pre is not self.pre else ()
             since = min(trigger.stamp - pre.seconds if pre.is_duration else trigger.stamp, self._ring[0].stamp)
-            self._open = _OpenWindow(self._ring, trigger, post, since)
+            self._open = _OpenWindow(self._ring, trigger, post, since, before)
         self._ring.clear()
         return self._split(self._open)
+
+    def _older_than(self, pre):
+        """Take from the ring the driving records older than ``pre`` before the newest (still counted)."""
+        ring, older = self._ring, []
+        if pre.is_duration:
+            while ring and ring[0].stamp < self._clock - pre.seconds:
+                older.append(ring.popleft())
+        else:
+            while len(ring) > pre.count + 1:
+                older.append(ring.popleft())
+        return older
+
+    @staticmethod
+    def _reach_back(window, pre):
+        """A trigger at the window's newest record with ``pre``: the window starts earlier when its held
+        records before the start hold what ``pre`` asks for."""
+        before = window.before
+        if window.continued or not before:
+            return
+        if pre.is_duration:
+            low = window.records[-1].stamp - pre.seconds
+            cut = len(before)
+            while cut and before[cut - 1].stamp >= low:
+                cut -= 1
+            window.since = min(window.since, low)
+        else:
+            cut = max(0, len(before) - max(0, pre.count - (len(window.records) - 1)))
+            if cut < len(before):
+                window.since = min(window.since, before[cut].stamp)
+        if cut < len(before):
+            window.records[:0] = before[cut:]
+            del before[cut:]
 
     @property
     def window_active(self):
@@ -446,9 +490,9 @@ class WindowBuffer(object):
         """Drop records of other topics older than the span of the window that may still take them (outside
         every window: older than ``pre`` before the newest driving record, or than their topic's own ``pre``)."""
         if self._pending is not None and self._pending.records:
-            oldest = self._pending.since
+            oldest = self._pending.reach
         elif self._open is not None and self._open.records:
-            oldest = self._open.since
+            oldest = self._open.reach
         elif self._ring:
             oldest = self._ring[0].stamp
             if self.pre.is_duration:  # a window opened now reaches back pre seconds, past its first driving record
@@ -469,6 +513,9 @@ class WindowBuffer(object):
         the first takes the side records since the previous part (those of its time span and those between).
         A topic with its own ``pre`` or ``post`` (``limits``) keeps only what lies within them of the window's
         first and last trigger."""
+        if window.before:  # a part goes out: no later trigger reaches back before it
+            self._bytes -= sum(record.cost for record in window.before)
+            window.before = []
         records = window.records if records is None else records
         start = float('-inf') if window.continued else window.since
         end = records[-1].stamp if records else float('-inf')
