@@ -169,7 +169,7 @@ DEMO_CONFIG = """# written by demo.py: the demo's smart logger (demo.launch sets
 # windows.pre is the most the logger holds before a trigger (the goal abort's); the classifier keeps less.
 windows: {pre: 10s, post: %(post)s}
 triggers:
-  - {name: classifier, kind: classifier, model: '%(model)s', topics: [odom], retrigger: event, pre: 1s}
+  - {name: classifier, kind: classifier, model: '%(model)s', topics: [odom], retrigger: event, pre: 2s}
   # the failure happened before the abort: keep the 10 s before it
   - {name: goal_aborted, kind: rule, topic: move_base/status, type: actionlib_msgs/GoalStatusArray,
      when: 'status_list[0].status == 4', pre: 10s, post: 1s}
