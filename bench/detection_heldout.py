@@ -23,10 +23,10 @@ trim 1 %); the rest of every run is replayed by ``cclog replay --json`` (classif
   feature window]; latency = first such trigger - onset (target <= 0.5 s); span kept = the share of [onset,
   end] inside saved windows (target >= 95 %); false windows = windows with no trigger near an event; kept /
   ideal = odometry messages in saved windows / those within [onset - 2 s, end + 2 s] of an event (target <=
-  1.5x); event length = end - onset: the anomaly, the return to the recorded twist and the blend back onto the
-  recorded track (at most 0.8 m/s faster or slower than recorded whatever the robot: tens of seconds on the car).
+  1.5x); event length = end - onset: the anomaly and the return to the recorded twist (after it the recording
+  carries on from where the anomaly left the base).
 
-Settings (``--settings``): ``defaults`` = exactly the CLI's (feature window 500 messages, pre/post 100 messages);
+Settings (``--settings``): ``defaults`` = exactly the CLI's (feature window 2 s, pre/post 2 s);
 ``2s`` = docs/DETECTION.md's recommendation for ~10 Hz robots (window 2 s, pre/post 2 s, the ideal's margin).
 
 Drift (``--no-drift`` skips): the robot's rest, the same place first and then the new place (``DRIFT_FROM``:

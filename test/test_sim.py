@@ -510,7 +510,7 @@ def test_inject_at_the_robot_scale(husky_records, kind, field, quantity):
     same = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=None)
     assert [serialized(r.msg) for r in base[0]] == [serialized(r.msg) for r in same[0]]
     doubled = sim.BWIBOT_LIMITS._replace(**{quantity: 2.0 * getattr(sim.BWIBOT_LIMITS, quantity)})
-    # the return to the recording is not the test: unbounded, and the blend back onto the track at the BWIBot's pace
+    # the return to the recorded twist is not the test: unbounded
     unlimited = sim.Limits(*(10.0 * x for x in sim.BWIBOT_LIMITS))._replace(max_speed=sim.BWIBOT_LIMITS.max_speed)
     one = sim.inject_anomalies(husky_records, [kind], seed=2, topic=HUSKY_ODOM, scale=sim.BWIBOT_LIMITS,
                                limits=unlimited)
