@@ -7,7 +7,8 @@
 
 A motion model (window 1s) is trained on a slow simulated BWIBot (0.5 m/s, 0.5 rad/s: the manoeuvres of the
 full-speed robot are new to it). The full-speed robot's nominal driving (seed 22) is then fed message by
-message through a ClassifierTrigger with online learning on (classify every 100 ms, ``--every`` vectors per
+message through a ClassifierTrigger with online learning on and its drift monitor (as smart mode and ``cclog
+replay`` run it: in drift the classifier's own flags are learned too; classify every 100 ms, ``--every`` vectors per
 refit, guard 3 s, refits in the caller's thread so the run is repeatable). After each simulated ``--report``
 minutes the model in use is scored on another nominal full-speed run (seed 23, 4 min: false windows = runs of
 anomalous scores, 2 s apart) and on a run with one anomaly of every type but planning_failure (seed 24:
@@ -23,7 +24,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.core import learning  # noqa: E402
+from cc_log.core import drift, learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream  # noqa: E402
 from cc_log.core.online_learning import OnlineLearner  # noqa: E402
@@ -83,6 +84,7 @@ def main(argv=None):
                                               anomaly_types=TYPES))
     learner = OnlineLearner(model, None, every=args.every, keep=5000, guard='3s', background=False)
     trigger = ClassifierTrigger('classifier', model, '/odom', classify_every='100ms', learner=learner)
+    monitor, = drift.monitor_classifiers([trigger])   # as smart mode and cclog replay run it
     learning_run, _ = odometry(sim.SimConfig(rate=args.rate, seed=22, minutes=args.minutes, anomalies=0))
     rows, step, refit_seconds = [], int(args.report * 60 * args.rate), []
 
@@ -92,7 +94,8 @@ def main(argv=None):
         caught = [e['type'] for e in truth if any(e['start'] <= s <= e['end'] + 1.0 for s in starts)]
         false = len(flag_starts(trigger.model, held_back))
         rows.append(['%.1f' % minutes, stats['vectors_seen'], stats['vectors_learned'], stats['vectors_refused'],
-                     stats['refits'], '%d (%.0f/h)' % (false, false * 15.0), '%d/%d' % (len(caught), len(truth)),
+                     stats['vectors_adapted'], 'no' if monitor.first_drift is None else 'yes', stats['refits'],
+                     '%d (%.0f/h)' % (false, false * 15.0), '%d/%d' % (len(caught), len(truth)),
                      ', '.join(sorted(set(e['type'] for e in truth) - set(caught))) or '-'])
     report(0.0)
     for index, (stamp, msg) in enumerate(learning_run):
@@ -103,7 +106,8 @@ def main(argv=None):
             refit_seconds.append(time.time() - started)
         if (index + 1) % step == 0:
             report((index + 1) / args.rate / 60.0)
-    common.table(['minutes learned', 'vectors seen', 'learned', 'refused (near a flag)', 'refits',
+    common.table(['minutes learned', 'vectors seen', 'learned', 'refused (near a flag)', 'adapted (in drift)',
+                  'drift reported', 'refits',
                   'false windows (4 min)', 'caught', 'missed'], rows,
                  'False windows on another nominal run, anomalies caught, as learning goes on:')
     if refit_seconds:
