@@ -149,6 +149,26 @@ class _OpenWindow(object):
         """The first stamp a trigger with a longer pre may still reach back to (side records from here on)."""
         return min(self.since, self.before[0].stamp) if self.before else self.since
 
+    def reach_back(self, pre):
+        """A trigger at the newest record with ``pre``: start earlier when the records held before the start
+        hold what ``pre`` asks for (never once a part was written)."""
+        before = self.before
+        if self.continued or not before:
+            return
+        if pre.is_duration:
+            low = self.records[-1].stamp - pre.seconds
+            cut = len(before)
+            while cut and before[cut - 1].stamp >= low:
+                cut -= 1
+            self.since = min(self.since, low)
+        else:
+            cut = max(0, len(before) - max(0, pre.count - (len(self.records) - 1)))
+            if cut < len(before):
+                self.since = min(self.since, before[cut].stamp)
+        if cut < len(before):
+            self.records[:0] = before[cut:]
+            del before[cut:]
+
     def extend(self, trigger, post):
         """Add a trigger; the window takes what the longest post of its triggers still asks for."""
         self.triggers.append(trigger)
@@ -324,14 +344,14 @@ class WindowBuffer(object):
         pre = self.pre if pre is None else Span.parse(pre, 'pre')
         if self._open is not None:
             self._open.extend(trigger, post)
-            self._reach_back(self._open, pre)
+            self._open.reach_back(pre)
             return []
         if self._pending is not None:
             # Every record after the pending window is still in the ring: the new window touches it.
             self._open, self._pending = self._pending, None
             self._open.records.extend(self._ring)
             self._open.extend(trigger, post)
-            self._reach_back(self._open, pre)
+            self._open.reach_back(pre)
         else:
             before = self._older_than(pre) if pre is not self.pre else ()
             since = min(trigger.stamp - pre.seconds if pre.is_duration else trigger.stamp, self._ring[0].stamp)
@@ -350,27 +370,6 @@ class WindowBuffer(object):
                 older.append(ring.popleft())
         return older
 
-    @staticmethod
-    def _reach_back(window, pre):
-        """A trigger at the window's newest record with ``pre``: the window starts earlier when its held
-        records before the start hold what ``pre`` asks for."""
-        before = window.before
-        if window.continued or not before:
-            return
-        if pre.is_duration:
-            low = window.records[-1].stamp - pre.seconds
-            cut = len(before)
-            while cut and before[cut - 1].stamp >= low:
-                cut -= 1
-            window.since = min(window.since, low)
-        else:
-            cut = max(0, len(before) - max(0, pre.count - (len(window.records) - 1)))
-            if cut < len(before):
-                window.since = min(window.since, before[cut].stamp)
-        if cut < len(before):
-            window.records[:0] = before[cut:]
-            del before[cut:]
-
     @property
     def window_active(self):
         """Whether a window is open or complete but not yet handed on (a new trigger then joins it)."""
@@ -386,17 +385,10 @@ class WindowBuffer(object):
     def _trim_ring(self, pre):
         """Keep the newest driving record plus ``pre`` before it (the others stay outside every window);
         return whether any was dropped."""
-        ring = self._ring
-        dropped = False
-        if pre.is_duration:
-            while ring and ring[0].stamp < self._clock - pre.seconds:
-                self._bytes -= ring.popleft().cost
-                dropped = True
-        else:
-            while len(ring) > pre.count + 1:
-                self._bytes -= ring.popleft().cost
-                dropped = True
-        return dropped
+        dropped = self._older_than(pre)
+        for record in dropped:
+            self._bytes -= record.cost
+        return bool(dropped)
 
     def flush(self):
         """Complete every window now (end of stream): the open one is written with what it has, messages of
