@@ -53,6 +53,30 @@ def test_tune_meets_the_budget_on_its_bags_and_records_it(husky):
     assert tuned.info['tuned'] == record and record['max_false_per_hour'] == 1.0
 
 
+def _peak_yaw_rate(injected, kind):
+    """The largest |yaw rate| inside the injected anomaly of ``kind`` (``tuning.injections``' entries)."""
+    _, run, entry, _ = next(item for item in injected if item[0] == kind)
+    return max(abs(r.msg.twist.twist.angular.z) for r in run if entry['start'] <= r.stamp <= entry['end'])
+
+
+def test_tune_injects_anomalies_at_the_robots_own_scale(husky):
+    """The Husky turns at most half as fast as the simulated BWIBot (0.51 against 1.0 rad/s): the twisting tune
+    injects into its driving swings about half as far unless the BWIBot's scale is asked for."""
+    model, _, second, _ = husky
+    envelope = sim.nominal_envelope(second, HUSKY_ODOM)
+    assert envelope.max_yaw_rate < 0.6 * sim.BWIBOT_LIMITS.max_yaw_rate
+    record = tuning.tune(AnomalyModel.from_dict(model.to_dict()), [second], HUSKY_ODOM, 1000.0)
+    assert record['injection_scale'] == 'robot' and record['envelope'] == dict(envelope._asdict())
+    own = _peak_yaw_rate(tuning.injections(model, second, HUSKY_ODOM, envelope=envelope), 'excessive_twisting')
+    bwibot = _peak_yaw_rate(tuning.injections(model, second, HUSKY_ODOM), 'excessive_twisting')
+    assert own < 0.75 * bwibot
+    plain = tuning.tune(AnomalyModel.from_dict(model.to_dict()), [second], HUSKY_ODOM, 1000.0,
+                        injection_scale='bwibot')
+    assert plain['injection_scale'] == 'bwibot' and plain['envelope'] is None
+    with pytest.raises(ValueError, match='injection_scale'):
+        tuning.tune(AnomalyModel.from_dict(model.to_dict()), [second], HUSKY_ODOM, 1.0, injection_scale='car')
+
+
 def test_cclog_tune_writes_the_tuned_model_and_refuses_bad_input(husky, tmp_path):
     _, bag, _, path = husky
     out = tmp_path / 'tuned.json'
@@ -61,6 +85,10 @@ def test_cclog_tune_writes_the_tuned_model_and_refuses_bad_input(husky, tmp_path
     saved = json.loads(out.read_text())
     assert saved['threshold'] == result['threshold'] and saved['info']['tuned']['max_false_per_hour'] == 30.0
     assert result['false_per_hour'] <= 30.0 and json.loads(open(path).read())['threshold'] == result['threshold_before']
+    assert result['injection_scale'] == 'robot' and result['envelope']['max_speed'] > 0
+    text = run('tune', '--model', path, '--bag', bag, '--topic', HUSKY_ODOM, '--max-false-per-hour', '30',
+               '--out', out, '--injection-scale', 'bwibot')
+    assert text.returncode == 0 and "at the simulated BWIBot's scale" in text.stdout, text.stderr
     bad = run('tune', '--model', path, '--bag', bag, '--topic', HUSKY_ODOM, '--max-false-per-hour', '-1',
               '--out', out)
     assert bad.returncode == 2 and 'max-false-per-hour' in bad.stderr

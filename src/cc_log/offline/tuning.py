@@ -5,9 +5,11 @@ classifier trigger the smart logger runs (``triggers.ClassifierTrigger``: classi
 its fires into logging windows of [fire - pre, fire + post] as ``WindowBuffer`` does, and lowers the threshold
 (to just below the score of a nominal classification) until the windows per hour of nominal driving are
 within the budget. It then injects one anomaly of every simulator type (``sim.inject_anomalies``) into the
-first run and reports which the tuned threshold still catches (a fire between onset and end + feature
-window; the latency is the first such fire's delay after onset). The result goes into
-``model.info['tuned']``. Figures on the tuning runs are in-sample: held-out nominal runs give the honest rate.
+first run, at the robot's own scale (``injection_scale='robot'``: every magnitude in the ratio of the runs'
+nominal envelope, ``sim.nominal_envelope``, to the BWIBot's; ``'bwibot'``: the simulator's magnitudes), and
+reports which the tuned threshold still catches (a fire between onset and end + feature window; the latency is
+the first such fire's delay after onset). The result goes into ``model.info['tuned']``. Figures on the tuning
+runs are in-sample: held-out nominal runs give the honest rate.
 
 It never loses an event without saying so: recall is measured on those injected anomalies at the model's own
 threshold, at the tuned one and along a curve of CURVE_POINTS thresholds (false windows per hour against events
@@ -39,6 +41,10 @@ DEFAULT_RETRIGGER = 'event'
 DEFAULT_CLASSIFY_EVERY = '50ms'
 TRAIN_EVERY = '100ms'   # one training vector per this much of the nominal runs (a model of another window)
 CURVE_POINTS = 8        # thresholds of the false-windows-against-recall curve (plus the model's and the chosen)
+# The scale of the injected anomalies: 'robot', the tuning runs' own (a 0.09 m/s Create and a 10 m/s car get
+# anomalies of their own size); 'bwibot', the simulator's magnitudes in m/s and rad/s whatever the robot.
+INJECTION_SCALES = ('robot', 'bwibot')
+DEFAULT_INJECTION_SCALE = 'robot'
 
 
 def _seconds(span, rate, name):
@@ -84,18 +90,30 @@ def step_scores(model, records, topic, classify_every=DEFAULT_CLASSIFY_EVERY):
     return model.scores(np.array(vectors)) if vectors else np.array([])
 
 
+def injection_envelope(runs, topic, injection_scale=DEFAULT_INJECTION_SCALE):
+    """The ``Limits`` anomalies are injected at (``sim.inject_anomalies``' ``scale``): with 'robot' the nominal
+    envelope of all ``runs`` on ``topic``, with 'bwibot' None (the simulator's magnitudes)."""
+    if injection_scale not in INJECTION_SCALES:
+        raise ValueError('injection_scale: %r is not one of %s' % (injection_scale, ', '.join(INJECTION_SCALES)))
+    if injection_scale == 'bwibot':
+        return None
+    return sim.nominal_envelope([r for run in runs for r in run], topic)
+
+
 def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_POST,
-         classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, sources=None, keep_recall=False):
+         classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, sources=None, keep_recall=False,
+         injection_scale=DEFAULT_INJECTION_SCALE):
     """Lower ``model.threshold`` (in place) until the nominal ``runs`` give at most ``max_false_per_hour``
     windows per hour (with ``keep_recall``: to the lowest threshold that still catches every injected type the
     model's own threshold catches); return the record stored in ``model.info['tuned']`` (see the module
-    docstring)."""
+    docstring). ``injection_scale``: 'robot' or 'bwibot' (``INJECTION_SCALES``)."""
     if not (max_false_per_hour >= 0):
         raise ValueError('max_false_per_hour: %r must be zero or positive' % (max_false_per_hour,))
     runs = [[r for r in run if r.topic == topic] for run in runs]
     runs = [run for run in runs if len(run) > 1]
     if not runs:
         raise ValueError('bag: no %s messages to tune on' % topic)
+    envelope = injection_envelope(runs, topic, injection_scale)
     hours = sum(run[-1].stamp - run[0].stamp for run in runs) / 3600.0
     rate = _rate(runs[0])
     pre_s, post_s = _seconds(pre, rate, 'pre'), _seconds(post, rate, 'post')
@@ -126,7 +144,7 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
             if count <= allowed or lo == 0:
                 break
             lo -= 1
-    injected = injections(model, runs[0], topic)
+    injected = injections(model, runs[0], topic, envelope=envelope)
 
     def caught_at(value):
         return [kind for kind, delay in caught_in(model, injected, topic, value, classify_every, retrigger).items()
@@ -151,7 +169,8 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
         ('catches', caught), ('misses', [kind for kind, delay in found.items() if delay is None]),
         ('latencies', dict((kind, found[kind]) for kind in caught)),
         ('mean_latency', float(np.mean(latencies)) if latencies else None),
-        ('injected', sum(1 for entry in injected if entry[1] is not None)), ('caught_before', reference),
+        ('injected', sum(1 for entry in injected if entry[1] is not None)), ('injection_scale', injection_scale),
+        ('envelope', dict(envelope._asdict()) if envelope else None), ('caught_before', reference),
         ('lost', [kind for kind in reference if kind not in caught]), ('keep_recall', bool(keep_recall)),
         ('keep_recall_threshold', keep), ('keep_recall_false_windows', keep_count),
         ('keep_recall_false_per_hour', keep_count / hours if hours else 0.0),
@@ -199,15 +218,17 @@ def _curve(candidates, extra, caught_at, false_windows, hours):
     return curve
 
 
-def injections(model, run, topic, seed=0):
+def injections(model, run, topic, seed=0, envelope=None):
     """``[(type, the run with one anomaly of it injected, its truth entry, reach)]`` of ``detections``: one per
-    simulator type that fits into ``run`` (reach: the feature window in seconds)."""
+    simulator type that fits into ``run`` (reach: the feature window in seconds), at the scale of ``envelope``
+    (``injection_envelope``; None: the simulator's magnitudes)."""
     span = model.config.span
     reach = span.seconds if span.is_duration else span.count / _rate(run)
     out = []
     for kind in sim.ANOMALY_TYPES:
         try:
-            injected, truth = sim.inject_anomalies(run, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0)
+            injected, truth = sim.inject_anomalies(run, [kind], seed=seed, topic=topic, warmup=3.0, gap=2.0,
+                                                   scale=envelope, limits=envelope or sim.BWIBOT_LIMITS)
         except ValueError:
             out.append((kind, None, None, reach))
             continue
@@ -270,11 +291,12 @@ def model_for(model, runs, topic, window, every=TRAIN_EVERY):
 
 
 def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_CLASSIFY_EVERY,), pre=DEFAULT_PRE,
-           post=DEFAULT_POST, retrigger=DEFAULT_RETRIGGER, sources=None, keep_recall=False):
+           post=DEFAULT_POST, retrigger=DEFAULT_RETRIGGER, sources=None, keep_recall=False,
+           injection_scale=DEFAULT_INJECTION_SCALE):
     """Tune every feature window in ``windows`` (default: the model's) with every classify rate in ``rates``;
     return ``(model, record)`` of the chosen setting (see the module docstring). ``record`` is ``tune``'s with
     ``window``, ``chosen_by`` and ``grid`` (a summary of every setting) added; it is the model's
-    ``info['tuned']``. ``keep_recall``: as ``tune``'s."""
+    ``info['tuned']``. ``keep_recall``, ``injection_scale``: as ``tune``'s."""
     windows = [model.config.window] if not windows else list(windows)
     configs = [FeatureConfig(model.config.feature_set, window, model.config.topic_type) for window in windows]
     train_runs = tune_runs = runs
@@ -287,7 +309,7 @@ def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_
         for rate in rates:
             candidate = copy.deepcopy(base)
             record = tune(candidate, tune_runs, topic, max_false_per_hour, pre, post, rate, retrigger, sources,
-                          keep_recall)
+                          keep_recall, injection_scale)
             meets = record['false_per_hour'] <= max_false_per_hour + 1e-9
             key = (meets, len(record['catches']), -(record['mean_latency'] if record['catches'] else float('inf')),
                    -record['false_windows'])

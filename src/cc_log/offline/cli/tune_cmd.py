@@ -7,13 +7,16 @@ from cc_log.offline.cli.common import (
 
 def add_parser(subparsers):
     """The ``cclog tune`` sub-parser."""
+    from cc_log.offline.tuning import DEFAULT_INJECTION_SCALE, INJECTION_SCALES
     p = subparsers.add_parser('tune', **command_help(
         'set a model\'s threshold to a false-window budget on nominal bags',
         """
         Replay nominal bags through the classifier trigger the smart logger runs (--classify-every,
         --retrigger), merge its fires into windows (--pre, --post) and lower the model's threshold until
         the bags give at most --max-false-per-hour windows per hour; then inject one anomaly of every
-        simulator type into the first bag and report which the tuned model still catches. It prints the
+        simulator type into the first bag, at the robot's own scale (--injection-scale robot: magnitudes in
+        the ratio of the bags' nominal driving to the simulated BWIBot's), and report which the tuned
+        model still catches. It prints the
         false windows per hour against the injected events caught over a range of thresholds, and says on
         the chosen line when that threshold loses an event the model's own threshold catches, and what
         the best threshold keeping every event gives; --keep-recall chooses that threshold instead (the
@@ -44,6 +47,10 @@ def add_parser(subparsers):
                    help='choose the threshold with the fewest false windows that still catches every injected event '
                    'the model\'s own threshold catches, even above the budget (default: the budget decides, and '
                    'the events it loses are named)')
+    p.add_argument('--injection-scale', choices=INJECTION_SCALES, default=DEFAULT_INJECTION_SCALE,
+                   help='the size of the injected anomalies: robot, the bags\' own driving (its speed, acceleration '
+                   'and turn rates against the BWIBot\'s); bwibot, the simulator\'s m/s and rad/s whatever the robot '
+                   '(default: %(default)s)')
     output_flags(p)
     return p
 
@@ -64,7 +71,7 @@ def run(args):
         try:
             model, record = tuning.choose(model, runs, args.topic, args.max_false_per_hour, args.windows,
                                           args.classify_every, args.pre, args.post, args.retrigger, sources=args.bag,
-                                          keep_recall=args.keep_recall)
+                                          keep_recall=args.keep_recall, injection_scale=args.injection_scale)
         except ValueError as error:
             raise CommandError(str(error))
     try:
@@ -88,12 +95,22 @@ def run(args):
               record['hours'], record['false_windows_before'], record['threshold_before'],
               record['false_windows_before'] / record['hours'], record['false_windows'], record['threshold'],
               record['false_per_hour'], record['max_false_per_hour']))
-    print('still caught (one injected anomaly each): %s; missed: %s' % (
-        ', '.join(record['catches']) or 'none', ', '.join(record['misses']) or 'none'))
+    print('still caught (one injected anomaly each, %s): %s; missed: %s' % (
+        scale_text(record), ', '.join(record['catches']) or 'none', ', '.join(record['misses']) or 'none'))
     for line in tune_lines(record):
         print(line)
     print('%-16s %s' % ('Saved', args.out))
     return EXIT_OK
+
+
+def scale_text(record):
+    """The scale the anomalies of ``tuning.tune``'s record were injected at, in words."""
+    envelope = record.get('envelope')
+    if not envelope:
+        return 'at the simulated BWIBot\'s scale'
+    return ('at the robot\'s own scale: its nominal driving reaches %.2f m/s, %.2f m/s^2 up, %.2f m/s^2 braking, '
+            '%.2f rad/s' % (envelope['max_speed'], envelope['max_accel'], envelope['max_decel'],
+                            envelope['max_yaw_rate']))
 
 
 def tune_lines(record):
