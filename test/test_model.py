@@ -11,7 +11,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.svm import OneClassSVM
 
 from cc_log.features import FeatureConfig, vector_length, vector_names
-from cc_log.core.model import AnomalyModel, ModelError
+from cc_log.core.model import FLOOR_FRACTION, AnomalyModel, ModelError
 
 CONFIG = FeatureConfig('motion', '5s')
 D = vector_length(CONFIG)
@@ -162,3 +162,38 @@ def test_constructor_validates_shapes():
         AnomalyModel(CONFIG, np.zeros(D), np.ones(D), 'ocsvm',
                      {'support_vectors': np.full((2, D), np.nan), 'dual_coef': np.ones(2), 'intercept': 0.0,
                       'gamma': 1.0}, 0)
+
+
+def test_far_vectors_score_lower_the_further_they_are_and_equal_sklearn_near(fitted):
+    """Far from every support vector the RBF sum underflows and scikit-learn gives every vector the same floor
+    score; the model goes on ranking them (the log of the sum), finite, and equals scikit-learn above the joint."""
+    X, scaler, svm, model = fitted
+    centre = X.mean(axis=0)
+    direction = X.std(axis=0)
+    far = np.array([centre + k * direction for k in (5.0, 10.0, 40.0, 1e3, 1e5)])
+    plain = svm.decision_function(scaler.transform(far))
+    assert plain[-1] == plain[-2] == plain[-3]                   # scikit-learn: all at its floor
+    got = model.scores(far)
+    assert np.all(np.isfinite(got)) and np.all(np.diff(got) < 0)  # further is lower, never -inf
+    assert np.allclose(got, [model.score(v) for v in far], rtol=1e-9, atol=1e-9)
+    joint = FLOOR_FRACTION * -svm.intercept_[0]
+    near = np.vstack([data(200, seed=1), far])
+    sums = svm.decision_function(scaler.transform(near)) - svm.intercept_[0]
+    above = sums >= joint
+    assert above.sum() > 100 and (~above).sum() >= 3
+    assert np.abs(model.scores(near)[above] - (sums[above] + svm.intercept_[0])).max() < 1e-9
+    assert np.all(model.scores(near)[~above] <= joint + svm.intercept_[0] + 1e-12)
+
+
+def test_the_continued_score_meets_the_plain_one_at_the_joint(fitted):
+    """Same value and slope where the kernel sum crosses FLOOR_FRACTION of -intercept."""
+    _, _, svm, model = fitted
+    joint = FLOOR_FRACTION * -svm.intercept_[0]
+    d2 = np.zeros((3, len(svm.dual_coef_.ravel())))
+    sums = joint * np.array([1.0 - 1e-6, 1.0, 1.0 + 1e-6])
+    # rows whose kernel sums are exactly ``sums``: every centre at the distance giving that sum
+    total = svm.dual_coef_.ravel().sum()
+    d2[:] = (-np.log(sums / total) / model.kernel['gamma'])[:, None]
+    scores = model._continued(sums, d2)
+    plain = sums + svm.intercept_[0]
+    assert np.abs(scores - plain).max() < 1e-12 * max(1.0, abs(svm.intercept_[0]))

@@ -346,9 +346,9 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
         info['threshold_rule'] = ('held-out nominal: q%g - %g * (median - q%g)' % (quantile, margin, quantile))
         info['gamma_reductions'] = reductions
         if floor is not None and threshold <= floor + 0.1 * (low - floor):
-            # a threshold at or below the lowest possible score would never flag anything
+            # at or below the floor a threshold flags only what lies beyond the reach of every support vector
             threshold = floor + 0.1 * (low - floor)
-            info['threshold_rule'] += ', raised above the lowest possible score'
+            info['threshold_rule'] += ', raised above the kernel floor'
         if A is not None:
             threshold = max(threshold, _recall_threshold(held_scores, fitted.scores(A)))
     model = fitted.model
@@ -477,7 +477,8 @@ def coverage(vectors, config):
 
 
 def _score_floor(model):
-    """The lowest score the model can give (far from every support vector), or None when unbounded."""
+    """The score the plain kernel sum tends to far from every support vector (the model's score goes on below it,
+    ever more slowly: ``model.FLOOR_FRACTION``), or None when the kernel has no such floor."""
     if model.kind == 'ocsvm':
         return model.kernel['intercept'] + float(np.sum(np.minimum(model.kernel['dual_coef'], 0.0)))
     return None

@@ -4,7 +4,12 @@ Two kernel models, both trained by ``learning.train`` with scikit-learn and kept
 
 - ``ocsvm``: scikit-learn's ``OneClassSVM`` with an RBF kernel:
   ``score(x) = sum_i dual_coef[i] * exp(-gamma * |sv_i - z|^2) + intercept`` where ``z`` is ``x``
-  standardised with the scaler's mean and scale; equal to ``OneClassSVM.decision_function``.
+  standardised with the scaler's mean and scale; equal to ``OneClassSVM.decision_function`` wherever the kernel
+  sum is at least ``FLOOR_FRACTION`` of ``-intercept``. Below that the RBF sum has all but reached its floor
+  (far from every support vector it underflows to 0, so the plain score of every far vector is the same
+  ``intercept``); there the score goes on as ``intercept + r * (1 + ln(sum / r))``, r = FLOOR_FRACTION *
+  -intercept, the sum's log computed without underflow: the same value and slope at the joint, and a vector
+  further from the support vectors still scores lower, so a threshold can be set among far vectors too.
 - ``nystroem-sgd``: the scalable formulation of scikit-learn 1.2: ``Nystroem`` (RBF) then
   ``SGDOneClassSVM``: ``score(x) = coef . (exp(-gamma * |c_j - z|^2)_j @ normalization.T) - offset``.
 
@@ -31,6 +36,7 @@ KINDS = ('ocsvm', 'nystroem-sgd')
 #: Largest model file read: an ``ocsvm`` model of 20,000 support vectors of 200 features is ~80 MB of JSON.
 MAX_MODEL_BYTES = 1 << 30
 SCORE_BLOCK = 32  # vectors scored at a time by score_each (bounds its block of distances to the centres)
+FLOOR_FRACTION = 1e-3  # ocsvm: below this share of -intercept the kernel sum is continued by its log
 #: Plausible ranges of a model (anything outside is refused, naming the key): the feature window in
 #: messages (held as rows) or seconds, the RBF kernel's gamma (of standardised features: ~1e-3 to 10).
 MAX_WINDOW_COUNT = 100000
@@ -70,10 +76,14 @@ class AnomalyModel(object):
     def _prepare(self):
         self._inv_scale = 1.0 / self.scale
         self._gamma = self.kernel['gamma']
+        self._joint = None   # the kernel sum below which the score is continued by its log (ocsvm)
         if self.kind == 'ocsvm':
             self._centres = self.kernel['support_vectors']
             self._weights = self.kernel['dual_coef']
             self._bias = self.kernel['intercept']
+            if self._bias < 0.0 and len(self._weights) and np.all(self._weights > 0.0):
+                self._joint = -FLOOR_FRACTION * self._bias
+                self._log_weights = np.log(self._weights)
         else:
             self._centres = self.kernel['components']
             # coef . (k @ N.T) == (N.T @ coef) . k: fold the normalization into one weight vector
@@ -100,8 +110,9 @@ class AnomalyModel(object):
         for start in range(0, len(X), SCORE_BLOCK):
             Z = (X[start:start + SCORE_BLOCK] - self.mean) * self._inv_scale
             diff = self._centres[None, :, :] - Z[:, None, :]
-            kernel = np.exp(-self._gamma * np.einsum('kij,kij->ki', diff, diff))
-            out.extend(float(self._weights.dot(row) + self._bias) for row in kernel)
+            d2 = np.einsum('kij,kij->ki', diff, diff)
+            sums = np.array([self._weights.dot(row) for row in np.exp(-self._gamma * d2)])
+            out.extend(float(value) for value in self._continued(sums, d2))
         return out
 
     def scores(self, vectors):
@@ -116,7 +127,21 @@ class AnomalyModel(object):
             d2 = (np.einsum('ij,ij->i', block, block)[:, None] - 2.0 * block.dot(self._centres.T)
                   + np.einsum('ij,ij->i', self._centres, self._centres)[None, :])
             np.maximum(d2, 0.0, out=d2)
-            out[start:start + 512] = np.exp(-self._gamma * d2).dot(self._weights) + self._bias
+            out[start:start + 512] = self._continued(np.exp(-self._gamma * d2).dot(self._weights), d2)
+        return out
+
+    def _continued(self, sums, d2):
+        """Scores of rows whose kernel sums are ``sums`` (of their squared distances ``d2`` to the centres):
+        ``sum + intercept``, and below the joint (ocsvm) ``intercept + joint * (1 + ln(sum / joint))``."""
+        out = sums + self._bias
+        if self._joint is None:
+            return out
+        low = sums < self._joint
+        if np.any(low):
+            terms = self._log_weights[None, :] - self._gamma * d2[low]
+            top = terms.max(axis=1)
+            log_sum = top + np.log(np.exp(terms - top[:, None]).sum(axis=1))
+            out[low] = self._bias + self._joint * (1.0 + log_sum - math.log(self._joint))
         return out
 
     def is_anomalous(self, vector):

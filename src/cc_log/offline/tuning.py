@@ -92,12 +92,16 @@ def step_scores(model, records, topic, classify_every=DEFAULT_CLASSIFY_EVERY):
 
 def injection_envelope(runs, topic, injection_scale=DEFAULT_INJECTION_SCALE):
     """The ``Limits`` anomalies are injected at (``sim.inject_anomalies``' ``scale``): with 'robot' the nominal
-    envelope of all ``runs`` on ``topic``, with 'bwibot' None (the simulator's magnitudes)."""
+    envelope of all ``runs`` on ``topic`` (None when they hold too few messages for one), with 'bwibot' None (the
+    simulator's magnitudes)."""
     if injection_scale not in INJECTION_SCALES:
         raise ValueError('injection_scale: %r is not one of %s' % (injection_scale, ', '.join(INJECTION_SCALES)))
     if injection_scale == 'bwibot':
         return None
-    return sim.nominal_envelope([r for run in runs for r in run], topic)
+    try:
+        return sim.nominal_envelope([r for run in runs for r in run], topic)
+    except ValueError:  # too few messages for an envelope: too few to inject anything into as well
+        return None
 
 
 def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_POST,

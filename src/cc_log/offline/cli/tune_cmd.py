@@ -106,8 +106,10 @@ def run(args):
 def scale_text(record):
     """The scale the anomalies of ``tuning.tune``'s record were injected at, in words."""
     envelope = record.get('envelope')
-    if not envelope:
+    if record.get('injection_scale') == 'bwibot':
         return 'at the simulated BWIBot\'s scale'
+    if not envelope:
+        return 'at the robot\'s own scale'
     return ('at the robot\'s own scale: its nominal driving reaches %.2f m/s, %.2f m/s^2 up, %.2f m/s^2 braking, '
             '%.2f rad/s' % (envelope['max_speed'], envelope['max_accel'], envelope['max_decel'],
                             envelope['max_yaw_rate']))
