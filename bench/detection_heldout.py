@@ -27,7 +27,14 @@ trim 1 %); the rest of every run is replayed by ``cclog replay --json`` (classif
   carries on from where the anomaly left the base).
 
 Settings (``--settings``): ``defaults`` = exactly the CLI's (feature window 2 s, pre/post 2 s);
-``2s`` = docs/DETECTION.md's recommendation for ~10 Hz robots (window 2 s, pre/post 2 s, the ideal's margin).
+``2s`` = docs/DETECTION.md's recommendation for ~10 Hz robots (window 2 s, pre/post 2 s, the ideal's margin);
+``dynamics`` = the defaults with the level-free ``dynamics`` feature set (how the motion changes, never how fast:
+the remedy for a new speed regime that the drift report names).
+
+``--tune N``: the learnt model is tuned by ``cclog tune --max-false-per-hour N`` on the training bags (the nominal
+driving a user has when the model is new; anomalies injected at the first ``--injection`` scale) and every replay
+uses the tuned model; the report says what tune estimated (recall at the model's threshold and at the chosen one,
+what it lost).
 
 Drift (``--no-drift`` skips): the robot's rest, the same place first and then the new place (``DRIFT_FROM``:
 the lecture hall, Frankfurt), replayed as one bag by ``cclog replay`` (its drift monitor: is drift reported
@@ -68,6 +75,7 @@ MIN_SPAN_KEPT = 0.95
 SETTINGS = collections.OrderedDict([
     ('defaults', {}),                                                   # the CLI's own defaults
     ('2s', {'window': '2s', 'pre': '2s', 'post': '2s'}),              # docs/DETECTION.md, ~10 Hz robots
+    ('dynamics', {'features': 'dynamics'}),                            # the defaults, the level-free feature set
 ])
 DRIFT_FROM = {'tuc': 'tuc_lecture_hall', 'smartloc': 'smartloc_frankfurt_main_tower', 'mrclam': None}
 BLOCK = 300.0           # s: false windows per block after the switch
@@ -120,8 +128,9 @@ def learn(train, setting, tmp, stride=None):
         common.write_bag(bag, records)
         out = os.path.join(tmp, 'vectors%d' % k)
         argv = ['collect', bag, '--topic', TOPIC, '--out', out]
-        if 'window' in setting:
-            argv += ['--window', setting['window']]
+        for key in ('window', 'features'):
+            if key in setting:
+                argv += ['--' + key, setting[key]]
         if stride:
             argv += ['--stride', str(stride)]
         lines.append(quiet_cli(argv).strip())
@@ -197,11 +206,28 @@ def reach_of(setting, rate):
     return float(window[:-1]) if window.endswith('s') else int(window) / rate
 
 
-def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, drift, stride=None):
+def tune(model, train, setting, tmp, budget, injection):
+    """``cclog tune --json`` of ``model`` on the training bags ``learn`` wrote, anomalies injected at the scale
+    ``injection``; (the tuned model's path, tune's record)."""
+    tuned = os.path.join(tmp, 'tuned.json')
+    argv = ['tune', '--model', model, '--topic', TOPIC, '--max-false-per-hour', '%g' % budget, '--out', tuned,
+            '--json', '--injection-scale', injection]
+    for k in range(len(train)):
+        argv += ['--bag', os.path.join(tmp, 'train%d.bag' % k)]
+    for key in ('pre', 'post'):
+        if key in setting:
+            argv += ['--' + key, setting[key]]
+    return tuned, json.loads(quiet_cli(argv))
+
+
+def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, drift, stride=None, budget=None):
     setting = SETTINGS[setting_name]
     train, rest = split(runs, train_seconds)
     started = time.time()
     model, lines = learn(train, setting, tmp, stride)
+    tuned = None
+    if budget is not None:
+        model, tuned = tune(model, train, setting, tmp, budget, injections[0])
     first = [r for _, records in train for r in records]
     envelope = sim.nominal_envelope(first, TOPIC)
     rate = rate_of(first)
@@ -209,7 +235,7 @@ def evaluate(robot, runs, setting_name, seeds, injections, tmp, train_seconds, d
     trained_steps = np.concatenate([speed_steps(records)[1] for _, records in train])
     out = {'robot': robot, 'setting': setting_name, 'lines': lines, 'rate': rate, 'reach': reach,
            'train_s': sum(r[-1].stamp - r[0].stamp for _, r in train), 'runs': [], 'events': [],
-           'envelope': envelope,
+           'envelope': envelope, 'tune': tuned,
            'trained_steps': (float(np.quantile(trained_steps, 0.999)), float(trained_steps.max()))}
     for name, records in rest:
         hours = (records[-1].stamp - records[0].stamp) / 3600.0
@@ -328,6 +354,17 @@ def report(r, injections, explain=False):
         print('  ' + line.replace('\n', '\n  '))
     print('  envelope of the training driving: %s' % ', '.join(
         '%s %.2f' % kv for kv in r['envelope']._asdict().items()))
+    record = r['tune']
+    if record:
+        caught = record['caught_before']
+        print('  cclog tune --max-false-per-hour %g on the training bags (anomalies at the %s scale; every replay '
+              'below uses the tuned model): the model\'s threshold %.4g catches %d/%d injected (%s) with %d false '
+              'window(s) in-sample; the chosen %.4g catches %d/%d%s with %d' % (
+                  record['max_false_per_hour'], record['injection_scale'], record['threshold_before'], len(caught),
+                  record['injected'], 'missed: ' + ', '.join(k for k in sim.ANOMALY_TYPES if k not in caught)
+                  if len(caught) < record['injected'] else 'all', record['false_windows_before'],
+                  record['threshold'], len(record['catches']), record['injected'],
+                  ' (lost: %s)' % ', '.join(record['lost']) if record['lost'] else '', record['false_windows']))
     rows = []
     total_false = total_hours = 0.0
     for row in r['runs']:
@@ -412,7 +449,7 @@ def main(argv=None):
     parser.add_argument('--data', default=heldout_data.OUT, help='the bags of heldout_data.py (default %s)'
                         % heldout_data.OUT)
     parser.add_argument('--robots', default=','.join(heldout_data.ORDER))
-    parser.add_argument('--settings', default=','.join(SETTINGS))
+    parser.add_argument('--settings', default='defaults,2s', help='of %s (default: defaults,2s)' % ', '.join(SETTINGS))
     parser.add_argument('--seeds', default='0,1,2')
     parser.add_argument('--injection', default='robot,bwibot', help='robot, bwibot or both (default both)')
     parser.add_argument('--train-minutes', type=float, default=20.0)
@@ -420,6 +457,8 @@ def main(argv=None):
     parser.add_argument('--no-drift', action='store_true')
     parser.add_argument('--stride', type=int, help="cclog collect's --stride (default: its own)")
     parser.add_argument('--explain', action='store_true', help='describe the driving around every false window')
+    parser.add_argument('--tune', type=float, metavar='N', help='cclog tune the model to N false windows/h on the '
+                        'training bags (anomalies at the first --injection scale) and replay with the tuned model')
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(',')]
     injections = args.injection.split(',')
@@ -437,7 +476,7 @@ def main(argv=None):
             tmp = tempfile.mkdtemp(prefix='cc_log_heldout_')
             try:
                 report(evaluate(robot, runs, setting, seeds, injections, tmp, args.train_minutes * 60.0,
-                                not args.no_drift, args.stride), injections, args.explain)
+                                not args.no_drift, args.stride, args.tune), injections, args.explain)
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)
     print('total %.0f s' % (time.time() - started))
