@@ -16,13 +16,12 @@ def add_parser(subparsers):
         the bags give at most --max-false-per-hour windows per hour; then inject one anomaly of every
         simulator type into the first bag, at the robot's own scale (--injection-scale robot: magnitudes in
         the ratio of the bags' nominal driving to the simulated BWIBot's), and report which the tuned
-        model still catches. It prints the
-        false windows per hour against the injected events caught over a range of thresholds, and says on
-        the chosen line when that threshold loses an event the model's own threshold catches, and what
-        the best threshold keeping every event gives; --keep-recall chooses that threshold instead (the
-        fewest false windows that keep every event, budget or not). The model written to --out records
-        what it was tuned for (info.tuned). Figures on the tuning bags are in-sample: check on other
-        nominal bags with cclog replay.
+        model still catches. It prints the false windows per hour against the injected events caught over
+        a range of thresholds, and says on the chosen line when that threshold loses an event the model's
+        own threshold catches, and what the best threshold keeping every event gives; --keep-recall
+        chooses that threshold instead (the fewest false windows that keep every event, budget or not).
+        The model written to --out records what it was tuned for (info.tuned). Figures on the tuning bags
+        are in-sample: check on other nominal bags with cclog replay.
         """,
         """
           cclog tune --model model.json --bag nominal.bag --topic /odom --max-false-per-hour 1 --out tuned.json
