@@ -271,3 +271,25 @@ def test_tune_names_the_events_its_budget_loses_and_keep_recall_keeps_them(dirty
 
 def tune_tail(record):
     return tune_lines(record)[-1]
+
+
+def test_a_model_tuned_lower_is_judged_for_drift_at_the_threshold_training_set():
+    """``cclog tune`` lowers a threshold to open fewer windows; the driving is no different, so drift is judged
+    where training set it: 1.3 m/s against a 0.3-0.6 m/s training is drift for the tuned model too."""
+    model = circling_model()
+    fast = odometry(1.3, 90.0)
+    stream = FeatureStream(model.config, every='100ms')
+    scores = model.scores(np.array([v for v in (stream.add(r.msg, r.stamp) for r in fast) if v is not None]))
+    tuned = AnomalyModel.from_dict(model.to_dict())
+    tuned.threshold = float(scores.min()) - 1.0          # flags none of it
+    assert tuned.info['threshold'] == model.threshold > tuned.threshold
+    assert drift.judged_margin(tuned) == pytest.approx(model.threshold - tuned.threshold)
+    assert drift.judged_margin(model) == 0.0
+    trigger = ClassifierTrigger('motion', tuned, '/odom', classify_every='100ms')
+    [monitor] = drift.monitor_classifiers([trigger])
+    as_decided = drift.DriftMonitor(drift.trained_rate(tuned))
+    trigger.observers.append(as_decided.observe)
+    feed(trigger, fast)
+    assert trigger.anomalous == 0 and not as_decided.drifting   # its own decisions: nothing flagged
+    assert monitor.drifting and monitor.first_drift is not None
+    assert monitor.status()[0] == drift.WARN and 'flagged 100%' in monitor.status()[1]

@@ -23,7 +23,11 @@ same as JSON values.
 ``trained_rate(model)``: the share of held-out nominal vectors the model flags at its threshold
 (``info.held_out_flagged`` / ``info.vectors_held_out`` of ``learning.train``), never less than the
 calibration's target (``learning.DEFAULT_QUANTILE``, 0.2 %: the threshold sits below that quantile of the
-held-out scores), which is also used when the model file does not say.
+held-out scores), which is also used when the model file does not say. ``judged_threshold(model)``: the
+threshold that rate was measured at (training's, ``info.threshold``): a model ``cclog tune`` set lower flags
+less, but the driving it sees has not changed, so its decisions are judged at training's threshold (the
+monitor's ``margin``, ``observe(..., margin=)``); a tuned model reports a new place as soon as the model it was
+tuned from would.
 
 Coverage: a model file trained by this version records the range its nominal training vectors cover
 (``learning.coverage``: the largest speed |v| and yaw rate |w| of a window and the share of windows stopped for
@@ -69,6 +73,21 @@ def trained_rate(model):
     return max(measured, DEFAULT_QUANTILE)  # the held-out quantile the threshold is set below
 
 
+def judged_threshold(model):
+    """The threshold drift is judged at: the one ``learning.train`` set (``info.threshold``, where the trained
+    rate was measured), else the model's own."""
+    value = (getattr(model, 'info', None) or {}).get('threshold')
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        return float(model.threshold)
+    return float(value)
+
+
+def judged_margin(model):
+    """How far above ``model``'s threshold a score still counts as flagged for drift: ``judged_threshold`` minus
+    the model's threshold (0 for a model as trained; a model tuned lower, more)."""
+    return max(0.0, judged_threshold(model) - float(model.threshold))
+
+
 def percent(share):
     """A share as a short percentage: ``62%``, ``1.5%``, ``0.2%``."""
     value = 100.0 * share
@@ -86,11 +105,14 @@ class DriftMonitor(object):
     """The live share of anomalous decisions of one classifier against its trained rate (module docstring).
 
     trained_rate: the model's share of flagged nominal samples (``trained_rate(model)``); span, settle: seconds
-    of message time; factor, min_rate: when the share is drift; name: the classifier's, in messages.
-    ValueError('<parameter>: ...') for a bad parameter."""
+    of message time; factor, min_rate: when the share is drift; name: the classifier's, in messages;
+    margin: a decision observed with its margin (score minus the classifier's threshold) is flagged when the
+    margin is below this (``judged_margin``; 0: as the classifier decided). ValueError('<parameter>: ...') for a
+    bad parameter."""
 
     def __init__(self, trained_rate, span=DEFAULT_SPAN, factor=DEFAULT_FACTOR, min_rate=DEFAULT_MIN_RATE,
-                 settle=None, name='classifier', coverage=None, config=None, episodes=DEFAULT_EPISODES):
+                 settle=None, name='classifier', coverage=None, config=None, episodes=DEFAULT_EPISODES,
+                 margin=0.0):
         for key, value, low, high in (('trained_rate', trained_rate, 0.0, 1.0), ('span', span, 0.0, None),
                                       ('factor', factor, 0.0, None), ('min_rate', min_rate, 0.0, 1.0)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > low \
@@ -98,6 +120,7 @@ class DriftMonitor(object):
                 raise ValueError('%s: %s must be a number > %g%s' % (
                     key, repr(value)[:40], low, '' if high is None else ' and <= %g' % high))
         self.trained_rate = float(trained_rate)
+        self.margin = float(margin)
         self.span = float(span)
         self.settle = self.span / 2.0 if settle is None else float(settle)
         if not 0.0 <= self.settle <= self.span:
@@ -125,9 +148,10 @@ class DriftMonitor(object):
         self._stopped = 0
         self._start = None  # stamp of the first decision since the reset
 
-    def observe(self, stamp, anomalous, vector=None):
+    def observe(self, stamp, anomalous, vector=None, margin=None):
         """One decision of the classifier at message time ``stamp`` (float s); ``anomalous``: bool; ``vector``: the
-        feature vector decided on (for the coverage; None: not known)."""
+        feature vector decided on (for the coverage; None: not known); ``margin``: its score minus the classifier's
+        threshold (below the monitor's ``margin``: flagged; None: ``anomalous`` decides)."""
         decisions = self._decisions
         if decisions and stamp < decisions[-1][0] - 1.0:
             self.reset()  # time went back (another run): start again
@@ -135,7 +159,7 @@ class DriftMonitor(object):
         if self._start is None:
             self._start = stamp
             self.began = stamp if self.began is None else self.began
-        anomalous = bool(anomalous)
+        anomalous = bool(anomalous if margin is None else margin < self.margin)
         beyond = stopped = False
         if self.coverage is not None and vector is not None:
             beyond, stopped = self.coverage.observe(vector)
@@ -363,7 +387,7 @@ def monitor_classifiers(classifiers, **options):
     for trigger in classifiers:
         monitor = DriftMonitor(trained_rate(trigger.model), name=trigger.name,
                                coverage=getattr(trigger.model, 'coverage', None), config=trigger.model.config,
-                               **options)
+                               margin=judged_margin(getattr(trigger, 'original', trigger.model)), **options)
         trigger.observers.append(monitor.observe)
         if getattr(trigger, 'learner', None) is not None:
             trigger.learner.drifting = (lambda m: lambda: m.drifting)(monitor)  # online learning adapts in drift

@@ -111,7 +111,8 @@ class ClassifierTrigger(Trigger):
             raise ValueError('classify_every: 0 messages; use 1 to classify every message')
         self.recent = recent_span(self.config.span, recent, name)
         self.learner = learner  # an online_learning.OnlineLearner, or None (no online learning)
-        # callables (stamp, anomalous, vector) told every decision, e.g. drift.DriftMonitor.observe
+        # callables (stamp, anomalous, vector, margin: score - threshold) told every decision, e.g.
+        # drift.DriftMonitor.observe
         self.observers = []
         self.calls = 0
         self.seconds = 0.0
@@ -172,7 +173,7 @@ class ClassifierTrigger(Trigger):
         if self.learner is not None:
             self.learner.observe(record.stamp, batch.vectors[k], anomalous)
         for observe in self.observers:
-            observe(record.stamp, anomalous, batch.vectors[k])
+            observe(record.stamp, anomalous, batch.vectors[k], score - self.threshold)
         if anomalous:
             self.anomalous += 1
             if not self._armed and self.retrigger == 'event':
