@@ -134,9 +134,11 @@ class DiskTest(unittest.TestCase):
             stream.write(b'n' * 50000)
         quota = 0.25  # MB
         self.start(directory, '_format:=bag-lz4', '_max_disk_mb:=%gkB' % (quota * 1000))  # a size with a unit
-        self.stream.publish(3.0, 1000.0)
+        sent = self.stream.publish(3.0, 1000.0)
+        # every message taken in (else a window cut later makes the quota delete a file listed below)
         level, message, values = self.wait_status(
-            lambda level, message, values: values.get('intake queue') == '0' and values.get('writer queue') == '0'
+            lambda level, message, values: values.get('messages seen') == str(2 * sent)
+            and values.get('intake queue') == '0' and values.get('writer queue') == '0'
             and int(values.get('windows deleted (quota)', 0)) > 0, 'windows deleted by the quota', 30)
         files = log_format.window_files(directory)
         sizes = [os.path.getsize(path) for path in files]
