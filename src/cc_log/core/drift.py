@@ -23,11 +23,10 @@ same as JSON values.
 ``trained_rate(model)``: the share of held-out nominal vectors the model flags at its threshold
 (``info.held_out_flagged`` / ``info.vectors_held_out`` of ``learning.train``), never less than the
 calibration's target (``learning.DEFAULT_QUANTILE``, 0.2 %: the threshold sits below that quantile of the
-held-out scores), which is also used when the model file does not say. ``judged_threshold(model)``: the
-threshold that rate was measured at (training's, ``info.threshold``): a model ``cclog tune`` set lower flags
-less, but the driving it sees has not changed, so its decisions are judged at training's threshold (the
-monitor's ``margin``, ``observe(..., margin=)``); a tuned model reports a new place as soon as the model it was
-tuned from would.
+held-out scores), which is also used when the model file does not say. That rate was measured at training's
+threshold (``info.threshold``): a model ``cclog tune`` set lower flags less, but the driving it sees has not
+changed, so its decisions are judged at training's threshold (``judged_margin(model)``, the monitor's ``margin``,
+``observe(..., margin=)``); a tuned model reports a new place as soon as the model it was tuned from would.
 
 Coverage: a model file trained by this version records the range its nominal training vectors cover
 (``learning.coverage``: the largest speed |v| and yaw rate |w| of a window and the share of windows stopped for
@@ -73,19 +72,14 @@ def trained_rate(model):
     return max(measured, DEFAULT_QUANTILE)  # the held-out quantile the threshold is set below
 
 
-def judged_threshold(model):
-    """The threshold drift is judged at: the one ``learning.train`` set (``info.threshold``, where the trained
-    rate was measured), else the model's own."""
-    value = (getattr(model, 'info', None) or {}).get('threshold')
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        return float(model.threshold)
-    return float(value)
-
-
 def judged_margin(model):
-    """How far above ``model``'s threshold a score still counts as flagged for drift: ``judged_threshold`` minus
-    the model's threshold (0 for a model as trained; a model tuned lower, more)."""
-    return max(0.0, judged_threshold(model) - float(model.threshold))
+    """How far above ``model``'s threshold a score still counts as flagged for drift: the threshold
+    ``learning.train`` set (``info.threshold``, where the trained rate was measured) minus the model's own (0 for
+    a model as trained or a file without it; a model tuned lower, more). Model info holds finite JSON values."""
+    trained = (getattr(model, 'info', None) or {}).get('threshold')
+    if isinstance(trained, bool) or not isinstance(trained, (int, float)):
+        return 0.0
+    return max(0.0, float(trained) - float(model.threshold))
 
 
 def percent(share):
