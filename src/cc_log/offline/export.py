@@ -77,28 +77,56 @@ def to_bag(records, out, compression='lz4', progress=None, names=None):
     return [target.path]
 
 
-MCAP_COMPRESSIONS = ('none', 'lz4')
+MCAP_COMPRESSIONS = ('zstd', 'lz4', 'none')
 #: The one line when the optional MCAP library is missing.
 MCAP_MISSING = ('--to mcap needs the Python package mcap (an optional extra): /usr/bin/python3 -m pip install '
                 '--break-system-packages mcap mcap-ros1-support')
+#: The name of the MCAP Metadata record of each window exported.
+MCAP_WINDOW_METADATA = 'cc_log.window'
 
 
-def to_mcap(records, out, compression='none', progress=None):
+def default_mcap_compression():
+    """``zstd`` when the ``zstandard`` package imports (python3-zstandard), else ``lz4``."""
+    try:
+        import zstandard  # noqa: F401
+    except ImportError:
+        return 'lz4'
+    return 'zstd'
+
+
+def mcap_window_metadata(path, metadata):
+    """The metadata of the window whose own file is ``path`` as MCAP Metadata (``{str: str}``): every key, a
+    string as it is and anything else as JSON, plus ``file`` (the file's name) and ``scores`` (the triggers'
+    scores, JSON)."""
+    result = {'file': os.path.basename(path),
+              'scores': json.dumps([plain(t.get('score')) for t in metadata.get('triggers') or []
+                                    if isinstance(t, dict)])}
+    for key, value in metadata.items():
+        result[str(key)] = value if isinstance(value, str) else json.dumps(plain(value), sort_keys=True)
+    return result
+
+
+def to_mcap(records, out, compression=None, progress=None, windows=()):
     """The records as one MCAP file ``out`` (replaced) in its ROS 1 profile, for Foxglove, PlotJuggler and the
     ``mcap`` tools: one ``ros1msg`` schema per message type (its full definition), one ``ros1`` channel per
     topic (metadata ``md5sum``, ``callerid`` and ``latching`` where the window kept them), each message as its
-    serialized bytes at its stamp (log and publish time). ``compression``: chunks ``none`` or ``lz4``;
-    ``progress()`` after each record; ``[out]``. ValueError(``MCAP_MISSING``) without the ``mcap`` package, and
-    when a topic holds messages of two types."""
+    serialized bytes at its stamp (log and publish time). ``windows``: ``[(path, metadata)]`` of the windows
+    exported, each written as a Metadata record ``cc_log.window`` (``mcap_window_metadata``) and its metadata
+    as a JSON Attachment ``<file>.json`` at the window's start. ``compression``: chunks ``zstd``, ``lz4`` or
+    ``none`` (None: ``default_mcap_compression``); ``progress()`` after each record; ``[out]``.
+    ValueError(``MCAP_MISSING``) without the ``mcap`` package, and when a topic holds messages of two types."""
     try:
         from mcap.writer import CompressionType, Writer
     except ImportError:
         raise ValueError(MCAP_MISSING)
+    compression = compression or default_mcap_compression()
     if compression not in MCAP_COMPRESSIONS:
-        raise ValueError('compression: MCAP chunks are %s, not %s' % (' or '.join(MCAP_COMPRESSIONS), compression))
+        raise ValueError('compression: MCAP chunks are %s, not %s' % (', '.join(MCAP_COMPRESSIONS), compression))
+    if compression == 'zstd' and default_mcap_compression() != 'zstd':
+        raise ValueError('compression: zstd needs the Python package zstandard (Debian: python3-zstandard)')
     headers = bag_lz4.connection_headers(records)
     with AtomicFile(out, overwrite=True) as stream:
-        writer = Writer(stream, compression=CompressionType.LZ4 if compression == 'lz4' else CompressionType.NONE)
+        writer = Writer(stream, compression=getattr(CompressionType, compression.upper()))
         writer.start(profile='ros1', library='cc_log')
         schemas, channels = {}, {}
         for topic, header in headers.items():
@@ -120,8 +148,18 @@ def to_mcap(records, out, compression='none', progress=None):
                                data=data)
             if progress:
                 progress()
+        for path, metadata in windows:
+            writer.add_metadata(MCAP_WINDOW_METADATA, mcap_window_metadata(path, metadata))
+            secs, nsecs = bag_lz4.bag_stamp(metadata['start']) if _is_stamp(metadata.get('start')) else (0, 0)
+            writer.add_attachment(create_time=secs * 1000000000 + nsecs, log_time=secs * 1000000000 + nsecs,
+                                  name=os.path.basename(path) + '.json', media_type='application/json',
+                                  data=json.dumps(plain(metadata), sort_keys=True, allow_nan=False).encode('utf-8'))
         writer.finish()
     return [out]
+
+
+def _is_stamp(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0
 
 
 def _csv_cell(value):
