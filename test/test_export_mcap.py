@@ -123,8 +123,8 @@ def test_an_exported_mcap_says_each_window_metadata_and_compresses_as_asked(orig
         chunks = {chunk.compression for chunk in reader.get_summary().chunk_indexes}
     assert chunks == {compression or 'zstd'}  # zstd by default: python3-zstandard is a test dependency
     assert [name for name, _ in metadata] == ['cc_log.window'] * 2
-    for (_, said), path, part, window_triggers in zip(metadata, paths, (originals[:half], originals[half:]),
-                                                       triggers):
+    parts = (originals[:half], originals[half:])
+    for (_, said), path, part, window_triggers in zip(metadata, paths, parts, triggers):
         assert said['file'] == os.path.basename(path)
         assert abs(float(said['start']) - part[0].stamp) < 1e-6 and abs(float(said['end']) - part[-1].stamp) < 1e-6
         assert json.loads(said['reasons']) == [t.reason for t in window_triggers]
