@@ -6,13 +6,12 @@ Each writer takes records in stamp order and returns the files it wrote; every f
 """
 import collections
 import csv
+import io
 import itertools
 import json
 import math
 import os
 import re
-import struct
-import zlib
 
 import numpy
 
@@ -222,26 +221,26 @@ def to_csv(records, directory):
 IMAGE_TYPES = ('sensor_msgs/Image', 'sensor_msgs/CompressedImage')
 PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
 JPEG_MAGIC = b'\xff\xd8\xff'
-#: sensor_msgs/Image encoding -> (samples per pixel, sample type, PNG colour type, channel order for PNG)
+#: The one line when Pillow, which writes the PNG files, is missing.
+PNG_MISSING = '--to png needs Pillow, a dependency of cc_log: apt install python3-pil'
+#: sensor_msgs/Image encoding -> (samples per pixel, sample type, channel order for PNG)
 IMAGE_ENCODINGS = {
-    'rgb8': (3, 'u1', 2, None), 'bgr8': (3, 'u1', 2, [2, 1, 0]), 'rgba8': (4, 'u1', 6, None),
-    'bgra8': (4, 'u1', 6, [2, 1, 0, 3]), 'mono8': (1, 'u1', 0, None), '8UC1': (1, 'u1', 0, None),
-    'mono16': (1, 'u2', 0, None), '16UC1': (1, 'u2', 0, None), '32FC1': (1, 'f4', 0, None)}
+    'rgb8': (3, 'u1', None), 'bgr8': (3, 'u1', [2, 1, 0]), 'rgba8': (4, 'u1', None),
+    'bgra8': (4, 'u1', [2, 1, 0, 3]), 'mono8': (1, 'u1', None), '8UC1': (1, 'u1', None),
+    'mono16': (1, 'u2', None), '16UC1': (1, 'u2', None), '32FC1': (1, 'f4', None)}
 
 
 def png_file(pixels):
     """The bytes of a PNG of ``pixels`` (height x width [x channels] uint8 or uint16; 1, 3 or 4 channels:
-    grey, RGB, RGBA), every row unfiltered, zlib-compressed."""
-    height, width = pixels.shape[:2]
-    channels = pixels.shape[2] if pixels.ndim == 3 else 1
-    depth = 16 if pixels.dtype.itemsize == 2 else 8
-    rows = numpy.ascontiguousarray(pixels, dtype='>u2' if depth == 16 else 'u1').reshape(height, -1).view('u1')
-    data = numpy.hstack([numpy.zeros((height, 1), 'u1'), rows]).tobytes()   # filter type 0 before each row
-
-    def chunk(kind, body):
-        return struct.pack('>I', len(body)) + kind + body + struct.pack('>I', zlib.crc32(kind + body) & 0xffffffff)
-    header = struct.pack('>IIBBBBB', width, height, depth, {1: 0, 3: 2, 4: 6}[channels], 0, 0, 0)
-    return PNG_MAGIC + chunk(b'IHDR', header) + chunk(b'IDAT', zlib.compress(data, 6)) + chunk(b'IEND', b'')
+    grey, RGB, RGBA; uint16 as 16-bit grey), as Pillow (python3-pil) writes it. ValueError without Pillow."""
+    try:
+        from PIL import Image
+    except ImportError:
+        raise ValueError(PNG_MISSING)
+    pixels = numpy.ascontiguousarray(pixels, dtype=numpy.uint16 if pixels.dtype.itemsize == 2 else numpy.uint8)
+    stream = io.BytesIO()
+    Image.fromarray(pixels).save(stream, format='PNG')
+    return stream.getvalue()
 
 
 def image_pixels(msg):
@@ -251,7 +250,7 @@ def image_pixels(msg):
     does not fit the data."""
     if msg.encoding not in IMAGE_ENCODINGS:
         raise ValueError('encoding %s is not supported' % (msg.encoding[:40] or '(empty)'))
-    channels, sample, _, order = IMAGE_ENCODINGS[msg.encoding]
+    channels, sample, order = IMAGE_ENCODINGS[msg.encoding]
     size = channels * int(sample[1:])
     data = msg.data if isinstance(msg.data, bytes) else bytes(bytearray(msg.data))
     if not msg.width or not msg.height or msg.step < msg.width * size or len(data) < msg.step * msg.height:
