@@ -196,6 +196,7 @@ def test_the_readme_camera_configuration_writes_one_bag_per_window_that_replays_
     assert cli.main(['replay', bag, '--config', str(cfg), '--out', out]) == 0
     sets = log_format.window_sets(log_format.window_files(out))
     assert len(sets) >= 2
+    kept = 0
     for files in sets:
         bags = [f for f in files if f.endswith('.bag')]
         copies = [f for f in files if f not in bags]
@@ -213,3 +214,15 @@ def test_the_readme_camera_configuration_writes_one_bag_per_window_that_replays_
         metadata, records = log_format.read_window_set(files)  # readers count the copied topics once
         assert metadata['counts'] == counts and metadata['count'] == sum(counts.values()) == len(records)
         assert log_format.merged_metadata([log_format.read_metadata(f) for f in files], files)['counts'] == counts
+        kept += sum(counts.values())
+    # the logger counts a copy once too (kept, and what /diagnostics says was dropped: never below zero)
+    from cc_log.offline import replay
+    reader = replay.open_bag(bag)
+    try:
+        options, _, _ = replay.replay_setup(config.Config.from_dict(data), reader)
+    finally:
+        reader.close()
+    logger = replay.offline_logger(str(tmp_path / 'again'), options)
+    replay.replay_into(logger, bag)
+    stats = logger.stats()
+    assert stats['messages_kept'] == kept and 0 <= stats['messages_dropped'] <= stats['messages_seen'] - kept
