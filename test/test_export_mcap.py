@@ -136,3 +136,15 @@ def test_an_exported_mcap_says_each_window_metadata_and_compresses_as_asked(orig
     assert [(name, media) for name, media, _ in attachments] == [
         (os.path.basename(path) + '.json', 'application/json') for path in paths]
     assert [t['reason'] for t in attachments[1][2]['triggers']] == ['pressed', 'too fast']
+
+
+def test_without_zstandard_mcap_chunks_are_lz4_and_zstd_is_refused_in_one_line(originals, tmp_path, monkeypatch):
+    from mcap.reader import make_reader
+    monkeypatch.setitem(sys.modules, 'zstandard', None)  # as if python3-zstandard were not installed
+    assert export.default_mcap_compression() == 'lz4'
+    out = str(tmp_path / 'x.mcap')
+    export.to_mcap(originals[:50], out)
+    with open(out, 'rb') as stream:
+        assert {chunk.compression for chunk in make_reader(stream).get_summary().chunk_indexes} == {'lz4'}
+    with pytest.raises(ValueError, match='^compression: zstd needs the Python package zstandard'):
+        export.to_mcap(originals[:50], str(tmp_path / 'y.mcap'), 'zstd')
