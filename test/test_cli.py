@@ -357,6 +357,25 @@ def test_simulate_writes_bag_and_truth(tmp_path):
     assert 'exists' in fails('simulate', '--minutes', '1', '--anomalies', '0', bag)
 
 
+def test_simulate_writes_a_camera_and_a_scan_at_their_rates(tmp_path):
+    import rosbag
+    from cc_log.sim import sensors
+    bag = tmp_path / 'cameras.bag'
+    result = ok_json('simulate', '--minutes', '0.1', '--anomalies', '0', '--camera', '--scan', bag)
+    assert result['camera'] is True and result['scan'] is True
+    with rosbag.Bag(str(bag)) as reader:
+        topics = reader.get_type_and_topic_info().topics
+        seconds = reader.get_end_time() - reader.get_start_time()
+        image = next(msg for _, msg, _ in reader.read_messages([sensors.CAMERA_TOPIC]))
+    assert topics[sensors.CAMERA_TOPIC].msg_type == 'sensor_msgs/Image'
+    assert topics[sensors.SCAN_TOPIC].msg_type == 'sensor_msgs/LaserScan'
+    assert abs(seconds - 6.0) < 0.1
+    for topic, rate in ((sensors.CAMERA_TOPIC, sensors.CAMERA_RATE), (sensors.SCAN_TOPIC, sensors.SCAN_RATE)):
+        assert abs(topics[topic].message_count - rate * 6.0) <= 1, (topic, topics[topic].message_count)
+        assert abs(topics[topic].frequency - rate) < 0.05 * rate, (topic, topics[topic].frequency)
+    assert (image.width, image.height, image.encoding) == (sensors.WIDTH, sensors.HEIGHT, 'rgb8')
+
+
 # -- progress -------------------------------------------------------------------------------------------------
 
 def test_progress_only_on_stderr_and_only_when_asked(replayed, trained):

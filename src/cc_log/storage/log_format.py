@@ -143,7 +143,8 @@ def read_window_set(paths):
     """``(metadata, records)`` of a window written as several files (``window_sets``: routes, split files): the
     metadata of them all (``merged_metadata``) with ``counts``/``topics``/``count`` of the records read, and the
     records: those of the files of the window's own file or of one route in file order (split files follow each
-    other), those of different routes merged in stamp order. ValueError as ``read_window``."""
+    other), those of different routes merged in stamp order; a ``copy`` route's records are read from the
+    window's own file. ValueError as ``read_window``."""
     metadata, records = read_window(paths[0])
     if len(paths) == 1:
         return metadata, records
@@ -151,7 +152,8 @@ def read_window_set(paths):
     for path in paths[1:]:
         found, more = read_window(path)
         metadatas.append(found)
-        groups.setdefault(_file_order(path)[:2], []).extend(more)
+        if not _is_copy(found, paths):
+            groups.setdefault(_file_order(path)[:2], []).extend(more)
     merged = list(heapq.merge(*groups.values(), key=lambda record: record.stamp)) if len(groups) > 1 else records
     counts = collections.Counter(record.topic for record in merged)
     metadata = dict(merged_metadata(metadatas, paths), counts=dict(counts), topics=list(counts), count=len(merged))
@@ -170,6 +172,7 @@ def merged_metadata(metadatas, paths):
     result.pop('split', None)
     if any(split_number(path) for path in paths):  # the files written (older ones may be gone: max_disk_mb)
         result['splits'] = own[-1].get('splits', len(own))
+    metadatas = [meta for meta in metadatas if not _is_copy(meta, paths)]  # a copy's messages are counted once
     counts, types = collections.Counter(), {}
     for meta in metadatas:
         counts.update(meta.get('counts') or {})
@@ -200,6 +203,12 @@ def merged_metadata(metadatas, paths):
         result.update(topic_bytes=dict(summary.topic_bytes), raw_json_bytes=summary.raw_json_bytes,
                       topic_spans=dict((topic, list(span)) for topic, span in summary.topic_spans.items()))
     return result
+
+
+def _is_copy(metadata, paths):
+    """True for the metadata of a ``copy`` route's file (``core.routes``) of a window whose own file is among
+    ``paths`` (as ``window_sets`` orders them): its messages are in the window's own file too."""
+    return bool(metadata.get('copy')) and metadata.get('route') is not None and not _file_order(paths[0])[0]
 
 
 def kept_leftovers(directory):

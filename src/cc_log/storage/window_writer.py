@@ -66,7 +66,8 @@ class Job(object):
     ``write``, a function that writes another file and returns its path. ``what`` names the kind of file
     (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events. ``fmt`` and
     ``route``: the window's file of a route (``core.routes``) in that format, named ``<base>+<route>``; ``base``:
-    the window's file name without extension, the same for all its files (None: ``log_format.base_name``)."""
+    the window's file name without extension, the same for all its files (None: ``log_format.base_name``). A
+    copy route's file (``metadata['copy']``) counts no messages or memory: its window's own file does."""
 
     __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole',
                  'fmt', 'route', 'base')
@@ -80,8 +81,9 @@ class Job(object):
         self.write = write
         self.what = what or (WINDOW if window is not None else 'file')
         self.tag = tag
-        self.messages = len(window) if window is not None else 0
-        self.bytes = sum(record.cost for record in window.records) if window is not None else 0  # memory held
+        counted = window is not None and not (metadata or {}).get('copy')  # a copy route's: counted by its window's
+        self.messages = len(window) if counted else 0
+        self.bytes = sum(record.cost for record in window.records) if counted else 0  # memory held
         self.whole = None       # a window written a part at a time, as a whole, once its file is finished
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent

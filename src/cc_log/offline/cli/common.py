@@ -221,15 +221,22 @@ def read_windows(args, paths, label):
 
 def selected_records(args):
     """All records of the window files named by ``args.paths`` (``--topic`` filter), in stamp order."""
+    return selected_windows(args)[0]
+
+
+def selected_windows(args):
+    """``(records, windows)``: ``selected_records`` and the ``(path, metadata)`` of every window read
+    (``read_windows``)."""
     topics = set(args.topic) if args.topic else None
-    records = []
-    for _, _, window in read_windows(args, args.paths, 'read'):
+    records, windows = [], []
+    for path, metadata, window in read_windows(args, args.paths, 'read'):
         records.extend(record for record in window if topics is None or record.topic in topics)
+        windows.append((path, metadata))
     records.sort(key=lambda record: record.stamp)
     if not records:
         raise CommandError('topic: no messages of %s in %s' % (', '.join(sorted(topics)), ', '.join(args.paths))
                            if topics else '%s: no messages' % ', '.join(args.paths))
-    return records
+    return records, windows
 
 
 def configuration(args, flat):
