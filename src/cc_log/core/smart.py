@@ -40,9 +40,7 @@ import time
 from cc_log import errors
 from cc_log import features as features_mod
 from cc_log.storage import log_format
-from cc_log.core import msg_codec
-from cc_log.core import raw_message
-from cc_log.core import routes as routes_mod, smart_events, window_prep
+from cc_log.core import msg_codec, raw_message, routes as routes_mod, smart_events, window_prep
 from cc_log.core.raw_json import RawJsonEstimate
 from cc_log.core.smart_events import DELETED, FAILED, OPENED, SPLIT, WRITTEN, Event
 from cc_log.core.stamp_clock import StampClock
@@ -107,7 +105,7 @@ class SmartLogger(object):
     reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
     in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those
     (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
-    many MB (0: never).
+    many MB (0: never). wait_for_writer (offline): a message waits for room in the budget, never thinned for the writer.
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -119,7 +117,7 @@ class SmartLogger(object):
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
                  close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
-                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE):
+                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE, wait_for_writer=False):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -155,6 +153,7 @@ class SmartLogger(object):
         self._bases = {}  # window key -> the base name of its files, while it is handed on in parts (routes)
         self.keep = dict(keep or {})  # trigger name -> the topics its windows keep (window_prep.restrict)
         self.stamp_tolerance = float(stamp_tolerance)
+        self.wait_for_writer = bool(wait_for_writer)
         if not self.stamp_tolerance > 0:
             raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))
         self._restamped = collections.Counter()  # topic -> messages whose header stamp was off the clock
@@ -337,7 +336,10 @@ class SmartLogger(object):
         driving = self.driving_topic
         by_topic = self._by_topic
         timed, latched, fire = self._timed, window_prep.any_latched(connections), self._fire
+        waits = self._buffer.max_buffer_bytes if self.wait_for_writer else 0
         for record, view, topic in zip(records, views, topics):
+            if waits:  # the writer's queue leaves room for the record beside the buffer (or is empty)
+                self.writer.wait_for_room(waits - self._buffer.buffered_bytes - record.cost)
             if latched and raw_message.is_latched(record.connection):
                 self._latched.note(topic, record)
             if topic == driving:
@@ -544,12 +546,12 @@ class SmartLogger(object):
     def _complete(self, windows):
         """Hand completed windows to the writer, each with the latched messages at its start, thinned first when
         the writer's queue, the buffer, the window and room for the next part together pass the memory budget
-        (``window_prep.thin``; an idle writer keeps up: the part is already held). What is dropped is counted
-        per topic (``stats()['shed_by_topic']``) and said in the window's metadata (``CarriedDrops``)."""
+        (``window_prep.thin``; an idle writer keeps up: the part is already held; never with ``wait_for_writer``).
+        What is dropped is counted per topic (``stats()['shed_by_topic']``) and said in the metadata."""
         for window in windows:
             budget, queued = self._buffer.max_buffer_bytes, self._bytes_queued()
             shed = {}
-            if budget and queued:
+            if budget and queued and not self.wait_for_writer:
                 shed = window_prep.thin(window, budget - self._buffer.part_limit - self._buffer.buffered_bytes - queued)
                 with self._stats.lock:
                     self._shed.update(shed)

@@ -130,6 +130,7 @@ class WindowWriter(object):
         self._next_retry = 0.0            # monotonic clock of the next attempt at held jobs
         self._callbacks = []
         self._lock = threading.Lock()
+        self._drained = threading.Condition(self._lock)  # notified when queued jobs are written or lost
         self._counts = collections.Counter()
         self._written = collections.Counter()  # files written by Job.what
         self.last_error = ''
@@ -160,6 +161,18 @@ class WindowWriter(object):
     def lost(self):
         """Jobs lost so far (an offline command stops at the first)."""
         return self._counts['jobs_lost']
+
+    def wait_for_room(self, limit):
+        """Wait until the jobs waiting or held take at most ``limit`` bytes (``bytes_queued``; at most 0 for a
+        ``limit`` below it), or no writer thread is left to write them (at once without one: ``submit`` writes).
+        Offline, reading waits so for the writer instead of thinning windows (``SmartLogger``'s
+        ``wait_for_writer``)."""
+        thread = self._thread
+        if self._counts['bytes_queued'] <= max(0, limit):
+            return
+        with self._drained:
+            while self._counts['bytes_queued'] > max(0, limit) and thread is not None and thread.is_alive():
+                self._drained.wait(1.0)
 
     def submit(self, job):
         """Queue a job (write it now without a background thread)."""
@@ -388,6 +401,7 @@ class WindowWriter(object):
             self._counts['jobs_queued'] -= 1
             self._counts['messages_queued'] -= job.messages
             self._counts['bytes_queued'] -= job.bytes
+            self._drained.notify_all()
             self._counts['messages_kept'] += job.messages
             self._counts['stored_bytes'] += nbytes
             if path is not None:
@@ -440,6 +454,7 @@ class WindowWriter(object):
         with self._lock:
             self._counts['jobs_queued'] -= 1
             self._counts['bytes_queued'] -= job.bytes
+            self._drained.notify_all()
             self._counts['messages_queued'] -= job.messages
             self._counts['jobs_lost'] += 1
             self._counts['messages_lost'] += job.messages
