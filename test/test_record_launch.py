@@ -12,20 +12,31 @@ LAUNCH = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))
 
 
 def params(*args, **kwargs):
-    """The parameters a launch file (``launch``: record.launch) sets, run from ``cwd`` (a shell's $PWD)."""
+    """The parameters a launch file (``launch``: record.launch) sets, run from ``cwd`` (a shell's $PWD) with the
+    environment variables ``env`` (``{name: value}``, None: unset)."""
     if shutil.which('roslaunch') is None:
         pytest.skip('roslaunch is not on PATH (source the workspace)')
     launch = os.path.join(os.path.dirname(LAUNCH), kwargs.get('launch', 'record.launch'))
     cwd = kwargs.get('cwd', os.getcwd())
     out = subprocess.run(['roslaunch', '--dump-params', launch] + list(args), stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, universal_newlines=True, timeout=120, cwd=cwd,
-                         env=dict(os.environ, PWD=cwd))
+                         env=environment(kwargs.get('env', {}), PWD=cwd))
     assert out.returncode == 0, out.stderr
     return yaml.safe_load(out.stdout)
 
 
+def environment(changes, **more):
+    """os.environ with ``changes`` and ``more`` (None: unset)."""
+    env = dict(os.environ, **more)
+    for name, value in changes.items():
+        env.pop(name, None)
+        if value is not None:
+            env[name] = value
+    return env
+
+
 def test_no_arguments_gives_bwis_defaults():
-    got = params()
+    got = params(env={'ROS_HOME': None})
     assert got['/cc_log/context_topics'] == 'odom_1hz amcl_pose /diagnostics'  # BWI's topics, always recorded
     assert got['/cc_log/topics'] == ''  # extra_topics false: none
     assert got['/cc_log/directory'] == '' and got['/cc_log/model'].endswith('/.ros/cc_log/model.json')
@@ -36,6 +47,11 @@ def test_bwi_arguments_keep_their_meaning():
                  'extra_prefix:=heavy')
     assert got['/cc_log/directory'] == '/data/logs'
     assert got['/cc_log/context_topics'] == 'odom_1hz scan' and got['/cc_log/topics'] == 'imu/data camera/image'
+
+
+def test_the_default_model_follows_ros_home(tmp_path):
+    got = params(env={'ROS_HOME': str(tmp_path / 'ros_home')})
+    assert got['/cc_log/model'] == str(tmp_path / 'ros_home' / 'cc_log' / 'model.json')
 
 
 @pytest.mark.parametrize('value, topics', [('true', '*'), ('True', '*'), ('false', ''), ('False', ''),
