@@ -178,12 +178,15 @@ class Intake(object):
     subscribed besides the driving one), ``subscribe`` adds more. The queue is bounded (``max_messages``,
     ``max_bytes``): a message arriving when it is full is dropped and counted in ``overflowed`` (and in
     ``dropped``, which also counts messages that could not be decoded or handled, and those of a refused
-    message definition: ``decoder.refused``)."""
+    message definition: ``decoder.refused``). ``on_new_topic(topic, type name)`` (optional) is called at each
+    topic's first accepted message, on the feeder thread."""
+
+    on_new_topic = None
 
     def __init__(self, sink, driving_topic, side_topics=(), max_messages=DEFAULT_MAX_MESSAGES,
                  max_bytes=int(DEFAULT_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY, on_new_topic=None):
         self.sink = sink
-        self.on_new_topic = on_new_topic  # called (topic, type name) at each topic's first accepted message
+        self.on_new_topic = on_new_topic
         self._typed = set()               # topics whose first message was accepted
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
@@ -317,10 +320,9 @@ class Intake(object):
         """Whether the decoder accepts the serialized ``msg``; the first of each topic goes to ``on_new_topic``."""
         if not self.decoder.accepts(msg._connection_header, topic):
             return False
-        if topic not in self._typed:
+        if self.on_new_topic is not None and topic not in self._typed:
             self._typed.add(topic)
-            if self.on_new_topic is not None:
-                self.on_new_topic(topic, msg._connection_header.get('type', ''))
+            self.on_new_topic(topic, msg._connection_header.get('type', ''))
         return True
 
     def _feed_batch(self, records):
