@@ -597,3 +597,34 @@ def test_collect_into_a_full_disk_retries_then_fails_naming_the_directory(traine
     assert '%d of %d feature vectors not written' % (expected, expected) in line, line
     assert 'No space left on device' in line, line
     assert [name for name in os.listdir(os.path.join(out, 'nominal')) if '.tmp-' in name] == []
+
+
+# -- trigger (a live smart logger's ~trigger_window; the call itself: manual_trigger.test) ----------------------
+
+def test_trigger_without_a_master_is_one_line():
+    result = run('trigger', '--reason', 'bump')
+    assert result.returncode == 1 and result.stdout == ''
+    assert result.stderr == ('cclog trigger: error: no ROS master at http://127.0.0.1:1 (start roscore, or set '
+                             "ROS_MASTER_URI to the robot's)\n")
+
+
+def test_trigger_finds_the_one_smart_logger_or_says_what_runs():
+    from cc_log.errors import CommandError
+    from cc_log.offline.cli.trigger_cmd import trigger_service
+    services = ['/rosout/get_loggers', '/robot1/smart_logger/trigger', '/robot1/smart_logger/trigger_window']
+    assert trigger_service(services, ['/rosout']) == '/robot1/smart_logger/trigger_window'
+    assert trigger_service(services, [], 'robot1/smart_logger/') == '/robot1/smart_logger/trigger_window'
+    with pytest.raises(CommandError, match=r'^--node /smart_logger: no trigger_window service there \(smart '
+                                           r'loggers running: /robot1/smart_logger\)$'):
+        trigger_service(services, [], '/smart_logger')
+    with pytest.raises(CommandError, match=r'^several smart loggers are running \(/a, /robot1/smart_logger\): '
+                                           r'choose one with --node$'):
+        trigger_service(services + ['/a/trigger_window'], [])
+    with pytest.raises(CommandError, match=r'^no smart logger is running \(no trigger_window service; nodes '
+                                           r'running: /collect_logger, /rosout\)$'):
+        trigger_service(['/rosout/get_loggers'], ['/rosout', '/collect_logger'])
+
+
+def test_trigger_durations_are_checked_where_they_enter():
+    result = run('trigger', '--before', 'soon')
+    assert result.returncode == 2 and result.stderr.count('\n') == 1 and "'soon' is not a duration" in result.stderr

@@ -141,3 +141,12 @@ def test_a_configuration_with_its_own_triggers_gets_no_default_model(tmp_path):
     assert module == 'smart_node' and 'model' not in params  # (the default model would add a classifier)
     module, params, _, _, _ = parse(['/odom', '--model', str(tmp_path / 'none.json')])
     assert params['model'] == str(tmp_path / 'none.json')
+
+
+def test_the_default_model_is_in_ros_home(tmp_path, monkeypatch):
+    monkeypatch.setenv('ROS_HOME', str(tmp_path / 'ros_home'))
+    model = tmp_path / 'ros_home' / 'cc_log' / 'model.json'
+    model.parent.mkdir(parents=True)
+    model.write_text('{}')
+    module, params, _, _, _ = parse(['/odom'])
+    assert module == 'smart_node' and params['model'] == str(model)

@@ -226,3 +226,20 @@ def test_the_readme_camera_configuration_writes_one_bag_per_window_that_replays_
     replay.replay_into(logger, bag)
     stats = logger.stats()
     assert stats['messages_kept'] == kept and 0 <= stats['messages_dropped'] <= stats['messages_seen'] - kept
+
+
+def test_a_heavy_topic_written_as_json_xz_is_advised_bag_lz4():
+    from cc_log.core.routes import format_of
+    from cc_log.storage.formats.json_xz import heavy_topic_advice
+    routes = parse_routes([NUMERIC, {'name': 'cameras', 'topics': ['re:/camera/.*'], 'format': 'json-xz'}], FORMATS)
+    assert [format_of(topic, routes, 'bag-lz4') for topic in ('/odom', '/camera/image_raw', '/scan')] == [
+        'json-xz', 'json-xz', 'bag-lz4']
+    written_as = format_of('/camera/image_raw', routes, 'bag-lz4')
+    advice = heavy_topic_advice('/camera/image_raw', 'sensor_msgs/Image', written_as)
+    assert advice == ('json-xz carries about 16 MB/s per core: /camera/image_raw (sensor_msgs/Image) is better kept '
+                      'as bag-lz4 (a route: routes: [{name: sensors, topics: [/camera/image_raw], format: bag-lz4}], '
+                      'or format: bag-lz4)')
+    assert heavy_topic_advice('/points', 'sensor_msgs/PointCloud2', format_of('/points', [], 'json-xz'))
+    assert heavy_topic_advice('/scan', 'sensor_msgs/LaserScan', format_of('/scan', routes, 'bag-lz4')) is None
+    assert heavy_topic_advice('/odom', 'nav_msgs/Odometry', format_of('/odom', routes, 'bag-lz4')) is None
+    assert heavy_topic_advice('/camera/x', 'sensor_msgs/CompressedImage', 'json-xz').startswith('json-xz carries')

@@ -261,7 +261,8 @@ OPTIONS = (
             COLLECT),
     # parameters of the nodes only
     _option('config', '', TEXT, '', 'the configuration file (these keys; parameters override it)', BOTH),
-    _option('directory', '', TEXT, '', 'where files go (default: ~/.ros/cc_log, then /tmp/cc_log)', BOTH),
+    _option('directory', '', TEXT, '', 'where files go (default: $ROS_HOME/cc_log, ~/.ros/cc_log without ROS_HOME, '
+            'then /tmp/cc_log)', BOTH),
     _option('model', '', TEXT, '', 'model file (cclog learn) of the classifier named `classifier`', SMART),
     _option('window', '', SPAN, features.DEFAULT_WINDOW, "the feature window (smart mode: checked against the "
             "model's)", BOTH),

@@ -95,6 +95,17 @@ def metadata(window_metadata, route):
     return result
 
 
+def route_of(topic, routes):
+    """The first of ``routes`` whose topics match ``topic``, else None (the window's own file)."""
+    return next((route for route in routes if route.selection.matches(topic)), None)
+
+
+def format_of(topic, routes, own_format):
+    """The format ``topic`` is written in: its route's, else the window's own ``own_format``."""
+    route = route_of(topic, routes)
+    return own_format if route is None else route.format
+
+
 def split(window, routes):
     """``[(route or None, LogWindow)]``: ``window``'s records by route (None: the window's own file), each
     part with the window's triggers, part number, finality and key; a record a ``copy`` route takes is in the
@@ -107,7 +118,7 @@ def split(window, routes):
     for record in window.records:
         route = cache.get(record.topic, False)
         if route is False:
-            route = cache[record.topic] = next((r for r in routes if r.selection.matches(record.topic)), None)
+            route = cache[record.topic] = route_of(record.topic, routes)
         if route is None or route.copy:
             own.append(record)
         if route is not None:

@@ -5,7 +5,7 @@ diagnostics and the writer's part of their status.
   raises ``ConfigError('~<name>: ...')`` (one line, printed by ``fail``) instead of a traceback; each
   resolved value is logged once. ``init_node`` first checks the ``_name:=value`` arguments for what rospy
   itself would choke on (an integer beyond XML-RPC's 32 bits, YAML it cannot parse).
-- ``resolve_directory``: ``~directory``, else ``~/.ros/cc_log``, else ``/tmp/cc_log``; a fallback is
+- ``resolve_directory``: ``~directory``, else ``$ROS_HOME/cc_log``, else ``/tmp/cc_log``; a fallback is
   returned as a warning the node keeps on /diagnostics (WARN, with the directory in use).
 - ``recover_leftovers``: crash leftovers recovered or reported at start (``recovery``), each logged.
 - ``Diagnostics``: one DiagnosticStatus every period of wall time through diagnostic_updater, with each
@@ -212,7 +212,7 @@ def node_config(params, flat, classifier=None):
 # -- directory and leftovers ------------------------------------------------------------------------------
 
 def resolve_directory(value):
-    """``(directory, warning)``: ``value``, else ~/.ros/cc_log, else /tmp/cc_log (created); ``warning`` is ''
+    """``(directory, warning)``: ``value``, else $ROS_HOME/cc_log, else /tmp/cc_log (created); ``warning`` is ''
     or says why the requested directory is not used and which one is (the node shows it on /diagnostics)."""
     try:
         directory = LoggingDirectory(value or None)

@@ -44,11 +44,11 @@ import time
 
 from cc_log.core.spans import megabytes, seconds
 from cc_log.nodes import launcher
-from cc_log.storage.directory import LoggingDirectory
+from cc_log.storage.directory import LoggingDirectory, cc_log_home
 
 __all__ = ['parse', 'node_params', 'main', 'parse_size', 'parse_split_size', 'parse_duration', 'Plan', 'Watch']
 
-DEFAULT_MODEL = '~/.ros/cc_log/model.json'
+DEFAULT_MODEL = 'model.json'  # in cc_log's directory of ROS's home: directory.cc_log_home
 DEFAULT_MIN_SPACE = '1G'
 UNLIMITED_MB = 1e6  # -b 0 (rosbag: an infinite buffer)
 REFUSED = {
@@ -136,8 +136,8 @@ def _parser():
                         help='publish the directory on begin_write (std_msgs/String, latched) once recording')
     for flags, dest, nargs in REFUSED_FLAGS:
         parser.add_argument(*flags, dest=dest, nargs=nargs, action=_Refuse, help=argparse.SUPPRESS)
-    parser.add_argument('--model', help='model file: smart windows when it exists (default: %s, unless --config '
-                        'names the triggers)' % DEFAULT_MODEL)
+    parser.add_argument('--model', help='model file: smart windows when it exists (default: $ROS_HOME/cc_log/%s, '
+                        'ROS_HOME being ~/.ros when unset, unless --config names the triggers)' % DEFAULT_MODEL)
     parser.add_argument('--config', default='', help='configuration file (YAML)')
     parser.add_argument('--mode', default='auto', choices=launcher.MODES)
     parser.add_argument('--context', default='', metavar='TOPICS', help='context track: "odom:1 amcl_pose"')
@@ -171,7 +171,7 @@ def parse(argv, subscriptions=None):
         raise ValueError('--size: without --split rosbag stops at SIZE; cc_log does not stop at a size: --split '
                          '--size SIZE splits window files at SIZE')
     if args.model is None and not args.config:  # the default model; a configuration names its own triggers
-        args.model = DEFAULT_MODEL
+        args.model = cc_log_home(DEFAULT_MODEL)
     module, note = launcher.choose(args.mode, args.model, args.config)
     if args.split and args.duration is not None and module == 'smart_node' and not args.context:
         raise ValueError('--split --duration: smart mode writes one file per anomaly window; --split --duration '

@@ -61,7 +61,8 @@ from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 from cc_log.core import drift
 from cc_log.nodes import intake
 from cc_log.storage import window_info
-from cc_log.core import smart, trigger_topics
+from cc_log.storage.formats import json_xz
+from cc_log.core import routes, smart, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
@@ -143,7 +144,8 @@ class SmartNode(object):
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
                                            {self.logger.driving_topic}),
-                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
+                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2),
+                                    on_new_topic=self._advise_format)
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
@@ -180,6 +182,13 @@ class SmartNode(object):
             self.events.publish(msg)
         except rospy.ROSException:  # shutting down
             pass
+
+    def _advise_format(self, topic, msg_type):
+        """At a topic's first message: WARN once when it is written as json-xz and its type is heavy."""
+        written_as = routes.format_of(topic, self.logger.routes, self.logger.format)
+        advice = json_xz.heavy_topic_advice(topic, msg_type, written_as)
+        if advice:
+            rospy.logwarn(advice)
 
     def _flag_learners(self, event):
         """Online learning: nothing from around a window any trigger opened is learned."""
