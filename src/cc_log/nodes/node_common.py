@@ -228,11 +228,12 @@ def resolve_directory(value):
     return directory.path, warning
 
 
-def recover_leftovers(directory, vector_directory=None):
-    """Recover crash leftovers in ``directory`` (see ``recovery``) and log each; return the outcomes. Leftovers
+def recover_leftovers(directory, vector_directory=None, prefix=log_format.PREFIX):
+    """Recover crash leftovers in ``directory`` (of files named ``<prefix>...``, see ``recovery``) and log each;
+    return the outcomes. Leftovers
     of feature-vector files under ``vector_directory`` (``<label>/*.tmp-*``) are reported (UNRECOVERABLE,
     kept)."""
-    outcomes = recovery.recover_directory(directory)
+    outcomes = recovery.recover_directory(directory, prefix)
     if vector_directory and os.path.isdir(vector_directory):
         for label in sorted(os.listdir(vector_directory)):
             folder = os.path.join(vector_directory, label)

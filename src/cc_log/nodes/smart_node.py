@@ -68,6 +68,7 @@ from cc_log.nodes.node_common import (
     CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
     Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.node_extras import NodeExtras, context_rates
+from cc_log.storage.log_format import file_prefix
 from cc_log.triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
@@ -115,7 +116,8 @@ class SmartNode(object):
         for trigger in triggers:
             rospy.loginfo('trigger %s: %s', trigger.name, trigger.describe())
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
-        self.leftovers = recover_leftovers(self.directory)
+        prefix = file_prefix(params.option('name_prefix'))
+        self.leftovers = recover_leftovers(self.directory, prefix=prefix)
         enabled = params.option('enabled')
         period = params.option('diagnostic_period')
         intake_max_messages = params.option('intake_max_messages')
@@ -125,7 +127,7 @@ class SmartNode(object):
             options['side_topics'] = sorted(set(options['side_topics']).union(context[0]) - {options['driving_topic']})
         try:
             self.logger = smart.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
-                                            **options)
+                                            prefix=prefix, **options)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         types = trigger_topics.topic_types(triggers)
@@ -143,7 +145,8 @@ class SmartNode(object):
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
                                            {self.logger.driving_topic}),
-                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
+                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2),
+                                    tcp_nodelay=params.option('tcp_nodelay'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
@@ -157,7 +160,7 @@ class SmartNode(object):
 
     def _publish_event(self, event):
         if event.kind == smart.DELETED:
-            rospy.logwarn('window file deleted (~max_disk_mb): %s', event.path)
+            rospy.logwarn('window file deleted (%s): %s', self.logger.guard.quota_text(), event.path)
             return
         if event.kind == smart.SPLIT:
             rospy.loginfo('window file closed at ~split_mb: %s (%d bytes); the window goes on in the next',
