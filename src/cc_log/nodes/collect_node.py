@@ -36,8 +36,8 @@ from cc_log import features
 from cc_log.storage import log_format
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
-    Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, Params, fail, format_options, init_node, node_config,
+    node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.intake import Intake
 from cc_log.nodes.node_extras import NodeExtras
 
@@ -70,7 +70,7 @@ class CollectNode(object):
                    'close_retry': CLOSE_RETRY,
                    'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,
                    'max_buffer_mb': cfg.max_buffer_mb, 'max_disk_mb': cfg.max_disk_mb,
-                   'min_free_mb': cfg.min_free_mb, 'format_options': cfg.format_options(),
+                   'min_free_mb': cfg.min_free_mb, 'format_options': format_options(params, cfg),
                    'max_files': cfg.max_files, 'prefix': prefix}
         try:
             specs = cfg.feature_specs(AnomalyModel.load, rospy.resolve_name)

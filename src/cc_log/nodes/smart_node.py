@@ -65,8 +65,8 @@ from cc_log.core import smart, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
-    Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, Params, fail, format_options, init_node, node_config,
+    node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.node_extras import NodeExtras, context_rates
 from cc_log.storage.log_format import file_prefix
 from cc_log.triggers import ClassifierTrigger
@@ -104,6 +104,7 @@ class SmartNode(object):
         try:
             triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
             options = cfg.logger_options(triggers, rospy.resolve_name)
+            options['format_options'] = format_options(params, cfg)
         except ValueError as error:
             raise ConfigError(str(error))
         classifiers = [t for t in triggers if isinstance(t, ClassifierTrigger)]
