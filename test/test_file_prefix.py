@@ -1,6 +1,7 @@
 """A file-name prefix other than cc_log_ (``~name_prefix``, rosbag record's ``-o PREFIX``): naming, listing,
 recovery and the quota (in bytes and in files, ``~max_files``) follow it and leave other files alone; and the
 LZ4 bags' chunk size (``~chunk_kb``, rosbag record's ``--chunksize``)."""
+import json
 import os
 import sys
 
@@ -110,3 +111,28 @@ def test_chunk_kb_sets_the_lz4_chunk_size(tmp_path):
     assert _chunks(small) >= 10 * _chunks(whole)  # 16 KB chunks instead of rosbag's 768 KB: 48 times as many
     assert bag_lz4.chunk_bytes({'chunk_kb': 16}) == 16384 and bag_lz4.chunk_bytes({}) is None
     assert options.get('chunk_kb').parse('768') == 768
+
+
+def test_cclog_reads_and_recovers_the_files_of_a_prefix(tmp_path):
+    """cclog takes DIR/PREFIX as record -o does: the files DIR/PREFIX_* (info), their leftovers (recover); an
+    explicit leftover of another prefix is recovered too."""
+    from test_cli import run
+    directory = str(tmp_path)
+    ours = write_window(window(start=0), directory, Format.BAG_LZ4, prefix=RUN)[0]
+    leftover = as_leftover(write_window(window(start=1000), directory, Format.BAG_LZ4, prefix=RUN)[0])
+    theirs = as_leftover(write_window(window(start=2000), directory, Format.BAG_LZ4)[0])
+    info = run('info', os.path.join(directory, 'run'), '--json')
+    assert info.returncode == 0, info.stderr
+    assert os.path.basename(ours) in info.stdout and 'cc_log_' not in info.stdout
+    recovered = run('recover', os.path.join(directory, 'run'), '--json')
+    assert recovered.returncode == 0, recovered.stderr
+    outcome, = json.loads(recovered.stdout)['leftovers']
+    assert outcome['leftover'] == leftover and outcome['status'] == 'complete' and os.path.exists(theirs)
+    assert recovery.prefix_of(leftover) == RUN and recovery.prefix_of('run_context_20150521T191138.027Z.bag') == RUN
+    context = tmp_path / 'context'
+    context.mkdir()
+    stray = context / ('x_20000101T000000.000Z_a.bag' + log_format.TMP_MARK + str(DEAD_PID))
+    stray.write_bytes(b'')
+    again = run('recover', str(stray))
+    assert again.returncode == 0 and 'empty' in again.stdout and not stray.exists()
+    assert run('info', os.path.join(directory, 'nothing')).returncode != 0

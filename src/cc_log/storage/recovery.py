@@ -73,6 +73,16 @@ def _leftover(prefix):
         re.escape(log_format.TMP_MARK)))
 
 
+_STAMPED = re.compile(r'^(.+?_)(%s)?\d{8}T\d{6}\.\d{3}Z' % re.escape(log_format.CONTEXT_MARK))
+
+
+def prefix_of(path):
+    """The file prefix of a leftover's name: what comes before its UTC stamp (and a context file's ``context_``):
+    ``run_`` of ``run_20150521T191138.027Z_x.bag.tmp-1``; ``log_format.PREFIX`` when it has no stamp."""
+    match = _STAMPED.match(os.path.basename(path))
+    return match.group(1) if match else log_format.PREFIX
+
+
 def scan(directory, prefix=log_format.PREFIX):
     """Leftovers (``cc_log_*.tmp-<pid>``; ``prefix``: ``log_format.file_prefix``'s) in ``directory``, sorted."""
     pattern = _leftover(prefix)
