@@ -107,8 +107,7 @@ class SmartLogger(object):
     reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
     in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those
     (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
-    many MB (0: never); max_files: the quota in files (``disk_guard``; 0: none); prefix: what file names begin
-    with (``log_format.file_prefix``).
+    many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``).
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -120,8 +119,7 @@ class SmartLogger(object):
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
                  close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
-                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE, max_files=0,
-                 prefix=log_format.PREFIX):
+                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE, max_files=0, prefix=log_format.PREFIX):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -184,8 +182,7 @@ class SmartLogger(object):
         self.writer = window_writer.WindowWriter(
             self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
             max_held_messages=max_held_messages, background=background, give_up_after=give_up_after,
-            close_retry=close_retry, split_mb=split_mb, name='cc_log window writer', max_files=max_files,
-            prefix=prefix)
+            close_retry=close_retry, split_mb=split_mb, max_files=max_files, prefix=prefix, name='cc_log window writer')
         self.guard = self.writer.guard
         self.retry_period = self.writer.retry_period
         self.writer.on_event(self._written)
@@ -564,8 +561,7 @@ class SmartLogger(object):
             if not self.routes:
                 self.writer.submit(window_writer.Job(window, metadata))
                 continue
-            base = (self._bases.pop(window.key, None)  # all its files' name
-                    or log_format.base_name(window, 0, self.writer.prefix))
+            base = self._bases.pop(window.key, None) or log_format.base_name(window, 0, self.writer.prefix)
             if window.part and not window.final:
                 self._bases[window.key] = base
             for route, part in routes_mod.split(window, self.routes):  # one file per route (core.routes)
