@@ -18,7 +18,9 @@ Parameters
   (vectors into ``<directory>/features/<label>/``), ``~format``, ``~rotate``, ``~topics``, ``~label``,
   ``~window``, ``~feature_set`` (its first input is the driving topic, ``odom``; its other inputs are
   subscribed under their role names, e.g. ``cmd_vel``: remap them), ``~stride``, ``~max_buffer_mb`` (a new file
-  starts when it is reached), ``~max_disk_mb``, ``~min_free_mb``. Each resolved value is logged once.
+  starts when it is reached), ``~max_disk_mb``, ``~max_files``, ``~min_free_mb``, ``~name_prefix`` (files
+  ``<name_prefix>_<UTC>_<reason>``), ``~tcp_nodelay``, ``~chunk_kb``. Each resolved value is logged once
+  (``~quiet``: warnings and errors only).
 
 Every parameter is type-checked (one line ``/collect_logger: ~<name>: ...``, exit 1). On start, crash
 leftovers in ``~directory`` are recovered or reported and kept, as the smart node does. Files and vectors

@@ -28,13 +28,14 @@ Parameters
   lists them with their defaults): ``~config`` (the configuration file: topics, triggers, windows, format,
   limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
   ``~recent``, ``~learn_online``, the windows' ``~pre``, ``~post``, ``~max_window``, ``~topic_limits``, the
-  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb`` and ``~min_free_mb``, ``~directory``, the intake's
-  bounds, the context track and the upload command. Each resolved value is logged once.
+  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb``, ``~max_files`` and ``~min_free_mb``, ``~directory``
+  and ``~name_prefix`` (files ``<name_prefix>_<UTC>_<reason>``), the intake's bounds and ``~tcp_nodelay``, the
+  context track and the upload command. Each resolved value is logged once (``~quiet``: warnings and errors only).
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
 
-On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``) are recovered into window files or,
+On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``, of ``~name_prefix``) are recovered into window files or,
 when they cannot be, reported (logwarn and /diagnostics) and left in place: never deleted silently. A write
 that fails (disk full, directory not writable) is reported (ERROR on /diagnostics, a FAILED event) and the
 window is kept in memory and retried every few seconds (``window_writer``); when space is short the quota
