@@ -35,7 +35,7 @@ Parameters
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
 
-On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``, of ``~name_prefix``) are recovered into window files or,
+On start, leftovers of a crash in ``~directory`` (``cc_log_*.tmp-*``) are recovered into window files or,
 when they cannot be, reported (logwarn and /diagnostics) and left in place: never deleted silently. A write
 that fails (disk full, directory not writable) is reported (ERROR on /diagnostics, a FAILED event) and the
 window is kept in memory and retried every few seconds (``window_writer``); when space is short the quota
