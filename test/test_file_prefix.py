@@ -136,3 +136,20 @@ def test_cclog_reads_and_recovers_the_files_of_a_prefix(tmp_path):
     again = run('recover', str(stray))
     assert again.returncode == 0 and 'empty' in again.stdout and not stray.exists()
     assert run('info', os.path.join(directory, 'nothing')).returncode != 0
+
+
+def test_the_context_track_names_its_files_with_the_prefix_and_takes_the_chunk_size(tmp_path):
+    import rosbag
+    from cc_log.core.records import Record
+    from test_reliability import odom
+    written = []
+    track = context_track.ContextTrack(str(tmp_path), {'/odom': None}, rotate=1000, prefix=RUN, chunk_bytes=4096,
+                                       submit=lambda job: written.append(job.write()))
+    for i in range(2000):
+        message = odom(i)
+        track.add(Record(message.header.stamp.to_sec(), '/odom', message))
+    track.close()
+    path, = written
+    assert os.path.basename(path).startswith('run_context_2015')
+    with rosbag.Bag(path) as bag:
+        assert len(bag._chunks) >= 50 and bag.get_message_count() == 2000  # 4 KB chunks of ~700 kB

@@ -102,7 +102,8 @@ class NodeExtras(object):
             guard.directories.append(folder)
             self.writer.on_event(self._context_event)
             self.track = context_track.ContextTrack(directory, self.rates, rotate, submit=self.writer.submit,
-                                                    names=names, prefix=writer.prefix)
+                                                    names=names, prefix=writer.prefix,
+                                                    chunk_bytes=params.option('chunk_kb') * 1024)
             rospy.loginfo('context track: %s into %s', ', '.join(
                 '%s%s' % (topic, ' at %g Hz' % rate if rate else '') for topic, rate in sorted(self.rates.items())),
                 folder)

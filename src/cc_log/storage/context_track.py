@@ -39,6 +39,7 @@ import time
 from cc_log import features as features_mod
 from cc_log.storage import log_format, recovery, window_writer
 from cc_log.core import raw_message, safe_files
+from cc_log.storage.bag import bag_writer
 from cc_log.storage.formats import bag_lz4
 from cc_log.core.records import Record
 from cc_log.core.spans import seconds
@@ -108,7 +109,7 @@ class _OpenBag(object):
     failed half-way, what reached the disk is salvaged by ``recovery``); ``discard`` removes it. A file that cannot
     be opened is removed at once."""
 
-    def __init__(self, directory, first_stamp, prefix=log_format.PREFIX):
+    def __init__(self, directory, first_stamp, prefix=log_format.PREFIX, chunk_bytes=None):
         import rosbag
         safe_files.make_dirs(directory)
         self.directory = directory
@@ -128,7 +129,8 @@ class _OpenBag(object):
             self.discard()
             raise
         try:
-            self.bag = rosbag.Bag(stream, 'w', compression=rosbag.Compression.LZ4)
+            self.bag = rosbag.Bag(stream, 'w', compression=rosbag.Compression.LZ4,
+                                  chunk_threshold=chunk_bytes or bag_writer.CHUNK_THRESHOLD)
         except BaseException:
             _quietly(stream.close)
             self.discard()
@@ -193,9 +195,10 @@ class ContextTrack(object):
     """The context track of one logging directory (see the module docstring). Thread-safe."""
 
     def __init__(self, directory, rates, rotate=DEFAULT_ROTATE, submit=None, retry=RETRY_PERIOD, clock=time.monotonic,
-                 names=None, prefix=log_format.PREFIX):
+                 names=None, prefix=log_format.PREFIX, chunk_bytes=None):
         self.directory = os.path.join(str(directory), SUBDIRECTORY)
         self.prefix = prefix  # of the file names (``log_format.file_prefix``)
+        self.chunk_bytes = chunk_bytes  # of the bags' LZ4 chunks, uncompressed (None: rosbag's 768 KB)
         self.rates = dict(rates)
         self.names = dict(names or {})  # topic -> the name it is stored under (BWI's odom_1hz), when not its own
         self.rotate = seconds(rotate, 'context_rotate', positive=True)
@@ -265,7 +268,7 @@ class ContextTrack(object):
                 self._close_locked()
             try:
                 if self._bag is None:
-                    self._bag = _OpenBag(self.directory, record.stamp, self.prefix)
+                    self._bag = _OpenBag(self.directory, record.stamp, self.prefix, self.chunk_bytes)
                 self._bag.write(record._replace(topic=self.names[record.topic]) if record.topic in self.names
                                 else record, time)
             except Exception as error:  # OSError (disk full), rosbag's, a bad message: the track goes on
