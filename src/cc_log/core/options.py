@@ -290,8 +290,8 @@ OPTIONS = (
             'bound of the subscriber queue in messages; beyond it messages are counted as lost', SMART),
     _option('intake_max_mb', '', size(0.001), 64.0, 'bound of the subscriber queue in bytes', SMART),
     _option('chunk_kb', '', Grammar(number(1, 1 << 20, integer=True), 'KB', 'a whole number of KB (1024 bytes) '
-                                    'from 1'), 768, "bag-lz4: a chunk is closed once it holds this many KB "
-            "uncompressed (rosbag record's `--chunksize`)", BOTH),
+                                    'from 1'), 768, "bag-lz4 windows and context bags: a chunk is closed once "
+            "it holds this many KB uncompressed (rosbag record's `--chunksize`)", BOTH),
     _option('quiet', '', BOOL, False, "log warnings and errors only, no INFO lines (rosbag record's `-q`)", BOTH),
     _option('tcp_nodelay', '', BOOL, False, "subscribe with TCP_NODELAY (rosbag record's `--tcpnodelay`): lower "
             'latency for small messages, more packets', BOTH),
