@@ -30,7 +30,7 @@ from cc_log.core.safe_input import brief
 from cc_log.core.spans import Rotation, Span, megabytes, seconds
 from cc_log.core.topic_select import topic_list
 from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE
-from cc_log.storage import context_track, formats
+from cc_log.storage import context_track, formats, log_format
 from cc_log.storage.formats import json_xz
 from cc_log.triggers.classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES
 
@@ -159,6 +159,9 @@ RETRIGGER = Grammar(_choice(lambda: RETRIGGER_MODES), 'MODE', ', '.join('`%s`' %
 FEATURE_SET = Grammar(_choice(features.names), 'SET', 'a feature set: %s' % ', '.join(
     '`%s`' % name for name in features.names()))
 COMMAND = Grammar(_text_or_list, 'COMMAND', 'an argument list or a string')
+NAME_PREFIX = Grammar(lambda value, name: log_format.file_prefix(value, name)[:-1], 'NAME',
+                      'a plain part of a file name (no `/`, no control character, not starting with `.`)')
+COUNT = Grammar(number(0, integer=True), 'N', 'a whole number >= 0')
 
 
 class Option(collections.namedtuple('Option', 'name key grammar default doc nodes commands')):
@@ -246,6 +249,8 @@ OPTIONS = (
             'in parts (one file)', SMART),
     _option('max_disk_mb', 'limits.max_disk_mb', SIZE, 0.0, 'keep window files within this size by deleting the '
             'oldest (0: no quota)', BOTH),
+    _option('max_files', 'limits.max_files', COUNT, 0, 'keep at most this many window (and context) files by '
+            "deleting the oldest, as `max_disk_mb` does (rosbag record's `--max-splits`; 0: no limit)", BOTH),
     _option('min_free_mb', 'limits.min_free_mb', SIZE, 0.0, 'below this much free disk, writing pauses and '
             'windows wait in memory (0: off)', BOTH),
     _option('max_buffer_mb', 'limits.max_buffer_mb', SIZE, DEFAULT_MAX_BUFFER_MB, 'memory budget of every '
@@ -263,6 +268,9 @@ OPTIONS = (
     _option('config', '', TEXT, '', 'the configuration file (these keys; parameters override it)', BOTH),
     _option('directory', '', TEXT, '', 'where files go (default: $ROS_HOME/cc_log, ~/.ros/cc_log without ROS_HOME, '
             'then /tmp/cc_log)', BOTH),
+    _option('name_prefix', '', NAME_PREFIX, 'cc_log', 'what file names begin with, before `_<UTC>_<reason>` '
+            "(rosbag record's `-o PREFIX`); listing, recovery, the quota and uploads follow it: files named "
+            'otherwise are left alone', BOTH),
     _option('model', '', TEXT, '', 'model file (cclog learn) of the classifier named `classifier`', SMART),
     _option('window', '', SPAN, features.DEFAULT_WINDOW, "the feature window (smart mode: checked against the "
             "model's)", BOTH),
@@ -282,6 +290,12 @@ OPTIONS = (
     _option('intake_max_messages', '', Grammar(number(1, integer=True), 'N', 'a whole number >= 1'), 20000,
             'bound of the subscriber queue in messages; beyond it messages are counted as lost', SMART),
     _option('intake_max_mb', '', size(0.001), 64.0, 'bound of the subscriber queue in bytes', SMART),
+    _option('chunk_kb', '', Grammar(number(1, 1 << 20, integer=True), 'KB', 'a whole number of KB (1024 bytes) '
+                                    'from 1'), 768, "bag-lz4 windows and context bags: a chunk is closed once "
+            "it holds this many KB uncompressed (rosbag record's `--chunksize`)", BOTH),
+    _option('quiet', '', BOOL, False, "log warnings and errors only, no INFO lines (rosbag record's `-q`)", BOTH),
+    _option('tcp_nodelay', '', BOOL, False, "subscribe with TCP_NODELAY (rosbag record's `--tcpnodelay`): lower "
+            'latency for small messages, more packets', BOTH),
     _option('context_topics', '', TOPICS, (), 'topics recorded always, each `topic` or `topic:Hz`, in rotated '
             'LZ4 bags under `context/`', BOTH),
     _option('context_rotate', '', POSITIVE_DURATION, context_track.DEFAULT_ROTATE, 'seconds of stamps per context '

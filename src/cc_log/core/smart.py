@@ -39,13 +39,12 @@ import time
 
 from cc_log import errors
 from cc_log import features as features_mod
-from cc_log.storage import log_format
+from cc_log.storage import log_format, window_writer
 from cc_log.core import msg_codec, raw_message, routes as routes_mod, smart_events, window_prep
 from cc_log.core.raw_json import RawJsonEstimate
 from cc_log.core.smart_events import DELETED, FAILED, OPENED, SPLIT, WRITTEN, Event
 from cc_log.core.stamp_clock import StampClock
 from cc_log.core.trigger_topics import TriggerViews, check_triggers, topic_types
-from cc_log.storage import window_writer
 from cc_log.core.spans import Span
 from cc_log.triggers import (
     DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger, ManualTrigger)
@@ -62,7 +61,6 @@ DEFAULT_DRIVING_TOPIC = 'odom'
 
 _TOPIC, _RAW, _CONNECTION, _STAMP = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp'))
 DEFAULT_STAMP_TOLERANCE = 5.0  # seconds a header stamp may differ from the message's arrival (else: its arrival)
-
 DEFAULT_RETRY_PERIOD = window_writer.DEFAULT_RETRY_PERIOD        # seconds between attempts at held windows
 DEFAULT_MAX_HELD_MESSAGES = window_writer.DEFAULT_MAX_HELD_MESSAGES  # unwritten messages kept in memory
 
@@ -105,7 +103,8 @@ class SmartLogger(object):
     reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
     in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those
     (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
-    many MB (0: never). wait_for_writer (offline): a message waits for room in the budget, never thinned for the writer.
+    many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
+    (offline): a message waits for room in the budget, never thinned for the writer.
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -117,7 +116,8 @@ class SmartLogger(object):
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
                  close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
-                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE, wait_for_writer=False):
+                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE, wait_for_writer=False, max_files=0,
+                 prefix=log_format.PREFIX):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -181,7 +181,7 @@ class SmartLogger(object):
         self.writer = window_writer.WindowWriter(
             self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
             max_held_messages=max_held_messages, background=background, give_up_after=give_up_after,
-            close_retry=close_retry, split_mb=split_mb, name='cc_log window writer')
+            close_retry=close_retry, split_mb=split_mb, max_files=max_files, prefix=prefix, name='cc_log window writer')
         self.guard = self.writer.guard
         self.retry_period = self.writer.retry_period
         self.writer.on_event(self._written)
@@ -563,7 +563,7 @@ class SmartLogger(object):
             if not self.routes:
                 self.writer.submit(window_writer.Job(window, metadata))
                 continue
-            base = self._bases.pop(window.key, None) or log_format.base_name(window, 0)  # all its files' name
+            base = self._bases.pop(window.key, None) or log_format.base_name(window, 0, self.writer.prefix)
             if window.part and not window.final:
                 self._bases[window.key] = base
             for route, part in routes_mod.split(window, self.routes):  # one file per route (core.routes)

@@ -179,15 +179,18 @@ class Intake(object):
     ``max_bytes``): a message arriving when it is full is dropped and counted in ``overflowed`` (and in
     ``dropped``, which also counts messages that could not be decoded or handled, and those of a refused
     message definition: ``decoder.refused``). ``on_new_topic(topic, type name)`` (optional) is called at each
-    topic's first accepted message, on the feeder thread."""
+    topic's first accepted message, on the feeder thread. ``tcp_nodelay``: subscribe with TCP_NODELAY
+    (``~tcp_nodelay``)."""
 
     on_new_topic = None
 
     def __init__(self, sink, driving_topic, side_topics=(), max_messages=DEFAULT_MAX_MESSAGES,
-                 max_bytes=int(DEFAULT_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY, on_new_topic=None):
+                 max_bytes=int(DEFAULT_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY, on_new_topic=None,
+                 tcp_nodelay=False):
         self.sink = sink
         self.on_new_topic = on_new_topic
         self._typed = set()               # topics whose first message was accepted
+        self.tcp_nodelay = bool(tcp_nodelay)
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
         self.cpu_seconds = 0.0       # CPU time of the feeder thread handing messages to the sink
@@ -221,7 +224,8 @@ class Intake(object):
     def _subscribe(self, resolved):
         self.queue.listen(resolved)  # its rate is 0 until its first message
         self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
-                                                      queue_size=None, buff_size=RECEIVE_BYTES)
+                                                      queue_size=None, buff_size=RECEIVE_BYTES,
+                                                      tcp_nodelay=self.tcp_nodelay)
         return resolved
 
     @property

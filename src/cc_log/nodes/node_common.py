@@ -15,6 +15,7 @@ diagnostics and the writer's part of their status.
 ROS edge (rospy).
 """
 import ctypes
+import logging
 import os
 import sys
 import threading
@@ -156,10 +157,19 @@ def node_name(name, argv):
 
 def init_node(name, argv):
     """``rospy.init_node`` after ``check_command_line`` (ConfigError instead of a traceback), with freed
-    message buffers reused (``reuse_freed_memory``)."""
+    message buffers reused (``reuse_freed_memory``); with ``~quiet`` the node logs warnings and errors only."""
     check_command_line(argv)
     reuse_freed_memory()
     rospy.init_node(name, argv=argv)
+    if Params(log=lambda *args: None).option('quiet'):
+        logging.getLogger('rosout').setLevel(logging.WARNING)  # rospy.loginfo's logger (init_node's log_level)
+
+
+def format_options(params, cfg):
+    """What the window format is told in each window's metadata: the configuration's (``precision``) and
+    ``~chunk_kb`` when it is set."""
+    chunk = {'chunk_kb': params.option('chunk_kb')} if params.given('chunk_kb') else {}
+    return dict(cfg.format_options(), **chunk)
 
 
 def reuse_freed_memory():
@@ -228,11 +238,12 @@ def resolve_directory(value):
     return directory.path, warning
 
 
-def recover_leftovers(directory, vector_directory=None):
-    """Recover crash leftovers in ``directory`` (see ``recovery``) and log each; return the outcomes. Leftovers
+def recover_leftovers(directory, vector_directory=None, prefix=log_format.PREFIX):
+    """Recover crash leftovers in ``directory`` (of files named ``<prefix>...``, see ``recovery``) and log each;
+    return the outcomes. Leftovers
     of feature-vector files under ``vector_directory`` (``<label>/*.tmp-*``) are reported (UNRECOVERABLE,
     kept)."""
-    outcomes = recovery.recover_directory(directory)
+    outcomes = recovery.recover_directory(directory, prefix)
     if vector_directory and os.path.isdir(vector_directory):
         for label in sorted(os.listdir(vector_directory)):
             folder = os.path.join(vector_directory, label)

@@ -28,8 +28,9 @@ Parameters
   lists them with their defaults): ``~config`` (the configuration file: topics, triggers, windows, format,
   limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
   ``~recent``, ``~learn_online``, the windows' ``~pre``, ``~post``, ``~max_window``, ``~topic_limits``, the
-  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb`` and ``~min_free_mb``, ``~directory``, the intake's
-  bounds, the context track and the upload command. Each resolved value is logged once.
+  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb``, ``~max_files`` and ``~min_free_mb``, ``~directory``
+  and ``~name_prefix`` (files ``<name_prefix>_<UTC>_<reason>``), the intake's bounds and ``~tcp_nodelay``, the
+  context track and the upload command. Each resolved value is logged once (``~quiet``: warnings and errors only).
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
@@ -66,9 +67,10 @@ from cc_log.core import routes, smart, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
-    Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, Params, fail, format_options, init_node, node_config,
+    node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.node_extras import NodeExtras, context_rates
+from cc_log.storage.log_format import file_prefix
 from cc_log.triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
@@ -104,6 +106,7 @@ class SmartNode(object):
         try:
             triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
             options = cfg.logger_options(triggers, rospy.resolve_name)
+            options['format_options'] = format_options(params, cfg)
         except ValueError as error:
             raise ConfigError(str(error))
         classifiers = [t for t in triggers if isinstance(t, ClassifierTrigger)]
@@ -116,7 +119,8 @@ class SmartNode(object):
         for trigger in triggers:
             rospy.loginfo('trigger %s: %s', trigger.name, trigger.describe())
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
-        self.leftovers = recover_leftovers(self.directory)
+        prefix = file_prefix(params.option('name_prefix'))
+        self.leftovers = recover_leftovers(self.directory, prefix=prefix)
         enabled = params.option('enabled')
         period = params.option('diagnostic_period')
         intake_max_messages = params.option('intake_max_messages')
@@ -126,7 +130,7 @@ class SmartNode(object):
             options['side_topics'] = sorted(set(options['side_topics']).union(context[0]) - {options['driving_topic']})
         try:
             self.logger = smart.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
-                                            **options)
+                                            prefix=prefix, **options)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         types = trigger_topics.topic_types(triggers)
@@ -145,7 +149,8 @@ class SmartNode(object):
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
                                            {self.logger.driving_topic}),
                                     max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2),
-                                    on_new_topic=self._advise_format)
+                                    on_new_topic=self._advise_format,
+                                    tcp_nodelay=params.option('tcp_nodelay'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
@@ -159,7 +164,7 @@ class SmartNode(object):
 
     def _publish_event(self, event):
         if event.kind == smart.DELETED:
-            rospy.logwarn('window file deleted (~max_disk_mb): %s', event.path)
+            rospy.logwarn('window file deleted (%s): %s', self.logger.guard.quota_text(), event.path)
             return
         if event.kind == smart.SPLIT:
             rospy.loginfo('window file closed at ~split_mb: %s (%d bytes); the window goes on in the next',

@@ -31,8 +31,9 @@ from cc_log.core import safe_files, safe_input
 from cc_log.storage.window_info import (
     SUMMARY_KEYS, Contents, check_metadata, merged_summary, summary_of, trigger_name, utc_text, window_metadata)
 
-PREFIX = 'cc_log_'
+PREFIX = 'cc_log_'  # what every file name begins with (``file_prefix``: another, from ``~name_prefix``)
 CONTEXT_PREFIX = PREFIX + 'context_'  # a context-track file (``context_track``: a plain rosbag, not a window)
+CONTEXT_MARK = 'context_'  # after the prefix: a context-track file
 TMP_MARK = safe_files.TMP_MARK
 KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
 FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
@@ -51,18 +52,29 @@ class Format(object):
 
 # -- names ----------------------------------------------------------------------------------------------
 
+def file_prefix(name_prefix, name='name_prefix'):
+    """What every file name begins with for ``name_prefix`` (``cc_log``, or ``run`` of rosbag's ``-o /data/run``):
+    ``<name_prefix>_``. ValueError('<name>: ...') unless it is a plain part of a file name (no ``/``, no control
+    character, not starting with ``.``, at most 100 characters)."""
+    if (not isinstance(name_prefix, str) or not name_prefix or name_prefix.startswith('.') or '/' in name_prefix
+            or len(name_prefix) > 100 or any(ord(c) < 32 or ord(c) == 127 for c in name_prefix)):
+        raise ValueError('%s: %s must be a plain part of a file name (no "/", no control character, not starting '
+                         'with ".", at most 100 characters)' % (name, safe_input.brief(name_prefix)))
+    return name_prefix + '_'
+
+
 def _reason_text(window):
     reason = trigger_name(window.triggers[0]) if window.triggers else 'window'
     text = re.sub(r'[^A-Za-z0-9-]+', '-', reason).strip('-')
     return text or 'window'
 
 
-def base_name(window, part=None):
+def base_name(window, part=None, prefix=PREFIX):
     """``cc_log_<UTC of the first stamp>_<name of the first trigger>[_part<N>]`` (no extension; ``part``: None for
-    the window's own)."""
+    the window's own; ``prefix``: ``file_prefix``'s, for ``cc_log_``)."""
     moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
     stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
-    name = PREFIX + stamp + '_' + _reason_text(window)
+    name = prefix + stamp + '_' + _reason_text(window)
     part = getattr(window, 'part', 0) if part is None else part
     if part:
         name += '_part%d' % part
@@ -103,14 +115,15 @@ def _file_order(path):
     return (bool(separator), _SPLIT.sub('', route), split_number(path))
 
 
-def window_files(directory):
-    """Final window files in ``directory`` (paths, sorted by name, hence by time); ``*.tmp-*`` ignored."""
+def window_files(directory, prefix=PREFIX):
+    """Final window files in ``directory`` whose names begin with ``prefix`` (paths, sorted by name, hence by
+    time); ``*.tmp-*`` ignored."""
     try:
         names = os.listdir(directory)
     except OSError:
         return []
     return [os.path.join(directory, name) for name in sorted(names)
-            if name.startswith(PREFIX) and TMP_MARK not in name and _extension(name)]
+            if name.startswith(prefix) and TMP_MARK not in name and _extension(name)]
 
 
 def window_key(path):
@@ -129,7 +142,7 @@ def window_sets(paths):
         directory = os.path.dirname(path)
         if directory not in listed:  # each directory listed once: {window key: its files}
             listed[directory] = collections.defaultdict(list)
-            for name in window_files(directory or '.'):
+            for name in window_files(directory or '.', prefix=''):  # the key holds the path's prefix
                 sibling = os.path.join(directory, os.path.basename(name))
                 listed[directory][window_key(sibling)].append(sibling)
         files = sets.setdefault(key, [])
@@ -211,25 +224,25 @@ def _is_copy(metadata, paths):
     return bool(metadata.get('copy')) and metadata.get('route') is not None and not _file_order(paths[0])[0]
 
 
-def kept_leftovers(directory):
-    """Leftovers kept after a partial recovery (``cc_log_*.unrecovered-<pid>``), sorted: bytes no reader
-    could decode, left for a person to look at."""
+def kept_leftovers(directory, prefix=PREFIX):
+    """Leftovers kept after a partial recovery (``cc_log_*.unrecovered-<pid>``; ``prefix``: for ``cc_log_``),
+    sorted: bytes no reader could decode, left for a person to look at."""
     try:
         names = os.listdir(directory)
     except OSError:
         return []
     return [os.path.join(directory, name) for name in sorted(names)
-            if name.startswith(PREFIX) and KEPT_MARK in name and TMP_MARK not in name]
+            if name.startswith(prefix) and KEPT_MARK in name and TMP_MARK not in name]
 
 
-def temporary_files(directory):
-    """Leftovers of an interrupted write (``cc_log_*.tmp-<pid>``), sorted."""
+def temporary_files(directory, prefix=PREFIX):
+    """Leftovers of an interrupted write (``cc_log_*.tmp-<pid>``; ``prefix``: for ``cc_log_``), sorted."""
     try:
         names = os.listdir(directory)
     except OSError:
         return []
     return [os.path.join(directory, name) for name in sorted(names)
-            if name.startswith(PREFIX) and TMP_MARK in name]
+            if name.startswith(prefix) and TMP_MARK in name]
 
 
 # -- writing --------------------------------------------------------------------------------------------
@@ -247,10 +260,10 @@ def final_names(directory, base, extension):
         counter += 1
 
 
-def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None):
+def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None, prefix=PREFIX):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
 
-    ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
+    ``base``: the file name without extension (default ``base_name(window, prefix=prefix)``; used by ``recovery``).
     ``triggers``: those its metadata says (default: the window's; a part of a window written as a file per part
     says those that came since the part before it, while its name is the window's first trigger's).
 
@@ -283,7 +296,7 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
             meta.pop(key, None)
         if left_out is not None:
             left_out.update(meta['undecodable_topics'])
-    base = base or base_name(window)
+    base = base or base_name(window, prefix=prefix)
     extension = module.EXTENSION
     write = module.encoder(records, meta)  # a format may encode now, before the temporary file exists
     target = safe_files.AtomicFile(os.path.join(directory, base + extension),
@@ -315,8 +328,9 @@ class WindowFile(object):
 
     SUMMED = ('dropped', 'undecodable')
 
-    def __init__(self, directory, fmt, suffix='', base=None, split_bytes=0):
+    def __init__(self, directory, fmt, suffix='', base=None, split_bytes=0, prefix=PREFIX):
         self.directory = directory
+        self.prefix = prefix  # of the base name when ``base`` is None (``file_prefix``)
         self.suffix = suffix  # after the window's base name: a route's file (``core.routes``)
         self.base = base      # the window's base name (None: its first part's)
         self.format = formats.check(fmt)
@@ -353,7 +367,7 @@ class WindowFile(object):
     def _open(self, window):
         ensure_directory(self.directory)
         if self._name is None:
-            self._name = (self.base or base_name(window, part=0)) + self.suffix
+            self._name = (self.base or base_name(window, part=0, prefix=self.prefix)) + self.suffix
         extension = self._module.EXTENSION
         path = self._name + (split_suffix(self.number) if self.number > 1 else '') + extension
         target = safe_files.AtomicFile(os.path.join(self.directory, path), names=self._final_names(extension),

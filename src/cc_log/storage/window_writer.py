@@ -108,7 +108,9 @@ class WindowWriter(object):
     jobs; background: write on a thread (True) or in the caller's (False: ``submit`` writes, and with
     ``give_up_after`` it waits for a failing job to be written or lost); give_up_after: seconds after which
     a failing job is lost (None: held until ``close``); close_retry: seconds ``close`` keeps retrying;
-    split_mb: the size at which a window written a part at a time goes on in a new file (0: never).
+    split_mb: the size at which a window written a part at a time goes on in a new file (0: never);
+    max_files: the quota in files (``disk_guard``; 0: none); prefix: what file names begin with
+    (``log_format.file_prefix``).
 
     Thread-safe: ``submit``, ``stats`` and ``close`` may be called from any thread. Bad values raise
     ``ValueError('<parameter>: ...')``.
@@ -116,10 +118,13 @@ class WindowWriter(object):
 
     def __init__(self, directory, fmt=log_format.Format.JSON_XZ, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES, background=True,
-                 give_up_after=None, close_retry=0.0, split_mb=0, name='cc_log window writer'):
+                 give_up_after=None, close_retry=0.0, split_mb=0, name='cc_log window writer', max_files=0,
+                 prefix=log_format.PREFIX):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
-        self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb)
+        self.prefix = prefix
+        self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb, max_files=max_files,
+                                          prefix=prefix)
         self.retry_period = seconds(retry_period, 'retry_period', positive=True)
         self.give_up_after = None if give_up_after is None else seconds(give_up_after, 'give_up_after')
         self.close_retry = seconds(close_retry, 'close_retry')
@@ -361,7 +366,7 @@ class WindowWriter(object):
                 if not window.records:  # a route none of whose topics came yet: no file
                     return None, 0
                 stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix, job.base,
-                                                                    self.split_bytes)
+                                                                    self.split_bytes, self.prefix)
             try:
                 if not window.final:
                     stream.append(window, job.metadata)
@@ -383,7 +388,7 @@ class WindowWriter(object):
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
         base = None if job.base is None else job.base + suffix + ('_part%d' % window.part if window.part else '')
         path, nbytes = log_format.write_window(window, self.directory, fmt, job.metadata, left_out=left_out,
-                                               triggers=triggers, base=base)
+                                               triggers=triggers, base=base, prefix=self.prefix)
         if parted and window.final:
             self._triggers_said.pop(key, None)
         elif parted:
@@ -431,7 +436,7 @@ class WindowWriter(object):
         return bool(self._quota(reserve=expected))
 
     def _quota(self, keep=(), reserve=0):
-        if not self.guard.max_bytes:
+        if not self.guard.has_quota:
             return []
         deleted = []
         for path in self.guard.enforce_quota(keep=keep, reserve=reserve):
@@ -439,8 +444,8 @@ class WindowWriter(object):
                 self._counts['windows_deleted'] += 1
                 self.last_deleted = path
             deleted.append(path)
-            self._emit(WriterEvent(DELETED, None, path, 0, 'deleted to stay within max_disk_mb %g'
-                                   % (self.guard.max_bytes / float(disk_guard.MB)), False))
+            self._emit(WriterEvent(DELETED, None, path, 0, 'deleted to stay within %s' % self.guard.quota_text(),
+                                   False))
         return deleted
 
     def _lose(self, job, error):

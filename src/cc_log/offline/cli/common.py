@@ -185,14 +185,34 @@ def retrigger_modes():
 
 # -- reading window files ---------------------------------------------------------------------------------
 
+def named_prefix(path):
+    """``(directory, file prefix)`` of a path that is a prefix of file names as rosbag record's ``-o`` takes it
+    (``/data/run``: /data and ``run_``, the files of ``record -o /data/run``), or None when ``path`` is not one (it
+    exists, or its directory does not, or its name is not a plain part of a file name)."""
+    from cc_log.storage import log_format
+    directory, part = os.path.split(path)
+    if os.path.exists(path) or not part or not os.path.isdir(directory or '.'):
+        return None
+    try:
+        return directory or '.', log_format.file_prefix(part)
+    except ValueError:
+        return None
+
+
 def window_paths(paths):
-    """Window files named by ``paths`` (files as given; directories: their window files, by time).
+    """Window files named by ``paths`` (files as given; directories: their window files, by time; a prefix as
+    ``record -o`` takes it, ``/data/run``: the window files ``/data/run_*``, by time).
 
     CommandError for a path that does not exist or a directory without window files.
     """
     from cc_log.storage import log_format
     found = []
     for path in paths:
+        prefixed = named_prefix(path)
+        files = log_format.window_files(*prefixed) if prefixed else []
+        if files:
+            found.extend(files)
+            continue
         if not os.path.exists(path):
             raise CommandError('%s: no such file or directory' % path)
         if os.path.isdir(path):

@@ -59,7 +59,14 @@ def write(target, records, metadata):
     if isinstance(target, (str, bytes, os.PathLike)):
         with os.fdopen(safe_files.create(target), 'w+b') as stream:
             return write(stream, records, metadata)
-    bag_writer.write_bag(target, *bag_messages(records, metadata))
+    bag_writer.write_bag(target, *bag_messages(records, metadata), chunk_threshold=chunk_bytes(metadata))
+
+
+def chunk_bytes(metadata):
+    """The uncompressed bytes at which a chunk is closed: the metadata's ``chunk_kb`` (``~chunk_kb``, rosbag
+    record's ``--chunksize``) KB of 1024 bytes, else None (``bag_writer.CHUNK_THRESHOLD``)."""
+    kb = (metadata or {}).get('chunk_kb')
+    return int(kb) * 1024 if isinstance(kb, int) and not isinstance(kb, bool) and kb > 0 else None
 
 
 def bag_messages(records, metadata):
@@ -188,6 +195,7 @@ class WindowStream(object):
             records = layout.add(records)
             headers = layout.headers
             if self.count == 0 and records:
+                bag.chunk_threshold = chunk_bytes(metadata) or bag.chunk_threshold
                 bag.write(METADATA_TOPIC, *layout.first, layout.metadata_data(metadata, final=False),
                           headers[METADATA_TOPIC])
             write = bag.write
