@@ -430,6 +430,7 @@ class SmartLogger(object):
             buffered_bytes = self._buffer.buffered_bytes
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
+            limited = self._limited + self._buffer.limited
         raw_estimate = self._raw_estimate.total  # its samples decoded here, off the message path
         written = self.writer.stats()
         triggers = {trigger.name: trigger.stats() for trigger in self.triggers}
@@ -444,7 +445,7 @@ class SmartLogger(object):
                 'messages_queued': written['messages_queued'],
                 'messages_buffered': buffered,
                 'buffered_bytes': buffered_bytes,
-                'buffer_trimmed': trimmed,
+                'buffer_trimmed': trimmed, 'topic_trimmed': limited,
                 'messages_lost': written['messages_lost'],
                 'raw_json_bytes': s.raw_json_bytes + raw_estimate,
                 'stored_bytes': written['stored_bytes'],
@@ -479,8 +480,8 @@ class SmartLogger(object):
                 'restamped_by_topic': dict(self._restamped),
             }
         # Not in any window (outside every anomaly, seen while paused, or trimmed from the pre buffer).
-        result['messages_dropped'] = (result['messages_seen'] - result['messages_kept'] - result['messages_queued']
-                                      - result['messages_buffered'] - result['messages_lost'] - result['messages_shed'])
+        result['messages_not_kept'] = result['messages_seen'] - sum(result[key] for key in (
+            'messages_kept', 'messages_queued', 'messages_buffered', 'messages_lost', 'messages_shed'))
         return result
 
     # -- message path ---------------------------------------------------------------------------------
@@ -507,8 +508,9 @@ class SmartLogger(object):
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed
+            self._limited += self._buffer.limited
         else:
-            self._resets = self._trimmed = 0
+            self._resets = self._trimmed = self._limited = 0
         self._buffer = buffer
         for trigger in self.triggers:
             trigger.reset()

@@ -220,6 +220,7 @@ class WindowBuffer(object):
         self._max_count = None if self.max_window.is_duration else self.max_window.count
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
+        self.limited = 0                   # records outside any window dropped by their topic's own pre or cap
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
         self._side = {}                    # topic -> its records (other topics than the driving one), by time
         self._side_bytes = {}              # topic -> memory of its records held
@@ -315,11 +316,11 @@ class WindowBuffer(object):
 
     def _limit_topic(self, topic, side, limits, clock):
         """Outside every window: a topic's records older than its own ``pre`` or beyond its own memory cap go
-        (counted in ``trimmed``), the oldest first."""
+        (counted in ``limited``), the oldest first."""
         while side and ((limits.pre is not None and side[0].stamp < clock - limits.pre)
                         or (limits.max_mb and self._side_bytes[topic] > limits.max_mb * MB and len(side) > 1)):
             self._drop_side(topic)
-            self.trimmed += 1
+            self.limited += 1
 
     def _drop_side(self, topic):
         record = self._side[topic].popleft()
