@@ -24,7 +24,7 @@ import diagnostic_updater
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from cc_log.core import config, health, options
+from cc_log.core import config, health, options, safe_input
 from cc_log.storage import log_format
 from cc_log.storage import recovery
 from cc_log.storage.directory import LoggingDirectory
@@ -70,15 +70,35 @@ def _ros_get(name, default):
     return rospy.get_param('~' + name, default)
 
 
+def _ros_names():
+    """The names of the node's private parameters (the first level under its namespace)."""
+    if _SETTINGS:
+        return list(_SETTINGS[0])
+    prefix = rospy.get_name().rstrip('/') + '/'
+    return [name[len(prefix):].split('/')[0] for name in rospy.get_param_names() if name.startswith(prefix)]
+
+
 class Params(object):
     """Typed private parameters. ``get(name, default)`` reads one (default: ``rospy.get_param('~' + name,
     default)``; a dict's ``get`` serves in tests); ``log(format, *args)`` reports the resolved value
-    (default: rospy.loginfo). Every reader raises ConfigError('~name: ...') for a value of the wrong type
-    or out of range."""
+    (default: rospy.loginfo); ``names()`` lists the private parameters set (default: the node's namespace).
+    Every reader raises ConfigError('~name: ...') for a value of the wrong type or out of range."""
 
-    def __init__(self, get=None, log=None):
+    def __init__(self, get=None, log=None, names=None):
         self._get = get if get is not None else _ros_get
         self._log = log if log is not None else rospy.loginfo
+        self._names = names if names is not None else _ros_names
+
+    def unknown(self):
+        """A warning for each private parameter that is neither an option (``core.options``) nor a key of the
+        configuration (``rosparam load`` of a file): ``unknown parameter ~formt (did you mean ~format?)``."""
+        known = sorted(set(o.name for o in options.OPTIONS).union(options.sections(), STRUCTURED))
+        warnings = []
+        for name in sorted(set(self._names()) - set(known)):
+            near = safe_input.closest(name, known)
+            warnings.append('unknown parameter ~%s%s' % (safe_input.printable(name),
+                                                         ' (did you mean ~%s?)' % near if near else ''))
+        return warnings
 
     def value(self, name, default, log=True):
         """The raw value (any type) or ``default``; logged once unless ``log`` is False."""

@@ -94,6 +94,8 @@ class SmartNode(object):
         from cc_log.srv import TriggerWindow
         self._event_class = AnomalyEvent
         params = Params()
+        for warning in params.unknown():  # a typo in a parameter's name: said, not silently ignored
+            rospy.logwarn(warning)
 
         def given(name):
             """The parameter ``name`` when it is set, else None (the configuration's value holds)."""
