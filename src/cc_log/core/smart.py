@@ -372,12 +372,9 @@ class SmartLogger(object):
 
     def trigger_now(self, reason='manual', before=None, after=None):
         """Save a window around the newest driving message now, with the manual trigger: ``reason`` (text),
-        ``before`` and ``after`` in seconds (None or 0: ``pre`` and ``post``; the past only as far as the
-        logger holds it, at most ``pre``).
-
-        Returns ``(True, message)`` or ``(False, why not)``: disabled, closed, no driving message yet, or a
-        bad span.
-        """
+        ``before`` and ``after`` in seconds (None or 0: ``pre`` and ``post``; the past only as far as the logger
+        holds it, at most ``pre``: the message says so when ``before`` was cut). Returns ``(True, message)`` or
+        ``(False, why not)``: disabled, closed, no driving message yet, or a bad span."""
         with self._lock:
             if self._closed:
                 return False, 'the logger is closed'
@@ -389,10 +386,13 @@ class SmartLogger(object):
                 fire = self.manual.request(reason, before, after)
             except ValueError as error:
                 return False, str(error)
+            held = self._last_stamp - self._buffer.oldest()
             self._fire([fire])
             start = self._buffer.window_start
-            return True, 'window triggered at %.3f (%s)%s' % (
-                self._last_stamp, fire.reason, '' if start is None else ', from %.3f' % start)
+            cut = '; before %g s cut to %.3f s: nothing older is held (the logger keeps ~pre %s)' % (
+                before, held, self.pre) if before and before > held else ''
+            return True, 'window triggered at %.3f (%s)%s%s' % (
+                self._last_stamp, fire.reason, '' if start is None else ', from %.3f' % start, cut)
 
     def set_enabled(self, flag):
         """Enable or pause the logger. Pausing completes any open window with what it holds; messages seen

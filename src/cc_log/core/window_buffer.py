@@ -21,6 +21,7 @@ Everything is pure Python: records carry any message object, stamps are float se
 """
 import collections
 import itertools
+import math
 import sys
 
 from cc_log.core.records import LogWindow, Trigger
@@ -359,6 +360,17 @@ class WindowBuffer(object):
             self._open = _OpenWindow(self._ring, trigger, post, since, before)
         self._ring.clear()
         return self._split(self._open)
+
+    def oldest(self):
+        """The stamp of the oldest driving record a trigger at the newest one can still keep (None before any):
+        the start of the window it joins (once a part was written: the start of its span), else of the pre
+        buffer, which holds ``pre`` before the newest record at most."""
+        for window in (self._open, self._pending):
+            if window is not None and (window.records or window.continued):
+                if window.continued:
+                    return window.since
+                return min(window.records[0].stamp, window.before[0].stamp if window.before else math.inf)
+        return self._ring[0].stamp if self._ring else None
 
     def _older_than(self, pre):
         """Take from the ring the driving records older than ``pre`` before the newest (still counted)."""
