@@ -222,15 +222,18 @@ class SmartWindowTest(unittest.TestCase):
 
     def test_0_a_silent_driving_topic_warns_naming_the_topics_of_its_type(self):
         # odometry flows on /husky_odom (this node's publisher) while these nodes watch /silent_odom
+        scripts = (('smart_logger.py', 'smart_logger_silent', ('_model:=' + self.model_path,)),
+                   ('collect_logger.py', 'collect_logger_silent', ()))
         nodes = [(name, fx.start(script, '__name:=' + name, 'odom:=silent_odom', '_diagnostic_period:=0.2',
                                  '_directory:=' + os.path.join(self.tmp, name), '_formt:=json-xz', *extra))
-                 for script, name, extra in (('smart_logger.py', 'smart_logger_silent', ('_model:=' + self.model_path,)),
-                                             ('collect_logger.py', 'collect_logger_silent', ()))]
+                 for script, name, extra in scripts]
+
+        def silence_said(name):
+            status = fx.status_values(self.diagnostics, name)
+            return status if 'no nav_msgs/Odometry on /silent_odom' in status[1] else None
         try:
             for name, _ in nodes:
-                level, message, _ = fx.wait_for(
-                    lambda: (lambda status: status if 'no nav_msgs/Odometry on /silent_odom' in status[1] else None)(
-                        fx.status_values(self.diagnostics, name)), 30, 'the silence of /silent_odom said by ' + name)
+                level, message, _ = fx.wait_for(lambda: silence_said(name), 30, 'the silence said by ' + name)
                 self.assertEqual(level, DiagnosticStatus.WARN, message)
                 self.assertIn('nav_msgs/Odometry is published on ', message)
                 self.assertIn('/husky_odom', message)
