@@ -16,9 +16,8 @@ Published topics
   WARN while paused, when the driving topic is silent for 5 s (naming the topics that carry its type) and when
   a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
   trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
-  off the clock), each
-  classifier's drift (WARN when it flags far more of the driving than of its training data, with the
-  remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
+  off the clock), each classifier's drift (WARN when it flags far more of the driving than of its training
+  data, with the remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
@@ -228,8 +227,9 @@ class SmartNode(object):
         level, message, extra = self.extras.status(level, message)
         level, message = self.silence.status(level, message)
         overflowed = self.intake.overflowed
-        level, message = health.worst(level, message, health.not_kept(stats, overflowed) + [
-            (health.WARN, status[1]) for status in (monitor.status() for monitor in self.drift) if status[0]])
+        drifting = [(health.WARN, text) for drift_level, text in (monitor.status() for monitor in self.drift)
+                    if drift_level]
+        level, message = health.worst(level, message, health.not_kept(stats, overflowed) + drifting)
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('enabled', stats['enabled']),
