@@ -11,7 +11,7 @@ topic remapped, then this node publishes the run message by message:
    rate, in the windows, as BWI's amcl_pose and /diagnostics are); AnomalyEvents OPENED and WRITTEN are
    published;
 2. ``~trigger``: a manual window of ``pre`` + 1 + ``post`` consecutive published messages;
-3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen.
+3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen and WARN while paused.
 """
 import os
 import shutil
@@ -341,6 +341,10 @@ class SmartWindowTest(unittest.TestCase):
         self.assertEqual(len(self.events), events)
         status = values()
         self.assertEqual(status['enabled'], 'False')
+        level, message, _ = fx.status_values(self.diagnostics, NODE)
+        self.assertEqual(level, DiagnosticStatus.WARN, message)  # paused: nothing is kept, said as a WARN
+        self.assertTrue(message.startswith('paused (~enable false)'), message)
+        self.assertGreater(int(status['messages not kept (outside every window)']), 0)
         self.assertEqual(status['windows saved'], '2')
         self.assertEqual(status['write errors'], '0')
         self.assertGreater(int(status['raw JSON bytes']), int(status['stored bytes']) > 0)
