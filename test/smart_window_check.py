@@ -11,7 +11,7 @@ topic remapped, then this node publishes the run message by message:
    rate, in the windows, as BWI's amcl_pose and /diagnostics are); AnomalyEvents OPENED and WRITTEN are
    published;
 2. ``~trigger``: a manual window of ``pre`` + 1 + ``post`` consecutive published messages;
-3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen.
+3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen and WARN while paused.
 """
 import os
 import shutil
@@ -220,6 +220,38 @@ class SmartWindowTest(unittest.TestCase):
             finally:
                 fx.stop(node)
 
+    def test_0_a_silent_driving_topic_warns_naming_the_topics_of_its_type(self):
+        # odometry flows on /husky_odom (this node's publisher) while these nodes watch /silent_odom
+        scripts = (('smart_logger.py', 'smart_logger_silent', ('_model:=' + self.model_path,)),
+                   ('collect_logger.py', 'collect_logger_silent', ()))
+        nodes = [(name, fx.start(script, '__name:=' + name, 'odom:=silent_odom', '_diagnostic_period:=0.2',
+                                 '_directory:=' + os.path.join(self.tmp, name), '_formt:=json-xz', *extra))
+                 for script, name, extra in scripts]
+
+        def silence_said(name):
+            status = fx.status_values(self.diagnostics, name)
+            return status if 'no nav_msgs/Odometry on /silent_odom' in status[1] else None
+        try:
+            for name, _ in nodes:
+                level, message, _ = fx.wait_for(lambda: silence_said(name), 30, 'the silence said by ' + name)
+                self.assertEqual(level, DiagnosticStatus.WARN, message)
+                self.assertIn('nav_msgs/Odometry is published on ', message)
+                self.assertIn('/husky_odom', message)
+            publisher = rospy.Publisher('silent_odom', Odometry, queue_size=100)
+            records = iter(self.odom * 10)
+
+            def settled_ok():
+                publisher.publish(next(records).msg)  # odometry now comes on the driving topic
+                return all(fx.status_values(self.diagnostics, name)[:2] == (DiagnosticStatus.OK, expected)
+                           for (name, _), expected in zip(nodes, ('logging', 'collecting')))
+            fx.wait_for(settled_ok, 30, 'both nodes back to OK once odometry arrives on /silent_odom')
+        finally:
+            outputs = [fx.stop(node) for _, node in nodes]
+        for code, out, err in outputs:
+            self.assertEqual(code, 0, err[-2000:])
+            self.assertEqual((out + err).count('no nav_msgs/Odometry on /silent_odom'), 1, out + err)  # once, no flood
+            self.assertIn('unknown parameter ~formt (did you mean ~format?)', out + err)
+
     def test_1_anomaly_writes_exactly_the_expected_window(self):
         # the offline classifier sees only the burst (messages 100..126 of the run: its 20-row windows)
         run_flags = [i for i in self.flags if i < RUN.stop - RUN.start]
@@ -309,6 +341,10 @@ class SmartWindowTest(unittest.TestCase):
         self.assertEqual(len(self.events), events)
         status = values()
         self.assertEqual(status['enabled'], 'False')
+        level, message, _ = fx.status_values(self.diagnostics, NODE)
+        self.assertEqual(level, DiagnosticStatus.WARN, message)  # paused: nothing is kept, said as a WARN
+        self.assertTrue(message.startswith('paused (~enable false)'), message)
+        self.assertGreater(int(status['messages not kept (outside every window)']), 0)
         self.assertEqual(status['windows saved'], '2')
         self.assertEqual(status['write errors'], '0')
         self.assertGreater(int(status['raw JSON bytes']), int(status['stored bytes']) > 0)

@@ -80,13 +80,15 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
 
 
 @pytest.mark.parametrize('text, message', [
-    ('windows: {pre: 1s, psot: 2s}', "windows: unknown key 'psot'"),
-    ('topic: [a]', "unknown key 'topic' (known: topics, topic_limits, driving_topic"),
+    ('windows: {pre: 1s, psot: 2s}', "windows: unknown key 'psot' (did you mean 'post'? known: pre, post"),
+    ('topic: [a]', "unknown key 'topic' (did you mean 'topics'? known: topics, topic_limits, driving_topic"),
+    ('zzz: 1', "unknown key 'zzz' (known: topics,"),  # nothing near: no suggestion
     ('triggers: [{name: x, kind: alarm}]', "triggers[0] (x): kind: 'alarm' is not one of classifier, rule, "
                                            'manual'),
     ('triggers: [{kind: classifier, feature_set: pixels}]', "triggers[0] (classifier): feature_set: 'pixels' is "
                                                             'not one of motion, raw, imu, command, progress, dynamics'),
-    ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]', "triggers[0] (r): unknown key 'whenn'"),
+    ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]',
+     "triggers[0] (r): unknown key 'whenn' (did you mean 'when'?"),
     ('triggers: [{name: r, kind: rule, topic: odom, arrival: true}, {name: r, kind: manual}]',
      "triggers[1]: name 'r' is used twice"),
     ('format: zip', "format: 'zip' is not one of: bag-lz4, json-xz"),

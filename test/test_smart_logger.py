@@ -154,7 +154,7 @@ def test_stats_count_every_message_and_byte(husky, tmp_path):
     assert stats['windows_saved'] == stats['windows_opened'] == len(files) == 1
     assert stats['messages_kept'] == len(files[0][2])
     assert stats['stored_bytes'] == os.path.getsize(files[0][0])
-    assert stats['messages_dropped'] == len(husky) - len(files[0][2])
+    assert stats['messages_not_kept'] == len(husky) - len(files[0][2])
     assert stats['messages_queued'] == stats['messages_lost'] == stats['write_errors'] == 0
     assert stats['classifier_calls'] == len(model.calls)
     assert 0 < stats['classifier_mean_us'] <= stats['classifier_max_us']

@@ -345,9 +345,9 @@ def known_keys(data, keys, where):
         return {}
     if not isinstance(data, dict):
         raise ValueError('%s: a mapping, not %s' % (where or 'configuration', brief(data)))
-    unknown = sorted(brief(key) for key in data if key not in keys)
+    unknown = safe_input.unknown_key(data, keys, where)
     if unknown:
-        raise ValueError('%sunknown key %s (known: %s)' % (where + ': ' if where else '', unknown[0], ', '.join(keys)))
+        raise ValueError(unknown)
     return data
 
 

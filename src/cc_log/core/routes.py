@@ -18,7 +18,7 @@ import collections
 import re
 
 from cc_log.core.records import LogWindow
-from cc_log.core.safe_input import brief, loads_yaml
+from cc_log.core.safe_input import brief, loads_yaml, unknown_key
 from cc_log.core.topic_select import TopicSelection
 
 SEPARATOR = '+'  # between a window's base name and a route's name in the route's file name
@@ -60,9 +60,9 @@ def parse_routes(value, formats, name='routes'):
             continue
         if not isinstance(entry, dict):
             raise ValueError('%s: a mapping {name, topics, format}, not %s' % (where, brief(entry)))
-        unknown = sorted(brief(key) for key in entry if key not in ROUTE_KEYS)
+        unknown = unknown_key(entry, ROUTE_KEYS, where)
         if unknown:
-            raise ValueError('%s: unknown key %s (known: %s)' % (where, unknown[0], ', '.join(ROUTE_KEYS)))
+            raise ValueError(unknown)
         route_name = entry.get('name')
         if not isinstance(route_name, str) or not _NAME.match(route_name):
             raise ValueError('%s: name: %s must be 1 to 40 letters, digits or "-"' % (where, brief(route_name)))

@@ -92,11 +92,10 @@ class SmartLogger(object):
     pre and post; side_topics: other topic names to keep (messages of any topic not listed, nor watched by
     a trigger, are ignored unless ``side_topics`` is None, which keeps every other topic); enabled: start
     enabled or paused; background: write windows on a writer thread (True) or inline in the calling thread
-    (False); max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period: seconds between
-    attempts to write windows that could not be written (disk full, unwritable directory, min_free_mb
-    reached: they are kept in memory, in order, up to max_held_messages messages; beyond, the oldest are
-    dropped and counted as lost); give_up_after, close_retry: see ``window_writer.WindowWriter`` (offline use:
-    lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
+    (False); max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period, max_held_messages
+    (windows that could not be written are held in memory and retried), give_up_after, close_retry: see
+    ``window_writer.WindowWriter`` (offline use: lose a window still failing after that many seconds; keep
+    retrying that long at close); max_buffer_mb:
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
     half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
     byte of a part; see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
@@ -374,12 +373,9 @@ class SmartLogger(object):
 
     def trigger_now(self, reason='manual', before=None, after=None):
         """Save a window around the newest driving message now, with the manual trigger: ``reason`` (text),
-        ``before`` and ``after`` in seconds (None or 0: ``pre`` and ``post``; the past only as far as the
-        logger holds it, at most ``pre``).
-
-        Returns ``(True, message)`` or ``(False, why not)``: disabled, closed, no driving message yet, or a
-        bad span.
-        """
+        ``before`` and ``after`` in seconds (None or 0: ``pre`` and ``post``; the past only as far as the logger
+        holds it, at most ``pre``: the message says so when ``before`` was cut). Returns ``(True, message)`` or
+        ``(False, why not)``: disabled, closed, no driving message yet, or a bad span."""
         with self._lock:
             if self._closed:
                 return False, 'the logger is closed'
@@ -391,10 +387,12 @@ class SmartLogger(object):
                 fire = self.manual.request(reason, before, after)
             except ValueError as error:
                 return False, str(error)
+            held = self._last_stamp - self._buffer.oldest()
             self._fire([fire])
             start = self._buffer.window_start
-            return True, 'window triggered at %.3f (%s)%s' % (
-                self._last_stamp, fire.reason, '' if start is None else ', from %.3f' % start)
+            cut = self.manual.cut_note(before, held, self.pre)
+            return True, 'window triggered at %.3f (%s)%s%s' % (
+                self._last_stamp, fire.reason, '' if start is None else ', from %.3f' % start, cut)
 
     def set_enabled(self, flag):
         """Enable or pause the logger. Pausing completes any open window with what it holds; messages seen
@@ -432,6 +430,7 @@ class SmartLogger(object):
             buffered_bytes = self._buffer.buffered_bytes
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
+            limited = self._limited + self._buffer.limited
         raw_estimate = self._raw_estimate.total  # its samples decoded here, off the message path
         written = self.writer.stats()
         triggers = {trigger.name: trigger.stats() for trigger in self.triggers}
@@ -446,7 +445,7 @@ class SmartLogger(object):
                 'messages_queued': written['messages_queued'],
                 'messages_buffered': buffered,
                 'buffered_bytes': buffered_bytes,
-                'buffer_trimmed': trimmed,
+                'buffer_trimmed': trimmed, 'topic_trimmed': limited,
                 'messages_lost': written['messages_lost'],
                 'raw_json_bytes': s.raw_json_bytes + raw_estimate,
                 'stored_bytes': written['stored_bytes'],
@@ -481,8 +480,8 @@ class SmartLogger(object):
                 'restamped_by_topic': dict(self._restamped),
             }
         # Not in any window (outside every anomaly, seen while paused, or trimmed from the pre buffer).
-        result['messages_dropped'] = (result['messages_seen'] - result['messages_kept'] - result['messages_queued']
-                                      - result['messages_buffered'] - result['messages_lost'] - result['messages_shed'])
+        result['messages_not_kept'] = result['messages_seen'] - sum(result[key] for key in (
+            'messages_kept', 'messages_queued', 'messages_buffered', 'messages_lost', 'messages_shed'))
         return result
 
     # -- message path ---------------------------------------------------------------------------------
@@ -509,8 +508,9 @@ class SmartLogger(object):
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed
+            self._limited += self._buffer.limited
         else:
-            self._resets = self._trimmed = 0
+            self._resets = self._trimmed = self._limited = 0
         self._buffer = buffer
         for trigger in self.triggers:
             trigger.reset()

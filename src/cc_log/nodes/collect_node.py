@@ -9,7 +9,8 @@ Subscribed topics
 Published topics
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
   bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
-  ``~diagnostic_period`` seconds (wall time).
+  ``~diagnostic_period`` seconds (wall time); WARN when the driving topic is silent for 5 s, naming the topics
+  that carry its type.
 
 Parameters
   every option with a ``collect`` node parameter in docs/OPTIONS.md (declared in ``cc_log.core.options``;
@@ -38,8 +39,8 @@ from cc_log import features
 from cc_log.storage import log_format
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, Params, fail, format_options, init_node, node_config,
-    node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
+    node_config, node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.intake import Intake
 from cc_log.nodes.node_extras import NodeExtras
 
@@ -59,6 +60,8 @@ class CollectNode(object):
     def __init__(self, note=''):
         self.note = note  # why collect mode runs (record.launch without a model): said on /diagnostics
         params = Params()
+        for warning in params.unknown():  # a typo in a parameter's name: said, not silently ignored
+            rospy.logwarn(warning)
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
         prefix = log_format.file_prefix(params.option('name_prefix'))
         self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
@@ -101,6 +104,9 @@ class CollectNode(object):
                              sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}),
                              tcp_nodelay=params.option('tcp_nodelay'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
+        driving = self.intake.driving_topic
+        self.silence = DrivingTopicWatch(driving, types.get(self.collector.driving_topic),
+                                         lambda: self.intake.counts().get(driving, 0))
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
                                        self.intake.counts, self.intake.sizes)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
@@ -120,6 +126,7 @@ class CollectNode(object):
         level, message, disk = writer_status(DiagnosticStatus.OK, self.note or 'collecting', self.collector.writer,
                                              self.leftovers, self.directory_warning)
         level, message, extra = self.extras.status(level, message)
+        level, message = self.silence.status(level, message)
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('files written', stats['files_written']),
@@ -141,6 +148,7 @@ class CollectNode(object):
 
     def shutdown(self):
         """Feed what is queued, write the current file, stop diagnostics."""
+        self.silence.stop()
         self.intake.stop()
         if not self.collector.close(CLOSE_TIMEOUT):
             rospy.logerr('files still unwritten after %g s', CLOSE_TIMEOUT)

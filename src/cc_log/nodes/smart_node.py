@@ -11,11 +11,13 @@ Subscribed topics
 
 Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
-  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/dropped, raw vs stored
-  bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``), messages dropped
-  because the writer fell behind (WARN, per topic), messages restamped (header stamp off the clock), each
-  classifier's drift (WARN when it flags far more of the driving than of its training data, with the
-  remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/not kept (outside every
+  window), raw vs stored bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``);
+  WARN while paused, when the driving topic is silent for 5 s (naming the topics that carry its type) and when
+  a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
+  trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
+  off the clock), each classifier's drift (WARN when it flags far more of the driving than of its training
+  data, with the remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
@@ -56,10 +58,9 @@ import threading
 import time
 
 import rospy
-from diagnostic_msgs.msg import DiagnosticStatus
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
-from cc_log.core import drift
+from cc_log.core import drift, health
 from cc_log.nodes import intake
 from cc_log.storage import window_info
 from cc_log.storage.formats import json_xz
@@ -67,8 +68,8 @@ from cc_log.core import routes, smart, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, Params, fail, format_options, init_node, node_config,
-    node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
+    node_config, node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.node_extras import NodeExtras, context_rates
 from cc_log.storage.log_format import file_prefix
 from cc_log.triggers import ClassifierTrigger
@@ -95,6 +96,8 @@ class SmartNode(object):
         from cc_log.srv import TriggerWindow
         self._event_class = AnomalyEvent
         params = Params()
+        for warning in params.unknown():  # a typo in a parameter's name: said, not silently ignored
+            rospy.logwarn(warning)
 
         def given(name):
             """The parameter ``name`` when it is set, else None (the configuration's value holds)."""
@@ -156,6 +159,9 @@ class SmartNode(object):
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
         self._ticker = WallTicker(TICK_PERIOD, self._tick)
+        driving = self.intake.driving_topic
+        self.silence = DrivingTopicWatch(driving, types.get(self.logger.driving_topic),
+                                         lambda: self.intake.counts().get(driving, 0))
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
                                        self.intake.counts, self.intake.sizes)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
@@ -226,29 +232,18 @@ class SmartNode(object):
 
     def _status(self):
         stats = self.logger.stats()
-        level, message = DiagnosticStatus.OK, 'logging' if stats['enabled'] else 'disabled'
         if stats['messages_refused'] > self._refused:
             self._refused = stats['messages_refused']
             rospy.logwarn_throttle(10.0, stats['last_refused'])
-        if stats['messages_refused']:
-            level, message = DiagnosticStatus.WARN, '%d messages of the wrong type refused (last: %s)' % (
-                stats['messages_refused'], stats['last_refused'])
+        level, message = health.smart_head(stats)
         level, message, disk = writer_status(level, message, self.logger.writer, self.leftovers,
                                              self.directory_warning)
         level, message, extra = self.extras.status(level, message)
-        if stats['messages_shed']:
-            level = max(level, DiagnosticStatus.WARN)
-            message += ('; %d messages of windows dropped: the writer fell behind (%s)'
-                        % (stats['messages_shed'], _per_topic(stats['shed_by_topic'])))
-        for monitor in self.drift:
-            drift_level, drift_message = monitor.status()
-            if drift_level:
-                level = max(level, DiagnosticStatus.WARN)
-                message += '; ' + drift_message
+        level, message = self.silence.status(level, message)
         overflowed = self.intake.overflowed
-        if overflowed:
-            level = max(level, DiagnosticStatus.WARN)
-            message += '; %d messages dropped: intake queue full (the node falls behind)' % overflowed
+        drifting = [(health.WARN, text) for drift_level, text in (monitor.status() for monitor in self.drift)
+                    if drift_level]
+        level, message = health.worst(level, message, health.not_kept(stats, overflowed) + drifting)
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('enabled', stats['enabled']),
@@ -257,11 +252,12 @@ class SmartNode(object):
             ('last trigger', self._last_trigger),
             ('messages seen', stats['messages_seen']),
             ('messages kept', stats['messages_kept']),
-            ('messages dropped', stats['messages_dropped']),
+            ('messages not kept (outside every window)', stats['messages_not_kept']),
             ('messages buffered', stats['messages_buffered']),
             ('buffered bytes (estimated)', stats['buffered_bytes']),
             ('max buffer bytes', self.logger.buffer_budget or 'no budget'),
             ('messages trimmed (buffer budget)', stats['buffer_trimmed']),
+            ('messages trimmed (topic limits)', stats['topic_trimmed']),
             ('messages lost', stats['messages_lost'] + self.intake.dropped),
             ('raw JSON bytes', raw),
             ('stored bytes', stored),
@@ -275,9 +271,9 @@ class SmartNode(object):
             ('writer queue', stats['queue_depth']),
             ('writer queue bytes', stats['bytes_queued']),
             ('messages dropped (writer behind)', stats['messages_shed']),
-            ('dropped per topic (writer behind)', _per_topic(stats['shed_by_topic'])),
+            ('dropped per topic (writer behind)', health.per_topic(stats['shed_by_topic'])),
             ('messages restamped (header stamp off the clock)', stats['messages_restamped']),
-            ('restamped per topic', _per_topic(stats['restamped_by_topic'])),
+            ('restamped per topic', health.per_topic(stats['restamped_by_topic'])),
             ('intake queue', self.intake.queue.qsize()),
             ('intake dropped (queue full)', overflowed),
             ('classify every', str(self.logger.classify_every)),
@@ -312,6 +308,7 @@ class SmartNode(object):
     def shutdown(self):
         """Feed what is queued, write the last windows, stop diagnostics."""
         self._ticker.stop()
+        self.silence.stop()
         self.intake.stop()
         if not self.logger.close(CLOSE_TIMEOUT):
             stats = self.logger.stats()
@@ -320,17 +317,12 @@ class SmartNode(object):
         stats = self.logger.stats()
         if stats['messages_shed'] or stats['messages_lost']:
             rospy.logwarn('messages of windows not written: %d dropped while the writer fell behind (%s), %d lost '
-                          'writing', stats['messages_shed'], _per_topic(stats['shed_by_topic']),
+                          'writing', stats['messages_shed'], health.per_topic(stats['shed_by_topic']),
                           stats['messages_lost'])
         self.extras.close()
         for _, learner in self.learners:  # a refit being saved finishes (the save is atomic either way)
             learner.wait(CLOSE_TIMEOUT)
         self.diagnostics.stop()
-
-
-def _per_topic(counts):
-    """``{topic: n}`` as one line, largest first ('none' when empty)."""
-    return ', '.join('%s: %d' % item for item in sorted(counts.items(), key=lambda item: (-item[1], item[0]))) or 'none'
 
 
 class WallTicker(object):
