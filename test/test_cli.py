@@ -148,6 +148,33 @@ def test_collect_writes_one_vector_file_per_vector_under_the_label(trained):
     assert document['config'] == {'feature_set': 'motion', 'window': WINDOW, 'topic_type': 'nav_msgs/Odometry'}
 
 
+def test_without_topic_the_bags_only_odometry_topic_drives_and_is_said(real_bag, tmp_path):
+    """A newcomer's bag: odometry on /husky_velocity_controller/odom, no --topic: collect and replay take the bag's
+    only topic of the feature set's (the model's) type, saying which in one line; two such topics: one-line error
+    naming both."""
+    husky = real_bag(HUSKY)
+    result = run('collect', husky, '--out', tmp_path / 'vectors', '--window', '5s', '--json')
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)['topic'] == HUSKY_ODOM
+    assert result.stderr.splitlines() == ["cclog collect: driving topic %s (the bag's only nav_msgs/Odometry topic; "
+                                          "--topic chooses another)" % HUSKY_ODOM]
+    ok('learn', '--train', tmp_path / 'vectors', '--model', tmp_path / 'model.json')
+    result = run('replay', husky, '--model', tmp_path / 'model.json', '--out', tmp_path / 'logs', '--json')
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)['windows'] and 'driving topic %s' % HUSKY_ODOM in result.stderr
+    import rosbag
+    two = str(tmp_path / 'two.bag')
+    with rosbag.Bag(husky) as source, rosbag.Bag(two, 'w') as out:
+        for topic, msg, t in source.read_messages(topics=[HUSKY_ODOM]):
+            out.write(topic, msg, t)
+            out.write('/odom', msg, t)
+    line = fails('replay', two, '--model', tmp_path / 'model.json', '--out', tmp_path / 'two')
+    assert '2 topics carry nav_msgs/Odometry (%s, /odom): give --topic' % HUSKY_ODOM in line, line
+    line = fails('collect', real_bag(NORMAL).replace(NORMAL, 'f1tenth_DS1.bag'), '--features', 'imu',
+                 '--out', tmp_path / 'imu')
+    assert 'no topic carries sensor_msgs/Imu; its topics: /odom (nav_msgs/Odometry)' in line, line
+
+
 def test_collect_label_and_duration_window(real_bag, tmp_path):
     out = ok('collect', real_bag(HUSKY), '--topic', HUSKY_ODOM, '--out', tmp_path, '--label', 'bumpy',
              '--window', '10s', '--stride', '50')

@@ -183,10 +183,10 @@ def test_cclog_replay_with_a_configuration_runs_every_trigger_and_sets_retrigger
     assert all(metadata['post'] == '0.5s' for metadata in found)
 
 
-def test_cclog_replay_needs_a_model_and_a_topic_or_a_configuration(tmp_path, real_bag_path, model_path):
+def test_cclog_replay_needs_a_model_or_a_configuration(tmp_path, real_bag_path, model_path):
     result = cclog('replay', real_bag_path, '--out', tmp_path / 'logs')
     assert result.returncode == 1 and result.stderr.strip() == \
-        'cclog replay: error: replay: give --topic and --model, or --config (a configuration with triggers)'
+        'cclog replay: error: replay: give --model (and --topic), or --config (a configuration with triggers)'
     bad = write(tmp_path, 'triggers: [{name: r, kind: rule, topic: /odom, level: LOUD}]')
     result = cclog('replay', real_bag_path, '--config', bad, '--out', tmp_path / 'logs')
     assert result.returncode == 1 and result.stderr.count('\n') == 1

@@ -259,6 +259,25 @@ def selected_windows(args):
     return records, windows
 
 
+def driving_topic(args, type_name):
+    """``args.topic``, or, when it is not given, the one topic of ``type_name`` in the bag ``args.bag`` (said on
+    stderr in one line); CommandError naming the candidates otherwise."""
+    if args.topic is not None:
+        return args.topic
+    from cc_log.storage.bag import bagio
+    try:
+        bag = bagio.open_bag(args.bag)
+        try:
+            topic = bagio.only_topic_of_type(bag, type_name)
+        finally:
+            bag.close()
+    except ValueError as error:
+        raise CommandError('topic: %s' % error)
+    sys.stderr.write("%s %s: driving topic %s (the bag's only %s topic; --topic chooses another)\n"
+                     % (PROG, args.command, printable(topic), type_name))
+    return topic
+
+
 def configuration(args, flat):
     """The Config of ``--config`` (if given) with the options of ``flat`` (None: not given) and the single
     classifier of ``--model``/``--topic`` over it."""

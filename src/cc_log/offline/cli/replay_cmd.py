@@ -9,8 +9,8 @@ import sys
 from cc_log.core import options
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
-    PROG, EXIT_OK, CommandError, command_help, configuration, existing_file, fleet_end, fleet_flags, fleet_rows,
-    fleet_wanted, human_bytes, output_flags, print_json, retrigger_modes, run_fleet, size_ratio, span,
+    PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
+    fleet_rows, fleet_wanted, human_bytes, output_flags, print_json, retrigger_modes, run_fleet, size_ratio, span,
     stamp_text, writable_dir)
 
 
@@ -39,7 +39,8 @@ def add_parser(subparsers):
                    'one Dask task each, windows into OUT/<bag name>/')
     p.add_argument('--config', metavar='YAML', help='configuration (topics, triggers, windows, format, limits): '
                    'the file smart_logger.py reads; the options below override it')
-    p.add_argument('--topic', metavar='T', help="driving topic (the model's message type); needed without --config")
+    p.add_argument('--topic', metavar='T', help="driving topic (the model's message type; default: "
+                   "the bag's only topic of that type)")
     p.add_argument('--model', metavar='PATH', help='model file (cclog learn) of a classifier on --topic; needed '
                    'without --config')
     p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
@@ -68,12 +69,15 @@ def run(args):
     many = fleet_wanted(args, args.bag)
     if not many:
         args.bag = existing_file(args.bag[0], 'bag file')
-    if not args.config and (args.topic is None or args.model is None):
-        raise CommandError('replay: give --topic and --model, or --config (a configuration with triggers)')
+    if not args.config and args.model is None:
+        raise CommandError('replay: give --model (and --topic), or --config (a configuration with triggers)')
     if args.model is not None:
         existing_file(args.model, 'model file')
     if args.model is not None and args.topic is None:
-        raise CommandError('replay: --model needs --topic (the topic the model reads)')
+        if many:
+            raise CommandError('replay: --model needs --topic (the topic the model reads)')
+        from cc_log.core.model import AnomalyModel
+        args.topic = driving_topic(args, AnomalyModel.load(args.model).config.topic_type)
     flat = dict((option.name, getattr(args, option.name)) for option in options.for_command('replay'))
     flat.update({'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
                  'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
