@@ -208,7 +208,8 @@ class SmartWindowTest(unittest.TestCase):
         for script, name, extra in (('smart_logger.py', 'smart_logger_fallback', ('_model:=' + self.model_path,)),
                                     ('collect_logger.py', 'collect_logger_fallback', ())):
             node = fx.start(script, '__name:=' + name, '_directory:=' + os.path.join(blocker, 'logs'),
-                            '_diagnostic_period:=0.2', *extra, env={'HOME': home})
+                            '_diagnostic_period:=0.2', *extra,
+                            env={'HOME': home, 'ROS_HOME': os.path.join(home, '.ros')})  # ROS's home, as the run's
             try:
                 fx.wait_for(lambda: fx.status_values(self.diagnostics, name)[0] is not None, 30,
                             'diagnostics of ' + name)
