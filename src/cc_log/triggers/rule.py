@@ -31,7 +31,7 @@ import math
 import operator
 import re
 
-from cc_log.core import msg_codec
+from cc_log.core import msg_codec, why
 from cc_log.core.safe_input import brief
 from cc_log.core.spans import seconds
 from cc_log.triggers.base import Trigger, register
@@ -288,7 +288,19 @@ class RuleTrigger(Trigger):
             holds, value = self.condition.holds(record.msg)
         except (AttributeError, IndexError, TypeError, ValueError, OverflowError):
             holds, value = False, None
-        return self._update(holds, record.stamp, '%s (%s)' % (self.condition.text, _short(value)))
+        return self._update(holds, record.stamp, '%s (%s)' % (self.condition.text, _short(value)),
+                            why=self._why(value) if holds else ())
+
+    def _why(self, value):
+        """The ``why`` of a ``when`` condition that holds: the field, its value and the level it crossed (a
+        numeric comparison only; () otherwise)."""
+        level = self.condition.value
+        if isinstance(level, (bool, str)) or isinstance(value, (bool, str)) or level != level \
+                or not isinstance(value, (int, float)) or not math.isfinite(value):
+            return ()
+        field = ('abs(%s)' % self.condition.field) if self.condition.absolute else self.condition.field
+        text = '%s %s %s %s' % (field, why.number_text(value), self.condition.op_text, why.number_text(level))
+        return (why.entry(field, value, level, text=text[:why.MAX_TEXT]),)
 
     def _diagnostics(self, msg):
         for status in getattr(msg, 'status', None) or ():
@@ -303,14 +315,14 @@ class RuleTrigger(Trigger):
                 return True, '%s: %s %s' % (name, level_name(level), str(getattr(status, 'message', '')))[:200]
         return False, ''
 
-    def _update(self, holds, stamp, reason, event=False):
+    def _update(self, holds, stamp, reason, event=False, why=()):
         fires = []
         if holds:
             last = self._last_true
             onset = event or not self._active or last is None or stamp < last or stamp - last > self.hold_off
             self._last_true = stamp
             if onset and self._may_fire(stamp):
-                fires.append(self.fire(reason))
+                fires.append(self.fire(reason, why=why))
         self._active = holds
         return fires
 
