@@ -107,7 +107,7 @@ def bounded(why):
         clean = {}
         for key, value in item.items():
             key = str(key)[:MAX_FEATURE]
-            if key in _TEXT_KEYS or isinstance(value, str):
+            if key in _TEXT_KEYS or (isinstance(value, str) and key not in _NUMBER_KEYS):
                 clean[key] = str(value)[:MAX_TEXT if key == 'text' else MAX_FEATURE]
             else:
                 clean[key] = _finite(value)
@@ -127,7 +127,7 @@ def check(why):
         for key, value in item.items():
             if len(key) > MAX_FEATURE:
                 return False
-            if isinstance(value, str):
+            if isinstance(value, str) and key not in _NUMBER_KEYS:
                 if len(value) > (MAX_TEXT if key == 'text' else MAX_FEATURE):
                     return False
             elif value is not None and _finite(value) is None:
@@ -145,8 +145,8 @@ def classifier_why(model, vector, names=None):
     furthest outside the range the training vectors covered (``model.ranges``), measured in training standard
     deviations (``model.scale``) and compared with the most seen in training (``limit``: the training max above
     it, the min below it); for a model without ranges, or a vector inside them all, the entries furthest from the
-    training mean in standard deviations (``limit``: the mean). ``names``: of the vector's entries (default the
-    model's)."""
+    training mean in standard deviations (``limit``: the mean, ``ratio`` None). ``names``: of the vector's
+    entries (default the model's)."""
     vector = np.asarray(vector, dtype=float)
     names = names or getattr(model, 'names', None) or ['feature %d' % index for index in range(len(vector))]
     scale = np.asarray(model.scale, dtype=float)
@@ -174,5 +174,7 @@ def classifier_why(model, vector, names=None):
         side = 'above' if z[index] > 0 else 'below'
         text = '%s %s%s, %s sd %s the training mean' % (
             label, number_text(vector[index]), unit_text, number_text(abs(z[index])), side)
-        result.append(entry(names[index], vector[index], model.mean[index], unit, text, sd=float(z[index])))
+        said = entry(names[index], vector[index], model.mean[index], unit, text, sd=float(z[index]))
+        said['ratio'] = None  # a ratio to the mean says nothing
+        result.append(said)
     return tuple(result)
