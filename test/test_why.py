@@ -210,3 +210,12 @@ def test_a_rule_says_the_field_its_value_and_the_level_it_crossed():
     assert said['limit'] == 1.5 and said['ratio'] == pytest.approx(2.0 / 1.5)
     assert said['text'] == 'abs(twist.twist.angular.z) 2 > 1.5'
     assert not math.isnan(said['value'])
+
+
+def test_a_recovered_window_keeps_the_why_of_its_triggers_bounded():
+    from cc_log.storage import recovery
+    metadata = {'triggers': [{'stamp': 5.0, 'reason': 'spin', 'score': -1.0, 'name': 'spin', 'why': list(WHY)},
+                             {'stamp': 6.0, 'reason': 'spin', 'why': [{'text': 'x' * 1000, 'value': 'NaN'}] * 9}]}
+    first, second = recovery._triggers(metadata, 0.0)
+    assert first.why == list(WHY)
+    assert len(second.why) == why.MAX_ENTRIES and why.check(second.why) and second.why[0]['value'] is None

@@ -11,10 +11,11 @@ from cc_log.offline.cli.common import (
 def add_parser(subparsers):
     """The ``cclog info`` sub-parser."""
     p = subparsers.add_parser('info', **command_help(
-        'windows, spans, counts, sizes, codec, triggers, scores',
+        'windows, spans, counts, sizes, codec, triggers, scores, why',
         """
         Describe window files: time span, messages per topic, size on disk and as row-per-message JSON,
-        codec, the trigger(s) that opened the window with their scores, and the model threshold. PATH is a
+        codec, the trigger(s) that opened the window with their scores and what stood out (why), and the model
+        threshold. PATH is a
         window file or a directory of them (read in time order). The figures of a file written by this cc_log
         come from its metadata, without reading its messages (its row JSON size is then an estimate from a
         sample of its messages); --full reads and counts every message (older files always are).
