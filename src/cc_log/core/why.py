@@ -135,6 +135,22 @@ def check(why):
     return True
 
 
+def said(triggers):
+    """The indices of the ``triggers`` (``records.Trigger``s of a window) whose why its metadata says: of each
+    trigger name, the first firing that says why and the most anomalous one (the lowest score); the others would
+    mostly repeat them, and a window of hundreds of firings keeps its metadata small."""
+    first, lowest = {}, {}
+    for index, trigger in enumerate(triggers):
+        if not getattr(trigger, 'why', None):
+            continue
+        name = getattr(trigger, 'name', None) or trigger.reason
+        first.setdefault(name, index)
+        score = _finite(trigger.score)
+        if score is not None and (name not in lowest or score < lowest[name][0]):
+            lowest[name] = (score, index)
+    return set(first.values()) | set(index for _, index in lowest.values())
+
+
 def texts(why):
     """The ``text`` of each entry of a ``why`` (from a Fire or a file), joined by ``'; '`` ('' when none)."""
     return '; '.join(str(item.get('text', '')) for item in why or () if isinstance(item, dict))

@@ -27,7 +27,8 @@ def window_metadata(window, codec, extra=None, triggers=None):
 
     topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the first/last
     record), start_utc/end_utc, triggers ([{stamp, reason, score, name, why}]; name only for triggers that have one,
-    why (``core.why.bounded``) only for those that say one), reasons and names (distinct, in order: every trigger of
+    why (``core.why.bounded``) only for those that say one, the first and the most anomalous of each trigger:
+    ``core.why.said``), reasons and names (distinct, in order: every trigger of
     the window), part (0, or 1, 2, ... for a split window), codec, cc_log_version, and the summary ``cclog info``
     and ``stats`` read instead of the messages (``SUMMARY_KEYS``, see ``Contents``). ``triggers``: those to say
     (default: the window's).
@@ -141,12 +142,12 @@ class Contents(object):
 
     def metadata(self, triggers, part, codec, extra=None):
         """``window_metadata`` of the records taken."""
-        entries = []
-        for trigger in triggers:
+        entries, explained = [], why_.said(triggers)
+        for index, trigger in enumerate(triggers):
             entry = {'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
             if getattr(trigger, 'name', None) is not None:
                 entry['name'] = str(trigger.name)
-            if getattr(trigger, 'why', None):
+            if index in explained:
                 entry['why'] = why_.bounded(trigger.why)
             entries.append(entry)
         meta = {
