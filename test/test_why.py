@@ -163,6 +163,9 @@ def test_bounded_keeps_three_short_finite_entries():
     first = entries[0]
     assert len(first['text']) == why.MAX_TEXT and len(first['feature']) == why.MAX_FEATURE
     assert first['value'] is None and first['limit'] == 2.0 and first['ratio'] is None
+    many = why.bounded([dict({'k%d' % i: i for i in range(40)}, text='t', feature='f')])
+    assert why.check(many) and many[0]['text'] == 't' and many[0]['feature'] == 'f'
+    assert not why.check([dict({'k%d' % i: i for i in range(40)}, text='t')])
 
 
 @pytest.fixture(scope='module')

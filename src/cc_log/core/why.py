@@ -18,8 +18,10 @@ import numpy as np
 MAX_ENTRIES = 3
 MAX_TEXT = 120
 MAX_FEATURE = 64
+MAX_KEYS = 12  # keys of one entry
 _NUMBER_KEYS = ('value', 'limit', 'ratio')
 _TEXT_KEYS = ('feature', 'unit', 'text')
+_KEYS = ('feature', 'value', 'limit', 'ratio', 'unit', 'text')
 
 #: Words and unit of the channels of the feature sets (``features/``): a vector entry ``max(wz)`` reads
 #: "max yaw rate", rad/s. A channel not listed reads as its own name, without a unit.
@@ -98,15 +100,17 @@ def _finite(value):
 
 
 def bounded(why):
-    """``why`` as it goes into a window's metadata: at most MAX_ENTRIES dicts, texts cut to MAX_TEXT (the feature
-    and unit to MAX_FEATURE) characters, numbers finite floats or None; anything else left out."""
+    """``why`` as it goes into a window's metadata: at most MAX_ENTRIES dicts of at most MAX_KEYS keys (those of
+    the module docstring first), texts cut to MAX_TEXT (the others to MAX_FEATURE) characters, numbers finite floats
+    or None; anything else left out."""
     result = []
     for item in list(why or ())[:MAX_ENTRIES]:
         if not isinstance(item, dict):
             continue
         clean = {}
-        for key, value in item.items():
-            key = str(key)[:MAX_FEATURE]
+        keys = [key for key in _KEYS if key in item] + [key for key in item if key not in _KEYS]
+        for key in keys[:MAX_KEYS - 1]:
+            value, key = item[key], str(key)[:MAX_FEATURE]
             if key in _TEXT_KEYS or (isinstance(value, str) and key not in _NUMBER_KEYS):
                 clean[key] = str(value)[:MAX_TEXT if key == 'text' else MAX_FEATURE]
             else:
@@ -118,11 +122,12 @@ def bounded(why):
 
 def check(why):
     """Whether ``why`` (read from a file) is what ``bounded`` writes: a list of at most MAX_ENTRIES objects of
-    strings (``text`` at most MAX_TEXT characters, others at most MAX_FEATURE) and finite numbers or null."""
+    strings (``text`` at most MAX_TEXT characters, others at most MAX_FEATURE) and finite numbers or null, at most
+    MAX_KEYS keys each."""
     if not isinstance(why, list) or len(why) > MAX_ENTRIES:
         return False
     for item in why:
-        if not isinstance(item, dict) or not isinstance(item.get('text'), str) or len(item) > 16:
+        if not isinstance(item, dict) or not isinstance(item.get('text'), str) or len(item) > MAX_KEYS:
             return False
         for key, value in item.items():
             if len(key) > MAX_FEATURE:
