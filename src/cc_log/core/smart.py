@@ -524,13 +524,13 @@ class SmartLogger(object):
                     self._stats.fires_dropped += 1
                 continue
             announce = not self._buffer.window_active
-            done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post)
+            done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post, fire.why)
             if announce:
                 with self._stats.lock:
                     self._stats.windows_opened += 1
                 start = self._buffer.window_start
                 self._emit(Event(OPENED, self._last_stamp, fire.reason, fire.score, self._threshold_of(fire.name),
-                                 self._last_stamp if start is None else start, None, 0, '', 0, '', fire.name))
+                                 self._last_stamp if start is None else start, None, 0, '', 0, '', fire.name, fire.why))
             self._complete(done)
 
     def _threshold_of(self, name):

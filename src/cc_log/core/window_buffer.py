@@ -329,19 +329,20 @@ class WindowBuffer(object):
         self._bytes -= record.cost
         return record
 
-    def trigger(self, reason, score=None, name=None, pre=None, post=None):
+    def trigger(self, reason, score=None, name=None, pre=None, post=None, why=()):
         """Mark the last driving record: open a window around it or extend the open one.
 
-        ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the
-        buffer's). A ``pre`` longer than the buffer's gets what the buffer holds (its ``pre``). A trigger with
-        a longer ``pre`` than the one that opened the window reaches back as far as the buffer held when it
-        opened, until a part of the window is written. Returns the windows this completes: only parts of a
-        window that reached max_window, since a new window either extends the open one or merges with the
-        pending one (a pending window is completed as soon as a message after it leaves the pre buffer).
+        ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the buffer's);
+        ``why``: the features that stood out (kept with the trigger). A ``pre`` longer than the buffer's gets what
+        the buffer holds (its ``pre``). A trigger with a longer ``pre`` than the one that opened the window reaches
+        back as far as the buffer held when it opened, until a part of the window is written. Returns the windows
+        this completes: only parts of a window that reached max_window, since a new window either extends the open
+        one or merges with the pending one (a pending window is completed as soon as a message after it leaves the
+        pre buffer).
         """
         if self._clock is None:
             raise ValueError('trigger: no message has been added yet')
-        trigger = Trigger(self._clock, reason, score, name)
+        trigger = Trigger(self._clock, reason, score, name, tuple(why))
         post = self.post if post is None else Span.parse(post, 'post')
         pre = self.pre if pre is None else Span.parse(pre, 'pre')
         if self._open is not None:

@@ -64,7 +64,7 @@ from cc_log.core import drift, health
 from cc_log.nodes import intake
 from cc_log.storage import window_info
 from cc_log.storage.formats import json_xz
-from cc_log.core import routes, smart, trigger_topics
+from cc_log.core import routes, smart, smart_events, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
@@ -178,7 +178,8 @@ class SmartNode(object):
             return
         kind = {smart.OPENED: self._event_class.OPENED, smart.WRITTEN: self._event_class.WRITTEN,
                 smart.FAILED: self._event_class.FAILED}[event.kind]
-        msg = self._event_class(event=kind, trigger=event.trigger, reason=event.reason, score=event.score,
+        reason = smart_events.reason_text(event)
+        msg = self._event_class(event=kind, trigger=event.trigger, reason=reason, score=event.score,
                                 threshold=event.threshold, start=time_of(event.start), end=time_of(event.end),
                                 messages=event.messages, path=event.path, bytes=event.bytes)
         msg.header.stamp = time_of(event.stamp)
@@ -187,7 +188,7 @@ class SmartNode(object):
         elif event.kind == smart.FAILED:
             rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
         else:
-            rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, event.reason, event.score)
+            rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, reason, event.score)
             self._last_trigger = '%s: %s at %s' % (event.trigger, event.reason, window_info.utc_text(event.stamp))
         try:
             self.events.publish(msg)

@@ -39,7 +39,7 @@ import stat
 import time
 
 from cc_log.storage import formats, log_format
-from cc_log.core import msg_codec, safe_files
+from cc_log.core import msg_codec, safe_files, why
 from cc_log.core.records import LogWindow, Trigger
 
 __all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
@@ -140,7 +140,7 @@ def _triggers(metadata, first_stamp):
             stamp, score = first_stamp, None
         name = trigger.get('name')
         triggers.append(Trigger(stamp, str(trigger.get('reason', 'recovered')), score,
-                                name if isinstance(name, str) else None))
+                                name if isinstance(name, str) else None, why.bounded(trigger.get('why'))))
     return triggers
 
 
