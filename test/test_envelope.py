@@ -1,4 +1,6 @@
 """The physics envelope's features on synthetic odometry (pure numpy, no roscore)."""
+import re
+
 import numpy as np
 import pytest
 
@@ -155,3 +157,153 @@ def test_a_long_run_is_fast():
     start = time.perf_counter()
     ends, _ = envelope_windows(*samples)
     assert len(ends) > 5900 and time.perf_counter() - start < 2.0
+
+
+# -- the envelope model and trigger ---------------------------------------------------------------------------
+
+ODOM = '/odom'
+
+
+def nominal_drive(seconds=120.0, seed=0, rate=RATE):
+    """Smooth driving from 0.2 to 1 m/s and up to 0.5 rad/s, with sensor noise."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * rate)
+    phase = np.arange(n) / rate
+    v = 0.6 + 0.4 * np.sin(phase / 7.0 + seed) + rng.normal(0, 0.005, n)
+    w = 0.5 * np.sin(phase / 5.0 + 2 * seed) + rng.normal(0, 0.005, n)
+    return drive(v, w, rate=rate)
+
+
+def odom_records(samples, topic=ODOM):
+    """Records of decoded nav_msgs/Odometry-shaped messages (SimpleNamespace) of planar samples."""
+    from types import SimpleNamespace as NS
+    from cc_log.core.records import Record
+    records = []
+    for t, x, y, yaw, v, w in zip(*samples):
+        pose = NS(position=NS(x=x, y=y, z=0.0), orientation=NS(x=0.0, y=0.0, z=np.sin(yaw / 2), w=np.cos(yaw / 2)))
+        twist = NS(linear=NS(x=v, y=0.0, z=0.0), angular=NS(x=0.0, y=0.0, z=w))
+        records.append(Record(float(t), topic, NS(pose=NS(pose=pose), twist=NS(twist=twist))))
+    return records
+
+
+def learned(samples):
+    from cc_log.core import envelope
+    return envelope.learn([envelope_windows(*samples)[1]], ODOM, 1.0, 0.25, samples[0][-1] - samples[0][0])
+
+
+def fires_of(trigger, records, batch=64):
+    fires = []
+    for start in range(0, len(records), batch):
+        for record, fired in zip(records[start:start + batch], trigger.on_records(records[start:start + batch])):
+            fires.extend((record.stamp, fire) for fire in fired)
+    return fires
+
+
+def test_limits_are_the_training_maxima_floored_times_the_factor():
+    from cc_log.core.envelope import Envelope
+    samples = nominal_drive()
+    env = learned(samples)
+    matrix = envelope_windows(*samples)[1]
+    assert env.windows == len(matrix)
+    for i, name in enumerate(ENVELOPE_COLUMNS):
+        assert env.maxima[name] == pytest.approx(matrix[:, i].max())
+        assert env.trained()[i] == pytest.approx(max(matrix[:, i].max(), ENVELOPE_FLOORS[name]))
+    # never standing still, never spinning in place, pose and twist agreeing: the floors set those limits
+    for name in ('still_yaw_rate', 'max_pose_gap', 'max_heading_gap'):
+        assert env.maxima[name] < ENVELOPE_FLOORS[name]
+        assert env.limits(3.0)[ENVELOPE_COLUMNS.index(name)] == pytest.approx(3.0 * ENVELOPE_FLOORS[name])
+    assert Envelope.from_dict(env.to_dict()) == env
+
+
+def test_a_surge_to_three_times_the_top_speed_fires_saying_why_and_nominal_driving_does_not():
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    env = learned(nominal_drive(seed=0))
+    top = env.maxima['max_speed']
+    trigger = EnvelopeTrigger('envelope', env, ODOM)
+    assert fires_of(trigger, odom_records(nominal_drive(seed=0))) == []     # the training itself
+    trigger.reset()
+    assert fires_of(trigger, odom_records(nominal_drive(seed=1))) == []     # other nominal driving
+    # a slow surge (0.3 m/s^2, within the accelerations seen) from 0.5 m/s to 3x the top speed, held 2 s
+    n = int(60 * RATE)
+    v = np.full(n, 0.5)
+    ramp = int((3 * top - 0.5) / 0.3 * RATE)
+    v[1000:1000 + ramp] = 0.5 + 0.3 * np.arange(ramp) / RATE
+    v[1000 + ramp:1000 + ramp + 100] = 3 * top
+    v[1000 + ramp + 100:1000 + 2 * ramp + 100] = 3 * top - 0.3 * np.arange(ramp) / RATE
+    samples = drive(v, np.zeros(n))
+    trigger = EnvelopeTrigger('envelope', env, ODOM)
+    fires = fires_of(trigger, odom_records(samples))
+    assert fires, 'the surge was not flagged'
+    t_over = samples[0][np.argmax(v > 2 * top)]      # the limit at factor 2
+    assert fires[0][0] == pytest.approx(np.ceil(t_over / 0.25) * 0.25, abs=0.03)
+    stamp, fire = min(fires, key=lambda item: item[1].score)
+    assert fire.name == 'envelope' and fire.reason == 'envelope'
+    assert fire.score == pytest.approx(-np.log(3 * top / (2 * top)), abs=1e-3)
+    assert fire.why[0]['feature'] == 'max_speed' and len(fire.why) <= 3
+    assert fire.why[0]['value'] == pytest.approx(3 * top, rel=1e-3)
+    assert fire.why[0]['limit'] == pytest.approx(2 * top) and fire.why[0]['ratio'] == pytest.approx(1.5, rel=1e-3)
+    assert fire.why[0]['unit'] == 'm/s'
+    assert fire.why[0]['text'] == 'speed %.3g m/s, 3.0x the most seen in training' % (3 * top)
+    assert all(entry['ratio'] > 1 for entry in fire.why)
+    stats = trigger.stats()
+    assert stats['fired'] == len(fires) and stats['envelope_beyond'] >= len(fires)
+    assert stats['envelope_windows'] == len(envelope_windows(*samples)[0])
+
+
+def test_the_trigger_fires_alike_whatever_the_batches():
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    env = learned(nominal_drive(seed=0))
+    samples = nominal_drive(seconds=40, seed=3)
+    x = samples[1].copy()
+    x[1200:] += 0.8                              # a localization jump
+    records = odom_records((samples[0], x) + samples[2:])
+    runs = []
+    for batch in (1, 7, 256):
+        trigger = EnvelopeTrigger('envelope', env, ODOM)
+        runs.append([(stamp, fire.score, fire.why) for stamp, fire in fires_of(trigger, records, batch)])
+    assert runs[0] == runs[1] == runs[2] and len(runs[0]) >= 1
+    why = runs[0][0][2]
+    assert why[0]['feature'] in ('max_pose_gap', 'sum_pose_gap')
+    pose = next(entry for entry in why if entry['feature'] == 'max_pose_gap')
+    assert re.match(r'^pose moved 0\.[78]\d m in one step while the wheels reported 0\.0\d m, 1\d\.\dx the floor '
+                    r'0\.05 m \(training never reached it\)$', pose['text']), pose['text']
+
+
+def test_time_going_back_starts_the_ring_over():
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    env = learned(nominal_drive(seed=0))
+    records = odom_records(nominal_drive(seconds=20, seed=1))
+    trigger = EnvelopeTrigger('envelope', env, ODOM)
+    assert fires_of(trigger, records + records, batch=100) == []     # a bag played twice: no false extreme
+    once = len(envelope_windows(*nominal_drive(seconds=20, seed=1))[0])
+    assert trigger.stats()['envelope_windows'] == 2 * once
+
+
+def test_envelope_files_are_read_with_bounds(tmp_path):
+    import json
+    from cc_log.core.envelope import Envelope
+    env = learned(nominal_drive(seconds=30))
+    path = str(tmp_path / 'envelope.json')
+    env.save(path)
+    assert Envelope.load(path) == env
+    document = env.to_dict()
+    cases = [(dict(document, extra=1), 'unknown key'),
+             (dict(document, maxima=dict(document['maxima'], max_speed=-1.0)), 'maxima: max_speed: -1.0 must be'),
+             (dict(document, maxima={k: v for k, v in document['maxima'].items() if k != 'max_jerk'}),
+              'missing max_jerk'),
+             (dict(document, window=0), 'window: 0 must be a finite positive number'),
+             (dict(document, kind='model'), 'not an envelope file')]
+    for bad, said in cases:
+        with open(path, 'w') as stream:
+            json.dump(bad, stream)
+        with pytest.raises(ValueError) as error:
+            Envelope.load(path)
+        assert str(error.value).startswith(path + ': ') and said in str(error.value) and '\n' not in str(error.value)
+    with open(path, 'w') as stream:
+        stream.write(json.dumps(document).replace('"max_speed": %r' % document['maxima']['max_speed'],
+                                                  '"max_speed": NaN'))
+    with pytest.raises(ValueError, match='NaN is not a number JSON allows'):
+        Envelope.load(path)
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    with pytest.raises(ValueError, match='^envelope: factor: 0.5 must be a number from 1 up'):
+        EnvelopeTrigger('envelope', env, ODOM, factor=0.5)

@@ -178,11 +178,14 @@ def explain(row, envelope, factor=DEFAULT_FACTOR, details=None):
     for index in order:
         name = ENVELOPE_COLUMNS[index]
         value, unit = float(row[index]), ENVELOPE_UNITS[name]
-        plain = '%s %s%s' % (LABELS[name], _figure(value), '' if unit == '1' else ' ' + unit)
-        said = (details or {}).get(name) or plain
+        shown = '' if unit == '1' else ' ' + unit
+        said = (details or {}).get(name) or '%s %s%s' % (LABELS[name], _figure(value), shown)
         seen = float(envelope.maxima[name])
-        times = ('%.1fx the most seen in training' % (value / seen) if seen >= trained[index] else
-                 '%.1fx the floor %s (training never reached it)' % (value / trained[index], _figure(trained[index])))
+        if seen >= trained[index]:
+            times = '%.1fx the most seen in training' % (value / seen)
+        else:
+            times = '%.1fx the floor %s%s (training never reached it)' % (value / trained[index],
+                                                                          _figure(trained[index]), shown)
         why.append({'feature': name, 'value': value, 'limit': float(limits[index]),
                     'ratio': float(value / limits[index]), 'unit': unit, 'text': '%s, %s' % (said, times)})
     return tuple(why)
