@@ -67,7 +67,7 @@ ENVELOPE_FLOORS = {
     'max_speed': 0.1, 'max_yaw_rate': 0.1, 'max_accel': 0.5, 'max_yaw_accel': 0.5,
     'max_jerk': 5.0, 'speed_variation': 0.1, 'yaw_rate_variation': 0.1, 'yaw_rate_flips': 2.0,
     'max_pose_gap': 0.05, 'sum_pose_gap': 0.1, 'max_heading_gap': 0.05, 'sum_heading_gap': 0.1,
-    'still_fraction': 0.25, 'still_yaw_rate': 0.1, 'max_span_accel': 0.5,
+    'still_fraction': 1.0, 'still_yaw_rate': 0.1, 'max_span_accel': 0.5,
     'max_decel': 0.5, 'max_speedup': 0.5, 'max_speed_drop': 0.1, 'max_speed_rise': 0.1,
 }
 MAX_GAP = 0.5        # s: a longer step between samples is no step (its change measures read 0)
