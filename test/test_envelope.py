@@ -279,6 +279,38 @@ def test_time_going_back_starts_the_ring_over():
     assert trigger.stats()['envelope_windows'] == 2 * once
 
 
+def test_a_stamp_repeated_for_ever_does_not_grow_the_ring():
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    env = learned(nominal_drive(seed=0))
+    trigger = EnvelopeTrigger('envelope', env, ODOM)
+    records = odom_records(nominal_drive(seconds=5, seed=1))
+    stuck = [records[-1]] * 5000
+    assert fires_of(trigger, records + stuck, batch=100) == []
+    assert trigger.stats()['envelope_ring'] <= 1.75 * RATE + 1    # window, history and a stride, no more
+
+
+def test_a_configuration_entry_of_kind_envelope(tmp_path):
+    from cc_log.core.config import Config, installed_class
+    from cc_log.core.model import AnomalyModel
+    env = learned(nominal_drive(seconds=30))
+    path = str(tmp_path / 'envelope.json')
+    env.save(path)
+    cfg = Config.from_dict({'triggers': [{'name': 'env', 'kind': 'envelope', 'limits': path, 'factor': 3}]})
+    trigger, = cfg.build_triggers(AnomalyModel.load, installed_class, resolve=lambda t: '/robot1' + t)
+    assert (trigger.kind, trigger.topic, trigger.factor) == ('envelope', '/robot1/odom', 3.0)
+    assert trigger.topic_types() == {'/robot1/odom': 'nav_msgs/Odometry'}
+    assert trigger.describe()['limits']['max_speed'] == pytest.approx(3.0 * env.trained()[0])
+    for entry, said in (({'name': 'env', 'kind': 'envelope'}, 'limits: required'),
+                        ({'name': 'env', 'kind': 'envelope', 'limits': str(tmp_path / 'none.json')},
+                         'none.json: cannot be read'),
+                        ({'name': 'env', 'kind': 'envelope', 'limits': path, 'factor': 'x'}, "factor: 'x' must be"),
+                        ({'name': 'env', 'kind': 'envelope', 'limits': path, 'facter': 2}, 'facter')):
+        with pytest.raises(ValueError) as error:
+            Config.from_dict({'triggers': [entry]}).build_triggers(AnomalyModel.load, installed_class)
+        assert said in str(error.value) and str(error.value).startswith('config: triggers[0] (env): ') and \
+            '\n' not in str(error.value), str(error.value)
+
+
 def test_envelope_files_are_read_with_bounds(tmp_path):
     import json
     from cc_log.core.envelope import Envelope

@@ -79,8 +79,9 @@ FLIP_DEADBAND = 0.05  # rad/s: a yaw rate closer to 0 has no sign
 HISTORY = 0.5        # s: how far before a window's start its rows look (derivatives of derivatives, spans)
 
 
-def _clean(stamps, x, y, yaw, v, w):
-    """The six inputs as float arrays of one length, keeping the finite samples that move time forward."""
+def clean_samples(stamps, x, y, yaw, v, w):
+    """The six inputs as float arrays of one length, keeping the finite samples that move time forward (ValueError
+    when their lengths differ)."""
     arrays = [np.asarray(a, dtype=float).ravel() for a in (stamps, x, y, yaw, v, w)]
     n = len(arrays[0])
     if any(len(a) != n for a in arrays):
@@ -202,7 +203,7 @@ def envelope_rows(stamps, x, y, yaw, v, w, ends, window=1.0):
     """The rows of the windows of ``window`` s ending at ``ends``: (the ends kept (those with two samples or
     more), an (n, 19) matrix). The samples must reach ``HISTORY`` s before the first window for its rows to be
     those of ``envelope_windows``."""
-    t, x, y, yaw, v, w = _clean(stamps, x, y, yaw, v, w)
+    t, x, y, yaw, v, w = clean_samples(stamps, x, y, yaw, v, w)
     ends = np.asarray(ends, dtype=float).ravel()
     if len(t) < 2 or not len(ends):
         return np.zeros(0), np.zeros((0, len(ENVELOPE_COLUMNS)))
@@ -233,7 +234,7 @@ def step_details(stamps, x, y, yaw, v, w, end, window=1.0):
     """What the largest pose and heading gaps of the window ending at ``end`` were, in words:
     ``{'max_pose_gap': 'pose moved 1.2 m in one step while the wheels reported 0.1 m', 'max_heading_gap':
     'heading turned 0.50 rad in one step while the yaw rate gave 0.01 rad'}`` (empty without a step)."""
-    t, x, y, yaw, v, w = _clean(stamps, x, y, yaw, v, w)
+    t, x, y, yaw, v, w = clean_samples(stamps, x, y, yaw, v, w)
     step, pose, wheels, turned, rate_turn = _steps(t, x, y, yaw, v, w)
     inside = np.flatnonzero(step & (t > end - window) & (t <= end))
     if not len(inside):
@@ -250,7 +251,7 @@ def envelope_windows(stamps, x, y, yaw, v, w, window=1.0, stride=0.25):
     """Window end stamps (n,) and the (n, 19) ``ENVELOPE_COLUMNS`` matrix of odometry samples in time order
     (stamps s, pose x y m, heading rad, forward speed m/s, yaw rate rad/s): one row per window of ``window`` s
     ending every ``stride`` s (see the module docstring)."""
-    t = _clean(stamps, x, y, yaw, v, w)[0]
+    t = clean_samples(stamps, x, y, yaw, v, w)[0]
     if len(t) < 2:
         return np.zeros(0), np.zeros((0, len(ENVELOPE_COLUMNS)))
     return envelope_rows(stamps, x, y, yaw, v, w, envelope_grid(t[0], t[-1], window, stride), window)

@@ -23,7 +23,8 @@ import time
 import numpy as np
 
 from cc_log.core.envelope import DEFAULT_FACTOR, Envelope, check_factor, explain, scores
-from cc_log.features.envelope import HISTORY, envelope_rows, odometry_samples, step_details
+from cc_log.features.envelope import (
+    ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, step_details)
 from cc_log.features.motion import ODOMETRY, OdometrySet
 from cc_log.triggers.base import Trigger, register
 
@@ -107,12 +108,14 @@ class EnvelopeTrigger(Trigger):
 
     def _take(self, samples, newest, fires, offset):
         """Add ``samples`` (in time order but for dropped ones) to the ring and evaluate the windows they end."""
-        finite = np.isfinite(samples[0])
-        if not finite.any():
+        samples = clean_samples(*samples)
+        if len(self._ring[0]):   # the ring's stamps only go forward (a stamp repeated for ever never grows it)
+            samples = tuple(a[samples[0] > self._ring[0][-1]] for a in samples)
+        if not len(samples[0]):
             return
         self._ring = tuple(np.concatenate((ring, new)) for ring, new in zip(self._ring, samples))
         if self._first is None:
-            self._first = float(samples[0][finite][0])
+            self._first = float(samples[0][0])
         k0 = np.ceil((self._first + self.window) / self.stride - 1e-9)
         if self._last_end is not None:
             k0 = max(k0, np.round(self._last_end / self.stride) + 1)
@@ -141,7 +144,7 @@ class EnvelopeTrigger(Trigger):
     def stats(self):
         result = super(EnvelopeTrigger, self).stats()
         result.update(envelope_windows=self.evaluated, envelope_beyond=self.beyond,
-                      envelope_seconds=self.seconds)
+                      envelope_seconds=self.seconds, envelope_ring=len(self._ring[0]))
         return result
 
     def describe(self):
@@ -149,5 +152,5 @@ class EnvelopeTrigger(Trigger):
         result.update(factor=self.factor, window=self.window, stride=self.stride,
                       learned={'topic': self.envelope.topic, 'windows': self.envelope.windows,
                                'seconds': self.envelope.seconds},
-                      limits={name: float(limit) for name, limit in zip(self.envelope.maxima, self.limits)})
+                      limits={name: float(limit) for name, limit in zip(ENVELOPE_COLUMNS, self.limits)})
         return result
