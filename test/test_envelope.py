@@ -410,3 +410,16 @@ def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_rea
     assert fire.why[0]['feature'] in ('max_span_accel', 'max_accel', 'max_speedup') and fire.why[0]['ratio'] > 1
     assert re.match(r'^(acceleration|acceleration over 0\.2 s|speed-up) \d+\.\d+ m/s\^2, \d+\.\dx ',
                     fire.why[0]['text']), fire.why[0]['text']
+
+
+def test_cclog_learn_envelope_says_what_is_wrong_in_one_line(tmp_path):
+    from conftest import cclog, real_data
+    bag = real_data('husky_outdoor_2015.bag')
+    out = tmp_path / 'envelope.json'
+    for args, said in ((('--topic', '/imu/data'), 'topic /imu/data is sensor_msgs/Imu, expected nav_msgs/Odometry'),
+                       (('--topic', HUSKY_ODOM, '--window', '5'), 'window: 5 must be a duration'),
+                       (('--topic', HUSKY_ODOM, '--window', '500s'), 'no whole window of 500 s of odometry')):
+        result = cclog('learn-envelope', bag, '--out', out, *args)
+        assert result.returncode == 1 and result.stderr.count('\n') == 1, result.stderr
+        assert result.stderr.startswith('cclog learn-envelope: error: ') and said in result.stderr, result.stderr
+    assert not out.exists()
