@@ -9,8 +9,9 @@ value / limit, and its score keeps cc_log's direction (lower is more anomalous; 
     score = -ln(max ratio)      0 at the limit, negative beyond it (flagged), positive inside
 
 (a max ratio below 1e-6 counts as 1e-6). ``explain`` names the features beyond their limit, most outstanding
-first. The file (``save``/``load``, JSON) is read with bounds: known keys only, every column's maximum a
-finite non-negative number, one-line ValueErrors naming the file. Pure: no rospy.
+first, each against the most seen in training (floored). The file (``save``/``load``, JSON) is read with bounds:
+known keys only, every column's maximum a finite non-negative number, one-line ValueErrors naming the file.
+Pure: no rospy.
 """
 import collections
 import json
@@ -165,29 +166,27 @@ def scores(matrix, limits):
 
 def explain(row, envelope, factor=DEFAULT_FACTOR, details=None):
     """Why a window (``row``, one ``envelope_windows`` row) is beyond the envelope: a tuple of at most MAX_WHY
-    dicts ``{feature, value, limit, ratio, unit, text}``, most outstanding (largest value / limit) first; only
-    features beyond their limit. ``ratio`` is value / limit; the text says how far past the most seen in
-    training. ``details``: ``{feature: text}`` said instead of the feature's plain value (e.g. the pose step
-    against the wheels' step)."""
+    dicts ``{feature, value, limit, ratio, unit, text}`` of the features beyond ``factor`` x their limit, most
+    outstanding first. ``limit`` is what the value is measured against, the most seen in training (floored:
+    ``Envelope.trained``), ``ratio`` value / limit (the window fired because it exceeds ``factor``); the text
+    says how far past it. ``details``: ``{feature: text}`` said instead of the feature's plain value (e.g. the
+    pose step against the wheels' step)."""
     trained = envelope.trained()
-    limits = check_factor(factor) * trained
     row = np.asarray(row, dtype=float)
-    beyond = np.flatnonzero(row > limits)
-    order = beyond[np.argsort(-(row[beyond] / limits[beyond]), kind='stable')][:MAX_WHY]
+    beyond = np.flatnonzero(row > check_factor(factor) * trained)
+    order = beyond[np.argsort(-(row[beyond] / trained[beyond]), kind='stable')][:MAX_WHY]
     why = []
     for index in order:
         name = ENVELOPE_COLUMNS[index]
-        value, unit = float(row[index]), ENVELOPE_UNITS[name]
+        value, unit, limit = float(row[index]), ENVELOPE_UNITS[name], float(trained[index])
         shown = '' if unit == '1' else ' ' + unit
         said = (details or {}).get(name) or '%s %s%s' % (LABELS[name], _figure(value), shown)
-        seen = float(envelope.maxima[name])
-        if seen >= trained[index]:
-            times = '%.1fx the most seen in training' % (value / seen)
+        if float(envelope.maxima[name]) >= limit:
+            times = '%.1fx the most seen in training' % (value / limit)
         else:
-            times = '%.1fx the floor %s%s (training never reached it)' % (value / trained[index],
-                                                                          _figure(trained[index]), shown)
-        why.append({'feature': name, 'value': value, 'limit': float(limits[index]),
-                    'ratio': float(value / limits[index]), 'unit': unit, 'text': '%s, %s' % (said, times)})
+            times = '%.1fx the floor %s%s (training never reached it)' % (value / limit, _figure(limit), shown)
+        why.append({'feature': name, 'value': value, 'limit': limit, 'ratio': value / limit, 'unit': unit,
+                    'text': '%s, %s' % (said, times)})
     return tuple(why)
 
 

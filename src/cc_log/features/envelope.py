@@ -232,8 +232,8 @@ def envelope_rows(stamps, x, y, yaw, v, w, ends, window=1.0):
 
 def step_details(stamps, x, y, yaw, v, w, end, window=1.0):
     """What the largest pose and heading gaps of the window ending at ``end`` were, in words:
-    ``{'max_pose_gap': 'pose moved 1.2 m in one step while the wheels reported 0.1 m', 'max_heading_gap':
-    'heading turned 0.50 rad in one step while the yaw rate gave 0.01 rad'}`` (empty without a step)."""
+    ``{'max_pose_gap': 'pose moved 1.20 m in a step while the wheels reported 0.10 m', 'max_heading_gap':
+    'heading turned 0.50 rad in a step, the yaw rate 0.01 rad'}`` (empty without a step)."""
     t, x, y, yaw, v, w = clean_samples(stamps, x, y, yaw, v, w)
     step, pose, wheels, turned, rate_turn = _steps(t, x, y, yaw, v, w)
     inside = np.flatnonzero(step & (t > end - window) & (t <= end))
@@ -241,10 +241,9 @@ def step_details(stamps, x, y, yaw, v, w, end, window=1.0):
         return {}
     i = inside[np.argmax(np.hypot(*(pose[inside] - wheels[inside]).T))]
     k = inside[np.argmax(np.abs(turned[inside] - rate_turn[inside]))]
-    return {'max_pose_gap': 'pose moved %.2f m in one step while the wheels reported %.2f m'
+    return {'max_pose_gap': 'pose moved %.2f m in a step while the wheels reported %.2f m'
                             % (np.hypot(*pose[i]), np.hypot(*wheels[i])),
-            'max_heading_gap': 'heading turned %.2f rad in one step while the yaw rate gave %.2f rad'
-                               % (turned[k], rate_turn[k])}
+            'max_heading_gap': 'heading turned %.2f rad in a step, the yaw rate %.2f rad' % (turned[k], rate_turn[k])}
 
 
 def envelope_windows(stamps, x, y, yaw, v, w, window=1.0, stride=0.25):

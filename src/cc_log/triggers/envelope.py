@@ -14,7 +14,8 @@ Every ``stride`` (0.25 s, the file's) of message time the trigger computes the r
 s (1 s, the file's) ending on that grid point, from a ring of the last ``window`` + ``HISTORY`` seconds of
 samples (``features.envelope.envelope_rows``: the very rows ``envelope_windows`` gives offline). A window beyond
 the envelope fires at the first message at or after its end, with score ``-ln(max value / limit)`` (< 0;
-lower is more anomalous) and ``why``: the features beyond their limit, most outstanding first. Each such
+lower is more anomalous) and ``why``: the features beyond their limit, most outstanding first, each against the
+most seen in training (``core.envelope.explain``). Each such
 window fires (every 0.25 s while the motion stays beyond the envelope; the logger merges them). Pure: no rospy.
 """
 import os
@@ -137,7 +138,7 @@ class EnvelopeTrigger(Trigger):
         for at, k in sorted(best.items()):
             details = step_details(*self._ring, end=ends[k], window=self.window)
             why = explain(rows[k], self.envelope, self.factor, details)
-            fires[offset + at].append(self.fire(REASON, float(window_scores[k]))._replace(why=why))
+            fires[offset + at].append(self.fire(REASON, float(window_scores[k]), why))
         keep = self._ring[0] > self._last_end - self.window - HISTORY
         self._ring = tuple(a[keep] for a in self._ring)
 
