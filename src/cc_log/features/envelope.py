@@ -76,7 +76,7 @@ SPAN = 0.2           # s: the span of max_span_accel and of the speed drop and r
 SPAN_MAX = 0.3       # s: the longest span of max_span_accel
 STILL_SPEED = 0.05   # m/s: standing still below it
 FLIP_DEADBAND = 0.05  # rad/s: a yaw rate closer to 0 has no sign
-HISTORY = 0.5        # s: how far before a window's start its rows look (derivatives of derivatives, spans)
+HISTORY = 2 * MAX_GAP  # s: how far before a window's start its rows look (a derivative of a derivative)
 
 
 def clean_samples(stamps, x, y, yaw, v, w):
