@@ -42,8 +42,9 @@ The columns (window = the samples in it; units in ``ENVELOPE_UNITS``):
 ==================== ==========================================================================================
 
 ``ENVELOPE_FLOORS``: the smallest limit each feature gets whatever the training saw (a robot that never turned
-in training must not flag every turn). ``odometry_samples(records)`` reads the six inputs from nav_msgs/Odometry
-records (serialized or decoded) with the readers of ``motion``. Pure numpy, vectorised: no rospy.
+in training must not flag every turn; ``still_fraction``'s is 1, a whole window: parking alone never flags).
+``odometry_samples(records)`` reads the six inputs from nav_msgs/Odometry records (serialized or decoded) with the
+readers of ``motion``. Pure numpy, vectorised: no rospy.
 """
 import numpy as np
 
