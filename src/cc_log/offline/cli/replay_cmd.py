@@ -96,6 +96,7 @@ def run(args):
                      for w in summary['windows']]),
         ('drift', [monitor.as_dict() for monitor in summary['drift']]),
         ('online', summary['online']),
+        ('keep_budget', summary['keep_budget']),
     ])
     if args.json:
         print_json(result)
@@ -116,7 +117,19 @@ def run(args):
         print('  %s' % monitor.report())
     for learner in summary['online']:
         print('  %s: online learning %s' % (learner['classifier'], learner['resumed'] or 'started afresh'))
+    print(''.join(_skipped_lines(summary['keep_budget'])), end='')
     return EXIT_OK
+
+
+def _skipped_lines(budget):
+    """The lines saying what the keep budget skipped (``KeepBudget.stats()``; none when nothing): its report and
+    the last skipped windows, each with its stamp, trigger and score."""
+    from cc_log.core import keep_budget
+    report = keep_budget.report(budget)
+    if not report:
+        return []
+    return ['  %s\n' % report] + ['    skipped  %s  %s  score %.4g\n' % (
+        stamp_text(skip['stamp']), skip['trigger'], skip['score']) for skip in budget['skipped']]
 
 
 def _replay_many(args, cfg):
@@ -125,12 +138,14 @@ def _replay_many(args, cfg):
     writable_dir(args.out, 'out')
     outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
         engine, bags, args.out, cfg, progress=progress))
-    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online'))
+    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
+                                 'keep_budget'))
     reports = {}
     for row in rows:
         row['windows'] = [collections.OrderedDict((key, w[key]) for key in ('start', 'end', 'messages', 'path'))
                           for w in row.get('windows', ())]
-        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ()))
+        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ())) + ''.join(
+            '\n' + line.rstrip('\n') for line in _skipped_lines(row.get('keep_budget') or {}))
         row['drift'] = [monitor.as_dict() for monitor in row.get('drift', ())]
     good = [row for row in rows if 'error' not in row]
     summary['windows'] = sum(len(row['windows']) for row in good)
