@@ -6,7 +6,8 @@ the wrong type were refused. ``not_kept(stats, overflowed)`` lists the messages 
 are not on disk: thinned while the writer fell behind, trimmed from the buffer to stay within
 ``max_buffer_mb`` (a window opened then starts later than ``pre``), or dropped by a full intake queue; each is
 a WARN. ``skipped(stats)``: the windows the keep budget did not open (WARN: the robot's normal may have drifted).
-``DrivingWatch`` says when the driving topic is silent and where its message type is published instead. ``worst(level, message, problems)`` adds problems to a status.
+``DrivingWatch`` says when the driving topic is silent and where its message type is published instead.
+``worst(level, message, problems)`` adds problems to a status.
 """
 from cc_log.core import keep_budget
 
