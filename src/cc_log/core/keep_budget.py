@@ -16,9 +16,11 @@ threshold over a sliding span of message time. ``n = max_windows_per_hour`` (a n
 - a Fire that extends an open window is never refused (the same event); its score, when lower, becomes the
   window's score (a window's score is the lowest of its Fires').
 
-Refused Fires less than ``join`` seconds apart (the logger's pre + post, at least ``MIN_JOIN``) are one skipped
-window, the one they would have opened; its score is the lowest of theirs. ``stats()`` counts them and keeps the
-last ``SKIPS_KEPT`` (stamp, trigger, score); ``report(stats)`` says it on /diagnostics and in ``cclog replay``.
+Refused Fires less than pre + post seconds apart (the logger's; at least ``MIN_JOIN``; a count of messages counts
+as 0 s) are one skipped window, the one they would have opened; its score is the lowest of theirs. When a window
+opens less than ``pre`` seconds after the last of them, they are in its ``pre``: the event's window opened a little
+later, nothing was skipped. ``stats()`` counts the skipped windows and keeps the last ``SKIPS_KEPT`` (stamp of the
+first refused Fire, trigger, score); ``report(stats)`` says it on /diagnostics and in ``cclog replay``.
 Message time that jumps back (a bag played again, a simulator reset) starts the budget afresh. Pure.
 """
 import collections
@@ -54,23 +56,34 @@ class _Kept(object):
         self.stamp, self.score = stamp, score
 
 
+class _Skip(object):
+    """A skipped window: the stamp and trigger of its first refused Fire, its score (the lowest), its last stamp."""
+
+    __slots__ = ('stamp', 'trigger', 'score', 'last')
+
+    def __init__(self, stamp, trigger, score):
+        self.stamp, self.trigger, self.score, self.last = stamp, trigger, score, stamp
+
+
 class KeepBudget(object):
     """Which Fires may open a window (see the module docstring). ``max_windows_per_hour``: a number from 0 (no
-    budget) to MAX_PER_HOUR; ``join``: seconds within which refused Fires are one skipped window. Thread-safe:
-    ``admit`` from the message path, ``stats`` from another thread."""
+    budget) to MAX_PER_HOUR; ``pre``, ``post``: the logger's, in seconds (None or 0 for a count of messages).
+    Thread-safe: ``admit`` from the message path, ``stats`` from another thread."""
 
-    def __init__(self, max_windows_per_hour=0, join=MIN_JOIN):
+    def __init__(self, max_windows_per_hour=0, pre=0.0, post=0.0):
         self.max_windows_per_hour = check_rate(max_windows_per_hour)
         rate = self.max_windows_per_hour
         self.count = int(math.ceil(rate)) if rate else 0   # k: windows per span
         self.span = HOUR * self.count / rate if rate else HOUR  # seconds of the sliding span
-        self.join = max(MIN_JOIN, float(join or 0.0))
+        self.pre = float(pre or 0.0)
+        self.join = max(MIN_JOIN, self.pre + float(post or 0.0))
         self._kept = collections.deque()  # _Kept of the span, oldest first
         self._open = None                 # the _Kept of the newest window (extensions lower its score)
         self._newest = None               # newest stamp seen
-        self._skips = collections.deque(maxlen=SKIPS_KEPT)  # [stamp, trigger, score, last refused stamp]
-        self.skipped = 0
-        self._low = self._high = None     # score range of every skipped window
+        self._skips = collections.deque(maxlen=SKIPS_KEPT)  # the last skipped windows: _Skip
+        self._skip = None                 # the newest, while a Fire may still join it or a window take it in
+        self.skipped = 0                  # skipped windows before _skip
+        self._low = self._high = None     # score range of those
         self._lock = threading.Lock()
 
     @property
@@ -92,8 +105,10 @@ class KeepBudget(object):
                 return True
             threshold = self._threshold()
             if score is not None and threshold is not None and not score < threshold:
-                self._skip(stamp, fire, score)
+                self._refuse(stamp, fire.name, score)
                 return False
+            if self._skip is not None and 0 <= stamp - self._skip.last < self.pre:
+                self._skip = None  # its Fires are in this window's pre
             self._open = _Kept(stamp, -math.inf if score is None else score)
             self._kept.append(self._open)
             return True
@@ -119,25 +134,36 @@ class KeepBudget(object):
         while self._kept and self._kept[0].stamp <= self._newest - self.span:
             self._kept.popleft()
 
-    def _skip(self, stamp, fire, score):
-        last = self._skips[-1] if self._skips else None
-        if last is not None and 0 <= stamp - last[3] < self.join:  # the same would-be window
-            last[2], last[3] = min(last[2], score), stamp
-        else:
+    def _refuse(self, stamp, name, score):
+        skip = self._skip
+        if skip is not None and 0 <= stamp - skip.last < self.join:  # the same would-be window
+            skip.score, skip.last = min(skip.score, score), stamp
+            return
+        self._settle()
+        self._skip = _Skip(stamp, name, score)
+
+    def _settle(self):
+        """The newest skipped window is one for good: counted, in the range and the last ones."""
+        skip, self._skip = self._skip, None
+        if skip is not None:
             self.skipped += 1
-            self._skips.append([stamp, fire.name, score, stamp])
-        self._low = score if self._low is None else min(self._low, score)
-        self._high = score if self._high is None else max(self._high, score)
+            self._skips.append(skip)
+            self._low = skip.score if self._low is None else min(self._low, skip.score)
+            self._high = skip.score if self._high is None else max(self._high, skip.score)
 
     def stats(self):
         """``{'max_windows_per_hour', 'windows_skipped', 'skipped_scores' (of the last skipped windows, oldest
-        first), 'skipped' ([{stamp, trigger, score}] of those), 'skipped_score_range' ((lowest, highest) of every
-        refused Fire, None before any), 'keep_threshold' (``threshold()``)}``."""
+        first), 'skipped' ([{stamp, trigger, score}] of those), 'skipped_score_range' ((lowest, highest) score of
+        the skipped windows, None before any), 'keep_threshold' (``threshold()``)}``."""
         with self._lock:
-            skips = [{'stamp': stamp, 'trigger': name, 'score': score} for stamp, name, score, _ in self._skips]
-            return {'max_windows_per_hour': self.max_windows_per_hour, 'windows_skipped': self.skipped,
-                    'skipped_scores': [skip['score'] for skip in skips], 'skipped': skips,
-                    'skipped_score_range': None if self._low is None else (self._low, self._high),
+            skips = list(self._skips)[1 if self._skip is not None and len(self._skips) == SKIPS_KEPT else 0:]
+            skips += [self._skip] if self._skip is not None else []
+            scores = [skip.score for skip in skips] + [score for score in (self._low, self._high) if score is not None]
+            return {'max_windows_per_hour': self.max_windows_per_hour,
+                    'windows_skipped': self.skipped + (self._skip is not None),
+                    'skipped_scores': [skip.score for skip in skips],
+                    'skipped': [{'stamp': skip.stamp, 'trigger': skip.trigger, 'score': skip.score} for skip in skips],
+                    'skipped_score_range': (min(scores), max(scores)) if scores else None,
                     'keep_threshold': self._threshold() if self.count else None}
 
 

@@ -145,7 +145,7 @@ class SmartLogger(object):
         watched = set().union(*(trigger.topics for trigger in self.triggers))
         self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self.max_buffer_mb = max_buffer_mb
-        self.budget = keep_budget.KeepBudget(max_windows_per_hour, (self.pre.seconds or 0) + (self.post.seconds or 0))
+        self.budget = keep_budget.KeepBudget(max_windows_per_hour, self.pre.seconds, self.post.seconds)
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
         self._bases = {}  # window key -> the base name of its files, while it is handed on in parts (routes)
