@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from cc_log.core import config, health, keep_budget, options
+from cc_log.core import config, health, options
 from cc_log.core.keep_budget import DRIFT_HINT, KeepBudget
 from cc_log.triggers.base import Fire
 
