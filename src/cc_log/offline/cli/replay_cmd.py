@@ -27,13 +27,15 @@ def add_parser(subparsers):
         stored_bytes, windows: [{start, end, messages, path}]}; start/end are the header stamps (float
         seconds) of the first and last message saved. A window that cannot be written (disk full) is retried
         for a few seconds; then replay stops and exits 1 with one line naming OUT and how many windows and
-        messages were not written.
+        messages were not written. --max-windows-per-hour N: the keep budget (past N windows in the last
+        hour, only a more anomalous one opens); the summary counts what it skipped (--json: keep_budget).
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
           cclog replay crash.bag --topic /odom --model model.json --out logs --pre 2s --post 2s --json
           cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
           cclog replay run.bag --config robot.yaml --out logs --classify-every 1 --retrigger onset
+          cclog replay long_run.bag --config robot.yaml --out logs --max-windows-per-hour 6
         """))
     p.add_argument('bag', nargs='+', metavar='BAG', help='input bag; several, a directory (its *.bag) or a glob: '
                    'one Dask task each, windows into OUT/<bag name>/')
