@@ -14,7 +14,7 @@ import pytest
 
 from cc_log.core import config, health, options
 from cc_log.core.keep_budget import DRIFT_HINT, KeepBudget
-from cc_log.triggers.base import Fire
+from cc_log.triggers.base import Fire, Trigger
 
 HUSKY = 'husky_outdoor_2015.bag'
 HUSKY_ODOM = '/husky_velocity_controller/odom'
@@ -151,6 +151,56 @@ def test_diagnostics_warn_once_windows_are_skipped_with_their_count_and_scores()
     assert text == '2 window(s) skipped (keep budget 1/h; scores -2.5 .. -1): ' + DRIFT_HINT
     assert "the robot's normal may have drifted (cclog replay reports drift)" in text
     assert health.skipped_value(budget.stats()) == '2 (scores -2.5 .. -1)'
+
+
+# -- in the smart logger ------------------------------------------------------------------------------------------
+
+class ScoreAt(Trigger):
+    """Fires with ``scores[stamp]`` at the odometry message of each of those stamps."""
+
+    kind = 'score_at'
+
+    def __init__(self, scores):
+        super(ScoreAt, self).__init__('scored')
+        self.topics = frozenset(['/odom'])
+        self.scores = dict(scores)
+
+    def on_record(self, record):
+        stamp = round(record.stamp, 3)
+        return [self.fire('scored', self.scores[stamp])] if stamp in self.scores else []
+
+
+def odom_msg(stamp):
+    from nav_msgs.msg import Odometry
+    msg = Odometry()
+    msg.header.stamp.secs, msg.header.stamp.nsecs = int(stamp), int(round((stamp % 1) * 1e9))
+    msg.pose.pose.orientation.w = 1.0
+    return msg
+
+
+def test_the_smart_logger_opens_only_what_the_budget_admits_and_says_what_it_skipped(tmp_path):
+    from cc_log.core.smart import OPENED, SmartLogger
+    from cc_log.storage import log_format
+    # 10.5 extends the window of 10 (never refused, though +5 is far from anomalous)
+    scores = {10.0: -1.0, 10.5: 5.0, 30.0: -0.5, 50.0: -2.0, 70.0: -1.5, 90.0: -3.0}
+    logger = SmartLogger(None, str(tmp_path), fmt='json-xz', pre='2s', post='2s', driving_topic='/odom',
+                         triggers=[ScoreAt(scores)], background=False, max_windows_per_hour=1)
+    opened = []
+    logger.on_event(lambda event: opened.append(event.score) if event.kind == OPENED else None)
+    for step in range(1000):  # 100 s at 10 Hz
+        logger.on_message('/odom', odom_msg(step / 10.0), step / 10.0)
+    logger.close()
+    # -1 opens; -0.5 is not below -1; -2 < -1 opens; -1.5 is not below -2; -3 < -2 opens
+    assert opened == [-1.0, -2.0, -3.0]
+    windows = [log_format.read_metadata(path) for path in log_format.window_files(str(tmp_path))]
+    windows.sort(key=lambda metadata: metadata['triggers'][0]['stamp'])
+    assert [[t['score'] for t in w['triggers']] for w in windows] == [[-1.0, 5.0], [-2.0], [-3.0]]
+    stats = logger.stats()
+    assert stats['windows_opened'] == 3 and stats['windows_skipped'] == 2
+    assert stats['skipped_scores'] == [-0.5, -1.5]
+    assert [(s['stamp'], s['trigger']) for s in stats['skipped']] == [(30.0, 'scored'), (70.0, 'scored')]
+    [(level, text)] = health.skipped(stats)
+    assert level == health.WARN and text.startswith('2 window(s) skipped (keep budget 1/h; scores -1.5 .. -0.5): ')
 
 
 # -- end to end: cclog replay of a real bag ---------------------------------------------------------------------
