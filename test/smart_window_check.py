@@ -346,6 +346,7 @@ class SmartWindowTest(unittest.TestCase):
         self.assertTrue(message.startswith('paused (~enable false)'), message)
         self.assertGreater(int(status['messages not kept (outside every window)']), 0)
         self.assertEqual(status['windows saved'], '2')
+        self.assertEqual(status['windows skipped (keep budget)'], '0 (no keep budget)')
         self.assertEqual(status['write errors'], '0')
         self.assertGreater(int(status['raw JSON bytes']), int(status['stored bytes']) > 0)
         self.assertGreater(int(status['free disk bytes']), 0)
