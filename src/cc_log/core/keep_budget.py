@@ -86,11 +86,6 @@ class KeepBudget(object):
         self._low = self._high = None     # score range of those
         self._lock = threading.Lock()
 
-    @property
-    def enabled(self):
-        """Whether there is a budget."""
-        return self.count > 0
-
     def admit(self, stamp, fire, opens=True):
         """Whether ``fire`` (a Fire) at message time ``stamp`` may open a window (``opens``; False: it extends
         the open window, always admitted). A refused Fire is counted as (part of) a skipped window."""

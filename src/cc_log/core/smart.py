@@ -80,28 +80,30 @@ class _Stats(object):
 class SmartLogger(object):
     """Triggered logging of a driving topic plus side topics.
 
-    model: an ``AnomalyModel`` (its ``config`` says the feature set, feature window and topic type) for the classifier
-    named ``'classifier'`` on ``driving_topic`` (and ``input_topics``, the topics of the set's other inputs: default
-    their role names), with ``classify_every`` (score on every message ``'1'``, every N-th ``'N'``, or at most once per
-    duration, ``'50ms'`` the default) and ``retrigger`` (``'every'`` anomalous score fires, or only the ``'onset'``);
-    or None. triggers: more triggers (``triggers.Trigger``: other classifiers, rules; a ``manual`` trigger is added
-    unless one is given); names must differ. directory: where window files go; fmt: ``'json-xz'`` or ``'bag-lz4'``;
-    pre, post, max_window: counts (``'100'``) or durations (``'2s'``) of the driving topic; driving_topic: the topic
-    whose messages count pre and post; side_topics: other topic names to keep (messages of any topic not listed, nor
-    watched by a trigger, are ignored unless ``side_topics`` is None, which keeps every other topic); enabled: start
-    enabled or paused; background: write windows on a writer thread (True) or inline in the calling thread (False);
-    max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period, max_held_messages (windows that
-    could not be written are held in memory and retried), give_up_after, close_retry: see
-    ``window_writer.WindowWriter`` (offline use: lose a window still failing after that many seconds; keep retrying
-    that long at close); max_buffer_mb: memory budget of every buffered message together (MB; 0: none): an open window
-    is written in parts at half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need
-    per estimated byte of a part; see ``WindowBuffer``). format_options: keys added to every window's metadata that the
-    format reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own
-    file in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only
-    those (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds
-    that many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
-    (offline): a message waits for room in the budget, never thinned for the writer. max_windows_per_hour: the keep
-    budget (``keep_budget.KeepBudget``: past it, only a more anomalous Fire opens a window; 0: none).
+    model: an ``AnomalyModel`` (its ``config`` says the feature set, feature window and topic type) for the
+    classifier named ``'classifier'`` on ``driving_topic`` (and ``input_topics``, the topics of the set's other
+    inputs: default their role names), with ``classify_every`` (score on every message ``'1'``, every N-th
+    ``'N'``, or at most once per duration, ``'50ms'`` the default) and ``retrigger`` (``'every'`` anomalous
+    score fires, or only the ``'onset'``); or None. triggers: more triggers (``triggers.Trigger``: other
+    classifiers, rules; a ``manual`` trigger is added unless one is given); names must differ.
+    directory: where window files go; fmt: ``'json-xz'`` or ``'bag-lz4'``; pre, post, max_window: counts
+    (``'100'``) or durations (``'2s'``) of the driving topic; driving_topic: the topic whose messages count
+    pre and post; side_topics: other topic names to keep (messages of any topic not listed, nor watched by
+    a trigger, are ignored unless ``side_topics`` is None, which keeps every other topic); enabled: start
+    enabled or paused; background: write windows on a writer thread (True) or inline in the calling thread
+    (False); max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period, max_held_messages
+    (windows that could not be written are held in memory and retried), give_up_after, close_retry: see
+    ``window_writer.WindowWriter`` (offline use: lose a window still failing after that many seconds; keep
+    retrying that long at close); max_buffer_mb:
+    memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
+    half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
+    byte of a part; see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
+    reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
+    in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those
+    (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
+    many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
+    (offline): a message waits for room in the budget, never thinned for the writer.
+    max_windows_per_hour: the keep budget (``keep_budget.KeepBudget``: past it, a Fire must be more anomalous; 0: off).
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
