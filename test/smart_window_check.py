@@ -13,6 +13,7 @@ topic remapped, then this node publishes the run message by message:
 2. ``~trigger``: a manual window of ``pre`` + 1 + ``post`` consecutive published messages;
 3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen and WARN while paused.
 """
+import copy
 import os
 import shutil
 import sys
@@ -199,6 +200,38 @@ class SmartWindowTest(unittest.TestCase):
             rospy.set_param('/use_sim_time', False)
             fx.stop(node)
 
+    def test_0_keep_budget_spent_skips_a_repeated_anomaly_and_warns(self):
+        # the run with its burst, then the very same run 100 s later (whole seconds: the same rows, the same
+        # scores): with a budget of one window an hour, the repeat is no more anomalous than the kept window
+        name, topic = 'smart_logger_budget', 'budget_odom'
+        out = os.path.join(self.tmp, 'budget')
+        first = self.stream[:RUN.stop - RUN.start]
+        again = [copy.deepcopy(record.msg) for record in first]
+        for msg in again:
+            msg.header.stamp.secs += 100
+        publisher = rospy.Publisher(topic, Odometry, queue_size=10000)
+        node = fx.start('smart_logger.py', '__name:=' + name, 'odom:=' + topic, '_model:=' + self.model_path,
+                        '_directory:=' + out, '_classify_every:=1', '_max_windows_per_hour:=1',
+                        '_diagnostic_period:=0.2')
+        try:
+            fx.wait_for(lambda: publisher.get_num_connections(), 20, name + ' to subscribe')
+            for msg in [record.msg for record in first] + again:
+                publisher.publish(msg)
+                time.sleep(1.0 / RATE)
+            fx.wait_for(lambda: fx.status_values(self.diagnostics, name)[2].get('messages seen') == str(
+                2 * len(first)), 10, 'diagnostics with every message')
+            fx.wait_for(lambda: fx.status_values(self.diagnostics, name)[2].get(
+                'windows skipped (keep budget)', '').startswith('1 (scores '), 10, 'the repeat skipped')
+            level, message, values = fx.status_values(self.diagnostics, name)
+            self.assertEqual(level, DiagnosticStatus.WARN, message)
+            self.assertIn('1 window(s) skipped (keep budget 1/h; scores ', message)
+            self.assertIn("the keep budget is spent: the robot's normal may have drifted (cclog replay reports "
+                          'drift)', message)
+            self.assertEqual(values['windows opened'], '1')
+        finally:
+            fx.stop(node)
+            publisher.unregister()
+
     def test_0_unusable_directory_is_a_warning_naming_the_directory_in_use(self):
         blocker = os.path.join(self.tmp, 'a_file')
         with open(blocker, 'w') as stream:
@@ -347,6 +380,7 @@ class SmartWindowTest(unittest.TestCase):
         self.assertTrue(message.startswith('paused (~enable false)'), message)
         self.assertGreater(int(status['messages not kept (outside every window)']), 0)
         self.assertEqual(status['windows saved'], '2')
+        self.assertEqual(status['windows skipped (keep budget)'], '0 (no keep budget)')
         self.assertEqual(status['write errors'], '0')
         self.assertGreater(int(status['raw JSON bytes']), int(status['stored bytes']) > 0)
         self.assertGreater(int(status['free disk bytes']), 0)

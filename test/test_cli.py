@@ -215,8 +215,10 @@ def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     from cc_log.storage import log_format
     from cc_log.core import msg_codec
     summary, bag = replayed['summary'], replayed['bag']
-    assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online']
+    assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
+                             'keep_budget']
     assert summary['online'] == []  # no classifier learns online here
+    assert summary['keep_budget']['windows_skipped'] == 0  # no keep budget: every window kept
     records = bag_messages(bag, ['/odom', '/scan'])
     assert summary['input_messages'] == len(records) == 542
     # estimated from a sample of the messages (replay does not decode them all)

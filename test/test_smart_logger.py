@@ -432,7 +432,7 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
         for record in run:
             out.write(ODOM, record.msg, t=record.msg.header.stamp)
     summary = replay(bag, ODOM, path, str(tmp_path / 'out'), PRE, POST, 'json-xz')
-    assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows'}
+    assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'keep_budget'}
     assert summary['input_messages'] == len(run)
     # estimated from a sample of the messages (replay does not decode them all)
     assert summary['raw_json_bytes'] == pytest.approx(sum(msg_codec.row_json_bytes(r.msg) for r in run), rel=0.01)

@@ -5,13 +5,17 @@ status before the writer's and the disk's part: WARN while it is paused (nothing
 the wrong type were refused. ``not_kept(stats, overflowed)`` lists the messages that belonged in a window and
 are not on disk: thinned while the writer fell behind, trimmed from the buffer to stay within
 ``max_buffer_mb`` (a window opened then starts later than ``pre``), or dropped by a full intake queue; each is
-a WARN. ``DrivingWatch`` says when the driving topic is silent and where its message type is published
-instead. ``worst(level, message, problems)`` adds problems to a status.
+a WARN. ``skipped(stats)``: the windows the keep budget did not open (WARN: the robot's normal may have drifted).
+``DrivingWatch`` says when the driving topic is silent and where its message type is published instead.
+``worst(level, message, problems)`` adds problems to a status.
 """
+from cc_log.core import keep_budget
+
 OK, WARN, ERROR = 0, 1, 2  # diagnostic_msgs/DiagnosticStatus levels
 SILENCE = 5.0  # seconds without a driving message (after start or the last one) before the node warns
 
-__all__ = ['OK', 'WARN', 'ERROR', 'SILENCE', 'smart_head', 'not_kept', 'worst', 'per_topic', 'DrivingWatch']
+__all__ = ['OK', 'WARN', 'ERROR', 'SILENCE', 'smart_head', 'not_kept', 'skipped', 'worst', 'per_topic',
+           'DrivingWatch']
 
 
 def per_topic(counts):
@@ -42,6 +46,19 @@ def not_kept(stats, overflowed=0):
     if overflowed:
         problems.append((WARN, '%d messages dropped: intake queue full (the node falls behind)' % overflowed))
     return problems
+
+
+def skipped(stats):
+    """``[(WARN, text)]`` once the keep budget skipped a window (``keep_budget.report``), else ``[]``."""
+    text = keep_budget.report(stats)
+    return [(WARN, text)] if text else []
+
+
+def skipped_value(stats):
+    """The diagnostics value of the windows the keep budget skipped: their count and score range."""
+    if not stats.get('windows_skipped'):
+        return '0' if stats.get('max_windows_per_hour') else '0 (no keep budget)'
+    return '%d (scores %.3g .. %.3g)' % ((stats['windows_skipped'],) + tuple(stats['skipped_score_range']))
 
 
 def worst(level, message, problems):

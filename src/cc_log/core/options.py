@@ -25,6 +25,7 @@ import re
 
 from cc_log import features
 from cc_log.core import safe_input
+from cc_log.core.keep_budget import MAX_PER_HOUR, check_rate
 from cc_log.core.routes import ROUTE_KEYS, parse_routes
 from cc_log.core.safe_input import brief
 from cc_log.core.spans import Rotation, Span, megabytes, seconds
@@ -255,6 +256,11 @@ OPTIONS = (
             'windows wait in memory (0: off)', BOTH),
     _option('max_buffer_mb', 'limits.max_buffer_mb', SIZE, DEFAULT_MAX_BUFFER_MB, 'memory budget of every '
             'buffered message and the writer queue (0: none)', BOTH, ('replay',)),
+    _option('max_windows_per_hour', 'limits.max_windows_per_hour', Grammar(check_rate, 'N', 'a number of windows '
+            'from 0 (off) to %g, e.g. 0.1 .. 60' % MAX_PER_HOUR), 0.0, 'keep budget: once this many windows opened '
+            'in the last hour, a Fire opens a window only if its score is more anomalous than the hour\'s N-th '
+            'most anomalous window (a rising threshold; Fires without a score always open; skipped windows are '
+            'counted); 0: no budget', SMART, ('replay',)),
     _option('split_mb', 'limits.split_mb', SIZE, 0.0, "a window's file is closed and a new one begun once it holds "
             "this many MB, at the next part (`.001`, `.002`, ... before the extension; bag-lz4 and any format written "
             "a part at a time); 0: never split", SMART, ('replay',)),

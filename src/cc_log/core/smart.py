@@ -12,14 +12,13 @@ triggers (``triggers``: classifiers, rules, the manual trigger) over the records
 - the last message of each latched topic (connection header ``latching: '1'``: ``/tf_static``, maps) is
   written at the start of every window, as ``rosbag record`` keeps them.
 
-Messages come decoded (``on_message``) or as their serialized bytes with their connection header
-(``on_records``, a batch of them, what the live intake and offline replay hand over; ``on_raw``, one): the
-classifiers take a batch at once (rows, vectors, one scoring call), then the window logic runs record by
-record with their Fires known. Serialized messages are buffered as bytes and decoded only
-when a trigger reads a field (a feature set reads its fixed layouts straight from the bytes) and, for
-json-xz, in the writer thread, only for the messages kept. The row-JSON bytes of messages not decoded
-are estimated from a sample (``raw_json.RawJsonEstimate``) decoded when ``stats()`` is asked, not on the
-message path.
+Messages come decoded (``on_message``) or as their serialized bytes with their connection header (``on_records``, a
+batch of them, what the live intake and offline replay hand over; ``on_raw``, one): the classifiers take a batch at
+once (rows, vectors, one scoring call), then the window logic runs record by record with their Fires known.
+Serialized messages are buffered as bytes and decoded only when a trigger reads a field (a feature set reads its
+fixed layouts straight from the bytes) and, for json-xz, in the writer thread, only for the messages kept. The
+row-JSON bytes of messages not decoded are estimated from a sample (``raw_json.RawJsonEstimate``) decoded when
+``stats()`` is asked, not on the message path.
 
 Completed windows go to the ``window_writer.WindowWriter`` (shared with collect mode), whose background
 thread calls ``log_format.write_window``, so compression and disk writes never run on the message path and
@@ -28,8 +27,8 @@ disk limits. All buffered messages together are bounded by ``max_buffer_mb`` (an
 in parts at half of it). ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear when a window
 opens, is written or fails to be written, and when the quota deletes an old window file.
 
-Pure: no rospy. The parts it runs: ``stamp_clock`` (the one clock of the stamps), ``window_prep`` (windows
-thinned under overload, latched messages first), ``smart_events`` (Event), ``trigger_topics``.
+Pure: no rospy. Its parts: ``stamp_clock`` (the one clock of the stamps), ``window_prep`` (windows thinned under
+overload, latched messages first), ``smart_events`` (Event), ``trigger_topics``, ``keep_budget``.
 """
 import collections
 import itertools
@@ -40,7 +39,7 @@ import time
 from cc_log import errors
 from cc_log import features as features_mod
 from cc_log.storage import log_format, window_writer
-from cc_log.core import msg_codec, raw_message, routes as routes_mod, smart_events, window_prep
+from cc_log.core import keep_budget, msg_codec, raw_message, routes as routes_mod, smart_events, window_prep
 from cc_log.core.raw_json import RawJsonEstimate
 from cc_log.core.smart_events import DELETED, FAILED, OPENED, SPLIT, WRITTEN, Event
 from cc_log.core.stamp_clock import StampClock
@@ -53,8 +52,8 @@ from cc_log.core.window_buffer import (
     DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, WindowBuffer)
 
 __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
-           'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
-           'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
+           'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC', 'RETRIGGER_MODES', 'DEFAULT_RETRIGGER',
+           'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
 DEFAULT_FORMAT = log_format.formats.DEFAULT
 DEFAULT_DRIVING_TOPIC = 'odom'
@@ -104,6 +103,7 @@ class SmartLogger(object):
     (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
     many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
     (offline): a message waits for room in the budget, never thinned for the writer.
+    max_windows_per_hour: the keep budget (``keep_budget.KeepBudget``: past it, a Fire must be more anomalous; 0: off).
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -116,7 +116,7 @@ class SmartLogger(object):
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
                  close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
                  keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE, wait_for_writer=False, max_files=0,
-                 prefix=log_format.PREFIX):
+                 prefix=log_format.PREFIX, max_windows_per_hour=0):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -147,6 +147,7 @@ class SmartLogger(object):
         watched = set().union(*(trigger.topics for trigger in self.triggers))
         self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self.max_buffer_mb = max_buffer_mb
+        self.budget = keep_budget.KeepBudget(max_windows_per_hour, self.pre.seconds, self.post.seconds)
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
         self._bases = {}  # window key -> the base name of its files, while it is handed on in parts (routes)
@@ -477,7 +478,7 @@ class SmartLogger(object):
                 'messages_shed': sum(self._shed.values()),
                 'shed_by_topic': dict(self._shed),
                 'messages_restamped': sum(self._restamped.values()),
-                'restamped_by_topic': dict(self._restamped),
+                'restamped_by_topic': dict(self._restamped), **self.budget.stats(),  # windows_skipped, ...
             }
         # Not in any window (outside every anomaly, seen while paused, or trimmed from the pre buffer).
         result['messages_not_kept'] = result['messages_seen'] - sum(result[key] for key in (
@@ -523,6 +524,8 @@ class SmartLogger(object):
                 with self._stats.lock:
                     self._stats.fires_dropped += 1
                 continue
+            if not self.budget.admit(self._last_stamp, fire, opens=not self._buffer.window_active):
+                continue  # the keep budget is spent and this Fire would open a window: counted as skipped
             announce = not self._buffer.window_active
             done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post, fire.why)
             if announce:
@@ -534,10 +537,7 @@ class SmartLogger(object):
             self._complete(done)
 
     def _threshold_of(self, name):
-        for trigger in self.classifiers:
-            if trigger.name == name:
-                return trigger.threshold
-        return self.threshold
+        return next((trigger.threshold for trigger in self.classifiers if trigger.name == name), self.threshold)
 
     def _bytes_queued(self):
         """Memory of the parts handed to the writer and not yet written."""

@@ -17,7 +17,8 @@ Published topics
   a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
   trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
   off the clock), each classifier's drift (WARN when it flags far more of the driving than of its training
-  data, with the remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
+  data, with the remedies: ``drift.DriftMonitor``), the windows the keep budget ``~max_windows_per_hour`` skipped
+  (WARN once it skips: the robot's normal may have drifted), every ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
@@ -244,12 +245,14 @@ class SmartNode(object):
         overflowed = self.intake.overflowed
         drifting = [(health.WARN, text) for drift_level, text in (monitor.status() for monitor in self.drift)
                     if drift_level]
-        level, message = health.worst(level, message, health.not_kept(stats, overflowed) + drifting)
+        level, message = health.worst(level, message, health.not_kept(stats, overflowed) + drifting
+                                      + health.skipped(stats))
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('enabled', stats['enabled']),
             ('windows opened', stats['windows_opened']),
             ('windows saved', stats['windows_saved']),
+            ('windows skipped (keep budget)', health.skipped_value(stats)),
             ('last trigger', self._last_trigger),
             ('messages seen', stats['messages_seen']),
             ('messages kept', stats['messages_kept']),

@@ -136,10 +136,11 @@ def replay(bag_path, topic, model_path, out_dir, pre=smart.DEFAULT_PRE, post=sma
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
-    'path'}]}`` with windows in start order (start/end: header stamps, float s, of the first and last
-    message saved). ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``);
-    ``triggers``, ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``,
-    called every PROGRESS_EVERY messages and at the end. The reading waits for the writer (``SmartLogger``'s
+    'path'}], 'keep_budget'}`` with windows in start order (start/end: header stamps, float s, of the first and last
+    message saved); ``keep_budget``: ``KeepBudget.stats()``, the windows the keep budget skipped.
+    ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``); ``triggers``,
+    ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``, called every
+    PROGRESS_EVERY messages and at the end. The reading waits for the writer (``SmartLogger``'s
     ``wait_for_writer``: nothing thinned because it is behind). A window that cannot be written (disk full...) is
     retried for ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops.
     Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag cannot be read or a
@@ -231,4 +232,5 @@ def replay_records(logger, records, progress=None, source='the records'):
         'raw_json_bytes': stats['raw_json_bytes'],
         'stored_bytes': stats['stored_bytes'],
         'windows': sorted(windows, key=lambda window: window['start']),
+        'keep_budget': logger.budget.stats(),  # the windows it skipped (core.keep_budget)
     }

@@ -27,13 +27,15 @@ def add_parser(subparsers):
         stored_bytes, windows: [{start, end, messages, path}]}; start/end are the header stamps (float
         seconds) of the first and last message saved. A window that cannot be written (disk full) is retried
         for a few seconds; then replay stops and exits 1 with one line naming OUT and how many windows and
-        messages were not written.
+        messages were not written. --max-windows-per-hour N: the keep budget (past N windows in the last
+        hour, only a more anomalous one opens); the summary counts what it skipped (--json: keep_budget).
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
           cclog replay crash.bag --topic /odom --model model.json --out logs --pre 2s --post 2s --json
           cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
           cclog replay run.bag --config robot.yaml --out logs --classify-every 1 --retrigger onset
+          cclog replay long_run.bag --config robot.yaml --out logs --max-windows-per-hour 6
         """))
     p.add_argument('bag', nargs='+', metavar='BAG', help='input bag; several, a directory (its *.bag) or a glob: '
                    'one Dask task each, windows into OUT/<bag name>/')
@@ -100,6 +102,7 @@ def run(args):
                      for w in summary['windows']]),
         ('drift', [monitor.as_dict() for monitor in summary['drift']]),
         ('online', summary['online']),
+        ('keep_budget', summary['keep_budget']),
     ])
     if args.json:
         print_json(result)
@@ -120,7 +123,19 @@ def run(args):
         print('  %s' % monitor.report())
     for learner in summary['online']:
         print('  %s: online learning %s' % (learner['classifier'], learner['resumed'] or 'started afresh'))
+    print(''.join(_skipped_lines(summary['keep_budget'])), end='')
     return EXIT_OK
+
+
+def _skipped_lines(budget):
+    """The lines saying what the keep budget skipped (``KeepBudget.stats()``; none when nothing): its report and
+    the last skipped windows, each with its stamp, trigger and score."""
+    from cc_log.core import keep_budget
+    report = keep_budget.report(budget)
+    if not report:
+        return []
+    return ['  %s\n' % report] + ['    skipped  %s  %s  score %.4g\n' % (
+        stamp_text(skip['stamp']), skip['trigger'], skip['score']) for skip in budget['skipped']]
 
 
 def _replay_many(args, cfg):
@@ -129,12 +144,14 @@ def _replay_many(args, cfg):
     writable_dir(args.out, 'out')
     outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
         engine, bags, args.out, cfg, progress=progress))
-    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online'))
+    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
+                                 'keep_budget'))
     reports = {}
     for row in rows:
         row['windows'] = [collections.OrderedDict((key, w[key]) for key in ('start', 'end', 'messages', 'path'))
                           for w in row.get('windows', ())]
-        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ()))
+        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ())) + ''.join(
+            '\n' + line.rstrip('\n') for line in _skipped_lines(row.get('keep_budget') or {}))
         row['drift'] = [monitor.as_dict() for monitor in row.get('drift', ())]
     good = [row for row in rows if 'error' not in row]
     summary['windows'] = sum(len(row['windows']) for row in good)
