@@ -1,0 +1,195 @@
+#!/usr/bin/env python3
+"""Which signal each anomaly needs: odometry, IMU, command and goal-status detectors side by side.
+
+    cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
+    python3 bench/imu_collision.py            # about two minutes
+    python3 bench/imu_collision.py --quick    # tiny run (tests)
+
+The question: a collision inside the robot's own stopping envelope (``soft_collision`` of the simulator: the base
+stops no harder than its own nominal stops, the IMU rings, the planner keeps commanding speed) is invisible to
+odometry features; which signal catches it, how fast, at what false-window cost? And which signal does each of
+the simulator's anomaly types need?
+
+Detectors, each trained or set from nominal driving alone and replayed alone through SmartLogger (the replay of
+``cclog replay``; bag-lz4, pre and post 2 s, classify every 50 ms, retrigger ``event``):
+
+- ``odometry``: cc_log's default classifier (``motion`` features, 2 s window, ``cclog learn``'s training);
+- ``imu``: the same classifier on the ``imu`` feature set (``/imu/data``);
+- ``command``: the same classifier on the ``command`` feature set (``/odom`` against ``/cmd_vel``);
+- ``imu rule``: a rule ``abs(linear_acceleration.x) > K``, K = 2 x the largest |forward acceleration| of the
+  training run (the issue's envelope factor; no learning beyond that maximum);
+- ``goal rule``: a rule on move_base's status, ``status_list[0].status == 4`` (ABORTED).
+
+Data: the simulated BWIBot (cc_log.sim, 100 Hz odometry and IMU, 20 Hz cmd_vel, 2 Hz goal status). Training: a
+nominal run (seed 21; ``--train-minutes``). Test: a run (seed 22) with every anomaly type of sim.ANOMALY_TYPES
+and ``soft_collision`` (``--per-type`` of each), and a nominal run (seed 23) for false windows. Real IMU: the
+Husky (../shared/data/real/husky_outdoor_2015.bag, 30 Hz /imu/data, 10 Hz odometry, rough terrain, nominal
+only): trained on its first half, replayed on the second; every window there is false.
+
+Caught: a Fire of the detector within [onset, end + 2 s]; latency: the first such Fire minus the onset. A window
+is false when none of its Fires is within [onset, end + 2 s] of an anomaly.
+"""
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+
+from cc_log import sim  # noqa: E402
+from cc_log.core import learning  # noqa: E402
+from cc_log.features import FeatureConfig, FeatureStream  # noqa: E402
+from cc_log.triggers.classifier import ClassifierTrigger  # noqa: E402
+from cc_log.triggers.rule import RuleTrigger  # noqa: E402
+
+REACH = 2.0           # s after an anomaly's end a Fire still counts as catching it
+RULE_FACTOR = 2.0     # the IMU rule's threshold: this many times the training run's largest |a_x|
+STRIDE = 10           # training vectors: one every this many messages of the first input
+TYPES = sim.ANOMALY_TYPES + sim.SIM_ONLY_TYPES
+DETECTORS = ('odometry', 'imu', 'command', 'imu rule', 'goal rule')
+SIM_TOPICS = {'odom': sim.ODOM_TOPIC, 'imu': sim.IMU_TOPIC, 'cmd_vel': sim.CMD_TOPIC}
+
+
+def sim_config(seed, minutes, types=None, per_type=0):
+    """A simulated run with IMU and commands: nominal, or ``per_type`` anomalies of each of ``types``."""
+    count = len(types) * per_type if types else 0
+    return sim.SimConfig(seed=seed, minutes=minutes, anomalies=count, anomaly_types=types or sim.ANOMALY_TYPES,
+                         imu=True, commands=True)
+
+
+def train_classifier(records, feature_set, topics):
+    """A model trained as ``cclog learn`` does (1 % trimmed) on ``records``: the feature set's vectors, one every
+    STRIDE messages of its first input; ``topics`` maps its roles to topic names."""
+    config = FeatureConfig(feature_set)
+    roles = {topics[role]: role for role, _ in config.feature.inputs}
+    first = topics[config.feature.inputs[0][0]]
+    stream, vectors = FeatureStream(config, every=STRIDE), []
+    for record in records:
+        role = roles.get(record.topic)
+        if role is None:
+            continue
+        if record.topic != first:
+            stream.observe(role, record.msg, record.stamp)
+            continue
+        vector = stream.add(record.msg, record.stamp)
+        if vector is not None:
+            vectors.append(vector)
+    model, _ = learning.train(np.array(vectors), config=config, trim=learning.DEFAULT_TRIM)
+    return model
+
+
+def largest_forward_acceleration(records, topic):
+    """The largest |linear_acceleration.x| of ``topic``'s IMU messages."""
+    return max(abs(r.msg.linear_acceleration.x) for r in records if r.topic == topic)
+
+
+def detectors(training, topics, names=DETECTORS):
+    """``{name: function making a fresh Trigger}`` of the detectors, trained on ``training`` (records)."""
+    made = {}
+    for name, feature_set in (('odometry', 'motion'), ('imu', 'imu'), ('command', 'command')):
+        if name in names:
+            model = train_classifier(training, feature_set, topics)
+            inputs = [topics[role] for role, _ in model.config.feature.inputs]
+            made[name] = (lambda model=model, inputs=inputs: ClassifierTrigger('classifier', model, inputs))
+    if 'imu rule' in names:
+        limit = RULE_FACTOR * largest_forward_acceleration(training, topics['imu'])
+        made['imu rule'] = lambda: RuleTrigger('imu_rule', topic=topics['imu'],
+                                               when='abs(linear_acceleration.x) > %.4g' % limit)
+    if 'goal rule' in names:
+        made['goal rule'] = lambda: RuleTrigger('goal_rule', topic=topics['status'],
+                                                when='status_list[0].status == 4')
+    return made
+
+
+def replay(trigger, records, driving_topic):
+    """Windows of one trigger replayed over ``records`` (bench/common.smart_replay)."""
+    with tempfile.TemporaryDirectory() as directory:
+        return common.smart_replay(None, records, driving_topic, directory, fmt='bag-lz4', pre='2s', post='2s',
+                                   triggers=(trigger,))['windows']
+
+
+def score(windows, truth):
+    """``(per-anomaly [{type, caught, latency}], false windows)``."""
+    per, false = common.match_anomalies(truth, windows, REACH)
+    return [{'type': e['type'], 'caught': e['caught'], 'latency': e['delay']} for e in per], false
+
+
+def husky_halves():
+    """(first half, second half) of the Husky's odometry and IMU records (decoded), and their hours."""
+    import rosbag
+    from cc_log.core.records import Record
+    with rosbag.Bag(common.HUSKY_BAG) as bag:
+        records = [Record(m.header.stamp.to_sec() if m.header.stamp.to_sec() else t.to_sec(), topic, m)
+                   for topic, m, t in bag.read_messages(topics=[common.HUSKY_ODOM, common.HUSKY_IMU])]
+    records.sort(key=lambda r: r.stamp)
+    middle = (records[0].stamp + records[-1].stamp) / 2.0
+    first = [r for r in records if r.stamp < middle]
+    second = [r for r in records if r.stamp >= middle]
+    return first, second, (records[-1].stamp - middle) / 3600.0
+
+
+def upper95(count, hours):
+    """The 95 % upper bound of a rate (per hour) from ``count`` events in ``hours`` (Poisson, exact)."""
+    from scipy.stats import chi2
+    return chi2.ppf(0.95, 2 * (count + 1)) / 2.0 / hours
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--train-minutes', type=float, default=8.0)
+    parser.add_argument('--nominal-minutes', type=float, default=10.0)
+    parser.add_argument('--per-type', type=int, default=3, help='anomalies of each type in the test run')
+    parser.add_argument('--quick', action='store_true', help='tiny run: 2 min training, 1 of each type')
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.train_minutes, args.nominal_minutes, args.per_type = 2.0, 1.0, 1
+    print(common.machine())
+    print('revision: %s' % common.revision())
+    print(common.describe_data(common.HUSKY_BAG))
+    started = time.time()
+    topics = dict(SIM_TOPICS, status=sim.STATUS_TOPIC)
+    training, _ = common.sim_records(sim_config(21, args.train_minutes))
+    made = detectors(training, topics)
+    print('imu rule: %s (2 x the training run\'s largest |a_x|)' % made['imu rule']().condition.text)
+    minutes = len(TYPES) * args.per_type * (20.0 + sim.MAX_ANOMALY_SECONDS) / 60.0 + 1.0
+    test, truth = common.sim_records(sim_config(22, minutes, TYPES, args.per_type))
+    nominal, _ = common.sim_records(sim_config(23, args.nominal_minutes))
+    nominal_hours = (nominal[-1].stamp - nominal[0].stamp) / 3600.0
+    results = {}
+    for name, make in made.items():
+        caught, false = score(replay(make(), test, sim.ODOM_TOPIC), truth)
+        _, nominal_false = score(replay(make(), nominal, sim.ODOM_TOPIC), [])
+        results[name] = (caught, false, nominal_false)
+    print('\nsimulated BWIBot: trained on %.0f min nominal (seed 21); test run seed 22, %d anomalies; nominal run '
+          'seed 23, %.0f min' % (args.train_minutes, len(truth), nominal_hours * 60))
+    print('caught/n (median latency s) per anomaly type and detector:')
+    print('%-20s' % 'type' + ''.join('%-16s' % name for name in made))
+    for kind in TYPES:
+        cells = []
+        for name in made:
+            hits = [e for e in results[name][0] if e['type'] == kind]
+            latency = [e['latency'] for e in hits if e['caught']]
+            cells.append('%d/%d (%s)' % (len(latency), len(hits), '%.2f' % np.median(latency) if latency else '-'))
+        print('%-20s' % kind + ''.join('%-16s' % cell for cell in cells))
+    print('%-20s' % 'false windows (test)' + ''.join('%-16d' % results[name][1] for name in made))
+    print('%-20s' % 'false, nominal run' + ''.join('%-16s' % ('%d (<%.0f/h)' % (
+        results[name][2], upper95(results[name][2], nominal_hours))) for name in made))
+    # the real IMU: the Husky, nominal only
+    first, second, hours = husky_halves()
+    husky_topics = {'odom': common.HUSKY_ODOM, 'imu': common.HUSKY_IMU}
+    real = detectors(first, husky_topics, ('odometry', 'imu', 'imu rule'))
+    print('\nHusky (real, nominal): trained on the first half, replayed on the second (%.1f min); %s'
+          % (hours * 60, real['imu rule']().condition.text))
+    for name, make in real.items():
+        count = len(replay(make(), second, common.HUSKY_ODOM))
+        print('  %-10s false windows %d (95%% upper bound %.0f/h)' % (name, count, upper95(count, hours)))
+    print('\n%.0f s' % (time.time() - started))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
