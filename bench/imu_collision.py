@@ -49,6 +49,8 @@ from cc_log.triggers.rule import RuleTrigger  # noqa: E402
 REACH = 2.0           # s after an anomaly's end a Fire still counts as catching it
 RULE_FACTOR = 2.0     # the IMU rule's threshold: this many times the training run's largest |a_x|
 STRIDE = 10           # training vectors: one every this many messages of the first input
+SEQUOR_NOMINAL = 'sequor_E2_normal_safe_escape_straight.bag'
+SEQUOR_CRASHES = 'sequor_N3_anomalous_crash_wall.bag'
 TYPES = sim.ANOMALY_TYPES + sim.SIM_ONLY_TYPES
 DETECTORS = ('odometry', 'imu', 'command', 'imu rule', 'goal rule')
 SIM_TOPICS = {'odom': sim.ODOM_TOPIC, 'imu': sim.IMU_TOPIC, 'cmd_vel': sim.CMD_TOPIC}
@@ -119,17 +121,27 @@ def score(windows, truth):
 
 
 def husky_halves():
-    """(first half, second half) of the Husky's odometry and IMU records (decoded), and their hours."""
-    import rosbag
-    from cc_log.core.records import Record
-    with rosbag.Bag(common.HUSKY_BAG) as bag:
-        records = [Record(m.header.stamp.to_sec() if m.header.stamp.to_sec() else t.to_sec(), topic, m)
-                   for topic, m, t in bag.read_messages(topics=[common.HUSKY_ODOM, common.HUSKY_IMU])]
-    records.sort(key=lambda r: r.stamp)
-    middle = (records[0].stamp + records[-1].stamp) / 2.0
-    first = [r for r in records if r.stamp < middle]
-    second = [r for r in records if r.stamp >= middle]
-    return first, second, (records[-1].stamp - middle) / 3600.0
+    """(first half, second half) of the Husky's odometry and IMU records in time order, and the second's hours."""
+    records = sorted(common.husky_records((common.HUSKY_ODOM, common.HUSKY_IMU)), key=lambda r: r.stamp)
+    first, second = common.split_half(records, common.HUSKY_ODOM)
+    return first, second, (second[-1].stamp - second[0].stamp) / 3600.0
+
+
+def sequor_crashes():
+    """The Sequor robot's real wall crashes against its normal driving, on its /lin_acc (AccelStamped, 10 Hz):
+    ``(nominal max |a|, [(trial, its max |a|)] of the crashes)``, |a| the larger of |x| and |y|."""
+    def largest(path):
+        label, peaks = None, {}
+        for record in bagio.read_messages(path, ['/label', '/lin_acc']):
+            if record.topic == '/label':
+                label = record.msg.data
+            elif label is not None:
+                linear = record.msg.accel.linear
+                peaks[label] = max(peaks.get(label, 0.0), abs(linear.x), abs(linear.y))
+        return peaks
+    from cc_log.storage.bag import bagio
+    nominal = largest(os.path.join(common.DATA, SEQUOR_NOMINAL))
+    return max(nominal.values()), sorted(largest(os.path.join(common.DATA, SEQUOR_CRASHES)).items())
 
 
 def upper95(count, hours):
@@ -141,53 +153,67 @@ def upper95(count, hours):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--train-minutes', type=float, default=8.0)
-    parser.add_argument('--nominal-minutes', type=float, default=10.0)
-    parser.add_argument('--per-type', type=int, default=3, help='anomalies of each type in the test run')
+    parser.add_argument('--nominal-minutes', type=float, default=20.0)
+    parser.add_argument('--per-type', type=int, default=4, help='anomalies of each type in the test run')
+    parser.add_argument('--soft-decel', default='%g,%g' % sim.anomalies.SOFT_DECEL,
+                        help='a soft collision\'s deceleration range as fractions of the planned braking (%g m/s^2; '
+                             'the base\'s max_decel is %g)' % (sim.floor.PLANNED_DECEL, sim.BWIBOT_LIMITS.max_decel))
     parser.add_argument('--quick', action='store_true', help='tiny run: 2 min training, 1 of each type')
     args = parser.parse_args(argv)
     if args.quick:
         args.train_minutes, args.nominal_minutes, args.per_type = 2.0, 1.0, 1
-    print(common.machine())
-    print('revision: %s' % common.revision())
-    print(common.describe_data(common.HUSKY_BAG))
+    sim.anomalies.SOFT_DECEL = tuple(float(value) for value in args.soft_decel.split(','))
     started = time.time()
+    common.header('Which signal each anomaly needs: odometry, IMU, command, goal status (simulated BWIBot, Husky)',
+                  [common.describe_data(common.HUSKY_BAG, '(real IMU, nominal)'), 'revision: %s' % common.revision()])
     topics = dict(SIM_TOPICS, status=sim.STATUS_TOPIC)
     training, _ = common.sim_records(sim_config(21, args.train_minutes))
     made = detectors(training, topics)
-    print('imu rule: %s (2 x the training run\'s largest |a_x|)' % made['imu rule']().condition.text)
     minutes = len(TYPES) * args.per_type * (20.0 + sim.MAX_ANOMALY_SECONDS) / 60.0 + 1.0
     test, truth = common.sim_records(sim_config(22, minutes, TYPES, args.per_type))
     nominal, _ = common.sim_records(sim_config(23, args.nominal_minutes))
-    nominal_hours = (nominal[-1].stamp - nominal[0].stamp) / 3600.0
+    hours = (nominal[-1].stamp - nominal[0].stamp) / 3600.0
     results = {}
     for name, make in made.items():
         caught, false = score(replay(make(), test, sim.ODOM_TOPIC), truth)
         _, nominal_false = score(replay(make(), nominal, sim.ODOM_TOPIC), [])
         results[name] = (caught, false, nominal_false)
-    print('\nsimulated BWIBot: trained on %.0f min nominal (seed 21); test run seed 22, %d anomalies; nominal run '
-          'seed 23, %.0f min' % (args.train_minutes, len(truth), nominal_hours * 60))
-    print('caught/n (median latency s) per anomaly type and detector:')
-    print('%-20s' % 'type' + ''.join('%-16s' % name for name in made))
+    print('simulated BWIBot: trained on %g min of nominal driving (seed 21); test run (seed 22): %d anomalies, '
+          'soft collisions at %s x %g m/s^2; nominal run (seed 23): %.0f min; %s'
+          % (args.train_minutes, len(truth), args.soft_decel, sim.floor.PLANNED_DECEL, hours * 60,
+             made['imu rule']().condition.text))
+    rows = []
     for kind in TYPES:
-        cells = []
+        row = [kind]
         for name in made:
             hits = [e for e in results[name][0] if e['type'] == kind]
             latency = [e['latency'] for e in hits if e['caught']]
-            cells.append('%d/%d (%s)' % (len(latency), len(hits), '%.2f' % np.median(latency) if latency else '-'))
-        print('%-20s' % kind + ''.join('%-16s' % cell for cell in cells))
-    print('%-20s' % 'false windows (test)' + ''.join('%-16d' % results[name][1] for name in made))
-    print('%-20s' % 'false, nominal run' + ''.join('%-16s' % ('%d (<%.0f/h)' % (
-        results[name][2], upper95(results[name][2], nominal_hours))) for name in made))
-    # the real IMU: the Husky, nominal only
-    first, second, hours = husky_halves()
-    husky_topics = {'odom': common.HUSKY_ODOM, 'imu': common.HUSKY_IMU}
-    real = detectors(first, husky_topics, ('odometry', 'imu', 'imu rule'))
-    print('\nHusky (real, nominal): trained on the first half, replayed on the second (%.1f min); %s'
-          % (hours * 60, real['imu rule']().condition.text))
-    for name, make in real.items():
-        count = len(replay(make(), second, common.HUSKY_ODOM))
-        print('  %-10s false windows %d (95%% upper bound %.0f/h)' % (name, count, upper95(count, hours)))
-    print('\n%.0f s' % (time.time() - started))
+            row.append('%d/%d (%s)' % (len(latency), len(hits), '%.2f s' % np.median(latency) if latency else '-'))
+        rows.append(row)
+    rows.append(['false windows, test run'] + [results[name][1] for name in made])
+    rows.append(['false windows, nominal run'] + ['%d (< %.0f/h)' % (results[name][2], upper95(results[name][2], hours))
+                                                  for name in made])
+    common.table(['anomaly: caught/n (median latency)'] + list(made), rows)
+    first, second, husky_hours = husky_halves()
+    real = detectors(first, {'odom': common.HUSKY_ODOM, 'imu': common.HUSKY_IMU}, ('odometry', 'imu', 'imu rule'))
+    counts = {name: len(replay(make(), second, common.HUSKY_ODOM)) for name, make in real.items()}
+    print('Husky (real, nominal only): trained on the first half, replayed on the second (%.1f min); %s'
+          % (husky_hours * 60, real['imu rule']().condition.text))
+    common.table(['detector', 'false windows', '95% upper bound /h'],
+                 [[name, count, upper95(count, husky_hours)] for name, count in counts.items()])
+    nominal_peak, crashes = sequor_crashes()
+    peaks = [peak for _, peak in crashes]
+    beyond = [sum(p > factor * nominal_peak for p in peaks) for factor in (2.0, 1.5)]
+    print('Sequor (real): %d wall crashes (%s) against 20 normal runs (%s), /lin_acc at 10 Hz; a rule at 2 x the '
+          'normal runs\' largest |a| (%.2f m/s^2) catches %d/%d; at 1.5 x, %d/%d; crash peaks %.2f-%.2f m/s^2 (median '
+          '%.2f)\n' % (len(crashes), SEQUOR_CRASHES, SEQUOR_NOMINAL, nominal_peak, beyond[0], len(peaks), beyond[1],
+                       len(peaks), min(peaks), max(peaks), float(np.median(peaks))))
+    soft = {name: [e for e in results[name][0] if e['type'] == 'soft_collision'] for name in made}
+    for name in ('imu', 'command', 'imu rule'):
+        prompt = sum(1 for e in soft[name] if e['caught'] and e['latency'] <= 0.5)
+        print('target (%s) every soft collision caught within 0.5 s: %d/%d -> %s'
+              % (name, prompt, len(soft[name]), 'met' if prompt == len(soft[name]) else 'NOT met'))
+    print('total %.1f s' % (time.time() - started))
     return 0
 
 

@@ -17,10 +17,12 @@ between events:
 Simulator only, never part of ``ANOMALY_TYPES`` (so never drawn unless named, and not for ``inject``, which
 changes odometry alone): ``SIM_ONLY_TYPES``:
 
-- ``soft_collision``: the base runs into something that gives (a person, a chair) and stops no harder than
-  its own nominal stops (``SOFT_DECEL`` of ``max_decel``), then stands still for seconds while the planner
-  keeps commanding speed; the IMU feels the impact as a short ringing acceleration spike (``impact``). Invisible
-  to odometry features by design: only the IMU or the command against the motion can tell it.
+- ``soft_collision``: the base runs into something that gives (a person, a cart) and stops no harder than
+  its own nominal stops: at ``SOFT_DECEL`` of the braking its planner plans with (``floor.PLANNED_DECEL``, half
+  the base's ``max_decel``; a stop from cruise speed at the limit is a harder one than nominal driving ever
+  makes, which odometry features see), then stands still for seconds while the planner keeps commanding speed;
+  the IMU feels the impact as a short ringing acceleration spike (``impact``). Meant to be invisible to odometry
+  features: only the IMU or the command against the motion should tell it.
 
 A model is a plan (``draw_plan``: durations in seconds, so any rate works) and the twist it makes the base
 drive ``tau`` seconds in (``command``; ``jump_offset`` for the pose of a localization jump). The ground truth
@@ -28,6 +30,7 @@ of the anomalies is ``truth``'s.
 """
 import math
 
+from cc_log.sim.floor import PLANNED_DECEL
 from cc_log.sim.kinematics import BWIBOT_LIMITS
 
 ANOMALY_TYPES = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting',
@@ -36,7 +39,7 @@ MAX_ANOMALY_SECONDS = 10.0   # no anomaly's active phase lasts longer (simulator
 NEEDS_MOTION = ('collision', 'sudden_acceleration', 'excessive_twisting', 'wheels_slipping')  # start where it drives
 MOVES_BASE = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting')  # change the twist
 SIM_ONLY_TYPES = ('soft_collision',)  # named explicitly (SimConfig.anomaly_types) only: IMU and commands needed
-SOFT_DECEL = (0.5, 0.9)               # a soft collision's deceleration, as a fraction of the base's max_decel
+SOFT_DECEL = (0.6, 0.9)               # a soft collision's deceleration, as a fraction of the planned braking
 IMPACT_PEAK = (5.0, 15.0)             # m/s^2: the spike's amplitude (0.5-1.5 g)
 IMPACT_HZ = (20.0, 35.0)              # its ringing frequency
 IMPACT_DECAY = (0.02, 0.05)           # s: its decay time constant
@@ -92,7 +95,7 @@ def draw_plan(kind, rng, v0, scale=None):
             plan['stop_time'] = max(max(v0, 0.0) / decel, 1e-3)
         plan['duration'] = rng.uniform(3.0, 6.0)
     elif kind == 'soft_collision':
-        plan['decel'] = rng.uniform(*SOFT_DECEL) * BWIBOT_LIMITS.max_decel * ratio('max_decel')
+        plan['decel'] = rng.uniform(*SOFT_DECEL) * PLANNED_DECEL * ratio('max_decel')
         plan['stop_time'] = max(max(v0, 0.0) / plan['decel'], 1e-3)
         plan['duration'] = plan['stop_time'] + rng.uniform(3.0, 6.0)
         plan['peak'] = rng.uniform(*IMPACT_PEAK)
