@@ -49,6 +49,7 @@ from cc_log.triggers.rule import RuleTrigger  # noqa: E402
 REACH = 2.0           # s after an anomaly's end a Fire still counts as catching it
 RULE_FACTOR = 2.0     # the IMU rule's threshold: this many times the training run's largest |a_x|
 STRIDE = 10           # training vectors: one every this many messages of the first input
+SLOT = 45.0           # s of the test run per anomaly: 20 s gap, up to 10 s of anomaly, 15 s to find the base driving
 SEQUOR_NOMINAL = 'sequor_E2_normal_safe_escape_straight.bag'
 SEQUOR_CRASHES = 'sequor_N3_anomalous_crash_wall.bag'
 TYPES = sim.ANOMALY_TYPES + sim.SIM_ONLY_TYPES
@@ -154,7 +155,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--train-minutes', type=float, default=8.0)
     parser.add_argument('--nominal-minutes', type=float, default=20.0)
-    parser.add_argument('--per-type', type=int, default=4, help='anomalies of each type in the test run')
+    parser.add_argument('--per-type', type=int, default=3, help='anomalies of each type in the test run')
     parser.add_argument('--soft-decel', default='%g,%g' % sim.anomalies.SOFT_DECEL,
                         help='a soft collision\'s deceleration range as fractions of the planned braking (%g m/s^2; '
                              'the base\'s max_decel is %g)' % (sim.floor.PLANNED_DECEL, sim.BWIBOT_LIMITS.max_decel))
@@ -169,7 +170,7 @@ def main(argv=None):
     topics = dict(SIM_TOPICS, status=sim.STATUS_TOPIC)
     training, _ = common.sim_records(sim_config(21, args.train_minutes))
     made = detectors(training, topics)
-    minutes = len(TYPES) * args.per_type * (20.0 + sim.MAX_ANOMALY_SECONDS) / 60.0 + 1.0
+    minutes = len(TYPES) * args.per_type * SLOT / 60.0 + 1.0
     test, truth = common.sim_records(sim_config(22, minutes, TYPES, args.per_type))
     nominal, _ = common.sim_records(sim_config(23, args.nominal_minutes))
     hours = (nominal[-1].stamp - nominal[0].stamp) / 3600.0
