@@ -2,8 +2,9 @@
 """Which signal each anomaly needs: odometry, IMU, command and goal-status detectors side by side.
 
     cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
-    python3 bench/imu_collision.py            # about two minutes
+    python3 bench/imu_collision.py            # about four minutes
     python3 bench/imu_collision.py --quick    # tiny run (tests)
+    python3 bench/imu_collision.py --soft-decel 1.0,1.8   # braking at 0.5-0.9 x max_decel
 
 The question: a collision inside the robot's own stopping envelope (``soft_collision`` of the simulator: the base
 stops no harder than its own nominal stops, the IMU rings, the planner keeps commanding speed) is invisible to
@@ -22,9 +23,11 @@ Detectors, each trained or set from nominal driving alone and replayed alone thr
 
 Data: the simulated BWIBot (cc_log.sim, 100 Hz odometry and IMU, 20 Hz cmd_vel, 2 Hz goal status). Training: a
 nominal run (seed 21; ``--train-minutes``). Test: a run (seed 22) with every anomaly type of sim.ANOMALY_TYPES
-and ``soft_collision`` (``--per-type`` of each), and a nominal run (seed 23) for false windows. Real IMU: the
-Husky (../shared/data/real/husky_outdoor_2015.bag, 30 Hz /imu/data, 10 Hz odometry, rough terrain, nominal
-only): trained on its first half, replayed on the second; every window there is false.
+and ``soft_collision`` (``--per-type`` of each, SLOT seconds apiece), and a nominal run (seed 23) for false
+windows. Real IMU: the Husky (../shared/data/real/husky_outdoor_2015.bag, 30 Hz /imu/data, 10 Hz odometry,
+rough terrain, nominal only): trained on its first half, replayed on the second; every window there is false.
+Sequor (real wall crashes of a teleoperated robot, ../shared/data/real/sequor_*.bag): its /lin_acc peaks in the
+crashes against its normal runs', the IMU rule's test.
 
 Caught: a Fire of the detector within [onset, end + 2 s]; latency: the first such Fire minus the onset. A window
 is false when none of its Fires is within [onset, end + 2 s] of an anomaly.
