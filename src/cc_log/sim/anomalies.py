@@ -20,7 +20,7 @@ changes odometry alone): ``SIM_ONLY_TYPES``:
 - ``soft_collision``: the base runs into something that gives (a person, a cart) and stops no harder than
   its own nominal stops: at ``SOFT_DECEL`` of the braking its planner plans with (``floor.PLANNED_DECEL``, half
   the base's ``max_decel``; a stop from cruise speed at the limit is a harder one than nominal driving ever
-  makes, which odometry features see), then stands still for seconds while the planner keeps commanding speed;
+  makes, which odometry features see), then stands still for seconds while the planner keeps commanding motion;
   the IMU feels the impact as a short ringing acceleration spike (``impact``). Meant to be invisible to odometry
   features: only the IMU or the command against the motion should tell it.
 
