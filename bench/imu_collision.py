@@ -55,6 +55,8 @@ STRIDE = 10           # training vectors: one every this many messages of the fi
 SLOT = 45.0           # s of the test run per anomaly: 20 s gap, up to 10 s of anomaly, 15 s to find the base driving
 SEQUOR_NOMINAL = 'sequor_E2_normal_safe_escape_straight.bag'
 SEQUOR_CRASHES = 'sequor_N3_anomalous_crash_wall.bag'
+ALFA = 'alfa_carbonZ_engine_failure.bag'
+ALFA_IMU, ALFA_FAILURE = '/mavros/imu/data_raw', '/failure_status/engines'
 TYPES = sim.ANOMALY_TYPES + sim.SIM_ONLY_TYPES
 DETECTORS = ('odometry', 'imu', 'command', 'imu rule', 'goal rule')
 SIM_TOPICS = {'odom': sim.ODOM_TOPIC, 'imu': sim.IMU_TOPIC, 'cmd_vel': sim.CMD_TOPIC}
@@ -148,6 +150,21 @@ def sequor_crashes():
     return max(nominal.values()), sorted(largest(os.path.join(common.DATA, SEQUOR_CRASHES)).items())
 
 
+def alfa_engine_failure():
+    """The ALFA UAV's IMU (/mavros/imu/data_raw, 10 Hz) before and after its engine fails (the first True on
+    /failure_status/engines): ``(largest |a_x|, |a_y| before, the same after)``."""
+    from cc_log.storage.bag import bagio
+    failed, before, after = None, [0.0, 0.0], [0.0, 0.0]
+    for record in bagio.read_messages(os.path.join(common.DATA, ALFA), [ALFA_IMU, ALFA_FAILURE]):
+        if record.topic == ALFA_FAILURE:
+            failed = failed or (record.stamp if record.msg.data else None)
+            continue
+        peaks = after if failed is not None else before
+        linear = record.msg.linear_acceleration
+        peaks[0], peaks[1] = max(peaks[0], abs(linear.x)), max(peaks[1], abs(linear.y))
+    return before, after
+
+
 def upper95(count, hours):
     """The 95 % upper bound of a rate (per hour) from ``count`` events in ``hours`` (Poisson, exact)."""
     from scipy.stats import chi2
@@ -212,6 +229,9 @@ def main(argv=None):
           'normal runs\' largest |a| (%.2f m/s^2) catches %d/%d; at 1.5 x, %d/%d; crash peaks %.2f-%.2f m/s^2 (median '
           '%.2f)\n' % (len(crashes), SEQUOR_CRASHES, SEQUOR_NOMINAL, nominal_peak, beyond[0], len(peaks), beyond[1],
                        len(peaks), min(peaks), max(peaks), float(np.median(peaks))))
+    before, after = alfa_engine_failure()
+    print('ALFA UAV (real, %s, %s): largest |a_x|, |a_y| before the engine fails %.2f, %.2f m/s^2; after %.2f, %.2f: '
+          'a failing engine is no shock\n' % (ALFA, ALFA_IMU, before[0], before[1], after[0], after[1]))
     soft = {name: [e for e in results[name][0] if e['type'] == 'soft_collision'] for name in made}
     for name in ('imu', 'command', 'imu rule'):
         prompt = sum(1 for e in soft[name] if e['caught'] and e['latency'] <= 0.5)
