@@ -26,7 +26,7 @@ nominal run (seed 21; ``--train-minutes``). Test: a run (seed 22) with every ano
 and ``soft_collision`` (``--per-type`` of each, SLOT seconds apiece), and a nominal run (seed 23) for false
 windows. Real IMU: the Husky (../shared/data/real/husky_outdoor_2015.bag, 30 Hz /imu/data, 10 Hz odometry,
 rough terrain, nominal only): trained on its first half, replayed on the second; every window there is false.
-Sequor (real wall crashes of a teleoperated robot, ../shared/data/real/sequor_*.bag): its /lin_acc peaks in the
+Sequor (real wall crashes, ../shared/data/real/sequor_*.bag): its /lin_acc peaks in the
 crashes against its normal runs', the IMU rule's test.
 
 Caught: a Fire of the detector within [onset, end + 2 s]; latency: the first such Fire minus the onset. A window
