@@ -29,7 +29,8 @@ def add_parser(subparsers):
     p.add_argument('--seed', type=non_negative_int('seed'), default=1, help='(default: %(default)s)')
     p.add_argument('--rate', type=positive_float('rate'), default=_sim_rate(),
                    help='odometry Hz (default: %(default)s)')
-    p.add_argument('--types', metavar='A,B', help='anomaly types to draw from (default: all)')
+    p.add_argument('--types', metavar='A,B', help='anomaly types to draw from (default: all; soft_collision, a '
+                   'collision within the base\'s own braking, only when named: give --imu --commands)')
     p.add_argument('--imu', action='store_true', help='also write sensor_msgs/Imu')
     p.add_argument('--commands', action='store_true', help='also write the planner\'s /cmd_vel and a move_base-like '
                    '/move_base/status')
