@@ -17,6 +17,13 @@ except ImportError:
         [os.path.join(ROOT, 'src')] + [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep) if p])
 
 
+def approx_floats(expected):
+    """``pytest.approx(expected)`` within the rounding a BLAS kernel adds to floats computed another way (a batch
+    against one row, another matrix shape: OpenBLAS's Prescott kernel differs in the last bits, ~1e-15). Scores,
+    model numbers and scaled features are compared with it; the decisions made from them are compared exactly."""
+    return pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
 def real_data(name):
     """The path of a real bag in ../shared/data/real by file name; fail when it is missing (module-scoped
     fixtures call it; tests take the ``real_bag`` fixture)."""

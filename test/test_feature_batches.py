@@ -1,6 +1,7 @@
 """Feature windows and window vectors computed a batch at a time (``FeatureStream.add_records``) on real bags:
 every vector is ``window_vector`` of the rows the window holds by its rules written out plainly, whatever the
-batch boundaries, with gaps and jumps back inside a batch; the classifier decides as record by record."""
+batch boundaries, with gaps and jumps back inside a batch; the classifier decides as record by record (its scores
+equal up to the rounding of a BLAS kernel)."""
 import os
 import random
 
@@ -17,7 +18,7 @@ from cc_log.core.spans import Span
 from cc_log.triggers import ClassifierTrigger
 from cc_log.core.records import Record
 
-from conftest import REAL_DATA
+from conftest import REAL_DATA, approx_floats
 
 HUSKY = ('husky_outdoor_2015.bag', '/husky_velocity_controller/odom', '/imu/data')
 F1TENTH = ('f1tenth_DS2.bag', '/odom', None)   # two gaps (one of 26 s) in its odometry
@@ -286,7 +287,9 @@ def test_the_classifier_decides_on_a_batch_as_record_by_record(f1tenth_model, re
     got = []
     for batch in batches(records, random.Random(4), 300):
         got += [[f.score for f in fires] for fires in together.on_records(batch)]
-    assert got == want
+    assert [len(fires) for fires in got] == [len(fires) for fires in want]  # the same records fire
+    flat = [[score for fires in run for score in fires] for run in (got, want)]
+    assert flat[0] == approx_floats(flat[1])  # equal but for a BLAS kernel's rounding of a batch
     assert together.calls == alone.calls and together.anomalous == alone.anomalous > 1000
     fired = sum(map(len, want))
     assert fired < together.anomalous if retrigger != 'every' else fired == together.anomalous

@@ -104,7 +104,8 @@ class AnomalyModel(object):
 
     def score_each(self, vectors):
         """``[score(v) for v in vectors]`` (a list of 1-D vectors), computed SCORE_BLOCK at a time with the
-        same arithmetic for each, so a batch scores bit for bit as one vector does."""
+        same arithmetic for each, so a batch scores as one vector does (bit for bit where the BLAS kernel rounds a
+        dot product alike wherever its row lies in memory; OpenBLAS's Prescott kernel differs in the last bits)."""
         X = np.asarray(vectors, dtype=float)
         if X.ndim != 2 or X.shape[1:] != self.mean.shape:
             shape = X.shape[1:] if X.ndim == 2 else X.shape

@@ -231,7 +231,7 @@ class ClassifierTrigger(Trigger):
 
 
 def scores_of(model, vectors):
-    """The scores of ``vectors`` (a list of 1-D arrays), each exactly what the model gives one vector:
+    """The scores of ``vectors`` (a list of 1-D arrays), each what the model gives one vector (see ``score_each``):
     ``AnomalyModel.score_each``, or one ``is_anomalous`` call at a time for another model."""
     score_each = getattr(model, 'score_each', None)
     if score_each is None:
