@@ -49,7 +49,7 @@ debian_packages_of() {
     diagnostic_updater) echo python3-diagnostic-updater ;;
     *_msgs|*_srvs) echo "ros-$name python3-$name" ;;     # message definitions and their Python classes
     python3-catkin-lint) echo catkin-lint ;;
-    python3-*|xz-utils|jq) echo "$key" ;;                 # rosdep's Debian rule: the same name
+    python3-*|xz-utils|jq|libopenblas-dev) echo "$key" ;; # rosdep's Debian rule: the same name
     *) return 1 ;;
   esac
 }
