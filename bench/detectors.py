@@ -319,13 +319,13 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True):
     started = time.time()
     total = sum(duration(records) for _, records in runs)
     train, rest = heldout.split(runs, min(train_seconds, fraction * total))
-    first = [r for _, records in train for r in records]
-    envelope = sim.nominal_envelope(first, TOPIC)
+    # each training run apart: runs of one robot may be stamped in any order
+    envelope = sim.Limits(*np.max([sim.nominal_envelope(records, TOPIC) for _, records in train], axis=0))
     detectors = make_detectors()
     X = np.concatenate([windows(records)[1] for _, records in train])
     for detector in detectors.values():
         detector.fit(X)
-    out = {'robot': robot, 'train_s': sum(duration(r) for _, r in train), 'rate': heldout.rate_of(first),
+    out = {'robot': robot, 'train_s': sum(duration(r) for _, r in train), 'rate': detection_runs.rate_of(train[0][1]),
            'hours': sum(duration(r) for _, r in rest) / 3600.0, 'runs': [name for name, _ in rest],
            'train_windows': len(X), 'events': [], 'lines': [], 'no_room': 0,
            'stats': {name: {level: tally() for level in LEVELS} for name in detectors}}
@@ -450,7 +450,7 @@ HEADERS = ['detector', 'caught', 'within 0.5 s', 'strong (>= 1.5x) caught', 'fal
 def report_robot(r, level):
     print('## %s: %.1f Hz, trained on %.1f min (%d windows), held out %.1f min nominal (%s), %d events injected%s'
           % (r['robot'], r['rate'], r['train_s'] / 60.0, r['train_windows'], r['hours'] * 60.0, ', '.join(r['runs']),
-             len(r['events']), ', %d run(s) too short to inject' % r['no_room'] if r['no_room'] else ''))
+             len(r['events']), ', %d run x seed(s) too short to inject' % r['no_room'] if r['no_room'] else ''))
     for line in r['lines']:
         print('  ' + line.replace('\n', '\n  '))
     common.table(HEADERS, [row_of(r, name, level) for name in r['stats']])
