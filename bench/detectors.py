@@ -40,7 +40,9 @@ episodes. False windows: the episodes of the held-out nominal driving, per hour,
 (Poisson: chi2.ppf(0.975, 2k + 2) / 2 / T, or 3 / T for k = 0). kept x ideal: odometry messages inside episodes of
 the injected replays / those within [onset - 2 s, end + 2 s] of an event. Per event its extreme: the largest
 envelope ratio (feature over the robot's own floored training maximum) of the windows ending in [onset, end + 1 s];
-"strong" events (extreme >= 1.5x) are the target's population.
+"strong" events (extreme >= 1.5x) are the target's population; ``--events`` prints every event with its extreme.
+
+Figures and what they say: docs/DETECTION.md, "Against the standard detectors".
 """
 import argparse
 import collections
@@ -311,6 +313,16 @@ def upper95(k, hours):
     return 3.0 / hours if k == 0 else chi2.ppf(0.975, 2 * k + 2) / 2.0 / hours
 
 
+def extreme_of(envelope, ends, M, entry):
+    """(largest envelope ratio, its feature) of the windows ending in [onset, end + WINDOW] of an event."""
+    inside = (ends >= entry['start']) & (ends <= entry['end'] + WINDOW)
+    if not inside.any():
+        return 0.0, '-'
+    ratios = envelope.ratios(M[inside])
+    row, column = np.unravel_index(int(np.argmax(ratios)), ratios.shape)
+    return float(ratios[row, column]), ENVELOPE_COLUMNS[column]
+
+
 # -- one robot -----------------------------------------------------------------------------------------------------
 
 def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True):
@@ -362,11 +374,10 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True):
             for k, (injected, truth) in enumerate(replays):
                 ends, M = windows(injected)
                 stamps = np.array([r.stamp for r in injected])
-                ratio = detectors['envelope'].ratios(M).max(axis=1) if len(M) else np.zeros(0)
                 for entry in truth:
-                    inside = (ends >= entry['start']) & (ends <= entry['end'] + WINDOW)
-                    out['events'].append({'type': entry['type'], 'run': name, 'seed': seed,
-                                          'extreme': float(ratio[inside].max()) if inside.any() else 0.0})
+                    extreme, feature = extreme_of(detectors['envelope'], ends, M, entry)
+                    out['events'].append({'type': entry['type'], 'run': name, 'seed': seed, 'feature': feature,
+                                          'at': entry['start'] - records[0].stamp, 'extreme': extreme})
                 for label, detector in detectors.items():
                     scores = detector.score(M)
                     for level in LEVELS:
@@ -445,6 +456,17 @@ def dominating(result, level=None):
 HEADERS = ['detector', 'caught', 'within 0.5 s', 'strong (>= 1.5x) caught', 'false windows', 'false/h',
            'false/h 95% upper', 'kept x ideal', 'span >= 95% kept', 'caught per type (%s)' % ' '.join(
                SHORT[kind] for kind in sim.ANOMALY_TYPES)]
+
+
+def report_events(r, level):
+    """One line per injected event: where, its extreme (and which feature), the detectors that caught it."""
+    print('every event (run, seed, onset s into the held-out run, type, extreme: feature; caught at level %g by):'
+          % level)
+    for k, e in enumerate(r['events']):
+        caught = [name for name in r['stats'] if r['stats'][name][level if name != 'cclog' else None]['caught'][k]]
+        print('  %s seed %d %7.1f s %-19s %6.2fx %-18s %s' % (
+            e['run'], e['seed'], e['at'], e['type'], e['extreme'], e['feature'], ' '.join(caught) or 'none'))
+    print()
 
 
 def report_robot(r, level):
@@ -540,6 +562,7 @@ def main(argv=None):
     parser.add_argument('--no-cclog', action='store_true', help="leave cc_log's defaults out (faster)")
     parser.add_argument('--out', default=os.path.join(tempfile.gettempdir(), 'cc_log_detectors'),
                         help='where the curve PNG goes')
+    parser.add_argument('--events', action='store_true', help='one line per injected event: its extreme, who caught it')
     parser.add_argument('--quick', action='store_true', help='the Husky alone, seed 0')
     args = parser.parse_args(argv)
     robots = ['husky'] if args.quick else args.robots.split(',')
@@ -568,6 +591,8 @@ def main(argv=None):
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         report_robot(results[-1], args.level)
+        if args.events:
+            report_events(results[-1], args.level)
     report_pooled(pooled(results), results, args.level, args.out)
     print('total %.0f s' % (time.time() - started))
     return 0
