@@ -2,8 +2,8 @@
 """cc_log's defaults against the standard detectors on every real robot, thresholds from training alone.
 
     /usr/bin/python3 bench/heldout_data.py                            # the held-out bags (once)
-    nice -n 10 /usr/bin/python3 bench/detectors.py                    # every robot, seeds 0 1 (~15 min, 2 cores)
-    /usr/bin/python3 bench/detectors.py --quick                       # the Husky, seed 0 (~1 min)
+    nice -n 10 /usr/bin/python3 bench/detectors.py                    # every robot, seeds 0 1 (~8 min, 2 cores)
+    /usr/bin/python3 bench/detectors.py --quick                       # the Husky, seed 0 (~10 s)
     /usr/bin/python3 bench/detectors.py --robots icelab,pioneer --seeds 0 --out /tmp/curves
 
 Robots: the held-out public robots (bench/heldout_data.py: ``tuc``, ``smartloc``, ``mrclam`` with all five
