@@ -42,9 +42,13 @@ The columns (window = the samples in it; units in ``ENVELOPE_UNITS``):
 ==================== ==========================================================================================
 
 ``ENVELOPE_FLOORS``: the smallest limit each feature gets whatever the training saw (a robot that never turned
-in training must not flag every turn). Pure numpy, vectorised: no rospy.
+in training must not flag every turn; ``still_fraction``'s is 1, a whole window: parking alone never flags).
+``odometry_samples(records)`` reads the six inputs from nav_msgs/Odometry records (serialized or decoded) with the
+readers of ``motion``. Pure numpy, vectorised: no rospy.
 """
 import numpy as np
+
+from cc_log.features.motion import OdometrySet, read_odometry, read_odometry_block_raw
 
 ENVELOPE_COLUMNS = (
     'max_speed', 'max_yaw_rate', 'max_accel', 'max_yaw_accel', 'max_jerk',
@@ -64,7 +68,7 @@ ENVELOPE_FLOORS = {
     'max_speed': 0.1, 'max_yaw_rate': 0.1, 'max_accel': 0.5, 'max_yaw_accel': 0.5,
     'max_jerk': 5.0, 'speed_variation': 0.1, 'yaw_rate_variation': 0.1, 'yaw_rate_flips': 2.0,
     'max_pose_gap': 0.05, 'sum_pose_gap': 0.1, 'max_heading_gap': 0.05, 'sum_heading_gap': 0.1,
-    'still_fraction': 0.25, 'still_yaw_rate': 0.1, 'max_span_accel': 0.5,
+    'still_fraction': 1.0, 'still_yaw_rate': 0.1, 'max_span_accel': 0.5,
     'max_decel': 0.5, 'max_speedup': 0.5, 'max_speed_drop': 0.1, 'max_speed_rise': 0.1,
 }
 MAX_GAP = 0.5        # s: a longer step between samples is no step (its change measures read 0)
@@ -73,11 +77,12 @@ SPAN = 0.2           # s: the span of max_span_accel and of the speed drop and r
 SPAN_MAX = 0.3       # s: the longest span of max_span_accel
 STILL_SPEED = 0.05   # m/s: standing still below it
 FLIP_DEADBAND = 0.05  # rad/s: a yaw rate closer to 0 has no sign
-HISTORY = 0.5        # s: how far before a window's start its rows look (derivatives of derivatives, spans)
+HISTORY = 2 * MAX_GAP  # s: how far before a window's start its rows look (a derivative of a derivative)
 
 
-def _clean(stamps, x, y, yaw, v, w):
-    """The six inputs as float arrays of one length, keeping the finite samples that move time forward."""
+def clean_samples(stamps, x, y, yaw, v, w):
+    """The six inputs as float arrays of one length, keeping the finite samples that move time forward (ValueError
+    when their lengths differ)."""
     arrays = [np.asarray(a, dtype=float).ravel() for a in (stamps, x, y, yaw, v, w)]
     n = len(arrays[0])
     if any(len(a) != n for a in arrays):
@@ -119,25 +124,33 @@ def _range_reduce(ufunc, values, lo, hi):
     return ufunc.reduceat(padded, index, axis=0)[0::2]
 
 
+def _steps(t, x, y, yaw, v, w):
+    """Per sample, its step from the sample before: ``(step, pose, wheels, turned, rate_turn)``: whether it is one
+    (not the first, at most MAX_GAP), the pose's (dx, dy) and the twist-predicted one (mean speed x dt along the
+    mean heading) as (n, 2) arrays, the heading change and the yaw-rate-integrated one (mean yaw rate x dt)."""
+    dt = np.diff(t, prepend=t[:1])
+    step = np.concatenate(([False], dt[1:] <= MAX_GAP))
+    turned = _wrap(np.diff(yaw, prepend=yaw[:1]))
+    mid_heading = np.concatenate((yaw[:1], yaw[:-1])) + 0.5 * turned
+    travelled = 0.5 * (v + np.concatenate((v[:1], v[:-1]))) * dt
+    pose = np.stack([np.diff(x, prepend=x[:1]), np.diff(y, prepend=y[:1])], axis=1)
+    wheels = np.stack([travelled * np.cos(mid_heading), travelled * np.sin(mid_heading)], axis=1)
+    rate_turn = 0.5 * (w + np.concatenate((w[:1], w[:-1]))) * dt
+    return step, pose, wheels, turned, rate_turn
+
+
 def _per_sample(t, x, y, yaw, v, w):
     """The per-sample measures: (maxima (n, 13), sums (n, 6)), the columns `_SOURCE` names."""
     n = len(t)
     speed = np.abs(v)
-    dt = np.diff(t)
-    step = np.concatenate(([False], dt <= MAX_GAP))
-    dt = np.concatenate(([0.0], dt))
+    step, pose, wheels, turned, rate_turn = _steps(t, x, y, yaw, v, w)
 
     def stepped(values):
         return np.where(step, values, 0.0)
     dv = stepped(np.abs(np.diff(v, prepend=v[:1])))
     dw = stepped(np.abs(np.diff(w, prepend=w[:1])))
-    turned = _wrap(np.diff(yaw, prepend=yaw[:1]))
-    mid_heading = np.concatenate((yaw[:1], yaw[:-1])) + 0.5 * turned
-    mean_v = 0.5 * (v + np.concatenate((v[:1], v[:-1])))
-    mean_w = 0.5 * (w + np.concatenate((w[:1], w[:-1])))
-    pose_gap = stepped(np.hypot(np.diff(x, prepend=x[:1]) - mean_v * dt * np.cos(mid_heading),
-                                np.diff(y, prepend=y[:1]) - mean_v * dt * np.sin(mid_heading)))
-    heading_gap = stepped(np.abs(turned - mean_w * dt))
+    pose_gap = stepped(np.hypot(*(pose - wheels).T))
+    heading_gap = stepped(np.abs(turned - rate_turn))
 
     j, ok = _reference(t, DIFF_SPAN, MAX_GAP)
     accel = _rate(v, t, j, ok)
@@ -191,7 +204,7 @@ def envelope_rows(stamps, x, y, yaw, v, w, ends, window=1.0):
     """The rows of the windows of ``window`` s ending at ``ends``: (the ends kept (those with two samples or
     more), an (n, 19) matrix). The samples must reach ``HISTORY`` s before the first window for its rows to be
     those of ``envelope_windows``."""
-    t, x, y, yaw, v, w = _clean(stamps, x, y, yaw, v, w)
+    t, x, y, yaw, v, w = clean_samples(stamps, x, y, yaw, v, w)
     ends = np.asarray(ends, dtype=float).ravel()
     if len(t) < 2 or not len(ends):
         return np.zeros(0), np.zeros((0, len(ENVELOPE_COLUMNS)))
@@ -218,11 +231,52 @@ def envelope_rows(stamps, x, y, yaw, v, w, ends, window=1.0):
     return ends, np.maximum(matrix, 0.0)
 
 
+def step_details(stamps, x, y, yaw, v, w, end, window=1.0):
+    """What the largest pose and heading gaps of the window ending at ``end`` were, in words:
+    ``{'max_pose_gap': 'pose moved 1.20 m in a step while the wheels reported 0.10 m', 'max_heading_gap':
+    'heading turned 0.50 rad in a step, the yaw rate 0.01 rad'}`` (empty without a step)."""
+    t, x, y, yaw, v, w = clean_samples(stamps, x, y, yaw, v, w)
+    step, pose, wheels, turned, rate_turn = _steps(t, x, y, yaw, v, w)
+    inside = np.flatnonzero(step & (t > end - window) & (t <= end))
+    if not len(inside):
+        return {}
+    i = inside[np.argmax(np.hypot(*(pose[inside] - wheels[inside]).T))]
+    k = inside[np.argmax(np.abs(turned[inside] - rate_turn[inside]))]
+    return {'max_pose_gap': 'pose moved %.2f m in a step while the wheels reported %.2f m'
+                            % (np.hypot(*pose[i]), np.hypot(*wheels[i])),
+            'max_heading_gap': 'heading turned %.2f rad in a step, the yaw rate %.2f rad' % (turned[k], rate_turn[k])}
+
+
 def envelope_windows(stamps, x, y, yaw, v, w, window=1.0, stride=0.25):
     """Window end stamps (n,) and the (n, 19) ``ENVELOPE_COLUMNS`` matrix of odometry samples in time order
     (stamps s, pose x y m, heading rad, forward speed m/s, yaw rate rad/s): one row per window of ``window`` s
     ending every ``stride`` s (see the module docstring)."""
-    t = _clean(stamps, x, y, yaw, v, w)[0]
+    t = clean_samples(stamps, x, y, yaw, v, w)[0]
     if len(t) < 2:
         return np.zeros(0), np.zeros((0, len(ENVELOPE_COLUMNS)))
     return envelope_rows(stamps, x, y, yaw, v, w, envelope_grid(t[0], t[-1], window, stride), window)
+
+
+def odometry_samples(records):
+    """``(stamps, x, y, yaw, v, w)`` arrays of nav_msgs/Odometry ``records`` (``Record``s; serialized ones of
+    the layout ``motion`` reads are read from their bytes, the others from their message): the stamp, the
+    position, the heading of the orientation, the forward speed (twist linear x) and the yaw rate (twist angular
+    z). A message that cannot be read gives NaN (``envelope_windows`` drops it)."""
+    records = list(records)
+    values = np.full((len(records), 13), np.nan)
+    raw = [i for i, r in enumerate(records) if r.msg is None and r.raw is not None and
+           OdometrySet.reads_raw(r.connection)]
+    if raw:
+        values[raw] = read_odometry_block_raw([records[i].raw for i in raw])
+    for i in sorted(set(range(len(records))) - set(raw)):
+        try:
+            values[i] = read_odometry(records[i].msg)
+        except (AttributeError, TypeError, ValueError, OverflowError):
+            pass
+    qx, qy, qz, qw = values[:, 3], values[:, 4], values[:, 5], values[:, 6]
+    with np.errstate(invalid='ignore'):
+        norm = qx * qx + qy * qy + qz * qz + qw * qw
+        yaw = np.where(norm > 1e-12, np.arctan2(2.0 * (qw * qz + qx * qy), qw * qw + qx * qx - qy * qy - qz * qz),
+                       np.nan)
+    stamps = np.array([r.stamp for r in records], dtype=float)
+    return stamps, values[:, 0], values[:, 1], yaw, values[:, 7], values[:, 12]

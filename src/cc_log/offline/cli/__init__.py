@@ -2,7 +2,8 @@
 
     rosrun cc_log cclog <command> [options]      (see ``cclog <command> --help`` and docs/CLI.md)
 
-Commands: ``collect`` (feature vectors from a bag), ``learn`` (train / evaluate a model), ``replay`` (the
+Commands: ``collect`` (feature vectors from a bag), ``learn`` (train / evaluate a model), ``learn-envelope`` (the
+physics envelope of nominal bags), ``replay`` (the
 smart logger over a bag), ``info``, ``cat``, ``export`` (window files), ``codecs`` (the paper's Table 2 on
 some data), ``plot`` (a timeline of a run), ``tune`` (a threshold for a false-window budget), ``simulate`` (a
 simulated BWIBot bag with labelled anomalies); on a live robot, ``top`` (the running nodes) and ``trigger`` (save a
@@ -28,14 +29,15 @@ import sys
 
 from cc_log.offline.cli import (cat_cmd, codecs_cmd, collect_cmd, export_cmd, info_cmd, learn_cmd, plot_cmd,
                                 recover_cmd, replay_cmd, simulate_cmd, stats_cmd, top_cmd, trigger_cmd, tune_cmd)
+from cc_log.offline.cli import learn_envelope_cmd
 from cc_log.offline.cli.common import (
     PROG, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, INTERRUPT_GRACE, CommandError, Parser, command_help)
 
 __all__ = ['main', 'build_parser', 'COMMANDS', 'CommandError', 'Interrupt', 'INTERRUPT_GRACE']
 
 # the commands, in the order of ``cclog --help``
-COMMANDS = (collect_cmd, learn_cmd, tune_cmd, replay_cmd, info_cmd, cat_cmd, export_cmd, codecs_cmd, plot_cmd,
-            simulate_cmd, recover_cmd, stats_cmd, top_cmd, trigger_cmd)
+COMMANDS = (collect_cmd, learn_cmd, learn_envelope_cmd, tune_cmd, replay_cmd, info_cmd, cat_cmd, export_cmd,
+            codecs_cmd, plot_cmd, simulate_cmd, recover_cmd, stats_cmd, top_cmd, trigger_cmd)
 
 
 def build_parser():
