@@ -17,8 +17,8 @@ EVENT_EVERY s of a long run (the types repeated), a short run split into fewer t
 Detectors, all on the same windows (1 s, every 0.25 s) of the same 19 envelope features
 (``cc_log.features.envelope``), fitted on the training windows, every score lower = more anomalous:
 
-- ``envelope``: the physics envelope, limits = the training maximum of each feature floored at
-  ``ENVELOPE_FLOORS``, score = -(largest ratio of a feature to its limit);
+- ``envelope``: the physics envelope (``core.envelope``, the ``envelope`` trigger's): the training maximum of each
+  feature floored at ``ENVELOPE_FLOORS``, score = -(largest ratio of a feature to it);
 - ``knn-mean``, ``knn-max``: mean / largest distance to the 5 nearest training windows (training scores leave the
   window itself out); ``lof`` (sklearn, novelty=True, 20 neighbours); ``iforest`` (sklearn IsolationForest);
   ``ocsvm`` (sklearn OneClassSVM, RBF, gamma 'scale', nu 0.01); ``mahalanobis`` (sklearn MinCovDet, robust);
@@ -62,9 +62,9 @@ import detection_runs  # noqa: E402
 import heldout_data  # noqa: E402
 
 from cc_log import sim  # noqa: E402
-from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS, envelope_windows  # noqa: E402
+from cc_log.core import envelope  # noqa: E402
+from cc_log.features.envelope import ENVELOPE_COLUMNS, envelope_windows, odometry_samples  # noqa: E402
 from cc_log.offline.tuning import windows_of  # noqa: E402
-from cc_log.sim.messages import yaw_of  # noqa: E402
 
 TOPIC = heldout.TOPIC
 WINDOW, STRIDE = 1.0, 0.25
@@ -77,7 +77,6 @@ EVENT_EVERY = 60.0      # s of held-out driving per injected event on a long run
 WARMUP = GAP = 5.0      # s: sim.inject_anomalies' warmup and gap
 REAL = ('husky', 'f1tenth', 'icelab', 'pioneer')
 ROBOTS = heldout_data.ORDER + REAL
-FLOORS = np.array([ENVELOPE_FLOORS[name] for name in ENVELOPE_COLUMNS])
 SHORT = {'planning_failure': 'plan', 'collision': 'coll', 'sudden_acceleration': 'accel',
          'excessive_twisting': 'twist', 'localization_jump': 'loc', 'wheels_slipping': 'slip'}
 
@@ -93,15 +92,16 @@ class Detector(object):
 
 
 class Envelope(Detector):
-    """The physics envelope: per-feature limits = training maximum floored; score = -(largest ratio)."""
+    """The physics envelope (``core.envelope``): per-feature training maximum floored; score = -(largest ratio to
+    it), so level 2 is the envelope trigger's default factor."""
 
     def fit(self, X):
-        self.limits = np.maximum(X.max(axis=0), FLOORS)
+        self.limits = envelope.learn([X], TOPIC, WINDOW, STRIDE, len(X) * STRIDE).trained()
         self.zero, self.extreme = 0.0, -1.0
         return self
 
     def ratios(self, X):
-        return X / self.limits
+        return envelope.ratios(X, self.limits)
 
     def score(self, X):
         return -self.ratios(X).max(axis=1) if len(X) else np.zeros(0)
@@ -236,18 +236,9 @@ def load_robot(robot, data):
             for name in detection_runs.ROBOTS[robot]]
 
 
-def odometry(records):
-    """(stamps, x, y, yaw, v, w) arrays of odometry records."""
-    pose = [r.msg.pose.pose for r in records]
-    twist = [r.msg.twist.twist for r in records]
-    return (np.array([r.stamp for r in records]), np.array([p.position.x for p in pose]),
-            np.array([p.position.y for p in pose]), np.array([yaw_of(p.orientation) for p in pose]),
-            np.array([t.linear.x for t in twist]), np.array([t.angular.z for t in twist]))
-
-
 def windows(records):
     """(window ends, envelope feature matrix) of one continuous run."""
-    return envelope_windows(*odometry(records), window=WINDOW, stride=STRIDE)
+    return envelope_windows(*odometry_samples(records), window=WINDOW, stride=STRIDE)
 
 
 def duration(records):

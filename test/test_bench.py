@@ -253,7 +253,9 @@ def test_detectors_flag_what_lies_beyond_the_training_windows():
     sys.path.insert(0, BENCH)
     import detectors
     rng = np.random.RandomState(0)
-    train = np.abs(rng.normal(1.0, 0.2, size=(600, len(detectors.ENVELOPE_COLUMNS)))) * detectors.FLOORS * 2
+    from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS
+    floors = np.array([ENVELOPE_FLOORS[name] for name in ENVELOPE_COLUMNS])
+    train = np.abs(rng.normal(1.0, 0.2, size=(600, len(ENVELOPE_COLUMNS)))) * floors * 2
     typical = np.median(train, axis=0, keepdims=True)
     one = typical.copy()
     one[0, 3] = train[:, 3].max() * 5
