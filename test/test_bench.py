@@ -8,6 +8,7 @@ import shutil
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -238,3 +239,42 @@ def test_heavy_sensors_quick(tmp_path):
     detail = next(line for line in out.splitlines() if line.startswith('| one ') and '/camera/image_raw' in line)
     played, recorded, recorded_lz4 = (cell.strip() for cell in detail.split('|')[4:7])
     assert played == '180' and recorded.isdigit() and recorded_lz4.isdigit()
+
+
+def test_detectors_quick_prints_every_detector_and_the_curve(tmp_path):
+    out = run('detectors.py', '--quick', '--out', str(tmp_path))
+    for name in ('envelope', 'knn-mean', 'knn-max', 'lof', 'iforest', 'ocsvm', 'mahalanobis', 'ecod', 'copod',
+                 'cclog'):
+        assert re.search(r'\n\| %s +\| \d+/6 +\| \d +\| \d+/\d+ +\| \d+ +\|' % name, out), name
+    assert re.search(r'\n## husky: [\d.]+ Hz, trained on 3.3 min \(\d+ windows\), held out 3.3 min nominal', out)
+    assert 'recall per anomaly type' in out and 'per threshold level (the curve)' in out
+    assert (tmp_path / 'detectors_curve.png').stat().st_size > 1000
+    assert len(targets(out)) == 2
+
+
+def test_detectors_flag_what_lies_beyond_the_training_windows():
+    """Every window detector, fitted on synthetic nominal windows, flags a window with every feature far beyond
+    them at the table's level, and the typical window never; a window with one feature 5x its training maximum is
+    flagged by all but the isolation forest (its random splits seldom cut the one feature among 19) and ECOD and
+    COPOD (one feature's tail adds at most log(n + 1) to a sum over 19). The Poisson bound and the message count
+    are exact."""
+    sys.path.insert(0, BENCH)
+    import detectors
+    rng = np.random.RandomState(0)
+    from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS
+    floors = np.array([ENVELOPE_FLOORS[name] for name in ENVELOPE_COLUMNS])
+    train = np.abs(rng.normal(1.0, 0.2, size=(600, len(ENVELOPE_COLUMNS)))) * floors * 2
+    typical = np.median(train, axis=0, keepdims=True)
+    one = typical.copy()
+    one[0, 3] = train[:, 3].max() * 5
+    every = train.max(axis=0, keepdims=True) * 5
+    for name, detector in detectors.make_detectors().items():
+        detector.fit(train)
+        threshold = detector.threshold(2.0)
+        assert detector.score(every)[0] < threshold, name
+        assert (detector.score(one)[0] < threshold) == (name not in ('iforest', 'ecod', 'copod')), name
+        assert detector.score(typical)[0] > threshold, name
+    assert detectors.upper95(0, 2.0) == pytest.approx(1.5)
+    assert detectors.upper95(4, 1.0) == pytest.approx(10.2416, abs=1e-3)  # chi2.ppf(0.975, 10) / 2: Garwood
+    stamps = np.arange(0.0, 10.0, 0.5)
+    assert detectors.count_inside(stamps, [(1.0, 2.0), (1.5, 3.0), (8.9, 9.1)]) == 6  # 1.0-3.0 once, and 9.0

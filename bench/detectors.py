@@ -1,0 +1,593 @@
+#!/usr/bin/env python3
+"""cc_log's defaults against the standard detectors on every real robot, thresholds from training alone.
+
+    /usr/bin/python3 bench/heldout_data.py                            # the held-out bags (once)
+    nice -n 10 /usr/bin/python3 bench/detectors.py                    # every robot, seeds 0 1 (~8 min, 2 cores)
+    /usr/bin/python3 bench/detectors.py --quick                       # the Husky, seed 0 (~10 s)
+    /usr/bin/python3 bench/detectors.py --robots icelab,pioneer --seeds 0 --out /tmp/curves
+
+Robots: the held-out public robots (bench/heldout_data.py: ``tuc``, ``smartloc``, ``mrclam`` with all five
+Creates) and the real runs of ../shared/data/real (``husky``, ``f1tenth`` DS1-5, ``icelab`` four runs,
+``pioneer`` two traces; bench/detection_runs.py's ROBOTS). Per robot its runs in order; the first
+``--train-minutes`` (20) of driving, at most ``--train-fraction`` (0.5) of it, train (bench/detection_heldout.py's
+``split``); the rest is held out: replayed as it is (every flag is false) and with ``sim.inject_anomalies`` at the
+robot's own scale (``sim.nominal_envelope`` of its training driving), the six types, per seed: one event per
+EVENT_EVERY s of a long run (the types repeated), a short run split into fewer types per replay.
+
+Detectors, all on the same windows (1 s, every 0.25 s) of the same 19 envelope features
+(``cc_log.features.envelope``), fitted on the training windows, every score lower = more anomalous:
+
+- ``envelope``: the physics envelope (``core.envelope``, the ``envelope`` trigger's): the training maximum of each
+  feature floored at ``ENVELOPE_FLOORS``, score = -(largest ratio of a feature to it);
+- ``knn-mean``, ``knn-max``: mean / largest distance to the 5 nearest training windows (training scores leave the
+  window itself out); ``lof`` (sklearn, novelty=True, 20 neighbours); ``iforest`` (sklearn IsolationForest);
+  ``ocsvm`` (sklearn OneClassSVM, RBF, gamma 'scale', nu 0.01); ``mahalanobis`` (sklearn MinCovDet, robust);
+  ``ecod``, ``copod``: implemented here in numpy after their papers (Li et al. 2022, 2020, as PyOD computes them),
+  tail probabilities of each feature from the training windows (the window itself counted), summed;
+  all on features standardised by a scaler fitted on the training windows;
+- ``cclog``: cc_log's defaults as a user runs them: ``cclog collect`` / ``learn`` of the training bags and
+  ``cclog replay`` of every held-out bag (detection_heldout.py's ``defaults``): its windows, its triggers.
+
+The threshold rule, the same for every window detector: ``zero - level x (zero - extreme)`` where ``extreme`` is
+the most anomalous training score and ``zero`` the median training score (the envelope: its physical zero, ratio 0,
+and its limit, ratio 1, so level 2 is "2x the limit": the issue's envelope at 2x). ``--level`` (2) sets the table's
+threshold, LEVELS the recall-versus-false-windows curve. cc_log's defaults keep their own threshold.
+
+Measures: a flagged window's end is a fire; fires merge into episodes [fire - 2 s, fire + 2 s] as cc_log's windows
+do. An event is caught when a fire lies in [onset, end + the detector's window] (1 s; cclog: its 2 s), within
+0.5 s when the first such fire is at most 0.5 s after onset; its span is kept when >= 95 % of [onset, end] lies in
+episodes. False windows: the episodes of the held-out nominal driving, per hour, with the 95 % upper bound
+(Poisson: chi2.ppf(0.975, 2k + 2) / 2 / T, or 3 / T for k = 0). kept x ideal: odometry messages inside episodes of
+the injected replays / those within [onset - 2 s, end + 2 s] of an event. Per event its extreme: the largest
+envelope ratio (feature over the robot's own floored training maximum) of the windows ending in [onset, end + 1 s];
+"strong" events (extreme >= 1.5x) are the target's population; ``--events`` prints every event with its extreme.
+
+Figures and what they say: docs/DETECTION.md, "Against the standard detectors".
+"""
+import argparse
+import collections
+import os
+import shutil
+import sys
+import tempfile
+import time
+import warnings
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+import detection_heldout as heldout  # noqa: E402
+import detection_runs  # noqa: E402
+import heldout_data  # noqa: E402
+
+from cc_log import sim  # noqa: E402
+from cc_log.core import envelope  # noqa: E402
+from cc_log.features.envelope import ENVELOPE_COLUMNS, envelope_windows, odometry_samples  # noqa: E402
+from cc_log.offline.tuning import windows_of  # noqa: E402
+
+TOPIC = heldout.TOPIC
+WINDOW, STRIDE = 1.0, 0.25
+PRE = POST = heldout.MARGIN
+LATENCY = heldout.LATENCY
+MIN_SPAN_KEPT = heldout.MIN_SPAN_KEPT
+LEVELS = (1.0, 1.25, 1.5, 2.0, 3.0, 4.0)
+STRONG = 1.5
+EVENT_EVERY = 60.0      # s of held-out driving per injected event on a long run
+WARMUP = GAP = 5.0      # s: sim.inject_anomalies' warmup and gap
+REAL = ('husky', 'f1tenth', 'icelab', 'pioneer')
+ROBOTS = heldout_data.ORDER + REAL
+SHORT = {'planning_failure': 'plan', 'collision': 'coll', 'sudden_acceleration': 'accel',
+         'excessive_twisting': 'twist', 'localization_jump': 'loc', 'wheels_slipping': 'slip'}
+
+
+# -- detectors: fit(X) on training windows, score(X) lower = more anomalous, a threshold per level -----------------
+
+class Detector(object):
+    """A window detector: ``fit(X)`` on training windows sets ``zero`` and ``extreme``; ``score(X)``."""
+
+    def threshold(self, level):
+        """Flag a window whose score is below this."""
+        return self.zero - level * (self.zero - self.extreme)
+
+
+class Envelope(Detector):
+    """The physics envelope (``core.envelope``): per-feature training maximum floored; score = -(largest ratio to
+    it), so level 2 is the envelope trigger's default factor."""
+
+    def fit(self, X):
+        self.limits = envelope.learn([X], TOPIC, WINDOW, STRIDE, len(X) * STRIDE).trained()
+        self.zero, self.extreme = 0.0, -1.0
+        return self
+
+    def ratios(self, X):
+        return envelope.ratios(X, self.limits)
+
+    def score(self, X):
+        return -self.ratios(X).max(axis=1) if len(X) else np.zeros(0)
+
+
+class Standardised(Detector):
+    """A standard detector on standardised features; ``zero`` / ``extreme``: median / lowest training score."""
+
+    def __init__(self, make):
+        self.make = make
+
+    def fit(self, X):
+        from sklearn.preprocessing import StandardScaler
+        self.scaler = StandardScaler().fit(X)
+        self.model = self.make()
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            train = np.asarray(self.model.fit(self.scaler.transform(X)), dtype=float)
+        self.zero, self.extreme = float(np.median(train)), float(train.min())
+        return self
+
+    def score(self, X):
+        if not len(X):
+            return np.zeros(0)
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            return np.asarray(self.model.score(self.scaler.transform(X)), dtype=float)
+
+
+class Knn(object):
+    """Mean or largest distance to the k nearest training windows (training: the window itself left out)."""
+
+    def __init__(self, how, k=5):
+        self.how, self.k = how, k
+
+    def fit(self, X):
+        from sklearn.neighbors import NearestNeighbors
+        self.tree = NearestNeighbors(n_neighbors=self.k).fit(X)
+        return -self._agg(self.tree.kneighbors(X, self.k + 1)[0][:, 1:])
+
+    def score(self, X):
+        return -self._agg(self.tree.kneighbors(X, self.k)[0])
+
+    def _agg(self, distances):
+        return distances.mean(axis=1) if self.how == 'mean' else distances.max(axis=1)
+
+
+class Sklearn(object):
+    """An sklearn estimator: ``fit`` then its training scores by ``train`` and others by ``test`` (method names)."""
+
+    def __init__(self, estimator, train, test):
+        self.estimator, self.train, self.test = estimator, train, test
+
+    def fit(self, X):
+        self.estimator.fit(X)
+        found = getattr(self.estimator, self.train)
+        return found(X) if callable(found) else found
+
+    def score(self, X):
+        return getattr(self.estimator, self.test)(X)
+
+
+class Mahalanobis(object):
+    """Minus the squared Mahalanobis distance to the robust (minimum covariance determinant) centre."""
+
+    def fit(self, X):
+        from sklearn.covariance import MinCovDet
+        self.mcd = MinCovDet(random_state=0).fit(X)
+        return self.score(X)
+
+    def score(self, X):
+        return -self.mcd.mahalanobis(X)
+
+
+class Tails(object):
+    """ECOD (``copod=False``) or COPOD: per feature -log of its empirical left / right tail probability among the
+    training windows (the scored window counted once), the skewness-chosen tail; ECOD takes the largest of the
+    three per feature, COPOD the larger of the skew tail and the mean of both; summed over features, negated."""
+
+    def __init__(self, copod):
+        self.copod = copod
+
+    def fit(self, X):
+        from scipy.stats import skew
+        self.sorted = np.sort(X, axis=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')
+            self.sign = np.nan_to_num(np.sign(skew(X, axis=0)))
+        return self.score(X)
+
+    def score(self, X):
+        n = len(self.sorted)
+        below = np.stack([np.searchsorted(self.sorted[:, j], X[:, j], side='right') for j in range(X.shape[1])], 1)
+        above = n - np.stack([np.searchsorted(self.sorted[:, j], X[:, j], side='left') for j in range(X.shape[1])], 1)
+        left, right = -np.log((below + 1.0) / (n + 1.0)), -np.log((above + 1.0) / (n + 1.0))
+        skewed = np.where(self.sign < 0, left, np.where(self.sign > 0, right, left + right))
+        if self.copod:
+            per = np.maximum(skewed, 0.5 * (left + right))
+        else:
+            per = np.maximum(np.maximum(left, right), skewed)
+        return -per.sum(axis=1)
+
+
+def make_detectors():
+    """The window detectors, by name, unfitted (cclog runs through the CLI)."""
+    from sklearn.ensemble import IsolationForest
+    from sklearn.neighbors import LocalOutlierFactor
+    from sklearn.svm import OneClassSVM
+    return collections.OrderedDict([
+        ('envelope', Envelope()),
+        ('knn-mean', Standardised(lambda: Knn('mean'))),
+        ('knn-max', Standardised(lambda: Knn('max'))),
+        ('lof', Standardised(lambda: Sklearn(LocalOutlierFactor(n_neighbors=20, novelty=True),
+                                             'negative_outlier_factor_', 'score_samples'))),
+        ('iforest', Standardised(lambda: Sklearn(IsolationForest(random_state=0), 'score_samples', 'score_samples'))),
+        ('ocsvm', Standardised(lambda: Sklearn(OneClassSVM(nu=0.01, gamma='scale'), 'decision_function',
+                                               'decision_function'))),
+        ('mahalanobis', Standardised(Mahalanobis)),
+        ('ecod', Standardised(lambda: Tails(copod=False))),
+        ('copod', Standardised(lambda: Tails(copod=True))),
+    ])
+
+
+# -- data ----------------------------------------------------------------------------------------------------------
+
+def load_robot(robot, data):
+    """[(run name, records on TOPIC)] of a robot, in order."""
+    if robot in heldout_data.ORDER:
+        return heldout.load_runs(robot, data, 5)
+    topics = {name: topic for name, topic, _ in detection_runs.RUNS}
+    return [(name, [r._replace(topic=TOPIC) for r in detection_runs.load(name, topics[name], None)])
+            for name in detection_runs.ROBOTS[robot]]
+
+
+def windows(records):
+    """(window ends, envelope feature matrix) of one continuous run."""
+    return envelope_windows(*odometry_samples(records), window=WINDOW, stride=STRIDE)
+
+
+def duration(records):
+    return records[-1].stamp - records[0].stamp
+
+
+def injections(records, seed, envelope):
+    """[(injected records, truth)] of one held-out run for one seed: one event per EVENT_EVERY s (the six types
+    repeated) when it fits, else the six types split into the fewest replays that fit; [] when none fits."""
+    types = list(sim.ANOMALY_TYPES) * max(1, int(duration(records) // (EVENT_EVERY * len(sim.ANOMALY_TYPES))))
+    for parts in range(1, len(types) + 1):
+        groups = [types[k::parts] for k in range(parts)]
+        try:
+            return [sim.inject_anomalies(records, group, seed=seed, topic=TOPIC, warmup=WARMUP, gap=GAP,
+                                         scale=envelope, limits=envelope) for group in groups]
+        except ValueError:
+            continue
+    return []
+
+
+# -- measures ------------------------------------------------------------------------------------------------------
+
+def merged(intervals):
+    """Overlapping [a, b] intervals merged, sorted."""
+    out = []
+    for a, b in sorted(intervals):
+        if out and a <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append([a, b])
+    return out
+
+
+def count_inside(stamps, intervals):
+    """How many of the sorted ``stamps`` lie in the union of ``intervals``."""
+    spans = np.array(merged(intervals)).reshape(-1, 2)
+    return int((np.searchsorted(stamps, spans[:, 1], 'right') - np.searchsorted(stamps, spans[:, 0], 'left')).sum())
+
+
+def tally():
+    return {'false': 0, 'caught': [], 'fast': [], 'spans': [], 'kept': 0, 'need': 0}
+
+
+def add_events(stats, fires, episodes, truth, reach, stamps):
+    """Add one injected replay's events (caught, within LATENCY, span kept) and kept / need to ``stats``."""
+    fires = np.sort(np.asarray(fires, dtype=float))
+    for entry in truth:
+        near = fires[(fires >= entry['start']) & (fires <= entry['end'] + reach)]
+        stats['caught'].append(bool(len(near)))
+        stats['fast'].append(bool(len(near)) and near[0] - entry['start'] <= LATENCY)
+        length = entry['end'] - entry['start']
+        covered = sum(max(0.0, min(b, entry['end']) - max(a, entry['start'])) for a, b in merged(episodes))
+        stats['spans'].append(length <= 0 or covered / length >= MIN_SPAN_KEPT)
+    stats['kept'] += count_inside(stamps, episodes)
+    stats['need'] += count_inside(stamps, [(e['start'] - PRE, e['end'] + POST) for e in truth])
+
+
+def upper95(k, hours):
+    """The 95 % upper bound of a Poisson rate (per hour) after ``k`` counts in ``hours``."""
+    from scipy.stats import chi2
+    if not hours:
+        return float('nan')
+    return 3.0 / hours if k == 0 else chi2.ppf(0.975, 2 * k + 2) / 2.0 / hours
+
+
+def extreme_of(envelope, ends, M, entry):
+    """(largest envelope ratio, its feature) of the windows ending in [onset, end + WINDOW] of an event."""
+    inside = (ends >= entry['start']) & (ends <= entry['end'] + WINDOW)
+    if not inside.any():
+        return 0.0, '-'
+    ratios = envelope.ratios(M[inside])
+    row, column = np.unravel_index(int(np.argmax(ratios)), ratios.shape)
+    return float(ratios[row, column]), ENVELOPE_COLUMNS[column]
+
+
+# -- one robot -----------------------------------------------------------------------------------------------------
+
+def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True):
+    """Every detector on one robot: {'robot', 'train_s', 'hours', 'rate', 'lines', 'events' [{type, extreme}],
+    'stats' {detector: {level: tally}}, 'seconds'}."""
+    started = time.time()
+    total = sum(duration(records) for _, records in runs)
+    train, rest = heldout.split(runs, min(train_seconds, fraction * total))
+    # each training run apart: runs of one robot may be stamped in any order
+    envelope = sim.Limits(*np.max([sim.nominal_envelope(records, TOPIC) for _, records in train], axis=0))
+    detectors = make_detectors()
+    X = np.concatenate([windows(records)[1] for _, records in train])
+    for detector in detectors.values():
+        detector.fit(X)
+    out = {'robot': robot, 'train_s': sum(duration(r) for _, r in train), 'rate': detection_runs.rate_of(train[0][1]),
+           'hours': sum(duration(r) for _, r in rest) / 3600.0, 'runs': [name for name, _ in rest],
+           'train_windows': len(X), 'events': [], 'lines': [], 'no_room': 0,
+           'stats': {name: {level: tally() for level in LEVELS} for name in detectors}}
+    setting = heldout.SETTINGS['defaults']
+    if with_cclog:
+        model, lines = heldout.learn(train, setting, tmp)
+        out['lines'] = lines
+        out['stats']['cclog'] = {None: tally()}
+        reach = heldout.reach_of(setting, out['rate'])
+
+    def cclog(records, tag, truth=None):
+        if not with_cclog:
+            return
+        found, _ = heldout.replay(records, model, setting, tmp, tag)
+        fires = sorted(t for w in found for t in w['triggers'])
+        episodes = [(w['start'], w['end']) for w in found]
+        stats = out['stats']['cclog'][None]
+        if truth is None:
+            stats['false'] += len(found)
+        else:
+            add_events(stats, fires, episodes, truth, reach, np.array([r.stamp for r in records]))
+
+    for name, records in rest:
+        ends, M = windows(records)
+        for label, detector in detectors.items():
+            scores = detector.score(M)
+            for level in LEVELS:
+                out['stats'][label][level]['false'] += len(windows_of(ends[scores < detector.threshold(level)],
+                                                                      PRE, POST))
+        cclog(records, 'nominal-' + name)
+        for seed in seeds:
+            replays = injections(records, seed, envelope)
+            out['no_room'] += not replays
+            for k, (injected, truth) in enumerate(replays):
+                ends, M = windows(injected)
+                stamps = np.array([r.stamp for r in injected])
+                for entry in truth:
+                    extreme, feature = extreme_of(detectors['envelope'], ends, M, entry)
+                    out['events'].append({'type': entry['type'], 'run': name, 'seed': seed, 'feature': feature,
+                                          'at': entry['start'] - records[0].stamp, 'extreme': extreme})
+                for label, detector in detectors.items():
+                    scores = detector.score(M)
+                    for level in LEVELS:
+                        fires = ends[scores < detector.threshold(level)]
+                        add_events(out['stats'][label][level], fires, windows_of(fires, PRE, POST), truth, WINDOW,
+                                   stamps)
+                cclog(injected, 'inj-%s-%d-%d' % (name, seed, k), truth)
+    out['seconds'] = time.time() - started
+    return out
+
+
+# -- report --------------------------------------------------------------------------------------------------------
+
+def pooled(results):
+    """The results of several robots as one (stats and events concatenated, hours summed)."""
+    out = {'hours': sum(r['hours'] for r in results), 'events': [e for r in results for e in r['events']],
+           'stats': {}}
+    for name in results[0]['stats']:
+        out['stats'][name] = {}
+        for level in results[0]['stats'][name]:
+            parts = [r['stats'][name][level] for r in results if name in r['stats']]
+            out['stats'][name][level] = {key: sum((p[key] for p in parts), [] if key in ('caught', 'fast', 'spans')
+                                                  else 0) for key in tally()}
+    return out
+
+
+def row_of(result, name, level):
+    """The table row of one detector at one level: caught, fast, strong caught, false, rates, kept, spans."""
+    stats = result['stats'][name][level if name != 'cclog' else None]
+    strong = [e['extreme'] >= STRONG for e in result['events']]
+    n, hours = len(stats['caught']), result['hours']
+    caught = sum(stats['caught'])
+    strong_caught = sum(c and s for c, s in zip(stats['caught'], strong))
+    return [name, '%d/%d' % (caught, n), sum(stats['fast']), '%d/%d' % (strong_caught, sum(strong)),
+            stats['false'], stats['false'] / hours if hours else float('nan'), upper95(stats['false'], hours),
+            '%.2fx' % (stats['kept'] / float(stats['need'])) if stats['need'] else '-',
+            '%d/%d' % (sum(stats['spans']), n), by_type(stats['caught'], result['events'])]
+
+
+def by_type(caught, events):
+    """'a/b c/d ...': events caught of each type, in sim.ANOMALY_TYPES' order."""
+    return ' '.join('%d/%d' % (sum(c for c, e in zip(caught, events) if e['type'] == kind),
+                               sum(1 for e in events if e['type'] == kind)) for kind in sim.ANOMALY_TYPES)
+
+
+def recall_false(result, name, level):
+    """(recall, false windows per hour) of one detector at one level."""
+    stats = result['stats'][name][level if name != 'cclog' else None]
+    recall = sum(stats['caught']) / float(len(stats['caught'])) if stats['caught'] else float('nan')
+    return recall, stats['false'] / result['hours'] if result['hours'] else float('nan')
+
+
+def point(result, name, level):
+    """'recall % / false per hour' of one detector at one level."""
+    recall, false = recall_false(result, name, level)
+    return '%.0f%% / %.1f' % (100 * recall, false)
+
+
+def dominating(result, level=None):
+    """Window detectors (at ``level``, or at any level of LEVELS) whose recall and false windows are both at
+    least as good as cclog's, one strictly better: [(name, level)]."""
+    if 'cclog' not in result['stats']:
+        return []
+    recall, false = recall_false(result, 'cclog', None)
+    out = []
+    for name in result['stats']:
+        for lv in ([level] if level is not None else LEVELS):
+            if name == 'cclog':
+                continue
+            r, f = recall_false(result, name, lv)
+            if r >= recall and f <= false and (r > recall or f < false):
+                out.append((name, lv))
+    return out
+
+
+HEADERS = ['detector', 'caught', 'within 0.5 s', 'strong (>= 1.5x) caught', 'false windows', 'false/h',
+           'false/h 95% upper', 'kept x ideal', 'span >= 95% kept', 'caught per type (%s)' % ' '.join(
+               SHORT[kind] for kind in sim.ANOMALY_TYPES)]
+
+
+def report_events(r, level):
+    """One line per injected event: where, its extreme (and which feature), the detectors that caught it."""
+    print('every event (run, seed, onset s into the held-out run, type, extreme: feature; caught at level %g by):'
+          % level)
+    for k, e in enumerate(r['events']):
+        caught = [name for name in r['stats'] if r['stats'][name][level if name != 'cclog' else None]['caught'][k]]
+        print('  %s seed %d %7.1f s %-19s %6.2fx %-18s %s' % (
+            e['run'], e['seed'], e['at'], e['type'], e['extreme'], e['feature'], ' '.join(caught) or 'none'))
+    print()
+
+
+def report_robot(r, level):
+    print('## %s: %.1f Hz, trained on %.1f min (%d windows), held out %.1f min nominal (%s), %d events injected%s'
+          % (r['robot'], r['rate'], r['train_s'] / 60.0, r['train_windows'], r['hours'] * 60.0, ', '.join(r['runs']),
+             len(r['events']), ', %d run x seed(s) too short to inject' % r['no_room'] if r['no_room'] else ''))
+    for line in r['lines']:
+        print('  ' + line.replace('\n', '\n  '))
+    common.table(HEADERS, [row_of(r, name, level) for name in r['stats']])
+    found = dominating(r, level)
+    print('dominating cclog at level %g: %s; at some level of the curve: %s' % (
+        level, ', '.join(name for name, _ in found) or 'none',
+        ', '.join('%s (%g)' % item for item in dominating(r)) or 'none'))
+    if 'cclog' in r['stats']:
+        env, ours = recall_false(r, 'envelope', 2.0), recall_false(r, 'cclog', None)
+        print('cclog against the envelope at 2x: recall %.0f%% vs %.0f%%, false/h %.1f vs %.1f: at least as many '
+              'caught with no more false windows: %s' % (100 * ours[0], 100 * env[0], ours[1], env[1],
+                                                         'yes' if ours[0] >= env[0] and ours[1] <= env[1] else 'NO'))
+    print('(%.0f s)\n' % r['seconds'])
+    sys.stdout.flush()
+
+
+def report_pooled(p, results, level, out_dir):
+    print('## Pooled over %d robots: %.2f h of held-out nominal driving, %d events' % (
+        len(results), p['hours'], len(p['events'])))
+    common.table(HEADERS, [row_of(p, name, level) for name in p['stats']])
+    rows = []
+    types = sim.ANOMALY_TYPES
+    for name in p['stats']:
+        stats = p['stats'][name][level if name != 'cclog' else None]
+        cells = [name]
+        for kind in types:
+            hits = [c for c, e in zip(stats['caught'], p['events']) if e['type'] == kind]
+            cells.append('%d/%d' % (sum(hits), len(hits)))
+        rows.append(cells)
+    common.table(['detector'] + list(types), rows, 'recall per anomaly type (pooled, level %g):' % level)
+    rows = []
+    for kind in types:
+        extremes = [e['extreme'] for e in p['events'] if e['type'] == kind]
+        rows.append([kind, len(extremes), np.median(extremes) if extremes else float('nan'),
+                     min(extremes) if extremes else float('nan'), sum(x >= STRONG for x in extremes)])
+    common.table(['type', 'events', 'median extreme (x nominal max)', 'least extreme', 'strong (>= 1.5x)'], rows,
+                 "each event's most extreme envelope feature over the robot's own floored training maximum:")
+    rows = [[name] + [point(p, name, lv) for lv in LEVELS] for name in p['stats'] if name != 'cclog']
+    if 'cclog' in p['stats']:
+        rows.append(['cclog (own threshold)'] + [point(p, 'cclog', None)] * len(LEVELS))
+    common.table(['detector'] + ['level %g' % lv for lv in LEVELS], rows,
+                 'recall / false windows per hour, pooled, per threshold level (the curve):')
+    plot_curve(p, os.path.join(out_dir, 'detectors_curve.png'))
+    strong = [e['extreme'] >= STRONG for e in p['events']]
+    if 'cclog' in p['stats']:
+        stats = p['stats']['cclog'][None]
+        print('target cclog defaults pooled: %.1f false windows/h (95%% upper %.1f; target <= 5/h) over %.2f h '
+              '(target >= 3 h); strong events caught within %.1f s %d/%d, >= 95%% of the span kept %d/%d' % (
+                  stats['false'] / p['hours'], upper95(stats['false'], p['hours']), p['hours'], LATENCY,
+                  sum(f and s for f, s in zip(stats['fast'], strong)), sum(strong),
+                  sum(k and s for k, s in zip(stats['spans'], strong)), sum(strong)))
+        print('target no standard detector at level %g dominates cclog on any robot: %s' % (level, '; '.join(
+            '%s: %s' % (r['robot'], ', '.join(n for n, _ in dominating(r, level))) for r in results
+            if dominating(r, level)) or 'met'))
+
+
+def plot_curve(p, path):
+    """Recall against false windows per hour of every detector over LEVELS (cclog: one point) into ``path``."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    figure, axes = plt.subplots(figsize=(7, 5))
+    for name in p['stats']:
+        points = [recall_false(p, name, lv) for lv in (LEVELS if name != 'cclog' else [None])]
+        axes.plot([f for _, f in points], [100 * r for r, _ in points], 'o-' if name != 'cclog' else 's',
+                  label=name, markersize=4 if name != 'cclog' else 9)
+    axes.set_xscale('symlog', linthresh=1.0)
+    axes.set_xlabel('false windows per hour of held-out nominal driving')
+    axes.set_ylabel('events caught (%)')
+    axes.set_title('pooled, threshold levels %s' % ', '.join('%g' % lv for lv in LEVELS))
+    axes.legend(fontsize=7)
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+    print('curve: %s\n' % path)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--data', default=heldout_data.OUT, help='the held-out bags (default %s)' % heldout_data.OUT)
+    parser.add_argument('--robots', default=','.join(ROBOTS), help='of %s (default: all)' % ', '.join(ROBOTS))
+    parser.add_argument('--seeds', default='0,1')
+    parser.add_argument('--train-minutes', type=float, default=20.0)
+    parser.add_argument('--train-fraction', type=float, default=0.5, help='at most this share of a robot trains')
+    parser.add_argument('--level', type=float, default=2.0, help='the threshold level of the tables (default 2)')
+    parser.add_argument('--no-cclog', action='store_true', help="leave cc_log's defaults out (faster)")
+    parser.add_argument('--out', default=os.path.join(tempfile.gettempdir(), 'cc_log_detectors'),
+                        help='where the curve PNG goes')
+    parser.add_argument('--events', action='store_true', help='one line per injected event: its extreme, who caught it')
+    parser.add_argument('--quick', action='store_true', help='the Husky alone, seed 0')
+    args = parser.parse_args(argv)
+    robots = ['husky'] if args.quick else args.robots.split(',')
+    seeds = [0] if args.quick else [int(s) for s in args.seeds.split(',')]
+    for robot in robots:
+        if robot not in ROBOTS:
+            raise SystemExit('robots: unknown robot %r (choose from %s)' % (robot, ', '.join(ROBOTS)))
+    if args.level not in LEVELS:
+        raise SystemExit('level: %g is not one of %s' % (args.level, ', '.join('%g' % lv for lv in LEVELS)))
+    started = time.time()
+    paths = [p for robot in robots if robot in heldout_data.ORDER for p in heldout_data.runs(robot, args.data)]
+    paths += [detection_runs.bag_path(name) for robot in robots if robot in REAL
+              for name in detection_runs.ROBOTS[robot]]
+    common.header("Detectors: cc_log's defaults against the standard detectors, thresholds from training alone",
+                  ['data: %s (bench/HELDOUT_SOURCES.md, ../shared/data/real/SOURCES.md)' % ', '.join(
+                      '%s %s' % (os.path.basename(p), common.sha12(p)) for p in paths),
+                   'seeds %s; windows %g s every %g s; train the first %g min, at most %g of a robot; level %g; '
+                   'ECOD and COPOD: numpy, after their papers (PyOD not used)' % (
+                       seeds, WINDOW, STRIDE, args.train_minutes, args.train_fraction, args.level)])
+    results = []
+    for robot in robots:
+        tmp = tempfile.mkdtemp(prefix='cc_log_detectors_')
+        try:
+            results.append(evaluate(robot, load_robot(robot, args.data), seeds, args.train_minutes * 60.0,
+                                    args.train_fraction, tmp, not args.no_cclog))
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        report_robot(results[-1], args.level)
+        if args.events:
+            report_events(results[-1], args.level)
+    report_pooled(pooled(results), results, args.level, args.out)
+    print('total %.0f s' % (time.time() - started))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
