@@ -141,7 +141,7 @@ def test_a_window_in_parts_is_still_one_window_with_its_route_files(tmp_path):
     out = replayed(tmp_path, {'pre': '2s', 'post': '2s', 'max': 150})  # parts of 150 odometry messages
     files = log_format.window_files(out)
     own = [f for f in files if '+' not in os.path.basename(f)]
-    parts = [f for f in files if '+numeric_part' in os.path.basename(f)]
+    parts = [f for f in files if '+numeric.' in os.path.basename(f)]
     assert own and len(parts) > len(own)  # one bag per window (parts appended), a json-xz file per part
     sets = log_format.window_sets(files)
     assert len(sets) == len(own) and all(s[0] in own and len(s) > 2 for s in sets)

@@ -152,7 +152,7 @@ class SmartLogger(object):
         self.max_buffer_mb = max_buffer_mb
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
-        self._bases = {}  # window key -> the base name of its files, while it is handed on in parts (routes)
+        self._names = {}  # window key -> the log_format.WindowName of its files, while it is handed on in parts
         self.keep = dict(keep or {})  # trigger name -> the topics its windows keep (window_prep.restrict)
         self.stamp_tolerance = float(stamp_tolerance)
         if not self.stamp_tolerance > 0:
@@ -558,16 +558,16 @@ class SmartLogger(object):
             metadata, shed = self._metadata(window), self._unsaid.said(window, shed)  # an emptied part's: the next's
             if shed:
                 metadata['dropped'] = shed
-            if not self.routes:
-                self.writer.submit(window_writer.Job(window, metadata))
-                continue
-            base = self._bases.pop(window.key, None) or log_format.base_name(window, 0)  # all its files' name
+            name = self._names.pop(window.key, None) or log_format.WindowName(log_format.base_name(window))
             if window.part and not window.final:
-                self._bases[window.key] = base
-            for route, part in routes_mod.split(window, self.routes):  # one file per route (core.routes)
-                self.writer.submit(window_writer.Job(part, metadata, base=base) if route is None else window_writer.Job(
-                    part, routes_mod.metadata(metadata, route), what=window_writer.ROUTE, fmt=route.format,
-                    route=route.name, base=base))
+                self._names[window.key] = name  # all its files, every part's, take one name
+            pieces = routes_mod.split(window, self.routes)  # one file per route (core.routes)
+            for number, (route, piece) in enumerate(pieces, 1):
+                last = (window.final or not window.part) and number == len(pieces)
+                self.writer.submit(window_writer.Job(piece, metadata, name=name, last=last) if route is None else
+                                   window_writer.Job(piece, routes_mod.metadata(metadata, route),
+                                                     what=window_writer.ROUTE, fmt=route.format, route=route.name,
+                                                     name=name, last=last))
 
     def _metadata(self, window):
         """Smart-mode metadata added to log_format's (which already holds triggers, names, part, counts)."""

@@ -4,13 +4,24 @@
 (``json-xz``: pure, ``formats.json_xz``; ``bag-lz4``: a rosbag, ``formats.bag_lz4``, rosbag imported only
 when that format is written or read); ``read_window(path)`` reads any of them by its magic bytes, and
 ``read_metadata(path)`` only its metadata, whose summary (``window_info.summary_of``: messages, serialized bytes and
-first/last stamps per topic, row JSON bytes) tells ``cclog info`` and ``stats`` what they report. Files are
-named by the UTC time of their first stamp and the first trigger reason, so names sort by time::
+first/last stamps per topic, row JSON bytes) tells ``cclog info`` and ``stats`` what they report.
 
-    cc_log_20150521T191138.027Z_classifier.json.xz
-    cc_log_20150521T191138.027Z_classifier_part2.json.xz   (second part of a split window)
-    cc_log_20150521T191138.027Z_classifier_1.json.xz       (a file of that name existed already)
-    cc_log_20150521T191138.027Z_classifier.002.bag         (the second file of a window split at split_mb)
+Names (docs/FORMAT.md): a window's *name* is chosen once, when its first piece is written: ``PREFIX``, the UTC time
+of its first stamp and the name of its first trigger, and ``_<N>`` when that name is taken in the directory
+(``reserve_name``: ``<name>.reserved`` created with ``O_EXCL``, so two writers, even in two processes, never
+share a name). Every file of the window is that name, then its route (``+<route>``, ``core.routes``), then its
+number among that route's files (``.<NNN>``: a window split at ``split_mb`` or written a file per part), then
+its format's extension (``piece_name``); one function reads it back (``parse_piece``, ``re.fullmatch``) and
+every reader groups files by it (``window_key``, ``window_sets``), so names sort by time::
+
+    cc_log_20150521T191138.027Z_classifier.bag                  (a window in one file)
+    cc_log_20150521T191138.027Z_classifier+numeric.json.xz      (its route numeric)
+    cc_log_20150521T191138.027Z_classifier.002.bag              (the second file of a window split at split_mb)
+    cc_log_20150521T191138.027Z_classifier+numeric.002.json.xz  (the second part of its route's json-xz files)
+    cc_log_20150521T191138.027Z_classifier_1.bag                (another window of that name and time)
+
+Names written before this scheme (``<name>_part2``, ``<name>+numeric_part2``, ``<name>_collect_part1``,
+``<name>+numeric_1``) are still read: ``_part<N>`` as the number ``N``.
 
 A file is written as ``<final name>.tmp-<pid>``, flushed and fsynced, moved to a final name that does not
 exist yet (hard link then unlink, so a file is never overwritten even by another process; rename on file
@@ -51,37 +62,62 @@ class Format(object):
 
 # -- names ----------------------------------------------------------------------------------------------
 
+#: A window's name and the names of its pieces (one grammar, parsed by ``parse_piece``; ``prefix``: ``PREFIX``).
+#: Legacy pieces (``_part<N>``, ``_collect_part<N>``, ``+<route>_<N>``) are read, never written.
+_PIECE = (r'(?P<name>%s(?P<stamp>[0-9]{8}T[0-9]{6}\.[0-9]{3}Z)_(?P<reason>[A-Za-z0-9-]+)(?:_(?P<serial>[0-9]+))?)'
+          r'(?:_part(?P<old_part>[0-9]+)(?:_[0-9]+)?)?'
+          r'(?:\+(?P<route>[A-Za-z0-9-]{1,40})(?:_part(?P<old_route_part>[0-9]+))?(?:_[0-9]+)?)?'
+          r'(?:\.(?P<number>[0-9]{3,}))?'
+          r'(?P<recovered>_recovered(?:_[0-9]+)?)?')
+_PATTERNS = {}
+RESERVED_MARK = '.reserved'  # ``<name>.reserved``: a window's name taken while its pieces are written
+
+Piece = collections.namedtuple('Piece', 'name route number')
+Piece.__doc__ = """What a file's name says of it: ``name``, its window's name; ``route``, its route's name (None: the
+window's own file); ``number``, its number among the files of that route (a window split at ``split_mb`` or
+written a file per part: 1, 2, ...; 0 for a window's only file)."""
+
+
 def _reason_text(window):
     reason = trigger_name(window.triggers[0]) if window.triggers else 'window'
     text = re.sub(r'[^A-Za-z0-9-]+', '-', reason).strip('-')
     return text or 'window'
 
 
-def base_name(window, part=None):
-    """``cc_log_<UTC of the first stamp>_<name of the first trigger>[_part<N>]`` (no extension; ``part``: None for
-    the window's own)."""
+def base_name(window, prefix=PREFIX):
+    """The name proposed for a window: ``<prefix><UTC of its first stamp>_<name of its first trigger>``; the name
+    it gets (``reserve_name``) may have ``_<N>`` added, the first free one in its directory."""
     moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
     stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
-    name = PREFIX + stamp + '_' + _reason_text(window)
-    part = getattr(window, 'part', 0) if part is None else part
-    if part:
-        name += '_part%d' % part
-    return name
+    return prefix + stamp + '_' + _reason_text(window)
 
 
-def _extension(path):
-    module = formats.by_extension(path)
-    return module.CODEC if module else None
-
-
-#: A window's file number N (1, 2, ...) once it is split at ``split_mb``: ``<base>[+<route>].<N, 3 digits>``.
-#: Base names hold no other ``.<digits>`` at their end (trigger and route names are ``[A-Za-z0-9-]``).
-_SPLIT = re.compile(r'\.([0-9]+)$')
+def piece_name(name, route=None, number=0):
+    """The file name (without extension) of a piece of the window ``name``: ``<name>[+<route>][.<number>]``."""
+    return name + (routes.SEPARATOR + route if route else '') + (split_suffix(number) if number else '')
 
 
 def split_suffix(number):
     """What follows a window's name (and route) in the name of its file ``number`` (1, 2, ...): ``.002``."""
     return '.%03d' % number
+
+
+def parse_piece(name, prefix=PREFIX):
+    """The ``Piece`` a file name (with or without its format's extension) names, or None for a name that is
+    not a cc_log window piece (``re.fullmatch``: nothing may follow, not even a newline)."""
+    pattern = _PATTERNS.get(prefix)
+    if pattern is None:
+        pattern = _PATTERNS[prefix] = re.compile(_PIECE % re.escape(prefix))
+    match = pattern.fullmatch(_stem(name))
+    if match is None:
+        return None
+    number = match.group('number') or match.group('old_part') or match.group('old_route_part') or 0
+    return Piece(match.group('name'), match.group('route'), int(number))
+
+
+def _extension(path):
+    module = formats.by_extension(path)
+    return module.CODEC if module else None
 
 
 def _stem(name):
@@ -90,17 +126,19 @@ def _stem(name):
 
 
 def split_number(path):
-    """The number of a window's file split at ``split_mb`` (``<base>.002.bag``: 2); 0 for a file never split."""
-    match = _SPLIT.search(_stem(os.path.basename(path)))
-    return int(match.group(1)) if match else 0
+    """The number of a window's file among those of its route (``<name>.002.bag``: 2); 0 for a window's only
+    file."""
+    piece = parse_piece(os.path.basename(path))
+    return piece.number if piece else 0
 
 
 def _file_order(path):
     """Where a file goes among its window's (``window_sets``): the window's own first, then each route, each
-    of them by split number."""
-    stem = _stem(os.path.basename(path))
-    _, separator, route = stem.partition(routes.SEPARATOR)
-    return (bool(separator), _SPLIT.sub('', route), split_number(path))
+    of them by number."""
+    piece = parse_piece(os.path.basename(path))
+    if piece is None:
+        return (False, '', 0)
+    return (piece.route is not None, piece.route or '', piece.number)
 
 
 def window_files(directory):
@@ -114,10 +152,73 @@ def window_files(directory):
 
 
 def window_key(path):
-    """What the files of one window share: the path without its format's extension, up to a route's name
-    (``<window>+<route>.<ext>``, ``core.routes``) or its split number (``<window>.002.<ext>``, ``split_number``)."""
+    """What the files of one window share: its directory and name (``parse_piece``); a file whose name is not a
+    window piece's is a window of its own (its path without extension)."""
     directory, name = os.path.split(path)
-    return os.path.join(directory, _SPLIT.sub('', _stem(name).split(routes.SEPARATOR, 1)[0]))
+    piece = parse_piece(name)
+    return os.path.join(directory, piece.name if piece else _stem(name))
+
+
+def reserve_name(directory, proposed):
+    """Take the first free name of ``proposed``, ``proposed_1``, ``proposed_2``, ... in ``directory``: its
+    ``<name>.reserved`` created (``O_EXCL``: one writer wins, in any process), then no other file holding that
+    name. Returns ``(name, path of the reservation)``; ``release_name`` removes it once the window's pieces are
+    written. OSError when the directory cannot be written."""
+    ensure_directory(directory)
+    for candidate in final_names(directory, proposed, ''):
+        name = os.path.basename(candidate)
+        reservation = candidate + RESERVED_MARK
+        try:
+            os.close(safe_files.create(reservation))
+        except FileExistsError:
+            continue
+        if not _held_by_others(directory, name):
+            return name, reservation
+        release_name(reservation)
+
+
+def _held_by_others(directory, name):
+    """Whether a file of ``directory`` other than ``name``'s reservation holds the window name ``name``."""
+    for entry in os.listdir(directory):
+        if entry == name + RESERVED_MARK:
+            continue
+        for mark in (TMP_MARK, KEPT_MARK):
+            entry = entry.split(mark, 1)[0]
+        piece = parse_piece(entry)
+        if piece is not None and piece.name == name:
+            return True
+    return False
+
+
+def release_name(reservation):
+    """Remove a name's reservation (``reserve_name``); the pieces written keep the name taken."""
+    try:
+        os.unlink(reservation)
+    except FileNotFoundError:
+        pass
+
+
+class WindowName(object):
+    """The name of one window, shared by every job of it (its parts, its routes): ``proposed`` (None: the
+    ``base_name`` of its first job's window) until ``take`` reserves it in a directory (``reserve_name``) on the
+    first piece's write; ``release`` once its last piece is written."""
+
+    __slots__ = ('proposed', 'name', 'reservation')
+
+    def __init__(self, proposed=None, name=None):
+        self.proposed, self.name, self.reservation = proposed, name, None
+
+    def take(self, directory, window):
+        """The window's name, reserved now if it was not yet."""
+        if self.name is None:
+            self.name, self.reservation = reserve_name(directory, self.proposed or base_name(window))
+        return self.name
+
+    def release(self):
+        """Give up the reservation (idempotent)."""
+        if self.reservation is not None:
+            release_name(self.reservation)
+            self.reservation = None
 
 
 def window_sets(paths):
@@ -241,7 +342,9 @@ def final_names(directory, base, extension):
 def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
 
-    ``base``: the file name without extension (default ``base_name(window)``; used by ``recovery``).
+    ``base``: the file name without extension (default: a name reserved for the window, ``reserve_name``, numbered
+    by the window's part as ``piece_name`` does; the writer gives its reserved name's piece, ``recovery`` a
+    leftover's).
     ``triggers``: those its metadata says (default: the window's; a part of a window written as a file per part
     says those that came since the part before it, while its name is the window's first trigger's).
 
@@ -274,13 +377,18 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
             meta.pop(key, None)
         if left_out is not None:
             left_out.update(meta['undecodable_topics'])
-    base = base or base_name(window)
     extension = module.EXTENSION
     write = module.encoder(records, meta)  # a format may encode now, before the temporary file exists
-    target = safe_files.AtomicFile(os.path.join(directory, base + extension),
-                                   names=final_names(directory, base, extension))
-    with target as stream:
-        write(stream)
+    name = WindowName()
+    if base is None:
+        base = piece_name(name.take(directory, window), None, getattr(window, 'part', 0))
+    try:
+        target = safe_files.AtomicFile(os.path.join(directory, base + extension),
+                                       names=final_names(directory, base, extension))
+        with target as stream:
+            write(stream)
+    finally:
+        name.release()
     return target.path, target.size
 
 
@@ -292,30 +400,29 @@ def streams(fmt):
 class WindowFile(object):
     """One window file written a part at a time, for a window handed on in parts (``LogWindow.part`` 1, 2, ...,
     the last ``final``), by a format with a ``WindowStream``: ``append(part, metadata)`` for each part, then
-    ``finish(metadata)`` -> ``(path, bytes)``. The file is ``<base name of the window>.<ext>.tmp-<pid>`` until
-    it is finished (a crash leaves a leftover that ``recovery`` salvages), then gets its final name as
-    ``write_window``'s files do. ``summary``: the window as a whole (triggers, start, end, its length) once a part
-    was appended. Metadata counters that every part carries (``SUMMED``) are summed over the parts; ``lost``:
-    messages of parts that could not be written (said in the metadata).
+    ``finish(metadata)`` -> ``(path, bytes)``. The file is ``<piece name>.<ext>.tmp-<pid>`` until it is finished (a
+    crash leaves a leftover that ``recovery`` salvages), then gets its final name, ``piece_name(name, route)``
+    (``name``: the window's reserved name; None: one reserved for its first part's ``base_name``). ``summary``: the
+    window as a whole (triggers, start, end, its length) once a part was appended. Metadata counters that every
+    part carries (``SUMMED``) are summed over the parts; ``lost``: messages of parts that could not be written (said
+    in the metadata).
 
     ``split_bytes`` (0: never): before a part, a file holding at least that many bytes is finished and the part
-    begins a new one; the files are then ``<base>.001<ext>``, ``<base>.002<ext>``, ... (``split_suffix``), each
+    begins a new one; the files are then ``<piece>.001<ext>``, ``<piece>.002<ext>``, ... (``split_suffix``), each
     a complete file whose metadata says its own messages, ``split`` (its number) and ``window_start``, the last
     also ``splits`` and ``window_end``; each holds at least ``split_bytes`` (but the last) and at most one part
     more. ``take_closed()`` gives the ``(path, bytes)`` of the files finished so by ``append``."""
 
     SUMMED = ('dropped', 'undecodable')
 
-    def __init__(self, directory, fmt, suffix='', base=None, split_bytes=0):
+    def __init__(self, directory, fmt, route=None, name=None, split_bytes=0):
         self.directory = directory
-        self.suffix = suffix  # after the window's base name: a route's file (``core.routes``)
-        self.base = base      # the window's base name (None: its first part's)
+        self.route = route    # a route's file of the window (``core.routes``), None for its own
+        self.name = WindowName(name=name)  # the window's name (None until its first part: reserved then)
         self.format = formats.check(fmt)
         self.split_bytes = int(split_bytes or 0)
         self._module = formats.get(fmt)
         self._target = self._stream = self._file = None
-        self._name = None     # base name and suffix of every file of the window (fixed by its first part)
-        self._chosen = None   # the first free name of a split window's files (``_final_names``)
         self._split = False   # a file was finished at split_bytes: every file is named as a split
         self.number = 1       # of the file being written
         self._closed = []     # (path, bytes) of the files finished before the window's end (``take_closed``)
@@ -343,30 +450,20 @@ class WindowFile(object):
 
     def _open(self, window):
         ensure_directory(self.directory)
-        if self._name is None:
-            self._name = (self.base or base_name(window, part=0)) + self.suffix
+        name = self.name.take(self.directory, window)
         extension = self._module.EXTENSION
-        path = self._name + (split_suffix(self.number) if self.number > 1 else '') + extension
-        target = safe_files.AtomicFile(os.path.join(self.directory, path), names=self._final_names(extension),
+        path = piece_name(name, self.route, self.number if self.number > 1 else 0) + extension
+        target = safe_files.AtomicFile(os.path.join(self.directory, path), names=self._final_name(extension),
                                        keep=True)
         self._file = target.__enter__()
         self._target, self._stream = target, self._module.WindowStream(self._file)
         self._in_file, self._summed, self.lost = Contents(), {}, 0
 
-    def _final_names(self, extension):
-        """The names the file being written may take when it is finished (read then: a window's first file is
-        named as a split once a second one began). A split window's files share the first free name
-        (``<base>``, ``<base>_1``, ...: ``final_names``) that its first file took; a name another window's files
-        have, split or not, is not taken."""
-        number, directory, split = self.number, self.directory, self._split
-        if self._chosen is not None:
-            yield from final_names(directory, self._chosen + split_suffix(number), extension)
-            return
-        for candidate in final_names(directory, self._name, ''):
-            if os.path.lexists(candidate + (extension if split else split_suffix(1) + extension)):
-                continue  # another window of that name, split or not: its files would be taken for this one's
-            self._chosen = os.path.basename(candidate)
-            yield candidate + (split_suffix(number) if split else '') + extension
+    def _final_name(self, extension):
+        """The name the file being written takes when it is finished (read then: a window's first file is named
+        as a split once a second one began)."""
+        number = self.number if self._split else 0
+        yield os.path.join(self.directory, piece_name(self.name.name, self.route, number) + extension)
 
     def _close_split(self):
         """Finish the file being written (its number said) before the next part begins a new one."""
@@ -397,7 +494,10 @@ class WindowFile(object):
         split = {}
         if self.number > 1:
             split = {'split': self.number, 'splits': self.number, 'window_end': float(self._contents.end)}
-        return self._close(window.triggers, metadata, split)
+        try:
+            return self._close(window.triggers, metadata, split)
+        finally:
+            self.name.release()
 
     def _close(self, triggers, metadata, split):
         """Write the final metadata of the file being written (``split``: its keys of a split window), close it
@@ -418,12 +518,14 @@ class WindowFile(object):
         if self._target is not None:
             target, self._target, self._stream = self._target, None, None
             target.abandon()
+        self.name.release()
 
     def discard(self):
         """Remove the unfinished file (nothing of it is kept)."""
         if self._target is not None:
             target, self._target, self._stream = self._target, None, None
             target.__exit__(ValueError, ValueError('discarded'), None)
+        self.name.release()
 
     @property
     def summary(self):

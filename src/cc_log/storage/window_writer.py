@@ -33,7 +33,6 @@ import time
 
 from cc_log.storage import disk_guard
 from cc_log.storage import log_format
-from cc_log.core import routes
 from cc_log.core.records import LogWindow
 from cc_log.core.spans import megabytes, seconds
 
@@ -65,14 +64,16 @@ class Job(object):
     """One file for the writer: ``window`` (a LogWindow) with ``metadata`` for ``log_format.write_window``, or
     ``write``, a function that writes another file and returns its path. ``what`` names the kind of file
     (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events. ``fmt`` and
-    ``route``: the window's file of a route (``core.routes``) in that format, named ``<base>+<route>``; ``base``:
-    the window's file name without extension, the same for all its files (None: ``log_format.base_name``)."""
+    ``route``: the window's file of a route (``core.routes``) in that format, named ``<name>+<route>``; ``name``:
+    the window's ``log_format.WindowName``, shared by the jobs of all its files (its parts, its routes) and reserved
+    at the first one's write (None: the job is a whole window of its own); ``last``: the window's last job (its
+    name's reservation is released once it is done)."""
 
     __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole',
-                 'fmt', 'route', 'base')
+                 'fmt', 'route', 'name', 'last')
 
     def __init__(self, window=None, metadata=None, write=None, what=None, tag=None, fmt=None, route=None,
-                 base=None):
+                 name=None, last=True):
         if (window is None) == (write is None):
             raise ValueError('job: give either a window or a write function')
         self.window = window
@@ -85,7 +86,9 @@ class Job(object):
         self.whole = None       # a window written a part at a time, as a whole, once its file is finished
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent
-        self.fmt, self.route, self.base = fmt, route, base
+        self.fmt, self.route = fmt, route
+        self.name = name if name is not None or window is None else log_format.WindowName()
+        self.last = last
 
     @property
     def stream_key(self):
@@ -136,6 +139,7 @@ class WindowWriter(object):
         self.cpu_seconds = 0.0            # CPU time of the writer thread writing (decoding, compressing, disk)
         self._streams = {}                # (window key, route) -> its log_format.WindowFile being written
         self._triggers_said = {}          # (window key, route) -> its triggers in the files of its parts so far
+        self._names = set()               # the WindowNames reserved and not yet released
         self._queue = queue.Queue()
         self._thread = None
         if background:
@@ -240,7 +244,9 @@ class WindowWriter(object):
         self._retry_held(final=True)
         for (key, route), stream in list(self._streams.items()):  # a window whose last part never came
             self._write(Job(LogWindow([], stream.triggers, 1, True, key), stream.metadata, fmt=stream.format,
-                            route=route))
+                            route=route, name=log_format.WindowName(name=stream.name.name)))
+        for name in list(self._names):  # windows whose last job never came
+            self._release(name)
 
     def _wait_held(self, seconds):
         """Retry held jobs every retry_period for up to ``seconds`` or until none is held."""
@@ -339,14 +345,13 @@ class WindowWriter(object):
         if window is None:
             return job.write(), 0
         fmt, key = job.fmt or self.format, job.stream_key
-        suffix = routes.SEPARATOR + job.route if job.route else ''
         if window.part and window.key is not None and log_format.streams(fmt):
             stream = self._streams.get(key)
             if stream is None:
                 if not window.records:  # a route none of whose topics came yet: no file
                     return None, 0
-                stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix, job.base,
-                                                                    self.split_bytes)
+                stream = self._streams[key] = log_format.WindowFile(
+                    self.directory, fmt, job.route, self._take_name(job), self.split_bytes)
             try:
                 if not window.final:
                     stream.append(window, job.metadata)
@@ -366,7 +371,7 @@ class WindowWriter(object):
         # a part's file says the triggers that came since the part before it (a part's window holds all of them)
         triggers = window.triggers[self._triggers_said.get(key, 0):] if parted else None
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
-        base = None if job.base is None else job.base + suffix + ('_part%d' % window.part if window.part else '')
+        base = log_format.piece_name(self._take_name(job), job.route, window.part if parted else 0)
         path, nbytes = log_format.write_window(window, self.directory, fmt, job.metadata, left_out=left_out,
                                                triggers=triggers, base=base)
         if parted and window.final:
@@ -381,7 +386,20 @@ class WindowWriter(object):
                     'metadata)' % (path, sum(left_out.values()))
         return path, nbytes
 
+    def _take_name(self, job):
+        """The name of the job's window, reserved at its first piece (OSError: the directory cannot be written)."""
+        if job.name.name is None:
+            job.name.take(self.directory, job.window)
+            self._names.add(job.name)
+        return job.name.name
+
+    def _release(self, name):
+        name.release()
+        self._names.discard(name)
+
     def _written_file(self, job, path, nbytes):
+        if job.last and job.name is not None:
+            self._release(job.name)
         with self._lock:
             self._counts['jobs_queued'] -= 1
             self._counts['messages_queued'] -= job.messages
@@ -429,6 +447,8 @@ class WindowWriter(object):
 
     def _lose(self, job, error):
         window = job.window
+        if job.last and job.name is not None:
+            self._release(job.name)
         stream = self._streams.get(job.stream_key) if window is not None and window.key is not None else None
         if stream is not None:
             stream.lose(window, job.metadata)
