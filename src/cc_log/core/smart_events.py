@@ -2,10 +2,11 @@
 the writer's events (``window_writer``) said as Events. Pure."""
 import collections
 import math
+import os
 
-from cc_log.storage import window_writer
+from cc_log.storage import log_format, window_writer
 
-__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer']
+__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer', 'WindowTally']
 
 OPENED = 'opened'
 WRITTEN = 'written'
@@ -44,3 +45,35 @@ def from_writer(event, threshold_of):
     return Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
                  threshold_of(metadata['trigger']), start, end, len(window), event.path,
                  event.bytes, event.error, metadata['trigger'])
+
+
+class WindowTally(object):
+    """The windows a logger wrote, from its events (``SmartLogger.on_event(tally)``): one per window name
+    (``log_format.window_key``), whatever its files (routes, parts, splits). ``windows()``: ``[{'name', 'start',
+    'end', 'messages', 'files', 'path'}]`` in start order; messages and start/end over all its files, ``files``
+    in ``log_format.file_order``, ``path`` the first of them."""
+
+    def __init__(self):
+        self._windows = collections.OrderedDict()
+
+    def __call__(self, event):
+        if event.kind not in (WRITTEN, SPLIT) or not event.path:
+            return
+        key = log_format.window_key(event.path)
+        window = self._windows.setdefault(key, {'name': os.path.basename(key), 'start': None, 'end': None,
+                                                'messages': 0, 'files': []})
+        window['files'].append(event.path)
+        if event.kind != WRITTEN:  # a split file: its messages are said with the window's last file
+            return
+        window['messages'] += event.messages
+        for name, pick, stamp in (('start', min, event.start), ('end', max, event.end)):
+            if stamp is not None:
+                window[name] = stamp if window[name] is None else pick(window[name], stamp)
+
+    def windows(self):
+        """The windows written so far (see the class)."""
+        result = []
+        for window in self._windows.values():
+            files = sorted(window['files'], key=log_format.file_order)
+            result.append(dict(window, files=files, path=files[0]))
+        return sorted(result, key=lambda window: (window['start'] is None, window['start'] or 0.0))

@@ -132,7 +132,7 @@ def split_number(path):
     return piece.number if piece else 0
 
 
-def _file_order(path):
+def file_order(path):
     """Where a file goes among its window's (``window_sets``): the window's own first, then each route, each
     of them by number."""
     piece = parse_piece(os.path.basename(path))
@@ -237,7 +237,7 @@ def window_sets(paths):
         for candidate in [path] + listed[directory].get(key, []):
             if candidate not in files:
                 files.append(candidate)
-    return [sorted(files, key=_file_order) for files in sets.values()]
+    return [sorted(files, key=file_order) for files in sets.values()]
 
 
 def read_window_set(paths):
@@ -248,11 +248,11 @@ def read_window_set(paths):
     metadata, records = read_window(paths[0])
     if len(paths) == 1:
         return metadata, records
-    metadatas, groups = [metadata], collections.OrderedDict([(_file_order(paths[0])[:2], records)])
+    metadatas, groups = [metadata], collections.OrderedDict([(file_order(paths[0])[:2], records)])
     for path in paths[1:]:
         found, more = read_window(path)
         metadatas.append(found)
-        groups.setdefault(_file_order(path)[:2], []).extend(more)
+        groups.setdefault(file_order(path)[:2], []).extend(more)
     merged = list(heapq.merge(*groups.values(), key=lambda record: record.stamp)) if len(groups) > 1 else records
     counts = collections.Counter(record.topic for record in merged)
     metadata = dict(merged_metadata(metadatas, paths), counts=dict(counts), topics=list(counts), count=len(merged))
@@ -262,12 +262,14 @@ def read_window_set(paths):
 def merged_metadata(metadatas, paths):
     """The metadata of a window written as several files (``paths``, as ``window_sets`` orders them, and their
     ``metadatas``): that of the last file of its first group (its own file, or its last split: it names every
-    trigger), with ``files``, the messages (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the
+    trigger; a window written a file per part: the triggers of them all), with ``files``, the messages (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the
     summed ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own written) for a split
     window, and a summary (``SUMMARY_KEYS``) when every file has one."""
-    first = _file_order(paths[0])[:2]
-    own = [meta for meta, path in zip(metadatas, paths) if _file_order(path)[:2] == first]
+    first = file_order(paths[0])[:2]
+    own = [meta for meta, path in zip(metadatas, paths) if file_order(path)[:2] == first]
     result = dict(own[-1], files=list(paths))
+    if len(own) > 1 and not any('split' in meta for meta in own):  # a file per part: each says its new triggers
+        result['triggers'] = [trigger for meta in own for trigger in meta.get('triggers') or []]
     result.pop('split', None)
     if any(split_number(path) for path in paths):  # the files written (older ones may be gone: max_disk_mb)
         result['splits'] = own[-1].get('splits', len(own))

@@ -66,8 +66,8 @@ class Job(object):
     (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events. ``fmt`` and
     ``route``: the window's file of a route (``core.routes``) in that format, named ``<name>+<route>``; ``name``:
     the window's ``log_format.WindowName``, shared by the jobs of all its files (its parts, its routes) and reserved
-    at the first one's write (None: the job is a whole window of its own); ``last``: the window's last job (its
-    name's reservation is released once it is done)."""
+    at the first one's write (None: a name of its own, or for a part (``LogWindow.key``) its first part's);
+    ``last``: the window's last job (its name's reservation is released once it is done)."""
 
     __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole',
                  'fmt', 'route', 'name', 'last')
@@ -87,8 +87,7 @@ class Job(object):
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent
         self.fmt, self.route = fmt, route
-        self.name = name if name is not None or window is None else log_format.WindowName()
-        self.last = last
+        self.name, self.last = name, last
 
     @property
     def stream_key(self):
@@ -140,6 +139,7 @@ class WindowWriter(object):
         self._streams = {}                # (window key, route) -> its log_format.WindowFile being written
         self._triggers_said = {}          # (window key, route) -> its triggers in the files of its parts so far
         self._names = set()               # the WindowNames reserved and not yet released
+        self._part_names = {}             # window key -> WindowName of a window in parts whose jobs bring none
         self._queue = queue.Queue()
         self._thread = None
         if background:
@@ -344,14 +344,14 @@ class WindowWriter(object):
         window = job.window
         if window is None:
             return job.write(), 0
-        fmt, key = job.fmt or self.format, job.stream_key
+        fmt, key, name = job.fmt or self.format, job.stream_key, self._take_name(job)
         if window.part and window.key is not None and log_format.streams(fmt):
             stream = self._streams.get(key)
             if stream is None:
                 if not window.records:  # a route none of whose topics came yet: no file
                     return None, 0
                 stream = self._streams[key] = log_format.WindowFile(
-                    self.directory, fmt, job.route, self._take_name(job), self.split_bytes)
+                    self.directory, fmt, job.route, name, self.split_bytes)
             try:
                 if not window.final:
                     stream.append(window, job.metadata)
@@ -371,7 +371,7 @@ class WindowWriter(object):
         # a part's file says the triggers that came since the part before it (a part's window holds all of them)
         triggers = window.triggers[self._triggers_said.get(key, 0):] if parted else None
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
-        base = log_format.piece_name(self._take_name(job), job.route, window.part if parted else 0)
+        base = log_format.piece_name(name, job.route, window.part if parted else 0)
         path, nbytes = log_format.write_window(window, self.directory, fmt, job.metadata, left_out=left_out,
                                                triggers=triggers, base=base)
         if parted and window.final:
@@ -388,6 +388,15 @@ class WindowWriter(object):
 
     def _take_name(self, job):
         """The name of the job's window, reserved at its first piece (OSError: the directory cannot be written)."""
+        if job.name is None:
+            window = job.window
+            if window.part and window.key is not None:  # every part of a window takes its first part's name
+                job.name = self._part_names.pop(window.key, None) or log_format.WindowName()
+                job.last = window.final
+                if not window.final:
+                    self._part_names[window.key] = job.name
+            else:
+                job.name = log_format.WindowName()
         if job.name.name is None:
             job.name.take(self.directory, job.window)
             self._names.add(job.name)
