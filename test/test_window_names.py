@@ -10,6 +10,9 @@ import pytest
 import yaml
 
 from cc_log import sim
+from cc_log.core import options
+from cc_log.core.routes import parse_routes
+from cc_log.triggers import base as triggers_base
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.offline import cli
 from cc_log.storage import log_format
@@ -42,6 +45,17 @@ def test_one_parser_reads_every_piece_name_new_and_old(piece, expected):
                                   'cc_log_context_20150521T191138.027Z.bag', 'x' + NAME + '.bag', NAME + '.bag.orig'])
 def test_a_name_with_anything_more_is_no_window_piece(name):
     assert log_format.parse_piece(name) is None  # re.fullmatch: not even a trailing newline
+
+
+def _route(name):
+    return parse_routes([{'name': name, 'topics': ['/odom'], 'format': 'json-xz'}], ('json-xz',))
+
+
+@pytest.mark.parametrize('check', [_route, triggers_base.check_name, options.check_label])
+def test_every_name_check_refuses_a_trailing_newline(check):
+    check('numeric')
+    with pytest.raises(ValueError):  # re.match('^...$') let it through
+        check('numeric\n')
 
 
 def test_piece_names_are_what_the_parser_reads():

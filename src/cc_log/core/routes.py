@@ -22,7 +22,7 @@ from cc_log.core.topic_select import TopicSelection
 SEPARATOR = '+'  # between a window's base name and a route's name in the route's file name
 ROUTE_KEYS = ('name', 'topics', 'format')
 MAX_TEXT = 1 << 20  # characters of routes given as YAML text
-_NAME = re.compile(r'^[A-Za-z0-9-]{1,40}$')
+_NAME = re.compile(r'[A-Za-z0-9-]{1,40}')
 
 
 class Route(collections.namedtuple('Route', 'name selection format')):
@@ -58,7 +58,7 @@ def parse_routes(value, formats, name='routes'):
         if unknown:
             raise ValueError('%s: unknown key %s (known: %s)' % (where, unknown[0], ', '.join(ROUTE_KEYS)))
         route_name = entry.get('name')
-        if not isinstance(route_name, str) or not _NAME.match(route_name):
+        if not isinstance(route_name, str) or not _NAME.fullmatch(route_name):
             raise ValueError('%s: name: %s must be 1 to 40 letters, digits or "-"' % (where, brief(route_name)))
         if route_name in names:
             raise ValueError('%s: name %s is used twice' % (where, route_name))

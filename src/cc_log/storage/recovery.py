@@ -64,14 +64,14 @@ holds (0 when none); detail: one line for the log; lost_bytes: bytes of the left
 decoded (0 when none); kept: where the leftover is kept after a partial recovery ('' when it is not).
 """
 
-_LEFTOVER = re.compile(r'^%s.*(%s)%s(\d+)(\.\d+)?$' % (
+_LEFTOVER = re.compile(r'%s.*(%s)%s(\d+)(\.\d+)?' % (
     re.escape(log_format.PREFIX), '|'.join(re.escape(extension) for extension in formats.extensions()),
     re.escape(log_format.TMP_MARK)))
 
 
 def scan(directory):
     """Leftovers (``cc_log_*.tmp-<pid>``) in ``directory``, sorted."""
-    return [path for path in log_format.temporary_files(directory) if _LEFTOVER.match(os.path.basename(path))]
+    return [path for path in log_format.temporary_files(directory) if _LEFTOVER.fullmatch(os.path.basename(path))]
 
 
 def incomplete(outcomes):
@@ -82,7 +82,7 @@ def incomplete(outcomes):
 def _split(path):
     """(directory, final base name without extension, extension, pid) of a leftover path."""
     directory, name = os.path.split(path)
-    match = _LEFTOVER.match(name)
+    match = _LEFTOVER.fullmatch(name)
     if not match:
         raise ValueError('%s: not a cc_log leftover (cc_log_*.json.xz%s<pid> or cc_log_*.bag%s<pid>)'
                          % (path, log_format.TMP_MARK, log_format.TMP_MARK))
