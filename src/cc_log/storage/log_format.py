@@ -169,9 +169,13 @@ def reserve_name(directory, proposed):
         name = os.path.basename(candidate)
         reservation = candidate + RESERVED_MARK
         try:
-            os.close(safe_files.create(reservation))
+            fd = safe_files.create(reservation)
         except FileExistsError:
             continue
+        try:
+            os.write(fd, b'%d\n' % os.getpid())  # whose it is: ``recovery`` removes one of a process gone
+        finally:
+            os.close(fd)
         if not _held_by_others(directory, name):
             return name, reservation
         release_name(reservation)
@@ -188,6 +192,25 @@ def _held_by_others(directory, name):
         if piece is not None and piece.name == name:
             return True
     return False
+
+
+def reservations(directory):
+    """``[(path, pid or None)]`` of the names reserved in ``directory`` (``reserve_name``), sorted."""
+    try:
+        names = sorted(name for name in os.listdir(directory)
+                       if name.startswith(PREFIX) and name.endswith(RESERVED_MARK))
+    except OSError:
+        return []
+    found = []
+    for name in names:
+        path = os.path.join(directory, name)
+        try:
+            with open(path, 'rb') as stream:
+                text = stream.read(32).strip()
+        except OSError:
+            continue
+        found.append((path, int(text) if text.isdigit() else None))
+    return found
 
 
 def release_name(reservation):

@@ -41,7 +41,7 @@ from cc_log.storage import formats, log_format
 from cc_log.core import msg_codec, safe_files
 from cc_log.core.records import LogWindow, Trigger
 
-__all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
+__all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'release_stale_names', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
            'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']
 
 DUPLICATE = 'duplicate'
@@ -221,9 +221,26 @@ def recover(path):
     return _recover_partial(path, directory, base, extension, info.st_size, fmt)
 
 
+def release_stale_names(directory):
+    """Remove the name reservations (``log_format.reserve_name``) of processes no longer running (this one's
+    and a running one's are kept); they hold no data. Returns the paths removed."""
+    removed = []
+    for path, pid in log_format.reservations(directory):
+        if pid == os.getpid() or _alive(pid):
+            continue
+        log_format.release_name(path)
+        removed.append(path)
+    return removed
+
+
 def recover_directory(directory):
     """Recover every leftover in ``directory``; a list of Outcomes (an OSError for one leftover becomes an
-    UNRECOVERABLE outcome naming it; nothing is deleted then; one gone meanwhile is left out)."""
+    UNRECOVERABLE outcome naming it; nothing is deleted then; one gone meanwhile is left out). Stale name
+    reservations are removed first (``release_stale_names``)."""
+    try:
+        release_stale_names(directory)
+    except OSError:
+        pass  # a directory that cannot be written: its leftovers are reported below
     outcomes = []
     for path in scan(directory):
         try:
