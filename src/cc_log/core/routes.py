@@ -9,8 +9,9 @@ A configuration's ``routes`` (``options``)::
 write each window as ``cc_log_<UTC>_<reason>.bag`` (the cameras, the lidar) beside
 ``cc_log_<UTC>_<reason>+numeric.json.xz`` (the odometry, the IMU, the diagnostics: ``xz -dc | jq``-readable).
 A topic goes to the first route whose ``topics`` match it (names, ``*``, ``re:``, ``!`` as the configuration's
-``topics``), else to the window's own file. The files of one window share everything before ``+``
-(``SEPARATOR``): ``cclog info``, ``cat``, ``export`` and ``stats`` show them as one window. Pure.
+``topics``), else to the window's own file. The files of one window share its name, reserved once
+(``storage.log_format``: ``<name>[+<route>][.<NNN>]<ext>``, ``SEPARATOR`` before the route): ``cclog info``,
+``cat``, ``export`` and ``stats`` show them as one window. Pure.
 """
 import collections
 import re
@@ -19,7 +20,7 @@ from cc_log.core.records import LogWindow
 from cc_log.core.safe_input import brief, loads_yaml
 from cc_log.core.topic_select import TopicSelection
 
-SEPARATOR = '+'  # between a window's base name and a route's name in the route's file name
+SEPARATOR = '+'  # between a window's name and a route's name in the route's file name
 ROUTE_KEYS = ('name', 'topics', 'format')
 MAX_TEXT = 1 << 20  # characters of routes given as YAML text
 _NAME = re.compile(r'[A-Za-z0-9-]{1,40}')
