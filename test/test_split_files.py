@@ -64,7 +64,8 @@ def write_parts(directory, parts, split_mb, max_disk_mb=0, route=False, key=7):
     name = log_format.WindowName('cc_log_20150521T191138.000Z_bumper')
     for k in range(parts):
         final = k == parts - 1
-        writer.submit(Job(LogWindow(frames(k), TRIGGERS, k + 1, final, key), METADATA, name=name, last=final and not route))
+        writer.submit(Job(LogWindow(frames(k), TRIGGERS, k + 1, final, key), METADATA, name=name,
+                          last=final and not route))
         if route:
             writer.submit(Job(LogWindow(odometry(k), TRIGGERS, k + 1, final, key), dict(METADATA, route='numeric'),
                               what=window_writer.ROUTE, fmt='json-xz', route='numeric', name=name, last=final))

@@ -6,22 +6,8 @@ when that format is written or read); ``read_window(path)`` reads any of them by
 ``read_metadata(path)`` only its metadata, whose summary (``window_info.summary_of``: messages, serialized bytes and
 first/last stamps per topic, row JSON bytes) tells ``cclog info`` and ``stats`` what they report.
 
-Names (docs/FORMAT.md): a window's *name* is chosen once, when its first piece is written: ``PREFIX``, the UTC time
-of its first stamp and the name of its first trigger, and ``_<N>`` when that name is taken in the directory
-(``reserve_name``: ``<name>.reserved`` created with ``O_EXCL``, so two writers, even in two processes, never
-share a name). Every file of the window is that name, then its route (``+<route>``, ``core.routes``), then its
-number among that route's files (``.<NNN>``: a window split at ``split_mb`` or written a file per part), then
-its format's extension (``piece_name``); one function reads it back (``parse_piece``, ``re.fullmatch``) and
-every reader groups files by it (``window_key``, ``window_sets``), so names sort by time::
-
-    cc_log_20150521T191138.027Z_classifier.bag                  (a window in one file)
-    cc_log_20150521T191138.027Z_classifier+numeric.json.xz      (its route numeric)
-    cc_log_20150521T191138.027Z_classifier.002.bag              (the second file of a window split at split_mb)
-    cc_log_20150521T191138.027Z_classifier+numeric.002.json.xz  (the second part of its route's json-xz files)
-    cc_log_20150521T191138.027Z_classifier_1.bag                (another window of that name and time)
-
-Names written before this scheme (``<name>_part2``, ``<name>+numeric_part2``, ``<name>_collect_part1``,
-``<name>+numeric_1``) are still read: ``_part<N>`` as the number ``N``.
+Names (docs/FORMAT.md) are ``window_names``' (one grammar, a name reserved once per window), imported here for
+the readers and writers that use them through this module.
 
 A file is written as ``<final name>.tmp-<pid>``, flushed and fsynced, moved to a final name that does not
 exist yet (hard link then unlink, so a file is never overwritten even by another process; rename on file
@@ -31,21 +17,18 @@ systems without hard links), and the directory is fsynced (``safe_files.AtomicFi
 """
 import collections
 import heapq
-import datetime
 import os
-import re
 
-from cc_log.core import routes
 from cc_log.storage import formats, payload_check
 from cc_log.core import raw_message
 from cc_log.core import safe_files, safe_input
-from cc_log.storage.window_info import (
+from cc_log.storage.window_info import (  # noqa: F401 (trigger_name: also read through this module)
     SUMMARY_KEYS, Contents, check_metadata, merged_summary, summary_of, trigger_name, utc_text, window_metadata)
+from cc_log.storage.window_names import (  # noqa: F401 (the names, read through this module too)
+    KEPT_MARK, PREFIX, RESERVED_MARK, TMP_MARK, Piece, WindowName, base_name, file_order, final_names, parse_piece,
+    piece_name, release_name, reservations, reserve_name, split_number, split_suffix, window_key)
 
-PREFIX = 'cc_log_'
 CONTEXT_PREFIX = PREFIX + 'context_'  # a context-track file (``context_track``: a plain rosbag, not a window)
-TMP_MARK = safe_files.TMP_MARK
-KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
 FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
 DIR_MODE = safe_files.DIR_MODE
 
@@ -60,85 +43,11 @@ class Format(object):
     check = staticmethod(formats.check)
 
 
-# -- names ----------------------------------------------------------------------------------------------
-
-#: A window's name and the names of its pieces (one grammar, parsed by ``parse_piece``; ``prefix``: ``PREFIX``).
-#: Legacy pieces (``_part<N>``, ``_collect_part<N>``, ``+<route>_<N>``) are read, never written.
-_PIECE = (r'(?P<name>%s(?P<stamp>[0-9]{8}T[0-9]{6}\.[0-9]{3}Z)_(?P<reason>[A-Za-z0-9-]+)(?:_(?P<serial>[0-9]+))?)'
-          r'(?:_part(?P<old_part>[0-9]+)(?:_[0-9]+)?)?'
-          r'(?:\+(?P<route>[A-Za-z0-9-]{1,40})(?:_part(?P<old_route_part>[0-9]+))?(?:_[0-9]+)?)?'
-          r'(?:\.(?P<number>[0-9]{3,}))?'
-          r'(?P<recovered>_recovered(?:_[0-9]+)?)?')
-_PATTERNS = {}
-RESERVED_MARK = '.reserved'  # ``<name>.reserved``: a window's name taken while its pieces are written
-
-Piece = collections.namedtuple('Piece', 'name route number')
-Piece.__doc__ = """What a file's name says of it: ``name``, its window's name; ``route``, its route's name (None: the
-window's own file); ``number``, its number among the files of that route (a window split at ``split_mb`` or
-written a file per part: 1, 2, ...; 0 for a window's only file)."""
-
-
-def _reason_text(window):
-    reason = trigger_name(window.triggers[0]) if window.triggers else 'window'
-    text = re.sub(r'[^A-Za-z0-9-]+', '-', reason).strip('-')
-    return text or 'window'
-
-
-def base_name(window, prefix=PREFIX):
-    """The name proposed for a window: ``<prefix><UTC of its first stamp>_<name of its first trigger>``; the name
-    it gets (``reserve_name``) may have ``_<N>`` added, the first free one in its directory."""
-    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
-    stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
-    return prefix + stamp + '_' + _reason_text(window)
-
-
-def piece_name(name, route=None, number=0):
-    """The file name (without extension) of a piece of the window ``name``: ``<name>[+<route>][.<number>]``."""
-    return name + (routes.SEPARATOR + route if route else '') + (split_suffix(number) if number else '')
-
-
-def split_suffix(number):
-    """What follows a window's name (and route) in the name of its file ``number`` (1, 2, ...): ``.002``."""
-    return '.%03d' % number
-
-
-def parse_piece(name, prefix=PREFIX):
-    """The ``Piece`` a file name (with or without its format's extension) names, or None for a name that is
-    not a cc_log window piece (``re.fullmatch``: nothing may follow, not even a newline)."""
-    pattern = _PATTERNS.get(prefix)
-    if pattern is None:
-        pattern = _PATTERNS[prefix] = re.compile(_PIECE % re.escape(prefix))
-    match = pattern.fullmatch(_stem(name))
-    if match is None:
-        return None
-    number = match.group('number') or match.group('old_part') or match.group('old_route_part') or 0
-    return Piece(match.group('name'), match.group('route'), int(number))
-
+# -- grouping -------------------------------------------------------------------------------------------
 
 def _extension(path):
     module = formats.by_extension(path)
     return module.CODEC if module else None
-
-
-def _stem(name):
-    module = formats.by_extension(name)
-    return name[:-len(module.EXTENSION)] if module else name
-
-
-def split_number(path):
-    """The number of a window's file among those of its route (``<name>.002.bag``: 2); 0 for a window's only
-    file."""
-    piece = parse_piece(os.path.basename(path))
-    return piece.number if piece else 0
-
-
-def file_order(path):
-    """Where a file goes among its window's (``window_sets``): the window's own first, then each route, each
-    of them by number."""
-    piece = parse_piece(os.path.basename(path))
-    if piece is None:
-        return (False, '', 0)
-    return (piece.route is not None, piece.route or '', piece.number)
 
 
 def window_files(directory):
@@ -149,99 +58,6 @@ def window_files(directory):
         return []
     return [os.path.join(directory, name) for name in sorted(names)
             if name.startswith(PREFIX) and TMP_MARK not in name and _extension(name)]
-
-
-def window_key(path):
-    """What the files of one window share: its directory and name (``parse_piece``); a file whose name is not a
-    window piece's is a window of its own (its path without extension)."""
-    directory, name = os.path.split(path)
-    piece = parse_piece(name)
-    return os.path.join(directory, piece.name if piece else _stem(name))
-
-
-def reserve_name(directory, proposed):
-    """Take the first free name of ``proposed``, ``proposed_1``, ``proposed_2``, ... in ``directory``: its
-    ``<name>.reserved`` created (``O_EXCL``: one writer wins, in any process), then no other file holding that
-    name. Returns ``(name, path of the reservation)``; ``release_name`` removes it once the window's pieces are
-    written. OSError when the directory cannot be written."""
-    ensure_directory(directory)
-    for candidate in final_names(directory, proposed, ''):
-        name = os.path.basename(candidate)
-        reservation = candidate + RESERVED_MARK
-        try:
-            fd = safe_files.create(reservation)
-        except FileExistsError:
-            continue
-        try:
-            os.write(fd, b'%d\n' % os.getpid())  # whose it is: ``recovery`` removes one of a process gone
-        finally:
-            os.close(fd)
-        if not _held_by_others(directory, name):
-            return name, reservation
-        release_name(reservation)
-
-
-def _held_by_others(directory, name):
-    """Whether a file of ``directory`` other than ``name``'s reservation holds the window name ``name``."""
-    for entry in os.listdir(directory):
-        if entry == name + RESERVED_MARK:
-            continue
-        for mark in (TMP_MARK, KEPT_MARK):
-            entry = entry.split(mark, 1)[0]
-        piece = parse_piece(entry)
-        if piece is not None and piece.name == name:
-            return True
-    return False
-
-
-def reservations(directory):
-    """``[(path, pid or None)]`` of the names reserved in ``directory`` (``reserve_name``), sorted."""
-    try:
-        names = sorted(name for name in os.listdir(directory)
-                       if name.startswith(PREFIX) and name.endswith(RESERVED_MARK))
-    except OSError:
-        return []
-    found = []
-    for name in names:
-        path = os.path.join(directory, name)
-        try:
-            with open(path, 'rb') as stream:
-                text = stream.read(32).strip()
-        except OSError:
-            continue
-        found.append((path, int(text) if text.isdigit() else None))
-    return found
-
-
-def release_name(reservation):
-    """Remove a name's reservation (``reserve_name``); the pieces written keep the name taken."""
-    try:
-        os.unlink(reservation)
-    except FileNotFoundError:
-        pass
-
-
-class WindowName(object):
-    """The name of one window, shared by every job of it (its parts, its routes): ``proposed`` (None: the
-    ``base_name`` of its first job's window) until ``take`` reserves it in a directory (``reserve_name``) on the
-    first piece's write; ``release`` once its last piece is written."""
-
-    __slots__ = ('proposed', 'name', 'reservation')
-
-    def __init__(self, proposed=None, name=None):
-        self.proposed, self.name, self.reservation = proposed, name, None
-
-    def take(self, directory, window):
-        """The window's name, reserved now if it was not yet."""
-        if self.name is None:
-            self.name, self.reservation = reserve_name(directory, self.proposed or base_name(window))
-        return self.name
-
-    def release(self):
-        """Give up the reservation (idempotent)."""
-        if self.reservation is not None:
-            release_name(self.reservation)
-            self.reservation = None
 
 
 def window_sets(paths):
@@ -285,8 +101,9 @@ def read_window_set(paths):
 def merged_metadata(metadatas, paths):
     """The metadata of a window written as several files (``paths``, as ``window_sets`` orders them, and their
     ``metadatas``): that of the last file of its first group (its own file, or its last split: it names every
-    trigger; a window written a file per part: the triggers of them all), with ``files``, the messages (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the
-    summed ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own written) for a split
+    trigger; a window written a file per part: the triggers of them all), with ``files``, the messages
+    (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the summed
+    ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own written) for a split
     window, and a summary (``SUMMARY_KEYS``) when every file has one."""
     first = file_order(paths[0])[:2]
     own = [meta for meta, path in zip(metadatas, paths) if file_order(path)[:2] == first]
@@ -354,14 +171,6 @@ def temporary_files(directory):
 def ensure_directory(directory):
     """Create ``directory`` (and parents) group-writable, not world-writable, if it does not exist."""
     return safe_files.make_dirs(directory)
-
-
-def final_names(directory, base, extension):
-    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ..."""
-    counter = 0
-    while True:
-        yield os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
-        counter += 1
 
 
 def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None):

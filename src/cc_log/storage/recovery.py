@@ -41,8 +41,8 @@ from cc_log.storage import formats, log_format
 from cc_log.core import msg_codec, safe_files
 from cc_log.core.records import LogWindow, Trigger
 
-__all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'release_stale_names', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
-           'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']
+__all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'release_stale_names', 'incomplete', 'DUPLICATE',
+           'COMPLETE', 'PARTIAL', 'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']
 
 DUPLICATE = 'duplicate'
 COMPLETE = 'complete'

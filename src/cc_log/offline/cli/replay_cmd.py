@@ -26,9 +26,9 @@ def add_parser(subparsers):
         OUT; options given override the configuration. --json prints {input_messages, raw_json_bytes,
         stored_bytes, windows: [{name, start, end, messages, files, path}]}, one entry per window whatever
         its files (routes, parts, splits: messages of them all; path: its first); start/end are the header
-        stamps (float seconds) of the first and last message saved. A window that cannot be written (disk full) is retried
-        for a few seconds; then replay stops and exits 1 with one line naming OUT and how many windows and
-        messages were not written.
+        stamps (float seconds) of the first and last message saved. A window that cannot be written (disk
+        full) is retried for a few seconds; then replay stops and exits 1 with one line naming OUT and how
+        many windows and messages were not written.
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
