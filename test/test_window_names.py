@@ -151,3 +151,18 @@ def test_replay_counts_windows_not_files_with_routes_and_json_xz_parts(simulated
         metadata, records = log_format.read_window_set(files_of_one)
         assert window['messages'] == len(records) == metadata['count']
         assert window['start'] == pytest.approx(records[0].stamp, abs=1e-6)
+
+
+def test_a_sweep_counts_windows_not_files_with_routes_and_json_xz_parts(simulated, tmp_path):
+    from cc_log.core import config
+    from cc_log.offline import sweep
+    bag, make = simulated
+    cfg = config.Config.from_dict(yaml.safe_load(open(make('json-xz', max=150)).read()))
+    out = str(tmp_path / 'sweep')
+    row, = sweep.sweep_one(bag, out, [sweep.Sweep('routes', cfg, None)])['rows']
+    files = log_format.window_files(os.path.join(out, 'routes'))
+    starts = {os.path.basename(path)[len(log_format.PREFIX):].split('_')[0] for path in files}
+    assert row['windows'] == len(starts)  # windows 10 s apart: one first stamp (UTC in the name) per window
+    sets = log_format.window_sets(files)
+    assert len(sets) == len(starts) and len(files) > 2 * len(sets)  # parts and route files: several per window
+    assert row['kept'] == sum(log_format.read_window_set(files_of_one)[0]['count'] for files_of_one in sets)
