@@ -166,3 +166,27 @@ def test_a_sweep_counts_windows_not_files_with_routes_and_json_xz_parts(simulate
     sets = log_format.window_sets(files)
     assert len(sets) == len(starts) and len(files) > 2 * len(sets)  # parts and route files: several per window
     assert row['kept'] == sum(log_format.read_window_set(files_of_one)[0]['count'] for files_of_one in sets)
+
+
+def test_a_looping_bag_gives_each_window_its_own_name_and_route_file(simulated, tmp_path):
+    """``rosbag play -l`` into one logger: the stamps come again, so do the names proposed; each window still
+    gets a name of its own, its route file with it (/odom in every window)."""
+    from cc_log.core import config
+    from cc_log.offline import replay
+    from cc_log.storage.bag import bagio
+    bag, make = simulated
+    cfg = config.Config.from_dict(yaml.safe_load(open(make()).read()))
+    opened = replay.open_bag(bag)
+    try:
+        options, _, topics = replay.replay_setup(cfg, opened)
+    finally:
+        opened.close()
+    records = list(bagio.read_messages(bag, sorted(topics)))
+    out = str(tmp_path / 'loop')
+    summary = replay.replay_records(replay.offline_logger(out, options), records + records)  # played twice
+    sets = log_format.window_sets(log_format.window_files(out))
+    for files in sets:
+        assert [os.path.basename(path).endswith('+numeric.json.xz') for path in files] == [False, True]
+        metadata, _ = log_format.read_window_set(files)
+        assert metadata['counts'].get(sim.ODOM_TOPIC, 0) > 0
+    assert len(summary['windows']) == len(sets) >= 4
