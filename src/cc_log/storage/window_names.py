@@ -113,7 +113,7 @@ def window_key(path):
     return os.path.join(directory, piece.name if piece else _stem(name))
 
 
-def reserve_name(directory, proposed):
+def reserve_name(directory, proposed, prefix=PREFIX):
     """Take the first free name of ``proposed``, ``proposed_1``, ``proposed_2``, ... in ``directory``: its
     ``<name>.reserved`` created (``O_EXCL``: one writer wins, in any process), then no other file holding that
     name. Returns ``(name, path of the reservation)``; ``release_name`` removes it once the window's pieces are
@@ -130,19 +130,19 @@ def reserve_name(directory, proposed):
             os.write(fd, b'%d\n' % os.getpid())  # whose it is: ``recovery`` removes one of a process gone
         finally:
             os.close(fd)
-        if not _held_by_others(directory, name):
+        if not _held_by_others(directory, name, prefix):
             return name, reservation
         release_name(reservation)
 
 
-def _held_by_others(directory, name):
+def _held_by_others(directory, name, prefix=PREFIX):
     """Whether a file of ``directory`` other than ``name``'s reservation holds the window name ``name``."""
     for entry in os.listdir(directory):
-        if entry == name + RESERVED_MARK:
+        if not entry.startswith(name) or entry == name + RESERVED_MARK:  # (cheap first: a directory may be long)
             continue
         for mark in (TMP_MARK, KEPT_MARK):
             entry = entry.split(mark, 1)[0]
-        piece = parse_piece(entry)
+        piece = parse_piece(entry, prefix)
         if piece is not None and piece.name == name:
             return True
     return False
