@@ -223,11 +223,14 @@ def recover(path):
 
 def release_stale_names(directory):
     """Remove the name reservations (``log_format.reserve_name``) of processes no longer running (this one's
-    and a running one's are kept); they hold no data. Returns the paths removed."""
+    and a running one's are kept, and one that names no process but changed in the last ``BUSY_SECONDS``); they
+    hold no data. Returns the paths removed."""
     removed = []
     for path, pid in log_format.reservations(directory):
         if pid == os.getpid() or _alive(pid):
             continue
+        if pid is None and time.time() - os.lstat(path).st_mtime < BUSY_SECONDS:
+            continue  # whose it is is not said (a full disk): a recent one may be a running writer's
         log_format.release_name(path)
         removed.append(path)
     return removed

@@ -128,6 +128,8 @@ def reserve_name(directory, proposed, prefix=PREFIX):
             continue
         try:
             os.write(fd, b'%d\n' % os.getpid())  # whose it is: ``recovery`` removes one of a process gone
+        except OSError:
+            pass  # a full disk: the empty file reserves the name as well (an inode, no data block)
         finally:
             os.close(fd)
         if not _held_by_others(directory, name, prefix):
@@ -149,7 +151,8 @@ def _held_by_others(directory, name, prefix=PREFIX):
 
 
 def reservations(directory):
-    """``[(path, pid or None)]`` of the names reserved in ``directory`` (``reserve_name``), sorted."""
+    """``[(path, pid or None)]`` of the names reserved in ``directory`` (``reserve_name``), sorted (pid None: the
+    file says none, written on a full disk)."""
     try:
         names = sorted(name for name in os.listdir(directory)
                        if name.startswith(PREFIX) and name.endswith(RESERVED_MARK))
