@@ -2,6 +2,7 @@
 reserved in its directory for every piece; one parser (``parse_piece``) groups files by window for every reader,
 old names still read; ``cclog replay`` and ``--sweep`` count windows, not files."""
 import contextlib
+import errno
 import io
 import json
 import os
@@ -79,6 +80,23 @@ def test_a_name_is_reserved_once_and_never_shared(tmp_path):
     second.release()
     third.release()
     assert sorted(os.listdir(directory)) == [NAME + '+numeric.json.xz.tmp-1']  # no reservation left
+
+
+def test_a_name_reserved_on_a_full_disk_is_the_empty_file_and_recovery_keeps_a_recent_one(tmp_path, monkeypatch):
+    from cc_log.storage import recovery, window_names
+    directory = str(tmp_path)
+
+    def full(fd, data):
+        raise OSError(errno.ENOSPC, 'No space left on device')
+    monkeypatch.setattr(window_names.os, 'write', full)
+    name, reservation = log_format.reserve_name(directory, NAME)
+    monkeypatch.undo()
+    assert name == NAME and os.path.getsize(reservation) == 0  # no error, nothing more reserved
+    assert log_format.reservations(directory) == [(reservation, None)]
+    assert recovery.release_stale_names(directory) == [] and os.path.exists(reservation)  # may be a writer's
+    old = os.stat(reservation).st_mtime - recovery.BUSY_SECONDS - 1
+    os.utime(reservation, (old, old))
+    assert recovery.release_stale_names(directory) == [reservation] and not os.listdir(directory)
 
 
 # -- end to end: cclog replay with a route -----------------------------------------------------------------
