@@ -105,7 +105,7 @@ def test_end_of_stream_flushes_open_window():
     assert not buffer.window_open
 
 
-def test_window_is_completed_once_pre_more_messages_show_no_touch():
+def test_window_is_completed_once_pre_and_post_more_messages_show_none_within_post():
     buffer = WindowBuffer(pre=2, post=1)
     completed = []
     for i in range(8):
