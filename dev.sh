@@ -19,9 +19,10 @@ export PATH="/usr/bin:/bin:$PATH"
 
 # What building needs besides package.xml's keys: catkin_make configures a C/C++ project and runs make.
 BUILD_TOOLCHAIN=(g++ make cmake)
-# An optional extra without a rosdep key (ros/rosdistro's rosdep/python.yaml has no dask key): Dask, which the
-# fleet commands (cclog collect / learn / replay over many bags) run on; they ask for it in one line when missing.
-OPTIONAL_EXTRAS=(python3-dask python3-distributed python3-pip)
+# Optional extras without a rosdep key (ros/rosdistro's rosdep/python.yaml has no dask or zstandard key): Dask,
+# which the fleet commands (cclog collect / learn / replay over many bags) run on; they ask for it in one line when
+# missing; zstandard, the zstd chunks of `cclog export --to mcap` (lz4 without it).
+OPTIONAL_EXTRAS=(python3-dask python3-distributed python3-pip python3-zstandard)
 # Optional extras only on PyPI (Debian 12 has no package): the MCAP library, which `cclog export --to mcap`
 # writes with (it says how to install it in one line when missing). pip puts them in /usr/local for /usr/bin/python3.
 PIP_EXTRAS=(mcap mcap-ros1-support)

@@ -200,7 +200,7 @@ def smart_replay(model, records, driving_topic, directory, side_topics=(), fmt='
     from cc_log.core.smart import SmartLogger
     from cc_log.offline.replay import replay_records
     logger = SmartLogger(model, directory, fmt, pre, post, driving_topic=driving_topic,
-                         side_topics=tuple(side_topics), retrigger=retrigger, triggers=triggers)
+                         side_topics=tuple(side_topics), retrigger=retrigger, triggers=triggers, wait_for_writer=True)
     windows = replay_records(logger, records)['windows']
     for window in windows:
         window['bytes'] = os.path.getsize(window['path'])

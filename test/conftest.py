@@ -33,6 +33,38 @@ def cclog(*args):
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, universal_newlines=True, env=env, timeout=300)
 
 
+def assert_rosbag_spans(expected):
+    """Assert that rosbag says each bag of ``expected`` ({path: (first, last) stamp of its messages}) spans just
+    that: its ``Bag``'s get_start_time and get_end_time, ``rosbag info --yaml``'s start, end and duration (each to
+    a microsecond: bag times are nanoseconds, floats of today's seconds hold about 0.2 us) and plain ``rosbag
+    info``'s duration (to the 0.1 s it prints; whole seconds past a minute)."""
+    import re
+    import rosbag
+    import yaml
+    paths = sorted(expected)
+    for path in paths:
+        first, last = expected[path]
+        with rosbag.Bag(path) as bag:
+            assert (bag.get_start_time(), bag.get_end_time()) == pytest.approx((first, last), abs=1e-6), path
+    command = ['rosbag', 'info']
+    said = subprocess.run(command + ['--yaml'] + paths, stdout=subprocess.PIPE, universal_newlines=True, check=True,
+                          timeout=300).stdout
+    infos = [info for info in yaml.safe_load_all(said) if info]
+    assert [info['path'] for info in infos] == paths
+    for info in infos:
+        first, last = expected[info['path']]
+        assert (info['start'], info['end']) == pytest.approx((first, last), abs=1e-6), info['path']
+        assert info['duration'] == pytest.approx(last - first, abs=1e-6), info['path']
+    text = subprocess.run(command + paths, stdout=subprocess.PIPE, universal_newlines=True, check=True,
+                          timeout=300).stdout
+    durations = [float(re.findall(r'([0-9.]+)s', line)[-1]) for line in text.splitlines()
+                 if line.startswith('duration:')]
+    assert len(durations) == len(paths)
+    for path, duration in zip(paths, durations):
+        first, last = expected[path]
+        assert duration == pytest.approx(last - first, abs=0.05 + 1e-6 if last - first < 60 else 0.5), path
+
+
 @pytest.fixture
 def real_bag():
     """Return ``real_data``: the path of a real bag by file name."""

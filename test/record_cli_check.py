@@ -6,6 +6,7 @@ Waits (for conditions) until two split files are written, then checks they are L
 (named as launched) publishes its status with the free-space floor of -L.
 """
 import os
+import socket
 import sys
 import unittest
 
@@ -16,7 +17,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import String
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from rostest_fixtures import finish, start, subscribed, wait_for  # noqa: E402
+from rostest_fixtures import finish, start, stop, subscribed, wait_for  # noqa: E402
 
 from cc_log.storage import context_track, log_format  # noqa: E402
 
@@ -88,10 +89,49 @@ class RecordCliTest(unittest.TestCase):
         code, out, err = finish(process, 60)
         self.assertEqual(code, 0, err[-2000:])
         self.assertIn('--duration 4s reached', out)
+        self.assertGreaterEqual(out.count('[INFO]'), 10)  # what -q leaves out (test_prefix_max_splits_quiet)
         self.assertGreaterEqual(rospy.get_time() - began, 4.0)
         [path] = log_format.window_files(directory)
         with rosbag.Bag(path) as bag:
             self.assertAlmostEqual(bag.get_end_time() - bag.get_start_time(), 4.0, delta=1.0)
+
+    def test_prefix_max_splits_quiet_tcpnodelay(self):
+        """-o DIR/run: files DIR/run_<UTC>_<reason>.bag; --max-splits 2: the newest two kept (the oldest deleted
+        as new ones are written); -q: no INFO line (there are more than 10 without it); --tcpnodelay: the
+        publisher's socket to it has TCP_NODELAY (rospy sets it for a subscriber that asks)."""
+        directory = os.path.join(rospy.get_param('~directory'), 'prefix')
+        probe = rospy.Publisher('/record_cli_probe', String, queue_size=1)
+        process = start('record', '/odom', '/record_cli_probe', '-o', os.path.join(directory, 'run'), '--split',
+                        '--duration', '1', '--max-splits', '2', '-q', '--tcpnodelay', '--model',
+                        os.path.join(directory, 'none.json'), '__name:=record_prefix')
+        try:
+            mine = wait_for(lambda: [c for c in probe.impl.connections if c.endpoint_id == '/record_prefix'], 30,
+                            'the recorder subscribed to the probe')
+            self.assertEqual(mine[0].socket.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY), 1)
+            for other in [c for c in probe.impl.connections if c.endpoint_id != '/record_prefix']:  # record -a
+                self.assertEqual(other.socket.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY), 0)
+        except BaseException:
+            stop(process)
+            raise
+        finally:
+            probe.unregister()  # not a topic of this node for --node
+        seen = set()
+
+        def written(count):
+            seen.update(log_format.window_files(directory, 'run_'))
+            return len(seen) >= count
+        try:
+            wait_for(lambda: written(4), 60, 'four files of -o PREFIX')
+        finally:
+            code, out, err = stop(process)
+        self.assertEqual(code, 0, err[-2000:])
+        files = log_format.window_files(directory, 'run_')
+        self.assertEqual(len(files), 2, files)
+        self.assertEqual(files, sorted(seen.union(files))[-2:])  # the newest
+        self.assertEqual(log_format.window_files(directory), [])  # no cc_log_* file
+        with rosbag.Bag(files[-1]) as bag:
+            self.assertGreater(bag.get_message_count('/odom'), 0)
+        self.assertNotIn('[INFO]', out + err)
 
 
 if __name__ == '__main__':

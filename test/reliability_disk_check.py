@@ -225,7 +225,7 @@ class DiskTest(unittest.TestCase):
             new = [path for path in log_format.window_files(directory) if path not in old]
             kept = sum(len(log_format.read_window(path)[1]) for path in new)
             # everything but what came before the first window and the last IMU message (after the last odometry)
-            dropped = int(values['messages dropped'])
+            dropped = int(values['messages not kept (outside every window)'])
             self.assertTrue(2 * sent - dropped - 1 <= kept <= 2 * sent - dropped, (kept, sent, dropped))
         finally:
             os.unlink(filler)

@@ -6,7 +6,7 @@ For ``~duration`` seconds (10 in the test suite; 60 for the issue's figure: set 
 topics at ``~rate`` Hz each, paced in wall time, then checks:
 
 - every message published was seen by the node (diagnostics ``messages seen``), none lost
-  (``messages lost`` = 0: the loss counter; ``messages dropped`` counts messages outside every window, by
+  (``messages lost`` = 0: the loss counter; ``messages not kept`` counts messages outside every window, by
   design) and the intake queue drains;
 - the node's memory is bounded: its RSS (from /proc) at the end is within ``~rss_growth_mb`` of its RSS
   after the first seconds, although 2 x rate x duration messages went through (the buffer holds only ``pre``

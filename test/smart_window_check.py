@@ -11,8 +11,9 @@ topic remapped, then this node publishes the run message by message:
    rate, in the windows, as BWI's amcl_pose and /diagnostics are); AnomalyEvents OPENED and WRITTEN are
    published;
 2. ``~trigger``: a manual window of ``pre`` + 1 + ``post`` consecutive published messages;
-3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen.
+3. ``~enable`` false: another burst leaves no window; diagnostics count what was seen and WARN while paused.
 """
+import copy
 import os
 import shutil
 import sys
@@ -199,6 +200,38 @@ class SmartWindowTest(unittest.TestCase):
             rospy.set_param('/use_sim_time', False)
             fx.stop(node)
 
+    def test_0_keep_budget_spent_skips_a_repeated_anomaly_and_warns(self):
+        # the run with its burst, then the very same run 100 s later (whole seconds: the same rows, the same
+        # scores): with a budget of one window an hour, the repeat is no more anomalous than the kept window
+        name, topic = 'smart_logger_budget', 'budget_odom'
+        out = os.path.join(self.tmp, 'budget')
+        first = self.stream[:RUN.stop - RUN.start]
+        again = [copy.deepcopy(record.msg) for record in first]
+        for msg in again:
+            msg.header.stamp.secs += 100
+        publisher = rospy.Publisher(topic, Odometry, queue_size=10000)
+        node = fx.start('smart_logger.py', '__name:=' + name, 'odom:=' + topic, '_model:=' + self.model_path,
+                        '_directory:=' + out, '_classify_every:=1', '_max_windows_per_hour:=1',
+                        '_diagnostic_period:=0.2')
+        try:
+            fx.wait_for(lambda: publisher.get_num_connections(), 20, name + ' to subscribe')
+            for msg in [record.msg for record in first] + again:
+                publisher.publish(msg)
+                time.sleep(1.0 / RATE)
+            fx.wait_for(lambda: fx.status_values(self.diagnostics, name)[2].get('messages seen') == str(
+                2 * len(first)), 10, 'diagnostics with every message')
+            fx.wait_for(lambda: fx.status_values(self.diagnostics, name)[2].get(
+                'windows skipped (keep budget)', '').startswith('1 (scores '), 10, 'the repeat skipped')
+            level, message, values = fx.status_values(self.diagnostics, name)
+            self.assertEqual(level, DiagnosticStatus.WARN, message)
+            self.assertIn('1 window(s) skipped (keep budget 1/h; scores ', message)
+            self.assertIn("the keep budget is spent: the robot's normal may have drifted (cclog replay reports "
+                          'drift)', message)
+            self.assertEqual(values['windows opened'], '1')
+        finally:
+            fx.stop(node)
+            publisher.unregister()
+
     def test_0_unusable_directory_is_a_warning_naming_the_directory_in_use(self):
         blocker = os.path.join(self.tmp, 'a_file')
         with open(blocker, 'w') as stream:
@@ -208,7 +241,8 @@ class SmartWindowTest(unittest.TestCase):
         for script, name, extra in (('smart_logger.py', 'smart_logger_fallback', ('_model:=' + self.model_path,)),
                                     ('collect_logger.py', 'collect_logger_fallback', ())):
             node = fx.start(script, '__name:=' + name, '_directory:=' + os.path.join(blocker, 'logs'),
-                            '_diagnostic_period:=0.2', *extra, env={'HOME': home})
+                            '_diagnostic_period:=0.2', *extra,
+                            env={'HOME': home, 'ROS_HOME': os.path.join(home, '.ros')})  # ROS's home, as the run's
             try:
                 fx.wait_for(lambda: fx.status_values(self.diagnostics, name)[0] is not None, 30,
                             'diagnostics of ' + name)
@@ -219,6 +253,38 @@ class SmartWindowTest(unittest.TestCase):
                 self.assertEqual(values['directory'], in_use)
             finally:
                 fx.stop(node)
+
+    def test_0_a_silent_driving_topic_warns_naming_the_topics_of_its_type(self):
+        # odometry flows on /husky_odom (this node's publisher) while these nodes watch /silent_odom
+        scripts = (('smart_logger.py', 'smart_logger_silent', ('_model:=' + self.model_path,)),
+                   ('collect_logger.py', 'collect_logger_silent', ()))
+        nodes = [(name, fx.start(script, '__name:=' + name, 'odom:=silent_odom', '_diagnostic_period:=0.2',
+                                 '_directory:=' + os.path.join(self.tmp, name), '_formt:=json-xz', *extra))
+                 for script, name, extra in scripts]
+
+        def silence_said(name):
+            status = fx.status_values(self.diagnostics, name)
+            return status if 'no nav_msgs/Odometry on /silent_odom' in status[1] else None
+        try:
+            for name, _ in nodes:
+                level, message, _ = fx.wait_for(lambda: silence_said(name), 30, 'the silence said by ' + name)
+                self.assertEqual(level, DiagnosticStatus.WARN, message)
+                self.assertIn('nav_msgs/Odometry is published on ', message)
+                self.assertIn('/husky_odom', message)
+            publisher = rospy.Publisher('silent_odom', Odometry, queue_size=100)
+            records = iter(self.odom * 10)
+
+            def settled_ok():
+                publisher.publish(next(records).msg)  # odometry now comes on the driving topic
+                return all(fx.status_values(self.diagnostics, name)[:2] == (DiagnosticStatus.OK, expected)
+                           for (name, _), expected in zip(nodes, ('logging', 'collecting')))
+            fx.wait_for(settled_ok, 30, 'both nodes back to OK once odometry arrives on /silent_odom')
+        finally:
+            outputs = [fx.stop(node) for _, node in nodes]
+        for code, out, err in outputs:
+            self.assertEqual(code, 0, err[-2000:])
+            self.assertEqual((out + err).count('no nav_msgs/Odometry on /silent_odom'), 1, out + err)  # once, no flood
+            self.assertIn('unknown parameter ~formt (did you mean ~format?)', out + err)
 
     def test_1_anomaly_writes_exactly_the_expected_window(self):
         # the offline classifier sees only the burst (messages 100..126 of the run: its 20-row windows)
@@ -309,7 +375,12 @@ class SmartWindowTest(unittest.TestCase):
         self.assertEqual(len(self.events), events)
         status = values()
         self.assertEqual(status['enabled'], 'False')
+        level, message, _ = fx.status_values(self.diagnostics, NODE)
+        self.assertEqual(level, DiagnosticStatus.WARN, message)  # paused: nothing is kept, said as a WARN
+        self.assertTrue(message.startswith('paused (~enable false)'), message)
+        self.assertGreater(int(status['messages not kept (outside every window)']), 0)
         self.assertEqual(status['windows saved'], '2')
+        self.assertEqual(status['windows skipped (keep budget)'], '0 (no keep budget)')
         self.assertEqual(status['write errors'], '0')
         self.assertGreater(int(status['raw JSON bytes']), int(status['stored bytes']) > 0)
         self.assertGreater(int(status['free disk bytes']), 0)

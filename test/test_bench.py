@@ -186,6 +186,14 @@ def test_context_track_quick():
     assert '| sensor noise ' in out and 'cclog stats m' in out and out.count('%') >= 2
 
 
+def test_imu_collision_quick():
+    out = run('imu_collision.py', '--quick')
+    row = next(line for line in out.splitlines() if line.startswith('| soft_collision '))
+    assert [cell.split()[0] for cell in row.split('|')[2:-1]] == ['0/1', '1/1', '1/1', '1/1', '0/1']
+    assert 'Husky (real, nominal only)' in out and 'Sequor (real): 19 wall crashes' in out
+    assert len(targets(out)) == 3
+
+
 def test_progress_bars_quick():
     out = run('progress_bars.py', '--quick')
     assert 'microseconds per update()' in out and '| disabled ' in out and '| enabled, drawn ' in out

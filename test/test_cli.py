@@ -148,6 +148,33 @@ def test_collect_writes_one_vector_file_per_vector_under_the_label(trained):
     assert document['config'] == {'feature_set': 'motion', 'window': WINDOW, 'topic_type': 'nav_msgs/Odometry'}
 
 
+def test_without_topic_the_bags_only_odometry_topic_drives_and_is_said(real_bag, tmp_path):
+    """A newcomer's bag: odometry on /husky_velocity_controller/odom, no --topic: collect and replay take the bag's
+    only topic of the feature set's (the model's) type, saying which in one line; two such topics: one-line error
+    naming both."""
+    husky = real_bag(HUSKY)
+    result = run('collect', husky, '--out', tmp_path / 'vectors', '--window', '5s', '--json')
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)['topic'] == HUSKY_ODOM
+    assert result.stderr.splitlines() == ["cclog collect: driving topic %s (the bag's only nav_msgs/Odometry topic; "
+                                          "--topic chooses another)" % HUSKY_ODOM]
+    ok('learn', '--train', tmp_path / 'vectors', '--model', tmp_path / 'model.json')
+    result = run('replay', husky, '--model', tmp_path / 'model.json', '--out', tmp_path / 'logs', '--json')
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)['windows'] and 'driving topic %s' % HUSKY_ODOM in result.stderr
+    import rosbag
+    two = str(tmp_path / 'two.bag')
+    with rosbag.Bag(husky) as source, rosbag.Bag(two, 'w') as out:
+        for topic, msg, t in source.read_messages(topics=[HUSKY_ODOM]):
+            out.write(topic, msg, t)
+            out.write('/odom', msg, t)
+    line = fails('replay', two, '--model', tmp_path / 'model.json', '--out', tmp_path / 'two')
+    assert '2 topics carry nav_msgs/Odometry (%s, /odom): give --topic' % HUSKY_ODOM in line, line
+    line = fails('collect', real_bag(NORMAL).replace(NORMAL, 'f1tenth_DS1.bag'), '--features', 'imu',
+                 '--out', tmp_path / 'imu')
+    assert 'no topic carries sensor_msgs/Imu; its topics: /odom (nav_msgs/Odometry)' in line, line
+
+
 def test_collect_label_and_duration_window(real_bag, tmp_path):
     out = ok('collect', real_bag(HUSKY), '--topic', HUSKY_ODOM, '--out', tmp_path, '--label', 'bumpy',
              '--window', '10s', '--stride', '50')
@@ -188,8 +215,10 @@ def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     from cc_log.storage import log_format
     from cc_log.core import msg_codec
     summary, bag = replayed['summary'], replayed['bag']
-    assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online']
+    assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
+                             'keep_budget']
     assert summary['online'] == []  # no classifier learns online here
+    assert summary['keep_budget']['windows_skipped'] == 0  # no keep budget: every window kept
     records = bag_messages(bag, ['/odom', '/scan'])
     assert summary['input_messages'] == len(records) == 542
     # estimated from a sample of the messages (replay does not decode them all)
@@ -357,6 +386,25 @@ def test_simulate_writes_bag_and_truth(tmp_path):
     assert again.returncode == 0 and '\rsimulate [' in again.stderr and '100%' in again.stderr
     assert json.loads(again.stdout)['truth_anomalies'] == result['truth_anomalies']  # same seed, same run
     assert 'exists' in fails('simulate', '--minutes', '1', '--anomalies', '0', bag)
+
+
+def test_simulate_writes_a_camera_and_a_scan_at_their_rates(tmp_path):
+    import rosbag
+    from cc_log.sim import sensors
+    bag = tmp_path / 'cameras.bag'
+    result = ok_json('simulate', '--minutes', '0.1', '--anomalies', '0', '--camera', '--scan', bag)
+    assert result['camera'] is True and result['scan'] is True
+    with rosbag.Bag(str(bag)) as reader:
+        topics = reader.get_type_and_topic_info().topics
+        seconds = reader.get_end_time() - reader.get_start_time()
+        image = next(msg for _, msg, _ in reader.read_messages([sensors.CAMERA_TOPIC]))
+    assert topics[sensors.CAMERA_TOPIC].msg_type == 'sensor_msgs/Image'
+    assert topics[sensors.SCAN_TOPIC].msg_type == 'sensor_msgs/LaserScan'
+    assert abs(seconds - 6.0) < 0.1
+    for topic, rate in ((sensors.CAMERA_TOPIC, sensors.CAMERA_RATE), (sensors.SCAN_TOPIC, sensors.SCAN_RATE)):
+        assert abs(topics[topic].message_count - rate * 6.0) <= 1, (topic, topics[topic].message_count)
+        assert abs(topics[topic].frequency - rate) < 0.05 * rate, (topic, topics[topic].frequency)
+    assert (image.width, image.height, image.encoding) == (sensors.WIDTH, sensors.HEIGHT, 'rgb8')
 
 
 # -- progress -------------------------------------------------------------------------------------------------
@@ -580,3 +628,34 @@ def test_collect_into_a_full_disk_retries_then_fails_naming_the_directory(traine
     assert '%d of %d feature vectors not written' % (expected, expected) in line, line
     assert 'No space left on device' in line, line
     assert [name for name in os.listdir(os.path.join(out, 'nominal')) if '.tmp-' in name] == []
+
+
+# -- trigger (a live smart logger's ~trigger_window; the call itself: manual_trigger.test) ----------------------
+
+def test_trigger_without_a_master_is_one_line():
+    result = run('trigger', '--reason', 'bump')
+    assert result.returncode == 1 and result.stdout == ''
+    assert result.stderr == ('cclog trigger: error: no ROS master at http://127.0.0.1:1 (start roscore, or set '
+                             "ROS_MASTER_URI to the robot's)\n")
+
+
+def test_trigger_finds_the_one_smart_logger_or_says_what_runs():
+    from cc_log.errors import CommandError
+    from cc_log.offline.cli.trigger_cmd import trigger_service
+    services = ['/rosout/get_loggers', '/robot1/smart_logger/trigger', '/robot1/smart_logger/trigger_window']
+    assert trigger_service(services, ['/rosout']) == '/robot1/smart_logger/trigger_window'
+    assert trigger_service(services, [], 'robot1/smart_logger/') == '/robot1/smart_logger/trigger_window'
+    with pytest.raises(CommandError, match=r'^--node /smart_logger: no trigger_window service there \(smart '
+                                           r'loggers running: /robot1/smart_logger\)$'):
+        trigger_service(services, [], '/smart_logger')
+    with pytest.raises(CommandError, match=r'^several smart loggers are running \(/a, /robot1/smart_logger\): '
+                                           r'choose one with --node$'):
+        trigger_service(services + ['/a/trigger_window'], [])
+    with pytest.raises(CommandError, match=r'^no smart logger is running \(no trigger_window service; nodes '
+                                           r'running: /collect_logger, /rosout\)$'):
+        trigger_service(['/rosout/get_loggers'], ['/rosout', '/collect_logger'])
+
+
+def test_trigger_durations_are_checked_where_they_enter():
+    result = run('trigger', '--before', 'soon')
+    assert result.returncode == 2 and result.stderr.count('\n') == 1 and "'soon' is not a duration" in result.stderr

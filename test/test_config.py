@@ -80,13 +80,15 @@ def test_a_configuration_file_is_checked_and_builds_every_trigger(tmp_path, mode
 
 
 @pytest.mark.parametrize('text, message', [
-    ('windows: {pre: 1s, psot: 2s}', "windows: unknown key 'psot'"),
-    ('topic: [a]', "unknown key 'topic' (known: topics, topic_limits, driving_topic"),
+    ('windows: {pre: 1s, psot: 2s}', "windows: unknown key 'psot' (did you mean 'post'? known: pre, post"),
+    ('topic: [a]', "unknown key 'topic' (did you mean 'topics'? known: topics, topic_limits, driving_topic"),
+    ('zzz: 1', "unknown key 'zzz' (known: topics,"),  # nothing near: no suggestion
     ('triggers: [{name: x, kind: alarm}]', "triggers[0] (x): kind: 'alarm' is not one of classifier, rule, "
                                            'manual'),
     ('triggers: [{kind: classifier, feature_set: pixels}]', "triggers[0] (classifier): feature_set: 'pixels' is "
                                                             'not one of motion, raw, imu, command, progress, dynamics'),
-    ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]', "triggers[0] (r): unknown key 'whenn'"),
+    ('triggers: [{name: r, kind: rule, topic: odom, whenn: "a > 1"}]',
+     "triggers[0] (r): unknown key 'whenn' (did you mean 'when'?"),
     ('triggers: [{name: r, kind: rule, topic: odom, arrival: true}, {name: r, kind: manual}]',
      "triggers[1]: name 'r' is used twice"),
     ('format: zip', "format: 'zip' is not one of: bag-lz4, json-xz"),
@@ -181,10 +183,10 @@ def test_cclog_replay_with_a_configuration_runs_every_trigger_and_sets_retrigger
     assert all(metadata['post'] == '0.5s' for metadata in found)
 
 
-def test_cclog_replay_needs_a_model_and_a_topic_or_a_configuration(tmp_path, real_bag_path, model_path):
+def test_cclog_replay_needs_a_model_or_a_configuration(tmp_path, real_bag_path, model_path):
     result = cclog('replay', real_bag_path, '--out', tmp_path / 'logs')
     assert result.returncode == 1 and result.stderr.strip() == \
-        'cclog replay: error: replay: give --topic and --model, or --config (a configuration with triggers)'
+        'cclog replay: error: replay: give --model (and --topic), or --config (a configuration with triggers)'
     bad = write(tmp_path, 'triggers: [{name: r, kind: rule, topic: /odom, level: LOUD}]')
     result = cclog('replay', real_bag_path, '--config', bad, '--out', tmp_path / 'logs')
     assert result.returncode == 1 and result.stderr.count('\n') == 1

@@ -3,7 +3,7 @@ import os
 
 import pytest
 import rosbag
-from conftest import fill_disk
+from conftest import assert_rosbag_spans, fill_disk
 from nav_msgs.msg import Odometry
 from std_msgs.msg import String
 
@@ -197,6 +197,18 @@ def test_topics_on_different_clocks_are_not_a_jump_back(tmp_path):
         track.on_message('chatter', String(data='x'), 1005.0 + second)
     track.close()
     assert len(files(tmp_path)) == 1 and len(read(files(tmp_path)[0])) == 40
+
+
+def test_rosbag_says_each_rotated_file_spans_its_first_to_its_last_message(tmp_path):
+    track = ContextTrack(tmp_path, {'odom': None, 'chatter': None}, rotate=20)
+    for i in range(3000):  # two clocks 5 s apart, in files of several chunks
+        track.on_message('odom', odom(1000.0 + i * 0.01), None)
+        track.on_message('chatter', String(data='x' * 200), 1005.0 + i * 0.01)
+    track.close()
+    paths = files(tmp_path)
+    spans = {path: (min(t for _, _, t in read(path)), max(t for _, _, t in read(path))) for path in paths}
+    assert len(paths) == 2 and spans[paths[0]] == (1000.0, pytest.approx(1019.99))
+    assert_rosbag_spans(spans)
 
 
 def test_a_looping_bag_never_collides_on_temporary_names_and_loses_nothing(tmp_path):

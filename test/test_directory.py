@@ -1,4 +1,4 @@
-"""LoggingDirectory: the explicit path, then ~/.ros/cc_log, then /tmp/cc_log."""
+"""LoggingDirectory: the explicit path, then $ROS_HOME/cc_log (~/.ros/cc_log), then /tmp/cc_log."""
 import os
 
 import pytest
@@ -12,7 +12,7 @@ def defaults(tmp_path, monkeypatch):
     """Point the two default directories into tmp_path; return them."""
     home = tmp_path / 'home' / '.ros' / 'cc_log'
     tmp = tmp_path / 'tmp' / 'cc_log'
-    monkeypatch.setattr(directory_module, 'HOME_DIRECTORY', str(home))
+    monkeypatch.setenv('ROS_HOME', str(home.parent))
     monkeypatch.setattr(directory_module, 'TMP_DIRECTORY', str(tmp))
     return str(home), str(tmp)
 
@@ -47,13 +47,28 @@ def test_no_explicit_path_uses_home_ros(defaults):
         assert chosen.path == home and chosen.fallback is False and chosen.tried == []
 
 
+def test_the_default_is_in_ros_home_when_it_is_set(tmp_path, monkeypatch):
+    """ROS_HOME moves ROS's home (its logs, roslaunch's working directory): cc_log's files follow it."""
+    monkeypatch.setenv('HOME', str(tmp_path / 'someone'))
+    monkeypatch.setenv('ROS_HOME', str(tmp_path / 'ros_home'))
+    assert directory_module.ros_home() == str(tmp_path / 'ros_home')
+    assert LoggingDirectory(None).path == str(tmp_path / 'ros_home' / 'cc_log')
+    assert directory_module.cc_log_home('model.json') == str(tmp_path / 'ros_home' / 'cc_log' / 'model.json')
+    for unset in ('', None):  # set empty or not set: ~/.ros, as ROS has it
+        if unset is None:
+            monkeypatch.delenv('ROS_HOME')
+        else:
+            monkeypatch.setenv('ROS_HOME', unset)
+        assert LoggingDirectory(None).path == str(tmp_path / 'someone' / '.ros' / 'cc_log')
+
+
 def test_unwritable_explicit_path_falls_back_to_home_then_tmp(tmp_path, defaults, monkeypatch):
     home, tmp = defaults
     bad = blocked(tmp_path, 'explicit')
     chosen = LoggingDirectory(bad)
     assert chosen.path == home and chosen.fallback is True
     assert [path for path, _ in chosen.tried] == [bad]
-    monkeypatch.setattr(directory_module, 'HOME_DIRECTORY', blocked(tmp_path, 'home'))
+    monkeypatch.setenv('ROS_HOME', os.path.dirname(blocked(tmp_path, 'home')))  # its cc_log under a file
     chosen = LoggingDirectory(bad)
     assert chosen.path == tmp and chosen.fallback is True
     assert len(chosen.tried) == 2 and all(reason for _, reason in chosen.tried)
@@ -61,7 +76,8 @@ def test_unwritable_explicit_path_falls_back_to_home_then_tmp(tmp_path, defaults
 
 def test_nothing_writable_names_every_path(tmp_path, monkeypatch):
     paths = [blocked(tmp_path, name) for name in ('explicit', 'home', 'tmp')]
-    monkeypatch.setattr(directory_module, 'HOME_DIRECTORY', paths[1])
+    paths[1] = os.path.join(os.path.dirname(paths[1]), 'cc_log')  # $ROS_HOME/cc_log under a file
+    monkeypatch.setenv('ROS_HOME', os.path.dirname(paths[1]))
     monkeypatch.setattr(directory_module, 'TMP_DIRECTORY', paths[2])
     with pytest.raises(OSError) as error:
         LoggingDirectory(paths[0])

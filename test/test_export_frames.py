@@ -125,3 +125,15 @@ def test_cclog_export_to_png(simulated, tmp_path):
     odom_only = cclog('export', tmp_path / 'windows', '--to', 'png', '--out', tmp_path / 'none', '--topic', '/odom')
     assert odom_only.returncode == 1 and odom_only.stderr.strip().count('\n') == 0
     assert 'no sensor_msgs/Image or CompressedImage messages' in odom_only.stderr
+
+
+def test_frames_are_written_by_pillow_no_larger_than_its_own_png(simulated):
+    frames = [r.msg for r in simulated if r.topic == CAMERA][:5]
+    depth = numpy.random.default_rng(2).integers(400, 5000, (48, 64), dtype=numpy.uint16)
+    for msg in frames + [image('16UC1', depth)]:
+        data, extension = export.frame_file(msg)
+        pixels = export.image_pixels(msg)
+        own = io.BytesIO()
+        PILImage.fromarray(pixels).save(own, format='PNG')
+        assert extension == 'png' and numpy.array_equal(numpy.asarray(PILImage.open(io.BytesIO(data))), pixels)
+        assert len(data) <= len(own.getvalue()), (msg.encoding, len(data), len(own.getvalue()))

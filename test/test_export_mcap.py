@@ -1,6 +1,7 @@
 """``cclog export --to mcap`` (export.to_mcap) and ``--to bag`` of windows of either format, read back with the MCAP
 reader (mcap + mcap-ros1-support, installed by ``dev.sh setup``) and with rosbag."""
 import json
+import os
 import sys
 
 import pytest
@@ -12,7 +13,7 @@ from cc_log.offline import export
 from cc_log.storage import log_format
 from cc_log import sim
 from cc_log.storage.formats import bag_lz4
-from cc_log.core.records import LogWindow, Record
+from cc_log.core.records import LogWindow, Record, Trigger
 
 HUSKY = 'husky_outdoor_2015.bag'
 ODOM, IMU = '/husky_velocity_controller/odom', '/imu/data'
@@ -79,7 +80,7 @@ def test_an_exported_mcap_holds_every_message_with_its_bytes(originals, tmp_path
 
 def test_mcap_export_refuses_bz2_and_names_the_missing_library(originals, tmp_path, monkeypatch):
     records = originals[:50]
-    with pytest.raises(ValueError, match='^compression: MCAP chunks are none or lz4, not bz2$'):
+    with pytest.raises(ValueError, match='^compression: MCAP chunks are zstd, lz4, none, not bz2$'):
         export.to_mcap(records, str(tmp_path / 'x.mcap'), 'bz2')
     monkeypatch.setitem(sys.modules, 'mcap.writer', None)    # as if the optional package were not installed
     with pytest.raises(ValueError) as error:
@@ -99,3 +100,51 @@ def test_bag_export_of_json_xz_windows_opens_in_rosbag_with_every_message(origin
         assert bag.get_message_count() == len(originals)
         read = [(topic, raw[1]) for topic, raw, _ in bag.read_messages(raw=True)]
     assert read == [(r.topic, r.raw) for r in originals]
+
+
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', None])
+def test_an_exported_mcap_says_each_window_metadata_and_compresses_as_asked(originals, tmp_path, compression):
+    from mcap.reader import make_reader
+    if compression != 'lz4':
+        pytest.importorskip('zstandard')  # an optional extra that dev.sh setup installs (python3-zstandard)
+    windows = tmp_path / 'windows'
+    half = len(originals) // 2
+    triggers = ([Trigger(originals[10].stamp, 'wheel slip', -0.25, 'motion')],
+                [Trigger(originals[half + 5].stamp, 'pressed', None, 'bumper'),
+                 Trigger(originals[half + 9].stamp, 'too fast', 1.75, 'speed')])
+    paths = [log_format.write_window(LogWindow(part, said), str(windows), 'bag-lz4')[0]
+             for part, said in zip((originals[:half], originals[half:]), triggers)]
+    out = tmp_path / 'all.mcap'
+    asked = ['--compression', compression] if compression else []
+    result = cclog('export', windows, '--to', 'mcap', '--out', out, *asked)
+    assert result.returncode == 0, result.stderr
+    with open(str(out), 'rb') as stream:
+        reader = make_reader(stream)
+        metadata = [(record.name, dict(record.metadata)) for record in reader.iter_metadata()]
+        attachments = [(a.name, a.media_type, json.loads(a.data.decode())) for a in reader.iter_attachments()]
+        chunks = {chunk.compression for chunk in reader.get_summary().chunk_indexes}
+    assert chunks == {compression or 'zstd'}  # zstd by default when zstandard imports
+    assert [name for name, _ in metadata] == ['cc_log.window'] * 2
+    parts = (originals[:half], originals[half:])
+    for (_, said), path, part, window_triggers in zip(metadata, paths, parts, triggers):
+        assert said['file'] == os.path.basename(path)
+        assert abs(float(said['start']) - part[0].stamp) < 1e-6 and abs(float(said['end']) - part[-1].stamp) < 1e-6
+        assert json.loads(said['reasons']) == [t.reason for t in window_triggers]
+        assert json.loads(said['scores']) == [t.score for t in window_triggers]
+        assert [(t['name'], t['reason']) for t in json.loads(said['triggers'])] == [
+            (t.name, t.reason) for t in window_triggers]
+    assert [(name, media) for name, media, _ in attachments] == [
+        (os.path.basename(path) + '.json', 'application/json') for path in paths]
+    assert [t['reason'] for t in attachments[1][2]['triggers']] == ['pressed', 'too fast']
+
+
+def test_without_zstandard_mcap_chunks_are_lz4_and_zstd_is_refused_in_one_line(originals, tmp_path, monkeypatch):
+    from mcap.reader import make_reader
+    monkeypatch.setitem(sys.modules, 'zstandard', None)  # as if python3-zstandard were not installed
+    assert export.default_mcap_compression() == 'lz4'
+    out = str(tmp_path / 'x.mcap')
+    export.to_mcap(originals[:50], out)
+    with open(out, 'rb') as stream:
+        assert {chunk.compression for chunk in make_reader(stream).get_summary().chunk_indexes} == {'lz4'}
+    with pytest.raises(ValueError, match='^compression: zstd needs the Python package zstandard'):
+        export.to_mcap(originals[:50], str(tmp_path / 'y.mcap'), 'zstd')

@@ -1,12 +1,15 @@
 """Cameras and lidars in windows: one file per window however large, per-topic limits, one clock, overload
 said and counted. Pure: no roscore (the node's side is in the rostests); rosbag reads what was written."""
+import contextlib
 import errno
 import io
 import os
 
 import pytest
+import yaml
 
 from conftest import cclog
+from cc_log.offline import cli
 from cc_log.storage import log_format, recovery
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.bag import bag_writer
@@ -214,7 +217,8 @@ def test_a_topic_memory_cap_holds_outside_windows():
     for record in stream(5):
         record = record._replace(cost=len(record.raw))
         buffer.add(record) if record.topic == ODOM else buffer.add_side(record)
-    assert sum(1 for r in buffer._side[CAMERA]) == 10 and buffer.trimmed > 100
+    assert sum(1 for r in buffer._side[CAMERA]) == 10 and buffer.limited > 100
+    assert buffer.trimmed == 0  # its own cap, not the buffer budget (no budget here): no WARN on /diagnostics
 
 
 # -- one clock ---------------------------------------------------------------------------------------------
@@ -275,6 +279,34 @@ def test_a_writer_that_falls_behind_drops_heavy_frames_counted_never_light_ones(
     dropping = sum(1 for files in sets if any(log_format.read_metadata(path).get('dropped') for path in files))
     assert info.returncode == 0 and info.stdout.count('DROPPED') == dropping > 0
     assert sum(int(line.split()[1]) for line in info.stdout.splitlines() if 'DROPPED' in line) == dropped
+
+
+def test_an_offline_replay_waits_for_the_writer_and_keeps_every_frame(tmp_path):
+    """cclog replay has no live stream to keep up with: a writer slower than the reading (json-xz of 67 kB frames
+    within 4 MB) makes the reading wait. Each window file holds every message of its span; nothing DROPPED."""
+    records = stream(6, size=(160, 140))
+    assert min(len(r.raw) for r in records if r.topic == CAMERA) >= HEAVY_BYTES
+    bag = str(tmp_path / 'camera.bag')
+    with open(bag, 'wb') as out:
+        bag_writer.write_bag(out, map(bag_lz4.bag_message, records), CONNECTIONS)
+    cfg = tmp_path / 'camera.yaml'
+    cfg.write_text(yaml.safe_dump({'driving_topic': ODOM, 'topics': [CAMERA], 'format': 'json-xz',
+                                   'windows': {'pre': '1s', 'post': '1s'},
+                                   'triggers': [{'name': 'every2s', 'kind': 'periodic', 'every': '2s'}]}))
+    out, said = str(tmp_path / 'out'), io.StringIO()
+    with contextlib.redirect_stdout(said):
+        assert cli.main(['replay', bag, '--config', str(cfg), '--out', out, '--max-buffer-mb', '4']) == 0
+        assert cli.main(['info', out]) == 0
+    files = log_format.window_files(out)
+    assert len(files) > 3  # windows in parts: the budget holds about 60 frames
+    for path in files:
+        metadata, kept = log_format.read_window(path)
+        for topic in (ODOM, CAMERA):
+            span = [r.stamp for r in records if r.topic == topic and metadata['start'] <= r.stamp <= metadata['end']]
+            assert [r.stamp for r in kept if r.topic == topic] == pytest.approx(span, abs=1e-6), path
+        assert 'dropped' not in metadata
+    assert sum(r.topic == CAMERA for path in files for r in log_format.read_window(path)[1]) >= 110
+    assert 'DROPPED' not in said.getvalue()
 
 
 # -- configuration -------------------------------------------------------------------------------------------

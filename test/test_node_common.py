@@ -186,3 +186,20 @@ def test_freed_message_buffers_are_reused_instead_of_mapped_again():
     default, reused = faults('default'), faults('reuse')
     assert default > pages / 2  # glibc hands the burst back and maps it again: a fault per page
     assert reused < pages / 10
+
+
+def test_an_unknown_parameter_is_warned_with_the_nearest_known_name():
+    p = Params(get={}.get, log=lambda *args: None,
+               names=lambda: ['formt', 'model', 'triggers', 'windows', 'xyzzy', 'max_bufer_mb', 'topics'])
+    assert p.unknown() == ['unknown parameter ~formt (did you mean ~format?)',
+                           'unknown parameter ~max_bufer_mb (did you mean ~max_buffer_mb?)',
+                           'unknown parameter ~xyzzy']
+    assert Params(get={}.get, names=lambda: ['model', 'pre', 'json_xz', 'limits']).unknown() == []
+
+
+def test_record_settings_are_the_parameters_checked_for_unknown_names():
+    node_common.read_settings_only({'formt': 'json-xz', 'directory': '/tmp/x'})
+    try:
+        assert Params().unknown() == ['unknown parameter ~formt (did you mean ~format?)']
+    finally:
+        node_common._SETTINGS[:] = []

@@ -68,3 +68,16 @@ def test_drawing_yaw_rate_seconds_from_start_legend_off_the_data_window_kinds():
     spans = {patch.get_label(): patch for patch in axes[0].patches}
     assert spans['manual window'].get_hatch() == '//' and not spans['classifier window'].get_hatch()
     assert plot.window_kind({'triggers': [{'stamp': 1.0, 'reason': 'x > 2'}]}) == 'other'
+
+
+def test_trigger_markers_are_drawn_above_the_score_curve_threshold_and_windows():
+    t0 = 1600000000.0
+    windows = [('c', {'triggers': [{'stamp': t0 + 5, 'reason': 'classifier', 'score': -2.0}], 'threshold': -1.0},
+                [_Record(t0 + 4), _Record(t0 + 7)])]
+    curve = [(t0 + i * 0.5, -2.0 + 0.01 * i) for i in range(40)]
+    figure, _ = plot.draw(windows, [(t0 + i * 0.1, 1.0) for i in range(100)], curve)
+    bottom = figure.axes[-1]
+    [markers] = [line for line in bottom.lines if line.get_label() == 'trigger score']
+    others = [artist for artist in bottom.lines + bottom.patches + bottom.collections if artist is not markers]
+    assert {line.get_label() for line in bottom.lines} >= {'score', 'threshold -1'}
+    assert others and all(markers.get_zorder() > artist.get_zorder() for artist in others)

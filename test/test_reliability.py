@@ -566,7 +566,7 @@ def test_disk_full_keeps_the_window_in_memory_and_writes_it_when_space_returns(c
     stats = logger.stats()
     assert stats['windows_held'] == 2 and stats['messages_held'] == 22 and stats['messages_lost'] == 0
     assert stats['write_errors'] == 1 and os.strerror(code) in stats['last_error']
-    assert stats['messages_dropped'] + stats['messages_queued'] + stats['messages_buffered'] == 200
+    assert stats['messages_not_kept'] + stats['messages_queued'] + stats['messages_buffered'] == 200
     failed = [e for e in events if e.kind == FAILED]
     assert len(failed) == 1 and 'retrying' in failed[0].error
     deadline = time.time() + 10

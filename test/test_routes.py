@@ -1,5 +1,6 @@
 """Routes (cc_log.core.routes): a window cut once into one file per route, each route a topic set in its own
 format; the configuration declares them; bad routes are one line naming the entry."""
+import collections
 import contextlib
 import io
 import json
@@ -8,6 +9,7 @@ import os
 import pytest
 import rosbag
 import yaml
+from conftest import ROOT
 
 from cc_log import sim
 from cc_log.core import config
@@ -15,6 +17,7 @@ from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.core.routes import parse_routes, split
 from cc_log.offline import cli
 from cc_log.storage import log_format
+from cc_log.storage.bag.bag_format import METADATA_TOPIC
 
 FORMATS = ('bag-lz4', 'json-xz')
 NUMERIC = {'name': 'numeric', 'topics': ['/odom', 're:/imu/.*'], 'format': 'json-xz'}
@@ -33,6 +36,14 @@ def test_a_window_is_cut_once_by_route_in_order():
                      ('scans', ['/scan'])]  # the first route that matches takes a topic
     assert all(part.triggers[0].reason == 'collision' and part.key == 7 for _, part in parts)
     assert sum(len(part) for _, part in parts) == 6
+
+
+def test_a_copy_route_takes_its_topics_and_leaves_them_in_the_window_own_part():
+    routes = parse_routes([dict(NUMERIC, copy=True)], FORMATS)
+    parts = split(window(['/camera', '/odom', '/imu/data']), routes)
+    named = [(route.name if route else None, [r.topic for r in part.records]) for route, part in parts]
+    assert named == [(None, ['/camera', '/odom', '/imu/data']), ('numeric', ['/odom', '/imu/data'])]
+    assert [route.copy for route in parse_routes([NUMERIC], FORMATS)] == [False]  # a route moves by default
 
 
 def test_without_routes_the_window_is_its_own_file():
@@ -55,6 +66,7 @@ def test_every_part_of_a_window_in_parts_reaches_every_route():
     ([NUMERIC, NUMERIC], 'routes[1]: name numeric is used twice'),
     ('[{name: a, topics: [x], format: json-xz, size: 1}]', "routes[0]: unknown key 'size'"),
     ([{'name': 'a', 'topics': ['re:(a+)+'], 'format': 'json-xz'}], 'routes[0] (a): topics'),
+    ([dict(NUMERIC, copy='yes')], "routes[0] (numeric): copy: true or false, not 'yes'"),
 ])
 def test_bad_routes_are_one_line_naming_the_entry(value, error):
     with pytest.raises(ValueError) as raised:
@@ -157,3 +169,77 @@ def test_a_trigger_that_keeps_the_camera_keeps_no_scan(tmp_path):
     for files in log_format.window_sets(log_format.window_files(out)):
         metadata, _ = log_format.read_window_set(files)
         assert set(metadata['topics']) == {sim.ODOM_TOPIC, sim.CAMERA_TOPIC}, metadata['topics']
+
+
+def readme_camera_configuration():
+    """The YAML block of README.md's "Cameras and lidars" section, as text."""
+    with open(os.path.join(ROOT, 'README.md')) as stream:
+        section = stream.read().split('### Cameras and lidars', 1)[1]
+    return section.split('```yaml\n', 1)[1].split('```', 1)[0]
+
+
+def test_the_readme_camera_configuration_writes_one_bag_per_window_that_replays_it_all(tmp_path):
+    text = readme_camera_configuration()
+    with open(os.path.join(ROOT, 'config', 'cameras.yaml')) as stream:
+        assert stream.read() == text  # config/cameras.yaml is the README's block
+    bag = str(tmp_path / 'run.bag')
+    sim.simulate_to_bag(bag, sim.SimConfig(seed=3, minutes=0.5, anomalies=0, imu=True, camera=True, scan=True))
+    data = yaml.safe_load(text)
+    simulated = {sim.ODOM_TOPIC, sim.IMU_TOPIC, sim.CAMERA_TOPIC, sim.SCAN_TOPIC}
+    data['topics'] = [t for t in data['topics'] if '/' + t in simulated]  # replay refuses topics a bag lacks
+    assert len(data['topics']) == 4
+    data = dict(data, driving_topic=sim.ODOM_TOPIC, triggers=[
+        {'name': 'every10s', 'kind': 'periodic', 'every': '10s', 'pre': '2s', 'post': '2s'}])
+    cfg = tmp_path / 'cameras.yaml'
+    cfg.write_text(yaml.safe_dump(data))
+    out = str(tmp_path / 'out')
+    assert cli.main(['replay', bag, '--config', str(cfg), '--out', out]) == 0
+    sets = log_format.window_sets(log_format.window_files(out))
+    assert len(sets) >= 2
+    kept = 0
+    for files in sets:
+        bags = [f for f in files if f.endswith('.bag')]
+        copies = [f for f in files if f not in bags]
+        assert len(bags) == 1 and '+' not in os.path.basename(bags[0]), files  # the window: one bag
+        assert copies and all('+numeric' in os.path.basename(f) and f.endswith('.json.xz') for f in copies), files
+        with rosbag.Bag(bags[0]) as reader:  # every topic of the moment, as rosbag play reads it
+            counts = {topic: info.message_count for topic, info in reader.get_type_and_topic_info().topics.items()
+                      if topic != METADATA_TOPIC}
+        assert {sim.ODOM_TOPIC, sim.IMU_TOPIC, sim.CAMERA_TOPIC, sim.SCAN_TOPIC} <= set(counts), counts
+        copied = collections.Counter()
+        for path in copies:
+            copied.update(r.topic for r in log_format.read_window(path)[1])
+        assert set(copied) == {sim.ODOM_TOPIC, sim.IMU_TOPIC}
+        assert copied[sim.ODOM_TOPIC] == counts[sim.ODOM_TOPIC] and copied[sim.IMU_TOPIC] == counts[sim.IMU_TOPIC]
+        metadata, records = log_format.read_window_set(files)  # readers count the copied topics once
+        assert metadata['counts'] == counts and metadata['count'] == sum(counts.values()) == len(records)
+        assert log_format.merged_metadata([log_format.read_metadata(f) for f in files], files)['counts'] == counts
+        kept += sum(counts.values())
+    # the logger counts a copy once too (kept, and what /diagnostics says was dropped: never below zero)
+    from cc_log.offline import replay
+    reader = replay.open_bag(bag)
+    try:
+        options, _, _ = replay.replay_setup(config.Config.from_dict(data), reader)
+    finally:
+        reader.close()
+    logger = replay.offline_logger(str(tmp_path / 'again'), options)
+    replay.replay_into(logger, bag)
+    stats = logger.stats()
+    assert stats['messages_kept'] == kept and 0 <= stats['messages_not_kept'] <= stats['messages_seen'] - kept
+
+
+def test_a_heavy_topic_written_as_json_xz_is_advised_bag_lz4():
+    from cc_log.core.routes import format_of
+    from cc_log.storage.formats.json_xz import heavy_topic_advice
+    routes = parse_routes([NUMERIC, {'name': 'cameras', 'topics': ['re:/camera/.*'], 'format': 'json-xz'}], FORMATS)
+    assert [format_of(topic, routes, 'bag-lz4') for topic in ('/odom', '/camera/image_raw', '/scan')] == [
+        'json-xz', 'json-xz', 'bag-lz4']
+    written_as = format_of('/camera/image_raw', routes, 'bag-lz4')
+    advice = heavy_topic_advice('/camera/image_raw', 'sensor_msgs/Image', written_as)
+    assert advice == ('json-xz carries about 16 MB/s per core: /camera/image_raw (sensor_msgs/Image) is better kept '
+                      'as bag-lz4 (a route: routes: [{name: sensors, topics: [/camera/image_raw], format: bag-lz4}], '
+                      'or format: bag-lz4)')
+    assert heavy_topic_advice('/points', 'sensor_msgs/PointCloud2', format_of('/points', [], 'json-xz'))
+    assert heavy_topic_advice('/scan', 'sensor_msgs/LaserScan', format_of('/scan', routes, 'bag-lz4')) is None
+    assert heavy_topic_advice('/odom', 'nav_msgs/Odometry', format_of('/odom', routes, 'bag-lz4')) is None
+    assert heavy_topic_advice('/camera/x', 'sensor_msgs/CompressedImage', 'json-xz').startswith('json-xz carries')

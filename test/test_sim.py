@@ -351,6 +351,29 @@ def test_imu(ten_minutes):
     assert min(m.linear_acceleration.x for s, m in imu if collision['start'] <= s <= collision['end']) < -8.0
 
 
+def test_soft_collision_stops_within_the_nominal_deceleration_while_the_imu_rings_and_the_command_drives():
+    """A soft collision (named only, never in 'all' nor injected): the odometry's hardest deceleration stays
+    below the run's nominal one, while the IMU's forward acceleration spikes beyond 4 m/s^2 (nominal below 1.5)
+    and cmd_vel keeps asking for motion (speed, or a turn once the planner turns on the spot) at a standstill."""
+    assert 'soft_collision' in sim.SIM_ONLY_TYPES and 'soft_collision' not in sim.parse_anomaly_types('all')
+    with pytest.raises(ValueError, match="^types: unknown anomaly type 'soft_collision'"):
+        sim.inject_anomalies([], ('soft_collision',))
+    config = sim.SimConfig(seed=4, minutes=2.0, anomalies=2, anomaly_types='soft_collision', imu=True, commands=True)
+    track, truth, items, _ = sim_track(config)
+    assert [entry['type'] for entry in truth] == ['soft_collision'] * 2
+    decel = [(i, -a) for i, a in track.derivative(track.v, 0.1)]
+    nominal = max(d for i, d in decel if not inside(track.t[i], truth, 0.2))
+    imu = [(s, m.linear_acceleration.x) for topic, s, m in items if topic == sim.IMU_TOPIC]
+    commands = [(s, max(abs(m.linear.x), abs(m.angular.z))) for topic, s, m in items if topic == sim.CMD_TOPIC]
+    assert max(abs(a) for s, a in imu if not inside(s, truth, 0.5)) < 1.5
+    for entry in truth:
+        assert 0.2 < max(d for i, d in decel if inside(track.t[i], [entry])) < nominal, entry
+        assert max(abs(a) for s, a in imu if entry['start'] <= s <= entry['start'] + 0.2) > 4.0, entry
+        standing = track.indices(entry['end'] - 2.5, entry['end'] - 0.1)  # the standstill lasts 3 s at least
+        assert standing and max(abs(track.v[i]) for i in standing) < 0.05
+        assert min(v for s, v in commands if entry['end'] - 2.5 <= s <= entry['end'] - 0.1) > 0.5, entry
+
+
 def test_unlimited_run_keeps_going():
     simulator = sim.Simulator(sim.SimConfig(minutes=0, anomalies=1, anomaly_types='localization_jump',
                                             warmup=1.0, gap=1.0, rate=50))

@@ -154,7 +154,7 @@ def test_stats_count_every_message_and_byte(husky, tmp_path):
     assert stats['windows_saved'] == stats['windows_opened'] == len(files) == 1
     assert stats['messages_kept'] == len(files[0][2])
     assert stats['stored_bytes'] == os.path.getsize(files[0][0])
-    assert stats['messages_dropped'] == len(husky) - len(files[0][2])
+    assert stats['messages_not_kept'] == len(husky) - len(files[0][2])
     assert stats['messages_queued'] == stats['messages_lost'] == stats['write_errors'] == 0
     assert stats['classifier_calls'] == len(model.calls)
     assert 0 < stats['classifier_mean_us'] <= stats['classifier_max_us']
@@ -432,7 +432,7 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
         for record in run:
             out.write(ODOM, record.msg, t=record.msg.header.stamp)
     summary = replay(bag, ODOM, path, str(tmp_path / 'out'), PRE, POST, 'json-xz')
-    assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows'}
+    assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'keep_budget'}
     assert summary['input_messages'] == len(run)
     # estimated from a sample of the messages (replay does not decode them all)
     assert summary['raw_json_bytes'] == pytest.approx(sum(msg_codec.row_json_bytes(r.msg) for r in run), rel=0.01)

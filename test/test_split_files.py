@@ -10,6 +10,7 @@ import subprocess
 
 import pytest
 import yaml
+from conftest import assert_rosbag_spans
 
 from cc_log import sim
 from cc_log.core.records import LogWindow, Record, Trigger
@@ -109,6 +110,24 @@ def test_a_window_in_parts_is_split_at_the_size_into_bags_rosbag_reads(tmp_path)
     assert [e.path for e in events] == files and events[-1].job.messages == 70  # WRITTEN says the whole window
     assert stats['split_files'] == 3 and stats['windows_saved'] == 1
     assert stats['stored_bytes'] == sum(os.path.getsize(f) for f in files) and stats['messages_kept'] == 70
+
+
+def test_rosbag_says_each_bag_of_a_window_spans_its_first_to_its_last_record(tmp_path):
+    """rosbag's start and end (of a bag's first and last chunk): a whole window in several chunks, a window written
+    a part at a time and each file of a split one end at their last record, not at the metadata written last."""
+    writer = WindowWriter(str(tmp_path / 'whole'), 'bag-lz4', background=False)
+    writer.submit(Job(LogWindow(frames(0) + frames(1) + frames(2), TRIGGERS), METADATA))
+    writer.close()
+    write_parts(str(tmp_path / 'parts'), 3, 0)
+    write_parts(str(tmp_path / 'split'), 7, 1.5 * FRAMES * FRAME_BYTES / 1e6)
+    expected = {}
+    for folder in ('whole', 'parts', 'split'):
+        for path in log_format.window_files(str(tmp_path / folder)):
+            stamps = [record.stamp for record in log_format.read_window(path)[1]]
+            expected[path] = (min(stamps), max(stamps))
+    assert len(expected) == 6
+    assert expected[log_format.window_files(str(tmp_path / 'parts'))[0]] == (T0, T0 + 2.9)
+    assert_rosbag_spans(expected)
 
 
 def test_a_window_below_the_size_or_without_it_is_one_file_of_the_usual_name(tmp_path):

@@ -256,6 +256,24 @@ def test_imu_and_odometry_classifiers_side_by_side_merge_overlapping_windows_int
     assert logger.stats()['triggers']['odom_motion']['fired'] == 5
 
 
+def test_a_manual_request_reaching_beyond_what_the_logger_holds_says_it_was_cut(tmp_path):
+    logger = SmartLogger(None, str(tmp_path), 'json-xz', '2s', '1s', driving_topic=ODOM)
+    items = stream(10.0)  # 50 Hz from 100 s
+    for topic, msg, stamp in items[:52]:  # 26 odometry messages: 100.00 .. 100.50 s
+        logger.on_message(topic, msg, stamp)
+    ok, message = logger.trigger_now('early', before=1.5, after=0.1)
+    assert ok and message.endswith('; before 1.5 s cut to 0.500 s: nothing older is held (the logger keeps ~pre 2s)')
+    for topic, msg, stamp in items[52:600]:  # up to 105.98 s: the pre buffer holds its 2 s
+        logger.on_message(topic, msg, stamp)
+    ok, message = logger.trigger_now('far', before=10.0, after=0.1)
+    assert ok and message.endswith('; before 10 s cut to 2.000 s: nothing older is held (the logger keeps ~pre 2s)')
+    for topic, msg, stamp in items[600:1000]:  # the window before is complete (its post and a pre after it)
+        logger.on_message(topic, msg, stamp)
+    ok, message = logger.trigger_now('near', before=1.0, after=0.1)
+    assert ok and 'cut' not in message and message.endswith('from 108.980')  # as asked
+    assert logger.close(30)
+
+
 def test_manual_request_with_a_reason_and_its_own_span(tmp_path):
     logger = SmartLogger(None, str(tmp_path), 'json-xz', '2s', '1s', driving_topic=ODOM)
     items = stream(10.0)

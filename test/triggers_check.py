@@ -198,6 +198,11 @@ class TriggersTest(unittest.TestCase):
         self.assertLess(abs(shocks[0] - imu[min(imu_flags)].stamp), 0.2)
         self.assertEqual(metadata['trigger_info']['imu_shock']['model']['feature_set'], 'imu')
         self.assertTrue(any(r.topic == '/imu' for r in records))
+        # the classifier says why: in the metadata (its first and most anomalous firings) and on ~anomalies
+        said = [t['why'] for t in metadata['triggers'] if t['name'] == 'odom_motion' and 'why' in t]
+        self.assertTrue(said and all(1 <= len(why) <= 3 and why[0]['text'] for why in said), said)
+        opened = [e for e in self.events if e.event == AnomalyEvent.OPENED and e.trigger == 'odom_motion']
+        self.assertTrue(opened and opened[-1].reason.startswith('classifier; why: '), [e.reason for e in opened])
 
     def test_3_trigger_window_with_a_reason_and_its_own_span(self):
         odom = self.odom[NOMINAL.stop:NOMINAL.stop + 60 + POST]  # a window is handed on pre + post after its end

@@ -106,7 +106,8 @@ class Collector(object):
     on a writer thread; max_buffer_mb: memory budget of the file being collected and the one being written
     (MB; 0: none): half of it starts a new file; max_disk_mb, min_free_mb, retry_period, max_held_messages,
     close_retry: the writer's (see ``window_writer.WindowWriter``); format_options: keys added to every
-    window's metadata that the format reads (json-xz: ``precision``).
+    window's metadata that the format reads (json-xz: ``precision``); max_files, prefix: the writer's quota in
+    files and the file names' prefix (``log_format.file_prefix``).
 
     Thread-safe. Bad configuration raises ``ValueError('<parameter>: ...')``.
     """
@@ -117,7 +118,7 @@ class Collector(object):
                  label=DEFAULT_LABEL, background=True, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, max_disk_mb=0,
                  min_free_mb=0, retry_period=window_writer.DEFAULT_RETRY_PERIOD,
                  max_held_messages=window_writer.DEFAULT_MAX_HELD_MESSAGES, close_retry=0.0, feature_specs=None,
-                 format_options=None):
+                 format_options=None, max_files=0, prefix=log_format.PREFIX):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
         self.format_options = dict(format_options or {})  # e.g. json-xz precision: in every window's metadata
@@ -157,7 +158,7 @@ class Collector(object):
         self.writer = window_writer.WindowWriter(
             self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
             max_held_messages=max_held_messages, background=background, close_retry=close_retry,
-            name='cc_log collect writer')
+            name='cc_log collect writer', max_files=max_files, prefix=prefix)
         self.guard = self.writer.guard
         self.writer.on_event(self._written)
 

@@ -125,8 +125,9 @@ class Config(object):
 
     Attributes: topics, driving_topic (None: the first trigger's first topic), format, precision (json-xz
     rounding, ``{}``: lossless), pre, post,
-    max_window (Spans), max_disk_mb, min_free_mb, max_buffer_mb, split_mb, rotate, label, stride (None: the
-    collector's defaults), triggers (checked trigger entries, dicts with ``name`` and ``kind``), source.
+    max_window (Spans), max_disk_mb, min_free_mb, max_files, max_buffer_mb, split_mb, max_windows_per_hour (the keep
+    budget), rotate, label, stride (None: the collector's defaults), triggers (checked trigger entries, dicts with
+    ``name`` and ``kind``), source.
     """
 
     def __init__(self):
@@ -149,7 +150,7 @@ class Config(object):
         self.selection = TopicSelection.parse(entries, 'topics')  # names and patterns (*, re:..., !...)
         self.topics = [entry for entry in entries if not TopicSelection.is_pattern(entry)]
         for name in ('topic_limits', 'format', 'routes', 'precision', 'pre', 'post', 'max_window', 'max_disk_mb',
-                     'min_free_mb', 'max_buffer_mb', 'split_mb'):
+                     'min_free_mb', 'max_buffer_mb', 'split_mb', 'max_files', 'max_windows_per_hour'):
             setattr(self, name, values[name] if values[name] is not None else options.default(name))
         self.driving_topic = values['driving_topic']
         if self.precision and log_format.Format.JSON_XZ not in [self.format] + [r.format for r in self.routes]:
@@ -235,8 +236,9 @@ class Config(object):
         return {'fmt': self.format, 'pre': self.pre, 'post': self.post, 'max_window': self.max_window,
                 'driving_topic': resolve(driving),
                 'side_topics': None if self.selection.dynamic else [resolve(t) for t in self.topics],
-                'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb,
+                'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb, 'max_files': self.max_files,
                 'max_buffer_mb': self.max_buffer_mb, 'split_mb': self.split_mb, 'triggers': triggers,
+                'max_windows_per_hour': self.max_windows_per_hour,
                 'format_options': self.format_options(),
                 'topic_limits': dict((resolve(topic), limits) for topic, limits in self.topic_limits.items()),
                 'routes': [route.resolved(resolve) for route in self.routes],

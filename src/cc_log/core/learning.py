@@ -363,6 +363,7 @@ def train(nominal, anomalous=None, config=None, nu=None, gamma=None, method='aut
     })
     model.info = {key: value for key, value in info.items() if key != 'grid'}
     model.coverage = coverage(X, config)
+    model.ranges = {'min': np.min(X, axis=0), 'max': np.max(X, axis=0)}
     return model, info
 
 

@@ -18,7 +18,8 @@ Scores follow scikit-learn's ``decision_function``: lower is more anomalous; a v
 executes code (no pickle, no joblib), and anything but a well-formed model raises
 ``ModelError('<path>: <what is wrong>')``. The optional ``"coverage"`` (``learning.coverage``: the range of
 speed, yaw rate and time stopped, or of every feature, its nominal training vectors cover) is absent from
-older files.
+older files, as is the optional ``"ranges"`` (``{"min": [...], "max": [...]}``: each feature's smallest and largest
+value over the nominal training vectors, which ``core.why`` compares a window with).
 """
 import json
 import math
@@ -50,11 +51,12 @@ class AnomalyModel(object):
     ``kernel`` holds the arrays of ``kind``: for ``ocsvm`` ``support_vectors`` (n, d), ``dual_coef`` (n,),
     ``intercept``, ``gamma``; for ``nystroem-sgd`` ``components`` (m, d), ``normalization`` (m, m),
     ``coef`` (m,), ``offset``, ``gamma``. ``info`` is a free dict of JSON values (training figures);
-    ``coverage`` None or ``learning.coverage``'s dict.
+    ``coverage`` None or ``learning.coverage``'s dict; ``ranges`` None or ``{"min": array, "max": array}`` of the
+    training vectors (``core.why``).
     """
 
     def __init__(self, config, mean, scale, kind, kernel, threshold, names=None, info=None, source='<model>',
-                 coverage=None):
+                 coverage=None, ranges=None):
         if not isinstance(config, FeatureConfig):
             raise ModelError('%s: config: expected a FeatureConfig, got %s' % (source, type(config).__name__))
         self.config = config
@@ -70,6 +72,7 @@ class AnomalyModel(object):
         except (TypeError, ValueError) as error:
             raise ModelError('%s: info must hold finite JSON values only (%s)' % (source, error))
         self.coverage = check_coverage(coverage, source)
+        self.ranges = None if ranges is None else {key: np.asarray(ranges[key], dtype=float) for key in ('min', 'max')}
         _validate(self, source)
         self._prepare()
 
@@ -176,6 +179,8 @@ class AnomalyModel(object):
         }
         if self.coverage is not None:
             document['coverage'] = self.coverage
+        if self.ranges is not None:
+            document['ranges'] = {key: value.tolist() for key, value in self.ranges.items()}
         return document
 
     def save(self, path):
@@ -261,8 +266,13 @@ class AnomalyModel(object):
         info = document.get('info') or {}
         if not isinstance(info, dict):
             raise ModelError('%s: info must be an object' % path)
+        ranges = document.get('ranges')
+        if ranges is not None:
+            if not isinstance(ranges, dict):
+                raise ModelError('%s: ranges must be an object {"min": [...], "max": [...]}' % path)
+            ranges = {key: _array(ranges.get(key), 1, path, 'ranges.' + key) for key in ('min', 'max')}
         return cls(config, mean, scale, kind, kernel, threshold, names, info, source=path,
-                   coverage=document.get('coverage'))
+                   coverage=document.get('coverage'), ranges=ranges)
 
 
 def check_coverage(coverage, path='<model>'):
@@ -399,3 +409,9 @@ def _validate(model, path):
             raise bad('kernel.coef has shape %s, expected (%d,)' % (coef.shape, m))
     if model.names is not None and len(model.names) != dimension:
         raise bad('names has %d entries, expected %d' % (len(model.names), dimension))
+    if model.ranges is not None:
+        low, high = model.ranges['min'], model.ranges['max']
+        if low.shape != (dimension,) or high.shape != (dimension,):
+            raise bad('ranges: min and max need %d values each' % dimension)
+        if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(low <= high)):
+            raise bad('ranges: min and max must be finite, min at most max')

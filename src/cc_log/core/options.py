@@ -25,12 +25,13 @@ import re
 
 from cc_log import features
 from cc_log.core import safe_input
+from cc_log.core.keep_budget import MAX_PER_HOUR, check_rate
 from cc_log.core.routes import ROUTE_KEYS, parse_routes
 from cc_log.core.safe_input import brief
 from cc_log.core.spans import Rotation, Span, megabytes, seconds
 from cc_log.core.topic_select import topic_list
 from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE
-from cc_log.storage import context_track, formats
+from cc_log.storage import context_track, formats, log_format
 from cc_log.storage.formats import json_xz
 from cc_log.triggers.classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES
 
@@ -159,6 +160,9 @@ RETRIGGER = Grammar(_choice(lambda: RETRIGGER_MODES), 'MODE', ', '.join('`%s`' %
 FEATURE_SET = Grammar(_choice(features.names), 'SET', 'a feature set: %s' % ', '.join(
     '`%s`' % name for name in features.names()))
 COMMAND = Grammar(_text_or_list, 'COMMAND', 'an argument list or a string')
+NAME_PREFIX = Grammar(lambda value, name: log_format.file_prefix(value, name)[:-1], 'NAME',
+                      'a plain part of a file name (no `/`, no control character, not starting with `.`)')
+COUNT = Grammar(number(0, integer=True), 'N', 'a whole number >= 0')
 
 
 class Option(collections.namedtuple('Option', 'name key grammar default doc nodes commands')):
@@ -246,10 +250,17 @@ OPTIONS = (
             'in parts (one file)', SMART),
     _option('max_disk_mb', 'limits.max_disk_mb', SIZE, 0.0, 'keep window files within this size by deleting the '
             'oldest (0: no quota)', BOTH),
+    _option('max_files', 'limits.max_files', COUNT, 0, 'keep at most this many window (and context) files by '
+            "deleting the oldest, as `max_disk_mb` does (rosbag record's `--max-splits`; 0: no limit)", BOTH),
     _option('min_free_mb', 'limits.min_free_mb', SIZE, 0.0, 'below this much free disk, writing pauses and '
             'windows wait in memory (0: off)', BOTH),
     _option('max_buffer_mb', 'limits.max_buffer_mb', SIZE, DEFAULT_MAX_BUFFER_MB, 'memory budget of every '
             'buffered message and the writer queue (0: none)', BOTH, ('replay',)),
+    _option('max_windows_per_hour', 'limits.max_windows_per_hour', Grammar(check_rate, 'N', 'a number of windows '
+            'from 0 (off) to %g, e.g. 0.1 .. 60' % MAX_PER_HOUR), 0.0, 'keep budget: once this many windows opened '
+            'in the last hour, a Fire opens a window only if its score is more anomalous than the hour\'s N-th '
+            'most anomalous window (a rising threshold; Fires without a score always open; skipped windows are '
+            'counted); 0: no budget', SMART, ('replay',)),
     _option('split_mb', 'limits.split_mb', SIZE, 0.0, "a window's file is closed and a new one begun once it holds "
             "this many MB, at the next part (`.001`, `.002`, ... before the extension; bag-lz4 and any format written "
             "a part at a time); 0: never split", SMART, ('replay',)),
@@ -261,7 +272,11 @@ OPTIONS = (
             COLLECT),
     # parameters of the nodes only
     _option('config', '', TEXT, '', 'the configuration file (these keys; parameters override it)', BOTH),
-    _option('directory', '', TEXT, '', 'where files go (default: ~/.ros/cc_log, then /tmp/cc_log)', BOTH),
+    _option('directory', '', TEXT, '', 'where files go (default: $ROS_HOME/cc_log, ~/.ros/cc_log without ROS_HOME, '
+            'then /tmp/cc_log)', BOTH),
+    _option('name_prefix', '', NAME_PREFIX, 'cc_log', 'what file names begin with, before `_<UTC>_<reason>` '
+            "(rosbag record's `-o PREFIX`); listing, recovery, the quota and uploads follow it: files named "
+            'otherwise are left alone', BOTH),
     _option('model', '', TEXT, '', 'model file (cclog learn) of the classifier named `classifier`', SMART),
     _option('window', '', SPAN, features.DEFAULT_WINDOW, "the feature window (smart mode: checked against the "
             "model's)", BOTH),
@@ -281,6 +296,12 @@ OPTIONS = (
     _option('intake_max_messages', '', Grammar(number(1, integer=True), 'N', 'a whole number >= 1'), 20000,
             'bound of the subscriber queue in messages; beyond it messages are counted as lost', SMART),
     _option('intake_max_mb', '', size(0.001), 64.0, 'bound of the subscriber queue in bytes', SMART),
+    _option('chunk_kb', '', Grammar(number(1, 1 << 20, integer=True), 'KB', 'a whole number of KB (1024 bytes) '
+                                    'from 1'), 768, "bag-lz4 windows and context bags: a chunk is closed once "
+            "it holds this many KB uncompressed (rosbag record's `--chunksize`)", BOTH),
+    _option('quiet', '', BOOL, False, "log warnings and errors only, no INFO lines (rosbag record's `-q`)", BOTH),
+    _option('tcp_nodelay', '', BOOL, False, "subscribe with TCP_NODELAY (rosbag record's `--tcpnodelay`): lower "
+            'latency for small messages, more packets', BOTH),
     _option('context_topics', '', TOPICS, (), 'topics recorded always, each `topic` or `topic:Hz`, in rotated '
             'LZ4 bags under `context/`', BOTH),
     _option('context_rotate', '', POSITIVE_DURATION, context_track.DEFAULT_ROTATE, 'seconds of stamps per context '
@@ -330,9 +351,9 @@ def known_keys(data, keys, where):
         return {}
     if not isinstance(data, dict):
         raise ValueError('%s: a mapping, not %s' % (where or 'configuration', brief(data)))
-    unknown = sorted(brief(key) for key in data if key not in keys)
+    unknown = safe_input.unknown_key(data, keys, where)
     if unknown:
-        raise ValueError('%sunknown key %s (known: %s)' % (where + ': ' if where else '', unknown[0], ', '.join(keys)))
+        raise ValueError(unknown)
     return data
 
 

@@ -16,9 +16,10 @@ def records_of(stamps, topics, msgs, costs, raws, connections):
     return list(map(tuple.__new__, itertools.repeat(Record), zip(stamps, topics, msgs, costs, raws, connections)))
 
 
-Trigger = collections.namedtuple('Trigger', 'stamp reason score name', defaults=(None,))
+Trigger = collections.namedtuple('Trigger', 'stamp reason score name why', defaults=(None, ()))
 Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
-NaN when none) and the name of the trigger (None: the reason is the name, as in files written before names)."""
+NaN when none), the name of the trigger (None: the reason is the name, as in files written before names) and
+``why``: the features that stood out (the Fire's, ``core.why``; () when none)."""
 
 
 class LogWindow(object):

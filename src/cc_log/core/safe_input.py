@@ -28,6 +28,7 @@ Every refusal is a ValueError with one line saying what is wrong; callers add th
 rospy, no rosbag, no genpy.
 """
 import ast
+import difflib
 import functools
 import json
 import keyword
@@ -498,6 +499,25 @@ def brief(value, limit=BRIEF_CHARS):
     """A repr of ``value`` of at most ``limit`` characters (``...`` where cut), whatever its size."""
     text = _BRIEF.repr(value)
     return text if len(text) <= limit else text[:limit - 3] + '...'
+
+
+def closest(name, known):
+    """The name of ``known`` nearest to ``name`` (``difflib.get_close_matches``), None when none is near."""
+    if not isinstance(name, str):
+        return None
+    near = difflib.get_close_matches(name, [k for k in known if isinstance(k, str)], n=1)
+    return near[0] if near else None
+
+
+def unknown_key(data, known, where=''):
+    """'' when every key of the mapping ``data`` is ``known``, else the error text for the first unknown one:
+    ``<where>: unknown key 'formt' (did you mean 'format'? known: ...)``."""
+    unknown = sorted((key for key in data if key not in known), key=brief)
+    if not unknown:
+        return ''
+    near = closest(unknown[0], known)
+    return '%sunknown key %s (%sknown: %s)' % (where + ': ' if where else '', brief(unknown[0]),
+                                               'did you mean %s? ' % brief(near) if near else '', ', '.join(known))
 
 
 # control characters (a terminal escape sequence starts with one) and the bidirectional overrides

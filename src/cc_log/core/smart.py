@@ -12,14 +12,13 @@ triggers (``triggers``: classifiers, rules, the manual trigger) over the records
 - the last message of each latched topic (connection header ``latching: '1'``: ``/tf_static``, maps) is
   written at the start of every window, as ``rosbag record`` keeps them.
 
-Messages come decoded (``on_message``) or as their serialized bytes with their connection header
-(``on_records``, a batch of them, what the live intake and offline replay hand over; ``on_raw``, one): the
-classifiers take a batch at once (rows, vectors, one scoring call), then the window logic runs record by
-record with their Fires known. Serialized messages are buffered as bytes and decoded only
-when a trigger reads a field (a feature set reads its fixed layouts straight from the bytes) and, for
-json-xz, in the writer thread, only for the messages kept. The row-JSON bytes of messages not decoded
-are estimated from a sample (``raw_json.RawJsonEstimate``) decoded when ``stats()`` is asked, not on the
-message path.
+Messages come decoded (``on_message``) or as their serialized bytes with their connection header (``on_records``, a
+batch of them, what the live intake and offline replay hand over; ``on_raw``, one): the classifiers take a batch at
+once (rows, vectors, one scoring call), then the window logic runs record by record with their Fires known.
+Serialized messages are buffered as bytes and decoded only when a trigger reads a field (a feature set reads its
+fixed layouts straight from the bytes) and, for json-xz, in the writer thread, only for the messages kept. The
+row-JSON bytes of messages not decoded are estimated from a sample (``raw_json.RawJsonEstimate``) decoded when
+``stats()`` is asked, not on the message path.
 
 Completed windows go to the ``window_writer.WindowWriter`` (shared with collect mode), whose background
 thread calls ``log_format.write_window``, so compression and disk writes never run on the message path and
@@ -28,8 +27,8 @@ disk limits. All buffered messages together are bounded by ``max_buffer_mb`` (an
 in parts at half of it). ``stats()`` feeds the node's diagnostics; ``on_event`` callbacks hear when a window
 opens, is written or fails to be written, and when the quota deletes an old window file.
 
-Pure: no rospy. The parts it runs: ``stamp_clock`` (the one clock of the stamps), ``window_prep`` (windows
-thinned under overload, latched messages first), ``smart_events`` (Event), ``trigger_topics``.
+Pure: no rospy. Its parts: ``stamp_clock`` (the one clock of the stamps), ``window_prep`` (windows thinned under
+overload, latched messages first), ``smart_events`` (Event), ``trigger_topics``, ``keep_budget``.
 """
 import collections
 import itertools
@@ -39,15 +38,12 @@ import time
 
 from cc_log import errors
 from cc_log import features as features_mod
-from cc_log.storage import log_format
-from cc_log.core import msg_codec
-from cc_log.core import raw_message
-from cc_log.core import routes as routes_mod, smart_events, window_prep
+from cc_log.storage import log_format, window_writer
+from cc_log.core import keep_budget, msg_codec, raw_message, routes as routes_mod, smart_events, window_prep
 from cc_log.core.raw_json import RawJsonEstimate
 from cc_log.core.smart_events import DELETED, FAILED, OPENED, SPLIT, WRITTEN, Event
 from cc_log.core.stamp_clock import StampClock
 from cc_log.core.trigger_topics import TriggerViews, check_triggers, topic_types
-from cc_log.storage import window_writer
 from cc_log.core.spans import Span
 from cc_log.triggers import (
     DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger, ManualTrigger)
@@ -56,15 +52,14 @@ from cc_log.core.window_buffer import (
     DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, WindowBuffer)
 
 __all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
-           'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC',
-           'RETRIGGER_MODES', 'DEFAULT_RETRIGGER', 'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
+           'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC', 'RETRIGGER_MODES', 'DEFAULT_RETRIGGER',
+           'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
 DEFAULT_FORMAT = log_format.formats.DEFAULT
 DEFAULT_DRIVING_TOPIC = 'odom'
 
 _TOPIC, _RAW, _CONNECTION, _STAMP = map(operator.attrgetter, ('topic', 'raw', 'connection', 'stamp'))
 DEFAULT_STAMP_TOLERANCE = 5.0  # seconds a header stamp may differ from the message's arrival (else: its arrival)
-
 DEFAULT_RETRY_PERIOD = window_writer.DEFAULT_RETRY_PERIOD        # seconds between attempts at held windows
 DEFAULT_MAX_HELD_MESSAGES = window_writer.DEFAULT_MAX_HELD_MESSAGES  # unwritten messages kept in memory
 
@@ -96,18 +91,19 @@ class SmartLogger(object):
     pre and post; side_topics: other topic names to keep (messages of any topic not listed, nor watched by
     a trigger, are ignored unless ``side_topics`` is None, which keeps every other topic); enabled: start
     enabled or paused; background: write windows on a writer thread (True) or inline in the calling thread
-    (False); max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period: seconds between
-    attempts to write windows that could not be written (disk full, unwritable directory, min_free_mb
-    reached: they are kept in memory, in order, up to max_held_messages messages; beyond, the oldest are
-    dropped and counted as lost); give_up_after, close_retry: see ``window_writer.WindowWriter`` (offline use:
-    lose a window still failing after that many seconds; keep retrying that long at close); max_buffer_mb:
+    (False); max_disk_mb, min_free_mb: disk limits (0: off; see ``disk_guard``); retry_period, max_held_messages
+    (windows that could not be written are held in memory and retried), give_up_after, close_retry: see
+    ``window_writer.WindowWriter`` (offline use: lose a window still failing after that many seconds; keep
+    retrying that long at close); max_buffer_mb:
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
     half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
     byte of a part; see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
     reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
     in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those
     (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
-    many MB (0: never).
+    many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
+    (offline): a message waits for room in the budget, never thinned for the writer.
+    max_windows_per_hour: the keep budget (``keep_budget.KeepBudget``: past it, a Fire must be more anomalous; 0: off).
 
     Thread-safe: ``on_message``, ``on_raw``, ``on_records``, ``tick``, ``trigger_now``, ``set_enabled``, ``stats``
     and ``close`` may be called from different threads. Bad configuration raises ``ValueError('<parameter>: ...')``.
@@ -119,7 +115,8 @@ class SmartLogger(object):
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES,
                  classify_every=DEFAULT_CLASSIFY_EVERY, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, give_up_after=None,
                  close_retry=0.0, triggers=(), input_topics=None, format_options=None, topic_limits=None, routes=(),
-                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE):
+                 keep=None, split_mb=0, stamp_tolerance=DEFAULT_STAMP_TOLERANCE, wait_for_writer=False, max_files=0,
+                 prefix=log_format.PREFIX, max_windows_per_hour=0):
         if not driving_topic:
             raise ValueError('driving_topic: must not be empty')
         self.driving_topic = driving_topic
@@ -150,11 +147,13 @@ class SmartLogger(object):
         watched = set().union(*(trigger.topics for trigger in self.triggers))
         self.side_topics = None if side_topics is None else frozenset(side_topics).union(watched) - {driving_topic}
         self.max_buffer_mb = max_buffer_mb
+        self.budget = keep_budget.KeepBudget(max_windows_per_hour, self.pre.seconds, self.post.seconds)
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
         self._names = {}  # window key -> the log_format.WindowName of its files, while it is handed on in parts
         self.keep = dict(keep or {})  # trigger name -> the topics its windows keep (window_prep.restrict)
         self.stamp_tolerance = float(stamp_tolerance)
+        self.wait_for_writer = bool(wait_for_writer)
         if not self.stamp_tolerance > 0:
             raise ValueError('stamp_tolerance: %r must be a positive number of seconds' % (stamp_tolerance,))
         self._restamped = collections.Counter()  # topic -> messages whose header stamp was off the clock
@@ -182,7 +181,7 @@ class SmartLogger(object):
         self.writer = window_writer.WindowWriter(
             self.directory, self.format, max_disk_mb, min_free_mb, retry_period=retry_period,
             max_held_messages=max_held_messages, background=background, give_up_after=give_up_after,
-            close_retry=close_retry, split_mb=split_mb, name='cc_log window writer')
+            close_retry=close_retry, split_mb=split_mb, max_files=max_files, prefix=prefix, name='cc_log window writer')
         self.guard = self.writer.guard
         self.retry_period = self.writer.retry_period
         self.writer.on_event(self._written)
@@ -337,7 +336,10 @@ class SmartLogger(object):
         driving = self.driving_topic
         by_topic = self._by_topic
         timed, latched, fire = self._timed, window_prep.any_latched(connections), self._fire
+        waits = self._buffer.max_buffer_bytes if self.wait_for_writer else 0
         for record, view, topic in zip(records, views, topics):
+            if waits:  # the writer's queue leaves room for the record beside the buffer (or is empty)
+                self.writer.wait_for_room(waits - self._buffer.buffered_bytes - record.cost)
             if latched and raw_message.is_latched(record.connection):
                 self._latched.note(topic, record)
             if topic == driving:
@@ -372,12 +374,9 @@ class SmartLogger(object):
 
     def trigger_now(self, reason='manual', before=None, after=None):
         """Save a window around the newest driving message now, with the manual trigger: ``reason`` (text),
-        ``before`` and ``after`` in seconds (None or 0: ``pre`` and ``post``; the past only as far as the
-        logger holds it, at most ``pre``).
-
-        Returns ``(True, message)`` or ``(False, why not)``: disabled, closed, no driving message yet, or a
-        bad span.
-        """
+        ``before`` and ``after`` in seconds (None or 0: ``pre`` and ``post``; the past only as far as the logger
+        holds it, at most ``pre``: the message says so when ``before`` was cut). Returns ``(True, message)`` or
+        ``(False, why not)``: disabled, closed, no driving message yet, or a bad span."""
         with self._lock:
             if self._closed:
                 return False, 'the logger is closed'
@@ -389,10 +388,12 @@ class SmartLogger(object):
                 fire = self.manual.request(reason, before, after)
             except ValueError as error:
                 return False, str(error)
+            held = self._last_stamp - self._buffer.oldest()
             self._fire([fire])
             start = self._buffer.window_start
-            return True, 'window triggered at %.3f (%s)%s' % (
-                self._last_stamp, fire.reason, '' if start is None else ', from %.3f' % start)
+            cut = self.manual.cut_note(before, held, self.pre)
+            return True, 'window triggered at %.3f (%s)%s%s' % (
+                self._last_stamp, fire.reason, '' if start is None else ', from %.3f' % start, cut)
 
     def set_enabled(self, flag):
         """Enable or pause the logger. Pausing completes any open window with what it holds; messages seen
@@ -430,6 +431,7 @@ class SmartLogger(object):
             buffered_bytes = self._buffer.buffered_bytes
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
+            limited = self._limited + self._buffer.limited
         raw_estimate = self._raw_estimate.total  # its samples decoded here, off the message path
         written = self.writer.stats()
         triggers = {trigger.name: trigger.stats() for trigger in self.triggers}
@@ -444,7 +446,7 @@ class SmartLogger(object):
                 'messages_queued': written['messages_queued'],
                 'messages_buffered': buffered,
                 'buffered_bytes': buffered_bytes,
-                'buffer_trimmed': trimmed,
+                'buffer_trimmed': trimmed, 'topic_trimmed': limited,
                 'messages_lost': written['messages_lost'],
                 'raw_json_bytes': s.raw_json_bytes + raw_estimate,
                 'stored_bytes': written['stored_bytes'],
@@ -476,11 +478,11 @@ class SmartLogger(object):
                 'messages_shed': sum(self._shed.values()),
                 'shed_by_topic': dict(self._shed),
                 'messages_restamped': sum(self._restamped.values()),
-                'restamped_by_topic': dict(self._restamped),
+                'restamped_by_topic': dict(self._restamped), **self.budget.stats(),  # windows_skipped, ...
             }
         # Not in any window (outside every anomaly, seen while paused, or trimmed from the pre buffer).
-        result['messages_dropped'] = (result['messages_seen'] - result['messages_kept'] - result['messages_queued']
-                                      - result['messages_buffered'] - result['messages_lost'] - result['messages_shed'])
+        result['messages_not_kept'] = result['messages_seen'] - sum(result[key] for key in (
+            'messages_kept', 'messages_queued', 'messages_buffered', 'messages_lost', 'messages_shed'))
         return result
 
     # -- message path ---------------------------------------------------------------------------------
@@ -507,8 +509,9 @@ class SmartLogger(object):
         if getattr(self, '_buffer', None) is not None:
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed
+            self._limited += self._buffer.limited
         else:
-            self._resets = self._trimmed = 0
+            self._resets = self._trimmed = self._limited = 0
         self._buffer = buffer
         for trigger in self.triggers:
             trigger.reset()
@@ -521,21 +524,20 @@ class SmartLogger(object):
                 with self._stats.lock:
                     self._stats.fires_dropped += 1
                 continue
+            if not self.budget.admit(self._last_stamp, fire, opens=not self._buffer.window_active):
+                continue  # the keep budget is spent and this Fire would open a window: counted as skipped
             announce = not self._buffer.window_active
-            done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post)
+            done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post, fire.why)
             if announce:
                 with self._stats.lock:
                     self._stats.windows_opened += 1
                 start = self._buffer.window_start
                 self._emit(Event(OPENED, self._last_stamp, fire.reason, fire.score, self._threshold_of(fire.name),
-                                 self._last_stamp if start is None else start, None, 0, '', 0, '', fire.name))
+                                 self._last_stamp if start is None else start, None, 0, '', 0, '', fire.name, fire.why))
             self._complete(done)
 
     def _threshold_of(self, name):
-        for trigger in self.classifiers:
-            if trigger.name == name:
-                return trigger.threshold
-        return self.threshold
+        return next((trigger.threshold for trigger in self.classifiers if trigger.name == name), self.threshold)
 
     def _bytes_queued(self):
         """Memory of the parts handed to the writer and not yet written."""
@@ -544,12 +546,12 @@ class SmartLogger(object):
     def _complete(self, windows):
         """Hand completed windows to the writer, each with the latched messages at its start, thinned first when
         the writer's queue, the buffer, the window and room for the next part together pass the memory budget
-        (``window_prep.thin``; an idle writer keeps up: the part is already held). What is dropped is counted
-        per topic (``stats()['shed_by_topic']``) and said in the window's metadata (``CarriedDrops``)."""
+        (``window_prep.thin``; an idle writer keeps up: the part is already held; never with ``wait_for_writer``).
+        What is dropped is counted per topic (``stats()['shed_by_topic']``) and said in the metadata."""
         for window in windows:
             budget, queued = self._buffer.max_buffer_bytes, self._bytes_queued()
             shed = {}
-            if budget and queued:
+            if budget and queued and not self.wait_for_writer:
                 shed = window_prep.thin(window, budget - self._buffer.part_limit - self._buffer.buffered_bytes - queued)
                 with self._stats.lock:
                     self._shed.update(shed)
@@ -558,7 +560,7 @@ class SmartLogger(object):
             metadata, shed = self._metadata(window), self._unsaid.said(window, shed)  # an emptied part's: the next's
             if shed:
                 metadata['dropped'] = shed
-            name = self._names.pop(window.key, None) or log_format.WindowName(log_format.base_name(window))
+            name = self._names.pop(window.key, None) or self.writer.window_name(window)
             if window.part and not window.final:
                 self._names[window.key] = name  # all its files, every part's, take one name
             pieces = routes_mod.split(window, self.routes)  # one file per route (core.routes)

@@ -4,9 +4,10 @@ import collections
 import math
 import os
 
+from cc_log.core import why
 from cc_log.storage import log_format, window_writer
 
-__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer', 'WindowTally']
+__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer', 'reason_text', 'WindowTally']
 
 OPENED = 'opened'
 WRITTEN = 'written'
@@ -14,8 +15,8 @@ FAILED = 'failed'
 DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (path, bytes)
 SPLIT = 'split'  # a file of a window still being written finished at split_mb (path, bytes)
 
-Event = collections.namedtuple('Event', 'kind stamp reason score threshold start end messages path bytes error trigger',
-                               defaults=('',))
+Event = collections.namedtuple(
+    'Event', 'kind stamp reason score threshold start end messages path bytes error trigger why', defaults=('', ()))
 Event.__doc__ = """What happened to a logging window.
 
 kind: OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED (writing it failed;
@@ -28,7 +29,8 @@ was deleted to stay within max_disk_mb; stamp, start and end are None). stamp: o
 request's text); score: the lowest classifier score of the window's triggers (NaN when none); threshold: of the
 classifier that fired (else of the first classifier; NaN without one). start, end: header stamps (float s) of
 the first and last message (end is None for OPENED). messages, path, bytes: the window's message count (all
-topics), file and size on disk (0, '' and 0 until WRITTEN)."""
+topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that stood out when that trigger
+fired (``core.why``; () when it says none)."""
 
 
 def from_writer(event, threshold_of):
@@ -44,7 +46,14 @@ def from_writer(event, threshold_of):
     kind = {window_writer.WRITTEN: WRITTEN, window_writer.SPLIT: SPLIT}.get(event.kind, FAILED)
     return Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
                  threshold_of(metadata['trigger']), start, end, len(window), event.path,
-                 event.bytes, event.error, metadata['trigger'])
+                 event.bytes, event.error, metadata['trigger'], window.triggers[0].why if window.triggers else ())
+
+
+def reason_text(event):
+    """The reason of an Event as the ``AnomalyEvent`` and the log say it: its ``reason``, then the first of its
+    ``why`` (``'classifier; why: max yaw rate 4.2 rad/s, 2.3x the most seen in training'``)."""
+    first = why.texts(event.why[:1])
+    return '%s; why: %s' % (event.reason, first) if first else event.reason
 
 
 class WindowTally(object):

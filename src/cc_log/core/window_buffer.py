@@ -24,6 +24,7 @@ Everything is pure Python: records carry any message object, stamps are float se
 """
 import collections
 import itertools
+import math
 import sys
 
 from cc_log.core.records import LogWindow, Trigger
@@ -233,6 +234,7 @@ class WindowBuffer(object):
         self._max_count = None if self.max_window.is_duration else self.max_window.count
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
+        self.limited = 0                   # records outside any window dropped by their topic's own pre or cap
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
         self._side = {}                    # topic -> its records (other topics than the driving one), by time
         self._side_bytes = {}              # topic -> memory of its records held
@@ -331,11 +333,11 @@ class WindowBuffer(object):
 
     def _limit_topic(self, topic, side, limits, clock):
         """Outside every window: a topic's records older than its own ``pre`` or beyond its own memory cap go
-        (counted in ``trimmed``), the oldest first."""
+        (counted in ``limited``), the oldest first."""
         while side and ((limits.pre is not None and side[0].stamp < clock - limits.pre)
                         or (limits.max_mb and self._side_bytes[topic] > limits.max_mb * MB and len(side) > 1)):
             self._drop_side(topic)
-            self.trimmed += 1
+            self.limited += 1
 
     def _drop_side(self, topic):
         record = self._side[topic].popleft()
@@ -343,19 +345,20 @@ class WindowBuffer(object):
         self._bytes -= record.cost
         return record
 
-    def trigger(self, reason, score=None, name=None, pre=None, post=None):
+    def trigger(self, reason, score=None, name=None, pre=None, post=None, why=()):
         """Mark the last driving record: open a window around it or extend the open one.
 
-        ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the
-        buffer's). A ``pre`` longer than the buffer's gets what the buffer holds (its ``pre``). A trigger with
-        a longer ``pre`` than the one that opened the window reaches back as far as the buffer held when it
-        opened, until a part of the window is written. Returns the windows this completes: only parts of a
-        window that reached max_window, since a new window either extends the open one or merges with the
-        pending one (a pending window is completed as soon as a message after it leaves ``pre + post``).
+        ``name``: of the trigger (None: ``reason``); ``pre``, ``post``: this trigger's Spans (None: the buffer's);
+        ``why``: the features that stood out (kept with the trigger). A ``pre`` longer than the buffer's gets what
+        the buffer holds (its ``pre``). A trigger with a longer ``pre`` than the one that opened the window reaches
+        back as far as the buffer held when it opened, until a part of the window is written. Returns the windows
+        this completes: only parts of a window that reached max_window, since a new window either extends the open
+        one or merges with the pending one (a pending window is completed as soon as a message after it leaves
+        ``pre + post``).
         """
         if self._clock is None:
             raise ValueError('trigger: no message has been added yet')
-        trigger = Trigger(self._clock, reason, score, name)
+        trigger = Trigger(self._clock, reason, score, name, tuple(why))
         post = self.post if post is None else Span.parse(post, 'post')
         pre = self.pre if pre is None else Span.parse(pre, 'pre')
         if self._open is not None:
@@ -374,6 +377,17 @@ class WindowBuffer(object):
             self._open = _OpenWindow(self._ring, trigger, post, since, before)
         self._ring.clear()
         return self._split(self._open)
+
+    def oldest(self):
+        """The stamp of the oldest driving record a trigger at the newest one can still keep (None before any):
+        the start of the window it joins (once a part was written: the start of its span), else of the pre
+        buffer, which holds ``pre`` before the newest record at most."""
+        for window in (self._open, self._pending):
+            if window is not None and (window.records or window.continued):
+                if window.continued:
+                    return window.since
+                return min(window.records[0].stamp, window.before[0].stamp if window.before else math.inf)
+        return self._ring[0].stamp if self._ring else None
 
     def _older_than(self, pre):
         """Take from the ring the driving records older than ``pre`` before the newest (still counted)."""

@@ -9,7 +9,8 @@ Subscribed topics
 Published topics
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
   bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
-  ``~diagnostic_period`` seconds (wall time).
+  ``~diagnostic_period`` seconds (wall time); WARN when the driving topic is silent for 5 s, naming the topics
+  that carry its type.
 
 Parameters
   every option with a ``collect`` node parameter in docs/OPTIONS.md (declared in ``cc_log.core.options``;
@@ -18,7 +19,9 @@ Parameters
   (vectors into ``<directory>/features/<label>/``), ``~format``, ``~rotate``, ``~topics``, ``~label``,
   ``~window``, ``~feature_set`` (its first input is the driving topic, ``odom``; its other inputs are
   subscribed under their role names, e.g. ``cmd_vel``: remap them), ``~stride``, ``~max_buffer_mb`` (a new file
-  starts when it is reached), ``~max_disk_mb``, ``~min_free_mb``. Each resolved value is logged once.
+  starts when it is reached), ``~max_disk_mb``, ``~max_files``, ``~min_free_mb``, ``~name_prefix`` (files
+  ``<name_prefix>_<UTC>_<reason>``), ``~tcp_nodelay``, ``~chunk_kb``. Each resolved value is logged once
+  (``~quiet``: warnings and errors only).
 
 Every parameter is type-checked (one line ``/collect_logger: ~<name>: ...``, exit 1). On start, crash
 leftovers in ``~directory`` are recovered or reported and kept, as the smart node does. Files and vectors
@@ -36,8 +39,8 @@ from cc_log import features
 from cc_log.storage import log_format
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
-    Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
+    node_config, node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.intake import Intake
 from cc_log.nodes.node_extras import NodeExtras
 
@@ -57,9 +60,12 @@ class CollectNode(object):
     def __init__(self, note=''):
         self.note = note  # why collect mode runs (record.launch without a model): said on /diagnostics
         params = Params()
+        for warning in params.unknown():  # a typo in a parameter's name: said, not silently ignored
+            rospy.logwarn(warning)
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
+        prefix = log_format.file_prefix(params.option('name_prefix'))
         self.leftovers = recover_leftovers(self.directory, os.path.join(self.directory,
-                                                                        collector.FEATURES_SUBDIRECTORY))
+                                                                        collector.FEATURES_SUBDIRECTORY), prefix)
 
         cfg = node_config(params, params.configuration('collect'))
         window = str(params.option('window'))
@@ -69,7 +75,8 @@ class CollectNode(object):
                    'close_retry': CLOSE_RETRY,
                    'label': cfg.label or DEFAULT_LABEL, 'stride': cfg.stride or DEFAULT_STRIDE,
                    'max_buffer_mb': cfg.max_buffer_mb, 'max_disk_mb': cfg.max_disk_mb,
-                   'min_free_mb': cfg.min_free_mb, 'format_options': cfg.format_options()}
+                   'min_free_mb': cfg.min_free_mb, 'format_options': format_options(params, cfg),
+                   'max_files': cfg.max_files, 'prefix': prefix}
         try:
             specs = cfg.feature_specs(AnomalyModel.load, rospy.resolve_name)
         except ValueError as error:
@@ -94,8 +101,12 @@ class CollectNode(object):
         self.collector.on_event(self._on_event)
         self.extras = NodeExtras(params, self.collector.writer, self.directory, self.collector.driving_topic)
         self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic,
-                             sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}))
+                             sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}),
+                             tcp_nodelay=params.option('tcp_nodelay'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
+        driving = self.intake.driving_topic
+        self.silence = DrivingTopicWatch(driving, types.get(self.collector.driving_topic),
+                                         lambda: self.intake.counts().get(driving, 0))
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
                                        self.intake.counts, self.intake.sizes)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,
@@ -108,13 +119,14 @@ class CollectNode(object):
         elif kind == 'failed':
             rospy.logerr('%s of %d messages not written: %s', detail['what'], detail['messages'], detail['error'])
         elif kind == 'deleted':
-            rospy.logwarn('window file deleted (~max_disk_mb): %s', detail['path'])
+            rospy.logwarn('window file deleted (%s): %s', self.collector.writer.guard.quota_text(), detail['path'])
 
     def _status(self):
         stats = self.collector.stats()
         level, message, disk = writer_status(DiagnosticStatus.OK, self.note or 'collecting', self.collector.writer,
                                              self.leftovers, self.directory_warning)
         level, message, extra = self.extras.status(level, message)
+        level, message = self.silence.status(level, message)
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('files written', stats['files_written']),
@@ -136,6 +148,7 @@ class CollectNode(object):
 
     def shutdown(self):
         """Feed what is queued, write the current file, stop diagnostics."""
+        self.silence.stop()
         self.intake.stop()
         if not self.collector.close(CLOSE_TIMEOUT):
             rospy.logerr('files still unwritten after %g s', CLOSE_TIMEOUT)

@@ -178,11 +178,19 @@ class Intake(object):
     subscribed besides the driving one), ``subscribe`` adds more. The queue is bounded (``max_messages``,
     ``max_bytes``): a message arriving when it is full is dropped and counted in ``overflowed`` (and in
     ``dropped``, which also counts messages that could not be decoded or handled, and those of a refused
-    message definition: ``decoder.refused``)."""
+    message definition: ``decoder.refused``). ``on_new_topic(topic, type name)`` (optional) is called at each
+    topic's first accepted message, on the feeder thread. ``tcp_nodelay``: subscribe with TCP_NODELAY
+    (``~tcp_nodelay``)."""
+
+    on_new_topic = None
 
     def __init__(self, sink, driving_topic, side_topics=(), max_messages=DEFAULT_MAX_MESSAGES,
-                 max_bytes=int(DEFAULT_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY):
+                 max_bytes=int(DEFAULT_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY, on_new_topic=None,
+                 tcp_nodelay=False):
         self.sink = sink
+        self.on_new_topic = on_new_topic
+        self._typed = set()               # topics whose first message was accepted
+        self.tcp_nodelay = bool(tcp_nodelay)
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
         self.cpu_seconds = 0.0       # CPU time of the feeder thread handing messages to the sink
@@ -216,7 +224,8 @@ class Intake(object):
     def _subscribe(self, resolved):
         self.queue.listen(resolved)  # its rate is 0 until its first message
         self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
-                                                      queue_size=None, buff_size=RECEIVE_BYTES)
+                                                      queue_size=None, buff_size=RECEIVE_BYTES,
+                                                      tcp_nodelay=self.tcp_nodelay)
         return resolved
 
     @property
@@ -304,11 +313,20 @@ class Intake(object):
                 self._feed_batch(records)
                 records = []
                 self._feed_one(topic, msg, receipt)
-            elif not self.decoder.accepts(msg._connection_header, topic):
+            elif not self._accepts(msg, topic):
                 self.dropped += 1  # refused (warned once by the decoder)
             else:
                 records.append(Record(self._receipt(receipt), topic, None, 0, msg._buff, msg._connection_header))
         self._feed_batch(records)
+        return True
+
+    def _accepts(self, msg, topic):
+        """Whether the decoder accepts the serialized ``msg``; the first of each topic goes to ``on_new_topic``."""
+        if not self.decoder.accepts(msg._connection_header, topic):
+            return False
+        if self.on_new_topic is not None and topic not in self._typed:
+            self._typed.add(topic)
+            self.on_new_topic(topic, msg._connection_header.get('type', ''))
         return True
 
     def _feed_batch(self, records):
@@ -330,7 +348,7 @@ class Intake(object):
     def _feed_one(self, topic, msg, receipt):
         try:
             if self._raw and isinstance(msg, rospy.AnyMsg):
-                if not self.decoder.accepts(msg._connection_header, topic):
+                if not self._accepts(msg, topic):
                     self.dropped += 1  # refused (warned once by the decoder)
                     return
                 self.sink.on_raw(topic, msg._buff, msg._connection_header, self._receipt(receipt))

@@ -5,7 +5,7 @@ diagnostics and the writer's part of their status.
   raises ``ConfigError('~<name>: ...')`` (one line, printed by ``fail``) instead of a traceback; each
   resolved value is logged once. ``init_node`` first checks the ``_name:=value`` arguments for what rospy
   itself would choke on (an integer beyond XML-RPC's 32 bits, YAML it cannot parse).
-- ``resolve_directory``: ``~directory``, else ``~/.ros/cc_log``, else ``/tmp/cc_log``; a fallback is
+- ``resolve_directory``: ``~directory``, else ``$ROS_HOME/cc_log``, else ``/tmp/cc_log``; a fallback is
   returned as a warning the node keeps on /diagnostics (WARN, with the directory in use).
 - ``recover_leftovers``: crash leftovers recovered or reported at start (``recovery``), each logged.
 - ``Diagnostics``: one DiagnosticStatus every period of wall time through diagnostic_updater, with each
@@ -15,6 +15,7 @@ diagnostics and the writer's part of their status.
 ROS edge (rospy).
 """
 import ctypes
+import logging
 import os
 import sys
 import threading
@@ -24,7 +25,7 @@ import diagnostic_updater
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from cc_log.core import config, options
+from cc_log.core import config, health, options, safe_input
 from cc_log.storage import log_format
 from cc_log.storage import recovery
 from cc_log.storage.directory import LoggingDirectory
@@ -70,15 +71,35 @@ def _ros_get(name, default):
     return rospy.get_param('~' + name, default)
 
 
+def _ros_names():
+    """The names of the node's private parameters (the first level under its namespace)."""
+    if _SETTINGS:
+        return list(_SETTINGS[0])
+    prefix = rospy.get_name().rstrip('/') + '/'
+    return [name[len(prefix):].split('/')[0] for name in rospy.get_param_names() if name.startswith(prefix)]
+
+
 class Params(object):
     """Typed private parameters. ``get(name, default)`` reads one (default: ``rospy.get_param('~' + name,
     default)``; a dict's ``get`` serves in tests); ``log(format, *args)`` reports the resolved value
-    (default: rospy.loginfo). Every reader raises ConfigError('~name: ...') for a value of the wrong type
-    or out of range."""
+    (default: rospy.loginfo); ``names()`` lists the private parameters set (default: the node's namespace).
+    Every reader raises ConfigError('~name: ...') for a value of the wrong type or out of range."""
 
-    def __init__(self, get=None, log=None):
+    def __init__(self, get=None, log=None, names=None):
         self._get = get if get is not None else _ros_get
         self._log = log if log is not None else rospy.loginfo
+        self._names = names if names is not None else _ros_names
+
+    def unknown(self):
+        """A warning for each private parameter that is neither an option (``core.options``) nor a key of the
+        configuration (``rosparam load`` of a file): ``unknown parameter ~formt (did you mean ~format?)``."""
+        known = sorted(set(o.name for o in options.OPTIONS).union(options.sections(), STRUCTURED))
+        warnings = []
+        for name in sorted(set(self._names()) - set(known)):
+            near = safe_input.closest(name, known)
+            warnings.append('unknown parameter ~%s%s' % (safe_input.printable(name),
+                                                         ' (did you mean ~%s?)' % near if near else ''))
+        return warnings
 
     def value(self, name, default, log=True):
         """The raw value (any type) or ``default``; logged once unless ``log`` is False."""
@@ -156,10 +177,19 @@ def node_name(name, argv):
 
 def init_node(name, argv):
     """``rospy.init_node`` after ``check_command_line`` (ConfigError instead of a traceback), with freed
-    message buffers reused (``reuse_freed_memory``)."""
+    message buffers reused (``reuse_freed_memory``); with ``~quiet`` the node logs warnings and errors only."""
     check_command_line(argv)
     reuse_freed_memory()
     rospy.init_node(name, argv=argv)
+    if Params(log=lambda *args: None).option('quiet'):
+        logging.getLogger('rosout').setLevel(logging.WARNING)  # rospy.loginfo's logger (init_node's log_level)
+
+
+def format_options(params, cfg):
+    """What the window format is told in each window's metadata: the configuration's (``precision``) and
+    ``~chunk_kb`` when it is set."""
+    chunk = {'chunk_kb': params.option('chunk_kb')} if params.given('chunk_kb') else {}
+    return dict(cfg.format_options(), **chunk)
 
 
 def reuse_freed_memory():
@@ -212,7 +242,7 @@ def node_config(params, flat, classifier=None):
 # -- directory and leftovers ------------------------------------------------------------------------------
 
 def resolve_directory(value):
-    """``(directory, warning)``: ``value``, else ~/.ros/cc_log, else /tmp/cc_log (created); ``warning`` is ''
+    """``(directory, warning)``: ``value``, else $ROS_HOME/cc_log, else /tmp/cc_log (created); ``warning`` is ''
     or says why the requested directory is not used and which one is (the node shows it on /diagnostics)."""
     try:
         directory = LoggingDirectory(value or None)
@@ -228,11 +258,12 @@ def resolve_directory(value):
     return directory.path, warning
 
 
-def recover_leftovers(directory, vector_directory=None):
-    """Recover crash leftovers in ``directory`` (see ``recovery``) and log each; return the outcomes. Leftovers
+def recover_leftovers(directory, vector_directory=None, prefix=log_format.PREFIX):
+    """Recover crash leftovers in ``directory`` (of files named ``<prefix>...``, see ``recovery``) and log each;
+    return the outcomes. Leftovers
     of feature-vector files under ``vector_directory`` (``<label>/*.tmp-*``) are reported (UNRECOVERABLE,
     kept)."""
-    outcomes = recovery.recover_directory(directory)
+    outcomes = recovery.recover_directory(directory, prefix)
     if vector_directory and os.path.isdir(vector_directory):
         for label in sorted(os.listdir(vector_directory)):
             folder = os.path.join(vector_directory, label)
@@ -356,6 +387,56 @@ class Diagnostics(object):
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
+
+
+class DrivingTopicWatch(object):
+    """Warns when the node's driving topic ``topic`` (of type ``msg_type``) is silent or missing
+    (``health.DrivingWatch``: no message for ``silence`` seconds after start or after the last one), naming the
+    topics the master lists with its type. Checked every ``period`` seconds of wall time on a daemon thread;
+    ``received()`` returns the driving messages received so far. Logged once per change (WARN; INFO when its
+    messages come); ``status(level, message)`` adds the WARN to the node's /diagnostics status."""
+
+    def __init__(self, topic, msg_type, received, period=1.0, silence=health.SILENCE, published=None):
+        self.watch = health.DrivingWatch(topic, msg_type, time.monotonic(), silence)
+        self._received = received
+        self._published = published or rospy.get_published_topics
+        self.text = ''
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, args=(period,), name='cc_log driving topic watch')
+        self._thread.daemon = True
+        self._thread.start()
+
+    def _loop(self, period):
+        while not self._stop.wait(period) and not rospy.is_shutdown():
+            self.poll()
+
+    def poll(self):
+        """Check once; log what changed."""
+        before = self.watch.state
+        try:
+            self.text = self.watch.check(time.monotonic(), self._received(), self._published)
+        except Exception as error:  # the master is unreachable: said next time
+            rospy.logwarn_throttle(60.0, 'driving topic watch: %s' % error)
+            return
+        if self.watch.state != before:
+            if self.text:
+                rospy.logwarn(self.text)
+            else:
+                rospy.loginfo('messages arrive on %s', self.watch.topic)
+
+    def status(self, level, message):
+        """``(level, message)`` with the silence added (WARN; the message when the status was OK)."""
+        text = self.text
+        if not text:
+            return level, message
+        if level < health.WARN:
+            return health.WARN, text
+        return level, message + '; ' + text
+
+    def stop(self):
+        """Stop checking."""
+        self._stop.set()
+        self._thread.join(1.0)
 
 
 def writer_status(level, message, writer, leftovers=(), directory_warning=''):

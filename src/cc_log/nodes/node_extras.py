@@ -10,7 +10,8 @@ Parameters (private, both nodes)
   queued, failed and dropped (queue full) are on /diagnostics, failures and drops as a WARN.
 
 The context files have a writer of their own (closing, fsync, naming, retries) whose disk guard and the
-node's count the window and context files together: ``~max_disk_mb`` holds for both, oldest deleted first.
+node's count the window and context files together: ``~max_disk_mb`` and ``~max_files`` hold for both, oldest
+deleted first.
 """
 import math
 import os
@@ -86,7 +87,7 @@ class NodeExtras(object):
         self.track = self.writer = self.watcher = None
         self.leftovers = []
         if self.rates:
-            recovered, self.leftovers = context_track.recover(directory)
+            recovered, self.leftovers = context_track.recover(directory, writer.prefix)
             for path in recovered:
                 rospy.logwarn('context track: crash leftover recovered as %s', path)
             for path, why in self.leftovers:
@@ -96,12 +97,13 @@ class NodeExtras(object):
             self.writer = window_writer.WindowWriter(
                 folder, max_disk_mb=guard.max_bytes / float(disk_guard.MB),
                 min_free_mb=guard.min_free_bytes / float(disk_guard.MB), close_retry=writer.close_retry,
-                name='cc_log context writer')
+                name='cc_log context writer', max_files=guard.max_files, prefix=writer.prefix)
             self.writer.guard.directories.append(writer.directory)
             guard.directories.append(folder)
             self.writer.on_event(self._context_event)
             self.track = context_track.ContextTrack(directory, self.rates, rotate, submit=self.writer.submit,
-                                                    names=names)
+                                                    names=names, prefix=writer.prefix,
+                                                    chunk_bytes=params.option('chunk_kb') * 1024)
             rospy.loginfo('context track: %s into %s', ', '.join(
                 '%s%s' % (topic, ' at %g Hz' % rate if rate else '') for topic, rate in sorted(self.rates.items())),
                 folder)
@@ -139,7 +141,7 @@ class NodeExtras(object):
         elif event.kind == window_writer.FAILED:
             rospy.logerr('context file not closed: %s', event.error)
         else:
-            rospy.logwarn('file deleted (~max_disk_mb): %s', event.path)
+            rospy.logwarn('file deleted (%s): %s', event.error, event.path)
 
     def status(self, level, message):
         """``(level, message, values)``: the node's level and message with the context track's and the upload

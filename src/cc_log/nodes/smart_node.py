@@ -11,11 +11,14 @@ Subscribed topics
 
 Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
-  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/dropped, raw vs stored
-  bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``), messages dropped
-  because the writer fell behind (WARN, per topic), messages restamped (header stamp off the clock), each
-  classifier's drift (WARN when it flags far more of the driving than of its training data, with the
-  remedies: ``drift.DriftMonitor``), every ``~diagnostic_period`` seconds (wall time).
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/not kept (outside every
+  window), raw vs stored bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``);
+  WARN while paused, when the driving topic is silent for 5 s (naming the topics that carry its type) and when
+  a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
+  trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
+  off the clock), each classifier's drift (WARN when it flags far more of the driving than of its training
+  data, with the remedies: ``drift.DriftMonitor``), the windows the keep budget ``~max_windows_per_hour`` skipped
+  (WARN once it skips: the robot's normal may have drifted), every ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
@@ -28,8 +31,9 @@ Parameters
   lists them with their defaults): ``~config`` (the configuration file: topics, triggers, windows, format,
   limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
   ``~recent``, ``~learn_online``, the windows' ``~pre``, ``~post``, ``~max_window``, ``~topic_limits``, the
-  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb`` and ``~min_free_mb``, ``~directory``, the intake's
-  bounds, the context track and the upload command. Each resolved value is logged once.
+  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb``, ``~max_files`` and ``~min_free_mb``, ``~directory``
+  and ``~name_prefix`` (files ``<name_prefix>_<UTC>_<reason>``), the intake's bounds and ``~tcp_nodelay``, the
+  context track and the upload command. Each resolved value is logged once (``~quiet``: warnings and errors only).
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
@@ -55,19 +59,20 @@ import threading
 import time
 
 import rospy
-from diagnostic_msgs.msg import DiagnosticStatus
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
-from cc_log.core import drift
+from cc_log.core import drift, health
 from cc_log.nodes import intake
 from cc_log.storage import window_info
-from cc_log.core import smart, trigger_topics
+from cc_log.storage.formats import json_xz
+from cc_log.core import routes, smart, smart_events, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics,
-    Params, fail, init_node, node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
+    node_config, node_name, recover_leftovers, resolve_directory, writer_status)
 from cc_log.nodes.node_extras import NodeExtras, context_rates
+from cc_log.storage.log_format import file_prefix
 from cc_log.triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
@@ -92,6 +97,8 @@ class SmartNode(object):
         from cc_log.srv import TriggerWindow
         self._event_class = AnomalyEvent
         params = Params()
+        for warning in params.unknown():  # a typo in a parameter's name: said, not silently ignored
+            rospy.logwarn(warning)
 
         def given(name):
             """The parameter ``name`` when it is set, else None (the configuration's value holds)."""
@@ -103,6 +110,7 @@ class SmartNode(object):
         try:
             triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
             options = cfg.logger_options(triggers, rospy.resolve_name)
+            options['format_options'] = format_options(params, cfg)
         except ValueError as error:
             raise ConfigError(str(error))
         classifiers = [t for t in triggers if isinstance(t, ClassifierTrigger)]
@@ -115,7 +123,8 @@ class SmartNode(object):
         for trigger in triggers:
             rospy.loginfo('trigger %s: %s', trigger.name, trigger.describe())
         self.directory, self.directory_warning = resolve_directory(params.text('directory', ''))
-        self.leftovers = recover_leftovers(self.directory)
+        prefix = file_prefix(params.option('name_prefix'))
+        self.leftovers = recover_leftovers(self.directory, prefix=prefix)
         enabled = params.option('enabled')
         period = params.option('diagnostic_period')
         intake_max_messages = params.option('intake_max_messages')
@@ -125,7 +134,7 @@ class SmartNode(object):
             options['side_topics'] = sorted(set(options['side_topics']).union(context[0]) - {options['driving_topic']})
         try:
             self.logger = smart.SmartLogger(None, self.directory, enabled=enabled, close_retry=CLOSE_RETRY,
-                                            **options)
+                                            prefix=prefix, **options)
         except ValueError as error:
             raise ConfigError('~%s' % error)
         types = trigger_topics.topic_types(triggers)
@@ -143,12 +152,17 @@ class SmartNode(object):
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
                                     sorted(set(self.logger.side_topics or cfg.topics).union(types, self.extras.topics) -
                                            {self.logger.driving_topic}),
-                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2))
+                                    max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2),
+                                    on_new_topic=self._advise_format,
+                                    tcp_nodelay=params.option('tcp_nodelay'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
                          rospy.Service('~enable', SetBool, self._enable)]
         self._ticker = WallTicker(TICK_PERIOD, self._tick)
+        driving = self.intake.driving_topic
+        self.silence = DrivingTopicWatch(driving, types.get(self.logger.driving_topic),
+                                         lambda: self.intake.counts().get(driving, 0))
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
                                        self.intake.counts, self.intake.sizes)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
@@ -157,7 +171,7 @@ class SmartNode(object):
 
     def _publish_event(self, event):
         if event.kind == smart.DELETED:
-            rospy.logwarn('window file deleted (~max_disk_mb): %s', event.path)
+            rospy.logwarn('window file deleted (%s): %s', self.logger.guard.quota_text(), event.path)
             return
         if event.kind == smart.SPLIT:
             rospy.loginfo('window file closed at ~split_mb: %s (%d bytes); the window goes on in the next',
@@ -165,7 +179,8 @@ class SmartNode(object):
             return
         kind = {smart.OPENED: self._event_class.OPENED, smart.WRITTEN: self._event_class.WRITTEN,
                 smart.FAILED: self._event_class.FAILED}[event.kind]
-        msg = self._event_class(event=kind, trigger=event.trigger, reason=event.reason, score=event.score,
+        reason = smart_events.reason_text(event)
+        msg = self._event_class(event=kind, trigger=event.trigger, reason=reason, score=event.score,
                                 threshold=event.threshold, start=time_of(event.start), end=time_of(event.end),
                                 messages=event.messages, path=event.path, bytes=event.bytes)
         msg.header.stamp = time_of(event.stamp)
@@ -174,12 +189,19 @@ class SmartNode(object):
         elif event.kind == smart.FAILED:
             rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
         else:
-            rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, event.reason, event.score)
+            rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, reason, event.score)
             self._last_trigger = '%s: %s at %s' % (event.trigger, event.reason, window_info.utc_text(event.stamp))
         try:
             self.events.publish(msg)
         except rospy.ROSException:  # shutting down
             pass
+
+    def _advise_format(self, topic, msg_type):
+        """At a topic's first message: WARN once when it is written as json-xz and its type is heavy."""
+        written_as = routes.format_of(topic, self.logger.routes, self.logger.format)
+        advice = json_xz.heavy_topic_advice(topic, msg_type, written_as)
+        if advice:
+            rospy.logwarn(advice)
 
     def _flag_learners(self, event):
         """Online learning: nothing from around a window any trigger opened is learned."""
@@ -212,42 +234,34 @@ class SmartNode(object):
 
     def _status(self):
         stats = self.logger.stats()
-        level, message = DiagnosticStatus.OK, 'logging' if stats['enabled'] else 'disabled'
         if stats['messages_refused'] > self._refused:
             self._refused = stats['messages_refused']
             rospy.logwarn_throttle(10.0, stats['last_refused'])
-        if stats['messages_refused']:
-            level, message = DiagnosticStatus.WARN, '%d messages of the wrong type refused (last: %s)' % (
-                stats['messages_refused'], stats['last_refused'])
+        level, message = health.smart_head(stats)
         level, message, disk = writer_status(level, message, self.logger.writer, self.leftovers,
                                              self.directory_warning)
         level, message, extra = self.extras.status(level, message)
-        if stats['messages_shed']:
-            level = max(level, DiagnosticStatus.WARN)
-            message += ('; %d messages of windows dropped: the writer fell behind (%s)'
-                        % (stats['messages_shed'], _per_topic(stats['shed_by_topic'])))
-        for monitor in self.drift:
-            drift_level, drift_message = monitor.status()
-            if drift_level:
-                level = max(level, DiagnosticStatus.WARN)
-                message += '; ' + drift_message
+        level, message = self.silence.status(level, message)
         overflowed = self.intake.overflowed
-        if overflowed:
-            level = max(level, DiagnosticStatus.WARN)
-            message += '; %d messages dropped: intake queue full (the node falls behind)' % overflowed
+        drifting = [(health.WARN, text) for drift_level, text in (monitor.status() for monitor in self.drift)
+                    if drift_level]
+        level, message = health.worst(level, message, health.not_kept(stats, overflowed) + drifting
+                                      + health.skipped(stats))
         raw, stored = stats['raw_json_bytes'], stats['stored_bytes']
         values = [
             ('enabled', stats['enabled']),
             ('windows opened', stats['windows_opened']),
             ('windows saved', stats['windows_saved']),
+            ('windows skipped (keep budget)', health.skipped_value(stats)),
             ('last trigger', self._last_trigger),
             ('messages seen', stats['messages_seen']),
             ('messages kept', stats['messages_kept']),
-            ('messages dropped', stats['messages_dropped']),
+            ('messages not kept (outside every window)', stats['messages_not_kept']),
             ('messages buffered', stats['messages_buffered']),
             ('buffered bytes (estimated)', stats['buffered_bytes']),
             ('max buffer bytes', self.logger.buffer_budget or 'no budget'),
             ('messages trimmed (buffer budget)', stats['buffer_trimmed']),
+            ('messages trimmed (topic limits)', stats['topic_trimmed']),
             ('messages lost', stats['messages_lost'] + self.intake.dropped),
             ('raw JSON bytes', raw),
             ('stored bytes', stored),
@@ -261,9 +275,9 @@ class SmartNode(object):
             ('writer queue', stats['queue_depth']),
             ('writer queue bytes', stats['bytes_queued']),
             ('messages dropped (writer behind)', stats['messages_shed']),
-            ('dropped per topic (writer behind)', _per_topic(stats['shed_by_topic'])),
+            ('dropped per topic (writer behind)', health.per_topic(stats['shed_by_topic'])),
             ('messages restamped (header stamp off the clock)', stats['messages_restamped']),
-            ('restamped per topic', _per_topic(stats['restamped_by_topic'])),
+            ('restamped per topic', health.per_topic(stats['restamped_by_topic'])),
             ('intake queue', self.intake.queue.qsize()),
             ('intake dropped (queue full)', overflowed),
             ('classify every', str(self.logger.classify_every)),
@@ -298,6 +312,7 @@ class SmartNode(object):
     def shutdown(self):
         """Feed what is queued, write the last windows, stop diagnostics."""
         self._ticker.stop()
+        self.silence.stop()
         self.intake.stop()
         if not self.logger.close(CLOSE_TIMEOUT):
             stats = self.logger.stats()
@@ -306,17 +321,12 @@ class SmartNode(object):
         stats = self.logger.stats()
         if stats['messages_shed'] or stats['messages_lost']:
             rospy.logwarn('messages of windows not written: %d dropped while the writer fell behind (%s), %d lost '
-                          'writing', stats['messages_shed'], _per_topic(stats['shed_by_topic']),
+                          'writing', stats['messages_shed'], health.per_topic(stats['shed_by_topic']),
                           stats['messages_lost'])
         self.extras.close()
         for _, learner in self.learners:  # a refit being saved finishes (the save is atomic either way)
             learner.wait(CLOSE_TIMEOUT)
         self.diagnostics.stop()
-
-
-def _per_topic(counts):
-    """``{topic: n}`` as one line, largest first ('none' when empty)."""
-    return ', '.join('%s: %d' % item for item in sorted(counts.items(), key=lambda item: (-item[1], item[0]))) or 'none'
 
 
 class WallTicker(object):

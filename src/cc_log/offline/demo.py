@@ -30,9 +30,10 @@ from cc_log.core import learning
 from cc_log.storage import log_format
 from cc_log.core import msg_codec
 from cc_log.core import safe_files
+from cc_log.storage.directory import cc_log_home
 from cc_log import sim
 
-DEFAULT_OUT = os.path.join(os.path.expanduser('~'), '.ros', 'cc_log', 'demo')
+DEFAULT_OUT = 'demo'  # in cc_log's directory of ROS's home: directory.cc_log_home
 DEFAULT_TRAIN_MINUTES = 8.0
 DEFAULT_LIVE_MINUTES = 2.5
 DEFAULT_ANOMALIES = 6
@@ -381,7 +382,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(
         prog='demo.py', description=__doc__.split('\n\n')[0],
         epilog='example: rosrun cc_log demo.py --out /tmp/cc_log_demo --live-minutes 2')
-    parser.add_argument('--out', default=DEFAULT_OUT,
+    parser.add_argument('--out', default=cc_log_home(DEFAULT_OUT),
                         help='a new or empty directory, or one an earlier demo made (its outputs are replaced, '
                              'nothing else is touched; default: %(default)s)')
     parser.add_argument('--train-minutes', type=float, default=DEFAULT_TRAIN_MINUTES)

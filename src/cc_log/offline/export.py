@@ -6,13 +6,12 @@ Each writer takes records in stamp order and returns the files it wrote; every f
 """
 import collections
 import csv
+import io
 import itertools
 import json
 import math
 import os
 import re
-import struct
-import zlib
 
 import numpy
 
@@ -77,28 +76,56 @@ def to_bag(records, out, compression='lz4', progress=None, names=None):
     return [target.path]
 
 
-MCAP_COMPRESSIONS = ('none', 'lz4')
+MCAP_COMPRESSIONS = ('zstd', 'lz4', 'none')
 #: The one line when the optional MCAP library is missing.
 MCAP_MISSING = ('--to mcap needs the Python package mcap (an optional extra): /usr/bin/python3 -m pip install '
                 '--break-system-packages mcap mcap-ros1-support')
+#: The name of the MCAP Metadata record of each window exported.
+MCAP_WINDOW_METADATA = 'cc_log.window'
 
 
-def to_mcap(records, out, compression='none', progress=None):
+def default_mcap_compression():
+    """``zstd`` when the ``zstandard`` package imports (python3-zstandard), else ``lz4``."""
+    try:
+        import zstandard  # noqa: F401
+    except ImportError:
+        return 'lz4'
+    return 'zstd'
+
+
+def mcap_window_metadata(path, metadata):
+    """The metadata of the window whose own file is ``path`` as MCAP Metadata (``{str: str}``): every key, a
+    string as it is and anything else as JSON, plus ``file`` (the file's name) and ``scores`` (the triggers'
+    scores, JSON)."""
+    result = {'file': os.path.basename(path),
+              'scores': json.dumps([plain(t.get('score')) for t in metadata.get('triggers') or []
+                                    if isinstance(t, dict)])}
+    for key, value in metadata.items():
+        result[str(key)] = value if isinstance(value, str) else json.dumps(plain(value), sort_keys=True)
+    return result
+
+
+def to_mcap(records, out, compression=None, progress=None, windows=()):
     """The records as one MCAP file ``out`` (replaced) in its ROS 1 profile, for Foxglove, PlotJuggler and the
     ``mcap`` tools: one ``ros1msg`` schema per message type (its full definition), one ``ros1`` channel per
     topic (metadata ``md5sum``, ``callerid`` and ``latching`` where the window kept them), each message as its
-    serialized bytes at its stamp (log and publish time). ``compression``: chunks ``none`` or ``lz4``;
-    ``progress()`` after each record; ``[out]``. ValueError(``MCAP_MISSING``) without the ``mcap`` package, and
-    when a topic holds messages of two types."""
+    serialized bytes at its stamp (log and publish time). ``windows``: ``[(path, metadata)]`` of the windows
+    exported, each written as a Metadata record ``cc_log.window`` (``mcap_window_metadata``) and its metadata
+    as a JSON Attachment ``<file>.json`` at the window's start. ``compression``: chunks ``zstd``, ``lz4`` or
+    ``none`` (None: ``default_mcap_compression``); ``progress()`` after each record; ``[out]``.
+    ValueError(``MCAP_MISSING``) without the ``mcap`` package, and when a topic holds messages of two types."""
     try:
         from mcap.writer import CompressionType, Writer
     except ImportError:
         raise ValueError(MCAP_MISSING)
+    compression = compression or default_mcap_compression()
     if compression not in MCAP_COMPRESSIONS:
-        raise ValueError('compression: MCAP chunks are %s, not %s' % (' or '.join(MCAP_COMPRESSIONS), compression))
+        raise ValueError('compression: MCAP chunks are %s, not %s' % (', '.join(MCAP_COMPRESSIONS), compression))
+    if compression == 'zstd' and default_mcap_compression() != 'zstd':
+        raise ValueError('compression: zstd needs the Python package zstandard (Debian: python3-zstandard)')
     headers = bag_lz4.connection_headers(records)
     with AtomicFile(out, overwrite=True) as stream:
-        writer = Writer(stream, compression=CompressionType.LZ4 if compression == 'lz4' else CompressionType.NONE)
+        writer = Writer(stream, compression=getattr(CompressionType, compression.upper()))
         writer.start(profile='ros1', library='cc_log')
         schemas, channels = {}, {}
         for topic, header in headers.items():
@@ -120,8 +147,18 @@ def to_mcap(records, out, compression='none', progress=None):
                                data=data)
             if progress:
                 progress()
+        for path, metadata in windows:
+            writer.add_metadata(MCAP_WINDOW_METADATA, mcap_window_metadata(path, metadata))
+            secs, nsecs = bag_lz4.bag_stamp(metadata['start']) if _is_stamp(metadata.get('start')) else (0, 0)
+            writer.add_attachment(create_time=secs * 1000000000 + nsecs, log_time=secs * 1000000000 + nsecs,
+                                  name=os.path.basename(path) + '.json', media_type='application/json',
+                                  data=json.dumps(plain(metadata), sort_keys=True, allow_nan=False).encode('utf-8'))
         writer.finish()
     return [out]
+
+
+def _is_stamp(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0
 
 
 def _csv_cell(value):
@@ -184,26 +221,26 @@ def to_csv(records, directory):
 IMAGE_TYPES = ('sensor_msgs/Image', 'sensor_msgs/CompressedImage')
 PNG_MAGIC = b'\x89PNG\r\n\x1a\n'
 JPEG_MAGIC = b'\xff\xd8\xff'
-#: sensor_msgs/Image encoding -> (samples per pixel, sample type, PNG colour type, channel order for PNG)
+#: The one line when Pillow, which writes the PNG files, is missing.
+PNG_MISSING = '--to png needs Pillow, a dependency of cc_log: apt install python3-pil'
+#: sensor_msgs/Image encoding -> (samples per pixel, sample type, channel order for PNG)
 IMAGE_ENCODINGS = {
-    'rgb8': (3, 'u1', 2, None), 'bgr8': (3, 'u1', 2, [2, 1, 0]), 'rgba8': (4, 'u1', 6, None),
-    'bgra8': (4, 'u1', 6, [2, 1, 0, 3]), 'mono8': (1, 'u1', 0, None), '8UC1': (1, 'u1', 0, None),
-    'mono16': (1, 'u2', 0, None), '16UC1': (1, 'u2', 0, None), '32FC1': (1, 'f4', 0, None)}
+    'rgb8': (3, 'u1', None), 'bgr8': (3, 'u1', [2, 1, 0]), 'rgba8': (4, 'u1', None),
+    'bgra8': (4, 'u1', [2, 1, 0, 3]), 'mono8': (1, 'u1', None), '8UC1': (1, 'u1', None),
+    'mono16': (1, 'u2', None), '16UC1': (1, 'u2', None), '32FC1': (1, 'f4', None)}
 
 
 def png_file(pixels):
     """The bytes of a PNG of ``pixels`` (height x width [x channels] uint8 or uint16; 1, 3 or 4 channels:
-    grey, RGB, RGBA), every row unfiltered, zlib-compressed."""
-    height, width = pixels.shape[:2]
-    channels = pixels.shape[2] if pixels.ndim == 3 else 1
-    depth = 16 if pixels.dtype.itemsize == 2 else 8
-    rows = numpy.ascontiguousarray(pixels, dtype='>u2' if depth == 16 else 'u1').reshape(height, -1).view('u1')
-    data = numpy.hstack([numpy.zeros((height, 1), 'u1'), rows]).tobytes()   # filter type 0 before each row
-
-    def chunk(kind, body):
-        return struct.pack('>I', len(body)) + kind + body + struct.pack('>I', zlib.crc32(kind + body) & 0xffffffff)
-    header = struct.pack('>IIBBBBB', width, height, depth, {1: 0, 3: 2, 4: 6}[channels], 0, 0, 0)
-    return PNG_MAGIC + chunk(b'IHDR', header) + chunk(b'IDAT', zlib.compress(data, 6)) + chunk(b'IEND', b'')
+    grey, RGB, RGBA; uint16 as 16-bit grey), as Pillow (python3-pil) writes it. ValueError without Pillow."""
+    try:
+        from PIL import Image
+    except ImportError:
+        raise ValueError(PNG_MISSING)
+    pixels = numpy.ascontiguousarray(pixels, dtype=numpy.uint16 if pixels.dtype.itemsize == 2 else numpy.uint8)
+    stream = io.BytesIO()
+    Image.fromarray(pixels).save(stream, format='PNG')
+    return stream.getvalue()
 
 
 def image_pixels(msg):
@@ -213,7 +250,7 @@ def image_pixels(msg):
     does not fit the data."""
     if msg.encoding not in IMAGE_ENCODINGS:
         raise ValueError('encoding %s is not supported' % (msg.encoding[:40] or '(empty)'))
-    channels, sample, _, order = IMAGE_ENCODINGS[msg.encoding]
+    channels, sample, order = IMAGE_ENCODINGS[msg.encoding]
     size = channels * int(sample[1:])
     data = msg.data if isinstance(msg.data, bytes) else bytes(bytearray(msg.data))
     if not msg.width or not msg.height or msg.step < msg.width * size or len(data) < msg.step * msg.height:

@@ -43,6 +43,10 @@ WINDOW_STYLES = collections.OrderedDict([
 ])
 
 
+# the trigger markers are drawn above the score curve, the threshold and the windows (lines are at 2)
+TRIGGER_ZORDER = 3
+
+
 def window_kind(metadata):
     """``'classifier'`` when a trigger of the window has a score, else ``'manual'`` when one is the manual
     trigger, else ``'other'`` (rules, collect mode's files)."""
@@ -141,7 +145,7 @@ def draw(windows, speed, curve=(), threshold=None, truth=(), title=None, width=1
         bottom.plot([t - origin for t, _ in curve], [v for _, v in curve], lw=0.7, color='tab:gray', label='score')
     if triggers:
         bottom.plot([t - origin for t, _ in triggers], [s for _, s in triggers], 'v', color='tab:red', ms=4,
-                    label='trigger score')
+                    label='trigger score', zorder=TRIGGER_ZORDER)
     if threshold is not None:
         bottom.axhline(threshold, color='k', ls='--', lw=0.8, label='threshold %.3g' % threshold)
     top.set_ylabel('speed (m/s)')

@@ -83,12 +83,13 @@ def check_bag_topics(bag_path, topics, types):
 
 
 def offline_logger(out_dir, options):
-    """A SmartLogger of ``options`` (``replay_setup``'s) writing into ``out_dir`` with the offline retries. Online
+    """A SmartLogger of ``options`` (``replay_setup``'s) writing into ``out_dir`` with the offline retries, the
+    reading waiting for the writer (``wait_for_writer``: no window thinned because the writer is behind). Online
     learning refits in the replay's own thread: a refit lands at the message it was due, as on a robot (where it
     takes about a second), not minutes of message time later while a background thread races a fast replay."""
     retry = window_writer.OFFLINE_RETRY_SECONDS
     logger = smart.SmartLogger(None, out_dir, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
-                               give_up_after=retry, close_retry=retry, **options)
+                               give_up_after=retry, close_retry=retry, wait_for_writer=True, **options)
     for trigger in logger.classifiers:
         if getattr(trigger, 'learner', None) is not None:
             trigger.learner.background = False
@@ -135,11 +136,13 @@ def replay(bag_path, topic, model_path, out_dir, pre=smart.DEFAULT_PRE, post=sma
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'name', 'start', 'end', 'messages',
-    'files', 'path'}]}`` with windows in start order, one per window whatever its files (``smart_events.WindowTally``:
-    messages in all of them; start/end: header stamps, float s, of the first and last message saved; path: its
-    first file). ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``);
-    ``triggers``, ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``,
-    called every PROGRESS_EVERY messages and at the end. A window that cannot be written (disk full...) is
+    'files', 'path'}], 'keep_budget'}`` with windows in start order, one per window whatever its files
+    (``smart_events.WindowTally``: messages in all of them; start/end: header stamps, float s, of the first and last
+    message saved; path: its first file); ``keep_budget``: ``KeepBudget.stats()``, the windows the keep budget
+    skipped. ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``); ``triggers``,
+    ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``, called every
+    PROGRESS_EVERY messages and at the end. The reading waits for the writer (``SmartLogger``'s
+    ``wait_for_writer``: nothing thinned because it is behind). A window that cannot be written (disk full...) is
     retried for ``retry_seconds`` (None: ``window_writer.OFFLINE_RETRY_SECONDS``); then the replay stops.
     Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag cannot be read or a
     window cannot be written (naming ``out_dir`` and what was not written).
@@ -151,7 +154,7 @@ def replay(bag_path, topic, model_path, out_dir, pre=smart.DEFAULT_PRE, post=sma
                                max_window=max_window, retrigger=retrigger, classify_every=classify_every,
                                max_buffer_mb=max_buffer_mb, retry_period=window_writer.OFFLINE_RETRY_PERIOD,
                                give_up_after=retry_seconds, close_retry=retry_seconds, triggers=triggers,
-                               input_topics=input_topics)
+                               input_topics=input_topics, wait_for_writer=True)
     return replay_into(logger, bag_path, progress)
 
 
@@ -225,4 +228,5 @@ def replay_records(logger, records, progress=None, source='the records'):
         'raw_json_bytes': stats['raw_json_bytes'],
         'stored_bytes': stats['stored_bytes'],
         'windows': tally.windows(),
+        'keep_budget': logger.budget.stats(),  # the windows it skipped (core.keep_budget)
     }

@@ -21,7 +21,7 @@ This package re-exports the names the rest of cc_log uses (``from cc_log import 
 Everything here is pure and deterministic: the same configuration and seed give identical messages.
 ``rospy`` and ``rosbag`` are not imported.
 """
-from cc_log.sim.anomalies import ANOMALY_TYPES, MAX_ANOMALY_SECONDS, parse_anomaly_types
+from cc_log.sim.anomalies import ANOMALY_TYPES, MAX_ANOMALY_SECONDS, SIM_ONLY_TYPES, parse_anomaly_types
 from cc_log.sim.bags import simulate_to_bag
 from cc_log.sim.config import DEFAULT_START_TIME, SimConfig
 from cc_log.sim.floor import FloorPlan
@@ -36,7 +36,7 @@ from cc_log.sim.world import Simulator
 __all__ = [
     'ANOMALY_TYPES', 'BWIBOT_LIMITS', 'CAMERA_TOPIC', 'CMD_TOPIC', 'DEFAULT_START_TIME', 'FloorPlan', 'IMU_FRAME',
     'IMU_TOPIC', 'Limits', 'MAX_ANOMALY_SECONDS', 'ODOM_TOPIC', 'SCAN_TOPIC', 'STATUS_TOPIC', 'SimConfig',
-    'Simulator', 'TRUTH_FORMAT', 'TRUTH_TOPIC', 'inject_anomalies', 'load_truth', 'nominal_envelope',
+    'SIM_ONLY_TYPES', 'Simulator', 'TRUTH_FORMAT', 'TRUTH_TOPIC', 'inject_anomalies', 'load_truth', 'nominal_envelope',
     'parse_anomaly_types', 'serialized', 'simulate_to_bag', 'truth_entry', 'truth_event', 'truth_path',
     'write_truth',
 ]

@@ -14,12 +14,23 @@ between events:
 - ``wheels_slipping``: the wheels keep turning (the twist says the base is moving) while the pose does not
   move.
 
+Simulator only, never part of ``ANOMALY_TYPES`` (so never drawn unless named, and not for ``inject``, which
+changes odometry alone): ``SIM_ONLY_TYPES``:
+
+- ``soft_collision``: the base runs into something that gives (a person, a cart) and stops no harder than
+  its own nominal stops: at ``SOFT_DECEL`` of the braking its planner plans with (``floor.PLANNED_DECEL``, half
+  the base's ``max_decel``; a stop from cruise speed at the limit is a harder one than nominal driving ever
+  makes, which odometry features see), then stands still for seconds while the planner keeps commanding motion;
+  the IMU feels the impact as a short ringing acceleration spike (``impact``). Meant to be invisible to odometry
+  features: only the IMU or the command against the motion should tell it.
+
 A model is a plan (``draw_plan``: durations in seconds, so any rate works) and the twist it makes the base
 drive ``tau`` seconds in (``command``; ``jump_offset`` for the pose of a localization jump). The ground truth
 of the anomalies is ``truth``'s.
 """
 import math
 
+from cc_log.sim.floor import PLANNED_DECEL
 from cc_log.sim.kinematics import BWIBOT_LIMITS
 
 ANOMALY_TYPES = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting',
@@ -27,10 +38,16 @@ ANOMALY_TYPES = ('planning_failure', 'collision', 'sudden_acceleration', 'excess
 MAX_ANOMALY_SECONDS = 10.0   # no anomaly's active phase lasts longer (simulator)
 NEEDS_MOTION = ('collision', 'sudden_acceleration', 'excessive_twisting', 'wheels_slipping')  # start where it drives
 MOVES_BASE = ('planning_failure', 'collision', 'sudden_acceleration', 'excessive_twisting')  # change the twist
+SIM_ONLY_TYPES = ('soft_collision',)  # named explicitly (SimConfig.anomaly_types) only: IMU and commands needed
+SOFT_DECEL = (0.6, 0.9)               # a soft collision's deceleration, as a fraction of the planned braking
+IMPACT_PEAK = (5.0, 15.0)             # m/s^2: the spike's amplitude (0.5-1.5 g)
+IMPACT_HZ = (20.0, 35.0)              # its ringing frequency
+IMPACT_DECAY = (0.02, 0.05)           # s: its decay time constant
 
 
-def parse_anomaly_types(value, name='anomaly_types'):
-    """Anomaly types from a list/tuple or a comma-separated string ('all' or '' = every type).
+def parse_anomaly_types(value, name='anomaly_types', extra=()):
+    """Anomaly types from a list/tuple or a comma-separated string ('all' or '' = every type of
+    ``ANOMALY_TYPES``); ``extra``: more types accepted when named (``SIM_ONLY_TYPES``).
 
     Returns a tuple; raises ValueError naming ``name`` on an unknown type.
     """
@@ -45,10 +62,11 @@ def parse_anomaly_types(value, name='anomaly_types'):
         items = [str(item).strip() for item in value]
     if not items:
         raise ValueError('%s: no anomaly type given (choose from %s)' % (name, ', '.join(ANOMALY_TYPES)))
+    known = ANOMALY_TYPES + tuple(extra)
     for item in items:
-        if item not in ANOMALY_TYPES:
+        if item not in known:
             raise ValueError('%s: unknown anomaly type %r (choose from %s)'
-                             % (name, item, ', '.join(ANOMALY_TYPES)))
+                             % (name, item, ', '.join(known)))
     return tuple(items)
 
 
@@ -76,6 +94,14 @@ def draw_plan(kind, rng, v0, scale=None):
             decel = BWIBOT_LIMITS.max_speed / plan['stop_time'] * ratio('max_decel')
             plan['stop_time'] = max(max(v0, 0.0) / decel, 1e-3)
         plan['duration'] = rng.uniform(3.0, 6.0)
+    elif kind == 'soft_collision':
+        plan['decel'] = rng.uniform(*SOFT_DECEL) * PLANNED_DECEL * ratio('max_decel')
+        plan['stop_time'] = max(max(v0, 0.0) / plan['decel'], 1e-3)
+        plan['duration'] = plan['stop_time'] + rng.uniform(3.0, 6.0)
+        plan['peak'] = rng.uniform(*IMPACT_PEAK)
+        plan['frequency'] = rng.uniform(*IMPACT_HZ)
+        plan['decay'] = rng.uniform(*IMPACT_DECAY)
+        plan['vertical'] = rng.uniform(0.2, 0.5)   # share of the spike felt along z (the base pitches)
     elif kind == 'sudden_acceleration':
         plan['accel'] = rng.uniform(3.0, 5.0) * ratio('max_accel')
         plan['peak'] = min(max(v0, 0.0) + rng.uniform(0.9, 1.3) * ratio('max_speed'), 2.2 * ratio('max_speed'))
@@ -118,7 +144,7 @@ def command(plan, tau, v0, w0, v_nom, w_nom):
         phase = 2.0 * math.pi * tau / plan['period']
         return (plan['speed'] * math.sin(phase),
                 plan['direction'] * plan['yaw_rate'] * (1.0 if math.cos(phase) >= 0 else -1.0), True)
-    if kind == 'collision':
+    if kind in ('collision', 'soft_collision'):
         f = max(0.0, 1.0 - tau / plan['stop_time'])
         return v0 * f, w0 * f, False
     if kind == 'sudden_acceleration':
@@ -133,6 +159,15 @@ def command(plan, tau, v0, w0, v_nom, w_nom):
     if kind == 'excessive_twisting':
         return v_nom, w_nom + plan['amplitude'] * math.sin(2.0 * math.pi * plan['frequency'] * tau), False
     return v_nom, w_nom, False  # localization_jump, wheels_slipping: the base drives on as commanded
+
+
+def impact(plan, tau):
+    """The acceleration (x, z in m/s^2, body frame) a soft collision's impact adds to the IMU ``tau`` seconds in:
+    a decaying ring, braking first; (0, 0) for other types."""
+    if plan['type'] != 'soft_collision' or tau < 0.0:
+        return 0.0, 0.0
+    ring = plan['peak'] * math.exp(-tau / plan['decay']) * math.sin(2.0 * math.pi * plan['frequency'] * tau)
+    return -ring, plan['vertical'] * ring
 
 
 def jump_offset(plan, tau):

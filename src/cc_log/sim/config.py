@@ -2,7 +2,7 @@
 import collections
 import math
 
-from cc_log.sim.anomalies import ANOMALY_TYPES, MAX_ANOMALY_SECONDS, parse_anomaly_types
+from cc_log.sim.anomalies import ANOMALY_TYPES, MAX_ANOMALY_SECONDS, SIM_ONLY_TYPES, parse_anomaly_types
 
 DEFAULT_START_TIME = 1600000000.0  # stamps of a simulated run start here (2020-09-13), unless told
 
@@ -15,7 +15,8 @@ class SimConfig(object):
     minutes        simulated minutes; 0 = run until stopped (``Simulator.messages`` never ends)
     anomalies      how many anomalies to inject, spread over the run (types taken in a seeded shuffled
                    order, cycling through ``anomaly_types``)
-    anomaly_types  which types to use (tuple, or comma-separated string)
+    anomaly_types  which types to use (tuple, or comma-separated string): of ANOMALY_TYPES, or SIM_ONLY_TYPES
+                   named (``soft_collision``, best with ``imu`` and ``commands``)
     imu            also publish sensor_msgs/Imu on /imu/data
     commands       also publish /cmd_vel and /move_base/status (see ``cc_log.sim.world``)
     camera, scan   also publish the camera's images and the laser scans (``sensors``; off: cheap tests)
@@ -69,7 +70,7 @@ class SimConfig(object):
         number('warmup', 0.0, 3600.0)
         number('jitter', 0.0, 0.2 / self.rate)
         number('noise', 0.0, 10.0)
-        self.anomaly_types = parse_anomaly_types(self.anomaly_types)
+        self.anomaly_types = parse_anomaly_types(self.anomaly_types, extra=SIM_ONLY_TYPES)
         self.imu = bool(self.imu)
         self.commands, self.camera, self.scan = bool(self.commands), bool(self.camera), bool(self.scan)
         if self.anomalies and self.minutes > 0:

@@ -10,7 +10,7 @@ import math
 
 from cc_log.sim.kinematics import wrap
 
-_SOFT_DECEL = 0.5            # braking the planner plans with (m/s^2), below the limit
+PLANNED_DECEL = 0.5          # braking the planner plans with (m/s^2), below the limit
 
 
 class FloorPlan(object):
@@ -142,5 +142,5 @@ class Path(object):
         speed = self.speeds[i]
         for j in range(i + 1, min(i + 6, len(self.points))):
             ahead = max(0.0, self.cumulative[j] - s - (0.05 if j == len(self.points) - 1 else 0.0))
-            speed = min(speed, math.sqrt(self.corner[j] ** 2 + 2.0 * _SOFT_DECEL * ahead))
+            speed = min(speed, math.sqrt(self.corner[j] ** 2 + 2.0 * PLANNED_DECEL * ahead))
         return speed

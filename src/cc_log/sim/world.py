@@ -201,21 +201,24 @@ class Simulator(object):
         out.append((ODOM_TOPIC, stamp_s, (ODOM_ITEM, stamp, k, (px, py, pyaw, meas_v, meas_w))))
 
         if config.imu:
-            out.append(self._imu(k, t, accel))
+            shock = anomalies.impact(plan, (k - active['start_tick']) * dt) if plan is not None else (0.0, 0.0)
+            out.append(self._imu(k, t, accel, shock))
         if config.commands:
             if k % self._command_every == 0:
                 out.append((CMD_TOPIC, stamp_s, twist(self._cmd_v, self._cmd_w)))
             if k % self._status_every == 0 and self._goal:
                 out.append((STATUS_TOPIC, stamp_s, goal_status(stamp, self._goal, self._goal_status)))
         if self._sensors is not None:
-            collision = active['start_tick'] if active is not None and active['type'] == 'collision' else None
+            hit = active is not None and active['type'] in ('collision', 'soft_collision')
+            collision = active['start_tick'] if hit else None
             out.extend(self._sensors.frames(k, stamp, stamp_s, (self.x, self.y, self.yaw), collision))
         self.tick += 1
         if len(out) > 1:
             out.sort(key=lambda item: item[1])
         return out
 
-    def _imu(self, k, t, accel):
+    def _imu(self, k, t, accel, shock=(0.0, 0.0)):
+        """The IMU item at tick ``k``: ``accel`` the base's forward acceleration, ``shock`` (x, z) an impact's."""
         rng, noise = self._rng_imu, self.config.noise
         jitter = self.config.jitter
         offset = clamp(rng.gauss(0.0, jitter), -4 * jitter, 4 * jitter) if jitter else 0.0
@@ -225,9 +228,9 @@ class Simulator(object):
         gyro_x = rng.gauss(0.0, 0.005 * noise)
         gyro_y = rng.gauss(0.0, 0.005 * noise)
         gyro_z = self.w + self._imu_gyro_bias + rng.gauss(0.0, 0.005 * noise)
-        accel_x = accel + rng.gauss(0.0, 0.05 * noise)
+        accel_x = accel + shock[0] + rng.gauss(0.0, 0.05 * noise)
         accel_y = self.v * self.w + rng.gauss(0.0, 0.05 * noise)
-        accel_z = GRAVITY + rng.gauss(0.0, 0.05 * noise)
+        accel_z = GRAVITY + shock[1] + rng.gauss(0.0, 0.05 * noise)
         return IMU_TOPIC, stamp_s, (IMU_ITEM, stamp, k, (math.sin(yaw / 2.0), math.cos(yaw / 2.0), gyro_x, gyro_y,
                                                          gyro_z, accel_x, accel_y, accel_z))
 
@@ -240,7 +243,8 @@ class Simulator(object):
             return None
         driving = self._mode == 'drive'
         ready = {'planning_failure': driving, 'localization_jump': True,
-                 'collision': driving and self._cmd_v >= 0.6}.get(kind, driving and self._cmd_v >= 0.4)
+                 'collision': driving and self._cmd_v >= 0.6, 'soft_collision': driving and self._cmd_v >= 0.6,
+                 }.get(kind, driving and self._cmd_v >= 0.4)
         if not ready and t < deadline:
             return None
         plan = anomalies.draw_plan(kind, self._rng_anomaly, self.v)

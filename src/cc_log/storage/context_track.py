@@ -39,6 +39,7 @@ import time
 from cc_log import features as features_mod
 from cc_log.storage import log_format, recovery, window_writer
 from cc_log.core import raw_message, safe_files
+from cc_log.storage.bag import bag_writer
 from cc_log.storage.formats import bag_lz4
 from cc_log.core.records import Record
 from cc_log.core.spans import seconds
@@ -96,10 +97,10 @@ def _rate(value, name):
     return rate
 
 
-def file_name(stamp):
-    """``cc_log_context_<UTC of stamp>`` (no extension)."""
+def file_name(stamp, prefix=log_format.PREFIX):
+    """``cc_log_context_<UTC of stamp>`` (no extension; ``prefix``: ``log_format.file_prefix``'s, for ``cc_log_``)."""
     moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(stamp))
-    return PREFIX + moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
+    return prefix + log_format.CONTEXT_MARK + moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
 
 
 class _OpenBag(object):
@@ -108,11 +109,12 @@ class _OpenBag(object):
     failed half-way, what reached the disk is salvaged by ``recovery``); ``discard`` removes it. A file that cannot
     be opened is removed at once."""
 
-    def __init__(self, directory, first_stamp):
+    def __init__(self, directory, first_stamp, prefix=log_format.PREFIX, chunk_bytes=None):
         import rosbag
         safe_files.make_dirs(directory)
         self.directory = directory
-        self.base = file_name(first_stamp)
+        self.base = file_name(first_stamp, prefix)
+        self.prefix = prefix
         self.first = first_stamp
         name = '%s%s%s%d.%d' % (self.base, EXTENSION, safe_files.TMP_MARK, os.getpid(), next(_SERIAL))
         self.tmp = os.path.join(directory, name)
@@ -127,7 +129,8 @@ class _OpenBag(object):
             self.discard()
             raise
         try:
-            self.bag = rosbag.Bag(stream, 'w', compression=rosbag.Compression.LZ4)
+            self.bag = rosbag.Bag(stream, 'w', compression=rosbag.Compression.LZ4,
+                                  chunk_threshold=chunk_bytes or bag_writer.CHUNK_THRESHOLD)
         except BaseException:
             _quietly(stream.close)
             self.discard()
@@ -142,7 +145,7 @@ class _OpenBag(object):
         if self.path is not None:
             return self.path
         if self._close_error is not None:  # rosbag cannot close twice: what reached the disk is salvaged
-            outcome = recovery.recover(self.tmp)
+            outcome = recovery.recover(self.tmp, self.prefix)
             if not outcome.path:
                 raise RuntimeError('%s: closing failed (%s), %d messages lost: %s'
                                    % (self.tmp, self._close_error, self.messages, outcome.detail))
@@ -192,8 +195,10 @@ class ContextTrack(object):
     """The context track of one logging directory (see the module docstring). Thread-safe."""
 
     def __init__(self, directory, rates, rotate=DEFAULT_ROTATE, submit=None, retry=RETRY_PERIOD, clock=time.monotonic,
-                 names=None):
+                 names=None, prefix=log_format.PREFIX, chunk_bytes=None):
         self.directory = os.path.join(str(directory), SUBDIRECTORY)
+        self.prefix = prefix  # of the file names (``log_format.file_prefix``)
+        self.chunk_bytes = chunk_bytes  # of the bags' LZ4 chunks, uncompressed (None: rosbag's 768 KB)
         self.rates = dict(rates)
         self.names = dict(names or {})  # topic -> the name it is stored under (BWI's odom_1hz), when not its own
         self.rotate = seconds(rotate, 'context_rotate', positive=True)
@@ -263,7 +268,7 @@ class ContextTrack(object):
                 self._close_locked()
             try:
                 if self._bag is None:
-                    self._bag = _OpenBag(self.directory, record.stamp)
+                    self._bag = _OpenBag(self.directory, record.stamp, self.prefix, self.chunk_bytes)
                 self._bag.write(record._replace(topic=self.names[record.topic]) if record.topic in self.names
                                 else record, time)
             except Exception as error:  # OSError (disk full), rosbag's, a bad message: the track goes on
@@ -352,13 +357,13 @@ def tee(*sinks):
     return (RawTee if all(hasattr(sink, 'on_raw') for sink in sinks) else Tee)(*sinks)
 
 
-def recover(directory):
+def recover(directory, prefix=log_format.PREFIX):
     """Recover the crash leftovers of the context track in ``<directory>/context`` (``*.bag.tmp-<pid>[.<n>]`` of
     a dead process) through ``recovery`` (``formats.bag_salvage``: every message of every complete chunk, and
     of a chunk cut off mid-write, into ``<name>_recovered.bag``; one that holds no message is removed); returns
     ``(recovered paths, [(path, why)] kept)``."""
     recovered, kept = [], []
-    for outcome in recovery.recover_directory(os.path.join(str(directory), SUBDIRECTORY)):
+    for outcome in recovery.recover_directory(os.path.join(str(directory), SUBDIRECTORY), prefix):
         if outcome.path and outcome.status != recovery.DUPLICATE:
             recovered.append(outcome.path)
         if outcome.status == recovery.UNRECOVERABLE or outcome.lost_bytes:

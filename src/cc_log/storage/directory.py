@@ -1,4 +1,5 @@
-"""Where window files go: the explicit path, else ``~/.ros/cc_log``, else ``/tmp/cc_log``.
+"""Where window files go: the explicit path, else ``$ROS_HOME/cc_log`` (``~/.ros/cc_log`` without ROS_HOME),
+else ``/tmp/cc_log``.
 
 As in the BWI logging nodes, a robot keeps logging when the configured directory cannot be used: the
 first directory that can be created and written to wins. ``fallback`` tells the caller to warn.
@@ -8,9 +9,19 @@ import tempfile
 
 from cc_log.core import safe_files
 
-HOME_DIRECTORY = os.path.join('~', '.ros', 'cc_log')
 TMP_DIRECTORY = os.path.join(tempfile.gettempdir(), 'cc_log')
 DIR_MODE = safe_files.DIR_MODE  # group-writable, setgid, never world-writable (parents made too)
+
+
+def ros_home():
+    """ROS's home directory, as ROS decides it (``rospkg.get_ros_home``): ``$ROS_HOME``, else ``~/.ros``."""
+    return os.path.abspath(os.path.expanduser(os.environ.get('ROS_HOME') or os.path.join('~', '.ros')))
+
+
+def cc_log_home(*parts):
+    """cc_log's directory in ROS's home (``$ROS_HOME/cc_log``, ``~/.ros/cc_log``), or ``parts`` under it: the
+    default window directory, model and demo output."""
+    return os.path.join(ros_home(), 'cc_log', *parts)
 
 
 def _usable(path):
@@ -38,7 +49,7 @@ class LoggingDirectory(object):
         candidates = []
         if path:
             candidates.append(os.path.abspath(os.path.expanduser(str(path))))
-        for default in (os.path.expanduser(HOME_DIRECTORY), TMP_DIRECTORY):
+        for default in (cc_log_home(), TMP_DIRECTORY):
             default = os.path.abspath(default)
             if default not in candidates:
                 candidates.append(default)

@@ -1,6 +1,7 @@
 """Disk limits of a logging directory: a quota for cc_log's window files and a floor of free space.
 
-``DiskGuard(directory, max_disk_mb, min_free_mb)`` (MB = 10^6 bytes; 0 turns a limit off):
+``DiskGuard(directory, max_disk_mb, min_free_mb, max_files=0, prefix=log_format.PREFIX)`` (MB = 10^6 bytes; 0
+turns a limit off):
 
 - ``max_disk_mb``: after each window file is written, ``enforce_quota(keep=path)`` deletes the *oldest*
   cc_log window files (final names ``cc_log_*.json.xz`` / ``cc_log_*.bag`` only; oldest by the time they
@@ -10,6 +11,10 @@
   When a write finds too little space, ``enforce_quota(reserve=bytes)`` makes room for the next file the
   same way (oldest first) until the files and ``reserve`` fit the quota. Nothing else in the directory is
   ever deleted: not other files, not crash leftovers (``*.tmp-*``), not feature vectors.
+- ``max_files`` (rosbag record's ``--max-splits``): the same quota in files: ``enforce_quota`` also deletes the
+  oldest until at most ``max_files`` are left (the file just written kept).
+- ``prefix``: what the names of the files counted begin with (``log_format.file_prefix``; ``~name_prefix``):
+  files of another prefix are neither counted nor deleted.
 - ``min_free_mb``: ``check()`` says whether writing may go on: ``False`` while the file system holds less
   than ``min_free_mb`` free. The caller then keeps windows in memory (bounded) and tries again later;
   writing resumes by itself once space returns.
@@ -61,11 +66,16 @@ class DiskGuard(object):
     ``paused`` (the last ``check`` found too little free space).
     """
 
-    def __init__(self, directory, max_disk_mb=0, min_free_mb=0, statvfs=os.statvfs):
+    def __init__(self, directory, max_disk_mb=0, min_free_mb=0, statvfs=os.statvfs, max_files=0,
+                 prefix=log_format.PREFIX):
         self.directory = str(directory)
+        self.prefix = prefix
         self.directories = [self.directory]  # the quota counts the cc_log files of each (add the context track's)
         self.max_bytes = _limit(max_disk_mb, 'max_disk_mb')
         self.min_free_bytes = _limit(min_free_mb, 'min_free_mb')
+        if isinstance(max_files, bool) or not isinstance(max_files, int) or max_files < 0:
+            raise ValueError('max_files: %r must be a whole number >= 0 (0: no limit)' % (max_files,))
+        self.max_files = max_files
         self._statvfs = statvfs
         self.deleted = 0
         self.deleted_bytes = 0
@@ -75,7 +85,18 @@ class DiskGuard(object):
     @property
     def active(self):
         """Whether any limit is set."""
-        return bool(self.max_bytes or self.min_free_bytes)
+        return bool(self.max_bytes or self.min_free_bytes or self.max_files)
+
+    @property
+    def has_quota(self):
+        """Whether ``enforce_quota`` may delete files (``max_disk_mb`` or ``max_files``)."""
+        return bool(self.max_bytes or self.max_files)
+
+    def quota_text(self):
+        """The quota in words: ``max_disk_mb 500``, ``max_files 3`` or both."""
+        return ' and '.join(text for text, value in (('max_disk_mb %g' % (self.max_bytes / float(MB)),
+                                                      self.max_bytes), ('max_files %d' % self.max_files,
+                                                                        self.max_files)) if value)
 
     def free(self):
         """Bytes free for an unprivileged user on the directory's file system (None if unknown)."""
@@ -91,7 +112,8 @@ class DiskGuard(object):
         (``*.unrecovered-<pid>``), which are as old as the crash that left them."""
         files = []
         for path in (path for directory in self.directories
-                     for path in log_format.window_files(directory) + log_format.kept_leftovers(directory)):
+                     for path in log_format.window_files(directory, self.prefix) +
+                     log_format.kept_leftovers(directory, self.prefix)):
             try:
                 status = os.stat(path)
             except OSError:
@@ -119,29 +141,29 @@ class DiskGuard(object):
 
     def enforce_quota(self, keep=(), reserve=0):
         """Delete the oldest window files (by time written) until the rest, plus ``reserve`` bytes still to
-        be written, fit ``max_disk_mb``; never the paths in ``keep`` (a path or a list). Returns the deleted
-        paths (oldest first)."""
-        if not self.max_bytes:
+        be written, fit ``max_disk_mb`` and they are at most ``max_files``; never the paths in ``keep`` (a path
+        or a list). Returns the deleted paths (oldest first)."""
+        if not self.has_quota:
             return []
         keep = {keep} if isinstance(keep, str) else set(keep)
         keep = {os.path.abspath(path) for path in keep}
         files = self.window_files()
-        limit = max(0, self.max_bytes - max(0, int(reserve)))
-        total = sum(size for _, size in files)
+        limit = max(0, self.max_bytes - max(0, int(reserve))) if self.max_bytes else float('inf')
+        total, count = sum(size for _, size in files), len(files)
         deleted = []
         for path, size in files:  # oldest first
-            if total <= limit:
+            if total <= limit and (not self.max_files or count <= self.max_files):
                 break
             if os.path.abspath(path) in keep:
                 continue
             try:
                 os.unlink(path)
             except FileNotFoundError:
-                total -= size
+                total, count = total - size, count - 1
                 continue
             except OSError:
                 continue
-            total -= size
+            total, count = total - size, count - 1
             deleted.append(path)
             self.deleted += 1
             self.deleted_bytes += size

@@ -25,10 +25,12 @@ from cc_log.core import safe_files, safe_input
 from cc_log.storage.window_info import (  # noqa: F401 (trigger_name: also read through this module)
     SUMMARY_KEYS, Contents, check_metadata, merged_summary, summary_of, trigger_name, utc_text, window_metadata)
 from cc_log.storage.window_names import (  # noqa: F401 (the names, read through this module too)
-    KEPT_MARK, PREFIX, RESERVED_MARK, TMP_MARK, Piece, WindowName, base_name, file_order, final_names, parse_piece,
-    piece_name, release_name, reservations, reserve_name, split_number, split_suffix, window_key)
+    ANY_PREFIX, KEPT_MARK, PREFIX, RESERVED_MARK, TMP_MARK, Piece, WindowName, base_name, file_order, file_prefix,
+    final_names, parse_piece, piece_name, release_name, reservations, reserve_name, split_number, split_suffix,
+    window_key)
 
 CONTEXT_PREFIX = PREFIX + 'context_'  # a context-track file (``context_track``: a plain rosbag, not a window)
+CONTEXT_MARK = 'context_'  # after the prefix: a context-track file
 FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
 DIR_MODE = safe_files.DIR_MODE
 
@@ -50,14 +52,15 @@ def _extension(path):
     return module.CODEC if module else None
 
 
-def window_files(directory):
-    """Final window files in ``directory`` (paths, sorted by name, hence by time); ``*.tmp-*`` ignored."""
+def window_files(directory, prefix=PREFIX):
+    """Final window files in ``directory`` whose names begin with ``prefix`` (paths, sorted by name, hence by
+    time); ``*.tmp-*`` ignored."""
     try:
         names = os.listdir(directory)
     except OSError:
         return []
     return [os.path.join(directory, name) for name in sorted(names)
-            if name.startswith(PREFIX) and TMP_MARK not in name and _extension(name)]
+            if name.startswith(prefix) and TMP_MARK not in name and _extension(name)]
 
 
 def window_sets(paths):
@@ -69,7 +72,7 @@ def window_sets(paths):
         directory = os.path.dirname(path)
         if directory not in listed:  # each directory listed once: {window key: its files}
             listed[directory] = collections.defaultdict(list)
-            for name in window_files(directory or '.'):
+            for name in window_files(directory or '.', prefix=''):  # the key holds the path's prefix
                 sibling = os.path.join(directory, os.path.basename(name))
                 listed[directory][window_key(sibling)].append(sibling)
         files = sets.setdefault(key, [])
@@ -83,7 +86,8 @@ def read_window_set(paths):
     """``(metadata, records)`` of a window written as several files (``window_sets``: routes, split files): the
     metadata of them all (``merged_metadata``) with ``counts``/``topics``/``count`` of the records read, and the
     records: those of the files of the window's own file or of one route in file order (split files follow each
-    other), those of different routes merged in stamp order. ValueError as ``read_window``."""
+    other), those of different routes merged in stamp order; a ``copy`` route's records are read from the
+    window's own file. ValueError as ``read_window``."""
     metadata, records = read_window(paths[0])
     if len(paths) == 1:
         return metadata, records
@@ -91,7 +95,8 @@ def read_window_set(paths):
     for path in paths[1:]:
         found, more = read_window(path)
         metadatas.append(found)
-        groups.setdefault(file_order(path)[:2], []).extend(more)
+        if not _is_copy(found, paths):
+            groups.setdefault(file_order(path)[:2], []).extend(more)
     merged = list(heapq.merge(*groups.values(), key=lambda record: record.stamp)) if len(groups) > 1 else records
     counts = collections.Counter(record.topic for record in merged)
     metadata = dict(merged_metadata(metadatas, paths), counts=dict(counts), topics=list(counts), count=len(merged))
@@ -113,6 +118,7 @@ def merged_metadata(metadatas, paths):
     result.pop('split', None)
     if any(split_number(path) for path in paths):  # the files written (older ones may be gone: max_disk_mb)
         result['splits'] = own[-1].get('splits', len(own))
+    metadatas = [meta for meta in metadatas if not _is_copy(meta, paths)]  # a copy's messages are counted once
     counts, types = collections.Counter(), {}
     for meta in metadatas:
         counts.update(meta.get('counts') or {})
@@ -145,25 +151,31 @@ def merged_metadata(metadatas, paths):
     return result
 
 
-def kept_leftovers(directory):
-    """Leftovers kept after a partial recovery (``cc_log_*.unrecovered-<pid>``), sorted: bytes no reader
-    could decode, left for a person to look at."""
+def _is_copy(metadata, paths):
+    """True for the metadata of a ``copy`` route's file (``core.routes``) of a window whose own file is among
+    ``paths`` (as ``window_sets`` orders them): its messages are in the window's own file too."""
+    return bool(metadata.get('copy')) and metadata.get('route') is not None and not file_order(paths[0])[0]
+
+
+def kept_leftovers(directory, prefix=PREFIX):
+    """Leftovers kept after a partial recovery (``cc_log_*.unrecovered-<pid>``; ``prefix``: for ``cc_log_``),
+    sorted: bytes no reader could decode, left for a person to look at."""
     try:
         names = os.listdir(directory)
     except OSError:
         return []
     return [os.path.join(directory, name) for name in sorted(names)
-            if name.startswith(PREFIX) and KEPT_MARK in name and TMP_MARK not in name]
+            if name.startswith(prefix) and KEPT_MARK in name and TMP_MARK not in name]
 
 
-def temporary_files(directory):
-    """Leftovers of an interrupted write (``cc_log_*.tmp-<pid>``), sorted."""
+def temporary_files(directory, prefix=PREFIX):
+    """Leftovers of an interrupted write (``cc_log_*.tmp-<pid>``; ``prefix``: for ``cc_log_``), sorted."""
     try:
         names = os.listdir(directory)
     except OSError:
         return []
     return [os.path.join(directory, name) for name in sorted(names)
-            if name.startswith(PREFIX) and TMP_MARK in name]
+            if name.startswith(prefix) and TMP_MARK in name]
 
 
 # -- writing --------------------------------------------------------------------------------------------
@@ -173,12 +185,12 @@ def ensure_directory(directory):
     return safe_files.make_dirs(directory)
 
 
-def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None):
+def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None, prefix=PREFIX):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
 
-    ``base``: the file name without extension (default: a name reserved for the window, ``reserve_name``, numbered
-    by the window's part as ``piece_name`` does; the writer gives its reserved name's piece, ``recovery`` a
-    leftover's).
+    ``base``: the file name without extension (default: a name reserved for the window, ``reserve_name``, of
+    ``prefix`` (``file_prefix``'s), numbered by the window's part as ``piece_name`` does; the writer gives its
+    reserved name's piece, ``recovery`` a leftover's).
     ``triggers``: those its metadata says (default: the window's; a part of a window written as a file per part
     says those that came since the part before it, while its name is the window's first trigger's).
 
@@ -213,7 +225,7 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
             left_out.update(meta['undecodable_topics'])
     extension = module.EXTENSION
     write = module.encoder(records, meta)  # a format may encode now, before the temporary file exists
-    name = WindowName()
+    name = WindowName(prefix=prefix)
     if base is None:
         base = piece_name(name.take(directory, window), None, getattr(window, 'part', 0))
     try:
@@ -236,7 +248,8 @@ class WindowFile(object):
     the last ``final``), by a format with a ``WindowStream``: ``append(part, metadata)`` for each part, then
     ``finish(metadata)`` -> ``(path, bytes)``. The file is ``<piece name>.<ext>.tmp-<pid>`` until it is finished (a
     crash leaves a leftover that ``recovery`` salvages), then gets its final name, ``piece_name(name, route)``
-    (``name``: the window's reserved name; None: one reserved for its first part's ``base_name``). ``summary``: the
+    (``name``: the window's reserved name; None: one reserved for its first part's ``base_name`` of ``prefix``,
+    ``file_prefix``'s). ``summary``: the
     window as a whole (triggers, start, end, its length) once a part was appended. Metadata counters that every
     part carries (``SUMMED``) are summed over the parts; ``lost``: messages of parts that could not be written (said
     in the metadata).
@@ -249,10 +262,10 @@ class WindowFile(object):
 
     SUMMED = ('dropped', 'undecodable')
 
-    def __init__(self, directory, fmt, route=None, name=None, split_bytes=0):
+    def __init__(self, directory, fmt, route=None, name=None, split_bytes=0, prefix=PREFIX):
         self.directory = directory
         self.route = route    # a route's file of the window (``core.routes``), None for its own
-        self.name = WindowName(name=name)  # the window's name (None until its first part: reserved then)
+        self.name = WindowName(name=name, prefix=prefix)  # the window's (None until its first part: reserved then)
         self.format = formats.check(fmt)
         self.split_bytes = int(split_bytes or 0)
         self._module = formats.get(fmt)

@@ -22,7 +22,8 @@ leftover into a final window file with what it held:
   decodes, garbage, something that is not a regular file): left where it is, under its ``.tmp-`` name,
   and reported every time; it is never deleted.
 
-``scan(directory)`` lists the leftovers; ``recover_directory(directory)`` recovers them all and returns one
+``scan(directory, prefix)`` lists the leftovers of files named ``<prefix>...`` (default ``cc_log_``;
+``log_format.file_prefix``); ``recover_directory(directory, prefix)`` recovers them all and returns one
 ``Outcome`` per leftover, which the nodes log and show on /diagnostics. A leftover whose writer is still
 alive (its pid is running, is not this process, and the file changed in the last ``BUSY_SECONDS``: a
 pid reused after a reboot does not keep a stale leftover forever) is ``busy`` and left alone.
@@ -38,7 +39,7 @@ import stat
 import time
 
 from cc_log.storage import formats, log_format
-from cc_log.core import msg_codec, safe_files
+from cc_log.core import msg_codec, safe_files, why
 from cc_log.core.records import LogWindow, Trigger
 
 __all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'release_stale_names', 'incomplete', 'DUPLICATE',
@@ -64,14 +65,29 @@ holds (0 when none); detail: one line for the log; lost_bytes: bytes of the left
 decoded (0 when none); kept: where the leftover is kept after a partial recovery ('' when it is not).
 """
 
-_LEFTOVER = re.compile(r'%s.*(%s)%s(\d+)(\.\d+)?' % (
-    re.escape(log_format.PREFIX), '|'.join(re.escape(extension) for extension in formats.extensions()),
-    re.escape(log_format.TMP_MARK)))
+
+def _leftover(prefix):
+    """The pattern of a leftover's name whose final name begins with ``prefix``."""
+    return re.compile(r'%s.*(%s)%s(\d+)(\.\d+)?' % (  # (re.fullmatch)
+        re.escape(prefix), '|'.join(re.escape(extension) for extension in formats.extensions()),
+        re.escape(log_format.TMP_MARK)))
 
 
-def scan(directory):
-    """Leftovers (``cc_log_*.tmp-<pid>``) in ``directory``, sorted."""
-    return [path for path in log_format.temporary_files(directory) if _LEFTOVER.fullmatch(os.path.basename(path))]
+_STAMPED = re.compile(r'^(.+?_)(%s)?\d{8}T\d{6}\.\d{3}Z' % re.escape(log_format.CONTEXT_MARK))
+
+
+def prefix_of(path):
+    """The file prefix of a leftover's name: what comes before its UTC stamp (and a context file's ``context_``):
+    ``run_`` of ``run_20150521T191138.027Z_x.bag.tmp-1``; ``log_format.PREFIX`` when it has no stamp."""
+    match = _STAMPED.match(os.path.basename(path))
+    return match.group(1) if match else log_format.PREFIX
+
+
+def scan(directory, prefix=log_format.PREFIX):
+    """Leftovers (``cc_log_*.tmp-<pid>``; ``prefix``: ``log_format.file_prefix``'s) in ``directory``, sorted."""
+    pattern = _leftover(prefix)
+    return [path for path in log_format.temporary_files(directory, prefix)
+            if pattern.fullmatch(os.path.basename(path))]
 
 
 def incomplete(outcomes):
@@ -79,13 +95,13 @@ def incomplete(outcomes):
     return [outcome for outcome in outcomes if outcome.status == UNRECOVERABLE or outcome.lost_bytes]
 
 
-def _split(path):
+def _split(path, prefix):
     """(directory, final base name without extension, extension, pid) of a leftover path."""
     directory, name = os.path.split(path)
-    match = _LEFTOVER.fullmatch(name)
+    match = _leftover(prefix).fullmatch(name)
     if not match:
-        raise ValueError('%s: not a cc_log leftover (cc_log_*.json.xz%s<pid> or cc_log_*.bag%s<pid>)'
-                         % (path, log_format.TMP_MARK, log_format.TMP_MARK))
+        raise ValueError('%s: not a cc_log leftover (%s*.json.xz%s<pid> or %s*.bag%s<pid>)'
+                         % (path, prefix, log_format.TMP_MARK, prefix, log_format.TMP_MARK))
     extension = match.group(1)
     final = name[:name.rindex(log_format.TMP_MARK)]
     return directory, final[:-len(extension)], extension, int(match.group(2))
@@ -125,19 +141,19 @@ def _triggers(metadata, first_stamp):
             stamp, score = first_stamp, None
         name = trigger.get('name')
         triggers.append(Trigger(stamp, str(trigger.get('reason', 'recovered')), score,
-                                name if isinstance(name, str) else None))
+                                name if isinstance(name, str) else None, why.bounded(trigger.get('why'))))
     return triggers
 
 
-def _is_context(path):
+def _is_context(path, prefix):
     """Whether ``path`` is a context-track file (a plain rosbag, not a window)."""
-    return os.path.basename(path).startswith(log_format.CONTEXT_PREFIX)
+    return os.path.basename(path).startswith(prefix + log_format.CONTEXT_MARK)
 
 
-def _write_recovered(path, directory, base, fmt, metadata, records):
+def _write_recovered(path, directory, base, fmt, metadata, records, prefix):
     """Write ``records`` as ``<base>_recovered<extension>`` in format ``fmt`` with ``metadata`` (of the
     leftover), or as the plain rosbag it was for a context file; return its path."""
-    if _is_context(path):
+    if _is_context(path, prefix):
         from cc_log.offline import export
         names = log_format.final_names(directory, base + RECOVERED_SUFFIX, fmt.EXTENSION)
         return export.to_bag(records, os.path.join(directory, base + RECOVERED_SUFFIX + fmt.EXTENSION),
@@ -154,7 +170,7 @@ def _write_recovered(path, directory, base, fmt, metadata, records):
     return log_format.write_window(window, directory, fmt.CODEC, metadata, base=base + RECOVERED_SUFFIX)[0]
 
 
-def _recover_partial(path, directory, base, extension, size, fmt):
+def _recover_partial(path, directory, base, extension, size, fmt, prefix):
     """Outcome of a leftover that does not decode as a whole, by its format's ``salvage`` (see the module
     docstring)."""
     try:
@@ -172,7 +188,7 @@ def _recover_partial(path, directory, base, extension, size, fmt):
                                                'message data reached the disk): removed' % fmt.CODEC)
         return Outcome(path, UNRECOVERABLE, '', 0, '%s: no message decodes%s; %d bytes kept as they are'
                        % (path, why, size), size)
-    written, count = _write_recovered(path, directory, base, fmt, metadata, records), len(records)
+    written, count = _write_recovered(path, directory, base, fmt, metadata, records, prefix), len(records)
     cut = ', %d of them from a chunk cut off mid-write' % salvage.cut if salvage.cut else ''
     detail = 'cut off while written; %d messages recovered into %s%s' % (count, os.path.basename(written), cut)
     if salvage.undecoded:
@@ -189,10 +205,10 @@ def _recover_partial(path, directory, base, extension, size, fmt):
                    % (detail, lost, why, os.path.basename(kept)), lost, kept)
 
 
-def recover(path):
-    """Recover one leftover; return an Outcome. Raises ValueError for a path that is not a cc_log leftover
-    and OSError when the directory cannot be written (nothing is deleted then)."""
-    directory, base, extension, pid = _split(path)
+def recover(path, prefix=log_format.PREFIX):
+    """Recover one leftover (its name beginning with ``prefix``); return an Outcome. Raises ValueError for a path
+    that is not a cc_log leftover and OSError when the directory cannot be written (nothing is deleted then)."""
+    directory, base, extension, pid = _split(path, prefix)
     info = os.lstat(path)
     if not stat.S_ISREG(info.st_mode):
         return Outcome(path, UNRECOVERABLE, '', 0, '%s: not a regular file (a link?); left alone' % path)
@@ -218,15 +234,15 @@ def recover(path):
     fmt = formats.by_extension(extension)
     if not hasattr(fmt, 'salvage'):
         return Outcome(path, UNRECOVERABLE, '', 0, '%s; kept as it is' % reason, info.st_size)
-    return _recover_partial(path, directory, base, extension, info.st_size, fmt)
+    return _recover_partial(path, directory, base, extension, info.st_size, fmt, prefix)
 
 
-def release_stale_names(directory):
-    """Remove the name reservations (``log_format.reserve_name``) of processes no longer running (this one's
-    and a running one's are kept, and one that names no process but changed in the last ``BUSY_SECONDS``); they
-    hold no data. Returns the paths removed."""
+def release_stale_names(directory, prefix=log_format.PREFIX):
+    """Remove the name reservations (``log_format.reserve_name``; ``prefix``: of the names) of processes no longer
+    running (this one's and a running one's are kept, and one that names no process but changed in the last
+    ``BUSY_SECONDS``); they hold no data. Returns the paths removed."""
     removed = []
-    for path, pid in log_format.reservations(directory):
+    for path, pid in log_format.reservations(directory, prefix):
         if pid == os.getpid() or _alive(pid):
             continue
         if pid is None and time.time() - os.lstat(path).st_mtime < BUSY_SECONDS:
@@ -236,18 +252,18 @@ def release_stale_names(directory):
     return removed
 
 
-def recover_directory(directory):
-    """Recover every leftover in ``directory``; a list of Outcomes (an OSError for one leftover becomes an
-    UNRECOVERABLE outcome naming it; nothing is deleted then; one gone meanwhile is left out). Stale name
-    reservations are removed first (``release_stale_names``)."""
+def recover_directory(directory, prefix=log_format.PREFIX):
+    """Recover every leftover in ``directory`` (of files named ``<prefix>...``); a list of Outcomes (an OSError
+    for one leftover becomes an UNRECOVERABLE outcome naming it; nothing is deleted then; one gone meanwhile is
+    left out). Stale name reservations are removed first (``release_stale_names``)."""
     try:
-        release_stale_names(directory)
+        release_stale_names(directory, prefix)
     except OSError:
         pass  # a directory that cannot be written: its leftovers are reported below
     outcomes = []
-    for path in scan(directory):
+    for path in scan(directory, prefix):
         try:
-            outcomes.append(recover(path))
+            outcomes.append(recover(path, prefix))
         except (OSError, ValueError) as error:
             if isinstance(error, FileNotFoundError) and not os.path.lexists(path):
                 continue  # recovered meanwhile by another process

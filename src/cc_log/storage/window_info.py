@@ -7,7 +7,7 @@ import io
 import math
 
 from cc_log import __version__
-from cc_log.core import msg_codec, raw_message
+from cc_log.core import msg_codec, raw_message, why as why_
 
 
 def utc_text(stamp):
@@ -25,12 +25,13 @@ def _score(value):
 def window_metadata(window, codec, extra=None, triggers=None):
     """The metadata every window file carries; keys of ``extra`` (JSON-able) are added, overriding.
 
-    topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the
-    first/last record), start_utc/end_utc, triggers ([{stamp, reason, score, name}]; name only for
-    triggers that have one), reasons and names (distinct, in order: every trigger of the window), part (0, or
-    1, 2, ... for a split window), codec, cc_log_version, and the summary ``cclog info`` and ``stats`` read
-    instead of the messages (``SUMMARY_KEYS``, see ``Contents``). ``triggers``: those to say (default: the
-    window's).
+    topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the first/last
+    record), start_utc/end_utc, triggers ([{stamp, reason, score, name, why}]; name only for triggers that have one,
+    why (``core.why.bounded``) only for those that say one, the first and the most anomalous of each trigger:
+    ``core.why.said``), reasons and names (distinct, in order: every trigger of
+    the window), part (0, or 1, 2, ... for a split window), codec, cc_log_version, and the summary ``cclog info``
+    and ``stats`` read instead of the messages (``SUMMARY_KEYS``, see ``Contents``). ``triggers``: those to say
+    (default: the window's).
     """
     contents = Contents()
     contents.add(window.records)
@@ -141,11 +142,13 @@ class Contents(object):
 
     def metadata(self, triggers, part, codec, extra=None):
         """``window_metadata`` of the records taken."""
-        entries = []
-        for trigger in triggers:
+        entries, explained = [], why_.said(triggers)
+        for index, trigger in enumerate(triggers):
             entry = {'stamp': float(trigger.stamp), 'reason': str(trigger.reason), 'score': _score(trigger.score)}
             if getattr(trigger, 'name', None) is not None:
                 entry['name'] = str(trigger.name)
+            if index in explained:
+                entry['why'] = why_.bounded(trigger.why)
             entries.append(entry)
         meta = {
             'topics': list(self.types),
@@ -215,8 +218,11 @@ _METADATA_TYPES = (  # key, test, what it must be (keys a reader uses; each may 
     ('raw_json_bytes', lambda v: _is_count(v), 'a count'),
     ('triggers', lambda v: isinstance(v, list) and all(
         isinstance(t, dict) and _is_number(t.get('stamp')) and isinstance(t.get('reason', ''), str)
-        and _is_score(t.get('score')) and isinstance(t.get('name', ''), str) for t in v),
-     'a list of objects {"stamp": number, "reason": string, "score": number or null, "name": string}'),
+        and _is_score(t.get('score')) and isinstance(t.get('name', ''), str) and why_.check(t.get('why', []))
+        for t in v),
+     'a list of objects {"stamp": number, "reason": string, "score": number or null, "name": string, "why": at '
+     'most %d objects of short strings (text at most %d characters) and finite numbers}'
+     % (why_.MAX_ENTRIES, why_.MAX_TEXT)),
 )
 _METADATA_STRINGS = ('codec', 'reason', 'trigger', 'driving_topic', 'start_utc', 'end_utc', 'cc_log_version')
 

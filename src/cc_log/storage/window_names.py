@@ -15,23 +15,26 @@ A window's *name* is ``PREFIX``, the UTC time of its first stamp and the name of
     cc_log_20150521T191138.027Z_classifier_1.bag                (another window of that name and time)
 
 Names written before this scheme (``<name>_part2``, ``<name>+numeric_part2``, ``<name>_collect_part1``,
-``<name>+numeric_1``) are still read: ``_part<N>`` as the number ``N``. ``prefix`` (default ``PREFIX``) is a
-parameter of the functions that make or read a name. Pure (the file system only).
+``<name>+numeric_1``) are still read: ``_part<N>`` as the number ``N``. ``prefix`` (default ``PREFIX``; another
+from ``~name_prefix``, ``file_prefix``) is a parameter of the functions that make or read a name; those that group
+a window's files (``window_key``, ``file_order``, ``split_number``) read any prefix. Pure (the file system only).
 """
 import collections
 import datetime
 import os
 import re
 
-from cc_log.core import routes, safe_files
+from cc_log.core import routes, safe_files, safe_input
 from cc_log.storage import formats
 from cc_log.storage.window_info import trigger_name
 
-PREFIX = 'cc_log_'
+PREFIX = 'cc_log_'  # what every file name begins with (``file_prefix``: another, from ``~name_prefix``)
+ANY_PREFIX = None  # ``parse_piece``'s prefix for a name of any prefix
 TMP_MARK = safe_files.TMP_MARK
 KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
 
-#: A window's name and the names of its pieces (one grammar, parsed by ``parse_piece``; ``prefix``: ``PREFIX``).
+#: A window's name and the names of its pieces (one grammar, parsed by ``parse_piece``; ``prefix``: ``PREFIX``,
+#: or any for ``ANY_PREFIX``: the shortest that a stamp follows).
 #: Legacy pieces (``_part<N>``, ``_collect_part<N>``, ``+<route>_<N>``) are read, never written.
 _PIECE = (r'(?P<name>%s(?P<stamp>[0-9]{8}T[0-9]{6}\.[0-9]{3}Z)_(?P<reason>[A-Za-z0-9-]+)(?:_(?P<serial>[0-9]+))?)'
           r'(?:_part(?P<old_part>[0-9]+)(?:_[0-9]+)?)?'
@@ -47,6 +50,17 @@ window's own file); ``number``, its number among the files of that route (a wind
 written a file per part: 1, 2, ...; 0 for a window's only file)."""
 
 
+def file_prefix(name_prefix, name='name_prefix'):
+    """What every file name begins with for ``name_prefix`` (``cc_log``, or ``run`` of rosbag's ``-o /data/run``):
+    ``<name_prefix>_``. ValueError('<name>: ...') unless it is a plain part of a file name (no ``/``, no control
+    character, not starting with ``.``, at most 100 characters)."""
+    if (not isinstance(name_prefix, str) or not name_prefix or name_prefix.startswith('.') or '/' in name_prefix
+            or len(name_prefix) > 100 or any(ord(c) < 32 or ord(c) == 127 for c in name_prefix)):
+        raise ValueError('%s: %s must be a plain part of a file name (no "/", no control character, not starting '
+                         'with ".", at most 100 characters)' % (name, safe_input.brief(name_prefix)))
+    return name_prefix + '_'
+
+
 def _reason_text(window):
     reason = trigger_name(window.triggers[0]) if window.triggers else 'window'
     text = re.sub(r'[^A-Za-z0-9-]+', '-', reason).strip('-')
@@ -55,7 +69,8 @@ def _reason_text(window):
 
 def base_name(window, prefix=PREFIX):
     """The name proposed for a window: ``<prefix><UTC of its first stamp>_<name of its first trigger>``; the name
-    it gets (``reserve_name``) may have ``_<N>`` added, the first free one in its directory."""
+    it gets (``reserve_name``) may have ``_<N>`` added, the first free one in its directory. ``prefix``:
+    ``file_prefix``'s."""
     moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
     stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
     return prefix + stamp + '_' + _reason_text(window)
@@ -73,10 +88,11 @@ def split_suffix(number):
 
 def parse_piece(name, prefix=PREFIX):
     """The ``Piece`` a file name (with or without its format's extension) names, or None for a name that is
-    not a cc_log window piece (``re.fullmatch``: nothing may follow, not even a newline)."""
+    not a cc_log window piece of ``prefix`` (``ANY_PREFIX``: of any; ``re.fullmatch``: nothing may follow, not even
+    a newline)."""
     pattern = _PATTERNS.get(prefix)
     if pattern is None:
-        pattern = _PATTERNS[prefix] = re.compile(_PIECE % re.escape(prefix))
+        pattern = _PATTERNS[prefix] = re.compile(_PIECE % ('.*?' if prefix is ANY_PREFIX else re.escape(prefix)))
     match = pattern.fullmatch(_stem(name))
     if match is None:
         return None
@@ -92,32 +108,32 @@ def _stem(name):
 def split_number(path):
     """The number of a window's file among those of its route (``<name>.002.bag``: 2); 0 for a window's only
     file."""
-    piece = parse_piece(os.path.basename(path))
+    piece = parse_piece(os.path.basename(path), ANY_PREFIX)
     return piece.number if piece else 0
 
 
 def file_order(path):
     """Where a file goes among its window's (``window_sets``): the window's own first, then each route, each
     of them by number."""
-    piece = parse_piece(os.path.basename(path))
+    piece = parse_piece(os.path.basename(path), ANY_PREFIX)
     if piece is None:
         return (False, '', 0)
     return (piece.route is not None, piece.route or '', piece.number)
 
 
 def window_key(path):
-    """What the files of one window share: its directory and name (``parse_piece``); a file whose name is not a
-    window piece's is a window of its own (its path without extension)."""
+    """What the files of one window share: its directory and name (``parse_piece``, of any prefix); a file whose
+    name is not a window piece's is a window of its own (its path without extension)."""
     directory, name = os.path.split(path)
-    piece = parse_piece(name)
+    piece = parse_piece(name, ANY_PREFIX)
     return os.path.join(directory, piece.name if piece else _stem(name))
 
 
 def reserve_name(directory, proposed, prefix=PREFIX):
     """Take the first free name of ``proposed``, ``proposed_1``, ``proposed_2``, ... in ``directory``: its
     ``<name>.reserved`` created (``O_EXCL``: one writer wins, in any process), then no other file holding that
-    name. Returns ``(name, path of the reservation)``; ``release_name`` removes it once the window's pieces are
-    written. OSError when the directory cannot be written."""
+    name (``prefix``: of the names). Returns ``(name, path of the reservation)``; ``release_name`` removes it once
+    the window's pieces are written. OSError when the directory cannot be written."""
     safe_files.make_dirs(directory)
     for candidate in final_names(directory, proposed, ''):
         name = os.path.basename(candidate)
@@ -150,12 +166,12 @@ def _held_by_others(directory, name, prefix=PREFIX):
     return False
 
 
-def reservations(directory):
-    """``[(path, pid or None)]`` of the names reserved in ``directory`` (``reserve_name``), sorted (pid None: the
-    file says none, written on a full disk)."""
+def reservations(directory, prefix=PREFIX):
+    """``[(path, pid or None)]`` of the names of ``prefix`` reserved in ``directory`` (``reserve_name``), sorted
+    (pid None: the file says none, written on a full disk)."""
     try:
         names = sorted(name for name in os.listdir(directory)
-                       if name.startswith(PREFIX) and name.endswith(RESERVED_MARK))
+                       if name.startswith(prefix) and name.endswith(RESERVED_MARK))
     except OSError:
         return []
     found = []
@@ -180,18 +196,19 @@ def release_name(reservation):
 
 class WindowName(object):
     """The name of one window, shared by every job of it (its parts, its routes): ``proposed`` (None: the
-    ``base_name`` of its first job's window) until ``take`` reserves it in a directory (``reserve_name``) on the
-    first piece's write; ``release`` once its last piece is written."""
+    ``base_name`` of its first job's window, with ``prefix``) until ``take`` reserves it in a directory
+    (``reserve_name``) on the first piece's write; ``release`` once its last piece is written."""
 
-    __slots__ = ('proposed', 'name', 'reservation')
+    __slots__ = ('proposed', 'name', 'reservation', 'prefix')
 
-    def __init__(self, proposed=None, name=None):
-        self.proposed, self.name, self.reservation = proposed, name, None
+    def __init__(self, proposed=None, name=None, prefix=PREFIX):
+        self.proposed, self.name, self.reservation, self.prefix = proposed, name, None, prefix
 
     def take(self, directory, window):
         """The window's name, reserved now if it was not yet."""
         if self.name is None:
-            self.name, self.reservation = reserve_name(directory, self.proposed or base_name(window))
+            self.name, self.reservation = reserve_name(directory, self.proposed or base_name(window, self.prefix),
+                                                       self.prefix)
         return self.name
 
     def release(self):

@@ -67,7 +67,8 @@ class Job(object):
     ``route``: the window's file of a route (``core.routes``) in that format, named ``<name>+<route>``; ``name``:
     the window's ``log_format.WindowName``, shared by the jobs of all its files (its parts, its routes) and reserved
     at the first one's write (None: a name of its own, or for a part (``LogWindow.key``) its first part's);
-    ``last``: the window's last job (its name's reservation is released once it is done)."""
+    ``last``: the window's last job (its name's reservation is released once it is done). A copy route's file
+    (``metadata['copy']``) counts no messages or memory: its window's own file does."""
 
     __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole',
                  'fmt', 'route', 'name', 'last')
@@ -81,8 +82,9 @@ class Job(object):
         self.write = write
         self.what = what or (WINDOW if window is not None else 'file')
         self.tag = tag
-        self.messages = len(window) if window is not None else 0
-        self.bytes = sum(record.cost for record in window.records) if window is not None else 0  # memory held
+        counted = window is not None and not (metadata or {}).get('copy')  # a copy route's: counted by its window's
+        self.messages = len(window) if counted else 0
+        self.bytes = sum(record.cost for record in window.records) if counted else 0  # memory held
         self.whole = None       # a window written a part at a time, as a whole, once its file is finished
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent
@@ -108,7 +110,9 @@ class WindowWriter(object):
     jobs; background: write on a thread (True) or in the caller's (False: ``submit`` writes, and with
     ``give_up_after`` it waits for a failing job to be written or lost); give_up_after: seconds after which
     a failing job is lost (None: held until ``close``); close_retry: seconds ``close`` keeps retrying;
-    split_mb: the size at which a window written a part at a time goes on in a new file (0: never).
+    split_mb: the size at which a window written a part at a time goes on in a new file (0: never);
+    max_files: the quota in files (``disk_guard``; 0: none); prefix: what file names begin with
+    (``log_format.file_prefix``).
 
     Thread-safe: ``submit``, ``stats`` and ``close`` may be called from any thread. Bad values raise
     ``ValueError('<parameter>: ...')``.
@@ -116,10 +120,13 @@ class WindowWriter(object):
 
     def __init__(self, directory, fmt=log_format.Format.JSON_XZ, max_disk_mb=0, min_free_mb=0,
                  retry_period=DEFAULT_RETRY_PERIOD, max_held_messages=DEFAULT_MAX_HELD_MESSAGES, background=True,
-                 give_up_after=None, close_retry=0.0, split_mb=0, name='cc_log window writer'):
+                 give_up_after=None, close_retry=0.0, split_mb=0, name='cc_log window writer', max_files=0,
+                 prefix=log_format.PREFIX):
         self.directory = str(directory)
         self.format = log_format.Format.check(fmt)
-        self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb)
+        self.prefix = prefix
+        self.guard = disk_guard.DiskGuard(self.directory, max_disk_mb, min_free_mb, max_files=max_files,
+                                          prefix=prefix)
         self.retry_period = seconds(retry_period, 'retry_period', positive=True)
         self.give_up_after = None if give_up_after is None else seconds(give_up_after, 'give_up_after')
         self.close_retry = seconds(close_retry, 'close_retry')
@@ -130,6 +137,7 @@ class WindowWriter(object):
         self._next_retry = 0.0            # monotonic clock of the next attempt at held jobs
         self._callbacks = []
         self._lock = threading.Lock()
+        self._drained = threading.Condition(self._lock)  # notified when queued jobs are written or lost
         self._counts = collections.Counter()
         self._written = collections.Counter()  # files written by Job.what
         self.last_error = ''
@@ -162,6 +170,18 @@ class WindowWriter(object):
     def lost(self):
         """Jobs lost so far (an offline command stops at the first)."""
         return self._counts['jobs_lost']
+
+    def wait_for_room(self, limit):
+        """Wait until the jobs waiting or held take at most ``limit`` bytes (``bytes_queued``; at most 0 for a
+        ``limit`` below it), or no writer thread is left to write them (at once without one: ``submit`` writes).
+        Offline, reading waits so for the writer instead of thinning windows (``SmartLogger``'s
+        ``wait_for_writer``)."""
+        thread = self._thread
+        if self._counts['bytes_queued'] <= max(0, limit):
+            return
+        with self._drained:
+            while self._counts['bytes_queued'] > max(0, limit) and thread is not None and thread.is_alive():
+                self._drained.wait(1.0)
 
     def submit(self, job):
         """Queue a job (write it now without a background thread)."""
@@ -351,7 +371,7 @@ class WindowWriter(object):
                 if not window.records:  # a route none of whose topics came yet: no file
                     return None, 0
                 stream = self._streams[key] = log_format.WindowFile(
-                    self.directory, fmt, job.route, name, self.split_bytes)
+                    self.directory, fmt, job.route, name, self.split_bytes, self.prefix)
             try:
                 if not window.final:
                     stream.append(window, job.metadata)
@@ -373,7 +393,7 @@ class WindowWriter(object):
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
         base = log_format.piece_name(name, job.route, window.part if parted else 0)
         path, nbytes = log_format.write_window(window, self.directory, fmt, job.metadata, left_out=left_out,
-                                               triggers=triggers, base=base)
+                                               triggers=triggers, base=base, prefix=self.prefix)
         if parted and window.final:
             self._triggers_said.pop(key, None)
         elif parted:
@@ -386,17 +406,22 @@ class WindowWriter(object):
                     'metadata)' % (path, sum(left_out.values()))
         return path, nbytes
 
+    def window_name(self, window):
+        """A ``log_format.WindowName`` for the jobs of all the files of ``window`` (its parts, its routes): its
+        ``base_name`` with this writer's prefix, reserved at the first one's write."""
+        return log_format.WindowName(log_format.base_name(window, self.prefix), prefix=self.prefix)
+
     def _take_name(self, job):
         """The name of the job's window, reserved at its first piece (OSError: the directory cannot be written)."""
         if job.name is None:
             window = job.window
             if window.part and window.key is not None:  # every part of a window takes its first part's name
-                job.name = self._part_names.pop(window.key, None) or log_format.WindowName()
+                job.name = self._part_names.pop(window.key, None) or log_format.WindowName(prefix=self.prefix)
                 job.last = window.final
                 if not window.final:
                     self._part_names[window.key] = job.name
             else:
-                job.name = log_format.WindowName()
+                job.name = log_format.WindowName(prefix=self.prefix)
         if job.name.name is None:
             job.name.take(self.directory, job.window)
             self._names.add(job.name)
@@ -413,6 +438,7 @@ class WindowWriter(object):
             self._counts['jobs_queued'] -= 1
             self._counts['messages_queued'] -= job.messages
             self._counts['bytes_queued'] -= job.bytes
+            self._drained.notify_all()
             self._counts['messages_kept'] += job.messages
             self._counts['stored_bytes'] += nbytes
             if path is not None:
@@ -442,7 +468,7 @@ class WindowWriter(object):
         return bool(self._quota(reserve=expected))
 
     def _quota(self, keep=(), reserve=0):
-        if not self.guard.max_bytes:
+        if not self.guard.has_quota:
             return []
         deleted = []
         for path in self.guard.enforce_quota(keep=keep, reserve=reserve):
@@ -450,8 +476,8 @@ class WindowWriter(object):
                 self._counts['windows_deleted'] += 1
                 self.last_deleted = path
             deleted.append(path)
-            self._emit(WriterEvent(DELETED, None, path, 0, 'deleted to stay within max_disk_mb %g'
-                                   % (self.guard.max_bytes / float(disk_guard.MB)), False))
+            self._emit(WriterEvent(DELETED, None, path, 0, 'deleted to stay within %s' % self.guard.quota_text(),
+                                   False))
         return deleted
 
     def _lose(self, job, error):
@@ -467,6 +493,7 @@ class WindowWriter(object):
         with self._lock:
             self._counts['jobs_queued'] -= 1
             self._counts['bytes_queued'] -= job.bytes
+            self._drained.notify_all()
             self._counts['messages_queued'] -= job.messages
             self._counts['jobs_lost'] += 1
             self._counts['messages_lost'] += job.messages

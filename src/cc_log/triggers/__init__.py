@@ -5,7 +5,8 @@
   message arriving, a topic falling silent or slow (``rule.RuleTrigger``);
 - ``manual``: on request, with a reason and an optional span (``manual.ManualTrigger``);
 - ``periodic``: a window every ``every`` of message time, a nominal sample to retrain from
-  (``periodic.PeriodicTrigger``).
+  (``periodic.PeriodicTrigger``);
+- ``envelope``: odometry beyond the learned physics envelope of nominal driving (``envelope.EnvelopeTrigger``).
 
 ``base.Trigger`` is what they share and ``base.Fire`` what they say; ``SmartLogger`` runs a list of them.
 How to add a trigger: docs/DESIGN.md.
@@ -14,6 +15,7 @@ from cc_log.triggers import classifier  # noqa: F401
 from cc_log.triggers import rule  # noqa: F401
 from cc_log.triggers import manual  # noqa: F401
 from cc_log.triggers import periodic  # noqa: F401
+from cc_log.triggers import envelope  # noqa: F401
 from cc_log.triggers.base import Fire, Trigger, get, kinds, register
 from cc_log.triggers.classifier import (
     DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger)

@@ -23,9 +23,10 @@ Context.__doc__ = """What building a trigger from a configuration may need: ``lo
 naming the file), ``message_class(type)`` (an installed class or None), ``resolve(topic)`` (a full name),
 ``online_dir`` (where classifiers learning online keep their refits; None: beside their model files)."""
 
-Fire = collections.namedtuple('Fire', 'name reason score pre post', defaults=(None, None))
+Fire = collections.namedtuple('Fire', 'name reason score pre post why', defaults=(None, None, ()))
 Fire.__doc__ = """A trigger's decision to keep a window: its name, a reason (text), a score (float; NaN when none),
-and optional ``pre`` / ``post`` Spans for this window (None: the logger's)."""
+optional ``pre`` / ``post`` Spans for this window (None: the logger's) and ``why``: the features that stood out,
+most outstanding first (a tuple of at most 3 dicts, ``core.why``)."""
 
 NAN = float('nan')
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_-]{0,63}')
@@ -107,7 +108,7 @@ class Trigger(object):
         """What this trigger is, for window metadata (a JSON-able dict)."""
         return {'kind': self.kind, 'name': self.name, 'topics': sorted(self.topics)}
 
-    def fire(self, reason, score=NAN):
-        """A Fire of this trigger (counted)."""
+    def fire(self, reason, score=NAN, why=()):
+        """A Fire of this trigger (counted); ``why``: the features that stood out (``core.why``)."""
         self.fired += 1
-        return Fire(self.name, reason, score, self.pre, self.post)
+        return Fire(self.name, reason, score, self.pre, self.post, tuple(why))

@@ -7,7 +7,8 @@ inputs, in its order (the first makes the rows). Its ``features.FeatureStream`` 
 (``'onset'``: the score must come back above the threshold before it fires again), or at the onset and then
 only while the newest rows are anomalous (``'event'``: the window ends at the anomaly's end plus post, not a
 whole feature window later). Several classifiers may run at once, each with its own model, topics,
-``classify_every`` and ``retrigger``. Pure: no rospy.
+``classify_every`` and ``retrigger``. A Fire says why (``core.why.classifier_why``): the entries of the window
+vector furthest outside what the model's training vectors covered. Pure: no rospy.
 """
 import os
 import time
@@ -15,7 +16,7 @@ import time
 import numpy as np
 
 from cc_log import features
-from cc_log.core import online_learning
+from cc_log.core import online_learning, why
 from cc_log.features import FeatureStream
 from cc_log.core.spans import Span
 from cc_log.core.topic_select import topic_list
@@ -179,13 +180,20 @@ class ClassifierTrigger(Trigger):
             if not self._armed and self.retrigger == 'event':
                 anomalous, score = self._score_recent(batch.rows(k), batch.newest(k, self.recent))
             if anomalous and (self._armed or self.retrigger != 'onset'):
-                fires.append(self.fire('classifier', float(score)))
+                fires.append(self.fire('classifier', float(score), self.explain(batch.vectors[k])))
             self._armed = False
         else:
             self._armed = True
             if self.retrigger == 'event':
                 self._nominal_rows = batch.rows(k)
         return fires
+
+    def explain(self, vector):
+        """The features of a window ``vector`` that stood out against the model file's training data
+        (``core.why.classifier_why``; () for a model without a scaler)."""
+        if getattr(self.original, 'scale', None) is None:
+            return ()
+        return why.classifier_why(self.original, vector)
 
     def _score_recent(self, window_rows, recent):
         """``(anomalous, score)`` of the newest ``recent`` rows in place of the newest rows of the last window

@@ -40,3 +40,10 @@ class ManualTrigger(Trigger):
         text = ' '.join(str(reason or '').split())[:MAX_REASON] or DEFAULT_REASON
         self.fired += 1
         return Fire(self.name, text, float('nan'), spans[0], spans[1])
+
+    @staticmethod
+    def cut_note(before, held, pre):
+        """What a reply adds when ``before`` asked for more than the ``held`` seconds (``pre``: the logger's)."""
+        if not before or before <= held:
+            return ''
+        return '; before %g s cut to %.3f s: nothing older is held (the logger keeps ~pre %s)' % (before, held, pre)

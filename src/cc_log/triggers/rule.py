@@ -23,7 +23,8 @@ One rule watches one topic for one of:
 A rule fires at the onset of its condition: the first message on which it holds after one on which it did
 not (or after more than ``hold_off`` without a message where it held: event topics such as a goal result), and
 for silence when the topic falls silent or slow. It does not fire again within ``hold_off`` (default 5 s of
-message time) of its last firing, so a flapping condition makes one window. Pure: no rospy.
+message time) of its last firing, so a flapping condition makes one window. A ``when`` rule comparing numbers says
+why (``core.why``): the field, its value and the level it crossed. Pure: no rospy.
 """
 import collections
 import fnmatch
@@ -31,7 +32,7 @@ import math
 import operator
 import re
 
-from cc_log.core import msg_codec
+from cc_log.core import msg_codec, why
 from cc_log.core.safe_input import brief
 from cc_log.core.spans import seconds
 from cc_log.triggers.base import Trigger, register
@@ -288,7 +289,20 @@ class RuleTrigger(Trigger):
             holds, value = self.condition.holds(record.msg)
         except (AttributeError, IndexError, TypeError, ValueError, OverflowError):
             holds, value = False, None
-        return self._update(holds, record.stamp, '%s (%s)' % (self.condition.text, _short(value)))
+        return self._update(holds, record.stamp, '%s (%s)' % (self.condition.text, _short(value)), value=value)
+
+    def _why(self, value):
+        """The ``why`` of a ``when`` condition that holds: the field, its value and the level it crossed (a
+        numeric comparison only; () otherwise)."""
+        if self.condition is None:
+            return ()
+        level = self.condition.value
+        if isinstance(level, (bool, str)) or isinstance(value, (bool, str)) or level != level \
+                or not isinstance(value, (int, float)) or not math.isfinite(value):
+            return ()
+        field = ('abs(%s)' % self.condition.field) if self.condition.absolute else self.condition.field
+        text = '%s %s %s %s' % (field, why.number_text(value), self.condition.op_text, why.number_text(level))
+        return (why.entry(field, value, level, text=text[:why.MAX_TEXT]),)
 
     def _diagnostics(self, msg):
         for status in getattr(msg, 'status', None) or ():
@@ -303,14 +317,14 @@ class RuleTrigger(Trigger):
                 return True, '%s: %s %s' % (name, level_name(level), str(getattr(status, 'message', '')))[:200]
         return False, ''
 
-    def _update(self, holds, stamp, reason, event=False):
+    def _update(self, holds, stamp, reason, event=False, value=None):
         fires = []
         if holds:
             last = self._last_true
             onset = event or not self._active or last is None or stamp < last or stamp - last > self.hold_off
             self._last_true = stamp
             if onset and self._may_fire(stamp):
-                fires.append(self.fire(reason))
+                fires.append(self.fire(reason, why=self._why(value)))
         self._active = holds
         return fires
 

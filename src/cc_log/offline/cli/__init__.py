@@ -1,11 +1,13 @@
-"""``cclog``: the offline cc_log tool. No roscore is needed for any command.
+"""``cclog``: the offline cc_log tool. No roscore is needed, except by ``top`` and ``trigger`` (a live robot's).
 
     rosrun cc_log cclog <command> [options]      (see ``cclog <command> --help`` and docs/CLI.md)
 
-Commands: ``collect`` (feature vectors from a bag), ``learn`` (train / evaluate a model), ``replay`` (the
+Commands: ``collect`` (feature vectors from a bag), ``learn`` (train / evaluate a model), ``learn-envelope`` (the
+physics envelope of nominal bags), ``replay`` (the
 smart logger over a bag), ``info``, ``cat``, ``export`` (window files), ``codecs`` (the paper's Table 2 on
 some data), ``plot`` (a timeline of a run), ``tune`` (a threshold for a false-window budget), ``simulate`` (a
-simulated BWIBot bag with labelled anomalies).
+simulated BWIBot bag with labelled anomalies); on a live robot, ``top`` (the running nodes) and ``trigger`` (save a
+window now).
 
 Conventions shared by every command:
 
@@ -26,15 +28,16 @@ import os
 import sys
 
 from cc_log.offline.cli import (cat_cmd, codecs_cmd, collect_cmd, export_cmd, info_cmd, learn_cmd, plot_cmd,
-                                recover_cmd, replay_cmd, simulate_cmd, stats_cmd, top_cmd, tune_cmd)
+                                recover_cmd, replay_cmd, simulate_cmd, stats_cmd, top_cmd, trigger_cmd, tune_cmd)
+from cc_log.offline.cli import learn_envelope_cmd
 from cc_log.offline.cli.common import (
     PROG, EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, INTERRUPT_GRACE, CommandError, Parser, command_help)
 
 __all__ = ['main', 'build_parser', 'COMMANDS', 'CommandError', 'Interrupt', 'INTERRUPT_GRACE']
 
 # the commands, in the order of ``cclog --help``
-COMMANDS = (collect_cmd, learn_cmd, tune_cmd, replay_cmd, info_cmd, cat_cmd, export_cmd, codecs_cmd, plot_cmd,
-            simulate_cmd, recover_cmd, stats_cmd, top_cmd)
+COMMANDS = (collect_cmd, learn_cmd, learn_envelope_cmd, tune_cmd, replay_cmd, info_cmd, cat_cmd, export_cmd,
+            codecs_cmd, plot_cmd, simulate_cmd, recover_cmd, stats_cmd, top_cmd, trigger_cmd)
 
 
 def build_parser():
@@ -42,7 +45,8 @@ def build_parser():
     parser = Parser(prog=PROG, **command_help(
         None,
         """
-        cc_log offline tool: tune the anomaly logger on bags you already have. No roscore needed.
+        cc_log offline tool: tune the anomaly logger on bags you already have. No roscore needed (but by top
+        and trigger, which talk to a running logger).
 
         Results go to stdout (--json: one JSON object); progress bars to stderr (on a terminal or with
         --progress). Bad input prints one line "cclog <command>: error: ..." and exits 1 (2 for bad

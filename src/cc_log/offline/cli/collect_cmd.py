@@ -6,8 +6,8 @@ import sys
 
 from cc_log.offline.progress import bar as _bar, call as _call
 from cc_log.offline.cli.common import (
-    PROG, EXIT_OK, CommandError, command_help, configuration, existing_file, fleet_end, fleet_flags, fleet_rows,
-    fleet_wanted, non_negative_int, output_flags, print_json, run_fleet, span)
+    PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
+    fleet_rows, fleet_wanted, non_negative_int, output_flags, print_json, run_fleet, span)
 
 
 def add_parser(subparsers):
@@ -35,7 +35,7 @@ def add_parser(subparsers):
     p.add_argument('--config', metavar='YAML', help='configuration: vectors of every classifier (its feature set '
                    'and window, else its model\'s) into DIR/<name>/<label>/; collect.label and collect.stride too')
     p.add_argument('--topic', metavar='T', help="driving topic: the feature set's first input "
-                   '(nav_msgs/Odometry; imu: sensor_msgs/Imu); needed without --config')
+                   '(nav_msgs/Odometry; imu: sensor_msgs/Imu; default: the bag\'s only topic of that type)')
     p.add_argument('--out', required=True, metavar='DIR', help='vectors go to DIR/<label>/')
     p.add_argument('--label', help='label directory (default: nominal; anything but '
                    '"nominal" counts as anomalous)')
@@ -63,7 +63,10 @@ def run(args):
     if not many:
         args.bag = existing_file(args.bag[0], 'bag file')
     if not args.config and args.topic is None:
-        raise CommandError('collect: give --topic, or --config (a configuration with classifiers)')
+        if many:
+            raise CommandError('collect: give --topic, or --config (a configuration with classifiers)')
+        from cc_log import features
+        args.topic = driving_topic(args, features.get(args.features or _feature_sets()[0]).inputs[0][1])
     single = {}
     if args.topic is not None:
         single = {'topics': [args.topic] + args.input_topic, 'feature_set': args.features or _feature_sets()[0],

@@ -185,14 +185,34 @@ def retrigger_modes():
 
 # -- reading window files ---------------------------------------------------------------------------------
 
+def named_prefix(path):
+    """``(directory, file prefix)`` of a path that is a prefix of file names as rosbag record's ``-o`` takes it
+    (``/data/run``: /data and ``run_``, the files of ``record -o /data/run``), or None when ``path`` is not one (it
+    exists, or its directory does not, or its name is not a plain part of a file name)."""
+    from cc_log.storage import log_format
+    directory, part = os.path.split(path)
+    if os.path.exists(path) or not part or not os.path.isdir(directory or '.'):
+        return None
+    try:
+        return directory or '.', log_format.file_prefix(part)
+    except ValueError:
+        return None
+
+
 def window_paths(paths):
-    """Window files named by ``paths`` (files as given; directories: their window files, by time).
+    """Window files named by ``paths`` (files as given; directories: their window files, by time; a prefix as
+    ``record -o`` takes it, ``/data/run``: the window files ``/data/run_*``, by time).
 
     CommandError for a path that does not exist or a directory without window files.
     """
     from cc_log.storage import log_format
     found = []
     for path in paths:
+        prefixed = named_prefix(path)
+        files = log_format.window_files(*prefixed) if prefixed else []
+        if files:
+            found.extend(files)
+            continue
         if not os.path.exists(path):
             raise CommandError('%s: no such file or directory' % path)
         if os.path.isdir(path):
@@ -221,15 +241,41 @@ def read_windows(args, paths, label):
 
 def selected_records(args):
     """All records of the window files named by ``args.paths`` (``--topic`` filter), in stamp order."""
+    return selected_windows(args)[0]
+
+
+def selected_windows(args):
+    """``(records, windows)``: ``selected_records`` and the ``(path, metadata)`` of every window read
+    (``read_windows``)."""
     topics = set(args.topic) if args.topic else None
-    records = []
-    for _, _, window in read_windows(args, args.paths, 'read'):
+    records, windows = [], []
+    for path, metadata, window in read_windows(args, args.paths, 'read'):
         records.extend(record for record in window if topics is None or record.topic in topics)
+        windows.append((path, metadata))
     records.sort(key=lambda record: record.stamp)
     if not records:
         raise CommandError('topic: no messages of %s in %s' % (', '.join(sorted(topics)), ', '.join(args.paths))
                            if topics else '%s: no messages' % ', '.join(args.paths))
-    return records
+    return records, windows
+
+
+def driving_topic(args, type_name):
+    """``args.topic``, or, when it is not given, the one topic of ``type_name`` in the bag ``args.bag`` (said on
+    stderr in one line); CommandError naming the candidates otherwise."""
+    if args.topic is not None:
+        return args.topic
+    from cc_log.storage.bag import bagio
+    try:
+        bag = bagio.open_bag(args.bag)
+        try:
+            topic = bagio.only_topic_of_type(bag, type_name)
+        finally:
+            bag.close()
+    except ValueError as error:
+        raise CommandError('topic: %s' % error)
+    sys.stderr.write("%s %s: driving topic %s (the bag's only %s topic; --topic chooses another)\n"
+                     % (PROG, args.command, printable(topic), type_name))
+    return topic
 
 
 def configuration(args, flat):

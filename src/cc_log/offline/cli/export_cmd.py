@@ -5,7 +5,7 @@ import os
 from cc_log.offline import export
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
-    EXIT_OK, CommandError, command_help, output_flags, parent_exists, print_json, selected_records, writable_dir)
+    EXIT_OK, CommandError, command_help, output_flags, parent_exists, print_json, selected_windows, writable_dir)
 
 EXPORT_TARGETS = ('bag', 'mcap', 'csv', 'jsonl', 'png')
 
@@ -16,8 +16,10 @@ def add_parser(subparsers):
         'window files to a bag, MCAP, CSV, JSON lines or PNG frames',
         """
         Export the messages of window files (merged, in stamp order) to one rosbag (messages on their own
-        topics, stamp as bag time), to one MCAP file (ROS 1 profile, for Foxglove and PlotJuggler; needs the
-        optional Python package mcap: /usr/bin/python3 -m pip install --break-system-packages mcap), to CSV
+        topics, stamp as bag time), to one MCAP file (ROS 1 profile, for Foxglove and PlotJuggler; each
+        window's metadata, its triggers, reasons, scores and span, as a Metadata record "cc_log.window" and a
+        JSON attachment; needs the optional Python package mcap: /usr/bin/python3 -m pip install
+        --break-system-packages mcap), to CSV
         (--out is a directory: one <topic>.csv per topic, a "stamp" column then one column per field; arrays
         as JSON), to one JSON-lines file, or the camera frames to
         images (--to png, --out is a directory: each sensor_msgs/Image as <topic>_<stamp>.png, rgb8, bgr8,
@@ -26,7 +28,7 @@ def add_parser(subparsers):
         """,
         """
           cclog export logs --to bag --out anomalies.bag
-          cclog export logs --to mcap --out anomalies.mcap --compression lz4
+          cclog export logs --to mcap --out anomalies.mcap --compression zstd
           cclog export logs/cc_log_20150521T191138.027Z_classifier.json.xz --to csv --out csv/
           cclog export logs --to jsonl --out all.jsonl --topic /odom
           cclog export logs --to png --out frames/ --topic /camera/image_raw
@@ -36,8 +38,9 @@ def add_parser(subparsers):
     p.add_argument('--out', required=True, metavar='PATH',
                    help='output file (bag, mcap, jsonl) or directory (csv, png)')
     p.add_argument('--topic', action='append', metavar='T', help='only this topic (repeatable)')
-    p.add_argument('--compression', default='none', choices=export.BAG_COMPRESSIONS,
-                   help='bag compression; MCAP: none or lz4 (default: %(default)s)')
+    p.add_argument('--compression', choices=sorted(set(export.BAG_COMPRESSIONS + export.MCAP_COMPRESSIONS)),
+                   help='chunk compression: bag lz4, bz2 or none (default: none); MCAP zstd, lz4 or none '
+                        '(default: zstd when the Python package zstandard imports, else lz4)')
     p.add_argument('--force', action='store_true', help='overwrite an existing bag or MCAP file')
     output_flags(p)
     return p
@@ -45,7 +48,7 @@ def add_parser(subparsers):
 
 def run(args):
     """Window files to one bag, one CSV per topic, or one JSON-lines file (``export``)."""
-    records = selected_records(args)
+    records, windows = selected_windows(args)
     if args.to == 'jsonl':
         parent_exists(args.out, 'out')
         files = export.to_jsonl(records, args.out)
@@ -54,8 +57,10 @@ def run(args):
         if os.path.exists(args.out) and not args.force:
             raise CommandError('out: %s exists (use --force to overwrite)' % args.out)
         with _bar(args, 'export', len(records)) as bar:
-            write = export.to_bag if args.to == 'bag' else export.to_mcap
-            files = write(records, args.out, args.compression, bar.update)
+            if args.to == 'bag':
+                files = export.to_bag(records, args.out, args.compression or 'none', bar.update)
+            else:
+                files = export.to_mcap(records, args.out, args.compression, bar.update, windows)
     elif args.to == 'png':
         return _export_frames(args, records)
     else:

@@ -2,6 +2,7 @@
 import collections
 import os
 
+from cc_log.core import why
 from cc_log.offline import progress
 from cc_log.offline.cli.common import (
     EXIT_OK, command_help, human_bytes, output_flags, print_json, say, size_ratio, stamp_text, window_paths)
@@ -10,10 +11,11 @@ from cc_log.offline.cli.common import (
 def add_parser(subparsers):
     """The ``cclog info`` sub-parser."""
     p = subparsers.add_parser('info', **command_help(
-        'windows, spans, counts, sizes, codec, triggers, scores',
+        'windows, spans, counts, sizes, codec, triggers, scores, why',
         """
         Describe window files: time span, messages per topic, size on disk and as row-per-message JSON,
-        codec, the trigger(s) that opened the window with their scores, and the model threshold. PATH is a
+        codec, the trigger(s) that opened the window with their scores and what stood out (why), and the model
+        threshold. PATH is a
         window file or a directory of them (read in time order). The figures of a file written by this cc_log
         come from its metadata, without reading its messages (its row JSON size is then an estimate from a
         sample of its messages); --full reads and counts every message (older files always are).
@@ -68,6 +70,8 @@ def run(args):
                 w['reason'], len(w['triggers']),
                 ', scores %.4g .. %.4g' % (min(scores), max(scores)) if scores else '',
                 ', threshold %.4g' % w['threshold'] if isinstance(w['threshold'], (int, float)) else ''))
+            for name, said in _whys(w['triggers']):
+                say('  why        %s: %s' % (name, why.texts(said)))
         if w['part'] and len(w['files']) > 1:  # every part's files read as this window
             say('  parts      %s (a file per part, the window split at max_window)' % w['part'])
         elif w['part']:
@@ -76,6 +80,20 @@ def run(args):
         total['windows'], total['messages'], human_bytes(total['bytes']), human_bytes(total['raw_json_bytes']),
         ' (%.1fx)' % total['ratio'] if total['ratio'] else ''))
     return EXIT_OK
+
+
+def _whys(triggers):
+    """``[(trigger name, its why)]``: for each trigger of a window that says why, the why of its most anomalous
+    firing (the lowest score; the first when none has one), in order of first firing."""
+    best = collections.OrderedDict()
+    for trigger in triggers:
+        if not trigger['why']:
+            continue
+        name = str(trigger['name'] or trigger['reason'])
+        score = trigger['score'] if isinstance(trigger['score'], (int, float)) else float('inf')
+        if name not in best or score < best[name][0]:
+            best[name] = (score, trigger['why'])
+    return [(name, said) for name, (_, said) in best.items()]
 
 
 def _counts_of(value):
@@ -142,7 +160,8 @@ def _described(path, metadata, counts, types, topic_bytes, raw, span):
         score = trigger.get('score')
         if isinstance(score, str):  # non-finite scores are stored as 'NaN' / 'Infinity' strings
             score = None
-        triggers.append({'stamp': trigger.get('stamp'), 'reason': trigger.get('reason'), 'score': score})
+        triggers.append({'stamp': trigger.get('stamp'), 'reason': trigger.get('reason'), 'score': score,
+                         'name': trigger.get('name'), 'why': trigger.get('why') or []})
     scores = [trigger['score'] for trigger in triggers if isinstance(trigger['score'], (int, float))]
     return collections.OrderedDict([
         ('path', path),

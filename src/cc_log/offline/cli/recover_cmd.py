@@ -1,7 +1,8 @@
 """``cclog recover``: crash leftovers turned back into window files."""
 import os
 
-from cc_log.offline.cli.common import EXIT_OK, EXIT_BAD_INPUT, CommandError, command_help, output_flags, print_json
+from cc_log.offline.cli.common import (
+    EXIT_OK, EXIT_BAD_INPUT, CommandError, command_help, named_prefix, output_flags, print_json)
 
 
 def add_parser(subparsers):
@@ -18,8 +19,10 @@ def add_parser(subparsers):
         """
           cclog recover ~/.ros/cc_log
           cclog recover ~/.ros/cc_log/cc_log_20150521T191138.027Z_classifier.bag.tmp-4242 --json
+          cclog recover /data/run      # the leftovers of rosrun cc_log record -o /data/run (/data/run_*)
         """))
-    p.add_argument('paths', nargs='+', metavar='DIR|FILE', help='window directories or leftover files')
+    p.add_argument('paths', nargs='+', metavar='DIR|FILE|PREFIX',
+                   help='window directories, leftover files, or DIR/PREFIX (record -o\'s): the leftovers of PREFIX_*')
     output_flags(p)
     return p
 
@@ -29,10 +32,13 @@ def run(args):
     from cc_log.storage import recovery
     outcomes = []
     for path in args.paths:
+        prefixed = named_prefix(path)
         if os.path.isdir(path):
             outcomes.extend(recovery.recover_directory(path))
         elif os.path.exists(path):
-            outcomes.append(recovery.recover(path))
+            outcomes.append(recovery.recover(path, recovery.prefix_of(path)))
+        elif prefixed and recovery.scan(*prefixed):
+            outcomes.extend(recovery.recover_directory(*prefixed))
         else:
             raise CommandError('%s: no such file or directory' % path)
     if args.json:

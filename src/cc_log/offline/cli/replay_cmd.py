@@ -9,8 +9,8 @@ import sys
 from cc_log.core import options
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
-    PROG, EXIT_OK, CommandError, command_help, configuration, existing_file, fleet_end, fleet_flags, fleet_rows,
-    fleet_wanted, human_bytes, output_flags, print_json, retrigger_modes, run_fleet, size_ratio, span,
+    PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
+    fleet_rows, fleet_wanted, human_bytes, output_flags, print_json, retrigger_modes, run_fleet, size_ratio, span,
     stamp_text, writable_dir)
 
 
@@ -28,19 +28,23 @@ def add_parser(subparsers):
         its files (routes, parts, splits: messages of them all; path: its first); start/end are the header
         stamps (float seconds) of the first and last message saved. A window that cannot be written (disk
         full) is retried for a few seconds; then replay stops and exits 1 with one line naming OUT and how
-        many windows and messages were not written.
+        many windows and messages were not written. --max-windows-per-hour N: the keep budget (past N windows
+        in the last hour, only a more anomalous one opens); the summary counts what it skipped (--json:
+        keep_budget).
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
           cclog replay crash.bag --topic /odom --model model.json --out logs --pre 2s --post 2s --json
           cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
           cclog replay run.bag --config robot.yaml --out logs --classify-every 1 --retrigger onset
+          cclog replay long_run.bag --config robot.yaml --out logs --max-windows-per-hour 6
         """))
     p.add_argument('bag', nargs='+', metavar='BAG', help='input bag; several, a directory (its *.bag) or a glob: '
                    'one Dask task each, windows into OUT/<bag name>/')
     p.add_argument('--config', metavar='YAML', help='configuration (topics, triggers, windows, format, limits): '
                    'the file smart_logger.py reads; the options below override it')
-    p.add_argument('--topic', metavar='T', help="driving topic (the model's message type); needed without --config")
+    p.add_argument('--topic', metavar='T', help="driving topic (the model's message type; default: "
+                   "the bag's only topic of that type)")
     p.add_argument('--model', metavar='PATH', help='model file (cclog learn) of a classifier on --topic; needed '
                    'without --config')
     p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
@@ -69,12 +73,15 @@ def run(args):
     many = fleet_wanted(args, args.bag)
     if not many:
         args.bag = existing_file(args.bag[0], 'bag file')
-    if not args.config and (args.topic is None or args.model is None):
-        raise CommandError('replay: give --topic and --model, or --config (a configuration with triggers)')
+    if not args.config and args.model is None:
+        raise CommandError('replay: give --model (and --topic), or --config (a configuration with triggers)')
     if args.model is not None:
         existing_file(args.model, 'model file')
     if args.model is not None and args.topic is None:
-        raise CommandError('replay: --model needs --topic (the topic the model reads)')
+        if many:
+            raise CommandError('replay: --model needs --topic (the topic the model reads)')
+        from cc_log.core.model import AnomalyModel
+        args.topic = driving_topic(args, AnomalyModel.load(args.model).config.topic_type)
     flat = dict((option.name, getattr(args, option.name)) for option in options.for_command('replay'))
     flat.update({'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
                  'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
@@ -95,6 +102,7 @@ def run(args):
         ('windows', [_window_entry(w) for w in summary['windows']]),
         ('drift', [monitor.as_dict() for monitor in summary['drift']]),
         ('online', summary['online']),
+        ('keep_budget', summary['keep_budget']),
     ])
     if args.json:
         print_json(result)
@@ -118,6 +126,7 @@ def run(args):
         print('  %s' % monitor.report())
     for learner in summary['online']:
         print('  %s: online learning %s' % (learner['classifier'], learner['resumed'] or 'started afresh'))
+    print(''.join(_skipped_lines(summary['keep_budget'])), end='')
     return EXIT_OK
 
 
@@ -126,17 +135,30 @@ def _window_entry(window):
     return collections.OrderedDict((key, window[key]) for key in ('name', 'start', 'end', 'messages', 'files', 'path'))
 
 
+def _skipped_lines(budget):
+    """The lines saying what the keep budget skipped (``KeepBudget.stats()``; none when nothing): its report and
+    the last skipped windows, each with its stamp, trigger and score."""
+    from cc_log.core import keep_budget
+    report = keep_budget.report(budget)
+    if not report:
+        return []
+    return ['  %s\n' % report] + ['    skipped  %s  %s  score %.4g\n' % (
+        stamp_text(skip['stamp']), skip['trigger'], skip['score']) for skip in budget['skipped']]
+
+
 def _replay_many(args, cfg):
     from cc_log.offline import fleet
     bags = fleet.expand_bags(args.bag)
     writable_dir(args.out, 'out')
     outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
         engine, bags, args.out, cfg, progress=progress))
-    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online'))
+    rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
+                                 'keep_budget'))
     reports = {}
     for row in rows:
         row['windows'] = [_window_entry(w) for w in row.get('windows', ())]
-        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ()))
+        reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ())) + ''.join(
+            '\n' + line.rstrip('\n') for line in _skipped_lines(row.get('keep_budget') or {}))
         row['drift'] = [monitor.as_dict() for monitor in row.get('drift', ())]
     good = [row for row in rows if 'error' not in row]
     summary['windows'] = sum(len(row['windows']) for row in good)

@@ -73,6 +73,20 @@ def topics_of(bag):
     return {topic: info.msg_type for topic, info in bag.get_type_and_topic_info().topics.items()}
 
 
+def only_topic_of_type(bag, type_name):
+    """The one topic of the open bag whose type is ``type_name``; ValueError naming the candidates (or the bag's
+    topics when there is none) when there is not exactly one."""
+    topics = topics_of(bag)
+    found = sorted(topic for topic, kind in topics.items() if kind == type_name)
+    if len(found) == 1:
+        return found[0]
+    if found:
+        raise ValueError('%s: %d topics carry %s (%s): give --topic'
+                         % (bag.filename, len(found), type_name, ', '.join(found)))
+    listing = ', '.join('%s (%s)' % (name, topics[name]) for name in sorted(topics)) or 'none'
+    raise ValueError('%s: no topic carries %s; its topics: %s' % (bag.filename, type_name, listing))
+
+
 def check_topic(bag, topic, expected_type=None):
     """Return the type of ``topic`` in the open bag; ValueError when absent or not ``expected_type``."""
     topics = topics_of(bag)

@@ -19,7 +19,8 @@ from cc_log.core import raw_message
 from cc_log.features import FeatureStream, stamp_of
 from cc_log.core.records import Record
 from cc_log.storage.bag import bag_reader
-from cc_log.storage.bag.bag_open import _one_line, check_topic, open_bag, read_raw, topics_of  # noqa: F401  (bagio.*)
+from cc_log.storage.bag.bag_open import (  # noqa: F401  (bagio.*)
+    _one_line, check_topic, only_topic_of_type, open_bag, read_raw, topics_of)
 
 
 def read_messages(path, topics, expected_types=None):
@@ -87,4 +88,4 @@ def feature_vectors(path, topic, config, stride=1, max_dt=None):
     return np.array(stamps, dtype=float), np.array(vectors, dtype=float).reshape(len(vectors), width)
 
 
-__all__ = ['open_bag', 'check_topic', 'topics_of', 'read_messages', 'read_raw', 'feature_vectors']
+__all__ = ['open_bag', 'check_topic', 'only_topic_of_type', 'topics_of', 'read_messages', 'read_raw', 'feature_vectors']

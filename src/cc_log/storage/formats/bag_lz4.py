@@ -5,8 +5,10 @@ stamp as the bag time; a record held as serialized bytes is written as they are,
 connection header (``callerid``, ``latching``, the publisher's definition), without decoding it. The
 window metadata is a JSON object in one ``std_msgs/String`` message on
 ``/cc_log/metadata``, written first at the time of the first record (``rostopic echo -b FILE
-/cc_log/metadata`` shows it; ``rosbag play FILE --topics ...`` can leave it out). The JSON also holds a
-``"bag"`` object that ``read`` uses and removes:
+/cc_log/metadata`` shows it; ``rosbag play FILE --topics ...`` can leave it out); a file written a part at a
+time (``WindowStream``) ends with its final metadata, in a chunk of its own at the time of its last record, so
+that rosbag's start and end (``rosbag info``: of its first and last chunk) are its first and last record's.
+The JSON also holds a ``"bag"`` object that ``read`` uses and removes:
 
 - ``topics``: the record topics in order of first appearance (ties in bag time are read in this order);
 - ``order``: only when the records were not in (bag time, topic) order: the index in bag read order of
@@ -57,7 +59,14 @@ def write(target, records, metadata):
     if isinstance(target, (str, bytes, os.PathLike)):
         with os.fdopen(safe_files.create(target), 'w+b') as stream:
             return write(stream, records, metadata)
-    bag_writer.write_bag(target, *bag_messages(records, metadata))
+    bag_writer.write_bag(target, *bag_messages(records, metadata), chunk_threshold=chunk_bytes(metadata))
+
+
+def chunk_bytes(metadata):
+    """The uncompressed bytes at which a chunk is closed: the metadata's ``chunk_kb`` (``~chunk_kb``, rosbag
+    record's ``--chunksize``) KB of 1024 bytes, else None (``bag_writer.CHUNK_THRESHOLD``)."""
+    kb = (metadata or {}).get('chunk_kb')
+    return int(kb) * 1024 if isinstance(kb, int) and not isinstance(kb, bool) and kb > 0 else None
 
 
 def bag_messages(records, metadata):
@@ -94,6 +103,7 @@ class _Layout(object):
         self.stamps = []    # every record's stamp (float s), in window order
         self.crc = 0        # of the records (``records_crc``), so far
         self.first = None   # the earliest bag time
+        self.last = None    # the latest bag time
         self.refused = collections.Counter()  # topic -> records refused (bytes not of their connection's type)
         self._check = payload_check.PayloadCheck()
 
@@ -113,8 +123,10 @@ class _Layout(object):
                 rank[topic] = len(rank)
         keys = [(bag_stamp(record.stamp), rank[record.topic]) for record in records]
         if keys:
-            earliest = min(key[0] for key in keys)
+            times = [key[0] for key in keys]
+            earliest, latest = min(times), max(times)
             self.first = earliest if self.first is None else min(self.first, earliest)
+            self.last = latest if self.last is None else max(self.last, latest)
         self.exact = self.exact and all(secs + nsecs / 1e9 == record.stamp
                                         for ((secs, nsecs), _), record in zip(keys, records))
         self.keys.extend(keys)
@@ -125,11 +137,11 @@ class _Layout(object):
     def state(self):
         """What ``restore`` needs to forget the records added after this call."""
         return (dict(self.headers), dict(self._sources), dict(self._rank), len(self.keys), self.exact, self.crc,
-                self.first, collections.Counter(self.refused))
+                self.first, self.last, collections.Counter(self.refused))
 
     def restore(self, state):
         """Back to ``state`` (of ``state()``)."""
-        headers, sources, rank, count, self.exact, self.crc, self.first, self.refused = state
+        headers, sources, rank, count, self.exact, self.crc, self.first, self.last, self.refused = state
         self.headers, self._sources, self._rank = headers, sources, rank
         del self.keys[count:]
         del self.stamps[count:]
@@ -163,8 +175,9 @@ class WindowStream(object):
     """A window written into a bag a part at a time (a long window, or one larger than the memory budget, is one
     file, as ``rosbag record`` writes one): ``append(records, metadata)`` writes a part (the first also writes
     a provisional metadata message, so that a file cut off mid-write is salvaged with it), ``finish(metadata)``
-    writes the final metadata (the layout of every record) and the index. A failed ``append`` is rolled back:
-    the same part may be appended again."""
+    writes the final metadata (the layout of every record, at the time of the latest record: rosbag takes a bag's
+    end from its last chunk) and the index. A failed ``append`` is rolled back: the same part may be appended
+    again."""
 
     def __init__(self, stream):
         self.bag = bag_writer.BagStream(stream)
@@ -182,6 +195,7 @@ class WindowStream(object):
             records = layout.add(records)
             headers = layout.headers
             if self.count == 0 and records:
+                bag.chunk_threshold = chunk_bytes(metadata) or bag.chunk_threshold
                 bag.write(METADATA_TOPIC, *layout.first, layout.metadata_data(metadata, final=False),
                           headers[METADATA_TOPIC])
             write = bag.write
@@ -202,7 +216,7 @@ class WindowStream(object):
         layout, bag = self._layout, self.bag
         bag.mark()
         try:
-            bag.write(METADATA_TOPIC, *layout.first, layout.metadata_data(metadata), layout.headers[METADATA_TOPIC])
+            bag.write(METADATA_TOPIC, *layout.last, layout.metadata_data(metadata), layout.headers[METADATA_TOPIC])
             bag.close()
             bag.stream.flush()
         except BaseException:

@@ -67,6 +67,12 @@ from cc_log.storage.formats.json_rows import (  # noqa: F401  (json_xz.flat_row,
 
 CODEC = 'json-xz'
 EXTENSION = '.json.xz'
+# Messages of these types are large (images, point clouds, scans: MB/s per topic): json-xz writes each value as
+# text and LZMA compresses it at about CARRIES_MB_S per core, where bag-lz4 writes their bytes as they came.
+HEAVY_TYPES = frozenset(['sensor_msgs/Image', 'sensor_msgs/CompressedImage', 'sensor_msgs/PointCloud2',
+                         'sensor_msgs/PointCloud', 'sensor_msgs/LaserScan', 'sensor_msgs/MultiEchoLaserScan',
+                         'stereo_msgs/DisparityImage', 'theora_image_transport/Packet'])
+CARRIES_MB_S = 16  # MB/s of messages one core turns into json-xz (LZMA; docs/RESULTS.md, heavy sensors)
 #: Memory the writer needs per estimated byte of a part (``WindowBuffer``'s part_factor): it decodes the kept
 #: messages' fields and builds the JSON text (nav_msgs/Odometry: 0.7 KB serialized, 3.5 KB decoded).
 PART_FACTOR = 8.0
@@ -314,6 +320,17 @@ METADATA_START = '{"metadata":'
 #: Decompressed bytes ``read_metadata`` takes at a time; it looks for the end of the metadata after the first
 #: of them, then each time it holds twice as many as when it last looked.
 METADATA_STEP = 16 << 10
+
+
+def heavy_topic_advice(topic, msg_type, fmt):
+    """The warning for ``topic`` written in format ``fmt`` (``routes.format_of``) when that is json-xz and its type
+    ``msg_type`` is heavy (``HEAVY_TYPES``), with the route that keeps it as bag-lz4; else None."""
+    if fmt != CODEC or msg_type not in HEAVY_TYPES:
+        return None
+    topic, msg_type = safe_input.printable(topic), safe_input.printable(msg_type)
+    return ('json-xz carries about %d MB/s per core: %s (%s) is better kept as bag-lz4 (a route: routes: '
+            '[{name: sensors, topics: [%s], format: bag-lz4}], or format: bag-lz4)' % (
+                CARRIES_MB_S, topic, msg_type, topic))
 
 
 def read_metadata(path, stream=None):

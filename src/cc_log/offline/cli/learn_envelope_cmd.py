@@ -1,0 +1,78 @@
+"""``cclog learn-envelope``: the physics envelope of nominal driving, for the ``envelope`` trigger."""
+from cc_log.offline.cli.common import (
+    EXIT_OK, CommandError, command_help, existing_file, output_flags, parent_exists, print_json, say, span)
+
+
+def add_parser(subparsers):
+    """The ``cclog learn-envelope`` sub-parser."""
+    p = subparsers.add_parser('learn-envelope', **command_help(
+        'the physics envelope of nominal bags, for a trigger of kind envelope',
+        """
+        Read the odometry (nav_msgs/Odometry) of nominal bags, compute the 19 envelope features (max speed,
+        yaw rate, accelerations, jerk, pose and heading against the twist, standing still, speed drops...)
+        over windows of --window every --stride, and write the largest value of each to --out (JSON). A
+        trigger of kind envelope in the configuration (limits: that file) then flags every window where a
+        feature exceeds its factor (default 2) times that maximum, floored by a physical minimum per feature.
+        Only the bags set the envelope: give nominal driving only (docs/DETECTION.md, "The physics envelope").
+        """,
+        """
+          cclog learn-envelope nominal.bag --topic /husky_velocity_controller/odom --out envelope.json
+          cclog learn-envelope day1.bag day2.bag --topic /odom --out envelope.json --json
+        """))
+    p.add_argument('bag', nargs='+', metavar='BAG', help='a bag of nominal driving (indexed, rosbag 2.0)')
+    p.add_argument('--topic', required=True, metavar='T', help='the odometry topic (nav_msgs/Odometry)')
+    p.add_argument('--out', required=True, metavar='PATH', help='the envelope file to write (JSON)')
+    p.add_argument('--window', type=span('window'), default='1s', metavar='Ns',
+                   help='feature window, a duration (default: %(default)s)')
+    p.add_argument('--stride', type=span('stride'), default='250ms', metavar='Ns',
+                   help='a window every this much message time (default: %(default)s)')
+    output_flags(p)
+    return p
+
+
+def _seconds(value, name):
+    from cc_log.core.spans import Span
+    parsed = Span.parse(value, name)
+    if not parsed.is_duration or not 0 < parsed.seconds <= 600:
+        raise CommandError('%s: %s must be a duration up to 10 minutes, like 1s or 250ms' % (name, value))
+    return parsed.seconds
+
+
+def learn_bags(paths, topic, window, stride):
+    """The ``Envelope`` of the odometry of ``topic`` in the bags ``paths`` (each bag's windows apart)."""
+    from cc_log.core import envelope
+    from cc_log.features.envelope import envelope_windows, odometry_samples
+    from cc_log.features.motion import ODOMETRY
+    from cc_log.offline import replay
+    from cc_log.storage.bag import bag_reader
+    matrices, seconds = [], 0.0
+    for path in paths:
+        replay.check_bag_topics(path, [topic], {topic: ODOMETRY})
+        samples = odometry_samples(bag_reader.read_raw(path, [topic]))
+        matrices.append(envelope_windows(*samples, window=window, stride=stride)[1])
+        if len(samples[0]) > 1:
+            seconds += float(samples[0].max() - samples[0].min())
+    return envelope.learn(matrices, topic, window, stride, seconds)
+
+
+def run(args):
+    """Learn the envelope of the bags and write it to --out."""
+    from cc_log.core.envelope import DEFAULT_FACTOR
+    from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_UNITS
+    paths = [existing_file(path, 'bag file') for path in args.bag]
+    parent_exists(args.out, 'out')
+    window, stride = _seconds(args.window, 'window'), _seconds(args.stride, 'stride')
+    learned = learn_bags(paths, args.topic, window, stride)
+    learned.save(args.out)
+    if args.json:
+        document = learned.to_dict()
+        document['out'] = args.out
+        print_json(document)
+        return EXIT_OK
+    say('envelope of %s in %d bag(s): %d windows of %g s every %g s, %.0f s of driving -> %s'
+        % (args.topic, len(paths), learned.windows, window, stride, learned.seconds, args.out))
+    trained, limits = learned.trained(), learned.limits(DEFAULT_FACTOR)
+    print('%-20s %-8s %12s %12s %12s' % ('feature', 'unit', 'most seen', 'floored', 'limit at %gx' % DEFAULT_FACTOR))
+    for name, floored, limit in zip(ENVELOPE_COLUMNS, trained, limits):
+        print('%-20s %-8s %12.4g %12.4g %12.4g' % (name, ENVELOPE_UNITS[name], learned.maxima[name], floored, limit))
+    return EXIT_OK

@@ -1,0 +1,157 @@
+"""The envelope trigger: a window of odometry beyond what the robot's nominal driving ever reached.
+
+Configuration (``kind: envelope``)::
+
+    triggers:
+      - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0}
+
+``limits``: the file ``cclog learn-envelope`` wrote (``core.envelope.Envelope``: the largest value of each of
+the 19 ``features.envelope`` features over nominal windows); ``topic``: the nav_msgs/Odometry topic (default:
+the one it was learned on); ``factor`` (default 2.0): a window is flagged when a feature exceeds ``factor`` x
+its training maximum (floored by ``ENVELOPE_FLOORS``).
+
+Every ``stride`` (0.25 s, the file's) of message time the trigger computes the row of the window of ``window``
+s (1 s, the file's) ending on that grid point, from a ring of the last ``window`` + ``HISTORY`` seconds of
+samples (``features.envelope.envelope_rows``: the very rows ``envelope_windows`` gives offline). A window beyond
+the envelope fires at the first message at or after its end, with score ``-ln(max value / limit)`` (< 0;
+lower is more anomalous) and ``why``: the features beyond their limit, most outstanding first, each against the
+most seen in training (``core.envelope.explain``). Each such
+window fires (every 0.25 s while the motion stays beyond the envelope; the logger merges them). Pure: no rospy.
+"""
+import os
+import time
+
+import numpy as np
+
+from cc_log.core.envelope import DEFAULT_FACTOR, Envelope, check_factor, explain, scores
+from cc_log.features.envelope import (
+    ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, step_details)
+from cc_log.features.motion import ODOMETRY, OdometrySet
+from cc_log.triggers.base import Trigger, register
+
+REASON = 'envelope'
+
+
+@register
+class EnvelopeTrigger(Trigger):
+    """Fires on odometry windows beyond the learned envelope (see the module docstring).
+
+    envelope: a ``core.envelope.Envelope``; topic: its nav_msgs/Odometry topic; factor: the limit factor."""
+
+    kind = 'envelope'
+    config_keys = ('limits', 'topic', 'factor')
+    batched = True
+
+    @classmethod
+    def from_config(cls, name, options, context):
+        """The envelope file of ``limits``; ``topic`` defaults to the one it was learned on."""
+        options = dict(options)
+        path = options.pop('limits', None)
+        if not isinstance(path, str) or not path:
+            raise ValueError('limits: required (the envelope file written by cclog learn-envelope)')
+        envelope = Envelope.load(os.path.expanduser(path))
+        topic = options.pop('topic', None)
+        if topic is not None and (not isinstance(topic, str) or not topic):
+            raise ValueError('%s: topic: %r is not a topic name' % (name, topic))
+        return cls(name, envelope, context.resolve(topic or envelope.topic), **options)
+
+    def __init__(self, name, envelope, topic, factor=DEFAULT_FACTOR, pre=None, post=None):
+        super(EnvelopeTrigger, self).__init__(name, pre, post)
+        if not isinstance(envelope, Envelope):
+            raise ValueError('%s: envelope: expected an Envelope, got %s' % (name, type(envelope).__name__))
+        self.envelope = envelope
+        self.factor = check_factor(factor, '%s: factor' % name)
+        self.limits = envelope.limits(self.factor)
+        self.topic = topic
+        self.topics = frozenset([topic])
+        self.window, self.stride = envelope.window, envelope.stride
+        self.evaluated = 0      # windows computed
+        self.beyond = 0         # of them beyond the envelope
+        self.seconds = 0.0
+        self.reset()
+
+    def reset(self):
+        self._ring = tuple(np.zeros(0) for _ in range(6))   # stamps, x, y, yaw, v, w
+        self._first = None      # the first stamp since the start or a restart
+        self._last_end = None   # the last grid point evaluated
+
+    def topic_types(self):
+        return {self.topic: ODOMETRY}
+
+    def needs_message(self, record):
+        return not OdometrySet.reads_raw(record.connection)
+
+    def on_record(self, record):
+        return self.on_records([record])[0]
+
+    def on_records(self, records):
+        """The Fires of a batch of odometry records (a list per record): the samples joined to the ring, then
+        every grid window that ended by the newest one evaluated at once."""
+        started = time.perf_counter()
+        samples = odometry_samples(records)
+        fires = [[] for _ in records]
+        finite = np.isfinite(samples[0])
+        stamps = np.where(finite, samples[0], -np.inf)
+        start = 0
+        while start < len(records):
+            known = self._ring[0][-1] if len(self._ring[0]) else -np.inf
+            newest = np.maximum.accumulate(np.concatenate(([known], stamps[start:])))
+            # time going back more than a window (a bag played again): the ring starts over there
+            back = np.flatnonzero(finite[start:] & (stamps[start:] < newest[:-1] - self.window))
+            if len(back) and back[0] == 0:
+                self.reset()
+                continue
+            stop = start + int(back[0]) if len(back) else len(records)
+            self._take(tuple(a[start:stop] for a in samples), newest[1:stop - start + 1], fires, start)
+            start = stop
+        self.seconds += time.perf_counter() - started
+        return fires
+
+    def _take(self, samples, newest, fires, offset):
+        """Add ``samples`` (in time order but for dropped ones) to the ring and evaluate the windows they end."""
+        samples = clean_samples(*samples)
+        if len(self._ring[0]):   # the ring's stamps only go forward (a stamp repeated for ever never grows it)
+            samples = tuple(a[samples[0] > self._ring[0][-1]] for a in samples)
+        if not len(samples[0]):
+            return
+        self._ring = tuple(np.concatenate((ring, new)) for ring, new in zip(self._ring, samples))
+        if self._first is None:
+            self._first = float(samples[0][0])
+        k0 = np.ceil((self._first + self.window) / self.stride - 1e-9)
+        if self._last_end is not None:
+            k0 = max(k0, np.round(self._last_end / self.stride) + 1)
+        k1 = np.floor(newest[-1] / self.stride + 1e-9)
+        if k1 < k0:
+            return
+        grid = np.arange(k0, k1 + 1) * self.stride
+        self._last_end = float(grid[-1])
+        ends, rows = envelope_rows(*self._ring, ends=grid, window=self.window)
+        self.evaluated += len(ends)
+        window_scores = scores(rows, self.limits)
+        beyond = np.flatnonzero(window_scores < 0.0)
+        self.beyond += len(beyond)
+        best = {}
+        for k in beyond:   # the first record at or after the window's end; its most anomalous window
+            at = min(int(np.searchsorted(newest, ends[k], side='left')), len(newest) - 1)
+            if at not in best or window_scores[k] < window_scores[best[at]]:
+                best[at] = k
+        for at, k in sorted(best.items()):
+            details = step_details(*self._ring, end=ends[k], window=self.window)
+            why = explain(rows[k], self.envelope, self.factor, details)
+            fires[offset + at].append(self.fire(REASON, float(window_scores[k]), why))
+        keep = self._ring[0] > self._last_end - self.window - HISTORY
+        self._ring = tuple(a[keep] for a in self._ring)
+
+    def stats(self):
+        result = super(EnvelopeTrigger, self).stats()
+        result.update(envelope_windows=self.evaluated, envelope_beyond=self.beyond,
+                      envelope_seconds=self.seconds, envelope_ring=len(self._ring[0]))
+        return result
+
+    def describe(self):
+        result = super(EnvelopeTrigger, self).describe()
+        result.update(factor=self.factor, window=self.window, stride=self.stride,
+                      learned={'topic': self.envelope.topic, 'windows': self.envelope.windows,
+                               'seconds': self.envelope.seconds},
+                      limits={name: float(limit) for name, limit in zip(ENVELOPE_COLUMNS, self.limits)})
+        return result
