@@ -83,6 +83,30 @@ def test_windows_33_ms_apart_become_one_window():
     assert [len(w) for w in windows] == [401, 401]
 
 
+def test_a_trigger_with_a_shorter_pre_joins_the_pending_window_only_when_its_pre_reaches_within_post():
+    """A trigger's own pre (a periodic trigger's 2 s in a 5 s / 5 s buffer) decides the gap: the pending window
+    waits the buffer's pre + post, but a window whose pre starts more than post after it stays apart."""
+    stamps = [i * 0.1 for i in range(300)]  # 10 Hz
+
+    def windows(second, pre):
+        buffer, done = WindowBuffer(pre='5s', post='5s'), []
+        for index, stamp in enumerate(stamps):
+            done += buffer.add(Record(stamp, '/odom', index))
+            if index in (100, second):
+                joins = buffer.joins(pre)
+                done += buffer.trigger('every10s', pre=pre, post='2s' if pre else None)
+                if index == second:
+                    assert joins == (len(done) == 0)  # a pending window not joined is completed by the trigger
+        return [(w.records[0].stamp, w.records[-1].stamp) for w in done + buffer.flush()]
+    first = (pytest.approx(8.0), pytest.approx(12.0))
+    # the first window 8..12 s; the second's pre (2 s) starts at 18 s: 6 s after it, more than post (5 s)
+    assert windows(200, '2s') == [first, (pytest.approx(18.0), pytest.approx(22.0))]
+    # the second at 18 s starts at 16 s: 4 s after the first, within post: one window with the messages between
+    assert windows(180, '2s') == [(pytest.approx(8.0), pytest.approx(20.0))]
+    # the buffer's own pre (5 s) from 20 s reaches 15 s, within post: one window
+    assert windows(200, None) == [(pytest.approx(5.0), pytest.approx(25.0))]
+
+
 def test_anomaly_in_first_and_last_message():
     windows = run(WindowBuffer(pre=3, post=3), [float(i) for i in range(12)], {0, 11})
     assert [indices(w) for w in windows] == [[0, 1, 2, 3], [8, 9, 10, 11]]

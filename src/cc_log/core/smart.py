@@ -524,9 +524,9 @@ class SmartLogger(object):
                 with self._stats.lock:
                     self._stats.fires_dropped += 1
                 continue
-            if not self.budget.admit(self._last_stamp, fire, opens=not self._buffer.window_active):
+            announce = not self._buffer.joins(fire.pre)  # it opens a window (else joins the open or pending one)
+            if not self.budget.admit(self._last_stamp, fire, opens=announce):
                 continue  # the keep budget is spent and this Fire would open a window: counted as skipped
-            announce = not self._buffer.window_active
             done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post, fire.why)
             if announce:
                 with self._stats.lock:

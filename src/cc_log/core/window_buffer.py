@@ -352,9 +352,9 @@ class WindowBuffer(object):
         ``why``: the features that stood out (kept with the trigger). A ``pre`` longer than the buffer's gets what
         the buffer holds (its ``pre``). A trigger with a longer ``pre`` than the one that opened the window reaches
         back as far as the buffer held when it opened, until a part of the window is written. Returns the windows
-        this completes: only parts of a window that reached max_window, since a new window either extends the open
-        one or merges with the pending one (a pending window is completed as soon as a message after it leaves
-        ``pre + post``).
+        this completes: parts of a window that reached max_window, and the pending window when this trigger's
+        ``pre`` starts more than ``post`` after it (``joins``; a new window else extends the open one or merges with
+        the pending one, which is completed as soon as a message after it leaves ``pre + post``).
         """
         if self._clock is None:
             raise ValueError('trigger: no message has been added yet')
@@ -365,6 +365,9 @@ class WindowBuffer(object):
             self._open.extend(trigger, post)
             self._open.reach_back(pre)
             return []
+        done = []
+        if self._pending is not None and not self.joins(pre):  # its pre starts more than post after the pending
+            done, self._pending = self._finish(self._pending), None
         if self._pending is not None:
             # Every record after the pending window is still in the ring: the new window joins it.
             self._open, self._pending = self._pending, None
@@ -376,7 +379,20 @@ class WindowBuffer(object):
             since = min(trigger.stamp - pre.seconds if pre.is_duration else trigger.stamp, self._ring[0].stamp)
             self._open = _OpenWindow(self._ring, trigger, post, since, before)
         self._ring.clear()
-        return self._split(self._open)
+        return done + self._split(self._open)
+
+    def joins(self, pre=None):
+        """Whether a trigger at the newest driving record, with its ``pre`` (None: the buffer's), joins a window:
+        the open one, or the pending one when its ``pre`` reaches within ``post`` of it (the ring holds every record
+        after the pending window: they all lie within ``pre + post``)."""
+        if self._open is not None:
+            return True
+        if self._pending is None:
+            return False
+        span, ring = _sum(self.pre if pre is None else Span.parse(pre, 'pre'), self.post), self._ring
+        if span.is_duration:
+            return not ring or ring[0].stamp >= self._clock - span.seconds
+        return len(ring) <= span.count + 1
 
     def oldest(self):
         """The stamp of the oldest driving record a trigger at the newest one can still keep (None before any):
@@ -399,11 +415,6 @@ class WindowBuffer(object):
             while len(ring) > pre.count + 1:
                 older.append(ring.popleft())
         return older
-
-    @property
-    def window_active(self):
-        """Whether a window is open or complete but not yet handed on (a new trigger then joins it)."""
-        return self._open is not None or (self._pending is not None and bool(self._pending.records))
 
     @property
     def window_start(self):
