@@ -223,9 +223,11 @@ def test_the_readme_camera_configuration_writes_one_bag_per_window_that_replays_
     finally:
         reader.close()
     logger = replay.offline_logger(str(tmp_path / 'again'), options)
-    replay.replay_into(logger, bag)
+    summary = replay.replay_into(logger, bag)
     stats = logger.stats()
     assert stats['messages_kept'] == kept and 0 <= stats['messages_not_kept'] <= stats['messages_seen'] - kept
+    assert len(summary['windows']) == len(sets)  # and so does replay's summary, a window's files as one
+    assert sum(window['messages'] for window in summary['windows']) == kept
 
 
 def test_a_heavy_topic_written_as_json_xz_is_advised_bag_lz4():

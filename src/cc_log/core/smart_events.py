@@ -16,7 +16,8 @@ DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (pa
 SPLIT = 'split'  # a file of a window still being written finished at split_mb (path, bytes)
 
 Event = collections.namedtuple(
-    'Event', 'kind stamp reason score threshold start end messages path bytes error trigger why', defaults=('', ()))
+    'Event', 'kind stamp reason score threshold start end messages path bytes error trigger why copy',
+    defaults=('', (), False))
 Event.__doc__ = """What happened to a logging window.
 
 kind: OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED (writing it failed;
@@ -30,7 +31,8 @@ request's text); score: the lowest classifier score of the window's triggers (Na
 classifier that fired (else of the first classifier; NaN without one). start, end: header stamps (float s) of
 the first and last message (end is None for OPENED). messages, path, bytes: the window's message count (all
 topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that stood out when that trigger
-fired (``core.why``; () when it says none)."""
+fired (``core.why``; () when it says none). copy: the file is a ``copy`` route's (``core.routes``): its messages
+are in the window's own file too."""
 
 
 def from_writer(event, threshold_of):
@@ -46,7 +48,8 @@ def from_writer(event, threshold_of):
     kind = {window_writer.WRITTEN: WRITTEN, window_writer.SPLIT: SPLIT}.get(event.kind, FAILED)
     return Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
                  threshold_of(metadata['trigger']), start, end, len(window), event.path,
-                 event.bytes, event.error, metadata['trigger'], window.triggers[0].why if window.triggers else ())
+                 event.bytes, event.error, metadata['trigger'], window.triggers[0].why if window.triggers else (),
+                 bool(metadata.get('copy')))
 
 
 def reason_text(event):
@@ -59,8 +62,9 @@ def reason_text(event):
 class WindowTally(object):
     """The windows a logger wrote, from its events (``SmartLogger.on_event(tally)``): one per window name
     (``log_format.window_key``), whatever its files (routes, parts, splits). ``windows()``: ``[{'name', 'start',
-    'end', 'messages', 'files', 'path'}]`` in start order; messages and start/end over all its files, ``files``
-    in ``log_format.file_order``, ``path`` the first of them."""
+    'end', 'messages', 'files', 'path'}]`` in start order; messages and start/end over all its files (a ``copy``
+    route's messages counted once, in the window's own file), ``files`` in ``log_format.file_order``, ``path`` the
+    first of them."""
 
     def __init__(self):
         self._windows = collections.OrderedDict()
@@ -74,7 +78,7 @@ class WindowTally(object):
         window['files'].append(event.path)
         if event.kind != WRITTEN:  # a split file: its messages are said with the window's last file
             return
-        window['messages'] += event.messages
+        window['messages'] += 0 if event.copy else event.messages
         for name, pick, stamp in (('start', min, event.start), ('end', max, event.end)):
             if stamp is not None:
                 window[name] = stamp if window[name] is None else pick(window[name], stamp)
