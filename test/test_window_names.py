@@ -208,3 +208,46 @@ def test_a_looping_bag_gives_each_window_its_own_name_and_route_file(simulated, 
         metadata, _ = log_format.read_window_set(files)
         assert metadata['counts'].get(sim.ODOM_TOPIC, 0) > 0
     assert len(summary['windows']) == len(sets) >= 4
+
+
+def test_a_prefix_names_every_piece_of_every_window_and_recovery_releases_its_reservations_only(simulated, tmp_path):
+    """A logger's file prefix (``~name_prefix``) reaches the name reserved once per window: its json-xz parts, its
+    route files and a looping bag's second windows (``_1``) all begin with it, no reservation is left; readers
+    group a window's files whatever the prefix; recovery of that prefix removes its stale reservations only."""
+    from cc_log.core import config
+    from cc_log.offline import replay
+    from cc_log.storage import recovery
+    from cc_log.storage.bag import bagio
+    from test_reliability import DEAD_PID
+    bag, make = simulated
+    cfg = config.Config.from_dict(yaml.safe_load(open(make('json-xz', max=150)).read()))
+    opened = replay.open_bag(bag)
+    try:
+        options, _, topics = replay.replay_setup(cfg, opened)
+    finally:
+        opened.close()
+    records = list(bagio.read_messages(bag, sorted(topics)))
+    out, run = str(tmp_path / 'out'), log_format.file_prefix('run')
+    summary = replay.replay_records(replay.offline_logger(out, dict(options, prefix=run)), records + records)
+    assert os.listdir(out) and all(name.startswith(run) and log_format.RESERVED_MARK not in name
+                                   for name in os.listdir(out))
+    files = log_format.window_files(out, run)
+    sets = log_format.window_sets(files)
+    assert sorted(w['files'] for w in summary['windows']) == sorted(sets) and len(sets) >= 4
+    assert len(files) > 2 * len(sets) and log_format.window_files(out) == []  # parts and routes; no cc_log_ file
+    for files_of_one in sets:
+        pieces = [log_format.parse_piece(os.path.basename(path), run) for path in files_of_one]
+        assert len({piece.name for piece in pieces}) == 1 and {piece.route for piece in pieces} == {None, 'numeric'}
+        assert log_format.parse_piece(os.path.basename(files_of_one[0])) is None  # not a cc_log_ piece
+        metadata, read = log_format.read_window_set(files_of_one)
+        assert metadata['count'] == len(read) == sum(len(log_format.read_window(path)[1]) for path in files_of_one)
+    names = [w['name'] for w in summary['windows']]
+    assert len(set(names)) == len(names) and any(name.endswith('_1') for name in names)
+    reserved = {}
+    for prefix in (run, log_format.PREFIX):  # reservations of a process gone
+        reserved[prefix] = os.path.join(out, prefix + '20150521T191138.027Z_x' + log_format.RESERVED_MARK)
+        with open(reserved[prefix], 'w') as stream:
+            stream.write('%d\n' % DEAD_PID)
+    assert log_format.reservations(out, run) == [(reserved[run], DEAD_PID)]
+    assert recovery.recover_directory(out, run) == []
+    assert not os.path.exists(reserved[run]) and os.path.exists(reserved[log_format.PREFIX])
