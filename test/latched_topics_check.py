@@ -86,7 +86,7 @@ class LatchedTopicsTest(unittest.TestCase):
             rospy.wait_for_service('/%s/trigger' % name, timeout=30)
         fx.wait_for(lambda: cls.odom_pub.get_num_connections() == len(NODES) and
                     cls.tf_pub.get_num_connections() == len(NODES), 20, 'the smart loggers to subscribe')
-        cls.odom = fx.husky()[0][700:700 + WINDOWS * 60]
+        cls.odom = fx.husky()[0][700:700 + WINDOWS * 60 + POST]
 
     @classmethod
     def tearDownClass(cls):
@@ -111,6 +111,7 @@ class LatchedTopicsTest(unittest.TestCase):
                 response = rospy.ServiceProxy('/%s/trigger' % name, Trigger)()
                 self.assertTrue(response.success, response.message)
             self.publish(self.odom[k * 60 + 30:k * 60 + 60])
+        self.publish(self.odom[WINDOWS * 60:WINDOWS * 60 + POST])  # a window is handed on pre + post after its end
         for fmt in NODES:
             fx.wait_for(lambda: len([e for e in self.events[fmt] if e.event == AnomalyEvent.WRITTEN]) >= WINDOWS,
                         30, '%d %s windows' % (WINDOWS, fmt))

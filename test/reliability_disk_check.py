@@ -212,7 +212,8 @@ class DiskTest(unittest.TestCase):
             level, message, values = self.wait_status(
                 lambda level, message, values: values.get('intake queue') == '0' and values.get('writer queue') == '0'
                 and values.get('messages seen') == str(2 * sent) and values.get('windows held') == '0'
-                and int(values.get('windows saved', 0)) >= 3, 'windows written on the full disk', 30)
+                and int(values.get('windows saved', 0)) >= 2, 'windows written on the full disk', 30)
+            # (files: the anomalies, closer than post, make one window, written in parts of max_window)
             deleted = int(values['windows deleted (quota)'])
             self.assertGreater(deleted, 0)
             self.assertEqual(values['messages lost'], '0')

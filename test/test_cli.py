@@ -230,7 +230,9 @@ def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     assert sorted(window['path'] for window in windows) == files
     assert summary['stored_bytes'] == sum(os.path.getsize(path) for path in files)
     for window in windows:
-        assert list(window) == ['start', 'end', 'messages', 'path']
+        assert list(window) == ['name', 'start', 'end', 'messages', 'files', 'path']
+        assert window['files'] == [window['path']] and window['name'] == log_format.window_key(window['path'])[
+            len(str(replayed['out'])) + 1:]
         metadata, saved = log_format.read_window(window['path'])
         assert window['messages'] == len(saved)
         assert window['start'] == saved[0].stamp == min(record.stamp for record in saved)

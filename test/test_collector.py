@@ -56,6 +56,10 @@ def test_rotation_by_count_keeps_every_message_once(husky, tmp_path):
     assert [(r.stamp, r.topic) for r in kept] == [(r.stamp, r.topic) for r in expected]
     assert all(msg_codec.to_dict(a.msg) == msg_codec.to_dict(b.msg) for a, b in zip(kept, expected))
     assert all(metadata['reason'] == 'collect' for _, metadata, _ in files)
+    pieces = [log_format.parse_piece(os.path.basename(path)) for path, _, _ in files]  # each file a window of its own
+    assert all(piece.name.endswith('_collect') and piece.route is None and piece.number == 0 for piece in pieces)
+    assert len(log_format.window_sets([path for path, _, _ in files])) == len(files)
+    assert [metadata['part'] for _, metadata, _ in files] == list(range(1, len(files) + 1))  # said, not in its name
     assert stats['files_written'] == len(files) and stats['messages_kept'] == len(husky) == stats['messages_seen']
     assert stats['stored_bytes'] == sum(os.path.getsize(path) for path, _, _ in files)
     assert stats['raw_json_bytes'] == sum(msg_codec.row_json_bytes(r.msg) for r in husky)

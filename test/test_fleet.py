@@ -286,9 +286,8 @@ def test_ctrl_c_stops_a_replay_in_this_process_within_a_second(tmp_path):
     seconds = time.monotonic() - interrupted
     assert process.returncode == 130 and stderr.strip().endswith('cclog replay: interrupted'), stderr
     assert seconds < 3.0, 'Ctrl-C took %.1f s' % seconds
-    for name in os.listdir(str(out / 'run')):
-        if log_format.TMP_MARK not in name:
-            log_format.read_window(str(out / 'run' / name))
+    for path in log_format.window_files(str(out / 'run')):  # final names (leftovers: .tmp-, .reserved)
+        log_format.read_window(path)
 
 
 def cpu_seconds(pid):

@@ -29,7 +29,7 @@ ALFA_ODOM = '/mavros/local_position/odom'
 
 REAL = os.path.normpath(os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                                      '..', 'shared', 'data', 'real'))
-NAME = re.compile(r'^cc_log_\d{8}T\d{6}\.\d{3}Z_[A-Za-z0-9-]+(_part\d+)?(_\d+)?\.(json\.xz|bag)$')
+NAME = re.compile(r'cc_log_\d{8}T\d{6}\.\d{3}Z_[A-Za-z0-9-]+(_\d+)?(\.\d{3})?\.(json\.xz|bag)')
 
 
 def real(name):
@@ -142,7 +142,7 @@ def test_husky_odometry_and_imu_round_trip(fmt, husky_window, tmp_path):
     assert metadata['cc_log_version'] == __import__('cc_log').__version__
     assert metadata['robot'] == 'husky' and metadata['rate'] == 10
     assert metadata['start_utc'].startswith('2015-05-21T19:')
-    assert NAME.match(os.path.basename(path)), path
+    assert NAME.fullmatch(os.path.basename(path)), path
 
 
 @pytest.mark.parametrize('fmt', Format.ALL)
@@ -162,7 +162,7 @@ def test_sequor_laserscan_round_trip_with_equal_stamps(fmt, sequor_window, tmp_p
 @pytest.mark.parametrize('fmt', Format.ALL)
 def test_alfa_odometry_round_trip_and_part_name(fmt, alfa_window, tmp_path):
     path, _ = write_window(alfa_window, str(tmp_path), fmt)
-    assert '_engine-failure_part2.' in os.path.basename(path)
+    assert '_engine-failure.002.' in os.path.basename(path)
     metadata, records = read_window(path)
     assert_same_records(alfa_window.records, records)
     assert metadata['part'] == 2 and metadata['count'] == 544
@@ -366,7 +366,7 @@ def test_no_temporary_file_left_and_collisions_do_not_overwrite(alfa_window, tmp
     with open(first, 'rb') as stream:
         assert stream.read() == first_bytes
     assert read_window(second)[0]['attempt'] == 2 and read_window(third)[0]['attempt'] == 3
-    assert all(NAME.match(os.path.basename(path)) for path in (first, second, third))
+    assert all(NAME.fullmatch(os.path.basename(path)) for path in (first, second, third))
     assert not [name for name in os.listdir(directory) if '.tmp-' in name]
     assert log_format.temporary_files(directory) == []
     assert log_format.window_files(directory) == sorted([first, second, third])

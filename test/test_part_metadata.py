@@ -66,8 +66,12 @@ def test_each_json_xz_part_says_only_its_own_triggers(tmp_path):
         assert all(records[0].stamp - 1e-6 <= stamp <= records[-1].stamp + 1e-6 for stamp in stamps), path
         said += stamps
         count += len(records)
-        assert '_classifier_part' in os.path.basename(path)  # named by the window's first trigger, every part
+        piece = log_format.parse_piece(os.path.basename(path))  # one name, the window's first trigger's
+        assert piece.name.endswith('_classifier') and piece.number == metadata['part'] and piece.route is None
     assert sorted(said) == pytest.approx(fired)  # every trigger said once over the parts
+    [one] = log_format.window_sets(paths)  # the readers: one window of all its parts
+    metadata, records = log_format.read_window_set(one)
+    assert len(records) == 590 and [t['stamp'] for t in metadata['triggers']] == pytest.approx(sorted(said))
     assert count == 590  # from 10 messages before the first trigger to the end of the stream
 
 

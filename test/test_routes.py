@@ -153,7 +153,7 @@ def test_a_window_in_parts_is_still_one_window_with_its_route_files(tmp_path):
     out = replayed(tmp_path, {'pre': '2s', 'post': '2s', 'max': 150})  # parts of 150 odometry messages
     files = log_format.window_files(out)
     own = [f for f in files if '+' not in os.path.basename(f)]
-    parts = [f for f in files if '+numeric_part' in os.path.basename(f)]
+    parts = [f for f in files if '+numeric.' in os.path.basename(f)]
     assert own and len(parts) > len(own)  # one bag per window (parts appended), a json-xz file per part
     sets = log_format.window_sets(files)
     assert len(sets) == len(own) and all(s[0] in own and len(s) > 2 for s in sets)
@@ -223,9 +223,11 @@ def test_the_readme_camera_configuration_writes_one_bag_per_window_that_replays_
     finally:
         reader.close()
     logger = replay.offline_logger(str(tmp_path / 'again'), options)
-    replay.replay_into(logger, bag)
+    summary = replay.replay_into(logger, bag)
     stats = logger.stats()
     assert stats['messages_kept'] == kept and 0 <= stats['messages_not_kept'] <= stats['messages_seen'] - kept
+    assert len(summary['windows']) == len(sets)  # and so does replay's summary, a window's files as one
+    assert sum(window['messages'] for window in summary['windows']) == kept
 
 
 def test_a_heavy_topic_written_as_json_xz_is_advised_bag_lz4():

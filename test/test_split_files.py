@@ -62,13 +62,14 @@ def write_parts(directory, parts, split_mb, max_disk_mb=0, route=False, key=7):
     writer = WindowWriter(directory, 'bag-lz4', max_disk_mb=max_disk_mb, background=False, split_mb=split_mb)
     events = []
     writer.on_event(events.append)
-    base = 'cc_log_20150521T191138.000Z_bumper'
+    name = log_format.WindowName('cc_log_20150521T191138.000Z_bumper')
     for k in range(parts):
         final = k == parts - 1
-        writer.submit(Job(LogWindow(frames(k), TRIGGERS, k + 1, final, key), METADATA, base=base))
+        writer.submit(Job(LogWindow(frames(k), TRIGGERS, k + 1, final, key), METADATA, name=name,
+                          last=final and not route))
         if route:
             writer.submit(Job(LogWindow(odometry(k), TRIGGERS, k + 1, final, key), dict(METADATA, route='numeric'),
-                              what=window_writer.ROUTE, fmt='json-xz', route='numeric', base=base))
+                              what=window_writer.ROUTE, fmt='json-xz', route='numeric', name=name, last=final))
     writer.close()
     return events, writer.stats()
 

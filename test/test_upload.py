@@ -36,12 +36,13 @@ def test_runs_once_per_window_or_context_file_with_the_path(tmp_path):
     script = 'import sys; open(sys.argv[1], "a").write(sys.argv[2] + "\\n")'
     hook = UploadHook([sys.executable, '-c', script, str(listing)])
     hook.on_event(event(window_writer.WRITTEN, window_writer.WINDOW, '/w/a.json.xz'))
+    hook.on_event(event(window_writer.WRITTEN, window_writer.ROUTE, '/w/a+numeric.json.xz'))  # a piece of it
     hook.on_event(event(window_writer.WRITTEN, window_writer.CONTEXT, '/w/context/c.bag'))
     hook.on_event(event(window_writer.WRITTEN, 'vector', '/w/features/v.json'))  # not a closed log file
     hook.on_event(event(window_writer.FAILED, window_writer.WINDOW, ''))
     wait_for(lambda: hook.stats()['running'] == 0)
-    assert sorted(listing.read_text().split()) == ['/w/a.json.xz', '/w/context/c.bag']
-    assert hook.stats()['succeeded'] == 2 and hook.stats()['failed'] == 0
+    assert sorted(listing.read_text().split()) == ['/w/a+numeric.json.xz', '/w/a.json.xz', '/w/context/c.bag']
+    assert hook.stats()['succeeded'] == 3 and hook.stats()['failed'] == 0
 
 
 def test_failures_are_counted_with_the_stderr_line(tmp_path):

@@ -33,12 +33,13 @@ def indices(window):
 
 
 def expected_by_count(n, anomalies, pre, post):
-    """Reference: the union of [i-pre, i+post] over the anomalies, split into maximal runs."""
+    """Reference: the union of [i-pre, i+post] over the anomalies, split into maximal runs, runs at most post
+    messages apart joined (with the messages between)."""
     kept = sorted({j for i in anomalies for j in range(max(0, i - pre), min(n - 1, i + post) + 1)})
     runs = []
     for j in kept:
-        if runs and runs[-1][-1] == j - 1:
-            runs[-1].append(j)
+        if runs and j - runs[-1][-1] - 1 <= post:
+            runs[-1].extend(range(runs[-1][-1] + 1, j + 1))
         else:
             runs.append([j])
     return runs
@@ -62,14 +63,53 @@ def test_touching_windows_become_one():
     assert [indices(w) for w in windows] == [list(range(8, 18))]
 
 
-def test_windows_with_a_gap_stay_apart():
+def test_windows_closer_than_post_become_one_and_farther_ones_stay_apart():
+    # first window 8..12; a second from 14 leaves a gap of one message (13), less than post: one window
     windows = run(WindowBuffer(pre=2, post=2), [float(i) for i in range(30)], {10, 16})
-    assert [indices(w) for w in windows] == [list(range(8, 13)), list(range(14, 19))]
+    assert [indices(w) for w in windows] == [list(range(8, 19))]
+    # a second from 18 leaves 13..17, more than post: two windows
+    windows = run(WindowBuffer(pre=2, post=2), [float(i) for i in range(30)], {10, 20})
+    assert [indices(w) for w in windows] == [list(range(8, 13)), list(range(18, 23))]
+
+
+def test_windows_33_ms_apart_become_one_window():
+    stamps = [i * 0.01 for i in range(1200)]  # 100 Hz; pre and post 2 s
+    # the first ends at 4.0 s (trigger at 2 s); the second begins 33 ms later (trigger at 6.033 s, pre 2 s)
+    windows = run(WindowBuffer(pre='2s', post='2s'), stamps, {200, 603})
+    assert len(windows) == 1 and [r.stamp for r in windows[0].records] == stamps[0:804]
+    windows = run(WindowBuffer(pre='2s', post='2s'), stamps, {200, 700})  # 1 s apart at 100 Hz: still one
+    assert len(windows) == 1
+    windows = run(WindowBuffer(pre='2s', post='2s'), stamps, {200, 900})  # 3 s apart, more than post: two
+    assert [len(w) for w in windows] == [401, 401]
+
+
+def test_a_trigger_with_a_shorter_pre_joins_the_pending_window_only_when_its_pre_reaches_within_post():
+    """A trigger's own pre (a periodic trigger's 2 s in a 5 s / 5 s buffer) decides the gap: the pending window
+    waits the buffer's pre + post, but a window whose pre starts more than post after it stays apart."""
+    stamps = [i * 0.1 for i in range(300)]  # 10 Hz
+
+    def windows(second, pre):
+        buffer, done = WindowBuffer(pre='5s', post='5s'), []
+        for index, stamp in enumerate(stamps):
+            done += buffer.add(Record(stamp, '/odom', index))
+            if index in (100, second):
+                joins = buffer.joins(pre)
+                done += buffer.trigger('every10s', pre=pre, post='2s' if pre else None)
+                if index == second:
+                    assert joins == (len(done) == 0)  # a pending window not joined is completed by the trigger
+        return [(w.records[0].stamp, w.records[-1].stamp) for w in done + buffer.flush()]
+    first = (pytest.approx(8.0), pytest.approx(12.0))
+    # the first window 8..12 s; the second's pre (2 s) starts at 18 s: 6 s after it, more than post (5 s)
+    assert windows(200, '2s') == [first, (pytest.approx(18.0), pytest.approx(22.0))]
+    # the second at 18 s starts at 16 s: 4 s after the first, within post: one window with the messages between
+    assert windows(180, '2s') == [(pytest.approx(8.0), pytest.approx(20.0))]
+    # the buffer's own pre (5 s) from 20 s reaches 15 s, within post: one window
+    assert windows(200, None) == [(pytest.approx(5.0), pytest.approx(25.0))]
 
 
 def test_anomaly_in_first_and_last_message():
-    windows = run(WindowBuffer(pre=3, post=3), [float(i) for i in range(10)], {0, 9})
-    assert [indices(w) for w in windows] == [[0, 1, 2, 3], [6, 7, 8, 9]]
+    windows = run(WindowBuffer(pre=3, post=3), [float(i) for i in range(12)], {0, 11})
+    assert [indices(w) for w in windows] == [[0, 1, 2, 3], [8, 9, 10, 11]]
 
 
 def test_back_to_back_anomalies():
@@ -89,16 +129,16 @@ def test_end_of_stream_flushes_open_window():
     assert not buffer.window_open
 
 
-def test_window_is_completed_once_pre_more_messages_show_no_touch():
+def test_window_is_completed_once_pre_and_post_more_messages_show_none_within_post():
     buffer = WindowBuffer(pre=2, post=1)
     completed = []
     for i in range(8):
         completed.append(buffer.add(Record(float(i), '/odom', i)))
         if i == 1:
             buffer.trigger('test')
-    # window 0..2; an anomaly at 3, 4 or 5 would still touch it (5 - pre = 3); 6 pushes 3 out of the pre
-    # buffer, so the window is complete
-    assert [len(c) for c in completed] == [0, 0, 0, 0, 0, 0, 1, 0]
+    # window 0..2; an anomaly at 3 .. 6 would still join it (6 - pre = 4: one message between, within post);
+    # 7 pushes 3 out of pre + post, so the window is complete
+    assert [len(c) for c in completed] == [0, 0, 0, 0, 0, 0, 0, 1]
 
 
 def test_durations_with_irregular_stamps():

@@ -205,8 +205,8 @@ class TriggersTest(unittest.TestCase):
         self.assertTrue(opened and opened[-1].reason.startswith('classifier; why: '), [e.reason for e in opened])
 
     def test_3_trigger_window_with_a_reason_and_its_own_span(self):
-        odom = self.odom[NOMINAL.stop:NOMINAL.stop + 60]
-        self.assertFalse(fx.flagged(self.motion, self.odom[NOMINAL.stop - 30:NOMINAL.stop + 60]))
+        odom = self.odom[NOMINAL.stop:NOMINAL.stop + 60 + POST]  # a window is handed on pre + post after its end
+        self.assertFalse(fx.flagged(self.motion, self.odom[NOMINAL.stop - 30:NOMINAL.stop + 60 + POST]))
         before = len(self.written())
         self.publish([(self.odom_pub, r.msg) for r in odom[:30]])
         self.wait_received()  # the request applies to the newest message received

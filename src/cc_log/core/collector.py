@@ -433,7 +433,7 @@ def drop_flagged(directory, label, spans, window_seconds):
     return removed
 
 
-_VECTOR_LEFTOVER = re.compile(r'^.+\.json%s(\d+)(\.\d+)?$' % re.escape(safe_files.TMP_MARK))
+_VECTOR_LEFTOVER = re.compile(r'.+\.json%s(\d+)(\.\d+)?' % re.escape(safe_files.TMP_MARK))
 
 
 def remove_vector_leftovers(directory):
@@ -445,7 +445,7 @@ def remove_vector_leftovers(directory):
     removed = []
     for root, _, names in os.walk(directory):
         for name in names:
-            match = _VECTOR_LEFTOVER.match(name)
+            match = _VECTOR_LEFTOVER.fullmatch(name)
             if match and not _alive(int(match.group(1))):
                 path = os.path.join(root, name)
                 try:

@@ -117,12 +117,12 @@ def _stride(value, name):
     return span.count
 
 
-_LABEL = re.compile(r'^[A-Za-z0-9_.-]+$')
+_LABEL = re.compile(r'[A-Za-z0-9_.-]+')
 
 
 def check_label(label, name='label'):
     """``label`` when it can name a directory, else ValueError('<name>: ...')."""
-    if not isinstance(label, str) or not _LABEL.match(label) or label in ('.', '..'):
+    if not isinstance(label, str) or not _LABEL.fullmatch(label) or label in ('.', '..'):
         raise ValueError('%s: %s must be letters, digits, ".", "_" or "-"' % (name, brief(label)))
     return label
 

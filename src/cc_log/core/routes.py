@@ -11,8 +11,9 @@ write each window as ``cc_log_<UTC>_<reason>.bag`` (the cameras, the lidar) besi
 A topic goes to the first route whose ``topics`` match it (names, ``*``, ``re:``, ``!`` as the configuration's
 ``topics``), else to the window's own file. A route with ``copy: true`` takes a copy: its topics stay in the
 window's own file too (a bag that replays the whole moment alone), and readers of the window's files read them
-from the window's own file only. The files of one window share everything before ``+``
-(``SEPARATOR``): ``cclog info``, ``cat``, ``export`` and ``stats`` show them as one window. Pure.
+from the window's own file only. The files of one window share its name, reserved once
+(``storage.log_format``: ``<name>[+<route>][.<NNN>]<ext>``, ``SEPARATOR`` before the route): ``cclog info``,
+``cat``, ``export`` and ``stats`` show them as one window. Pure.
 """
 import collections
 import re
@@ -21,10 +22,10 @@ from cc_log.core.records import LogWindow
 from cc_log.core.safe_input import brief, loads_yaml, unknown_key
 from cc_log.core.topic_select import TopicSelection
 
-SEPARATOR = '+'  # between a window's base name and a route's name in the route's file name
+SEPARATOR = '+'  # between a window's name and a route's name in the route's file name
 ROUTE_KEYS = ('name', 'topics', 'format', 'copy')
 MAX_TEXT = 1 << 20  # characters of routes given as YAML text
-_NAME = re.compile(r'^[A-Za-z0-9-]{1,40}$')
+_NAME = re.compile(r'[A-Za-z0-9-]{1,40}')
 
 
 class Route(collections.namedtuple('Route', 'name selection format copy')):
@@ -64,7 +65,7 @@ def parse_routes(value, formats, name='routes'):
         if unknown:
             raise ValueError(unknown)
         route_name = entry.get('name')
-        if not isinstance(route_name, str) or not _NAME.match(route_name):
+        if not isinstance(route_name, str) or not _NAME.fullmatch(route_name):
             raise ValueError('%s: name: %s must be 1 to 40 letters, digits or "-"' % (where, brief(route_name)))
         if route_name in names:
             raise ValueError('%s: name %s is used twice' % (where, route_name))

@@ -87,7 +87,7 @@ _STRING_STOP = re.compile(r'\\.|"""', re.S)  # CPython's tokenizer: a backslash 
 
 def check_type_name(msg_type):
     """Raise ValueError unless ``msg_type`` is ``package/Name`` (ASCII identifiers)."""
-    if not isinstance(msg_type, str) or not _TYPE_NAME.match(msg_type):
+    if not isinstance(msg_type, str) or not _TYPE_NAME.fullmatch(msg_type):
         raise ValueError('message type %r is not package/Name' % (msg_type,))
     return msg_type
 
@@ -149,7 +149,7 @@ def check_chunks(bag, source):
 @functools.lru_cache(maxsize=128)
 def _definition_problem(msg_type, definition):
     """What makes the definition unsafe or unusable, or None (cached: bags repeat definitions)."""
-    if not _TYPE_NAME.match(msg_type):
+    if not _TYPE_NAME.fullmatch(msg_type):
         return 'the type name is not package/Name'
     if len(definition) > MAX_DEFINITION_CHARS:
         return 'longer than %d characters' % MAX_DEFINITION_CHARS
@@ -185,7 +185,7 @@ def _sections(msg_type, text):
         if not part.startswith('MSG: ') or newline < 0:
             raise ValueError('a section after a line of 80 "=" does not start with "MSG: package/Name"')
         name = part[5:newline].strip()
-        if not _TYPE_NAME.match(name):
+        if not _TYPE_NAME.fullmatch(name):
             raise ValueError('section type %r is not package/Name' % name)
         sections.append((name, part[newline + 1:]))
     seen = {}
@@ -235,7 +235,7 @@ def _fields(msg_type, body):
 
 
 def _check_name(name, where):
-    if not _NAME.match(name) or keyword.iskeyword(name) or name in _RESERVED:
+    if not _NAME.fullmatch(name) or keyword.iskeyword(name) or name in _RESERVED:
         raise ValueError('%s: name %r is not an identifier cc_log accepts (ASCII letter, then letters, digits, '
                          '_; no Python keyword)' % (where, name[:80]))
 

@@ -150,7 +150,7 @@ class SmartLogger(object):
         self.budget = keep_budget.KeepBudget(max_windows_per_hour, self.pre.seconds, self.post.seconds)
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
-        self._bases = {}  # window key -> the base name of its files, while it is handed on in parts (routes)
+        self._names = {}  # window key -> the log_format.WindowName of its files, while it is handed on in parts
         self.keep = dict(keep or {})  # trigger name -> the topics its windows keep (window_prep.restrict)
         self.stamp_tolerance = float(stamp_tolerance)
         self.wait_for_writer = bool(wait_for_writer)
@@ -524,9 +524,9 @@ class SmartLogger(object):
                 with self._stats.lock:
                     self._stats.fires_dropped += 1
                 continue
-            if not self.budget.admit(self._last_stamp, fire, opens=not self._buffer.window_active):
+            announce = not self._buffer.joins(fire.pre)  # it opens a window (else joins the open or pending one)
+            if not self.budget.admit(self._last_stamp, fire, opens=announce):
                 continue  # the keep budget is spent and this Fire would open a window: counted as skipped
-            announce = not self._buffer.window_active
             done = self._buffer.trigger(fire.reason, fire.score, fire.name, fire.pre, fire.post, fire.why)
             if announce:
                 with self._stats.lock:
@@ -560,16 +560,16 @@ class SmartLogger(object):
             metadata, shed = self._metadata(window), self._unsaid.said(window, shed)  # an emptied part's: the next's
             if shed:
                 metadata['dropped'] = shed
-            if not self.routes:
-                self.writer.submit(window_writer.Job(window, metadata))
-                continue
-            base = self._bases.pop(window.key, None) or log_format.base_name(window, 0, self.writer.prefix)
+            name = self._names.pop(window.key, None) or self.writer.window_name(window)
             if window.part and not window.final:
-                self._bases[window.key] = base
-            for route, part in routes_mod.split(window, self.routes):  # one file per route (core.routes)
-                self.writer.submit(window_writer.Job(part, metadata, base=base) if route is None else window_writer.Job(
-                    part, routes_mod.metadata(metadata, route), what=window_writer.ROUTE, fmt=route.format,
-                    route=route.name, base=base))
+                self._names[window.key] = name  # all its files, every part's, take one name
+            pieces = routes_mod.split(window, self.routes)  # one file per route (core.routes)
+            for number, (route, piece) in enumerate(pieces, 1):
+                last = (window.final or not window.part) and number == len(pieces)
+                self.writer.submit(window_writer.Job(piece, metadata, name=name, last=last) if route is None else
+                                   window_writer.Job(piece, routes_mod.metadata(metadata, route),
+                                                     what=window_writer.ROUTE, fmt=route.format, route=route.name,
+                                                     name=name, last=last))
 
     def _metadata(self, window):
         """Smart-mode metadata added to log_format's (which already holds triggers, names, part, counts)."""

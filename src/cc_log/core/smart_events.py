@@ -2,11 +2,12 @@
 the writer's events (``window_writer``) said as Events. Pure."""
 import collections
 import math
+import os
 
 from cc_log.core import why
-from cc_log.storage import window_writer
+from cc_log.storage import log_format, window_writer
 
-__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer', 'reason_text']
+__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer', 'reason_text', 'WindowTally']
 
 OPENED = 'opened'
 WRITTEN = 'written'
@@ -15,7 +16,8 @@ DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (pa
 SPLIT = 'split'  # a file of a window still being written finished at split_mb (path, bytes)
 
 Event = collections.namedtuple(
-    'Event', 'kind stamp reason score threshold start end messages path bytes error trigger why', defaults=('', ()))
+    'Event', 'kind stamp reason score threshold start end messages path bytes error trigger why copy',
+    defaults=('', (), False))
 Event.__doc__ = """What happened to a logging window.
 
 kind: OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED (writing it failed;
@@ -29,7 +31,8 @@ request's text); score: the lowest classifier score of the window's triggers (Na
 classifier that fired (else of the first classifier; NaN without one). start, end: header stamps (float s) of
 the first and last message (end is None for OPENED). messages, path, bytes: the window's message count (all
 topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that stood out when that trigger
-fired (``core.why``; () when it says none)."""
+fired (``core.why``; () when it says none). copy: the file is a ``copy`` route's (``core.routes``): its messages
+are in the window's own file too."""
 
 
 def from_writer(event, threshold_of):
@@ -45,7 +48,8 @@ def from_writer(event, threshold_of):
     kind = {window_writer.WRITTEN: WRITTEN, window_writer.SPLIT: SPLIT}.get(event.kind, FAILED)
     return Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
                  threshold_of(metadata['trigger']), start, end, len(window), event.path,
-                 event.bytes, event.error, metadata['trigger'], window.triggers[0].why if window.triggers else ())
+                 event.bytes, event.error, metadata['trigger'], window.triggers[0].why if window.triggers else (),
+                 bool(metadata.get('copy')))
 
 
 def reason_text(event):
@@ -53,3 +57,36 @@ def reason_text(event):
     ``why`` (``'classifier; why: max yaw rate 4.2 rad/s, 2.3x the most seen in training'``)."""
     first = why.texts(event.why[:1])
     return '%s; why: %s' % (event.reason, first) if first else event.reason
+
+
+class WindowTally(object):
+    """The windows a logger wrote, from its events (``SmartLogger.on_event(tally)``): one per window name
+    (``log_format.window_key``), whatever its files (routes, parts, splits). ``windows()``: ``[{'name', 'start',
+    'end', 'messages', 'files', 'path'}]`` in start order; messages and start/end over all its files (a ``copy``
+    route's messages counted once, in the window's own file), ``files`` in ``log_format.file_order``, ``path`` the
+    first of them."""
+
+    def __init__(self):
+        self._windows = collections.OrderedDict()
+
+    def __call__(self, event):
+        if event.kind not in (WRITTEN, SPLIT) or not event.path:
+            return
+        key = log_format.window_key(event.path)
+        window = self._windows.setdefault(key, {'name': os.path.basename(key), 'start': None, 'end': None,
+                                                'messages': 0, 'files': []})
+        window['files'].append(event.path)
+        if event.kind != WRITTEN:  # a split file: its messages are said with the window's last file
+            return
+        window['messages'] += 0 if event.copy else event.messages
+        for name, pick, stamp in (('start', min, event.start), ('end', max, event.end)):
+            if stamp is not None:
+                window[name] = stamp if window[name] is None else pick(window[name], stamp)
+
+    def windows(self):
+        """The windows written so far (see the class)."""
+        result = []
+        for window in self._windows.values():
+            files = sorted(window['files'], key=log_format.file_order)
+            result.append(dict(window, files=files, path=files[0]))
+        return sorted(result, key=lambda window: (window['start'] is None, window['start'] or 0.0))

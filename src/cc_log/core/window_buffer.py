@@ -4,9 +4,12 @@ It holds the *logging windows* of the driving topic (the topic whose messages co
 on a trigger at message i, messages i-pre ... i+post are kept. A trigger inside an open window extends it
 (and reaches back before its start when its own pre is longer than the one that opened it: a goal abort after a
 classifier's flag; the buffer holds its pre of driving messages for that until the window's first part is
-written), and two windows that touch or overlap become one, so no message is written twice and none inside a
-window is skipped. Messages of other topics are buffered by time and saved in the windows whose time span holds
-them. (The feature window the classifiers score is ``features.FeatureWindow``.)
+written), and two windows that overlap, touch or lie closer than ``post`` (the gap from the end of one to the
+start of the next) become one, with the messages between, so no message is written twice, none inside a window
+is skipped and a window is not cut in two files by a short calm: a closed window waits ``pre + post`` more
+(counts with counts, durations with durations; else ``pre``) before it is handed on. Messages of other topics are
+buffered by time and saved in the windows whose time span holds them. (The feature window the classifiers score
+is ``features.FeatureWindow``.)
 
 Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
 window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``: a message held as its
@@ -189,17 +192,26 @@ class _OpenWindow(object):
             self.remaining -= 1
 
 
+def _sum(pre, post):
+    """``pre + post`` as one Span when both are counts or both durations, else ``pre``."""
+    if pre.is_duration and post.is_duration:
+        return Span.duration(pre.seconds + post.seconds)
+    if not pre.is_duration and not post.is_duration:
+        return Span.messages(pre.count + post.count)
+    return pre
+
+
 class WindowBuffer(object):
     """Logging windows around triggers.
 
     Call ``add`` for every driving message, ``add_side`` for messages of
     other topics, ``trigger`` when the last driving message is anomalous, and ``flush`` at the end of the
     stream. ``add``, ``add_side``, ``trigger`` and ``flush`` return the windows completed by that call (a
-    list of LogWindow); a window is complete once ``pre`` further messages have shown that the next window
-    does not touch it, or when it reaches ``max_window`` or the memory budget ``max_buffer_mb`` (written in
-    parts). ``cost``: the MemoryCost estimating records that carry no cost. ``part_factor``: the memory the writer
-    needs for a part per byte of it (>= 1; a format that decodes serialized messages needs several times
-    their size): parts are handed on at half the budget divided by it.
+    list of LogWindow); a window is complete once ``pre + post`` further messages have shown that the next
+    window does not come within ``post`` of it, or when it reaches ``max_window`` or the memory budget
+    ``max_buffer_mb`` (written in parts). ``cost``: the MemoryCost estimating records that carry no cost.
+    ``part_factor``: the memory the writer needs for a part per byte of it (>= 1; a format that decodes serialized
+    messages needs several times their size): parts are handed on at half the budget divided by it.
     """
 
     def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
@@ -218,6 +230,7 @@ class WindowBuffer(object):
         self._part_bytes = int(part_bytes(self.max_buffer_bytes) / max(1.0, float(part_factor)))
         self._cost = cost if cost is not None else MemoryCost()
         self._pre_count = None if self.pre.is_duration else self.pre.count  # (None: a duration)
+        self._bridge = _sum(self.pre, self.post)  # a closed window waits this long for the next (closer than post)
         self._max_count = None if self.max_window.is_duration else self.max_window.count
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
@@ -228,7 +241,7 @@ class WindowBuffer(object):
         self.limits = dict(topic_limits or {})  # topic -> options.TopicLimits (pre, post, max_mb)
         self._held_elsewhere = held_elsewhere or (lambda: 0)  # bytes of parts handed on and not yet written
         self._open = None                  # window taking driving records
-        self._pending = None               # closed window that the next one may still touch
+        self._pending = None               # closed window that the next one may still join (within post)
         self._clock = None                 # newest stamp seen (stamps may jitter backwards a little)
         self.resets = 0                    # times time jumped backwards and the buffer started over
 
@@ -285,10 +298,13 @@ class WindowBuffer(object):
         ring = self._ring
         ring.append(record)
         self._bytes += record.cost
-        if self._pre_count is None or len(ring) > self._pre_count + 1:  # else nothing to trim
-            if self._trim_ring(self.pre) and self._pending is not None:
+        if self._pending is not None:  # a trigger within post after its end (pre before it) joins the two windows
+            if self._trim_ring(self._bridge):
                 done.extend(self._finish(self._pending))
                 self._pending = None
+                self._trim_ring(self.pre)
+        elif self._pre_count is None or len(ring) > self._pre_count + 1:  # else nothing to trim
+            self._trim_ring(self.pre)
         if self._side:
             self._prune_side()
         if self.max_buffer_bytes and self._bytes > self._part_bytes:
@@ -336,9 +352,9 @@ class WindowBuffer(object):
         ``why``: the features that stood out (kept with the trigger). A ``pre`` longer than the buffer's gets what
         the buffer holds (its ``pre``). A trigger with a longer ``pre`` than the one that opened the window reaches
         back as far as the buffer held when it opened, until a part of the window is written. Returns the windows
-        this completes: only parts of a window that reached max_window, since a new window either extends the open
-        one or merges with the pending one (a pending window is completed as soon as a message after it leaves the
-        pre buffer).
+        this completes: parts of a window that reached max_window, and the pending window when this trigger's
+        ``pre`` starts more than ``post`` after it (``joins``; a new window else extends the open one or merges with
+        the pending one, which is completed as soon as a message after it leaves ``pre + post``).
         """
         if self._clock is None:
             raise ValueError('trigger: no message has been added yet')
@@ -349,8 +365,11 @@ class WindowBuffer(object):
             self._open.extend(trigger, post)
             self._open.reach_back(pre)
             return []
+        done = []
+        if self._pending is not None and not self.joins(pre):  # its pre starts more than post after the pending
+            done, self._pending = self._finish(self._pending), None
         if self._pending is not None:
-            # Every record after the pending window is still in the ring: the new window touches it.
+            # Every record after the pending window is still in the ring: the new window joins it.
             self._open, self._pending = self._pending, None
             self._open.records.extend(self._ring)
             self._open.extend(trigger, post)
@@ -360,7 +379,20 @@ class WindowBuffer(object):
             since = min(trigger.stamp - pre.seconds if pre.is_duration else trigger.stamp, self._ring[0].stamp)
             self._open = _OpenWindow(self._ring, trigger, post, since, before)
         self._ring.clear()
-        return self._split(self._open)
+        return done + self._split(self._open)
+
+    def joins(self, pre=None):
+        """Whether a trigger at the newest driving record, with its ``pre`` (None: the buffer's), joins a window:
+        the open one, or the pending one when its ``pre`` reaches within ``post`` of it (the ring holds every record
+        after the pending window: they all lie within ``pre + post``)."""
+        if self._open is not None:
+            return True
+        if self._pending is None:
+            return False
+        span, ring = _sum(self.pre if pre is None else Span.parse(pre, 'pre'), self.post), self._ring
+        if span.is_duration:
+            return not ring or ring[0].stamp >= self._clock - span.seconds
+        return len(ring) <= span.count + 1
 
     def oldest(self):
         """The stamp of the oldest driving record a trigger at the newest one can still keep (None before any):
@@ -383,11 +415,6 @@ class WindowBuffer(object):
             while len(ring) > pre.count + 1:
                 older.append(ring.popleft())
         return older
-
-    @property
-    def window_active(self):
-        """Whether a window is open or complete but not yet handed on (a new trigger then joins it)."""
-        return self._open is not None or (self._pending is not None and bool(self._pending.records))
 
     @property
     def window_start(self):

@@ -13,7 +13,7 @@ import itertools
 import operator
 
 from cc_log import errors
-from cc_log.core import raw_message, smart, trigger_topics
+from cc_log.core import raw_message, smart, smart_events, trigger_topics
 from cc_log.storage import window_writer
 
 __all__ = ['replay_one', 'replay_setup', 'replay', 'replay_into', 'replay_records', 'check_bag_topics',
@@ -135,10 +135,11 @@ def replay(bag_path, topic, model_path, out_dir, pre=smart.DEFAULT_PRE, post=sma
            max_buffer_mb=smart.DEFAULT_MAX_BUFFER_MB, retry_seconds=None, triggers=(), input_topics=None):
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
-    ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'start', 'end', 'messages',
-    'path'}], 'keep_budget'}`` with windows in start order (start/end: header stamps, float s, of the first and last
-    message saved); ``keep_budget``: ``KeepBudget.stats()``, the windows the keep budget skipped.
-    ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``); ``triggers``,
+    ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'name', 'start', 'end', 'messages',
+    'files', 'path'}], 'keep_budget'}`` with windows in start order, one per window whatever its files
+    (``smart_events.WindowTally``: messages in all of them; start/end: header stamps, float s, of the first and last
+    message saved; path: its first file); ``keep_budget``: ``KeepBudget.stats()``, the windows the keep budget
+    skipped. ``model_path``: the model of the classifier on ``topic`` (None: only ``triggers``); ``triggers``,
     ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``, called every
     PROGRESS_EVERY messages and at the end. The reading waits for the writer (``SmartLogger``'s
     ``wait_for_writer``: nothing thinned because it is behind). A window that cannot be written (disk full...) is
@@ -192,13 +193,8 @@ def replay_records(logger, records, progress=None, source='the records'):
     ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
     benchmarks."""
     out_dir = logger.directory
-    windows = []
-
-    def collect(event):
-        if event.kind == smart.WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages,
-                            'path': event.path})
-    logger.on_event(collect)
+    tally = smart_events.WindowTally()
+    logger.on_event(tally)
     count, stopped = 0, False
     try:
         for batch in _batches(records):
@@ -231,6 +227,6 @@ def replay_records(logger, records, progress=None, source='the records'):
         'input_messages': stats['messages_seen'],
         'raw_json_bytes': stats['raw_json_bytes'],
         'stored_bytes': stats['stored_bytes'],
-        'windows': sorted(windows, key=lambda window: window['start']),
+        'windows': tally.windows(),
         'keep_budget': logger.budget.stats(),  # the windows it skipped (core.keep_budget)
     }

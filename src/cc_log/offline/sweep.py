@@ -8,7 +8,7 @@ the bag's truth file when it has one, ``sweep_many`` does it for every bag on a 
 import collections
 import os
 
-from cc_log.core import smart
+from cc_log.core import smart_events
 from cc_log.offline import fleet, replay
 
 SWEEP_KEYS = ('threshold', 'pre', 'post', 'classify_every', 'retrigger')
@@ -49,13 +49,6 @@ def _thresholded(triggers, threshold):
     return triggers
 
 
-def _window_recorder(windows):
-    def record(event):
-        if event.kind == smart.WRITTEN:
-            windows.append({'start': event.start, 'end': event.end, 'messages': event.messages})
-    return record
-
-
 def _overlaps(window, span):
     return window['start'] <= span['end'] and window['end'] >= span['start']
 
@@ -75,9 +68,9 @@ def sweep_one(bag_path, out_dir, sweeps):
             _thresholded(options['triggers'], entry.threshold)
             total = max(total, replay.checked_count(bag, wanted, types))
             logger = replay.offline_logger(os.path.join(out_dir, entry.label), options)
-            windows = []
-            logger.on_event(_window_recorder(windows))
-            runs.append((entry, logger, frozenset(wanted), windows))
+            tally = smart_events.WindowTally()  # windows, not files (routes, parts)
+            logger.on_event(tally)
+            runs.append((entry, logger, frozenset(wanted), tally))
             topics.update(wanted)
     finally:
         bag.close()
@@ -97,7 +90,8 @@ def sweep_one(bag_path, out_dir, sweeps):
     truth_file = sim.truth_path(bag_path)
     truth = sim.load_truth(truth_file) if os.path.exists(truth_file) else None
     rows = []
-    for entry, logger, _, windows in runs:
+    for entry, logger, _, tally in runs:
+        windows = tally.windows()
         stats = logger.stats()
         if stats['messages_lost']:
             raise OSError('%s: %d window(s) (%d messages) not written: %s' % (

@@ -58,7 +58,7 @@ RETRY_PERIOD = 5.0       # seconds (monotonic clock) without a new file after a 
 # bwi_logging/record.launch names its odometry thinned to 1 Hz (topic_tools drop) odom_1hz; here it means the same.
 BWI_ALIASES = {'odom_1hz': ('odom', 1.0)}
 _SERIAL = itertools.count()  # the files this process opened: their temporary names never collide
-_ENTRY = re.compile(r'^(?P<topic>[^\s:]+)(?::(?P<rate>[^\s:]+))?$')
+_ENTRY = re.compile(r'(?P<topic>[^\s:]+)(?::(?P<rate>[^\s:]+))?')
 
 
 def parse_topics(value, name='context_topics', aliases=None, names=None):
@@ -71,7 +71,7 @@ def parse_topics(value, name='context_topics', aliases=None, names=None):
     else:
         entries = []
         for item in topic_list(value, name):
-            match = _ENTRY.match(item)
+            match = _ENTRY.fullmatch(item)
             if match is None:
                 raise ValueError('%s: %r is not a topic or topic:Hz' % (name, item))
             entries.append((match.group('topic'), match.group('rate')))

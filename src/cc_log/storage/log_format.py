@@ -4,13 +4,10 @@
 (``json-xz``: pure, ``formats.json_xz``; ``bag-lz4``: a rosbag, ``formats.bag_lz4``, rosbag imported only
 when that format is written or read); ``read_window(path)`` reads any of them by its magic bytes, and
 ``read_metadata(path)`` only its metadata, whose summary (``window_info.summary_of``: messages, serialized bytes and
-first/last stamps per topic, row JSON bytes) tells ``cclog info`` and ``stats`` what they report. Files are
-named by the UTC time of their first stamp and the first trigger reason, so names sort by time::
+first/last stamps per topic, row JSON bytes) tells ``cclog info`` and ``stats`` what they report.
 
-    cc_log_20150521T191138.027Z_classifier.json.xz
-    cc_log_20150521T191138.027Z_classifier_part2.json.xz   (second part of a split window)
-    cc_log_20150521T191138.027Z_classifier_1.json.xz       (a file of that name existed already)
-    cc_log_20150521T191138.027Z_classifier.002.bag         (the second file of a window split at split_mb)
+Names (docs/FORMAT.md) are ``window_names``' (one grammar, a name reserved once per window), imported here for
+the readers and writers that use them through this module.
 
 A file is written as ``<final name>.tmp-<pid>``, flushed and fsynced, moved to a final name that does not
 exist yet (hard link then unlink, so a file is never overwritten even by another process; rename on file
@@ -20,22 +17,20 @@ systems without hard links), and the directory is fsynced (``safe_files.AtomicFi
 """
 import collections
 import heapq
-import datetime
 import os
-import re
 
-from cc_log.core import routes
 from cc_log.storage import formats, payload_check
 from cc_log.core import raw_message
 from cc_log.core import safe_files, safe_input
-from cc_log.storage.window_info import (
+from cc_log.storage.window_info import (  # noqa: F401 (trigger_name: also read through this module)
     SUMMARY_KEYS, Contents, check_metadata, merged_summary, summary_of, trigger_name, utc_text, window_metadata)
+from cc_log.storage.window_names import (  # noqa: F401 (the names, read through this module too)
+    ANY_PREFIX, KEPT_MARK, PREFIX, RESERVED_MARK, TMP_MARK, Piece, WindowName, base_name, file_order, file_prefix,
+    final_names, parse_piece, piece_name, release_name, reservations, reserve_name, split_number, split_suffix,
+    window_key)
 
-PREFIX = 'cc_log_'  # what every file name begins with (``file_prefix``: another, from ``~name_prefix``)
 CONTEXT_PREFIX = PREFIX + 'context_'  # a context-track file (``context_track``: a plain rosbag, not a window)
 CONTEXT_MARK = 'context_'  # after the prefix: a context-track file
-TMP_MARK = safe_files.TMP_MARK
-KEPT_MARK = '.unrecovered-'  # a leftover kept after a partial recovery: <final name>.unrecovered-<pid>
 FILE_MODE = safe_files.FILE_MODE  # group-writable, never world-writable (the umask may take more away)
 DIR_MODE = safe_files.DIR_MODE
 
@@ -50,69 +45,11 @@ class Format(object):
     check = staticmethod(formats.check)
 
 
-# -- names ----------------------------------------------------------------------------------------------
-
-def file_prefix(name_prefix, name='name_prefix'):
-    """What every file name begins with for ``name_prefix`` (``cc_log``, or ``run`` of rosbag's ``-o /data/run``):
-    ``<name_prefix>_``. ValueError('<name>: ...') unless it is a plain part of a file name (no ``/``, no control
-    character, not starting with ``.``, at most 100 characters)."""
-    if (not isinstance(name_prefix, str) or not name_prefix or name_prefix.startswith('.') or '/' in name_prefix
-            or len(name_prefix) > 100 or any(ord(c) < 32 or ord(c) == 127 for c in name_prefix)):
-        raise ValueError('%s: %s must be a plain part of a file name (no "/", no control character, not starting '
-                         'with ".", at most 100 characters)' % (name, safe_input.brief(name_prefix)))
-    return name_prefix + '_'
-
-
-def _reason_text(window):
-    reason = trigger_name(window.triggers[0]) if window.triggers else 'window'
-    text = re.sub(r'[^A-Za-z0-9-]+', '-', reason).strip('-')
-    return text or 'window'
-
-
-def base_name(window, part=None, prefix=PREFIX):
-    """``cc_log_<UTC of the first stamp>_<name of the first trigger>[_part<N>]`` (no extension; ``part``: None for
-    the window's own; ``prefix``: ``file_prefix``'s, for ``cc_log_``)."""
-    moment = datetime.datetime(1970, 1, 1) + datetime.timedelta(seconds=float(window.start))
-    stamp = moment.strftime('%Y%m%dT%H%M%S.') + '%03dZ' % (moment.microsecond // 1000)
-    name = prefix + stamp + '_' + _reason_text(window)
-    part = getattr(window, 'part', 0) if part is None else part
-    if part:
-        name += '_part%d' % part
-    return name
-
+# -- grouping -------------------------------------------------------------------------------------------
 
 def _extension(path):
     module = formats.by_extension(path)
     return module.CODEC if module else None
-
-
-#: A window's file number N (1, 2, ...) once it is split at ``split_mb``: ``<base>[+<route>].<N, 3 digits>``.
-#: Base names hold no other ``.<digits>`` at their end (trigger and route names are ``[A-Za-z0-9-]``).
-_SPLIT = re.compile(r'\.([0-9]+)$')
-
-
-def split_suffix(number):
-    """What follows a window's name (and route) in the name of its file ``number`` (1, 2, ...): ``.002``."""
-    return '.%03d' % number
-
-
-def _stem(name):
-    module = formats.by_extension(name)
-    return name[:-len(module.EXTENSION)] if module else name
-
-
-def split_number(path):
-    """The number of a window's file split at ``split_mb`` (``<base>.002.bag``: 2); 0 for a file never split."""
-    match = _SPLIT.search(_stem(os.path.basename(path)))
-    return int(match.group(1)) if match else 0
-
-
-def _file_order(path):
-    """Where a file goes among its window's (``window_sets``): the window's own first, then each route, each
-    of them by split number."""
-    stem = _stem(os.path.basename(path))
-    _, separator, route = stem.partition(routes.SEPARATOR)
-    return (bool(separator), _SPLIT.sub('', route), split_number(path))
 
 
 def window_files(directory, prefix=PREFIX):
@@ -124,13 +61,6 @@ def window_files(directory, prefix=PREFIX):
         return []
     return [os.path.join(directory, name) for name in sorted(names)
             if name.startswith(prefix) and TMP_MARK not in name and _extension(name)]
-
-
-def window_key(path):
-    """What the files of one window share: the path without its format's extension, up to a route's name
-    (``<window>+<route>.<ext>``, ``core.routes``) or its split number (``<window>.002.<ext>``, ``split_number``)."""
-    directory, name = os.path.split(path)
-    return os.path.join(directory, _SPLIT.sub('', _stem(name).split(routes.SEPARATOR, 1)[0]))
 
 
 def window_sets(paths):
@@ -149,7 +79,7 @@ def window_sets(paths):
         for candidate in [path] + listed[directory].get(key, []):
             if candidate not in files:
                 files.append(candidate)
-    return [sorted(files, key=_file_order) for files in sets.values()]
+    return [sorted(files, key=file_order) for files in sets.values()]
 
 
 def read_window_set(paths):
@@ -161,12 +91,12 @@ def read_window_set(paths):
     metadata, records = read_window(paths[0])
     if len(paths) == 1:
         return metadata, records
-    metadatas, groups = [metadata], collections.OrderedDict([(_file_order(paths[0])[:2], records)])
+    metadatas, groups = [metadata], collections.OrderedDict([(file_order(paths[0])[:2], records)])
     for path in paths[1:]:
         found, more = read_window(path)
         metadatas.append(found)
         if not _is_copy(found, paths):
-            groups.setdefault(_file_order(path)[:2], []).extend(more)
+            groups.setdefault(file_order(path)[:2], []).extend(more)
     merged = list(heapq.merge(*groups.values(), key=lambda record: record.stamp)) if len(groups) > 1 else records
     counts = collections.Counter(record.topic for record in merged)
     metadata = dict(merged_metadata(metadatas, paths), counts=dict(counts), topics=list(counts), count=len(merged))
@@ -176,12 +106,15 @@ def read_window_set(paths):
 def merged_metadata(metadatas, paths):
     """The metadata of a window written as several files (``paths``, as ``window_sets`` orders them, and their
     ``metadatas``): that of the last file of its first group (its own file, or its last split: it names every
-    trigger), with ``files``, the messages (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the
-    summed ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own written) for a split
+    trigger; a window written a file per part: the triggers of them all), with ``files``, the messages
+    (``counts``, ``count``, ``topics``, ``types``), ``start``/``end`` and the summed
+    ``dropped``/``undecodable``/``lost`` of them all, ``splits`` (files of its own written) for a split
     window, and a summary (``SUMMARY_KEYS``) when every file has one."""
-    first = _file_order(paths[0])[:2]
-    own = [meta for meta, path in zip(metadatas, paths) if _file_order(path)[:2] == first]
+    first = file_order(paths[0])[:2]
+    own = [meta for meta, path in zip(metadatas, paths) if file_order(path)[:2] == first]
     result = dict(own[-1], files=list(paths))
+    if len(own) > 1 and not any('split' in meta for meta in own):  # a file per part: each says its new triggers
+        result['triggers'] = [trigger for meta in own for trigger in meta.get('triggers') or []]
     result.pop('split', None)
     if any(split_number(path) for path in paths):  # the files written (older ones may be gone: max_disk_mb)
         result['splits'] = own[-1].get('splits', len(own))
@@ -221,7 +154,7 @@ def merged_metadata(metadatas, paths):
 def _is_copy(metadata, paths):
     """True for the metadata of a ``copy`` route's file (``core.routes``) of a window whose own file is among
     ``paths`` (as ``window_sets`` orders them): its messages are in the window's own file too."""
-    return bool(metadata.get('copy')) and metadata.get('route') is not None and not _file_order(paths[0])[0]
+    return bool(metadata.get('copy')) and metadata.get('route') is not None and not file_order(paths[0])[0]
 
 
 def kept_leftovers(directory, prefix=PREFIX):
@@ -252,18 +185,12 @@ def ensure_directory(directory):
     return safe_files.make_dirs(directory)
 
 
-def final_names(directory, base, extension):
-    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ..."""
-    counter = 0
-    while True:
-        yield os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
-        counter += 1
-
-
 def write_window(window, directory, fmt, metadata=None, base=None, left_out=None, triggers=None, prefix=PREFIX):
     """Write a LogWindow to ``directory`` in format ``fmt``; return ``(path, bytes written)``.
 
-    ``base``: the file name without extension (default ``base_name(window, prefix=prefix)``; used by ``recovery``).
+    ``base``: the file name without extension (default: a name reserved for the window, ``reserve_name``, of
+    ``prefix`` (``file_prefix``'s), numbered by the window's part as ``piece_name`` does; the writer gives its
+    reserved name's piece, ``recovery`` a leftover's).
     ``triggers``: those its metadata says (default: the window's; a part of a window written as a file per part
     says those that came since the part before it, while its name is the window's first trigger's).
 
@@ -296,13 +223,18 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
             meta.pop(key, None)
         if left_out is not None:
             left_out.update(meta['undecodable_topics'])
-    base = base or base_name(window, prefix=prefix)
     extension = module.EXTENSION
     write = module.encoder(records, meta)  # a format may encode now, before the temporary file exists
-    target = safe_files.AtomicFile(os.path.join(directory, base + extension),
-                                   names=final_names(directory, base, extension))
-    with target as stream:
-        write(stream)
+    name = WindowName(prefix=prefix)
+    if base is None:
+        base = piece_name(name.take(directory, window), None, getattr(window, 'part', 0))
+    try:
+        target = safe_files.AtomicFile(os.path.join(directory, base + extension),
+                                       names=final_names(directory, base, extension))
+        with target as stream:
+            write(stream)
+    finally:
+        name.release()
     return target.path, target.size
 
 
@@ -314,31 +246,30 @@ def streams(fmt):
 class WindowFile(object):
     """One window file written a part at a time, for a window handed on in parts (``LogWindow.part`` 1, 2, ...,
     the last ``final``), by a format with a ``WindowStream``: ``append(part, metadata)`` for each part, then
-    ``finish(metadata)`` -> ``(path, bytes)``. The file is ``<base name of the window>.<ext>.tmp-<pid>`` until
-    it is finished (a crash leaves a leftover that ``recovery`` salvages), then gets its final name as
-    ``write_window``'s files do. ``summary``: the window as a whole (triggers, start, end, its length) once a part
-    was appended. Metadata counters that every part carries (``SUMMED``) are summed over the parts; ``lost``:
-    messages of parts that could not be written (said in the metadata).
+    ``finish(metadata)`` -> ``(path, bytes)``. The file is ``<piece name>.<ext>.tmp-<pid>`` until it is finished (a
+    crash leaves a leftover that ``recovery`` salvages), then gets its final name, ``piece_name(name, route)``
+    (``name``: the window's reserved name; None: one reserved for its first part's ``base_name`` of ``prefix``,
+    ``file_prefix``'s). ``summary``: the
+    window as a whole (triggers, start, end, its length) once a part was appended. Metadata counters that every
+    part carries (``SUMMED``) are summed over the parts; ``lost``: messages of parts that could not be written (said
+    in the metadata).
 
     ``split_bytes`` (0: never): before a part, a file holding at least that many bytes is finished and the part
-    begins a new one; the files are then ``<base>.001<ext>``, ``<base>.002<ext>``, ... (``split_suffix``), each
+    begins a new one; the files are then ``<piece>.001<ext>``, ``<piece>.002<ext>``, ... (``split_suffix``), each
     a complete file whose metadata says its own messages, ``split`` (its number) and ``window_start``, the last
     also ``splits`` and ``window_end``; each holds at least ``split_bytes`` (but the last) and at most one part
     more. ``take_closed()`` gives the ``(path, bytes)`` of the files finished so by ``append``."""
 
     SUMMED = ('dropped', 'undecodable')
 
-    def __init__(self, directory, fmt, suffix='', base=None, split_bytes=0, prefix=PREFIX):
+    def __init__(self, directory, fmt, route=None, name=None, split_bytes=0, prefix=PREFIX):
         self.directory = directory
-        self.prefix = prefix  # of the base name when ``base`` is None (``file_prefix``)
-        self.suffix = suffix  # after the window's base name: a route's file (``core.routes``)
-        self.base = base      # the window's base name (None: its first part's)
+        self.route = route    # a route's file of the window (``core.routes``), None for its own
+        self.name = WindowName(name=name, prefix=prefix)  # the window's (None until its first part: reserved then)
         self.format = formats.check(fmt)
         self.split_bytes = int(split_bytes or 0)
         self._module = formats.get(fmt)
         self._target = self._stream = self._file = None
-        self._name = None     # base name and suffix of every file of the window (fixed by its first part)
-        self._chosen = None   # the first free name of a split window's files (``_final_names``)
         self._split = False   # a file was finished at split_bytes: every file is named as a split
         self.number = 1       # of the file being written
         self._closed = []     # (path, bytes) of the files finished before the window's end (``take_closed``)
@@ -366,30 +297,20 @@ class WindowFile(object):
 
     def _open(self, window):
         ensure_directory(self.directory)
-        if self._name is None:
-            self._name = (self.base or base_name(window, part=0, prefix=self.prefix)) + self.suffix
+        name = self.name.take(self.directory, window)
         extension = self._module.EXTENSION
-        path = self._name + (split_suffix(self.number) if self.number > 1 else '') + extension
-        target = safe_files.AtomicFile(os.path.join(self.directory, path), names=self._final_names(extension),
+        path = piece_name(name, self.route, self.number if self.number > 1 else 0) + extension
+        target = safe_files.AtomicFile(os.path.join(self.directory, path), names=self._final_name(extension),
                                        keep=True)
         self._file = target.__enter__()
         self._target, self._stream = target, self._module.WindowStream(self._file)
         self._in_file, self._summed, self.lost = Contents(), {}, 0
 
-    def _final_names(self, extension):
-        """The names the file being written may take when it is finished (read then: a window's first file is
-        named as a split once a second one began). A split window's files share the first free name
-        (``<base>``, ``<base>_1``, ...: ``final_names``) that its first file took; a name another window's files
-        have, split or not, is not taken."""
-        number, directory, split = self.number, self.directory, self._split
-        if self._chosen is not None:
-            yield from final_names(directory, self._chosen + split_suffix(number), extension)
-            return
-        for candidate in final_names(directory, self._name, ''):
-            if os.path.lexists(candidate + (extension if split else split_suffix(1) + extension)):
-                continue  # another window of that name, split or not: its files would be taken for this one's
-            self._chosen = os.path.basename(candidate)
-            yield candidate + (split_suffix(number) if split else '') + extension
+    def _final_name(self, extension):
+        """The name the file being written takes when it is finished (read then: a window's first file is named
+        as a split once a second one began)."""
+        number = self.number if self._split else 0
+        yield os.path.join(self.directory, piece_name(self.name.name, self.route, number) + extension)
 
     def _close_split(self):
         """Finish the file being written (its number said) before the next part begins a new one."""
@@ -420,7 +341,10 @@ class WindowFile(object):
         split = {}
         if self.number > 1:
             split = {'split': self.number, 'splits': self.number, 'window_end': float(self._contents.end)}
-        return self._close(window.triggers, metadata, split)
+        try:
+            return self._close(window.triggers, metadata, split)
+        finally:
+            self.name.release()
 
     def _close(self, triggers, metadata, split):
         """Write the final metadata of the file being written (``split``: its keys of a split window), close it
@@ -441,12 +365,14 @@ class WindowFile(object):
         if self._target is not None:
             target, self._target, self._stream = self._target, None, None
             target.abandon()
+        self.name.release()
 
     def discard(self):
         """Remove the unfinished file (nothing of it is kept)."""
         if self._target is not None:
             target, self._target, self._stream = self._target, None, None
             target.__exit__(ValueError, ValueError('discarded'), None)
+        self.name.release()
 
     @property
     def summary(self):

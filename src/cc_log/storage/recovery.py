@@ -42,8 +42,8 @@ from cc_log.storage import formats, log_format
 from cc_log.core import msg_codec, safe_files, why
 from cc_log.core.records import LogWindow, Trigger
 
-__all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'incomplete', 'DUPLICATE', 'COMPLETE', 'PARTIAL',
-           'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']
+__all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'release_stale_names', 'incomplete', 'DUPLICATE',
+           'COMPLETE', 'PARTIAL', 'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']
 
 DUPLICATE = 'duplicate'
 COMPLETE = 'complete'
@@ -68,7 +68,7 @@ decoded (0 when none); kept: where the leftover is kept after a partial recovery
 
 def _leftover(prefix):
     """The pattern of a leftover's name whose final name begins with ``prefix``."""
-    return re.compile(r'^%s.*(%s)%s(\d+)(\.\d+)?$' % (
+    return re.compile(r'%s.*(%s)%s(\d+)(\.\d+)?' % (  # (re.fullmatch)
         re.escape(prefix), '|'.join(re.escape(extension) for extension in formats.extensions()),
         re.escape(log_format.TMP_MARK)))
 
@@ -86,7 +86,8 @@ def prefix_of(path):
 def scan(directory, prefix=log_format.PREFIX):
     """Leftovers (``cc_log_*.tmp-<pid>``; ``prefix``: ``log_format.file_prefix``'s) in ``directory``, sorted."""
     pattern = _leftover(prefix)
-    return [path for path in log_format.temporary_files(directory, prefix) if pattern.match(os.path.basename(path))]
+    return [path for path in log_format.temporary_files(directory, prefix)
+            if pattern.fullmatch(os.path.basename(path))]
 
 
 def incomplete(outcomes):
@@ -97,7 +98,7 @@ def incomplete(outcomes):
 def _split(path, prefix):
     """(directory, final base name without extension, extension, pid) of a leftover path."""
     directory, name = os.path.split(path)
-    match = _leftover(prefix).match(name)
+    match = _leftover(prefix).fullmatch(name)
     if not match:
         raise ValueError('%s: not a cc_log leftover (%s*.json.xz%s<pid> or %s*.bag%s<pid>)'
                          % (path, prefix, log_format.TMP_MARK, prefix, log_format.TMP_MARK))
@@ -236,10 +237,29 @@ def recover(path, prefix=log_format.PREFIX):
     return _recover_partial(path, directory, base, extension, info.st_size, fmt, prefix)
 
 
+def release_stale_names(directory, prefix=log_format.PREFIX):
+    """Remove the name reservations (``log_format.reserve_name``; ``prefix``: of the names) of processes no longer
+    running (this one's and a running one's are kept, and one that names no process but changed in the last
+    ``BUSY_SECONDS``); they hold no data. Returns the paths removed."""
+    removed = []
+    for path, pid in log_format.reservations(directory, prefix):
+        if pid == os.getpid() or _alive(pid):
+            continue
+        if pid is None and time.time() - os.lstat(path).st_mtime < BUSY_SECONDS:
+            continue  # whose it is is not said (a full disk): a recent one may be a running writer's
+        log_format.release_name(path)
+        removed.append(path)
+    return removed
+
+
 def recover_directory(directory, prefix=log_format.PREFIX):
     """Recover every leftover in ``directory`` (of files named ``<prefix>...``); a list of Outcomes (an OSError
     for one leftover becomes an UNRECOVERABLE outcome naming it; nothing is deleted then; one gone meanwhile is
-    left out)."""
+    left out). Stale name reservations are removed first (``release_stale_names``)."""
+    try:
+        release_stale_names(directory, prefix)
+    except OSError:
+        pass  # a directory that cannot be written: its leftovers are reported below
     outcomes = []
     for path in scan(directory, prefix):
         try:

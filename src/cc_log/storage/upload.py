@@ -13,8 +13,8 @@ queue of at most ``max_queued`` (MAX_QUEUED), started in order as commands end. 
 is full is not uploaded: it is counted as ``dropped`` (the file stays on disk). A slow uploader thus makes
 the queue grow, never the number of processes or threads.
 
-``on_event(WriterEvent)`` hooks it to a ``WindowWriter``: WRITTEN events of window and context files start
-it (not feature vectors). Pure (subprocess, threading).
+``on_event(WriterEvent)`` hooks it to a ``WindowWriter``: WRITTEN and SPLIT events of window files (every piece:
+routes too) and context files start it (not feature vectors). Pure (subprocess, threading).
 """
 import collections
 import os
@@ -75,10 +75,10 @@ class UploadHook(object):
         return bool(self.command)
 
     def on_event(self, event):
-        """A WindowWriter event: run the command for each window or context file written (a window split at
-        split_mb: each of its files)."""
+        """A WindowWriter event: run the command for each window or context file written (every piece of a
+        window: its own file, its route files, each file of a window split at split_mb)."""
         if event.kind in (window_writer.WRITTEN, window_writer.SPLIT) and event.job is not None and event.path and \
-                event.job.what in (window_writer.WINDOW, window_writer.CONTEXT):
+                event.job.what in (window_writer.WINDOW, window_writer.ROUTE, window_writer.CONTEXT):
             self.run(event.path)
 
     def run(self, path):

@@ -33,7 +33,6 @@ import time
 
 from cc_log.storage import disk_guard
 from cc_log.storage import log_format
-from cc_log.core import routes
 from cc_log.core.records import LogWindow
 from cc_log.core.spans import megabytes, seconds
 
@@ -65,15 +64,17 @@ class Job(object):
     """One file for the writer: ``window`` (a LogWindow) with ``metadata`` for ``log_format.write_window``, or
     ``write``, a function that writes another file and returns its path. ``what`` names the kind of file
     (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events. ``fmt`` and
-    ``route``: the window's file of a route (``core.routes``) in that format, named ``<base>+<route>``; ``base``:
-    the window's file name without extension, the same for all its files (None: ``log_format.base_name``). A
-    copy route's file (``metadata['copy']``) counts no messages or memory: its window's own file does."""
+    ``route``: the window's file of a route (``core.routes``) in that format, named ``<name>+<route>``; ``name``:
+    the window's ``log_format.WindowName``, shared by the jobs of all its files (its parts, its routes) and reserved
+    at the first one's write (None: a name of its own, or for a part (``LogWindow.key``) its first part's);
+    ``last``: the window's last job (its name's reservation is released once it is done). A copy route's file
+    (``metadata['copy']``) counts no messages or memory: its window's own file does."""
 
     __slots__ = ('window', 'metadata', 'write', 'what', 'tag', 'messages', 'bytes', 'failed_at', 'reported', 'whole',
-                 'fmt', 'route', 'base')
+                 'fmt', 'route', 'name', 'last')
 
     def __init__(self, window=None, metadata=None, write=None, what=None, tag=None, fmt=None, route=None,
-                 base=None):
+                 name=None, last=True):
         if (window is None) == (write is None):
             raise ValueError('job: give either a window or a write function')
         self.window = window
@@ -87,7 +88,8 @@ class Job(object):
         self.whole = None       # a window written a part at a time, as a whole, once its file is finished
         self.failed_at = None   # clock of the first failure
         self.reported = False   # a FAILED (kept) event was sent
-        self.fmt, self.route, self.base = fmt, route, base
+        self.fmt, self.route = fmt, route
+        self.name, self.last = name, last
 
     @property
     def stream_key(self):
@@ -144,6 +146,8 @@ class WindowWriter(object):
         self.cpu_seconds = 0.0            # CPU time of the writer thread writing (decoding, compressing, disk)
         self._streams = {}                # (window key, route) -> its log_format.WindowFile being written
         self._triggers_said = {}          # (window key, route) -> its triggers in the files of its parts so far
+        self._names = set()               # the WindowNames reserved and not yet released
+        self._part_names = {}             # window key -> WindowName of a window in parts whose jobs bring none
         self._queue = queue.Queue()
         self._thread = None
         if background:
@@ -260,7 +264,9 @@ class WindowWriter(object):
         self._retry_held(final=True)
         for (key, route), stream in list(self._streams.items()):  # a window whose last part never came
             self._write(Job(LogWindow([], stream.triggers, 1, True, key), stream.metadata, fmt=stream.format,
-                            route=route))
+                            route=route, name=log_format.WindowName(name=stream.name.name)))
+        for name in list(self._names):  # windows whose last job never came
+            self._release(name)
 
     def _wait_held(self, seconds):
         """Retry held jobs every retry_period for up to ``seconds`` or until none is held."""
@@ -358,15 +364,14 @@ class WindowWriter(object):
         window = job.window
         if window is None:
             return job.write(), 0
-        fmt, key = job.fmt or self.format, job.stream_key
-        suffix = routes.SEPARATOR + job.route if job.route else ''
+        fmt, key, name = job.fmt or self.format, job.stream_key, self._take_name(job)
         if window.part and window.key is not None and log_format.streams(fmt):
             stream = self._streams.get(key)
             if stream is None:
                 if not window.records:  # a route none of whose topics came yet: no file
                     return None, 0
-                stream = self._streams[key] = log_format.WindowFile(self.directory, fmt, suffix, job.base,
-                                                                    self.split_bytes, self.prefix)
+                stream = self._streams[key] = log_format.WindowFile(
+                    self.directory, fmt, job.route, name, self.split_bytes, self.prefix)
             try:
                 if not window.final:
                     stream.append(window, job.metadata)
@@ -386,7 +391,7 @@ class WindowWriter(object):
         # a part's file says the triggers that came since the part before it (a part's window holds all of them)
         triggers = window.triggers[self._triggers_said.get(key, 0):] if parted else None
         left_out = collections.Counter()  # messages that could not be decoded (json-xz): lost, not kept
-        base = None if job.base is None else job.base + suffix + ('_part%d' % window.part if window.part else '')
+        base = log_format.piece_name(name, job.route, window.part if parted else 0)
         path, nbytes = log_format.write_window(window, self.directory, fmt, job.metadata, left_out=left_out,
                                                triggers=triggers, base=base, prefix=self.prefix)
         if parted and window.final:
@@ -401,7 +406,34 @@ class WindowWriter(object):
                     'metadata)' % (path, sum(left_out.values()))
         return path, nbytes
 
+    def window_name(self, window):
+        """A ``log_format.WindowName`` for the jobs of all the files of ``window`` (its parts, its routes): its
+        ``base_name`` with this writer's prefix, reserved at the first one's write."""
+        return log_format.WindowName(log_format.base_name(window, self.prefix), prefix=self.prefix)
+
+    def _take_name(self, job):
+        """The name of the job's window, reserved at its first piece (OSError: the directory cannot be written)."""
+        if job.name is None:
+            window = job.window
+            if window.part and window.key is not None:  # every part of a window takes its first part's name
+                job.name = self._part_names.pop(window.key, None) or log_format.WindowName(prefix=self.prefix)
+                job.last = window.final
+                if not window.final:
+                    self._part_names[window.key] = job.name
+            else:
+                job.name = log_format.WindowName(prefix=self.prefix)
+        if job.name.name is None:
+            job.name.take(self.directory, job.window)
+            self._names.add(job.name)
+        return job.name.name
+
+    def _release(self, name):
+        name.release()
+        self._names.discard(name)
+
     def _written_file(self, job, path, nbytes):
+        if job.last and job.name is not None:
+            self._release(job.name)
         with self._lock:
             self._counts['jobs_queued'] -= 1
             self._counts['messages_queued'] -= job.messages
@@ -450,6 +482,8 @@ class WindowWriter(object):
 
     def _lose(self, job, error):
         window = job.window
+        if job.last and job.name is not None:
+            self._release(job.name)
         stream = self._streams.get(job.stream_key) if window is not None and window.key is not None else None
         if stream is not None:
             stream.lose(window, job.metadata)

@@ -29,7 +29,7 @@ optional ``pre`` / ``post`` Spans for this window (None: the logger's) and ``why
 most outstanding first (a tuple of at most 3 dicts, ``core.why``)."""
 
 NAN = float('nan')
-_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_-]{0,63}$')
+_NAME = re.compile(r'[A-Za-z][A-Za-z0-9_-]{0,63}')
 _KINDS = Registry('kind', 'kind')
 register = _KINDS.register
 kinds = _KINDS.names
@@ -38,7 +38,7 @@ get = _KINDS.get
 
 def check_name(name):
     """A trigger name (it goes into file names): a letter, then letters, digits, '_' or '-'."""
-    if not isinstance(name, str) or not _NAME.match(name):
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
         raise ValueError('trigger name: %s must be a letter then letters, digits, "_" or "-" (64 at most)'
                          % brief(name))
     return name

@@ -18,7 +18,7 @@ from cc_log.triggers.base import Trigger, register
 
 REASON = 'periodic'
 _UNITS = {'ms': 0.001, 's': 1.0, 'min': 60.0, 'h': 3600.0}
-_EVERY = re.compile(r'^\s*([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*(ms|s|min|h)\s*$')
+_EVERY = re.compile(r'\s*([0-9]+(?:\.[0-9]*)?|\.[0-9]+)\s*(ms|s|min|h)\s*')
 
 
 def parse_every(value, name='every'):
@@ -27,7 +27,7 @@ def parse_every(value, name='every'):
     if isinstance(value, Span) and value.is_duration:
         seconds = value.seconds
     else:
-        match = _EVERY.match(value) if isinstance(value, str) else None
+        match = _EVERY.fullmatch(value) if isinstance(value, str) else None
         if match is None:
             raise ValueError('%s: %s is not a duration like 30s, 10min or 1h' % (name, repr(value)[:40]))
         seconds = float(match.group(1)) * _UNITS[match.group(2)]

@@ -50,7 +50,7 @@ MAX_CONDITION_CHARS = 1000
 _FIELD_PATH = re.compile(r'[A-Za-z0-9_.\[\]]*')  # the characters a field path may hold (one pass, no backtracking)
 _PART = re.compile(r'([A-Za-z_][A-Za-z0-9_]*)(?:\[([0-9]{1,9})\])?\Z')
 _NUMBER = re.compile(r'[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\Z')
-_STRING = re.compile(r'^(?:"([^"\\]*)"|\'([^\'\\]*)\')$')
+_STRING = re.compile(r'(?:"([^"\\]*)"|\'([^\'\\]*)\')')
 OPERATORS = {'<': operator.lt, '<=': operator.le, '>': operator.gt, '>=': operator.ge, '==': operator.eq,
              '!=': operator.ne}
 _NUMERIC = msg_codec.FLOAT_TYPES | msg_codec.INT_TYPES | frozenset(['bool'])
@@ -68,7 +68,7 @@ class Condition(object):
         self.absolute, field, self.path, self.op_text, raw = parsed
         self.field = field
         self.op = OPERATORS[self.op_text]
-        string = _STRING.match(raw)
+        string = _STRING.fullmatch(raw)
         if string:
             self.value = string.group(1) if string.group(1) is not None else string.group(2)
         elif raw in ('true', 'false'):

@@ -72,7 +72,9 @@ def run(args):
                 ', threshold %.4g' % w['threshold'] if isinstance(w['threshold'], (int, float)) else ''))
             for name, said in _whys(w['triggers']):
                 say('  why        %s: %s' % (name, why.texts(said)))
-        if w['part']:
+        if w['part'] and len(w['files']) > 1:  # every part's files read as this window
+            say('  parts      %s (a file per part, the window split at max_window)' % w['part'])
+        elif w['part']:
             say('  part       %s of a window split at max_window' % w['part'])
     say('%d window(s), %d messages, %s on disk, %s as row JSON%s' % (
         total['windows'], total['messages'], human_bytes(total['bytes']), human_bytes(total['raw_json_bytes']),

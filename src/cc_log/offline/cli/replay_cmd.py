@@ -24,11 +24,13 @@ def add_parser(subparsers):
         a classifier scoring --topic with --model. Every trigger saves --pre messages before and --post
         after (counts or durations), with the --side-topic messages of that time span, as window files in
         OUT; options given override the configuration. --json prints {input_messages, raw_json_bytes,
-        stored_bytes, windows: [{start, end, messages, path}]}; start/end are the header stamps (float
-        seconds) of the first and last message saved. A window that cannot be written (disk full) is retried
-        for a few seconds; then replay stops and exits 1 with one line naming OUT and how many windows and
-        messages were not written. --max-windows-per-hour N: the keep budget (past N windows in the last
-        hour, only a more anomalous one opens); the summary counts what it skipped (--json: keep_budget).
+        stored_bytes, windows: [{name, start, end, messages, files, path}]}, one entry per window whatever
+        its files (routes, parts, splits: messages of them all; path: its first); start/end are the header
+        stamps (float seconds) of the first and last message saved. A window that cannot be written (disk
+        full) is retried for a few seconds; then replay stops and exits 1 with one line naming OUT and how
+        many windows and messages were not written. --max-windows-per-hour N: the keep budget (past N windows
+        in the last hour, only a more anomalous one opens); the summary counts what it skipped (--json:
+        keep_budget).
         """,
         """
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
@@ -97,9 +99,7 @@ def run(args):
         ('input_messages', summary['input_messages']),
         ('raw_json_bytes', summary['raw_json_bytes']),
         ('stored_bytes', summary['stored_bytes']),
-        ('windows', [collections.OrderedDict([('start', w['start']), ('end', w['end']),
-                                              ('messages', w['messages']), ('path', w['path'])])
-                     for w in summary['windows']]),
+        ('windows', [_window_entry(w) for w in summary['windows']]),
         ('drift', [monitor.as_dict() for monitor in summary['drift']]),
         ('online', summary['online']),
         ('keep_budget', summary['keep_budget']),
@@ -116,15 +116,23 @@ def run(args):
         human_bytes(result['raw_json_bytes']), human_bytes(result['stored_bytes']),
         ' (%.1fx smaller)' % ratio if ratio else ''))
     for number, window in enumerate(windows, 1):
-        print('  %3d  %s .. %s  %7.2f s  %6d msgs  %s' % (
+        more = len(window['files']) - 1
+        print('  %3d  %s .. %s  %7.2f s  %6d msgs  %s%s' % (
             number, stamp_text(window['start']), stamp_text(window['end']), window['end'] - window['start'],
-            window['messages'], window['path']))
+            window['messages'], os.path.join(args.out, window['name']),
+            ' (%d files: %s)' % (more + 1, ', '.join(os.path.basename(f) for f in window['files'])) if more else
+            ' (%s)' % os.path.basename(window['path'])))
     for monitor in summary['drift']:
         print('  %s' % monitor.report())
     for learner in summary['online']:
         print('  %s: online learning %s' % (learner['classifier'], learner['resumed'] or 'started afresh'))
     print(''.join(_skipped_lines(summary['keep_budget'])), end='')
     return EXIT_OK
+
+
+def _window_entry(window):
+    """A window of the summary as printed: its name, start, end, messages (in all its files), files, path."""
+    return collections.OrderedDict((key, window[key]) for key in ('name', 'start', 'end', 'messages', 'files', 'path'))
 
 
 def _skipped_lines(budget):
@@ -148,8 +156,7 @@ def _replay_many(args, cfg):
                                  'keep_budget'))
     reports = {}
     for row in rows:
-        row['windows'] = [collections.OrderedDict((key, w[key]) for key in ('start', 'end', 'messages', 'path'))
-                          for w in row.get('windows', ())]
+        row['windows'] = [_window_entry(w) for w in row.get('windows', ())]
         reports[row['bag']] = ''.join('\n  %s' % monitor.report() for monitor in row.get('drift', ())) + ''.join(
             '\n' + line.rstrip('\n') for line in _skipped_lines(row.get('keep_budget') or {}))
         row['drift'] = [monitor.as_dict() for monitor in row.get('drift', ())]
