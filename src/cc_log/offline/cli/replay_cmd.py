@@ -116,18 +116,24 @@ def run(args):
         human_bytes(result['raw_json_bytes']), human_bytes(result['stored_bytes']),
         ' (%.1fx smaller)' % ratio if ratio else ''))
     for number, window in enumerate(windows, 1):
-        more = len(window['files']) - 1
         print('  %3d  %s .. %s  %7.2f s  %6d msgs  %s%s' % (
             number, stamp_text(window['start']), stamp_text(window['end']), window['end'] - window['start'],
             window['messages'], os.path.join(args.out, window['name']),
-            ' (%d files: %s)' % (more + 1, ', '.join(os.path.basename(f) for f in window['files'])) if more else
-            ' (%s)' % os.path.basename(window['path'])))
+            ' (%s)' % _files_text(window['files'])))
     for monitor in summary['drift']:
         print('  %s' % monitor.report())
     for learner in summary['online']:
         print('  %s: online learning %s' % (learner['classifier'], learner['resumed'] or 'started afresh'))
     print(''.join(_skipped_lines(summary['keep_budget'])), end='')
     return EXIT_OK
+
+
+def _files_text(files, shown=3):
+    """A window's files as the summary names them: every one up to ``shown``, else the first and the last."""
+    names = [os.path.basename(path) for path in files]
+    if len(names) <= shown:
+        return ('%d files: ' % len(names) if len(names) > 1 else '') + ', '.join(names)
+    return '%d files: %s .. %s' % (len(names), names[0], names[-1])
 
 
 def _window_entry(window):
