@@ -20,12 +20,14 @@ WINDOW = '2s'
 ONSET, END = 130.0, 131.0   # a surge to 2.5 m/s
 
 
-def odom(stamp, x, speed):
+def odom(stamp, x, speed, yaw_rate=0.0):
+    """An Odometry message at ``stamp`` driving along x."""
     msg = Odometry()
     msg.header.stamp.secs, msg.header.stamp.nsecs = int(stamp), int(round((stamp % 1) * 1e9))
     msg.pose.pose.orientation.w = 1.0
     msg.pose.pose.position.x = x
     msg.twist.twist.linear.x = speed
+    msg.twist.twist.angular.z = yaw_rate
     return msg
 
 

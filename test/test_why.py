@@ -18,24 +18,14 @@ from cc_log.storage import log_format, window_info
 from cc_log.storage.log_format import window_files
 from cc_log.triggers import ClassifierTrigger, RuleTrigger
 from cc_log.triggers.base import Fire, Trigger as BaseTrigger
+from test_event_windows import odom
 
-from nav_msgs.msg import Odometry  # noqa: E402
 
 ODOM = '/odom'
 RATE = 20.0
 WHY = (why.entry('max(wz)', 4.2, 1.826, 'rad/s', label='yaw rate'),
        why.entry('pose_step', 1.2, 0.1, 'm', text='pose moved 1.2 m while the wheels reported 0.1 m'))
 WHY_TEXT = 'yaw rate 4.2 rad/s, 2.3x the most seen in training'
-
-
-def odom(stamp, x, speed, yaw_rate=0.0):
-    msg = Odometry()
-    msg.header.stamp.secs, msg.header.stamp.nsecs = int(stamp), int(round((stamp % 1) * 1e9))
-    msg.pose.pose.orientation.w = 1.0
-    msg.pose.pose.position.x = x
-    msg.twist.twist.linear.x = speed
-    msg.twist.twist.angular.z = yaw_rate
-    return msg
 
 
 def drive(seconds, start=100.0, spin=None, seed=0):

@@ -186,22 +186,28 @@ def test_a_sweep_counts_windows_not_files_with_routes_and_json_xz_parts(simulate
     assert row['kept'] == sum(log_format.read_window_set(files_of_one)[0]['count'] for files_of_one in sets)
 
 
-def test_a_looping_bag_gives_each_window_its_own_name_and_route_file(simulated, tmp_path):
-    """``rosbag play -l`` into one logger: the stamps come again, so do the names proposed; each window still
-    gets a name of its own, its route file with it (/odom in every window)."""
+def _played_twice(bag, config_path, out, **extra):
+    """Replay's summary of ``bag`` fed twice into one offline logger writing into ``out`` (``rosbag play -l``),
+    with the configuration at ``config_path`` and ``extra`` logger options."""
     from cc_log.core import config
     from cc_log.offline import replay
     from cc_log.storage.bag import bagio
-    bag, make = simulated
-    cfg = config.Config.from_dict(yaml.safe_load(open(make()).read()))
+    cfg = config.Config.from_dict(yaml.safe_load(open(config_path).read()))
     opened = replay.open_bag(bag)
     try:
         options, _, topics = replay.replay_setup(cfg, opened)
     finally:
         opened.close()
     records = list(bagio.read_messages(bag, sorted(topics)))
+    return replay.replay_records(replay.offline_logger(out, dict(options, **extra)), records + records)
+
+
+def test_a_looping_bag_gives_each_window_its_own_name_and_route_file(simulated, tmp_path):
+    """``rosbag play -l`` into one logger: the stamps come again, so do the names proposed; each window still
+    gets a name of its own, its route file with it (/odom in every window)."""
+    bag, make = simulated
     out = str(tmp_path / 'loop')
-    summary = replay.replay_records(replay.offline_logger(out, options), records + records)  # played twice
+    summary = _played_twice(bag, make(), out)
     sets = log_format.window_sets(log_format.window_files(out))
     for files in sets:
         assert [os.path.basename(path).endswith('+numeric.json.xz') for path in files] == [False, True]
@@ -214,21 +220,11 @@ def test_a_prefix_names_every_piece_of_every_window_and_recovery_releases_its_re
     """A logger's file prefix (``~name_prefix``) reaches the name reserved once per window: its json-xz parts, its
     route files and a looping bag's second windows (``_1``) all begin with it, no reservation is left; readers
     group a window's files whatever the prefix; recovery of that prefix removes its stale reservations only."""
-    from cc_log.core import config
-    from cc_log.offline import replay
     from cc_log.storage import recovery
-    from cc_log.storage.bag import bagio
     from test_reliability import DEAD_PID
     bag, make = simulated
-    cfg = config.Config.from_dict(yaml.safe_load(open(make('json-xz', max=150)).read()))
-    opened = replay.open_bag(bag)
-    try:
-        options, _, topics = replay.replay_setup(cfg, opened)
-    finally:
-        opened.close()
-    records = list(bagio.read_messages(bag, sorted(topics)))
     out, run = str(tmp_path / 'out'), log_format.file_prefix('run')
-    summary = replay.replay_records(replay.offline_logger(out, dict(options, prefix=run)), records + records)
+    summary = _played_twice(bag, make('json-xz', max=150), out, prefix=run)
     assert os.listdir(out) and all(name.startswith(run) and log_format.RESERVED_MARK not in name
                                    for name in os.listdir(out))
     files = log_format.window_files(out, run)
