@@ -185,6 +185,41 @@ def test_implausible_models_are_refused_naming_the_key(tmp_path, change, expecte
     assert text.startswith(str(path)) and expected in text
 
 
+@pytest.mark.parametrize('key', ['threshold', 'gamma', 'support_vectors', 'coverage'])
+def test_a_model_number_of_401_digits_is_refused_with_one_line(tmp_path, key):
+    """Issue 42 item 15: an integer no float holds (math and numpy raised OverflowError: a traceback in replay,
+    learn and the node) is refused by the model's one reader of numbers, naming the file."""
+    import json
+    from cc_log.core.model import AnomalyModel, ModelError
+    document = small_model_document()
+    huge = int('9' * 401)
+    if key == 'threshold':
+        document['threshold'] = huge
+    elif key == 'gamma':
+        document['kernel']['gamma'] = -huge
+    elif key == 'support_vectors':
+        document['kernel']['support_vectors'][0][0] = huge
+    else:
+        document['coverage'] = {'quantities': [{'name': 'v', 'unit': 'm/s', 'min': 0, 'max': huge}]}
+    path = tmp_path / 'model.json'
+    path.write_text(json.dumps(document))
+    with pytest.raises(ModelError) as error:
+        AnomalyModel.load(str(path))
+    text = one_line(error)
+    assert text.startswith(str(path) + ': ') and 'integer of 401 digits is out of range' in text
+
+
+def test_model_integers_a_float_holds_are_read(tmp_path):
+    """The bound of item 15 keeps every integer a float holds (here the threshold, 309 digits)."""
+    import json
+    from cc_log.core.model import AnomalyModel
+    document = small_model_document()
+    document['threshold'] = int('1' + '0' * 308)
+    path = tmp_path / 'model.json'
+    path.write_text(json.dumps(document))
+    assert AnomalyModel.load(str(path)).threshold == pytest.approx(1e308)
+
+
 # -- 10: topic patterns and rule conditions ----------------------------------------------------------------
 
 @pytest.mark.parametrize('pattern', ['(a+)+', '(/a|/a)*', '(x*y?)*z', '(.*)*', '.*.*.*.*x', r'(/a)\1',
