@@ -348,6 +348,23 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
     assert '/odom\\x1b]0;owned\\x07\\x1b[2J\\u202e 20' in info and 'reason \\x1b[31m' in info
 
 
+def test_a_trigger_window_reason_is_logged_with_its_terminal_escapes_shown(tmp_path):
+    """Issue 42 item 20: the reason of ~trigger_window (a service caller's text) reaches the node's log, its
+    AnomalyEvent and /diagnostics through smart_events.reason_text, which shows its terminal escapes."""
+    from cc_log.core import smart_events
+    from cc_log.core.smart import SmartLogger
+    from test_heavy_windows import ODOM, feed, stream
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, background=False)
+    events = []
+    logger.on_event(events.append)
+    feed(logger, stream(1, camera_hz=1))
+    ok, message = logger.trigger_now('door \x1b]0;owned\x07\x1b[2J\u202e')
+    assert ok, message
+    assert logger.close(30)
+    opened = [event for event in events if event.kind == smart_events.OPENED]
+    assert [smart_events.reason_text(event) for event in opened] == ['door \\x1b]0;owned\\x07\\x1b[2J\\u202e']
+
+
 @pytest.mark.parametrize('value', ['9' * 400 + 'GB', '9' * 5000 + 'x', 'r' * 10 ** 6], ids=['huge', 'digits', 'long'])
 def test_collect_rotation_sizes_are_bounded_one_line(value):
     from cc_log.core.collector import Rotation
