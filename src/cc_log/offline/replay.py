@@ -188,6 +188,14 @@ def _batches(records, size=None):
             yield list(run)
 
 
+def _lost_text(stats):
+    """What a replay lost, as its error says it: the windows not written (and their messages), or, when every window
+    was written, the messages left out of them (json-xz: bytes that cannot be decoded)."""
+    if stats['windows_lost']:
+        return '%d window(s) (%d messages) not written' % (stats['windows_lost'], stats['messages_lost'])
+    return '%d messages not written, left out of the windows written' % stats['messages_lost']
+
+
 def replay_records(logger, records, progress=None, source='the records'):
     """``replay_into`` of an iterable of ``records.Record``s (serialized ones go to ``on_records``, decoded
     ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
@@ -220,8 +228,8 @@ def replay_records(logger, records, progress=None, source='the records'):
         logger.close()
     stats = logger.stats()
     if stats['messages_lost']:
-        raise OSError('%s: %d window(s) (%d messages) not written: %s; %d window(s) written%s' % (
-            out_dir, stats['windows_lost'], stats['messages_lost'], stats['last_error'], stats['windows_saved'],
+        raise OSError('%s: %s: %s; %d window(s) written%s' % (
+            out_dir, _lost_text(stats), stats['last_error'], stats['windows_saved'],
             '; replay stopped after %d messages of %s' % (count, source) if stopped else ''))
     return {
         'input_messages': stats['messages_seen'],
