@@ -17,7 +17,7 @@ from cc_log.core import raw_message, smart, smart_events, trigger_topics
 from cc_log.storage import window_writer
 
 __all__ = ['replay_one', 'replay_setup', 'replay', 'replay_into', 'replay_records', 'check_bag_topics',
-           'offline_logger', 'open_bag', 'checked_count',
+           'offline_logger', 'open_bag', 'checked_count', 'lost_text',
            'PROGRESS_EVERY', 'REPLAY_BATCH']
 
 PROGRESS_EVERY = 1000  # messages between progress callbacks
@@ -188,7 +188,7 @@ def _batches(records, size=None):
             yield list(run)
 
 
-def _lost_text(stats):
+def lost_text(stats):
     """What a replay lost, as its error says it: the windows not written (and their messages), or, when every window
     was written, the messages left out of them (json-xz: bytes that cannot be decoded)."""
     if stats['windows_lost']:
@@ -229,7 +229,7 @@ def replay_records(logger, records, progress=None, source='the records'):
     stats = logger.stats()
     if stats['messages_lost']:
         raise OSError('%s: %s: %s; %d window(s) written%s' % (
-            out_dir, _lost_text(stats), stats['last_error'], stats['windows_saved'],
+            out_dir, lost_text(stats), stats['last_error'], stats['windows_saved'],
             '; replay stopped after %d messages of %s' % (count, source) if stopped else ''))
     return {
         'input_messages': stats['messages_seen'],
