@@ -25,7 +25,8 @@ leftover into a final window file with what it held:
 ``scan(directory, prefix)`` lists the leftovers of files named ``<prefix>...`` (default ``cc_log_``;
 ``log_format.file_prefix``); ``recover_directory(directory, prefix)`` recovers them all and returns one
 ``Outcome`` per leftover, which the nodes log and show on /diagnostics. A leftover whose writer is still
-alive (its pid is running, is not this process, and the file changed in the last ``BUSY_SECONDS``: a
+alive (its pid, read by ``safe_files.pid_of``: 0 or one out of range names none, is running, is not this
+process, and the file changed in the last ``BUSY_SECONDS``: a
 pid reused after a reboot does not keep a stale leftover forever) is ``busy`` and left alone.
 
 Pure: what a format needs to read a cut-off file is in its module.
