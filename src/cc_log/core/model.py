@@ -23,7 +23,6 @@ value over the nominal training vectors, which ``core.why`` compares a window wi
 """
 import json
 import math
-import sys
 
 import numpy as np
 
@@ -217,7 +216,7 @@ class AnomalyModel(object):
             raise ValueError('%s is not allowed' % name)
 
         try:
-            document = safe_input.json_loads(text, parse_constant=refuse_constant, parse_int=_bounded_int)
+            document = safe_input.json_loads(text, parse_constant=refuse_constant, parse_int=safe_input.bounded_int)
         except ValueError as error:
             raise ModelError('%s: not a cc_log model (invalid JSON: %s)' % (path, error))
         return cls.from_dict(document, path)
@@ -315,19 +314,6 @@ _KERNEL_FIELDS = {
     'ocsvm': {'support_vectors': 2, 'dual_coef': 1, 'intercept': 0, 'gamma': 0},
     'nystroem-sgd': {'components': 2, 'normalization': 2, 'coef': 1, 'offset': 0, 'gamma': 0},
 }
-
-
-_MAX_INT_DIGITS = len(str(int(sys.float_info.max)))
-
-
-def _bounded_int(text):
-    """A JSON integer of a model file, refused (ValueError) beyond what a float holds: every number of a model
-    is a float, so none reaches numpy or ``math`` as an integer too large to convert (OverflowError)."""
-    digits = len(text.lstrip('-'))
-    value = int(text) if digits <= _MAX_INT_DIGITS else None
-    if value is None or abs(value) > sys.float_info.max:
-        raise ValueError('an integer of %d digits is out of range' % digits)
-    return value
 
 
 def _number(value, path, name):
