@@ -595,6 +595,48 @@ def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
     assert ok_json('recover', tmp_path)['leftovers'] == []
 
 
+def _odom_window(real_bag, count=50):
+    """A window of ``count`` odometry messages of a real bag, triggered at its first."""
+    import rosbag
+    from cc_log.core.records import LogWindow, Record, Trigger
+    with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
+        records = [Record(m.header.stamp.to_sec(), topic, m) for topic, m, _ in
+                   bag.read_messages(topics=['/husky_velocity_controller/odom'])][:count]
+    return LogWindow(records, [Trigger(records[0].stamp, 'test', -1.0)])
+
+
+def _leftover(directory, name, real_bag, fmt='json-xz'):
+    """A complete window file left as ``directory/name`` (a ``*.tmp-<pid>`` of a writer gone)."""
+    from cc_log.storage import log_format
+    final, _ = log_format.write_window(_odom_window(real_bag), str(directory), fmt)
+    leftover = os.path.join(str(directory), name)
+    os.rename(final, leftover)
+    return leftover
+
+
+def test_recover_of_a_logging_directory_recovers_its_context_track_too(tmp_path, real_bag):
+    """Issue 42 item 18: ``cclog recover LOGDIR`` said "no leftovers" while LOGDIR/context/ held one."""
+    from test_reliability import DEAD_PID
+    context = tmp_path / 'context'
+    context.mkdir()
+    leftover = _leftover(context, 'cc_log_context_20150521T191138.027Z.bag.tmp-%d' % DEAD_PID, real_bag, 'bag-lz4')
+    result = run('recover', tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert 'no leftovers' not in result.stdout and leftover in result.stdout, result.stdout
+    assert not os.path.exists(leftover) and os.path.exists(str(context / 'cc_log_context_20150521T191138.027Z.bag'))
+    assert ok('recover', tmp_path).strip() == 'no leftovers'
+
+
+def test_recover_prints_a_leftover_name_with_its_terminal_escapes_shown(tmp_path, real_bag):
+    """Issue 42 item 20: a leftover's name reaches the terminal through safe_input.printable, never raw."""
+    from test_reliability import DEAD_PID
+    hostile = '\x1b]0;owned\x07\x1b[2J\u202e'
+    _leftover(tmp_path, 'cc_log_20150521T191138.027Z_%s.json.xz.tmp-%d' % (hostile, DEAD_PID), real_bag)
+    text = ok('recover', tmp_path)
+    assert '\x1b' not in text and '\x07' not in text and '\u202e' not in text, repr(text)
+    assert 'complete' in text and 'cc_log_20150521T191138.027Z_\\x1b]0;owned\\x07\\x1b[2J\\u202e.json.xz' in text
+
+
 # -- a full disk: offline commands retry briefly, then fail naming what was not written ------------------------
 
 def test_replay_into_a_full_disk_retries_then_fails_naming_the_directory_and_the_loss(trained, replayed,

@@ -344,6 +344,11 @@ def test_envelope_files_are_read_with_bounds(tmp_path):
                                                   '"max_speed": NaN'))
     with pytest.raises(ValueError, match='NaN is not a number JSON allows'):
         Envelope.load(path)
+    with open(path, 'w') as stream:  # issue 42 item 15: an integer no float holds (an OverflowError traceback)
+        json.dump(dict(document, maxima=dict(document['maxima'], max_speed=int('9' * 401))), stream)
+    with pytest.raises(ValueError) as error:
+        Envelope.load(path)
+    assert str(error.value) == '%s: not JSON (an integer of 401 digits is out of range)' % path
     from cc_log.triggers.envelope import EnvelopeTrigger
     with pytest.raises(ValueError, match='^envelope: factor: 0.5 must be a number from 1 up'):
         EnvelopeTrigger('envelope', env, ODOM, factor=0.5)

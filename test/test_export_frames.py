@@ -115,6 +115,22 @@ def test_bad_frames_are_counted_not_fatal(tmp_path):
                        '4x4 rgb8 with step 12 does not fit 10 bytes of data': 1}
 
 
+def test_cclog_export_to_png_prints_encodings_and_topics_with_their_terminal_escapes_shown(tmp_path):
+    """Issue 42 item 20: an image's encoding and its topic, read from a window file, reach the terminal through
+    safe_input.printable (in the skipped frames' reasons and the summary), never raw."""
+    hostile = '\x1b]0;owned\x07\x1b[2J\u202e'
+    good = image('rgb8', numpy.zeros((2, 2, 3), numpy.uint8))
+    odd = Image(height=1, width=1, encoding='yuv' + hostile, step=2, data=b'\x00\x00')
+    log_format.write_window(LogWindow([Record(1.0, '/c' + hostile, good), Record(2.0, '/c' + hostile, odd)], []),
+                            str(tmp_path / 'windows'), 'json-xz')
+    result = cclog('export', tmp_path / 'windows', '--to', 'png', '--out', tmp_path / 'frames')
+    assert result.returncode == 0, result.stderr
+    assert not any(char in result.stdout for char in '\x1b\x07\u202e'), repr(result.stdout)
+    shown = '\\x1b]0;owned\\x07\\x1b[2J\\u202e'
+    assert '1 frame(s) of /c%s -> ' % shown in result.stdout, result.stdout
+    assert 'skipped 1 frame(s): encoding yuv%s is not supported' % shown in result.stdout, result.stdout
+
+
 def test_cclog_export_to_png(simulated, tmp_path):
     log_format.write_window(LogWindow(simulated, []), str(tmp_path / 'windows'), 'json-xz')
     result = cclog('export', tmp_path / 'windows', '--to', 'png', '--out', tmp_path / 'frames', '--json')

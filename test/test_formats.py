@@ -2,6 +2,7 @@
 and the json-xz size target on the Husky odometry."""
 import fnmatch
 import io
+import itertools
 import json
 import lzma
 import os
@@ -668,6 +669,27 @@ def test_bag_lz4_refuses_records_that_do_not_match_their_crc32(husky_window, tmp
     with pytest.raises(ValueError, match='do not match their crc32') as error:
         read_window(str(bad))
     assert str(bad) in str(error.value)
+
+
+def test_a_json_xz_replay_that_left_messages_out_says_so_not_0_windows_not_written(tmp_path):
+    """Issue 42 item 20: a json-xz replay whose windows were all written, some messages left out of them (bytes
+    that cannot be decoded), said "0 window(s) (N messages) not written ... M window(s) written"."""
+    from cc_log.core.smart import SmartLogger
+    from cc_log.offline import replay
+    from cc_log.storage.bag.bag_reader import read_raw
+    from cc_log.triggers.periodic import PeriodicTrigger
+    records = [record._replace(raw=record.raw[:20]) if record.topic == '/imu/data' else record
+               for record in itertools.islice(read_raw(real(HUSKY), [HUSKY_ODOM, '/imu/data']), 2000)]
+    logger = SmartLogger(None, str(tmp_path), 'json-xz', '1s', '1s', driving_topic=HUSKY_ODOM,
+                         side_topics=('/imu/data',), triggers=[PeriodicTrigger('every', '10s')], wait_for_writer=True)
+    with pytest.raises(OSError) as error:
+        replay.replay_records(logger, records, source='the bag')
+    stats = logger.stats()
+    written = len(log_format.window_files(str(tmp_path)))
+    assert stats['windows_lost'] == 0 and stats['messages_lost'] > 0 and written >= 2
+    assert str(error.value).startswith('%s: %d messages not written, left out of the windows written: '
+                                       % (tmp_path, stats['messages_lost'])), str(error.value)
+    assert str(error.value).endswith('; %d window(s) written' % written) and 'window(s) (' not in str(error.value)
 
 
 def test_json_xz_rows_that_cannot_be_decoded_are_counted_lost_per_topic(tmp_path):

@@ -185,6 +185,41 @@ def test_implausible_models_are_refused_naming_the_key(tmp_path, change, expecte
     assert text.startswith(str(path)) and expected in text
 
 
+@pytest.mark.parametrize('key', ['threshold', 'gamma', 'support_vectors', 'coverage'])
+def test_a_model_number_of_401_digits_is_refused_with_one_line(tmp_path, key):
+    """Issue 42 item 15: an integer no float holds (math and numpy raised OverflowError: a traceback in replay,
+    learn and the node) is refused by the model's one reader of numbers, naming the file."""
+    import json
+    from cc_log.core.model import AnomalyModel, ModelError
+    document = small_model_document()
+    huge = int('9' * 401)
+    if key == 'threshold':
+        document['threshold'] = huge
+    elif key == 'gamma':
+        document['kernel']['gamma'] = -huge
+    elif key == 'support_vectors':
+        document['kernel']['support_vectors'][0][0] = huge
+    else:
+        document['coverage'] = {'quantities': [{'name': 'v', 'unit': 'm/s', 'min': 0, 'max': huge}]}
+    path = tmp_path / 'model.json'
+    path.write_text(json.dumps(document))
+    with pytest.raises(ModelError) as error:
+        AnomalyModel.load(str(path))
+    text = one_line(error)
+    assert text.startswith(str(path) + ': ') and 'integer of 401 digits is out of range' in text
+
+
+def test_model_integers_a_float_holds_are_read(tmp_path):
+    """The bound of item 15 keeps every integer a float holds (here the threshold, 309 digits)."""
+    import json
+    from cc_log.core.model import AnomalyModel
+    document = small_model_document()
+    document['threshold'] = int('1' + '0' * 308)
+    path = tmp_path / 'model.json'
+    path.write_text(json.dumps(document))
+    assert AnomalyModel.load(str(path)).threshold == pytest.approx(1e308)
+
+
 # -- 10: topic patterns and rule conditions ----------------------------------------------------------------
 
 @pytest.mark.parametrize('pattern', ['(a+)+', '(/a|/a)*', '(x*y?)*z', '(.*)*', '.*.*.*.*x', r'(/a)\1',
@@ -311,6 +346,23 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
     info = subprocess.run([sys.executable, os.path.join(root, 'scripts', 'cclog'), 'info', str(tmp_path)],
                           capture_output=True, text=True, timeout=300).stdout
     assert '/odom\\x1b]0;owned\\x07\\x1b[2J\\u202e 20' in info and 'reason \\x1b[31m' in info
+
+
+def test_a_trigger_window_reason_is_logged_with_its_terminal_escapes_shown(tmp_path):
+    """Issue 42 item 20: the reason of ~trigger_window (a service caller's text) reaches the node's log, its
+    AnomalyEvent and /diagnostics through smart_events.reason_text, which shows its terminal escapes."""
+    from cc_log.core import smart_events
+    from cc_log.core.smart import SmartLogger
+    from test_heavy_windows import ODOM, feed, stream
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, background=False)
+    events = []
+    logger.on_event(events.append)
+    feed(logger, stream(1, camera_hz=1))
+    ok, message = logger.trigger_now('door \x1b]0;owned\x07\x1b[2J\u202e')
+    assert ok, message
+    assert logger.close(30)
+    opened = [event for event in events if event.kind == smart_events.OPENED]
+    assert [smart_events.reason_text(event) for event in opened] == ['door \\x1b]0;owned\\x07\\x1b[2J\\u202e']
 
 
 @pytest.mark.parametrize('value', ['9' * 400 + 'GB', '9' * 5000 + 'x', 'r' * 10 ** 6], ids=['huge', 'digits', 'long'])

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from cc_log.core import safe_files
 from cc_log.storage import disk_guard, log_format, recovery
 from cc_log.storage.disk_guard import DiskGuard
 from cc_log.storage.log_format import Format, read_window, write_window
@@ -49,7 +50,8 @@ def same(records_a, records_b):
             == [(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in records_b])
 
 
-DEAD_PID = 999999999  # no such process
+# no such process (a pid in range: safe_files.pid_of takes one above PID_MAX as naming none)
+DEAD_PID = next(pid for pid in range(safe_files.PID_MAX, 1, -1) if not safe_files.writer_running(pid))
 
 
 def as_leftover(path):
@@ -89,6 +91,33 @@ def test_leftover_of_a_running_writer_is_left_alone(tmp_path):
     os.rename(path, tmp)
     outcome = recovery.recover(tmp)
     assert outcome.status == recovery.BUSY and os.path.exists(tmp)
+
+
+@pytest.mark.parametrize('pid', ['99999999999999999999', '0', '00'])
+def test_a_leftover_or_reservation_naming_no_process_is_recovered_at_once(pid, tmp_path):
+    """Issue 42 item 5: a pid out of range (os.kill raised OverflowError: the nodes and cclog recover stopped with a
+    traceback) or 0 (os.kill(0) signals this process group: "busy" for BUSY_SECONDS) names no running writer: the
+    leftover is recovered now and a reservation holding it (stale by its time) released."""
+    path, _ = write_window(window(), str(tmp_path), Format.JSON_XZ)
+    tmp = path + log_format.TMP_MARK + pid
+    os.rename(path, tmp)
+    reservation = os.path.join(str(tmp_path), 'cc_log_20150521T191138.027Z_other' + log_format.RESERVED_MARK)
+    with open(reservation, 'w') as stream:
+        stream.write(pid + '\n')
+    old = time.time() - recovery.BUSY_SECONDS - 1
+    os.utime(reservation, (old, old))
+    outcome, = recovery.recover_directory(str(tmp_path))
+    assert outcome.status == recovery.COMPLETE and outcome.path == path and outcome.messages == 300
+    assert not os.path.exists(reservation) and not os.path.exists(tmp)
+
+
+def test_a_vector_leftover_naming_no_process_is_removed(tmp_path):
+    """Issue 42 item 5 in collect mode: a vector leftover whose pid is out of range or 0 has no running writer."""
+    from cc_log.core import collector
+    names = ['1.0.json' + log_format.TMP_MARK + pid for pid in ('99999999999999999999', '0')]
+    for name in names:
+        (tmp_path / name).write_text('{}')
+    assert collector.remove_vector_leftovers(str(tmp_path)) == sorted(str(tmp_path / name) for name in names)
 
 
 def test_empty_and_garbled_leftovers_are_reported_and_garbled_kept(tmp_path):

@@ -270,3 +270,13 @@ def test_group_writable_whatever_the_umask(tmp_path, umask, world):
         assert mode(tmp_path / folder) == 0o2770 | world, (folder, oct(mode(tmp_path / folder)))
     for path in paths + [vector]:
         assert mode(path) == 0o660 | (world & 0o004), (path, oct(mode(path)))
+
+
+@pytest.mark.parametrize('text, pid', [
+    ('4242', 4242), (b' 4242\n', 4242), (str(safe_files.PID_MAX), safe_files.PID_MAX),
+    (str(safe_files.PID_MAX + 1), None), ('0', None), ('000', None), ('', None), ('9' * 20, None), ('-1', None),
+    ('\u0663', None), (b'\xff', None)])
+def test_a_pid_is_read_by_one_parser_with_a_range(text, pid):
+    """Issue 42 item 5: the pid of a leftover's name or a reservation: None when it names no process."""
+    assert safe_files.pid_of(text) == pid
+    assert not safe_files.writer_running(None)

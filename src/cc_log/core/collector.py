@@ -441,12 +441,11 @@ def remove_vector_leftovers(directory):
     anywhere below ``directory``) by this process or by processes that have ended (the workers of a cancelled
     cluster); a running process's are kept. A vector is recomputed from its bag, so nothing saved is lost.
     Returns the paths removed."""
-    from cc_log.storage.recovery import _alive
     removed = []
     for root, _, names in os.walk(directory):
         for name in names:
             match = _VECTOR_LEFTOVER.fullmatch(name)
-            if match and not _alive(int(match.group(1))):
+            if match and not safe_files.writer_running(safe_files.pid_of(match.group(1))):
                 path = os.path.join(root, name)
                 try:
                     os.unlink(path)

@@ -109,7 +109,7 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         if len(text) > MAX_FILE_BYTES:
             raise ValueError('%s: larger than %d bytes: not an envelope file' % (path, MAX_FILE_BYTES))
         try:
-            document = safe_input.json_loads(text, parse_constant=_refuse_constant)
+            document = safe_input.json_loads(text, parse_constant=_refuse_constant, parse_int=safe_input.bounded_int)
         except ValueError as error:
             raise ValueError('%s: not JSON (%s)' % (path, error))
         return cls.from_dict(document, path)

@@ -217,7 +217,7 @@ class AnomalyModel(object):
             raise ValueError('%s is not allowed' % name)
 
         try:
-            document = safe_input.json_loads(text, parse_constant=refuse_constant)
+            document = safe_input.json_loads(text, parse_constant=refuse_constant, parse_int=safe_input.bounded_int)
         except ValueError as error:
             raise ModelError('%s: not a cc_log model (invalid JSON: %s)' % (path, error))
         return cls.from_dict(document, path)

@@ -17,13 +17,37 @@ bit is never set, even under umask 0. Existing directories are left as they are.
 """
 import errno
 import os
+import re
 import stat
 
 FILE_MODE = 0o664
 DIR_MODE = 0o2775
 TMP_MARK = '.tmp-'
+PID_MAX = 1 << 22  # Linux's PID_MAX_LIMIT: no process id is larger
+_PID = re.compile(r'[0-9]{1,7}')
 _TRIES = 100  # temporary names tried when some are taken (a leftover, a planted link)
 _NO_HARD_LINKS = (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK)
+
+
+def pid_of(text):
+    """The process id a file's name or content gives (``'4242'`` of ``*.tmp-4242``, a reservation's text; str or
+    bytes), or None when it names no process (not decimal digits, 0, above ``PID_MAX``): no writer of it runs."""
+    if isinstance(text, (bytes, bytearray)):
+        text = bytes(text).decode('ascii', 'replace')
+    text = text.strip()
+    pid = int(text) if _PID.fullmatch(text) else 0
+    return pid if 0 < pid <= PID_MAX else None
+
+
+def writer_running(pid):
+    """Whether ``pid`` (``pid_of``'s; None: no process) is a running process other than this one."""
+    if pid is None or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except OSError as error:
+        return error.errno == errno.EPERM
+    return True
 
 
 def _group_writable(fd, mode):

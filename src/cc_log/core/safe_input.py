@@ -36,10 +36,11 @@ import os
 import re
 import reprlib
 import stat
+import sys
 from cc_log.errors import UnsafeDefinition
 
 __all__ = ['UnsafeDefinition', 'check_definition', 'check_connection', 'check_bag', 'check_type_name',
-           'check_json_depth', 'json_loads', 'open_input', 'check_regular', 'load_yaml', 'brief',
+           'check_json_depth', 'json_loads', 'bounded_int', 'open_input', 'check_regular', 'load_yaml', 'brief',
            'MAX_DEFINITION_CHARS', 'MAX_NESTING',
            'MAX_TYPES', 'MAX_DECLARATIONS', 'MAX_DEFAULT_VALUES', 'MAX_JSON_DEPTH']
 
@@ -373,6 +374,20 @@ def check_json_depth(text, limit=MAX_JSON_DEPTH):
                 return
             break
     raise ValueError('JSON nested deeper than %d levels' % limit)
+
+
+_MAX_INT_DIGITS = len(str(int(sys.float_info.max)))
+
+
+def bounded_int(text):
+    """A JSON integer (``json.loads``'s ``parse_int``) of a file whose numbers are floats (a model, an envelope),
+    refused (ValueError) beyond what a float holds: none reaches numpy or ``math`` as an integer too large to
+    convert (OverflowError)."""
+    digits = len(text.lstrip('-'))
+    value = int(text) if digits <= _MAX_INT_DIGITS else None
+    if value is None or abs(value) > sys.float_info.max:
+        raise ValueError('an integer of %d digits is out of range' % digits)
+    return value
 
 
 def json_loads(text, **kwargs):

@@ -4,7 +4,7 @@ import collections
 import math
 import os
 
-from cc_log.core import why
+from cc_log.core import safe_input, why
 from cc_log.storage import log_format, window_writer
 
 __all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer', 'reason_text', 'WindowTally']
@@ -54,9 +54,10 @@ def from_writer(event, threshold_of):
 
 def reason_text(event):
     """The reason of an Event as the ``AnomalyEvent`` and the log say it: its ``reason``, then the first of its
-    ``why`` (``'classifier; why: max yaw rate 4.2 rad/s, 2.3x the most seen in training'``)."""
+    ``why`` (``'classifier; why: max yaw rate 4.2 rad/s, 2.3x the most seen in training'``), through
+    ``safe_input.printable`` (a reason is a service caller's text: ``~trigger_window``)."""
     first = why.texts(event.why[:1])
-    return '%s; why: %s' % (event.reason, first) if first else event.reason
+    return safe_input.printable('%s; why: %s' % (event.reason, first) if first else event.reason)
 
 
 class WindowTally(object):

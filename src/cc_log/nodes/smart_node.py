@@ -68,6 +68,7 @@ from cc_log.storage.formats import json_xz
 from cc_log.core import routes, smart, smart_events, trigger_topics
 from cc_log.core import config
 from cc_log.core.model import AnomalyModel
+from cc_log.core.safe_input import printable
 from cc_log.nodes.node_common import (
     CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
     node_config, node_name, recover_leftovers, resolve_directory, writer_status)
@@ -189,8 +190,9 @@ class SmartNode(object):
         elif event.kind == smart.FAILED:
             rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
         else:
-            rospy.loginfo('window opened (%s: %s, score %.4g)', event.trigger, reason, event.score)
-            self._last_trigger = '%s: %s at %s' % (event.trigger, event.reason, window_info.utc_text(event.stamp))
+            rospy.loginfo('window opened (%s: %s, score %.4g)', printable(event.trigger), reason, event.score)
+            self._last_trigger = '%s: %s at %s' % (printable(event.trigger), printable(event.reason),
+                                                   window_info.utc_text(event.stamp))
         try:
             self.events.publish(msg)
         except rospy.ROSException:  # shutting down

@@ -20,6 +20,7 @@ from cc_log.core import msg_codec, raw_message, safe_files
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.bag import bag_writer
 from cc_log.core.safe_files import AtomicFile
+from cc_log.core.safe_input import printable
 
 BAG_COMPRESSIONS = bag_writer.COMPRESSIONS
 MAX_CSV_NAME = 100  # characters of a topic name kept in its CSV file's name
@@ -249,13 +250,13 @@ def image_pixels(msg):
     16-bit millimetres (NaN and below 0: 0). ValueError('<what is wrong>') for another encoding or a size that
     does not fit the data."""
     if msg.encoding not in IMAGE_ENCODINGS:
-        raise ValueError('encoding %s is not supported' % (msg.encoding[:40] or '(empty)'))
+        raise ValueError('encoding %s is not supported' % (printable(msg.encoding[:40]) or '(empty)'))
     channels, sample, order = IMAGE_ENCODINGS[msg.encoding]
     size = channels * int(sample[1:])
     data = msg.data if isinstance(msg.data, bytes) else bytes(bytearray(msg.data))
     if not msg.width or not msg.height or msg.step < msg.width * size or len(data) < msg.step * msg.height:
         raise ValueError('%dx%d %s with step %d does not fit %d bytes of data'
-                         % (msg.width, msg.height, msg.encoding, msg.step, len(data)))
+                         % (msg.width, msg.height, printable(msg.encoding), msg.step, len(data)))
     rows = numpy.frombuffer(data, 'u1', msg.step * msg.height).reshape(msg.height, msg.step)
     dtype = numpy.dtype(sample).newbyteorder('>' if msg.is_bigendian else '<')
     pixels = numpy.ascontiguousarray(rows[:, :msg.width * size]).view(dtype).reshape(msg.height, msg.width, channels)
@@ -278,7 +279,7 @@ def frame_file(msg):
             return data[offset:], 'png'
         if data[offset:offset + len(JPEG_MAGIC)] == JPEG_MAGIC:
             return data[offset:], 'jpg'
-    raise ValueError('compressed format %s is neither JPEG nor PNG' % (msg.format[:40] or '(empty)'))
+    raise ValueError('compressed format %s is neither JPEG nor PNG' % (printable(msg.format[:40]) or '(empty)'))
 
 
 def frame_name(topic, stamp, extension):
@@ -303,7 +304,7 @@ def to_frames(records, directory, skipped=None, progress=None):
             data, extension = frame_file(raw_message.decoded(record).msg)
         except ValueError as error:
             if skipped is None:
-                raise ValueError('%s at %.6f: %s' % (record.topic, record.stamp, error))
+                raise ValueError('%s at %.6f: %s' % (printable(record.topic), record.stamp, error))
             skipped[str(error)] = skipped.get(str(error), 0) + 1
             continue
         if not files:

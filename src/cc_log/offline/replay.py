@@ -17,7 +17,7 @@ from cc_log.core import raw_message, smart, smart_events, trigger_topics
 from cc_log.storage import window_writer
 
 __all__ = ['replay_one', 'replay_setup', 'replay', 'replay_into', 'replay_records', 'check_bag_topics',
-           'offline_logger', 'open_bag', 'checked_count',
+           'offline_logger', 'open_bag', 'checked_count', 'lost_text',
            'PROGRESS_EVERY', 'REPLAY_BATCH']
 
 PROGRESS_EVERY = 1000  # messages between progress callbacks
@@ -188,6 +188,14 @@ def _batches(records, size=None):
             yield list(run)
 
 
+def lost_text(stats):
+    """What a replay lost, as its error says it: the windows not written (and their messages), or, when every window
+    was written, the messages left out of them (json-xz: bytes that cannot be decoded)."""
+    if stats['windows_lost']:
+        return '%d window(s) (%d messages) not written' % (stats['windows_lost'], stats['messages_lost'])
+    return '%d messages not written, left out of the windows written' % stats['messages_lost']
+
+
 def replay_records(logger, records, progress=None, source='the records'):
     """``replay_into`` of an iterable of ``records.Record``s (serialized ones go to ``on_records``, decoded
     ones to ``on_message``) read from ``source`` (named in errors): the one replay of ``cclog replay`` and the
@@ -220,8 +228,8 @@ def replay_records(logger, records, progress=None, source='the records'):
         logger.close()
     stats = logger.stats()
     if stats['messages_lost']:
-        raise OSError('%s: %d window(s) (%d messages) not written: %s; %d window(s) written%s' % (
-            out_dir, stats['windows_lost'], stats['messages_lost'], stats['last_error'], stats['windows_saved'],
+        raise OSError('%s: %s: %s; %d window(s) written%s' % (
+            out_dir, lost_text(stats), stats['last_error'], stats['windows_saved'],
             '; replay stopped after %d messages of %s' % (count, source) if stopped else ''))
     return {
         'input_messages': stats['messages_seen'],

@@ -94,9 +94,8 @@ def sweep_one(bag_path, out_dir, sweeps):
         windows = tally.windows()
         stats = logger.stats()
         if stats['messages_lost']:
-            raise OSError('%s: %d window(s) (%d messages) not written: %s' % (
-                os.path.join(out_dir, entry.label), stats['windows_lost'], stats['messages_lost'],
-                stats['last_error']))
+            raise OSError('%s: %s: %s' % (os.path.join(out_dir, entry.label), replay.lost_text(stats),
+                                          stats['last_error']))
         rows.append({'label': entry.label, 'windows': len(windows), 'kept': sum(w['messages'] for w in windows),
                      'stored_bytes': stats['stored_bytes'],
                      'recalled': None if truth is None else sum(any(_overlaps(w, a) for w in windows) for a in truth),

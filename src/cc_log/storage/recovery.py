@@ -25,13 +25,13 @@ leftover into a final window file with what it held:
 ``scan(directory, prefix)`` lists the leftovers of files named ``<prefix>...`` (default ``cc_log_``;
 ``log_format.file_prefix``); ``recover_directory(directory, prefix)`` recovers them all and returns one
 ``Outcome`` per leftover, which the nodes log and show on /diagnostics. A leftover whose writer is still
-alive (its pid is running, is not this process, and the file changed in the last ``BUSY_SECONDS``: a
+alive (its pid, read by ``safe_files.pid_of``: 0 or one out of range names none, is running, is not this
+process, and the file changed in the last ``BUSY_SECONDS``: a
 pid reused after a reboot does not keep a stale leftover forever) is ``busy`` and left alone.
 
 Pure: what a format needs to read a cut-off file is in its module.
 """
 import collections
-import errno
 import itertools
 import os
 import re
@@ -104,17 +104,7 @@ def _split(path, prefix):
                          % (path, prefix, log_format.TMP_MARK, prefix, log_format.TMP_MARK))
     extension = match.group(1)
     final = name[:name.rindex(log_format.TMP_MARK)]
-    return directory, final[:-len(extension)], extension, int(match.group(2))
-
-
-def _alive(pid):
-    if pid is None or pid == os.getpid():
-        return False
-    try:
-        os.kill(pid, 0)
-    except OSError as error:
-        return error.errno == errno.EPERM
-    return True
+    return directory, final[:-len(extension)], extension, safe_files.pid_of(match.group(2))
 
 
 def _same_bytes(a, b):
@@ -212,7 +202,7 @@ def recover(path, prefix=log_format.PREFIX):
     info = os.lstat(path)
     if not stat.S_ISREG(info.st_mode):
         return Outcome(path, UNRECOVERABLE, '', 0, '%s: not a regular file (a link?); left alone' % path)
-    if _alive(pid) and time.time() - info.st_mtime < BUSY_SECONDS:
+    if safe_files.writer_running(pid) and time.time() - info.st_mtime < BUSY_SECONDS:
         return Outcome(path, BUSY, '', 0, 'process %d that writes it is still running' % pid)
     if info.st_size == 0:
         os.unlink(path)
@@ -243,7 +233,7 @@ def release_stale_names(directory, prefix=log_format.PREFIX):
     ``BUSY_SECONDS``); they hold no data. Returns the paths removed."""
     removed = []
     for path, pid in log_format.reservations(directory, prefix):
-        if pid == os.getpid() or _alive(pid):
+        if pid == os.getpid() or safe_files.writer_running(pid):
             continue
         if pid is None and time.time() - os.lstat(path).st_mtime < BUSY_SECONDS:
             continue  # whose it is is not said (a full disk): a recent one may be a running writer's

@@ -182,7 +182,7 @@ def reservations(directory, prefix=PREFIX):
                 text = stream.read(32).strip()
         except OSError:
             continue
-        found.append((path, int(text) if text.isdigit() else None))
+        found.append((path, safe_files.pid_of(text)))
     return found
 
 

@@ -5,7 +5,8 @@ import os
 from cc_log.offline import export
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
-    EXIT_OK, CommandError, command_help, output_flags, parent_exists, print_json, selected_windows, writable_dir)
+    EXIT_OK, CommandError, command_help, output_flags, parent_exists, print_json, say, selected_windows,
+    writable_dir)
 
 EXPORT_TARGETS = ('bag', 'mcap', 'csv', 'jsonl', 'png')
 
@@ -92,7 +93,7 @@ def _export_frames(args, records):
     if args.json:
         print_json(summary)
         return EXIT_OK
-    print('%d frame(s) of %s -> %s' % (len(files), ', '.join(summary['topics']), args.out))
+    say('%d frame(s) of %s -> %s' % (len(files), ', '.join(summary['topics']), args.out))
     for reason, count in sorted(skipped.items()):
-        print('  skipped %d frame(s): %s' % (count, reason))
+        say('  skipped %d frame(s): %s' % (count, reason))
     return EXIT_OK

@@ -2,7 +2,7 @@
 import os
 
 from cc_log.offline.cli.common import (
-    EXIT_OK, EXIT_BAD_INPUT, CommandError, command_help, named_prefix, output_flags, print_json)
+    EXIT_OK, EXIT_BAD_INPUT, CommandError, command_help, named_prefix, output_flags, print_json, say)
 
 
 def add_parser(subparsers):
@@ -14,7 +14,8 @@ def add_parser(subparsers):
         its final name, rebuilds a cut-off bag-lz4 window from every message it still holds
         (..._recovered.bag; the leftover is kept as *.unrecovered-<pid> when some of its bytes could not be
         decoded), removes empty leftovers and duplicates of final files, and reports the rest, which it
-        keeps. The smart node does the same at start. Exit status 1 when anything could not be recovered.
+        keeps. A directory's context/ subdirectory (the context track) is recovered with it. The smart node does
+        the same at start. Exit status 1 when anything could not be recovered.
         """,
         """
           cclog recover ~/.ros/cc_log
@@ -27,6 +28,13 @@ def add_parser(subparsers):
     return p
 
 
+def _with_context(directory):
+    """``directory`` and its context track's subdirectory when it has one: a logging directory's leftovers."""
+    from cc_log.storage import context_track
+    context = os.path.join(directory, context_track.SUBDIRECTORY)
+    return [directory, context] if os.path.isdir(context) else [directory]
+
+
 def run(args):
     """Leftovers of a crash (``cc_log_*.tmp-<pid>``) turned back into window files, or reported."""
     from cc_log.storage import recovery
@@ -34,11 +42,13 @@ def run(args):
     for path in args.paths:
         prefixed = named_prefix(path)
         if os.path.isdir(path):
-            outcomes.extend(recovery.recover_directory(path))
+            for directory in _with_context(path):
+                outcomes.extend(recovery.recover_directory(directory))
         elif os.path.exists(path):
             outcomes.append(recovery.recover(path, recovery.prefix_of(path)))
-        elif prefixed and recovery.scan(*prefixed):
-            outcomes.extend(recovery.recover_directory(*prefixed))
+        elif prefixed and any(recovery.scan(directory, prefixed[1]) for directory in _with_context(prefixed[0])):
+            for directory in _with_context(prefixed[0]):
+                outcomes.extend(recovery.recover_directory(directory, prefixed[1]))
         else:
             raise CommandError('%s: no such file or directory' % path)
     if args.json:
@@ -46,7 +56,7 @@ def run(args):
     else:
         for outcome in outcomes:
             target = ' -> %s (%d messages)' % (outcome.path, outcome.messages) if outcome.path else ''
-            print('%-13s %s%s: %s' % (outcome.status, outcome.leftover, target, outcome.detail))
+            say('%-13s %s%s: %s' % (outcome.status, outcome.leftover, target, outcome.detail))
         if not outcomes:
             print('no leftovers')
         elif len(outcomes) > 1:
