@@ -200,3 +200,26 @@ def test_a_bz2_chunk_inflating_to_gigabytes_is_refused_in_bounded_memory_and_tim
             line = one_line_naming(result, hostile)
             assert 'inflates to more' in line, line
         assert peak_mb < 600 and seconds < 30, (args, peak_mb, seconds)
+
+
+def test_a_json_xz_window_declaring_millions_of_messages_is_refused_in_bounded_memory_and_time(real_bag, tmp_path):
+    import json
+    import lzma
+    windows = windows_of(real_bag, tmp_path, '--format', 'json-xz')
+    window = str(windows / sorted(os.listdir(str(windows)))[0])
+    doc = json.loads(lzma.decompress(open(window, 'rb').read()))
+    # one section of constant fields declaring 5 M messages (its header stamps: no stamps list to pay for them)
+    section = next(section for section in doc['topics'] if section['stamps'] == 'header.stamp')
+    section['constant'].update((key, values[0]) for key, values in section.pop('columns').items())
+    section.update(columns={}, delta=[], count=5000000)
+    doc['topics'] = [section]
+    doc.pop('order', None)
+    (tmp_path / 'hostile').mkdir()
+    hostile = str(tmp_path / 'hostile' / os.path.basename(window))
+    open(hostile, 'wb').write(lzma.compress(json.dumps(doc).encode()))
+    assert os.path.getsize(hostile) < 20000
+    for args in (('info', hostile), ('info', '--full', hostile), ('cat', hostile)):
+        result, peak_mb, seconds = measured(*args)
+        line = one_line_naming(result, hostile)
+        assert 'declare 5000000 messages, more than' in line, line
+        assert peak_mb < 600 and seconds < 30, (args, peak_mb, seconds)
