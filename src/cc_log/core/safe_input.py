@@ -154,14 +154,14 @@ def check_chunks(bag, source, inflate_bz2=True):
             raise ValueError('%s: bag is truncated or damaged (chunk at byte %d declares %d bytes, more than %d: %s, '
                              '%d bytes stored)' % (source, pos, declared, most, header.compression, stored))
         if header.compression == 'bz2' and inflate_bz2 and stream is not None:
-            inflated = bz2_inflated_size(stream, header.data_pos, stored, declared)
+            inflated = _bz2_inflated_size(stream, header.data_pos, stored, declared)
             if inflated != declared:
                 raise ValueError('%s: bag is truncated or damaged (chunk at byte %d declares %d bytes, inflates to %s: '
                                  'bz2, %d bytes stored)' % (source, pos, declared, 'more' if inflated > declared
                                                             else '%d' % inflated, stored))
 
 
-def bz2_inflated_size(stream, start, stored, most):
+def _bz2_inflated_size(stream, start, stored, most):
     """How many bytes the ``stored`` bytes of bz2 streams at ``start`` of ``stream`` inflate to (as
     ``bz2.decompress`` reads them: stream after stream), counting stopped once past ``most``; the stream's
     position is put back. Damaged data counts as what inflated before the damage."""
