@@ -143,3 +143,83 @@ def test_a_bag_lz4_window_file_claiming_huge_chunks_is_refused(real_bag, tmp_pat
     claim_sizes(window, 3 << 30)
     line = one_line_naming(cclog('info', window), window)
     assert 'bag is truncated or damaged (chunk at byte ' in line and 'declares %d bytes' % (3 << 30) in line
+
+
+ZEROS = 45000000  # bytes of zeros per bz2 stream of the bomb (one stream: 50 bytes)
+BOMB_STREAMS = 48  # 2.16 GB once inflated, 2.4 kB stored
+
+
+def bz2_bomb(source, path):
+    """``source`` (a bag) written again to ``path`` in bz2 chunks, each followed by bz2 streams of 2.16 GB of zeros
+    (its declared size, its index and its records as they were: ``bz2.decompress`` inflates the streams too)."""
+    import bz2
+    import types
+    from cc_log.storage.bag import bag_writer
+    bomb = bz2.compress(bytes(ZEROS)) * BOMB_STREAMS
+    real = types.SimpleNamespace(compress=lambda data: bz2.compress(data) + bomb)
+    with rosbag.Bag(source) as bag_in, open(str(path), 'wb') as out:
+        writer = bag_writer.BagStream(out, compression='bz2')
+        original, bag_writer.bz2 = bag_writer.bz2, real
+        try:
+            for topic, raw, stamp, header in bag_in.read_messages(raw=True, return_connection_header=True):
+                writer.write(topic, stamp.secs, stamp.nsecs, raw[1], header)
+            writer.close()
+        finally:
+            bag_writer.bz2 = original
+    return str(path)
+
+
+def measured(*args):
+    """``cclog *args`` run in a child of a child: (result, the grandchild's peak RSS in MB, seconds). Its address
+    space is capped at 4 GB so that an unbounded reader fails rather than takes the machine."""
+    import json
+    import time
+    probe = ('import json, resource, subprocess, sys\n'
+             'resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))\n'
+             'r = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n'
+             'print(json.dumps([r.returncode, r.stdout[-4000:], r.stderr[-4000:], '
+             'resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0]))\n')
+    start = time.monotonic()
+    outer = subprocess.run([sys.executable, '-c', probe, sys.executable, os.path.join(ROOT, 'scripts', 'cclog')]
+                           + [str(a) for a in args], capture_output=True, text=True, timeout=600)
+    seconds = time.monotonic() - start
+    code, out, err, peak_mb = json.loads(outer.stdout)
+    return subprocess.CompletedProcess(args, code, out, err), peak_mb, seconds
+
+
+def test_a_bz2_chunk_inflating_to_gigabytes_is_refused_in_bounded_memory_and_time(real_bag, tmp_path):
+    windows = windows_of(real_bag, tmp_path, '--format', 'bag-lz4')
+    window = str(windows / sorted(os.listdir(str(windows)))[0])
+    (tmp_path / 'hostile').mkdir()
+    hostile = bz2_bomb(window, tmp_path / 'hostile' / os.path.basename(window))  # the window's name, bz2 bombs
+    assert os.path.getsize(hostile) < 2 * os.path.getsize(window) + 100000
+    export = ('export', hostile, '--to', 'csv', '--out', tmp_path / 'out.csv')
+    for args in (('cat', hostile), ('codecs', hostile, '--topic', '/odom'), export, ('stats', tmp_path / 'hostile')):
+        result, peak_mb, seconds = measured(*args)
+        if args[0] != 'stats':  # stats reads the metadata's chunk only (bag_reader: inflated up to its size)
+            line = one_line_naming(result, hostile)
+            assert 'inflates to more' in line, line
+        assert peak_mb < 600 and seconds < 30, (args, peak_mb, seconds)
+
+
+def test_a_json_xz_window_declaring_millions_of_messages_is_refused_in_bounded_memory_and_time(real_bag, tmp_path):
+    import json
+    import lzma
+    windows = windows_of(real_bag, tmp_path, '--format', 'json-xz')
+    window = str(windows / sorted(os.listdir(str(windows)))[0])
+    doc = json.loads(lzma.decompress(open(window, 'rb').read()))
+    # one section of constant fields declaring 5 M messages (its header stamps: no stamps list to pay for them)
+    section = next(section for section in doc['topics'] if section['stamps'] == 'header.stamp')
+    section['constant'].update((key, values[0]) for key, values in section.pop('columns').items())
+    section.update(columns={}, delta=[], count=5000000)
+    doc['topics'] = [section]
+    doc.pop('order', None)
+    (tmp_path / 'hostile').mkdir()
+    hostile = str(tmp_path / 'hostile' / os.path.basename(window))
+    open(hostile, 'wb').write(lzma.compress(json.dumps(doc).encode()))
+    assert os.path.getsize(hostile) < 20000
+    for args in (('info', hostile), ('info', '--full', hostile), ('cat', hostile)):
+        result, peak_mb, seconds = measured(*args)
+        line = one_line_naming(result, hostile)
+        assert 'declare 5000000 messages, more than' in line, line
+        assert peak_mb < 600 and seconds < 30, (args, peak_mb, seconds)

@@ -385,3 +385,21 @@ def test_the_intake_overflow_message_says_which_bound_and_what_to_raise():
     text = overflow_text(queue, '/odom', 10)
     assert text.startswith('intake queue full (3 of at most 3 messages') and 'falls behind' in text
     assert '2 in all so far' in text and '\n' not in text
+
+
+def test_a_json_xz_document_declares_no_more_messages_than_its_bytes_pay_for():
+    import json
+    import lzma
+    from cc_log.storage.formats import json_xz
+    assert json_xz.message_cap(None) == json_xz.MAX_DOCUMENT_MESSAGES
+    assert json_xz.message_cap(1600) == 100 + json_xz.FREE_MESSAGES
+    assert json_xz.message_cap(1 << 30) == json_xz.MAX_DOCUMENT_MESSAGES
+    doc = {'metadata': {'layout': 2}, 'topics': [{'topic': '/a', 'count': 6000}, {'topic': '/b', 'count': 6000}]}
+    data = lzma.compress(json.dumps(doc).encode())
+    with pytest.raises(ValueError) as error:
+        json_xz.decode(data, 'w.json.xz')
+    assert str(error.value).startswith('w.json.xz: the topic sections declare 12000 messages, more than the 10')
+    doc['topics'][1]['count'] = 4000  # within the cap: read on (and refused for what the sections lack)
+    with pytest.raises(ValueError) as error:
+        json_xz.decode(lzma.compress(json.dumps(doc).encode()), 'w.json.xz')
+    assert 'declare' not in str(error.value)

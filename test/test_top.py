@@ -21,3 +21,49 @@ def test_the_view_has_a_block_per_node_and_a_row_per_topic():
     assert block[2].split() == ['topic', 'Hz', 'MB/s', 'dropped']
     assert block[3].split() == ['/camera', '29.97', '27.600', '12'] and block[4].split()[0] == '/odom'
     assert top.render({}) == ['no cc_log node has published on /diagnostics yet']
+
+
+class _Status(object):
+    """A diagnostic_msgs/DiagnosticStatus as rospy hands it over (name, level, message, values)."""
+
+    def __init__(self, name, message='logging', values=(), level=0):
+        self.name, self.level, self.message = name, level, message
+        self.values = [_KeyValue(key, value) for key, value in values]
+
+
+class _KeyValue(object):
+    def __init__(self, key, value):
+        self.key, self.value = key, value
+
+
+def _render_kept(statuses, now=0.0):
+    """The view of ``statuses`` heard at ``now``: through ``Statuses`` where there is one, else (the view before
+    bounds) each status as it came."""
+    if hasattr(top, 'Statuses'):
+        kept = top.Statuses()
+        kept.heard(statuses, now)
+        return top.render(kept.view(now))
+    return top.render({status.name[len(top.PREFIX):]: (status.level, status.message,
+                                                       {kv.key: kv.value for kv in status.values})
+                       for status in statuses})
+
+
+def test_a_huge_status_gives_a_bounded_view():
+    # one 2.3 MB status: a long message, a long trigger, a long topic name and 20,000 values
+    huge = 'x' * 600000
+    values = [('last trigger', huge), ('rate /%s Hz' % huge, '1.0')]
+    values += [('rate /t%d Hz' % i, '%d' % i) for i in range(20000)]
+    lines = _render_kept([_Status(top.PREFIX + 'n' + huge, huge, values)])
+    assert sum(map(len, lines)) < 1000000
+    assert max(map(len, lines)) <= 10 * top.MAX_TEXT
+
+
+def test_statuses_are_bounded_and_forgotten():
+    kept = top.Statuses()
+    kept.heard([_Status(top.PREFIX + 'node%d' % i) for i in range(1000)], 0.0)
+    assert len(kept.view(0.0)) == top.MAX_NODES
+    assert 'node999' in kept.view(0.0) and 'node0' not in kept.view(0.0)
+    kept.heard([_Status(top.PREFIX + 'late', 'still here'), _Status('other: not cc_log')], top.FORGET_AFTER - 1.0)
+    assert set(kept.view(top.FORGET_AFTER + 0.5)) == {'late'}
+    assert kept.view(top.FORGET_AFTER + 0.5)['late'] == (0, 'still here', {})
+    assert kept.view(2 * top.FORGET_AFTER) == {}

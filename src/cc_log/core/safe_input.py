@@ -14,7 +14,8 @@ connection it reads), so a definition is checked here before any class is genera
   instance (fixed-size arrays) are bounded.
 - ``check_bag(bag, path)``: every connection and chunk header of an open rosbag, before any message is read
   (a chunk may not declare more than ``MAX_CHUNK_BYTES``, nor more than its stored bytes
-  can hold: readers allocate what a chunk declares before decompressing it).
+  can hold: readers allocate what a chunk declares before decompressing it; a bz2 chunk must inflate to what it
+  declares, counted a step at a time: rosbag inflates it whole, whatever it declares).
 - ``json_loads(text)``: ``json.loads`` after a nesting check (a deeply nested document would raise
   RecursionError inside ``json``).
 - ``open_input(path)``: open a file to read, refusing FIFOs, devices and sockets (a FIFO blocks forever).
@@ -28,6 +29,7 @@ Every refusal is a ValueError with one line saying what is wrong; callers add th
 rospy, no rosbag, no genpy.
 """
 import ast
+import bz2
 import difflib
 import functools
 import json
@@ -118,11 +120,11 @@ def _shown(name):
     return text if len(text) <= 100 else text[:97] + '...'
 
 
-def check_bag(bag, source):
+def check_bag(bag, source, inflate_bz2=True):
     """Check every connection of an open ``rosbag.Bag`` before any message is read (rosbag generates a class
-    from each connection's definition), and every chunk header (``check_chunks``); ValueError naming
-    ``source`` and the topic or chunk."""
-    check_chunks(bag, source)
+    from each connection's definition), and every chunk header (``check_chunks``; ``inflate_bz2``: False when
+    the caller inflates chunks itself, bounded); ValueError naming ``source`` and the topic or chunk."""
+    check_chunks(bag, source, inflate_bz2)
     for connection in list(getattr(bag, '_connections', {}).values()):
         check_connection(connection.topic, connection.datatype, connection.msg_def, source)
 
@@ -132,12 +134,19 @@ MAX_CHUNK_BYTES = 1 << 28
 #: Most an LZ4 block can expand (a 255:1 run-length limit), plus a frame's worth of slack.
 LZ4_MAX_RATIO = 256
 LZ4_SLACK = 1 << 16
+#: Bytes read and inflated at a time when a bz2 chunk's size is checked (bz2 has no useful ratio bound: zeros
+#: shrink ~1e5 times, so the chunk is inflated, a step at a time, and counted).
+BZ2_STEP = 1 << 20
 
 
-def check_chunks(bag, source):
+def check_chunks(bag, source, inflate_bz2=True):
     """Raise ValueError('<source>: ...') for a chunk of an open ``rosbag.Bag`` whose declared (decompressed)
     size is more than MAX_CHUNK_BYTES or more than its stored bytes can hold (uncompressed: exactly them;
-    LZ4: 256 times them)."""
+    LZ4: 256 times them), or (``inflate_bz2``: for rosbag, whose ``bz2.decompress`` ignores the declared size)
+    a bz2 chunk that does not inflate to its declared size (counted BZ2_STEP bytes at a time, stopped past it)."""
+    stream = getattr(bag, '_file', None)
+    if type(getattr(bag, '_encryptor', None)).__name__ not in ('NoneType', '_ROSBagNoEncryptor'):
+        stream = None  # encrypted chunks: their bz2 is inside the ciphertext
     for pos, header in sorted(getattr(bag, '_chunk_headers', {}).items()):
         declared, stored = header.uncompressed_size, header.compressed_size
         most = {'none': stored, 'lz4': stored * LZ4_MAX_RATIO + LZ4_SLACK}.get(header.compression, MAX_CHUNK_BYTES)
@@ -145,6 +154,41 @@ def check_chunks(bag, source):
         if declared > most:
             raise ValueError('%s: bag is truncated or damaged (chunk at byte %d declares %d bytes, more than %d: %s, '
                              '%d bytes stored)' % (source, pos, declared, most, header.compression, stored))
+        if header.compression == 'bz2' and inflate_bz2 and stream is not None:
+            inflated = _bz2_inflated_size(stream, header.data_pos, stored, declared)
+            if inflated != declared:
+                raise ValueError('%s: bag is truncated or damaged (chunk at byte %d declares %d bytes, inflates to %s: '
+                                 'bz2, %d bytes stored)' % (source, pos, declared, 'more' if inflated > declared
+                                                            else '%d' % inflated, stored))
+
+
+def _bz2_inflated_size(stream, start, stored, most):
+    """How many bytes the ``stored`` bytes of bz2 streams at ``start`` of ``stream`` inflate to (as
+    ``bz2.decompress`` reads them: stream after stream), counting stopped once past ``most``; the stream's
+    position is put back. Damaged data counts as what inflated before the damage."""
+    at = stream.tell()
+    stream.seek(start)
+    left, total = [stored], 0
+
+    def more():
+        data = stream.read(min(left[0], BZ2_STEP))
+        left[0] -= len(data)
+        return data
+    try:
+        inflater = bz2.BZ2Decompressor()
+        while total <= most:
+            if inflater.eof:
+                data, inflater = inflater.unused_data or more(), bz2.BZ2Decompressor()
+            else:
+                data = more() if inflater.needs_input else b''
+            if not data and inflater.needs_input:
+                break
+            total += len(inflater.decompress(data, BZ2_STEP))
+    except (OSError, EOFError, ValueError):
+        pass
+    finally:
+        stream.seek(at)
+    return total
 
 
 @functools.lru_cache(maxsize=128)

@@ -14,7 +14,7 @@ def open_bag(path, skip_index=False):
     """Open a bag for reading; raise ValueError('<path>: <what is wrong>') when it cannot be read, is not a
     regular file, or a connection's message definition is unsafe (checked before any message is read:
     rosbag generates a class from each definition). ``skip_index``: do not read the per-message index
-    (``bag_reader`` reads it itself)."""
+    (``bag_reader`` reads it itself, and inflates the chunks itself, bounded)."""
     if not os.path.exists(path):
         raise ValueError('%s: no such bag file' % path)
     if os.path.isdir(path):
@@ -38,7 +38,7 @@ def open_bag(path, skip_index=False):
         raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
     try:
         _check_index(bag, path)
-        safe_input.check_bag(bag, path)
+        safe_input.check_bag(bag, path, inflate_bz2=not skip_index)  # skip_index: bag_reader inflates, bounded
     except Exception:
         bag.close()
         raise

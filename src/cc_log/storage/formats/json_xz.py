@@ -100,6 +100,15 @@ MAX_DOCUMENT_BYTES = 1 << 30
 #: Documents up to this size are decompressed in one pass; a larger one is first counted without being
 #: kept, so a bomb costs decompression time up to MAX_DOCUMENT_BYTES but never that much memory.
 ONE_PASS_BYTES = 64 << 20
+#: Fewest document bytes a message costs (``decode`` refuses a document declaring more messages than its bytes
+#: pay for, beyond FREE_MESSAGES): a message's own values in the columns or stamps are ~50-2,000 bytes, a
+#: message of constant fields alone (its section states them once) is not, hence the free allowance.
+MIN_MESSAGE_BYTES = 16
+#: Messages a document may declare beyond what its bytes pay for at MIN_MESSAGE_BYTES each.
+FREE_MESSAGES = 10000
+#: Most messages one document may declare (10 times ``max_window``'s 100,000 driving messages): each costs ~1 kB
+#: of memory and ~25 us once read.
+MAX_DOCUMENT_MESSAGES = 1000000
 #: Memory the xz decoder may use (its dictionary): cc_log writes at most 64 MiB dictionaries.
 DECODER_MEMORY = 256 << 20
 
@@ -301,7 +310,7 @@ def decode(data, name='<bytes>'):
     except ValueError as error:
         raise ValueError('%s: not a JSON document (%s)' % (name, error))
     try:
-        return from_document(doc)
+        return from_document(doc, len(text))
     except ValueError as error:
         raise ValueError('%s: %s' % (name, error))
 
@@ -419,12 +428,19 @@ def _floats(value):
     return value
 
 
-def from_document(doc):
+def from_document(doc, size=None):
     """``(metadata, records)`` of a JSON document parsed with ``parse_float=decimal.Decimal`` (as ``decode``
-    does: delta columns are added up exactly); ValueError saying what does not fit."""
+    does: delta columns are added up exactly); ValueError saying what does not fit, also before any message is
+    built when its sections declare more messages than ``size`` (the document's bytes, when known) pays for
+    (``message_cap``)."""
     if not isinstance(doc, dict) or not isinstance(doc.get('metadata'), dict) \
             or not isinstance(doc.get('topics'), list):
         raise ValueError('not a cc_log json-xz window (needs "metadata" and "topics")')
+    declared = sum(section['count'] for section in doc['topics'] if isinstance(section, dict)
+                   and isinstance(section.get('count'), int) and section['count'] > 0)
+    if declared > message_cap(size):
+        raise ValueError('the topic sections declare %d messages, more than the %d a document of %s bytes may hold'
+                         % (declared, message_cap(size), 'unknown' if size is None else size))
     metadata = _floats(doc['metadata'])
     layout = metadata.get('layout')
     if layout not in LAYOUTS:
@@ -456,6 +472,14 @@ def from_document(doc):
     if positions != [len(recs) for recs in per_topic]:
         raise ValueError('"order" does not fit the topic sections')
     return metadata, records
+
+
+def message_cap(size=None):
+    """Most messages a document of ``size`` bytes (None: unknown) may declare: MIN_MESSAGE_BYTES per message
+    beyond FREE_MESSAGES, at most MAX_DOCUMENT_MESSAGES."""
+    if size is None:
+        return MAX_DOCUMENT_MESSAGES
+    return min(MAX_DOCUMENT_MESSAGES, size // MIN_MESSAGE_BYTES + FREE_MESSAGES)
 
 
 def _section_records(section):
