@@ -430,7 +430,8 @@ def test_metadata_of_the_wrong_type_is_refused_on_read(triggers, tmp_path):
     with pytest.raises(ValueError) as error:
         read_window(path)
     assert one_line(error.value) == '%s: metadata: triggers must be a list of objects {"stamp": number, ' \
-                                    '"reason": string, "score": number or null, "name": string}' % path
+                                    '"reason": string, "score": number or null, "name": string, "why": at most 3 ' \
+                                    'objects of short strings (text at most 120 characters) and finite numbers}' % path
     for args in (('info', path), ('plot', path, '--out', tmp_path / 'p.png')):
         assert 'metadata: triggers must be' in fails(*args)
 
