@@ -113,6 +113,12 @@ def test_limit_and_node_flags(tmp_path):
     assert plan.params['topics'] == ['/odom', '/scan']
     with pytest.raises(ValueError, match='^--node: /nobody subscribes to no topic'):
         parse(['--node', '/nobody'], {}.get)
+    plan = parse(['-e', 'cam.*', '--node', '/move_base', '--model', str(tmp_path / 'none.json')],
+                 {'/move_base': ['/odom', '/a.b']}.get)  # with -e, NODE's topics as patterns of their exact names
+    from cc_log.core.topic_select import TopicSelection
+    selection = TopicSelection.parse(plan.params['topics'], 'topics')
+    assert [selection.matches(topic) for topic in ('/odom', '/a.b', '/axb', '/odom\n', 'camera')] == [
+        True, True, False, False, True]
 
 
 def test_help_is_plain_text(capsys):

@@ -181,7 +181,7 @@ def parse(argv, subscriptions=None):
         found = subscriptions(args.node)
         if not found:
             raise ValueError('--node: %s subscribes to no topic (or is not running)' % args.node[:200])
-        args.topics = list(args.topics) + [('^%s$' % re.escape(topic)) if args.regex else topic
+        args.topics = list(args.topics) + [re.escape(topic) if args.regex else topic  # patterns match whole names
                                            for topic in found]
     if not (args.all or args.topics or args.config):
         raise ValueError('no topics given: TOPIC ..., -a, -e REGEX ... or --node NODE (or --config)')
