@@ -6,7 +6,8 @@ import pytest
 
 from cc_log.storage import log_format
 from cc_log.features import FeatureConfig
-from cc_log.core.smart import OPENED, WRITTEN, SmartLogger
+from cc_log.core.event_kinds import OPENED, WRITTEN
+from cc_log.core.smart import SmartLogger
 from cc_log.triggers import ClassifierTrigger, ManualTrigger, RuleTrigger
 from cc_log.triggers.rule import Condition
 from cc_log.core.records import Record
