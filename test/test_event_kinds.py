@@ -16,8 +16,8 @@ MSG = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'msg', 'Ano
 def message_constants():
     """The constants of msg/AnomalyEvent.msg (name -> value), as genmsg reads ``uint8 NAME=value``."""
     with open(MSG) as stream:
-        return {name: int(value) for name, value in re.findall(r'^\s*uint8\s+([A-Z_]+)\s*=\s*(\d+)', stream.read(),
-                                                                  re.M)}
+        text = stream.read()
+    return {name: int(value) for name, value in re.findall(r'^\s*uint8\s+([A-Z_]+)\s*=\s*(\d+)', text, re.M)}
 
 
 def test_the_message_constants_are_the_vocabulary_on_the_wire():

@@ -17,10 +17,11 @@ Event = collections.namedtuple(
 Event.__doc__ = """What happened to a logging window.
 
 kind (``core.event_kinds``): OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED
-(writing it failed; ``error`` says why: once when a disk problem first keeps the window in memory to be retried, and again if it is
-lost for good), SPLIT (``path``, a file of a window still being written, was finished at split_mb: the window
-goes on in the next; start, end, messages: of the part that began it) or DELETED (``path``, an old window file,
-was deleted to stay within max_disk_mb; stamp, start and end are None). stamp: of the message that triggered
+(writing it failed; ``error`` says why: once when a disk problem first keeps the window in memory to be
+retried, and again if it is lost for good), SPLIT (``path``, a file of a window still being written, was
+finished at split_mb: the window goes on in the next; start, end, messages: of the part that began it) or
+DELETED (``path``, an old window file, was deleted to stay within max_disk_mb; stamp, start and end are None).
+stamp: of the message that triggered
 (the first trigger of the window for WRITTEN and FAILED). trigger: the name of that trigger ('classifier',
 'manual', a rule's name...); reason: its reason ('classifier' for classifiers, a rule's condition, a manual
 request's text); score: the lowest classifier score of the window's triggers (NaN when none); threshold: of the
