@@ -21,15 +21,14 @@ kind (``core.event_kinds``): OPENED (a trigger opened a window), WRITTEN (the wi
 retried, and again if it is lost for good), SPLIT (``path``, a file of a window still being written, was
 finished at split_mb: the window goes on in the next; start, end, messages: of the part that began it) or
 DELETED (``path``, an old window file, was deleted to stay within max_disk_mb; stamp, start and end are None).
-stamp: of the message that triggered
-(the first trigger of the window for WRITTEN and FAILED). trigger: the name of that trigger ('classifier',
-'manual', a rule's name...); reason: its reason ('classifier' for classifiers, a rule's condition, a manual
-request's text); score: the lowest classifier score of the window's triggers (NaN when none); threshold: of the
-classifier that fired (else of the first classifier; NaN without one). start, end: header stamps (float s) of
-the first and last message (end is None for OPENED). messages, path, bytes: the window's message count (all
-topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that stood out when that trigger
-fired (``core.why``; () when it says none). copy: the file is a ``copy`` route's (``core.routes``): its messages
-are in the window's own file too."""
+stamp: of the message that triggered (the first trigger of the window for WRITTEN and FAILED). trigger: the name
+of that trigger ('classifier', 'manual', a rule's name...); reason: its reason ('classifier' for classifiers, a
+rule's condition, a manual request's text); score: the lowest classifier score of the window's triggers (NaN
+when none); threshold: of the classifier that fired (else of the first classifier; NaN without one). start, end:
+header stamps (float s) of the first and last message (end is None for OPENED). messages, path, bytes: the
+window's message count (all topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that
+stood out when that trigger fired (``core.why``; () when it says none). copy: the file is a ``copy`` route's
+(``core.routes``): its messages are in the window's own file too."""
 
 
 def from_writer(event, threshold_of):
