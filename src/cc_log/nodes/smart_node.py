@@ -61,12 +61,11 @@ import time
 import rospy
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
-from cc_log.core import drift, health
+from cc_log.core import drift, health, raw_message
 from cc_log.nodes import intake
 from cc_log.storage import window_info
 from cc_log.storage.formats import json_xz
 from cc_log.core import event_kinds, routes, smart, smart_events, trigger_topics
-from cc_log.core import config
 from cc_log.core.model import AnomalyModel
 from cc_log.core.safe_input import printable
 from cc_log.nodes.node_common import (
@@ -109,7 +108,7 @@ class SmartNode(object):
         if not cfg.triggers:
             raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
         try:
-            triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
+            triggers = cfg.build_triggers(AnomalyModel.load, raw_message.installed_class, rospy.resolve_name)
             options = cfg.logger_options(triggers, rospy.resolve_name)
             options['format_options'] = format_options(params, cfg)
         except ValueError as error:
@@ -139,7 +138,7 @@ class SmartNode(object):
         except ValueError as error:
             raise ConfigError('~%s' % error)
         types = trigger_topics.topic_types(triggers)
-        if self.logger.driving_topic in types and config.installed_class(types[self.logger.driving_topic]) is None:
+        if self.logger.driving_topic in types and raw_message.installed_class(types[self.logger.driving_topic]) is None:
             raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
         self._refused = 0
         self._last_trigger = 'none'
