@@ -5,7 +5,6 @@ simulator anomalies; recall by type and latency, false windows per hour, kept me
     cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
     python3 bench/detection_runs.py                       # all runs, seeds 0 1 2, ours and the paper's
     python3 bench/detection_runs.py --runs f1tenth_DS1 --seeds 0 --settings ours   # one run, quick
-    python3 bench/detection_real.py --only runs           # the same, from the detection bench
     python3 bench/detection_runs.py --settings ours --injection robot --threshold calibrated  # second round
     python3 bench/detection_runs.py --settings ours --train-on robot --injection robot   # third round
 

@@ -581,8 +581,7 @@ class SmartLogger(object):
             'trigger': log_format.trigger_name(first) if first else '',
             'threshold': self.threshold if self.classifiers else None,
             'driving_topic': self.driving_topic,
-            'pre': str(self.pre),
-            'post': str(self.post),
+            'pre': str(self.pre), 'post': str(self.post),
             'trigger_info': {t.name: t.describe() for t in self.triggers if t.name in names},
         }
         if self.config is not None:
