@@ -104,6 +104,11 @@ def table(headers, rows, title=None):
     sys.stdout.flush()
 
 
+def count_of(part, whole):
+    """``'part/whole'`` (``'3/18'``), or ``'-'`` when there is no whole."""
+    return '%d/%d' % (part, whole) if whole else '-'
+
+
 def _fmt(value):
     if isinstance(value, float):
         if value != value:

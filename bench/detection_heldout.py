@@ -60,6 +60,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
+from common import count_of  # noqa: E402
 import heldout_data  # noqa: E402
 
 from cc_log import sim  # noqa: E402
@@ -343,10 +344,6 @@ def injected_after(records, switch, model, setting, tmp, config, seeds, envelope
     return out
 
 
-def pct(a, b):
-    return '%d/%d' % (a, b) if b else '-'
-
-
 def report(r, injections, explain=False):
     print('## %s, setting %s: %.1f Hz, trained on %.1f min, feature window %.2f s' % (
         r['robot'], r['setting'], r['rate'], r['train_s'] / 60.0, r['reach']))
@@ -403,10 +400,10 @@ def report(r, injections, explain=False):
             caught = [e for e in ev if e['caught']]
             delays = [e['delay'] for e in caught]
             spans = [e['span'] for e in ev]
-            rows.append([kind, pct(len(caught), len(ev)),
+            rows.append([kind, count_of(len(caught), len(ev)),
                          sum(1 for d in delays if d <= LATENCY), '%.2f' % np.median(delays) if delays else '-',
                          '%.2f' % max(delays) if delays else '-', '%.0f%%' % (100 * np.median(spans)),
-                         '%.0f%%' % (100 * min(spans)), pct(sum(1 for s in spans if s >= MIN_SPAN_KEPT), len(ev)),
+                         '%.0f%%' % (100 * min(spans)), count_of(sum(1 for s in spans if s >= MIN_SPAN_KEPT), len(ev)),
                          '%.1f' % np.median([e['length'] for e in ev])])
         common.table(['type', 'caught', 'within %gs' % LATENCY, 'median latency s', 'worst latency s',
                       'median span kept', 'least span kept', '>= 95% kept', 'median event s'], rows,

@@ -13,30 +13,25 @@ Experiments (see docs/DETECTION.md for what the figures mean):
 - sequor: train on 15 of the 20 E2 (normal) trials, score the 5 held-back E2 trials (false alarms), the N2
   (jerky) trial and the 20 N3 (crash) trials; a trial counts as flagged when any of its vectors is.
 
-- runs (``--only runs``): every real run with continuous odometry, trained on its first half, replayed with
-  injected simulator anomalies of every type (bench/detection_runs.py).
-
 Each is run with the default 'motion' features and with the paper's 'raw' features (the same training and
 threshold calibration), plus the paper's own setting (raw features, nu 0.5, threshold 0 = sklearn predict).
 """
 import argparse
 import collections
-import hashlib
 import os
-import platform
 import sys
 import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, 'src'))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
 
 from cc_log.storage.bag import bagio  # noqa: E402
 from cc_log.core import learning  # noqa: E402
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
 
-DATA = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real'))
+DATA = common.DATA
 HUSKY = ('husky_outdoor_2015.bag', '/husky_velocity_controller/odom')
 ALFA = ('alfa_carbonZ_engine_failure.bag', '/mavros/local_position/odom')
 ALFA_ONSET = 116.25          # seconds after the bag start (SOURCES.md)
@@ -203,26 +198,6 @@ def training_cost(n=17512, seed=0):
     return rows
 
 
-def machine():
-    cpu = platform.processor() or ''
-    try:
-        with open('/proc/cpuinfo') as stream:
-            for line in stream:
-                if line.startswith('model name'):
-                    cpu = line.split(':', 1)[1].strip()
-                    break
-    except IOError:
-        pass
-    import sklearn
-    return '%s, %s, %d cores, Python %s, numpy %s, scikit-learn %s' % (
-        platform.node(), cpu, os.cpu_count() or 0, platform.python_version(), np.__version__, sklearn.__version__)
-
-
-def sha(name):
-    with open(os.path.join(DATA, name), 'rb') as stream:
-        return hashlib.sha256(stream.read()).hexdigest()[:12]
-
-
 SETTINGS = collections.OrderedDict([
     ('motion', ('motion', {})),
     ('raw', ('raw', {})),
@@ -232,19 +207,11 @@ SETTINGS = collections.OrderedDict([
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--only', choices=('husky', 'alfa', 'sequor', 'runs'), action='append',
-                        help='runs: every real run with odometry, injected anomalies (bench/detection_runs.py)')
+    parser.add_argument('--only', choices=('husky', 'alfa', 'sequor'), action='append')
     args = parser.parse_args(argv)
-    if args.only and 'runs' in args.only:
-        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-        import detection_runs
-        detection_runs.main([])
-        args.only.remove('runs')
-        if not args.only:
-            return 0
-    print('machine: %s' % machine())
+    print('machine: %s' % common.machine())
     for name in (HUSKY[0], ALFA[0], SEQUOR_E2[0], SEQUOR_N2[0], SEQUOR_N3[0]):
-        print('data: %s (sha256 %s...)' % (name, sha(name)))
+        print(common.describe_data(os.path.join(DATA, name)))
     print('columns: motion = default features and training; raw = the paper\'s features, same training; '
           'paper = raw features, nu 0.5, threshold 0\n')
     started = time.time()

@@ -5,7 +5,6 @@ simulator anomalies; recall by type and latency, false windows per hour, kept me
     cd /work/main && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
     python3 bench/detection_runs.py                       # all runs, seeds 0 1 2, ours and the paper's
     python3 bench/detection_runs.py --runs f1tenth_DS1 --seeds 0 --settings ours   # one run, quick
-    python3 bench/detection_real.py --only runs           # the same, from the detection bench
     python3 bench/detection_runs.py --settings ours --injection robot --threshold calibrated  # second round
     python3 bench/detection_runs.py --settings ours --train-on robot --injection robot   # third round
 
@@ -71,6 +70,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
+from common import count_of  # noqa: E402
 
 import retime  # noqa: E402
 from cc_log.storage.bag import bagio  # noqa: E402
@@ -421,10 +421,6 @@ def separability(name, topic, stop, setting, seeds, fraction, types=sim.ANOMALY_
     return float(depth(nominal).max()), min(anomalies)
 
 
-def pct(a, b):
-    return '-' if not b else '%d/%d' % (a, b)
-
-
 def main(argv=None):
     global WINDOW
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -529,7 +525,7 @@ def main(argv=None):
             rows.append([name, '%.0f' % r['rate'], '%.0f' % r['train_s'], '%.0f' % r['replay_s'],
                          r['false_nominal'], '%.1f' % (3600.0 * r['false_nominal'] / r['replay_s']),
                          '%.0f%%' % (100.0 * r['nominal_kept']),
-                         '%s (%d late, %d no room)' % (pct(caught, total), late, sum(r['no_room'].values())),
+                         '%s (%d late, %d no room)' % (count_of(caught, total), late, sum(r['no_room'].values())),
                          r['false_injected'], '%.2fx' % (r['kept'] / float(r['needed'])) if r['needed'] else '-',
                          '%.2fx (%d)' % (r['clean_kept'] / float(r['clean_needed']), r['clean'])
                          if r['clean_needed'] else '-'])
@@ -556,14 +552,14 @@ def main(argv=None):
                       'caught (late > %gs)' % LATENCY, 'false windows (injected)', 'kept/needed',
                       'kept/needed, no false fire in its windows (n)'], rows)
         common.table(['type', 'caught', 'late', 'no room', 'median latency s', 'worst latency s'],
-                     [[kind, pct(c['caught'], c['total']), c['late'], c['no_room'],
+                     [[kind, count_of(c['caught'], c['total']), c['late'], c['no_room'],
                        '%.2f' % np.median(latencies[kind]) if latencies[kind] else '-',
                        '%.2f' % max(latencies[kind]) if latencies[kind] else '-']
                       for kind, c in by_type.items()], 'by type:')
         hours = totals['replay_s'] / 3600.0
         print('all runs: caught %s (%d later than %gs); false windows without injection %d in %.3f h = %.1f/h; '
               'false windows with injection %d in %.3f h = %.1f/h; kept/needed %.2fx' % (
-                  pct(totals['caught'], totals['total']), totals['late'], LATENCY, totals['false'], hours,
+                  count_of(totals['caught'], totals['total']), totals['late'], LATENCY, totals['false'], hours,
                   totals['false'] / hours if hours else 0.0, totals['false_injected'], totals['injected_s'] / 3600.0,
                   totals['false_injected'] / (totals['injected_s'] / 3600.0) if totals['injected_s'] else 0.0,
                   totals['kept'] / float(totals['needed']) if totals['needed'] else float('nan')))

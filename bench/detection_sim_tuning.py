@@ -47,7 +47,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.core import config as configuration, learning  # noqa: E402
+from cc_log.core import config as configuration, learning, raw_message  # noqa: E402
 from cc_log.offline import demo  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
@@ -63,7 +63,7 @@ def replay(model, records, directory, retrigger, pre, post, progress=None):
     (stats, windows [{start, end, messages, bytes, triggers}])."""
     os.makedirs(directory)
     if isinstance(model, configuration.Config):  # the demo's configuration: its triggers and windows
-        triggers = model.build_triggers(learning.AnomalyModel.load, configuration.installed_class)
+        triggers = model.build_triggers(learning.AnomalyModel.load, raw_message.installed_class)
         options = model.logger_options(triggers)
         result = common.smart_replay(None, records, sim.ODOM_TOPIC, directory, side_topics=(sim.IMU_TOPIC,),
                                      pre=options['pre'], post=options['post'], triggers=triggers)

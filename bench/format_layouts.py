@@ -32,21 +32,19 @@ import argparse
 import json
 import lzma
 import os
-import platform
 import sys
 import tempfile
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-REAL = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real'))
-try:
-    import cc_log
-except ImportError:
-    sys.path.insert(0, os.path.join(ROOT, 'src'))
-    import cc_log
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import common  # noqa: E402
+
+import cc_log  # noqa: E402
 from cc_log.core import msg_codec  # noqa: E402
 from cc_log.storage.formats import json_rows, json_xz  # noqa: E402
 from cc_log.core.records import Record  # noqa: E402
+
+REAL = common.DATA
 
 BAGS = [
     ('husky_outdoor_2015.bag', '/husky_velocity_controller/odom'),
@@ -60,20 +58,6 @@ WRITTEN = '6+opts'  # preset 6 with json_xz.FILTER_OPTIONS, as the writer compre
 PRESETS = [('0', 0), ('1', 1), ('3', 3), ('6', 6), (WRITTEN, 6), ('9', 9), ('9e', 9 | lzma.PRESET_EXTREME)]
 QUICK_PRESETS = [('1', 1), ('6', 6), (WRITTEN, 6), ('9e', 9 | lzma.PRESET_EXTREME)]
 METADATA = {'codec': 'json-xz', 'reasons': ['classifier'], 'cc_log_version': cc_log.__version__}
-
-
-def machine():
-    model = platform.processor() or '?'
-    try:
-        with open('/proc/cpuinfo') as stream:
-            for line in stream:
-                if line.startswith('model name'):
-                    model = line.split(':', 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return '%s, %d cores (os.cpu_count), Python %s, liblzma via lzma module' % (
-        model, os.cpu_count() or 0, platform.python_version())
 
 
 def load(bag_name, topic):
@@ -226,7 +210,7 @@ def main(argv=None):
     presets = QUICK_PRESETS if args.quick else PRESETS
     began = time.perf_counter()
     print('# format_layouts: json-xz layouts and LZMA presets against row-per-message JSON')
-    print('machine: %s' % machine())
+    print('machine: %s' % common.machine())
     print('load: %.2f %.2f %.2f (os.getloadavg: 1, 5, 15 min)' % os.getloadavg())
     print('data: %s (see SOURCES.md there)' % REAL)
     print('row JSON = msg_codec.row_json_bytes (json.dumps of the nested message dict + newline)')

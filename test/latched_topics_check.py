@@ -50,7 +50,7 @@ def tf_message_class():
     """tf2_msgs/TFMessage built from its definition (tf2_msgs need not be installed)."""
     definition = 'geometry_msgs/TransformStamped[] transforms\n%s\nMSG: geometry_msgs/TransformStamped\n%s' % (
         '=' * 80, TransformStamped._full_text)
-    return msg_codec.message_class('tf2_msgs/TFMessage', definition)
+    return msg_codec.generated_class('tf2_msgs/TFMessage', definition)
 
 
 def text(value):

@@ -43,9 +43,8 @@ class SafeDecodingTest(unittest.TestCase):
         model = make_model(os.path.join(tmp, 'model.json'), always=False)
         diagnostics = []
         rospy.Subscriber('/diagnostics', DiagnosticArray, diagnostics.append, queue_size=None)
-        evil = rospy.Publisher('side', crafted_class(marker, msg_codec.message_class('cc_log_test/Evil',
-                                                                                     'float64 x\n')),
-                               queue_size=1000)
+        evil_class = crafted_class(marker, msg_codec.generated_class('cc_log_test/Evil', 'float64 x\n'))
+        evil = rospy.Publisher('side', evil_class, queue_size=1000)
         streamer = Streamer('odom_in', 'imu_in')
         node = fx.start('smart_logger.py', '__name:=' + NODE, 'odom:=odom_in', '_model:=' + model,
                         '_directory:=' + directory, '_topics:=side', '_diagnostic_period:=0.2')

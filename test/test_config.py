@@ -8,7 +8,8 @@ import pytest
 
 from cc_log.core import config, learning
 from cc_log.storage import log_format
-from cc_log.core.config import Config, installed_class
+from cc_log.core.config import Config
+from cc_log.core.raw_message import installed_class
 from cc_log.features import FeatureConfig
 from cc_log.core.model import AnomalyModel
 from cc_log.triggers import ClassifierTrigger, RuleTrigger

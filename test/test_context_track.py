@@ -7,6 +7,7 @@ from conftest import assert_rosbag_spans, fill_disk
 from nav_msgs.msg import Odometry
 from std_msgs.msg import String
 
+from cc_log.core import event_kinds
 from cc_log.storage import context_track, window_writer
 from cc_log.core import safe_files
 from cc_log.storage.context_track import ContextTrack, Tee, parse_topics
@@ -123,9 +124,9 @@ def test_closed_files_go_through_the_writer_and_share_the_quota(tmp_path):
     track.close()
     writer.close()
     kinds = [(event.kind, event.job.what if event.job else None) for event in events]
-    assert (window_writer.WRITTEN, window_writer.CONTEXT) in kinds
-    assert (window_writer.DELETED, None) in kinds and not old.exists()  # the window beyond the quota went
-    [written] = [event.path for event in events if event.kind == window_writer.WRITTEN]
+    assert (event_kinds.WRITTEN, window_writer.CONTEXT) in kinds
+    assert (event_kinds.DELETED, None) in kinds and not old.exists()  # the window beyond the quota went
+    [written] = [event.path for event in events if event.kind == event_kinds.WRITTEN]
     assert os.path.exists(written) and len(read(written)) == 20
 
 

@@ -153,7 +153,7 @@ def test_the_demos_configuration_keeps_every_event_of_its_run_whole(tmp_path):
     run (the simulator as demo.launch runs it: seed 8, 2.5 min, 6 anomalies, gap 10 s) through SmartLogger;
     demo.score passes (with retrigger onset and 1 s + 1 s, the old demo, a collision kept about a third)."""
     import yaml
-    from cc_log.core import config, learning
+    from cc_log.core import config, learning, raw_message
     from cc_log import sim
     from cc_log.core.smart import SmartLogger
     from cc_log.offline.replay import replay_records
@@ -165,7 +165,7 @@ def test_the_demos_configuration_keeps_every_event_of_its_run_whole(tmp_path):
                                       anomalies=demo.DEFAULT_ANOMALIES, gap=10.0, imu=True, jitter=0.0, commands=True))
     records = [Record(stamp, topic, msg) for topic, stamp, msg in run.messages() if topic != sim.TRUTH_TOPIC]
     cfg = config.Config.from_dict(yaml.safe_load(demo.config_text(model_path)), 'demo.yaml')
-    triggers = cfg.build_triggers(learning.AnomalyModel.load, config.installed_class)
+    triggers = cfg.build_triggers(learning.AnomalyModel.load, raw_message.installed_class)
     options = dict(cfg.logger_options(triggers), side_topics=[sim.IMU_TOPIC])
     logger = SmartLogger(None, str(tmp_path / 'windows'), background=False, **options)
     saved = replay_records(logger, records)['windows']

@@ -298,7 +298,8 @@ def test_a_stamp_repeated_for_ever_does_not_grow_the_ring():
 
 
 def test_a_configuration_entry_of_kind_envelope(tmp_path):
-    from cc_log.core.config import Config, installed_class
+    from cc_log.core.config import Config
+    from cc_log.core.raw_message import installed_class
     from cc_log.core.model import AnomalyModel
     env = learned(nominal_drive(seconds=30))
     path = str(tmp_path / 'envelope.json')

@@ -12,7 +12,8 @@ from cc_log.storage import context_track, disk_guard, log_format, recovery
 from cc_log.storage.disk_guard import DiskGuard
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.log_format import Format, file_prefix, write_window
-from cc_log.storage.window_writer import DELETED, Job, WindowWriter
+from cc_log.core.event_kinds import DELETED
+from cc_log.storage.window_writer import Job, WindowWriter
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from test_reliability import DEAD_PID, as_leftover, window  # noqa: E402

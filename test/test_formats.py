@@ -387,7 +387,7 @@ def test_window_files_sorted_by_time_and_leftovers_listed(sequor_window, alfa_wi
 
 
 def test_file_name_is_utc_of_first_stamp_and_first_reason(tmp_path):
-    msg_class = msg_codec.message_class('std_msgs/Float64', 'float64 data\n')
+    msg_class = msg_codec.generated_class('std_msgs/Float64', 'float64 data\n')
     stamp = 1432235498.0279760  # 2015-05-21 19:11:38.027976 UTC
     window = LogWindow([Record(stamp, '/x', msg_class(data=1.5)), Record(stamp + 1, '/x', msg_class(data=2.5))],
                        [Trigger(stamp, 'odd reason/1', 0.0), Trigger(stamp + 1, 'classifier', 0.0)])
@@ -519,7 +519,7 @@ MSG: std_msgs/Empty
 
 def test_msg_codec_every_kind_of_field():
     import genpy
-    cls = msg_codec.message_class('cc_log_test/AllTypes', ALL_TYPES)
+    cls = msg_codec.generated_class('cc_log_test/AllTypes', ALL_TYPES)
     classes = msg_codec.message_classes('cc_log_test/AllTypes', ALL_TYPES)
     msg = cls(blob=b'\x00\xff\x10', fixed=b'abcd', chars=b'xy', small=-5, big=2 ** 64 - 1, flag=True,
               text='h\u00e9llo # not a comment', single=0.10000000149011612,
@@ -537,7 +537,7 @@ def test_msg_codec_every_kind_of_field():
     assert serialized(back) == serialized(msg)
     assert back.blob == b'\x00\xff\x10' and back.big == 2 ** 64 - 1 and back.d == genpy.Duration(-3, 500)
     assert str(back.doubles[3]) == '-0.0' and back.doubles[5] == 5e-324
-    assert msg_codec.message_class('cc_log_test/AllTypes', ALL_TYPES) is cls  # cached
+    assert msg_codec.generated_class('cc_log_test/AllTypes', ALL_TYPES) is cls  # cached
 
 
 def test_msg_codec_errors_name_the_field():
@@ -559,7 +559,7 @@ def test_compact_definition_keeps_md5(real_bag):
             break
     compact = msg_codec.compact_definition(msg._full_text)
     assert len(compact) < len(msg._full_text) / 2 and '#' not in compact
-    assert msg_codec.message_class(msg._type, compact)._md5sum == msg._md5sum
+    assert msg_codec.generated_class(msg._type, compact)._md5sum == msg._md5sum
     assert msg_codec.compact_definition('string S=a # b\nint32 X=1 # one\n') == 'string S=a # b\nint32 X=1\n'
 
 

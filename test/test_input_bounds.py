@@ -351,7 +351,7 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
 def test_a_trigger_window_reason_is_logged_with_its_terminal_escapes_shown(tmp_path):
     """Issue 42 item 20: the reason of ~trigger_window (a service caller's text) reaches the node's log, its
     AnomalyEvent and /diagnostics through smart_events.reason_text, which shows its terminal escapes."""
-    from cc_log.core import smart_events
+    from cc_log.core import event_kinds, smart_events
     from cc_log.core.smart import SmartLogger
     from test_heavy_windows import ODOM, feed, stream
     logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, background=False)
@@ -361,7 +361,7 @@ def test_a_trigger_window_reason_is_logged_with_its_terminal_escapes_shown(tmp_p
     ok, message = logger.trigger_now('door \x1b]0;owned\x07\x1b[2J\u202e')
     assert ok, message
     assert logger.close(30)
-    opened = [event for event in events if event.kind == smart_events.OPENED]
+    opened = [event for event in events if event.kind == event_kinds.OPENED]
     assert [smart_events.reason_text(event) for event in opened] == ['door \\x1b]0;owned\\x07\\x1b[2J\\u202e']
 
 

@@ -91,7 +91,7 @@ def crafted_windows():
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Imu, LaserScan, Range
     from std_msgs.msg import Bool, ColorRGBA
-    custom = msg_codec.message_class(CUSTOM, CUSTOM_DEFINITION)
+    custom = msg_codec.generated_class(CUSTOM, CUSTOM_DEFINITION)
     specials = [float('nan'), float('inf'), float('-inf'), -0.0, 0.0, 5e-324, 1.7976931348623157e308, 0.1, 1e22]
     odometry, imu, ranges, custom_msgs, scans, bools, colors = [], [], [], [], [], [], []
     for i in range(120):

@@ -179,7 +179,8 @@ def odom_msg(stamp):
 
 
 def test_the_smart_logger_opens_only_what_the_budget_admits_and_says_what_it_skipped(tmp_path):
-    from cc_log.core.smart import OPENED, SmartLogger
+    from cc_log.core.event_kinds import OPENED
+    from cc_log.core.smart import SmartLogger
     from cc_log.storage import log_format
     # 10.5 extends the window of 10 (never refused, though +5 is far from anomalous)
     scores = {10.0: -1.0, 10.5: 5.0, 30.0: -0.5, 50.0: -2.0, 70.0: -1.5, 90.0: -3.0}

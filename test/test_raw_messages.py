@@ -193,7 +193,7 @@ def tf_message_class():
     from geometry_msgs.msg import TransformStamped
     definition = 'geometry_msgs/TransformStamped[] transforms\n%s\nMSG: geometry_msgs/TransformStamped\n%s' % (
         '=' * 80, TransformStamped._full_text)
-    return msg_codec.message_class('tf2_msgs/TFMessage', definition), TransformStamped
+    return msg_codec.generated_class('tf2_msgs/TFMessage', definition), TransformStamped
 
 
 def _tf_static(stamp):

@@ -535,7 +535,8 @@ def test_no_shell_anywhere():
 # -- SmartLogger: write failures, disk limits, bad input -------------------------------------------------
 
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
-from cc_log.core.smart import DELETED, FAILED, OPENED, WRITTEN, SmartLogger  # noqa: E402
+from cc_log.core.event_kinds import DELETED, FAILED, OPENED, WRITTEN  # noqa: E402
+from cc_log.core.smart import SmartLogger  # noqa: E402
 
 CONFIG = FeatureConfig('motion', '20')
 

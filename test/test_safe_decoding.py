@@ -109,7 +109,7 @@ def test_every_installed_message_definition_is_accepted_full_and_compact():
     for cls in classes:
         safe_input.check_definition(cls._type, cls._full_text)
         compact = msg_codec.compact_definition(cls._full_text)
-        assert msg_codec.message_class(cls._type, compact)._md5sum == cls._md5sum  # json-xz round trip
+        assert msg_codec.generated_class(cls._type, compact)._md5sum == cls._md5sum  # json-xz round trip
 
 
 def test_every_connection_of_the_real_bags_is_accepted(real_bag):
@@ -165,14 +165,14 @@ ATTACKS = [  # (definition with {m} for the marker, what the refusal says)
 def test_crafted_definitions_are_refused_before_genpy(definition, reason, marker):
     text = definition.replace('{m}', str(marker))
     with pytest.raises(safe_input.UnsafeDefinition) as error:
-        msg_codec.message_class('a/B', text)
+        msg_codec.generated_class('a/B', text)
     assert one_line(error.value).startswith('message definition of a/B: ') and reason in str(error.value)
 
 
 def test_type_names_and_sizes_are_checked(marker):
     for msg_type in ('a/B"""\nimport os', 'os', 'a/b/c', '__import__("os")/x', ''):
         with pytest.raises(ValueError) as error:
-            msg_codec.message_class(msg_type, 'int32 x\n')
+            msg_codec.generated_class(msg_type, 'int32 x\n')
         assert 'package/Name' in one_line(error.value)
     nested = 'L0 x\n' + ''.join(SEP + 'MSG: a/L%d\nL%d x' % (i, i + 1) for i in range(40)) + SEP + 'MSG: a/L40\n'
     with pytest.raises(ValueError, match='nested deeper than 32'):
@@ -189,7 +189,7 @@ def test_a_message_with_an_empty_dependency_round_trips_compacted():
     """compact_definition keeps "MSG: pkg/Type\\n" of a type with no field, which genpy needs."""
     from nav_msgs.msg import GetMapAction
     compact = msg_codec.compact_definition(GetMapAction._full_text)
-    assert msg_codec.message_class(GetMapAction._type, compact)._md5sum == GetMapAction._md5sum
+    assert msg_codec.generated_class(GetMapAction._type, compact)._md5sum == GetMapAction._md5sum
 
 
 # -- any definition the validator accepts becomes a class and nothing else ----------------------------------
@@ -417,7 +417,7 @@ def test_deeply_nested_json_is_refused_with_one_line(tmp_path):
     bag_path = str(tmp_path / 'cc_log_x.bag')  # a bag-lz4 window whose metadata nests too deep
     with rosbag.Bag(bag_path, 'w') as bag:
         record = window(1).records[0]
-        bag.write('/cc_log/metadata', msg_codec.message_class('std_msgs/String', 'string data\n')(data=DEEP),
+        bag.write('/cc_log/metadata', msg_codec.generated_class('std_msgs/String', 'string data\n')(data=DEEP),
                   record.msg.header.stamp)
         bag.write('/odom', record.msg, record.msg.header.stamp)
     with pytest.raises(ValueError, match='bad metadata JSON on /cc_log/metadata .*nested deeper'):

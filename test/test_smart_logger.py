@@ -11,7 +11,8 @@ from cc_log.core import learning, msg_codec, smart
 from cc_log.storage import log_format
 from cc_log.core.collector import VectorStream
 from cc_log.features import FeatureConfig, vector_length
-from cc_log.core.smart import FAILED, OPENED, WRITTEN, SmartLogger
+from cc_log.core.event_kinds import FAILED, OPENED, WRITTEN
+from cc_log.core.smart import SmartLogger
 from cc_log.offline.replay import replay
 from cc_log.triggers import ClassifierTrigger
 from cc_log.core.records import Record

@@ -18,7 +18,8 @@ from cc_log.core.raw_message import class_header, serialized
 from cc_log.offline import cli
 from cc_log.offline.stats import run_stats
 from cc_log.storage import log_format, window_writer
-from cc_log.storage.window_writer import DELETED, SPLIT, WRITTEN, Job, WindowWriter
+from cc_log.core.event_kinds import DELETED, SPLIT, WRITTEN
+from cc_log.storage.window_writer import Job, WindowWriter
 
 rosbag = pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402

@@ -6,7 +6,8 @@ import pytest
 
 from cc_log.storage import log_format
 from cc_log.features import FeatureConfig
-from cc_log.core.smart import OPENED, WRITTEN, SmartLogger
+from cc_log.core.event_kinds import OPENED, WRITTEN
+from cc_log.core.smart import SmartLogger
 from cc_log.triggers import ClassifierTrigger, ManualTrigger, RuleTrigger
 from cc_log.triggers.rule import Condition
 from cc_log.core.records import Record
@@ -358,7 +359,7 @@ def test_a_goal_status_rule_catches_every_simulated_planning_failure_once(tmp_pa
     simulator = sim.Simulator(run)
     rule = RuleTrigger('goal_aborted', sim.STATUS_TOPIC, type='actionlib_msgs/GoalStatusArray',
                        when='status_list[0].status == 4')
-    from cc_log.core.config import installed_class
+    from cc_log.core.raw_message import installed_class
     rule.check(installed_class(rule.type))
     logger = SmartLogger(None, str(tmp_path), 'json-xz', '1s', '1s', driving_topic=sim.ODOM_TOPIC, triggers=[rule])
     feed(logger, [(topic, msg, stamp) for topic, stamp, msg in simulator.messages()])
@@ -379,7 +380,8 @@ HUSKY, HUSKY_ODOM = 'husky_outdoor_2015.bag', '/husky_velocity_controller/odom'
 def configured_logger(directory, text):
     """A SmartLogger as the node and ``cclog replay --config`` build it from a configuration's text."""
     import yaml
-    from cc_log.core.config import Config, installed_class
+    from cc_log.core.config import Config
+    from cc_log.core.raw_message import installed_class
     from cc_log.core.model import AnomalyModel
     cfg = Config.from_dict(yaml.safe_load(text), 'test.yaml')
     triggers = cfg.build_triggers(AnomalyModel.load, installed_class)

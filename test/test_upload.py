@@ -6,6 +6,7 @@ import time
 import pytest
 
 from cc_log.nodes import launcher
+from cc_log.core import event_kinds
 from cc_log.storage import window_writer
 from cc_log.storage.upload import UploadHook, parse_command
 
@@ -35,11 +36,11 @@ def test_runs_once_per_window_or_context_file_with_the_path(tmp_path):
     listing = tmp_path / 'list'
     script = 'import sys; open(sys.argv[1], "a").write(sys.argv[2] + "\\n")'
     hook = UploadHook([sys.executable, '-c', script, str(listing)])
-    hook.on_event(event(window_writer.WRITTEN, window_writer.WINDOW, '/w/a.json.xz'))
-    hook.on_event(event(window_writer.WRITTEN, window_writer.ROUTE, '/w/a+numeric.json.xz'))  # a piece of it
-    hook.on_event(event(window_writer.WRITTEN, window_writer.CONTEXT, '/w/context/c.bag'))
-    hook.on_event(event(window_writer.WRITTEN, 'vector', '/w/features/v.json'))  # not a closed log file
-    hook.on_event(event(window_writer.FAILED, window_writer.WINDOW, ''))
+    hook.on_event(event(event_kinds.WRITTEN, window_writer.WINDOW, '/w/a.json.xz'))
+    hook.on_event(event(event_kinds.WRITTEN, window_writer.ROUTE, '/w/a+numeric.json.xz'))  # a piece of it
+    hook.on_event(event(event_kinds.WRITTEN, window_writer.CONTEXT, '/w/context/c.bag'))
+    hook.on_event(event(event_kinds.WRITTEN, 'vector', '/w/features/v.json'))  # not a closed log file
+    hook.on_event(event(event_kinds.FAILED, window_writer.WINDOW, ''))
     wait_for(lambda: hook.stats()['running'] == 0)
     assert sorted(listing.read_text().split()) == ['/w/a+numeric.json.xz', '/w/a.json.xz', '/w/context/c.bag']
     assert hook.stats()['succeeded'] == 3 and hook.stats()['failed'] == 0

@@ -11,7 +11,8 @@ import pytest
 from cc_log.core import learning, smart_events, why
 from cc_log.core.model import AnomalyModel
 from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.smart import OPENED, SmartLogger
+from cc_log.core.event_kinds import OPENED
+from cc_log.core.smart import SmartLogger
 from cc_log.features import FeatureConfig, FeatureStream
 from cc_log.offline import cli
 from cc_log.storage import log_format, window_info

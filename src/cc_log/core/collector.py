@@ -25,7 +25,7 @@ import threading
 import time
 
 from cc_log import features as features_mod
-from cc_log.core import learning
+from cc_log.core import event_kinds, learning
 from cc_log.storage import log_format
 from cc_log.core import msg_codec
 from cc_log.core import safe_files
@@ -271,9 +271,9 @@ class Collector(object):
     def _written(self, event):
         """A WindowWriter event as this collector's ``(kind, detail)`` callback."""
         job = event.job
-        if event.kind == window_writer.DELETED:
+        if event.kind == event_kinds.DELETED:
             kind, detail = 'deleted', {'path': event.path, 'error': event.error}
-        elif event.kind == window_writer.FAILED:
+        elif event.kind == event_kinds.FAILED:
             kind, detail = 'failed', {'what': job.what, 'messages': job.messages, 'error': event.error,
                                       'kept': event.kept}
         elif job.window is not None:

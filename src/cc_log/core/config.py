@@ -108,13 +108,6 @@ def with_classifier(data, **values):
     return data
 
 
-def installed_class(msg_type):
-    """The installed message class of ``msg_type`` (found by roslib; the name is checked first), or None."""
-    safe_input.check_type_name(msg_type)
-    import roslib.message  # no rospy: only the installed message packages
-    return roslib.message.get_message_class(msg_type)
-
-
 def global_name(topic):
     """How offline tools resolve a topic name: relative names are global (``odom`` -> ``/odom``)."""
     return topic if topic.startswith('/') else '/' + topic

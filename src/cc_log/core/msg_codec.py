@@ -33,7 +33,7 @@ import genpy.dynamic
 
 from cc_log.core import safe_input
 
-__all__ = ['to_dict', 'from_dict', 'message_class', 'message_classes', 'row_json', 'row_json_bytes',
+__all__ = ['to_dict', 'from_dict', 'generated_class', 'message_classes', 'row_json', 'row_json_bytes',
            'field_types', 'encode_float', 'decode_float', 'compact_definition', 'to_float32', 'short_float32',
            'NON_FINITE']
 
@@ -407,8 +407,9 @@ def message_classes(msg_type, definition):
     return classes
 
 
-def message_class(msg_type, definition):
-    """The message class of ``msg_type`` generated from its full definition text (cached)."""
+def generated_class(msg_type, definition):
+    """The message class of ``msg_type`` generated from its full definition text (cached), never the installed
+    one: ``raw_message.message_class`` resolves which class decodes."""
     return message_classes(msg_type, definition)[msg_type]
 
 

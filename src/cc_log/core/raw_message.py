@@ -3,10 +3,11 @@
 A ``records.Record`` may carry a message as its serialized bytes (``raw``) and its connection header
 (``connection``: a dict with ``type``, ``md5sum``, ``message_definition`` and, live, ``callerid`` and
 ``latching``) with ``msg`` None: the message is decoded only when something reads its fields
-(``decoded(record)``). ``message_class(connection)`` is the class decoding uses: the installed class of
-the type when its md5sum matches, else one built from the connection's definition, which must pass
-``safe_input.check_definition`` first (genpy runs the code it generates); a refused definition is a
-ValueError naming the type; ``serialized(msg)`` is the other way, a message's bytes. ``stamp(raw, connection,
+(``decoded(record)``). ``message_class(connection)`` is the one place cc_log resolves a message class: the
+installed class of the type when its md5sum matches, else one built from the connection's definition
+(``msg_codec.generated_class``), which must pass ``safe_input.check_definition`` first (genpy runs the code it
+generates); a refused definition is a ValueError naming the type; ``installed_class(type)`` is the installed
+class alone (a configuration's types); ``serialized(msg)`` is the other way, a message's bytes. ``stamp(raw, connection,
 fallback)`` reads the header stamp straight from the bytes of a type whose first field is a ``std_msgs/Header``.
 
 ``layout(cls)`` and ``blocks(fields, raws)`` find where each field lies in the bytes of many messages at
@@ -31,7 +32,7 @@ _HEADER_STAMP = functools.partial(_STAMP.unpack_from, offset=4)
 DECODE_ERRORS = (genpy.DeserializationError, ValueError, TypeError, struct.error, IndexError, KeyError)
 
 
-_CLASSES = {}      # (type, md5sum, definition) -> class
+_CLASSES = {}      # (type, md5sum, definition or None) -> class (None: not installed, no definition given)
 _HAS_HEADER = {}   # (type, definition) -> bool
 
 
@@ -43,24 +44,30 @@ def type_of(record):
 
 
 def message_class(connection):
-    """The class that decodes messages of ``connection`` (see the module docstring); cached. ValueError
-    when the type name is malformed or the definition is refused."""
+    """The class that decodes messages of ``connection`` (a connection header: ``type``, ``md5sum`` ('' or
+    '*': any), ``message_definition``; see the module docstring); cached. Without a ``message_definition``, the
+    installed class or None. ValueError when the type name is malformed or the definition is refused."""
     msg_type = connection.get('type', '')
     md5sum = connection.get('md5sum', '')
-    definition = connection.get('message_definition', '')
+    definition = connection.get('message_definition')
     key = (msg_type, md5sum, definition)
-    cls = _CLASSES.get(key)
-    if cls is None:
-        safe_input.check_type_name(msg_type)  # before anything imports <package>.msg
-        import roslib.message
-        try:
-            cls = roslib.message.get_message_class(msg_type)
-        except Exception:  # a package that cannot be imported: build the class from the definition
-            cls = None
-        if cls is None or (md5sum not in ('', '*') and cls._md5sum != md5sum):
-            cls = msg_codec.message_class(msg_type, definition)
-        _CLASSES[key] = cls
+    if key in _CLASSES:
+        return _CLASSES[key]
+    safe_input.check_type_name(msg_type)  # before anything imports <package>.msg
+    import roslib.message  # no rospy: only the installed message packages
+    try:
+        cls = roslib.message.get_message_class(msg_type)
+    except Exception:  # a package that cannot be imported: build the class from the definition
+        cls = None
+    if definition is not None and (cls is None or (md5sum not in ('', '*') and cls._md5sum != md5sum)):
+        cls = msg_codec.generated_class(msg_type, definition)
+    _CLASSES[key] = cls
     return cls
+
+
+def installed_class(msg_type):
+    """The installed message class of ``msg_type`` (the name checked first), or None."""
+    return message_class({'type': msg_type})
 
 
 def serialized(msg):

@@ -41,7 +41,8 @@ from cc_log import features as features_mod
 from cc_log.storage import log_format, window_writer
 from cc_log.core import keep_budget, msg_codec, raw_message, routes as routes_mod, smart_events, window_prep
 from cc_log.core.raw_json import RawJsonEstimate
-from cc_log.core.smart_events import DELETED, FAILED, OPENED, SPLIT, WRITTEN, Event
+from cc_log.core.event_kinds import OPENED
+from cc_log.core.smart_events import Event
 from cc_log.core.stamp_clock import StampClock
 from cc_log.core.trigger_topics import TriggerViews, check_triggers, topic_types
 from cc_log.core.spans import Span
@@ -51,7 +52,7 @@ from cc_log.core.records import Record, records_of
 from cc_log.core.window_buffer import (
     DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, WindowBuffer)
 
-__all__ = ['SmartLogger', 'Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
+__all__ = ['SmartLogger', 'Event', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
            'DEFAULT_POST', 'DEFAULT_MAX_WINDOW', 'DEFAULT_DRIVING_TOPIC', 'RETRIGGER_MODES', 'DEFAULT_RETRIGGER',
            'DEFAULT_CLASSIFY_EVERY', 'DEFAULT_MAX_BUFFER_MB']
 
@@ -580,8 +581,7 @@ class SmartLogger(object):
             'trigger': log_format.trigger_name(first) if first else '',
             'threshold': self.threshold if self.classifiers else None,
             'driving_topic': self.driving_topic,
-            'pre': str(self.pre),
-            'post': str(self.post),
+            'pre': str(self.pre), 'post': str(self.post),
             'trigger_info': {t.name: t.describe() for t in self.triggers if t.name in names},
         }
         if self.config is not None:

@@ -1,52 +1,47 @@
-"""What the smart logger says about its logging windows (``SmartLogger.on_event``): ``Event`` and its kinds, and
-the writer's events (``window_writer``) said as Events. Pure."""
+"""What the smart logger says about its logging windows (``SmartLogger.on_event``): ``Event`` (its kinds:
+``core.event_kinds``, the writer's and the node's too), and the writer's events (``window_writer``) said as
+Events. Pure."""
 import collections
 import math
 import os
 
 from cc_log.core import safe_input, why
-from cc_log.storage import log_format, window_writer
+from cc_log.core.event_kinds import DELETED, WRITTEN, SPLIT
+from cc_log.storage import log_format
 
-__all__ = ['Event', 'OPENED', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'from_writer', 'reason_text', 'WindowTally']
-
-OPENED = 'opened'
-WRITTEN = 'written'
-FAILED = 'failed'
-DELETED = 'deleted'  # an old window file deleted to stay within max_disk_mb (path, bytes)
-SPLIT = 'split'  # a file of a window still being written finished at split_mb (path, bytes)
+__all__ = ['Event', 'from_writer', 'reason_text', 'WindowTally']
 
 Event = collections.namedtuple(
     'Event', 'kind stamp reason score threshold start end messages path bytes error trigger why copy',
     defaults=('', (), False))
 Event.__doc__ = """What happened to a logging window.
 
-kind: OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED (writing it failed;
-``error`` says why: once when a disk problem first keeps the window in memory to be retried, and again if it is
-lost for good), SPLIT (``path``, a file of a window still being written, was finished at split_mb: the window
-goes on in the next; start, end, messages: of the part that began it) or DELETED (``path``, an old window file,
-was deleted to stay within max_disk_mb; stamp, start and end are None). stamp: of the message that triggered
-(the first trigger of the window for WRITTEN and FAILED). trigger: the name of that trigger ('classifier',
-'manual', a rule's name...); reason: its reason ('classifier' for classifiers, a rule's condition, a manual
-request's text); score: the lowest classifier score of the window's triggers (NaN when none); threshold: of the
-classifier that fired (else of the first classifier; NaN without one). start, end: header stamps (float s) of
-the first and last message (end is None for OPENED). messages, path, bytes: the window's message count (all
-topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that stood out when that trigger
-fired (``core.why``; () when it says none). copy: the file is a ``copy`` route's (``core.routes``): its messages
-are in the window's own file too."""
+kind (``core.event_kinds``): OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED
+(writing it failed; ``error`` says why: once when a disk problem first keeps the window in memory to be
+retried, and again if it is lost for good), SPLIT (``path``, a file of a window still being written, was
+finished at split_mb: the window goes on in the next; start, end, messages: of the part that began it) or
+DELETED (``path``, an old window file, was deleted to stay within max_disk_mb; stamp, start and end are None).
+stamp: of the message that triggered (the first trigger of the window for WRITTEN and FAILED). trigger: the name
+of that trigger ('classifier', 'manual', a rule's name...); reason: its reason ('classifier' for classifiers, a
+rule's condition, a manual request's text); score: the lowest classifier score of the window's triggers (NaN
+when none); threshold: of the classifier that fired (else of the first classifier; NaN without one). start, end:
+header stamps (float s) of the first and last message (end is None for OPENED). messages, path, bytes: the
+window's message count (all topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that
+stood out when that trigger fired (``core.why``; () when it says none). copy: the file is a ``copy`` route's
+(``core.routes``): its messages are in the window's own file too."""
 
 
 def from_writer(event, threshold_of):
     """A ``window_writer`` event as an Event; ``threshold_of(trigger name)``: the threshold to report (the name
     is None for DELETED)."""
-    if event.kind == window_writer.DELETED:
+    if event.kind == DELETED:
         return Event(DELETED, None, 'max_disk_mb', float('nan'), threshold_of(None), None, None, 0, event.path,
                      0, event.error)
     window, metadata = event.job.window, event.job.metadata
     scores = [t.score for t in window.triggers if t.score is not None and not math.isnan(t.score)]
     start, end = (window.start, window.end) if len(window) else (None, None)  # (the end of a window in parts)
     first = window.triggers[0].stamp if window.triggers else start
-    kind = {window_writer.WRITTEN: WRITTEN, window_writer.SPLIT: SPLIT}.get(event.kind, FAILED)
-    return Event(kind, first, metadata['reason'], min(scores) if scores else float('nan'),
+    return Event(event.kind, first, metadata['reason'], min(scores) if scores else float('nan'),
                  threshold_of(metadata['trigger']), start, end, len(window), event.path,
                  event.bytes, event.error, metadata['trigger'], window.triggers[0].why if window.triggers else (),
                  bool(metadata.get('copy')))

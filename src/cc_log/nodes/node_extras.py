@@ -19,7 +19,7 @@ import os
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from cc_log.core import raw_message
+from cc_log.core import event_kinds, raw_message
 from cc_log.storage import context_track, disk_guard, upload, window_writer
 from cc_log.nodes.node_common import ConfigError
 from cc_log.nodes.topic_watch import TopicWatcher
@@ -136,9 +136,9 @@ class NodeExtras(object):
         return context_track.tee(main, self.track, self.republisher)
 
     def _context_event(self, event):
-        if event.kind == window_writer.WRITTEN:
+        if event.kind == event_kinds.WRITTEN:
             rospy.loginfo('context file closed: %s', event.path)
-        elif event.kind == window_writer.FAILED:
+        elif event.kind == event_kinds.FAILED:
             rospy.logerr('context file not closed: %s', event.error)
         else:
             rospy.logwarn('file deleted (%s): %s', event.error, event.path)

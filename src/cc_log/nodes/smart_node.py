@@ -61,12 +61,11 @@ import time
 import rospy
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
-from cc_log.core import drift, health
+from cc_log.core import drift, health, raw_message
 from cc_log.nodes import intake
 from cc_log.storage import window_info
 from cc_log.storage.formats import json_xz
-from cc_log.core import routes, smart, smart_events, trigger_topics
-from cc_log.core import config
+from cc_log.core import event_kinds, routes, smart, smart_events, trigger_topics
 from cc_log.core.model import AnomalyModel
 from cc_log.core.safe_input import printable
 from cc_log.nodes.node_common import (
@@ -109,7 +108,7 @@ class SmartNode(object):
         if not cfg.triggers:
             raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
         try:
-            triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
+            triggers = cfg.build_triggers(AnomalyModel.load, raw_message.installed_class, rospy.resolve_name)
             options = cfg.logger_options(triggers, rospy.resolve_name)
             options['format_options'] = format_options(params, cfg)
         except ValueError as error:
@@ -139,7 +138,7 @@ class SmartNode(object):
         except ValueError as error:
             raise ConfigError('~%s' % error)
         types = trigger_topics.topic_types(triggers)
-        if self.logger.driving_topic in types and config.installed_class(types[self.logger.driving_topic]) is None:
+        if self.logger.driving_topic in types and raw_message.installed_class(types[self.logger.driving_topic]) is None:
             raise ConfigError('~model: message type %s is not installed' % types[self.logger.driving_topic])
         self._refused = 0
         self._last_trigger = 'none'
@@ -171,23 +170,21 @@ class SmartNode(object):
                       'enabled' if enabled else 'disabled until ~enable')
 
     def _publish_event(self, event):
-        if event.kind == smart.DELETED:
+        if event.kind == event_kinds.DELETED:
             rospy.logwarn('window file deleted (%s): %s', self.logger.guard.quota_text(), event.path)
             return
-        if event.kind == smart.SPLIT:
+        if event.kind == event_kinds.SPLIT:
             rospy.loginfo('window file closed at ~split_mb: %s (%d bytes); the window goes on in the next',
                           event.path, event.bytes)
             return
-        kind = {smart.OPENED: self._event_class.OPENED, smart.WRITTEN: self._event_class.WRITTEN,
-                smart.FAILED: self._event_class.FAILED}[event.kind]
         reason = smart_events.reason_text(event)
-        msg = self._event_class(event=kind, trigger=event.trigger, reason=reason, score=event.score,
+        msg = self._event_class(event=event.kind, trigger=event.trigger, reason=reason, score=event.score,
                                 threshold=event.threshold, start=time_of(event.start), end=time_of(event.end),
                                 messages=event.messages, path=event.path, bytes=event.bytes)
         msg.header.stamp = time_of(event.stamp)
-        if event.kind == smart.WRITTEN:
+        if event.kind == event_kinds.WRITTEN:
             rospy.loginfo('window written: %s (%d messages, %d bytes)', event.path, event.messages, event.bytes)
-        elif event.kind == smart.FAILED:
+        elif event.kind == event_kinds.FAILED:
             rospy.logerr('window of %d messages not written: %s', event.messages, event.error)
         else:
             rospy.loginfo('window opened (%s: %s, score %.4g)', printable(event.trigger), reason, event.score)
@@ -207,7 +204,7 @@ class SmartNode(object):
 
     def _flag_learners(self, event):
         """Online learning: nothing from around a window any trigger opened is learned."""
-        if event.kind == smart.OPENED:
+        if event.kind == event_kinds.OPENED:
             for name, learner in self.learners:
                 learner.flag(event.stamp, own=event.trigger == name)
 

@@ -32,9 +32,8 @@ def _options(cfg, online_dir=None):
     """``(SmartLogger keyword arguments, {topic: type} the triggers read)`` of ``cfg``, its triggers built (model
     files loaded; refits of online learning in ``online_dir``, None: beside the models); ``side_topics`` is None
     while topic patterns wait for a bag's topics."""
-    from cc_log.core import config as config_mod
     from cc_log.core.model import AnomalyModel
-    triggers = cfg.build_triggers(AnomalyModel.load, config_mod.installed_class, online_dir=online_dir)
+    triggers = cfg.build_triggers(AnomalyModel.load, raw_message.installed_class, online_dir=online_dir)
     return cfg.logger_options(triggers), trigger_topics.topic_types(triggers)
 
 

@@ -23,6 +23,7 @@ import shlex
 import subprocess
 import threading
 
+from cc_log.core import event_kinds
 from cc_log.storage import window_writer
 from cc_log.core.safe_input import brief
 
@@ -77,7 +78,7 @@ class UploadHook(object):
     def on_event(self, event):
         """A WindowWriter event: run the command for each window or context file written (every piece of a
         window: its own file, its route files, each file of a window split at split_mb)."""
-        if event.kind in (window_writer.WRITTEN, window_writer.SPLIT) and event.job is not None and event.path and \
+        if event.kind in (event_kinds.WRITTEN, event_kinds.SPLIT) and event.job is not None and event.path and \
                 event.job.what in (window_writer.WINDOW, window_writer.ROUTE, window_writer.CONTEXT):
             self.run(event.path)
 

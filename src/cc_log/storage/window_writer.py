@@ -19,10 +19,11 @@ writes them in order, on a background thread (``background=True``) or in the cal
   file at the first part after its file reached that size (``log_format.WindowFile``), as ``rosbag record
   --split --size`` does; each file finished so before the window's end is a SPLIT event and counts against the
   quota as a window file does. A window written at once (json-xz, a window never handed on in parts) is one file.
-- every outcome is an event ``WriterEvent(kind, job, path, bytes, error, kept)``: WRITTEN, FAILED (``kept``
-  True: held and retried, said once per job; False: lost for good, always said), SPLIT (a file of a window
-  finished at ``split_mb``: ``path``, ``bytes``; the job of the part that began the next file) and DELETED (a
-  window file deleted by the quota: ``path``, ``bytes``); and a counter in ``stats()``.
+- every outcome is an event ``WriterEvent(kind, job, path, bytes, error, kept)``, its kind one of
+  ``core.event_kinds``: WRITTEN, FAILED (``kept`` True: held and retried, said once per job; False: lost for
+  good, always said), SPLIT (a file of a window finished at ``split_mb``: ``path``, ``bytes``; the job of the part
+  that began the next file) and DELETED (a window file deleted by the quota: ``path``, ``bytes``); and a counter
+  in ``stats()``.
 
 Pure: no rospy.
 """
@@ -33,16 +34,13 @@ import time
 
 from cc_log.storage import disk_guard
 from cc_log.storage import log_format
+from cc_log.core.event_kinds import DELETED, FAILED, SPLIT, WRITTEN
 from cc_log.core.records import LogWindow
 from cc_log.core.spans import megabytes, seconds
 
-__all__ = ['WindowWriter', 'Job', 'WriterEvent', 'WRITTEN', 'FAILED', 'DELETED', 'SPLIT', 'DEFAULT_RETRY_PERIOD',
+__all__ = ['WindowWriter', 'Job', 'WriterEvent', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
 
-WRITTEN = 'written'
-FAILED = 'failed'
-DELETED = 'deleted'
-SPLIT = 'split'  # a file of a window finished at split_mb, the window going on in the next
 WINDOW = 'window'  # Job.what of a window file
 CONTEXT = 'context'  # Job.what of a closed context-track file (counted in the quota like a window)
 ROUTE = 'route'  # Job.what of a route's file of a window (core.routes): the window is counted once, by its own

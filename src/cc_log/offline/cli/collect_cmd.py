@@ -117,7 +117,7 @@ def _drop_rule_flagged(bag, out, cfg, specs, label):
     they fired on; ``{'rules': names, 'spans': [[start, end, names]], 'removed': {set: count}}``, or None when
     the configuration has no rule."""
     import copy
-    from cc_log.core import collector, config as config_mod
+    from cc_log.core import collector, raw_message
     from cc_log.core.model import AnomalyModel
     from cc_log.storage.bag import bagio
     rules_only = copy.copy(cfg)
@@ -125,7 +125,7 @@ def _drop_rule_flagged(bag, out, cfg, specs, label):
     if not rules_only.triggers:
         return None
     try:
-        triggers = rules_only.build_triggers(AnomalyModel.load, config_mod.installed_class)
+        triggers = rules_only.build_triggers(AnomalyModel.load, raw_message.installed_class)
         handle = bagio.open_bag(bag)
         try:
             driving = specs[0][2][0]

@@ -1,7 +1,7 @@
 """Reading a rosbag 2.0 file cut off mid-write, record by record: what ``recovery`` needs of a bag-lz4 leftover.
 
 ``salvage(path)`` reads every complete message of every chunk (and of a chunk cut off mid-write, as far as its
-data decompresses), each decoded with its connection header's class (``msg_codec.message_class``: definitions
+data decompresses), each decoded with its connection header's class (``raw_message.message_class``: definitions
 are data, checked there), and returns a ``Salvaged``. Pure: roslz4 is imported only to decompress chunks.
 """
 import collections
@@ -264,8 +264,10 @@ class _Salvage(object):
             topic = fields.get('topic', b'').decode('utf-8')
             header = _fields(payload)
             msg_type = header['type'].decode('utf-8')
-            cls = msg_codec.message_class(msg_type, header['message_definition'].decode('utf-8'))
-            if cls._md5sum != header.get('md5sum', b'').decode('ascii', 'replace'):
+            md5sum = header.get('md5sum', b'').decode('ascii', 'replace')
+            cls = raw_message.message_class({'type': msg_type, 'md5sum': md5sum,
+                                             'message_definition': header['message_definition'].decode('utf-8')})
+            if cls._md5sum != md5sum:
                 raise ValueError('%s: md5sum %s does not match its definition' % (msg_type, header.get('md5sum')))
         except (ValueError, KeyError) as error:
             self._problem('connection: %s' % error)

@@ -225,7 +225,7 @@ class WindowStream(object):
 
 
 def _string_class():
-    return msg_codec.message_class('std_msgs/String', _STRING_DEFINITION)
+    return raw_message.message_class({'type': 'std_msgs/String', 'message_definition': _STRING_DEFINITION})
 
 
 def connection_headers(records):

@@ -497,7 +497,7 @@ def _section_records(section):
         if key in delta:
             values = sums(values, key)
         columns[key] = _floats(values)
-    cls = msg_codec.message_class(msg_type, definition)
+    cls = msg_codec.generated_class(msg_type, definition)  # a document is decoded from its definitions
     if section.get('md5sum') not in (None, cls._md5sum):
         raise ValueError('md5sum %s does not match the definition (%s)' % (section['md5sum'], cls._md5sum))
     connection = section.get('connection')
