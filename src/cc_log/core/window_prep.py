@@ -58,13 +58,15 @@ class CarriedDrops(object):
 
 def restrict(window, keep, driving_topic):
     """``window`` with only ``driving_topic`` and the topics its triggers keep, when each of its triggers has
-    its own ``keep`` set (``{trigger name: topics}``; a window any other trigger opened or extended keeps every
-    topic): a collision keeps the cameras, a silent topic only the diagnostics."""
+    its own ``keep`` (``{trigger name: topic_select.TopicSelection}``; a window any other trigger opened or
+    extended keeps every topic): a collision keeps the cameras, a silent topic only the diagnostics."""
     names = set(trigger.name or trigger.reason for trigger in window.triggers)
     if not keep or not names or not names <= set(keep):
         return window
-    topics = set().union(*(keep[name] for name in names)) | {driving_topic}
-    window.records = [record for record in window.records if record.topic in topics]
+    selections = [keep[name] for name in names]
+    kept = dict((topic, topic == driving_topic or any(selection.matches(topic) for selection in selections))
+                for topic in set(record.topic for record in window.records))
+    window.records = [record for record in window.records if kept[record.topic]]
     return window
 
 
