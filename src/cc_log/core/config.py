@@ -17,9 +17,11 @@ configuration tuned offline on bags behaves the same on the robot::
       - {name: shock, kind: classifier, model: ~/.ros/cc_log/imu.json, topics: [imu/data]}
       - {name: motors, kind: rule, topic: /diagnostics, level: ERROR, status: 'motor*', hold_off: 5s}
       - {name: too_fast, kind: rule, topic: odom, type: nav_msgs/Odometry, when: 'twist.twist.linear.x > 2.0'}
-      - {name: bumper, kind: rule, topic: bumper, arrival: true}
+      - {name: bumper, kind: rule, topic: bumper, arrival: true, keep: [scan, 're:/camera/.*']}  # only these
       - {name: scan_dead, kind: rule, topic: scan, silent: 1s}
 
+A trigger's ``keep`` (names and patterns as ``topics``; its names are subscribed, or read from a bag, like
+those of ``topics``): a window only such triggers opened holds the driving topic and these, no other.
 ``Config.from_dict`` checks everything at start: an unknown key, trigger kind, feature set, field or message
 type fails with one line naming it (``ValueError('<source>: triggers[2] (motors): level: ...')``). Topic
 names may be relative: nodes resolve them in their namespace, offline tools as global names (``odom`` is
