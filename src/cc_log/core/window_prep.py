@@ -5,6 +5,7 @@ fallen behind (``thin``), and the newest message of each latched topic at its st
 import collections
 
 from cc_log.core import raw_message
+from cc_log.core.topic_select import TopicSelection
 
 __all__ = ['thin', 'CarriedDrops', 'restrict', 'Latched', 'any_latched', 'HEAVY_BYTES', 'LATCHED_KEPT']
 
@@ -54,6 +55,12 @@ class CarriedDrops(object):
             self._held[window.key] = counts
             return {}
         return dict(counts)
+
+
+def selections(keep):
+    """``keep`` (``{trigger name: topic_select.TopicSelection or topic names}``) as ``{name: TopicSelection}``."""
+    return dict((name, topics if isinstance(topics, TopicSelection) else TopicSelection(topics))
+                for name, topics in (keep or {}).items())
 
 
 def restrict(window, keep, driving_topic):
