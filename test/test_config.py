@@ -324,3 +324,66 @@ def test_limits_take_a_number_of_mb_or_a_size_with_a_unit(tmp_path):
     assert cfg.max_buffer_mb == pytest.approx(1.5 * 1024 ** 3 / 1e6)
     plain = Config.from_dict(config.load_file(write(tmp_path, 'limits: {max_disk_mb: 64}')), path)
     assert plain.max_disk_mb == 64.0
+
+
+# -- a trigger's keep: the grammar of topics ----------------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def imu_run(tmp_path_factory):
+    """A simulated half minute with odometry, IMU and scans: the bag's path and topics."""
+    from cc_log import sim
+    from cc_log.storage.bag import bagio
+    bag = str(tmp_path_factory.mktemp('keep') / 'run.bag')
+    sim.simulate_to_bag(bag, sim.SimConfig(seed=3, minutes=0.5, anomalies=0, imu=True, scan=True))
+    opened = bagio.open_bag(bag, skip_index=True)
+    try:
+        topics = set(bagio.topics_of(opened))
+    finally:
+        opened.close()
+    assert topics == {'/odom', '/imu/data', '/scan'}
+    return bag, topics
+
+
+def kept_topics(tmp_path, bag, keep, topics=('*',)):
+    """The topics of every window a periodic trigger with ``keep`` opened in a replay of ``bag``."""
+    from cc_log import sim
+    from cc_log.offline import replay
+    cfg = Config.from_dict({'driving_topic': sim.ODOM_TOPIC, 'topics': list(topics), 'windows': {'pre': 2, 'post': 2},
+                            'triggers': [{'name': 'every10s', 'kind': 'periodic', 'every': '10s', 'keep': keep}]})
+    out = str(tmp_path / 'out')
+    summary = replay.replay_one(bag, out, cfg)
+    assert summary['windows']
+    return [set(log_format.read_window_set(files)[0]['topics'])
+            for files in log_format.window_sets(log_format.window_files(out))]
+
+
+@pytest.mark.parametrize('keep, wanted', [(['re:/imu/.*'], {'/odom', '/imu/data'}),
+                                          (['*'], {'/odom', '/imu/data', '/scan'}),
+                                          (['*', '!/imu/data'], {'/odom', '/scan'}),
+                                          ('scan', {'/odom', '/scan'})])
+def test_keep_patterns_mean_what_they_mean_in_topics(tmp_path, imu_run, keep, wanted):
+    bag, topics = imu_run
+    kept = kept_topics(tmp_path, bag, keep)
+    assert kept and all(window == wanted for window in kept), (kept, wanted)
+
+
+@pytest.mark.parametrize('topics', [['*'], ['imu/data']])
+def test_keep_names_a_topic_the_bag_lacks_and_replay_says_so(tmp_path, imu_run, topics):
+    # topic names are case-sensitive: /IMU/data is not /imu/data; a window cannot keep a topic never read
+    with pytest.raises(ValueError, match=r'topic /IMU/data is not in the bag; its topics: .*/imu/data'):
+        kept_topics(tmp_path, imu_run[0], ['/IMU/data'], topics)
+
+
+def test_keep_names_are_subscribed_like_topics():
+    cfg = Config.from_dict({'driving_topic': 'odom', 'topics': ['scan'], 'triggers': [
+        {'name': 'bumper', 'kind': 'rule', 'topic': 'bumper', 'arrival': True, 'keep': ['camera', 're:/imu/.*']}]})
+    options = cfg.logger_options(cfg.build_triggers(None, lambda _: None))
+    assert options['side_topics'] == ['/scan', '/camera']
+    assert options['keep']['bumper'].matches('/imu/data') and not options['keep']['bumper'].matches('/scan')
+
+
+@pytest.mark.parametrize('keep', [['/imu/*'], ['regex:/imu/.*'], 'imu/data /IMU?', [''], ['re:(']])
+def test_a_keep_entry_of_no_known_grammar_is_refused_in_one_line(keep):
+    with pytest.raises(ValueError, match=r'^config: triggers\[0\] \(bumper\): keep: [^\n]+$'):
+        Config.from_dict({'triggers': [{'name': 'bumper', 'kind': 'rule', 'topic': 'b', 'arrival': True,
+                                        'keep': keep}]})

@@ -277,6 +277,43 @@ def test_the_trigger_fires_alike_whatever_the_batches():
                     r'0\.05 m \(training never reached it\)$', pose['text']), pose['text']
 
 
+def odometry_messages(samples, topic=ODOM):
+    """Records of real nav_msgs/Odometry messages of planar samples (what a logger writes)."""
+    from nav_msgs.msg import Odometry
+    from cc_log.core.records import Record
+    records = []
+    for t, x, y, yaw, v, w in zip(*samples):
+        msg = Odometry()
+        msg.header.stamp.secs, msg.header.stamp.nsecs = int(t), int(round((t % 1) * 1e9)) % 1000000000
+        msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+        msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = np.sin(yaw / 2), np.cos(yaw / 2)
+        msg.twist.twist.linear.x, msg.twist.twist.angular.z = v, w
+        records.append(Record(float(t), topic, msg))
+    return records
+
+
+@pytest.mark.parametrize('value', [1e200, float('inf'), float('nan'), -1e7])
+def test_five_seconds_of_speed_out_of_any_physical_range_fire_and_the_logger_keeps_their_span(tmp_path, value):
+    from cc_log.core.smart import SmartLogger
+    from cc_log.storage import log_format
+    from cc_log.triggers.envelope import OUT_OF_RANGE_SCORE, EnvelopeTrigger
+    env = learned(nominal_drive(seed=0))
+    t, x, y, yaw, v, w = nominal_drive(seconds=30, seed=1)
+    bad = (t >= t[0] + 10.0) & (t < t[0] + 15.0)
+    v = np.where(bad, value, v)
+    trigger = EnvelopeTrigger('envelope', env, ODOM)
+    logger = SmartLogger(None, str(tmp_path), 'json-xz', '0.5s', '0.5s', driving_topic=ODOM, triggers=[trigger])
+    for record in odometry_messages((t, x, y, yaw, v, w)):
+        logger.on_message(record.topic, record.msg, record.stamp)
+    assert logger.close(30)
+    (metadata, records), = [log_format.read_window(path) for path in log_format.window_files(str(tmp_path))]
+    kept = [r.stamp for r in records if t[0] + 10.0 <= r.stamp < t[0] + 15.0]
+    assert len(kept) == bad.sum()  # every message of the 5 s, in one window
+    assert metadata['start'] <= t[0] + 10.0 and metadata['end'] >= t[0] + 15.0
+    assert min(entry['score'] for entry in metadata['triggers']) == OUT_OF_RANGE_SCORE
+    assert metadata['triggers'][0]['why'][0]['feature'] == 'out_of_range'
+
+
 def test_time_going_back_starts_the_ring_over():
     from cc_log.triggers.envelope import EnvelopeTrigger
     env = learned(nominal_drive(seed=0))

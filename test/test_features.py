@@ -160,6 +160,26 @@ def test_non_finite_input_gives_finite_row_and_counts(feature_set):
         assert np.all(np.isfinite(window_vector([huge, good, huge], config)))
 
 
+@pytest.mark.parametrize('value', [1e200, 1e155, -1e300])
+def test_values_beyond_any_physical_range_give_clipped_finite_rows_counted_out_of_range(value):
+    """linear.x = 1e200 for 5 s: its square overflows (inf - inf in the energy is NaN); every row is finite, at
+    the clip, and counted, message by message and in a block alike, and a window holding one is out of range."""
+    from cc_log.features.base import CLIP, out_of_range
+    config = FeatureConfig('motion', '10')
+    stamps = [100.0 + k / 50.0 for k in range(300)]
+    msgs = [odom((0.5 * t, 0, 0), (0, 0, 0, 1), (value if 102.0 <= t < 107.0 else 0.5, 0, 0), (0, 0, 0), t)
+            for t in stamps]
+    one, block = get('motion')(config), get('motion')(config)
+    rows = np.array([one.row_values(msg, t) for msg, t in zip(msgs, stamps)])
+    blocked, _ = block.row_block(msgs, stamps, False, config.window)
+    assert np.array_equal(rows, blocked) and np.all(np.isfinite(rows)) and np.abs(rows).max() == CLIP
+    beyond = np.array([102.0 <= t < 107.0 + 0.03 for t in stamps])  # the derivatives see the end two rows later
+    assert [bool(np.abs(row).max() >= CLIP) for row in rows] == list(beyond)
+    assert one.out_of_range == block.out_of_range == beyond.sum() and one.rejected == block.rejected == 0
+    assert out_of_range(rows[95:105]) and not out_of_range(rows[:100]) and not out_of_range(rows[:0])
+    assert np.all(np.isfinite(window_vector(rows[95:105], config)))
+
+
 def test_window_vector_lengths_and_names():
     motion = FeatureConfig('motion', '5s')
     rng = np.random.default_rng(1)

@@ -15,6 +15,7 @@ from cc_log import sim
 from cc_log.core import config
 from cc_log.core.records import LogWindow, Record, Trigger
 from cc_log.core.routes import parse_routes, split
+from cc_log.core.topic_select import TopicSelection
 from cc_log.offline import cli
 from cc_log.storage import log_format
 from cc_log.storage.bag.bag_format import METADATA_TOPIC
@@ -88,7 +89,7 @@ def test_a_window_only_triggers_with_keep_opened_holds_only_their_topics():
     from cc_log.core import window_prep
     records = [Record(100.0 + i, topic, None, 10) for i, topic in enumerate(['/odom', '/camera', '/scan', '/diag'])]
     bumper = LogWindow(list(records), [Trigger(101.0, 'pressed', None, 'bumper')])
-    keep = {'bumper': frozenset(['/camera']), 'silent': frozenset(['/diag'])}
+    keep = {'bumper': TopicSelection(['/camera']), 'silent': TopicSelection(['/diag'])}
     assert [r.topic for r in window_prep.restrict(bumper, keep, '/odom').records] == ['/odom', '/camera']
     both = LogWindow(list(records), [Trigger(101.0, 'pressed', None, 'bumper'),
                                      Trigger(102.0, 'quiet', None, 'silent')])
@@ -97,8 +98,8 @@ def test_a_window_only_triggers_with_keep_opened_holds_only_their_topics():
     assert len(window_prep.restrict(other, keep, '/odom').records) == 4  # another trigger: every topic
     cfg = config.Config.from_dict({'driving_topic': 'odom', 'triggers': [
         {'name': 'bumper', 'kind': 'rule', 'topic': 'bumper', 'arrival': True, 'keep': 'camera/image_raw scan'}]})
-    assert cfg.logger_options(cfg.build_triggers(None, lambda _: None))['keep'] == {
-        'bumper': frozenset(['/camera/image_raw', '/scan'])}
+    kept = cfg.logger_options(cfg.build_triggers(None, lambda _: None))['keep']
+    assert list(kept) == ['bumper'] and kept['bumper'].names == ['/camera/image_raw', '/scan']
     with pytest.raises(ValueError, match=r'triggers\[0\] \(bumper\): keep: 5 is not a list of topic names'):
         config.Config.from_dict({'triggers': [{'name': 'bumper', 'kind': 'rule', 'topic': 'b', 'arrival': True,
                                                'keep': 5}]})

@@ -367,6 +367,51 @@ def test_time_jumping_back_restarts_the_buffer(husky, tmp_path):
     assert 150 + 19 in model.calls and 150 + 18 not in model.calls
 
 
+def stamped(record, stamp):
+    """``record`` with a copy of its message whose header says ``stamp`` (its arrival, ``record.stamp``, unchanged)."""
+    msg = copy.deepcopy(record.msg)
+    msg.header.stamp.secs, msg.header.stamp.nsecs = int(stamp), int(round((stamp % 1) * 1e9)) % 1000000000
+    return record._replace(msg=msg)
+
+
+def manual_window(tmp_path, odom, at=300):
+    """``(logger, records of the one window)``: ``odom`` through a logger holding 2 s before and 1 s after, a
+    manual trigger at message ``at``."""
+    logger = SmartLogger(ScriptedModel(), str(tmp_path), 'json-xz', '2s', '1s', driving_topic=ODOM)
+    for index, record in enumerate(odom):
+        logger.on_message(ODOM, record.msg, record.stamp)
+        if index == at:
+            assert logger.trigger_now()[0]
+    assert logger.close(30)
+    (_, _, records), = read_all(str(tmp_path))
+    return logger, records
+
+
+@pytest.mark.parametrize('outlier', [4294000000.0, 1.0, 100.0], ids=['2106', '1970', '100s-ahead'])
+def test_one_outlier_stamp_of_the_driving_topic_keeps_what_is_held_before_an_event(husky, tmp_path, outlier):
+    odom = [r for r in husky if r.topic == ODOM][:400]
+    _, expected = manual_window(tmp_path / 'plain', odom)
+    bad = 296  # 0.4 s before the event at 300 (10 Hz)
+    stamp = odom[bad].stamp + outlier if outlier == 100.0 else outlier
+    logger, records = manual_window(tmp_path / 'outlier', odom[:bad] + [stamped(odom[bad], stamp)] + odom[bad + 1:])
+    assert [r.stamp for r in records] == [r.stamp for r in expected]  # the same first message, none lost
+    first = [r.stamp for r in odom].index(records[0].stamp)
+    assert odom[300].stamp - records[0].stamp <= 2.0 < odom[300].stamp - odom[first - 1].stamp  # the whole 2 s
+    stats = logger.stats()
+    assert stats['restamped_by_topic'] == {ODOM: 1} and stats['time_resets'] == 0
+
+
+def test_a_jump_of_the_driving_clock_that_persists_is_followed(husky, tmp_path):
+    from cc_log.core.stamp_clock import FOLLOW_AFTER
+    odom = [r for r in husky if r.topic == ODOM][:400]
+    jumped = odom[:200] + [stamped(r, r.stamp + 100.0) for r in odom[200:]]  # the clock set 100 s ahead at 200
+    _, expected = manual_window(tmp_path / 'plain', odom)
+    logger, records = manual_window(tmp_path / 'jumped', jumped)
+    # the pre-buffer refilled on the new clock long before the event: the same window, 100 s later
+    assert [r.stamp for r in records] == pytest.approx([r.stamp + 100.0 for r in expected], abs=1e-6)
+    assert logger.stats()['restamped_by_topic'] == {ODOM: FOLLOW_AFTER - 1}  # placed at the clock until followed
+
+
 def test_failed_writes_are_reported_not_raised(husky, tmp_path):
     blocker = tmp_path / 'not_a_directory'
     blocker.write_text('x')

@@ -257,6 +257,27 @@ def test_imu_and_odometry_classifiers_side_by_side_merge_overlapping_windows_int
     assert logger.stats()['triggers']['odom_motion']['fired'] == 5
 
 
+@pytest.mark.parametrize('value', [1e200, 1e155, 1e7])
+def test_five_seconds_of_odometry_beyond_any_physical_range_fire_and_their_span_is_kept(tmp_path, value):
+    """linear.x = 1e200 from 105 s to 110 s: a classifier whose model calls every window nominal (a threshold
+    tuned low) still fires, and one window keeps the whole 5 s."""
+    model = Scripted('motion', window='10')  # never anomalous
+
+    def huge(item):
+        topic, msg, stamp = item
+        if topic == ODOM and 105.0 <= stamp < 110.0:
+            msg.twist.twist.linear.x = value
+        return item
+    trigger = ClassifierTrigger('motion', model, ODOM)
+    logger = SmartLogger(None, str(tmp_path), 'json-xz', '1s', '1s', driving_topic=ODOM, triggers=[trigger])
+    feed(logger, [huge(item) for item in stream(20.0)], [model])
+    (metadata, records), = windows(tmp_path)
+    assert metadata['names'] == ['motion'] and metadata['triggers'][0]['score'] == -1e6
+    assert metadata['start'] <= 104.0 + 0.06 and metadata['end'] >= 110.0  # fired within classify_every (50 ms)
+    kept = [r.stamp for r in records if r.topic == ODOM and 105.0 <= r.stamp < 110.0]
+    assert len(kept) == 250  # every message of the 5 s at 50 Hz
+
+
 def test_a_manual_request_reaching_beyond_what_the_logger_holds_says_it_was_cut(tmp_path):
     logger = SmartLogger(None, str(tmp_path), 'json-xz', '2s', '1s', driving_topic=ODOM)
     items = stream(10.0)  # 50 Hz from 100 s

@@ -17,9 +17,11 @@ configuration tuned offline on bags behaves the same on the robot::
       - {name: shock, kind: classifier, model: ~/.ros/cc_log/imu.json, topics: [imu/data]}
       - {name: motors, kind: rule, topic: /diagnostics, level: ERROR, status: 'motor*', hold_off: 5s}
       - {name: too_fast, kind: rule, topic: odom, type: nav_msgs/Odometry, when: 'twist.twist.linear.x > 2.0'}
-      - {name: bumper, kind: rule, topic: bumper, arrival: true}
+      - {name: bumper, kind: rule, topic: bumper, arrival: true, keep: [scan, 're:/camera/.*']}  # only these
       - {name: scan_dead, kind: rule, topic: scan, silent: 1s}
 
+A trigger's ``keep`` (names and patterns as ``topics``; its names are subscribed, or read from a bag, like
+those of ``topics``): a window only such triggers opened holds the driving topic and these, no other.
 ``Config.from_dict`` checks everything at start: an unknown key, trigger kind, feature set, field or message
 type fails with one line naming it (``ValueError('<source>: triggers[2] (motors): level: ...')``). Topic
 names may be relative: nodes resolve them in their namespace, offline tools as global names (``odom`` is
@@ -228,15 +230,21 @@ class Config(object):
             driving = first[0].topic if hasattr(first[0], 'topic') else sorted(first[0].topics)[0]
         return {'fmt': self.format, 'pre': self.pre, 'post': self.post, 'max_window': self.max_window,
                 'driving_topic': resolve(driving),
-                'side_topics': None if self.selection.dynamic else [resolve(t) for t in self.topics],
+                'side_topics': None if self.selection.dynamic else
+                [resolve(t) for t in dict.fromkeys(self.topics + self.keep_names())],
                 'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb, 'max_files': self.max_files,
                 'max_buffer_mb': self.max_buffer_mb, 'split_mb': self.split_mb, 'triggers': triggers,
                 'max_windows_per_hour': self.max_windows_per_hour,
                 'format_options': self.format_options(),
                 'topic_limits': dict((resolve(topic), limits) for topic, limits in self.topic_limits.items()),
                 'routes': [route.resolved(resolve) for route in self.routes],
-                'keep': dict((entry['name'], frozenset(resolve(topic) for topic in entry['keep']))
+                'keep': dict((entry['name'], entry['keep'].resolved(resolve))
                              for entry in self.triggers if 'keep' in entry)}
+
+    def keep_names(self):
+        """The topic names (not patterns) the triggers' ``keep`` lists name: subscribed, or read from a bag,
+        like the names of ``topics`` (a window cannot keep a topic nobody listens to)."""
+        return list(dict.fromkeys(name for entry in self.triggers if 'keep' in entry for name in entry['keep'].names))
 
     def format_options(self):
         """What the window format is told in each window's metadata: ``{'precision': ...}`` when set."""
@@ -283,5 +291,6 @@ def _trigger_entry(entry, index):
     checked = dict(entry)
     checked.update(name=name, kind=kind, index=index)
     if 'keep' in entry:  # the topics a window opened only by such triggers keeps, besides the driving topic
-        checked['keep'] = topic_list(entry['keep'], 'triggers[%d] (%s): keep' % (index, name))
+        where = 'triggers[%d] (%s): keep' % (index, name)  # names and patterns, as ``topics``
+        checked['keep'] = TopicSelection.parse(topic_list(entry['keep'], where), where)
     return checked

@@ -100,9 +100,9 @@ class SmartLogger(object):
     half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
     byte of a part; see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
     reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
-    in a format of their own; keep: ``{trigger name: topics}``: a window only such triggers opened keeps only those
-    (``window_prep.restrict``); split_mb: a window written in parts goes on in a new file once its file holds that
-    many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
+    in a format of their own; keep: ``{trigger name: topics}`` (``window_prep.selections``): a window only such
+    triggers opened keeps only those; split_mb: a window written in parts goes on in a new file once its file holds
+    that many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
     (offline): a message waits for room in the budget, never thinned for the writer.
     max_windows_per_hour: the keep budget (``keep_budget.KeepBudget``: past it, a Fire must be more anomalous; 0: off).
 
@@ -152,7 +152,7 @@ class SmartLogger(object):
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
         self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
         self._names = {}  # window key -> the log_format.WindowName of its files, while it is handed on in parts
-        self.keep = dict(keep or {})  # trigger name -> the topics its windows keep (window_prep.restrict)
+        self.keep = window_prep.selections(keep)  # trigger name -> what its windows keep (window_prep.restrict)
         self.stamp_tolerance = float(stamp_tolerance)
         self.wait_for_writer = bool(wait_for_writer)
         if not self.stamp_tolerance > 0:

@@ -2,7 +2,9 @@
 whose header stamp is off that clock is placed at its arrival instead. Pure: used by ``smart.SmartLogger``."""
 import operator
 
-__all__ = ['StampClock']
+__all__ = ['StampClock', 'FOLLOW_AFTER']
+
+FOLLOW_AFTER = 3  # driving messages in a row, off the clock and agreeing with each other, that the clock follows
 
 
 class StampClock(object):
@@ -10,36 +12,57 @@ class StampClock(object):
     each of its messages (0 before the first; a bag played without its clock keeps its own stamps). Any other
     message whose header stamp is more than ``tolerance`` seconds from its arrival on that clock is placed at
     that arrival instead: a sensor stamping by another clock (wall time next to a bag's, a camera without time
-    sync, a stamp in the future) can neither stretch a window nor hold others back."""
+    sync, a stamp in the future) can neither stretch a window nor hold others back.
+
+    A driving message off the clock in the same way (one stamp in 2106, in 1970, 100 s ahead) is placed at its
+    arrival too and counted, so one bad stamp cannot flush the messages held before a trigger; FOLLOW_AFTER of
+    them in a row whose offsets agree within ``tolerance`` are a real jump of the clock (a bag looped, a clock
+    set): the clock follows from the last of them on."""
 
     def __init__(self, driving_topic, tolerance):
         self.driving_topic = driving_topic
         self.tolerance = float(tolerance)
-        self.offset = 0.0  # the driving topic's header stamps minus their arrival
+        self.offset = None  # the driving topic's header stamps minus their arrival (None: no driving stamp yet)
+        self._jump = []  # the offsets of the driving messages in a row off the clock that agree with each other
 
     def place(self, stamps, arrivals, topics):
         """``(the stamps that place the messages in windows, the topics of those restamped or None)``."""
-        tolerance, driving, offset = self.tolerance, self.driving_topic, self.offset
+        tolerance, driving = self.tolerance, self.driving_topic
         if not stamps:
             return stamps, None
         differences = list(map(operator.sub, stamps, arrivals))
-        if all(arrivals) and max(differences) - min(differences) <= tolerance \
+        offset = 0.0 if self.offset is None else self.offset
+        if all(arrivals) and max(differences) - min(differences) <= tolerance and self.offset is not None \
                 and offset - tolerance <= min(differences) and max(differences) <= offset + tolerance:
             # every stamp within the tolerance of the clock and of each other: none is off, whatever the driving
             # messages among them set the clock to (the common case, checked without a Python step per message)
             if driving in topics:
                 self.offset = differences[len(topics) - 1 - topics[::-1].index(driving)]
+                self._jump = []
             return stamps, None
         restamped = None
-        for k, (stamp, arrival, topic) in enumerate(zip(stamps, arrivals, topics)):
+        for k, (difference, arrival, topic) in enumerate(zip(differences, arrivals, topics)):
             if not arrival:  # the clock has not started (use_sim_time before /clock)
                 continue
-            if topic == driving:
-                offset = stamp - arrival
-            elif not -tolerance <= stamp - arrival - offset <= tolerance:
+            if topic == driving and (self.offset is None or self._follows(difference, offset)):
+                offset = self.offset = difference
+            elif not -tolerance <= difference - offset <= tolerance:
                 if restamped is None:
                     stamps, restamped = list(stamps), []
                 stamps[k] = arrival + offset
                 restamped.append(topic)
-        self.offset = offset
         return stamps, restamped
+
+    def _follows(self, difference, offset):
+        """Whether the clock takes a driving message's offset ``difference`` (the clock at ``offset``): one
+        within the tolerance, or the last of FOLLOW_AFTER in a row off it that agree with each other."""
+        if -self.tolerance <= difference - offset <= self.tolerance:
+            self._jump = []
+            return True
+        if self._jump and abs(difference - self._jump[-1]) > self.tolerance:
+            self._jump = []
+        self._jump.append(difference)
+        if len(self._jump) < FOLLOW_AFTER:
+            return False
+        self._jump = []
+        return True

@@ -12,6 +12,10 @@ named in ``topics``, or matching one of the ``regex`` patterns (whole name, ``re
 - ``re:/camera/.*``: a regular expression (``-e``);
 - ``!re:/camera/.*/compressed``, ``!/tf``: an exclusion (``-x``; a name excludes that topic only).
 
+A name must be a legal ROS name (``rosgraph.names.is_legal_name``: a letter, ``/`` or ``~``, then letters, digits,
+``_`` and ``/``, never ``//``; case-sensitive): an entry that is neither such a name nor a pattern of this grammar
+(a glob such as ``/imu/*``, ``regex:...``) could never match a topic and is refused.
+
 ``names`` are the plain topic names (subscribed at start); ``dynamic`` says whether topics that appear later
 must be discovered (``-a`` or a regular expression: see ``topic_watch``). Pure; a bad pattern raises
 ``ValueError('<name>: ...')``.
@@ -30,7 +34,7 @@ except ImportError:  # pragma: no cover
 
 from cc_log.core.safe_input import brief
 
-__all__ = ['TopicSelection', 'topic_list', 'ALL', 'REGEX', 'EXCLUDE']
+__all__ = ['TopicSelection', 'topic_list', 'is_legal_name', 'ALL', 'REGEX', 'EXCLUDE']
 
 ALL = '*'
 REGEX = 're:'
@@ -38,6 +42,7 @@ EXCLUDE = '!'
 MAX_PATTERN_CHARS = 256
 MAX_UNBOUNDED_REPEATS = 3
 CACHE_TOPICS = 10000
+_LEGAL_NAME = re.compile(r'[~/A-Za-z][A-Za-z0-9_/]*')  # rosgraph.names.is_legal_name, ASCII
 
 _REPEATS = frozenset(op for op in (getattr(_sre_parse, name, None) for name in (
     'MAX_REPEAT', 'MIN_REPEAT', 'POSSESSIVE_REPEAT')) if op is not None)
@@ -126,6 +131,10 @@ class TopicSelection(object):
                 raise ValueError('%s: %s excludes nothing (a name, or re:PATTERN)' % (name, brief(entry)))
             else:
                 pattern = None
+                if not is_legal_name(body):
+                    raise ValueError('%s: %s is neither a topic name nor a pattern (a name, *, re:REGEX, !NAME, '
+                                     '!re:REGEX; names are letters, digits, _ and /, case-sensitive)'
+                                     % (name, brief(entry)))
             if negated:
                 exclude.append(pattern if pattern is not None else re.escape(body))
             elif pattern is not None:
@@ -176,6 +185,11 @@ class TopicSelection(object):
         if self.exclude:
             text += ' except ' + ', '.join('re:' + pattern.pattern for pattern in self.exclude)
         return text
+
+
+def is_legal_name(name):
+    """Whether ``name`` is a legal ROS graph name (relative, global or private), as ``rospy`` checks it."""
+    return bool(_LEGAL_NAME.fullmatch(name)) and '//' not in name
 
 
 def topic_list(value, name):

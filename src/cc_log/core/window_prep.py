@@ -5,6 +5,7 @@ fallen behind (``thin``), and the newest message of each latched topic at its st
 import collections
 
 from cc_log.core import raw_message
+from cc_log.core.topic_select import TopicSelection
 
 __all__ = ['thin', 'CarriedDrops', 'restrict', 'Latched', 'any_latched', 'HEAVY_BYTES', 'LATCHED_KEPT']
 
@@ -56,15 +57,23 @@ class CarriedDrops(object):
         return dict(counts)
 
 
+def selections(keep):
+    """``keep`` (``{trigger name: topic_select.TopicSelection or topic names}``) as ``{name: TopicSelection}``."""
+    return dict((name, topics if isinstance(topics, TopicSelection) else TopicSelection(topics))
+                for name, topics in (keep or {}).items())
+
+
 def restrict(window, keep, driving_topic):
     """``window`` with only ``driving_topic`` and the topics its triggers keep, when each of its triggers has
-    its own ``keep`` set (``{trigger name: topics}``; a window any other trigger opened or extended keeps every
-    topic): a collision keeps the cameras, a silent topic only the diagnostics."""
+    its own ``keep`` (``{trigger name: topic_select.TopicSelection}``; a window any other trigger opened or
+    extended keeps every topic): a collision keeps the cameras, a silent topic only the diagnostics."""
     names = set(trigger.name or trigger.reason for trigger in window.triggers)
     if not keep or not names or not names <= set(keep):
         return window
-    topics = set().union(*(keep[name] for name in names)) | {driving_topic}
-    window.records = [record for record in window.records if record.topic in topics]
+    selections = [keep[name] for name in names]
+    kept = dict((topic, topic == driving_topic or any(selection.matches(topic) for selection in selections))
+                for topic in set(record.topic for record in window.records))
+    window.records = [record for record in window.records if kept[record.topic]]
     return window
 
 

@@ -19,9 +19,13 @@ into one fixed-length *vector* the model scores. It declares:
 ``register`` adds a class to the registry under its ``name``; ``get(name)`` finds it (ValueError naming the
 feature set otherwise). The base class handles bad input and irregular time the same way for every set: a
 message with a non-finite or missing field never raises, its row repeats the last good row (zeros before
-any) and ``rejected`` counts it; sets that use derivatives call ``_step(stamp)``: a repeated stamp (closer
-than ``min_dt``) keeps the previous derivatives, time going backwards or a gap longer than ``max_dt``
-restarts them (``restarts``), and ``covers(span, stamp)`` says whether the rows since then fill a window.
+any) and ``rejected`` counts it; a row value beyond +-CLIP (far beyond any physical range, or one that
+overflowed to inf or NaN from finite input: ``linear.x = 1e200`` squared) is clipped to it and the row counted
+in ``out_of_range``: a window holding such a row is anomalous whatever its score (``out_of_range(rows)``, read by
+the classifier trigger), never a nominal-looking vector; sets that use derivatives call ``_step(stamp)``: a
+repeated stamp (closer than ``min_dt``) keeps the previous derivatives, time going backwards or a gap longer
+than ``max_dt`` restarts them (``restarts``), and ``covers(span, stamp)`` says whether the rows since then fill a
+window.
 
 Pure Python plus numpy: no rospy. Messages are read by attribute, so any object with the layout works.
 """
@@ -37,7 +41,8 @@ from cc_log.core.spans import Span
 STATISTICS = ('mean', 'std', 'min', 'max')
 DEFAULT_MAX_DT = 1.0    # seconds: a longer gap between messages restarts the derivatives
 DEFAULT_MIN_DT = 1e-4   # seconds: a shorter step counts as a repeated stamp
-CLIP = 1e6              # every row value is clipped to +-CLIP so window statistics stay finite
+CLIP = 1e6              # every row value is clipped to +-CLIP so window statistics stay finite; a value
+#                         beyond it is out of any physical range (real odometry rows stay below 1e4)
 
 RESTART, REPEAT, STEP = 'restart', 'repeat', 'step'
 
@@ -132,18 +137,25 @@ def stamp_of(msg, fallback):
 
 
 def _clip(value):
-    if value > CLIP:
-        return CLIP
     if value < -CLIP:
         return -CLIP
+    if not value <= CLIP:  # beyond, or NaN (an overflow: inf - inf)
+        return CLIP
     return value
 
 
 def clipped(values):
-    """``values`` (a tuple of floats) with every entry clipped to +-CLIP (itself when none is out of range)."""
-    if max(values) > CLIP or min(values) < -CLIP:
-        return tuple(_clip(value) for value in values)
-    return values
+    """``values`` (a tuple of floats) with every entry clipped to +-CLIP, NaN to +CLIP (itself when none is out of
+    range: then the same object)."""
+    if finite(values) and max(values) <= CLIP and min(values) >= -CLIP:
+        return values
+    return tuple(_clip(value) for value in values)
+
+
+def out_of_range(rows):
+    """Whether the rows of a feature window (a 2-D array) hold a value clipped at +-CLIP: a value out of any
+    physical range, anomalous by construction."""
+    return bool(len(rows)) and float(np.max(np.abs(rows))) >= CLIP
 
 
 def finite(values):
@@ -364,6 +376,7 @@ class FeatureSet(object):
         self.max_dt = float(max_dt)
         self.min_dt = float(min_dt)
         self.rejected = 0
+        self.out_of_range = 0  # rows with a value clipped at +-CLIP
         self.restarts = 0
         self.reset()
 
@@ -457,8 +470,10 @@ class FeatureSet(object):
         row = self.make_row(stamp, values) if ok else None
         if row is None:
             return self._reject()
-        row = clipped(row)
-        self._last_row = row
+        within = clipped(row)
+        if within is not row:
+            self.out_of_range += 1
+        row = self._last_row = within
         return row
 
     def covers(self, span, stamp):

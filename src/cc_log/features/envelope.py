@@ -48,6 +48,7 @@ readers of ``motion``. Pure numpy, vectorised: no rospy.
 """
 import numpy as np
 
+from cc_log.features.base import CLIP
 from cc_log.features.motion import OdometrySet, read_odometry, read_odometry_block_raw
 
 ENVELOPE_COLUMNS = (
@@ -93,6 +94,17 @@ def clean_samples(stamps, x, y, yaw, v, w):
     before = np.concatenate(([-np.inf], np.maximum.accumulate(t)[:-1])) if n else t
     keep &= t > before
     return [a[keep] for a in arrays]
+
+
+def out_of_range_samples(stamps, x, y, yaw, v, w):
+    """Which samples (a bool array) hold a value out of any physical range: a finite stamp with a position,
+    speed or yaw rate that is not finite, or a speed or yaw rate beyond +-CLIP (``features.base.CLIP``).
+    ``clean_samples`` drops them; the envelope trigger fires on the windows that hold one. A heading that cannot
+    be read (a zero quaternion: some odometry has none) is only dropped."""
+    t, x, y, v, w = (np.asarray(a, dtype=float).ravel() for a in (stamps, x, y, v, w))
+    with np.errstate(invalid='ignore'):
+        beyond = ~(np.abs(v) <= CLIP) | ~(np.abs(w) <= CLIP) | ~np.isfinite(x) | ~np.isfinite(y)
+    return np.isfinite(t) & beyond
 
 
 def _wrap(angle):

@@ -193,6 +193,7 @@ class MotionFeatures(OdometrySet):
             if end == start:
                 return start
             block, deriv = block[:end - start], tuple(column[:end - start] for column in deriv)
+        self.out_of_range += int((np.abs(block) > CLIP).any(axis=1).sum())
         np.minimum(np.maximum(block, -CLIP), CLIP, out=rows[start:end])
         last = end - 1 - start
         self._prev = (tuple(cur[0:3, last].tolist()), tuple(quat[:, last + 1].tolist()),

@@ -39,10 +39,13 @@ def _options(cfg, online_dir=None):
 
 def _selected(cfg, options, types, bag):
     """``(options, types, topics)``: the side topics the patterns of ``cfg`` select among the topics of ``bag``
-    (an open bag; none without one) and the topics to read, driving first."""
+    (an open bag; none without one), with the names the triggers ``keep`` (a bag must hold them, as the names of
+    ``topics``), and the topics to read, driving first."""
     if options['side_topics'] is None:
+        from cc_log.core.config import global_name
         from cc_log.storage.bag import bagio
-        options['side_topics'] = cfg.selection.select(sorted(bagio.topics_of(bag))) if bag is not None else []
+        selected = cfg.selection.select(sorted(bagio.topics_of(bag))) if bag is not None else []
+        options['side_topics'] = list(dict.fromkeys(selected + [global_name(name) for name in cfg.keep_names()]))
     driving = options['driving_topic']
     topics = [driving] + [t for t in sorted(set(options['side_topics']).union(types)) if t != driving]
     return options, types, topics

@@ -8,7 +8,10 @@ inputs, in its order (the first makes the rows). Its ``features.FeatureStream`` 
 only while the newest rows are anomalous (``'event'``: the window ends at the anomaly's end plus post, not a
 whole feature window later). Several classifiers may run at once, each with its own model, topics,
 ``classify_every`` and ``retrigger``. A Fire says why (``core.why.classifier_why``): the entries of the window
-vector furthest outside what the model's training vectors covered. Pure: no rospy.
+vector furthest outside what the model's training vectors covered. A window whose rows hold a value out of
+any physical range (``features.base.out_of_range``: clipped at +-CLIP) is anomalous whatever the model says,
+with the score OUT_OF_RANGE_SCORE: clipped, it would look like any far vector, which a threshold tuned low may
+call nominal. Pure: no rospy.
 """
 import os
 import time
@@ -18,6 +21,7 @@ import numpy as np
 from cc_log import features
 from cc_log.core import online_learning, why
 from cc_log.features import FeatureStream
+from cc_log.features.base import CLIP, out_of_range
 from cc_log.core.spans import Span
 from cc_log.core.topic_select import topic_list
 from cc_log.triggers.base import Trigger, register
@@ -42,6 +46,7 @@ RECENT_FRACTION = 0.25  # default ``recent``: this fraction of the feature windo
 # window vector and the model on the skipped messages; an anomaly still fires at the message where it is
 # detected (at most one period late), and the window's pre part keeps the skipped messages before it.
 DEFAULT_CLASSIFY_EVERY = '50ms'
+OUT_OF_RANGE_SCORE = -CLIP  # the score of a window holding a value out of range: below any model's threshold
 
 
 def default_topics(topics, feature_set, resolve):
@@ -168,7 +173,7 @@ class ClassifierTrigger(Trigger):
             self._armed = True
         if k is None:
             return []
-        score = scores[k]
+        score = min(OUT_OF_RANGE_SCORE, scores[k]) if out_of_range(batch.rows(k)) else scores[k]
         anomalous = score < self.threshold
         fires = []
         if self.learner is not None:
@@ -202,6 +207,8 @@ class ClassifierTrigger(Trigger):
             rows = window_rows if self._nominal_rows is None else recent
         else:
             rows = np.concatenate((self._nominal_rows[len(recent):], recent))
+        if out_of_range(rows):
+            return True, OUT_OF_RANGE_SCORE
         return self.model.is_anomalous(self.config.feature.vector(rows, self.config.span))
 
     def _take_learned(self):

@@ -16,7 +16,10 @@ samples (``features.envelope.envelope_rows``: the very rows ``envelope_windows``
 the envelope fires at the first message at or after its end, with score ``-ln(max value / limit)`` (< 0;
 lower is more anomalous) and ``why``: the features beyond their limit, most outstanding first, each against the
 most seen in training (``core.envelope.explain``). Each such
-window fires (every 0.25 s while the motion stays beyond the envelope; the logger merges them). Pure: no rospy.
+window fires (every 0.25 s while the motion stays beyond the envelope; the logger merges them). A window that
+holds a sample out of any physical range (``features.envelope.out_of_range_samples``: a speed, yaw rate or
+position that is inf, NaN or beyond +-1e6, which the rows leave out) fires too, with the score
+OUT_OF_RANGE_SCORE and that said first in its ``why``, even when no sample of it could be measured. Pure: no rospy.
 """
 import os
 import time
@@ -25,11 +28,13 @@ import numpy as np
 
 from cc_log.core.envelope import DEFAULT_FACTOR, Envelope, check_factor, explain, scores
 from cc_log.features.envelope import (
-    ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, step_details)
+    ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, out_of_range_samples, step_details)
+from cc_log.features.base import CLIP
 from cc_log.features.motion import ODOMETRY, OdometrySet
 from cc_log.triggers.base import Trigger, register
 
 REASON = 'envelope'
+OUT_OF_RANGE_SCORE = -CLIP  # the score of a window holding a sample out of range: below any envelope score
 
 
 @register
@@ -72,6 +77,7 @@ class EnvelopeTrigger(Trigger):
 
     def reset(self):
         self._ring = tuple(np.zeros(0) for _ in range(6))   # stamps, x, y, yaw, v, w
+        self._beyond = np.zeros(0)  # the stamps of the samples out of range still inside a window to come
         self._first = None      # the first stamp since the start or a restart
         self._last_end = None   # the last grid point evaluated
 
@@ -109,14 +115,16 @@ class EnvelopeTrigger(Trigger):
 
     def _take(self, samples, newest, fires, offset):
         """Add ``samples`` (in time order but for dropped ones) to the ring and evaluate the windows they end."""
+        beyond = samples[0][out_of_range_samples(*samples)]
         samples = clean_samples(*samples)
         if len(self._ring[0]):   # the ring's stamps only go forward (a stamp repeated for ever never grows it)
             samples = tuple(a[samples[0] > self._ring[0][-1]] for a in samples)
-        if not len(samples[0]):
+        if not len(samples[0]) and not len(beyond):
             return
         self._ring = tuple(np.concatenate((ring, new)) for ring, new in zip(self._ring, samples))
+        self._beyond = np.sort(np.concatenate((self._beyond, beyond)))
         if self._first is None:
-            self._first = float(samples[0][0])
+            self._first = float(samples[0][0] if len(samples[0]) else beyond[0])
         k0 = np.ceil((self._first + self.window) / self.stride - 1e-9)
         if self._last_end is not None:
             k0 = max(k0, np.round(self._last_end / self.stride) + 1)
@@ -128,19 +136,28 @@ class EnvelopeTrigger(Trigger):
         ends, rows = envelope_rows(*self._ring, ends=grid, window=self.window)
         self.evaluated += len(ends)
         window_scores = scores(rows, self.limits)
-        beyond = np.flatnonzero(window_scores < 0.0)
-        self.beyond += len(beyond)
+        held = (np.searchsorted(self._beyond, grid, side='right') -
+                np.searchsorted(self._beyond, grid - self.window, side='right'))  # out-of-range samples per window
+        measured = dict(zip(ends.tolist(), range(len(ends))))
         best = {}
-        for k in beyond:   # the first record at or after the window's end; its most anomalous window
-            at = min(int(np.searchsorted(newest, ends[k], side='left')), len(newest) - 1)
-            if at not in best or window_scores[k] < window_scores[best[at]]:
-                best[at] = k
-        for at, k in sorted(best.items()):
-            details = step_details(*self._ring, end=ends[k], window=self.window)
-            why = explain(rows[k], self.envelope, self.factor, details)
-            fires[offset + at].append(self.fire(REASON, float(window_scores[k]), why))
+        for end, count in zip(grid.tolist(), held.tolist()):
+            k = measured.get(end)
+            score = OUT_OF_RANGE_SCORE if count else float(window_scores[k]) if k is not None else 0.0
+            if score >= 0.0:
+                continue
+            self.beyond += 1
+            at = min(int(np.searchsorted(newest, end, side='left')), len(newest) - 1)  # the first record at or after
+            if at not in best or score < best[at][1]:   # the window's end: its most anomalous window
+                best[at] = (end, score, k, count)
+        for at, (end, score, k, count) in sorted(best.items()):
+            why = () if k is None else explain(rows[k], self.envelope, self.factor,
+                                               step_details(*self._ring, end=end, window=self.window))
+            if count:
+                why = (out_of_range_why(count),) + tuple(why)
+            fires[offset + at].append(self.fire(REASON, score, why))
         keep = self._ring[0] > self._last_end - self.window - HISTORY
         self._ring = tuple(a[keep] for a in self._ring)
+        self._beyond = self._beyond[self._beyond > self._last_end - self.window]
 
     def stats(self):
         result = super(EnvelopeTrigger, self).stats()
@@ -155,3 +172,10 @@ class EnvelopeTrigger(Trigger):
                                'seconds': self.envelope.seconds},
                       limits={name: float(limit) for name, limit in zip(ENVELOPE_COLUMNS, self.limits)})
         return result
+
+
+def out_of_range_why(count):
+    """The ``why`` entry of a window holding ``count`` samples out of any physical range."""
+    return {'feature': 'out_of_range', 'value': float(count),
+            'text': '%d odometry sample(s) with a speed, yaw rate or position out of any physical range (inf, NaN '
+                    'or beyond %g)' % (count, CLIP)}
