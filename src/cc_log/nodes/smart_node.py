@@ -172,7 +172,7 @@ class SmartNode(object):
 
     def _publish_event(self, event):
         if event.kind == smart.DELETED:
-            rospy.logwarn('window file deleted (%s): %s', self.logger.guard.quota_text(), event.path)
+            rospy.logwarn('window file %s: %s', event.error, event.path)
             return
         if event.kind == smart.SPLIT:
             rospy.loginfo('window file closed at ~split_mb: %s (%d bytes); the window goes on in the next',

@@ -159,7 +159,7 @@ def _flagged_text(flagged):
 def _collect_many(args, specs, label, stride):
     from cc_log.offline import fleet
     bags = fleet.expand_bags(args.bag)
-    with _leftovers_removed([os.path.join(args.out, name) for name in fleet.output_names(bags)]):
+    with _leftovers_removed(fleet.output_dirs(args.out, bags)):
         outcomes, summary = run_fleet(args, 'collect', lambda engine, progress: fleet.collect_many(
             engine, bags, args.out, specs, label, stride, single=not args.config, progress=progress))
     rows = fleet_rows(outcomes, ('vectors', 'messages'))
