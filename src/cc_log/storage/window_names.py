@@ -236,8 +236,9 @@ class WindowName(object):
 
 
 def final_names(directory, base, extension):
-    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ..."""
+    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ... (each
+    inside ``directory``: ``safe_files.inside``, ValueError otherwise)."""
     counter = 0
     while True:
-        yield os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
+        yield safe_files.inside(directory, base + ('_%d' % counter if counter else '') + extension, 'window')
         counter += 1

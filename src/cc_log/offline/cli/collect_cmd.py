@@ -1,9 +1,9 @@
 """``cclog collect``: feature vectors of bags, as collect mode writes them."""
 import collections
 import contextlib
-import os
 import sys
 
+from cc_log.core import safe_files
 from cc_log.offline.progress import bar as _bar, call as _call
 from cc_log.offline.cli.common import (
     PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
@@ -141,7 +141,7 @@ def _drop_rule_flagged(bag, out, cfg, specs, label):
     for name, config, _ in specs:
         span = config.span
         window = span.seconds if span.is_duration else span.count / rate
-        removed[name] = collector.drop_flagged(os.path.join(out, name), label, spans, window)
+        removed[name] = collector.drop_flagged(safe_files.inside(out, name, 'classifier'), label, spans, window)
     return collections.OrderedDict([('rules', [t.name for t in triggers]),
                                     ('spans', [[start, end, names] for start, end, names in spans]),
                                     ('removed', removed)])
