@@ -60,14 +60,21 @@ def test_names_that_leave_the_root_or_name_it_are_refused_in_one_line(tmp_path, 
 
 
 def test_a_link_inside_the_root_is_never_followed_but_the_root_may_be_one(tmp_path):
+    """A link as a directory of the path is refused; at its last part it is a name (writers replace a link there,
+    never write through it; a deletion removes the link itself)."""
     elsewhere = tmp_path / 'elsewhere'
     elsewhere.mkdir()
     root = tmp_path / 'root'
     root.mkdir()
     (root / 'robot1').symlink_to(elsewhere)
-    for name in ('robot1', 'robot1/nominal'):
+    for name in ('robot1/nominal', 'robot1/nominal/1.json'):
         with pytest.raises(ValueError, match='^label: .* is outside '):
             safe_files.inside(str(root), name, 'label')
+    assert safe_files.inside(str(root), 'robot1') == os.path.join(str(root), 'robot1')
+    with pytest.raises(ValueError, match='^bag: .* is outside '):  # a directory to write in: not a link either
+        safe_files.inside(str(root), 'robot1', 'bag', directory=True)
+    with pytest.raises(ValueError, match='^bag: .* is outside '):
+        fleet.output_dirs(str(root), [str(tmp_path / 'bags' / 'robot1.bag')])
     linked = tmp_path / 'linked_root'
     linked.symlink_to(root)
     assert safe_files.inside(str(linked), 'nominal') == os.path.join(str(linked), 'nominal')
@@ -88,6 +95,7 @@ def test_any_name_gives_a_path_inside_the_root_or_a_value_error(tmp_path, name):
         assert str(error).startswith('name: ')
         return
     assert is_inside(path, root) and os.path.normpath(path) == path
+    assert safe_files.inside(root, name, 'name', directory=True) == path  # (no link in root)
 
 
 # -- item 3: files written and deleted outside --out ---------------------------------------------------------

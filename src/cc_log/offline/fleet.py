@@ -298,7 +298,7 @@ def jobs(bags, out_dir, *args):
 def output_dirs(out_dir, bags):
     """The output directory of each bag: ``out_dir/<output name>``, checked inside ``out_dir``
     (``safe_files.inside``)."""
-    return [safe_files.inside(out_dir, name, 'bag') for name in output_names(bags)]
+    return [safe_files.inside(out_dir, name, 'bag', directory=True) for name in output_names(bags)]
 
 
 def collect_many(engine, bags, out_dir, specs, label, stride, single=True, progress=None):

@@ -67,7 +67,7 @@ def sweep_one(bag_path, out_dir, sweeps):
             options, types, wanted = replay.replay_setup(entry.cfg, bag)
             _thresholded(options['triggers'], entry.threshold)
             total = max(total, replay.checked_count(bag, wanted, types))
-            logger = replay.offline_logger(safe_files.inside(out_dir, entry.label, 'sweep'), options)
+            logger = replay.offline_logger(safe_files.inside(out_dir, entry.label, 'sweep', directory=True), options)
             tally = smart_events.WindowTally()  # windows, not files (routes, parts)
             logger.on_event(tally)
             runs.append((entry, logger, frozenset(wanted), tally))

@@ -141,7 +141,8 @@ def _drop_rule_flagged(bag, out, cfg, specs, label):
     for name, config, _ in specs:
         span = config.span
         window = span.seconds if span.is_duration else span.count / rate
-        removed[name] = collector.drop_flagged(safe_files.inside(out, name, 'classifier'), label, spans, window)
+        folder = safe_files.inside(out, name, 'classifier', directory=True)
+        removed[name] = collector.drop_flagged(folder, label, spans, window)
     return collections.OrderedDict([('rules', [t.name for t in triggers]),
                                     ('spans', [[start, end, names] for start, end, names in spans]),
                                     ('removed', removed)])
