@@ -190,3 +190,21 @@ def test_a_quota_deleting_a_file_its_writer_did_not_write_says_so(tmp_path):
     assert said[0][1] == 'deleted to stay within max_files 2' + FOREIGN_NOTE
     assert [error for _, error in said[1:]] == ['deleted to stay within max_files 2'] * 2
     assert writer.guard.foreign_deleted == 1 and writer.guard.deleted == 3
+
+
+def test_two_writers_sharing_one_quota_delete_each_others_files_as_their_own(tmp_path):
+    """The context track's writer and the windows' share one quota (``DiskGuard.share``): a file of either, deleted
+    by the other, is not said to be another run's."""
+    windows, context = tmp_path / 'logs', tmp_path / 'logs' / 'context'
+    context.mkdir(parents=True)
+    guard, context_guard = DiskGuard(str(windows), max_files=1), DiskGuard(str(context), max_files=1)
+    context_guard.share(guard)
+    first = windows_in(windows, 1)[0]
+    assert guard.enforce_quota(keep=first) == []
+    os.utime(first, ns=(1, 1))
+    second = windows_in(context, 1)[0]
+    assert context_guard.enforce_quota(keep=second) == [first]
+    assert context_guard.last_foreign == [] and context_guard.foreign_deleted == 0
+    foreign = windows_in(windows, 1)[0]  # written by neither writer
+    os.utime(foreign, ns=(1, 1))
+    assert guard.enforce_quota() == [foreign] and guard.last_foreign == [foreign] and guard.foreign_deleted == 1

@@ -95,7 +95,7 @@ class DiskGuard(object):
         self.foreign_deleted = 0
         self.last_foreign = []  # the paths of the last ``enforce_quota`` that this guard's writer did not write
         self.paused = False
-        self._written = set()  # absolute paths of the files written by this guard's writer (``wrote``)
+        self._written = set()  # absolute paths of the files written by this guard's writer (``wrote``, ``share``)
 
     @property
     def active(self):
@@ -149,6 +149,13 @@ class DiskGuard(object):
     def wrote(self, path):
         """``path`` was written by this guard's writer (``enforce_quota`` notes its ``keep`` so)."""
         self._written.add(os.path.abspath(path))
+
+    def share(self, other):
+        """One quota for this guard's writer and ``other``'s (the context track's): each counts the other's
+        directory, and a file either wrote is written here for both."""
+        self.directories.append(other.directory)
+        other.directories.append(self.directory)
+        other._written = self._written
 
     def written_here(self, path):
         """Whether ``path`` was written by this guard's writer (``wrote``); False for a file of another run or one
