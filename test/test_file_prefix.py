@@ -65,7 +65,7 @@ def test_the_quota_counts_and_deletes_files_of_its_prefix_only(tmp_path):
     directory = str(tmp_path)
     theirs = [write_window(window(start=1000 * k), directory, Format.JSON_XZ)[0] for k in range(2)]
     ours = [write_window(window(start=1000 * k), directory, Format.JSON_XZ, prefix=RUN)[0] for k in range(2, 6)]
-    size = os.path.getsize(ours[0])
+    size = disk_guard.allocated_bytes(os.lstat(ours[0]))
     guard = DiskGuard(directory, max_disk_mb=2.5 * size / disk_guard.MB, prefix=RUN)
     assert [path for path, _ in guard.window_files()] == ours
     assert guard.enforce_quota(keep=ours[-1]) == ours[:2]

@@ -431,7 +431,7 @@ def test_quota_deletes_only_the_oldest_window_files(tmp_path):
     leftover = tmp_path / ('cc_log_20000101T000000.000Z_x.json.xz' + log_format.TMP_MARK + '1')
     leftover.write_bytes(b'y' * 200000)
     paths = [write_window(window(300, start=1000 * k), directory, Format.JSON_XZ)[0] for k in range(6)]
-    size = os.path.getsize(paths[0])
+    size = disk_guard.allocated_bytes(os.lstat(paths[0]))
     guard = DiskGuard(directory, max_disk_mb=3.5 * size / disk_guard.MB)
     deleted = guard.enforce_quota(keep=paths[-1])
     assert deleted == paths[:3]

@@ -11,7 +11,7 @@ import pytest
 from conftest import fill_disk
 from cc_log.storage import log_format, window_writer
 from cc_log.core.collector import Collector
-from cc_log.storage.disk_guard import DiskGuard
+from cc_log.storage.disk_guard import DiskGuard, allocated_bytes
 from cc_log.storage.log_format import Format, read_window, write_window
 from cc_log.core.event_kinds import DELETED, FAILED, WRITTEN
 from cc_log.core.smart import SmartLogger
@@ -25,6 +25,11 @@ def leftovers(directory):
     """Every ``*.tmp-*`` file below ``directory``."""
     return [os.path.join(folder, name) for folder, _, names in os.walk(directory) for name in names
             if log_format.TMP_MARK in name]
+
+
+def allocated(path):
+    """The bytes the quota counts of ``path``: those allocated to it."""
+    return allocated_bytes(os.lstat(path))
 
 
 def wait_until(predicate, timeout=20.0):
@@ -70,7 +75,7 @@ def test_quota_orders_windows_by_time_written_not_by_their_stamps(tmp_path):
     for age, path in enumerate(reversed(late + early)):  # written one second apart, in that order
         os.utime(path, ns=(time.time_ns() - age * 10 ** 9,) * 2)
     assert sorted(late + early) == early + late  # by name the jumped-back windows look oldest
-    guard = DiskGuard(directory, max_disk_mb=2.5 * os.path.getsize(late[0]) / 1e6)
+    guard = DiskGuard(directory, max_disk_mb=2.5 * allocated(late[0]) / 1e6)
     deleted = guard.enforce_quota(keep=early[-1])
     assert deleted == late[:3] and log_format.window_files(directory) == early
     assert [path for path, _ in guard.window_files()] == early
@@ -82,15 +87,15 @@ def test_quota_counts_the_bytes_a_partial_recovery_kept_oldest_first(tmp_path):
     directory = str(tmp_path)
     windows = [write_window(window(300, start=1000 * k), directory, Format.JSON_XZ)[0] for k in range(2)]
     size = os.path.getsize(windows[0])
-    kept = os.path.join(directory, os.path.basename(windows[0]) + '.0' + log_format.KEPT_MARK + '4242')
+    kept = os.path.join(directory, os.path.basename(windows[0]) + log_format.KEPT_MARK + '4242')
     pending = os.path.join(directory, os.path.basename(windows[0]) + '.1' + log_format.TMP_MARK + '4243')
     for path in (kept, pending):
         with open(path, 'wb') as stream:
             stream.write(b'\0' * size)
     for age, path in enumerate([windows[1], windows[0], kept]):  # the kept leftover is the oldest
         os.utime(path, ns=(time.time_ns() - age * 10 ** 9,) * 2)
-    guard = DiskGuard(directory, max_disk_mb=(sum(map(os.path.getsize, windows)) + 1) / 1e6)
-    assert guard.usage() == sum(map(os.path.getsize, windows + [kept]))
+    guard = DiskGuard(directory, max_disk_mb=(sum(map(allocated, windows)) + 1) / 1e6)
+    assert guard.usage() == sum(map(allocated, windows + [kept]))
     assert log_format.kept_leftovers(directory) == [kept]
     assert guard.enforce_quota(keep=windows[1]) == [kept]
     assert os.path.exists(pending) and log_format.window_files(directory) == windows

@@ -133,7 +133,8 @@ class Collector(object):
             others = roles if input_topics is None else list(input_topics)
             self.specs = [VectorSpec('', config, [driving_topic] + others, self.features_directory, self.stride)]
         else:
-            self.specs = [VectorSpec(name, config, list(topics), os.path.join(self.features_directory, name),
+            self.specs = [VectorSpec(name, config, list(topics),
+                                     safe_files.inside(self.features_directory, name, 'classifier', True),
                                      self.stride) for name, config, topics in feature_specs]
             if driving_topic is None and self.specs:
                 driving_topic = self.specs[0].topic
@@ -334,7 +335,8 @@ def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WI
     if feature_specs is None:
         specs = [('', features_mod.FeatureConfig(feature_set, window), topic, out_dir)]
     else:
-        specs = [(name, config, topics, os.path.join(out_dir, name)) for name, config, topics in feature_specs]
+        specs = [(name, config, topics, safe_files.inside(out_dir, name, 'classifier', True))
+                 for name, config, topics in feature_specs]
     computed = [(name, config, directory) + _vectors_of(bag_path, topics, config, stride)
                 for name, config, topics, directory in specs]
     retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
@@ -349,7 +351,7 @@ def collect_bag(bag_path, topic, out_dir, label=DEFAULT_LABEL, window=DEFAULT_WI
             if writer.lost:
                 break
         written = writer.stats()['written'].get(VECTOR, 0) - before
-        where = os.path.join(directory, label)
+        where = safe_files.inside(directory, label, 'label', True)
         if written < len(stamps):
             writer.close()
             raise OSError('%s: %d of %d feature vectors not written: %s' % (
@@ -413,7 +415,7 @@ def rule_spans(bag_path, triggers, pre, post, rate):
 def drop_flagged(directory, label, spans, window_seconds):
     """Remove the vector files of ``directory/<label>/`` whose feature window ``[stamp - window_seconds, stamp]``
     overlaps one of ``spans`` (``rule_spans``): they are not nominal. Returns how many were removed."""
-    folder = os.path.join(directory, label)
+    folder = safe_files.inside(directory, label, 'label', True)
     if not spans or not os.path.isdir(folder):
         return 0
     starts = [start for start, _, _ in spans]
@@ -428,7 +430,7 @@ def drop_flagged(directory, label, spans, window_seconds):
         # the last span starting at or before the stamp: spans are merged, so it also ends last among those
         index = bisect.bisect_right(starts, stamp) - 1
         if index >= 0 and spans[index][1] >= stamp - window_seconds:
-            os.unlink(os.path.join(folder, name))
+            os.unlink(safe_files.inside(folder, name, 'vector'))
             removed += 1
     return removed
 

@@ -81,8 +81,8 @@ def write_vector(directory, label, stamp, vector, config, names=None):
         if len(names) != len(values):
             raise ValueError('names: %d names for %d features' % (len(names), len(values)))
         document['names'] = list(names)
-    folder = safe_files.make_dirs(os.path.join(directory, label))
-    path = os.path.join(folder, '%.6f.json' % stamp)
+    folder = safe_files.make_dirs(safe_files.inside(directory, label, 'label', directory=True))
+    path = safe_files.inside(folder, '%.6f.json' % stamp, 'stamp')
     with safe_files.AtomicFile(path, overwrite=True, text=True) as stream:
         json.dump(document, stream, allow_nan=False, separators=(',', ':'))
     return path

@@ -33,7 +33,7 @@ import time
 
 import numpy as np
 
-from cc_log.core import learning
+from cc_log.core import learning, safe_files
 from cc_log.core.spans import Span
 
 DEFAULT_EVERY = 2000    # new nominal vectors between refits
@@ -288,7 +288,8 @@ def from_options(model, path, options, load=None, directory=None):
             raise ValueError('%s: %r must be true or false' % (key, value))
     if not enabled:
         return None
-    saved = online_path(path) if directory is None else os.path.join(directory, os.path.basename(online_path(path)))
+    saved = (online_path(path) if directory is None
+             else safe_files.inside(directory, os.path.basename(online_path(path)), 'model'))
     learner = OnlineLearner(model, saved, **keys)
     if keep_learned and load is not None and directory is None:
         learner.resume(load)

@@ -8,6 +8,9 @@
   creates meanwhile); with ``overwrite`` it replaces ``path`` by rename (a file or link at ``path`` is
   replaced, never written through). The directory is fsynced. On any error the temporary file is removed
   and every descriptor closed.
+- ``inside(root, name)``: the one guard of every path cc_log writes or deletes: ``name`` (a relative path)
+  joined under ``root``, or ValueError when it would leave it (``..``, an absolute name, a link to a directory
+  inside ``root``).
 - ``make_dirs(path)``: the missing directories of ``path`` (parents too), each set to 2775 through an
   ``O_NOFOLLOW`` descriptor: group-writable, setgid so files inherit the group, never world-writable.
 
@@ -58,6 +61,36 @@ def _group_writable(fd, mode):
     wanted = (mode & 0o7770) | (current & 0o005)
     if wanted != current:
         os.fchmod(fd, wanted)
+
+
+def inside(root, name, what='path', directory=False):
+    """The path of ``name`` inside the directory ``root``: ``root`` joined with the parts of ``name`` (split at
+    ``/``), each a plain name (not empty, not ``.`` or ``..``, no NUL) and none but the last an existing symbolic
+    link (``root`` itself may be one: it is the caller's choice, followed as given; nothing inside it is: a link at
+    the last part is a name the writers replace, never write through (``create``, ``AtomicFile``), and ``unlink``
+    removes the link itself; ``directory``: the path is a directory to write in, so not a link either). So the
+    path stays inside ``root`` resolved once, whatever the name (a bag's, a topic's, a label).
+    ValueError('<what>: <name> is outside <root>') otherwise."""
+    text = os.fspath(name)
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    parts = text.split('/')
+    try:
+        os.fsencode(text)
+        plain = bool(text) and '\0' not in text and not any(part in ('', '.', '..') for part in parts)
+    except UnicodeError:
+        plain = False
+    path = os.fspath(root)
+    for part in (parts if directory else parts[:-1]) if plain else ():
+        path = os.path.join(path, part)
+        if os.path.islink(path):
+            plain = False
+            break
+    if plain and not directory:
+        path = os.path.join(path, parts[-1])
+    if not plain:
+        raise ValueError('%s: %r is outside %s' % (what, text, os.fspath(root)))
+    return path
 
 
 def create(path, mode=FILE_MODE):

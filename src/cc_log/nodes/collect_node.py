@@ -119,7 +119,7 @@ class CollectNode(object):
         elif kind == 'failed':
             rospy.logerr('%s of %d messages not written: %s', detail['what'], detail['messages'], detail['error'])
         elif kind == 'deleted':
-            rospy.logwarn('window file deleted (%s): %s', self.collector.writer.guard.quota_text(), detail['path'])
+            rospy.logwarn('window file %s: %s', detail['error'], detail['path'])
 
     def _status(self):
         stats = self.collector.stats()

@@ -98,8 +98,7 @@ class NodeExtras(object):
                 folder, max_disk_mb=guard.max_bytes / float(disk_guard.MB),
                 min_free_mb=guard.min_free_bytes / float(disk_guard.MB), close_retry=writer.close_retry,
                 name='cc_log context writer', max_files=guard.max_files, prefix=writer.prefix)
-            self.writer.guard.directories.append(writer.directory)
-            guard.directories.append(folder)
+            self.writer.guard.share(guard)
             self.writer.on_event(self._context_event)
             self.track = context_track.ContextTrack(directory, self.rates, rotate, submit=self.writer.submit,
                                                     names=names, prefix=writer.prefix,

@@ -171,7 +171,7 @@ class SmartNode(object):
 
     def _publish_event(self, event):
         if event.kind == event_kinds.DELETED:
-            rospy.logwarn('window file deleted (%s): %s', self.logger.guard.quota_text(), event.path)
+            rospy.logwarn('window file %s: %s', event.error, event.path)
             return
         if event.kind == event_kinds.SPLIT:
             rospy.loginfo('window file closed at ~split_mb: %s (%d bytes); the window goes on in the next',

@@ -206,8 +206,9 @@ def to_csv(records, directory):
         rows = [_flatten(msg_codec.to_dict(record.msg), '', collections.OrderedDict()) for record in topic_records]
         fields = list(collections.OrderedDict.fromkeys(key for row in rows for key in row))
         base = csv_file_name(topic)
-        target = AtomicFile(os.path.join(directory, base + '.csv'), text=True, newline='',
-                            names=log_format.final_names(directory, base, '.csv'))
+        names = log_format.final_names(directory, base, '.csv')
+        first = next(names)
+        target = AtomicFile(first, text=True, newline='', names=itertools.chain([first], names))
         with target as stream:
             writer = csv.writer(stream)
             writer.writerow(['stamp'] + fields)
@@ -309,7 +310,7 @@ def to_frames(records, directory, skipped=None, progress=None):
             continue
         if not files:
             safe_files.make_dirs(directory)
-        path = os.path.join(directory, frame_name(record.topic, record.stamp, extension))
+        path = safe_files.inside(directory, frame_name(record.topic, record.stamp, extension), 'topic')
         stem = path[:-len(extension) - 1]
         target = AtomicFile(path, names=itertools.chain([path], ('%s-%d.%s' % (stem, n, extension)
                                                                  for n in itertools.count(2))))

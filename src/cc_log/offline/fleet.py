@@ -15,6 +15,8 @@ import logging
 import os
 import time
 
+from cc_log.core import safe_files
+
 BAG_SUFFIX = '.bag'
 DASK_MISSING = ('Dask is not installed (the fleet commands run on it): apt-get install python3-dask '
                 'python3-distributed, or ./dev.sh setup')
@@ -87,18 +89,24 @@ def _unique(paths):
 
 def output_names(paths):
     """One distinct subdirectory name per input: its path below the inputs' common directory, ``.bag`` dropped
-    and ``/`` as ``__`` (``robot1/run.bag`` -> ``robot1__run``), so two robots' ``run.bag`` do not meet. Paths
-    that would still share a name (``robot1/run.bag`` and ``robot1__run.bag``; ``run`` and ``run.bag``) each get
-    ``-`` and 8 hex digits of their path's hash: the same name whatever the other inputs' order."""
+    (kept when what is left would be ``.``, ``..`` or nothing: ``...bag`` stays ``...bag``) and ``/`` as ``__``
+    (``robot1/run.bag`` -> ``robot1__run``), so two robots' ``run.bag`` do not meet. Paths that would still share
+    a name (``robot1/run.bag`` and ``robot1__run.bag``; ``run`` and ``run.bag``) each get ``-`` and 8 hex digits of
+    their path's hash: the same name whatever the other inputs' order."""
     import hashlib
     absolute = [os.path.abspath(path) for path in paths]
     common = os.path.commonpath([os.path.dirname(path) for path in absolute]) if absolute else ''
     relative = [os.path.relpath(path, common) for path in absolute]
-    names = [(name[:-len(BAG_SUFFIX)] if name.endswith(BAG_SUFFIX) else name).replace(os.sep, '__')
-             for name in relative]
+    names = [_without_suffix(name).replace(os.sep, '__') for name in relative]
     counts = collections.Counter(names)
     return [name if counts[name] == 1 else '%s-%s' % (name, hashlib.sha256(rel.encode('utf-8')).hexdigest()[:8])
             for name, rel in zip(names, relative)]
+
+
+def _without_suffix(name):
+    """``name`` without ``.bag``, unless that leaves no plain name (``...bag``, ``..bag``, ``.bag``)."""
+    stem = name[:-len(BAG_SUFFIX)] if name.endswith(BAG_SUFFIX) else name
+    return stem if os.path.basename(stem) not in ('', '.', '..') else name
 
 
 # -- the engine -----------------------------------------------------------------------------------------
@@ -283,8 +291,14 @@ class Job(collections.namedtuple('Job', 'name path out args')):
 
 
 def jobs(bags, out_dir, *args):
-    """One Job per bag, each writing into ``out_dir/<output name>``."""
-    return [Job(path, path, os.path.join(out_dir, name), args) for name, path in zip(output_names(bags), bags)]
+    """One Job per bag, each writing into ``out_dir/<output name>`` (``output_dirs``)."""
+    return [Job(path, path, out, args) for out, path in zip(output_dirs(out_dir, bags), bags)]
+
+
+def output_dirs(out_dir, bags):
+    """The output directory of each bag: ``out_dir/<output name>``, checked inside ``out_dir``
+    (``safe_files.inside``)."""
+    return [safe_files.inside(out_dir, name, 'bag', directory=True) for name in output_names(bags)]
 
 
 def collect_many(engine, bags, out_dir, specs, label, stride, single=True, progress=None):
@@ -331,5 +345,5 @@ def failures(outcomes):
     return [outcome.value for outcome in outcomes if not outcome.ok]
 
 
-__all__ = ['Engine', 'Outcome', 'Meter', 'expand_bags', 'expand_vector_dirs', 'output_names', 'collect_one',
-           'collect_many', 'replay_many', 'jobs', 'failures', 'peak_rss_mb']
+__all__ = ['Engine', 'Outcome', 'Meter', 'expand_bags', 'expand_vector_dirs', 'output_names', 'output_dirs',
+           'collect_one', 'collect_many', 'replay_many', 'jobs', 'failures', 'peak_rss_mb']

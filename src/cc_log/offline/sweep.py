@@ -8,7 +8,7 @@ the bag's truth file when it has one, ``sweep_many`` does it for every bag on a 
 import collections
 import os
 
-from cc_log.core import smart_events
+from cc_log.core import safe_files, smart_events
 from cc_log.offline import fleet, replay
 
 SWEEP_KEYS = ('threshold', 'pre', 'post', 'classify_every', 'retrigger')
@@ -67,7 +67,7 @@ def sweep_one(bag_path, out_dir, sweeps):
             options, types, wanted = replay.replay_setup(entry.cfg, bag)
             _thresholded(options['triggers'], entry.threshold)
             total = max(total, replay.checked_count(bag, wanted, types))
-            logger = replay.offline_logger(os.path.join(out_dir, entry.label), options)
+            logger = replay.offline_logger(safe_files.inside(out_dir, entry.label, 'sweep', directory=True), options)
             tally = smart_events.WindowTally()  # windows, not files (routes, parts)
             logger.on_event(tally)
             runs.append((entry, logger, frozenset(wanted), tally))
@@ -94,7 +94,7 @@ def sweep_one(bag_path, out_dir, sweeps):
         windows = tally.windows()
         stats = logger.stats()
         if stats['messages_lost']:
-            raise OSError('%s: %s: %s' % (os.path.join(out_dir, entry.label), replay.lost_text(stats),
+            raise OSError('%s: %s: %s' % (logger.directory, replay.lost_text(stats),
                                           stats['last_error']))
         rows.append({'label': entry.label, 'windows': len(windows), 'kept': sum(w['messages'] for w in windows),
                      'stored_bytes': stats['stored_bytes'],

@@ -117,7 +117,7 @@ class _OpenBag(object):
         self.prefix = prefix
         self.first = first_stamp
         name = '%s%s%s%d.%d' % (self.base, EXTENSION, safe_files.TMP_MARK, os.getpid(), next(_SERIAL))
-        self.tmp = os.path.join(directory, name)
+        self.tmp = safe_files.inside(directory, name, 'context')
         self.bag = self._sync_fd = self.path = self._close_error = None
         self.messages = 0
         fd = safe_files.create(self.tmp)

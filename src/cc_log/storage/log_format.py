@@ -17,6 +17,7 @@ systems without hard links), and the directory is fsynced (``safe_files.AtomicFi
 """
 import collections
 import heapq
+import itertools
 import os
 
 from cc_log.storage import formats, payload_check
@@ -229,8 +230,9 @@ def write_window(window, directory, fmt, metadata=None, base=None, left_out=None
     if base is None:
         base = piece_name(name.take(directory, window), None, getattr(window, 'part', 0))
     try:
-        target = safe_files.AtomicFile(os.path.join(directory, base + extension),
-                                       names=final_names(directory, base, extension))
+        names = final_names(directory, base, extension)
+        first = next(names)
+        target = safe_files.AtomicFile(first, names=itertools.chain([first], names))
         with target as stream:
             write(stream)
     finally:
@@ -300,8 +302,8 @@ class WindowFile(object):
         name = self.name.take(self.directory, window)
         extension = self._module.EXTENSION
         path = piece_name(name, self.route, self.number if self.number > 1 else 0) + extension
-        target = safe_files.AtomicFile(os.path.join(self.directory, path), names=self._final_name(extension),
-                                       keep=True)
+        target = safe_files.AtomicFile(safe_files.inside(self.directory, path, 'window'),
+                                       names=self._final_name(extension), keep=True)
         self._file = target.__enter__()
         self._target, self._stream = target, self._module.WindowStream(self._file)
         self._in_file, self._summed, self.lost = Contents(), {}, 0
@@ -310,7 +312,7 @@ class WindowFile(object):
         """The name the file being written takes when it is finished (read then: a window's first file is named
         as a split once a second one began)."""
         number = self.number if self._split else 0
-        yield os.path.join(self.directory, piece_name(self.name.name, self.route, number) + extension)
+        yield safe_files.inside(self.directory, piece_name(self.name.name, self.route, number) + extension, 'window')
 
     def _close_split(self):
         """Finish the file being written (its number said) before the next part begins a new one."""

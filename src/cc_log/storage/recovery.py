@@ -146,8 +146,8 @@ def _write_recovered(path, directory, base, fmt, metadata, records, prefix):
     if _is_context(path, prefix):
         from cc_log.offline import export
         names = log_format.final_names(directory, base + RECOVERED_SUFFIX, fmt.EXTENSION)
-        return export.to_bag(records, os.path.join(directory, base + RECOVERED_SUFFIX + fmt.EXTENSION),
-                             names=names)[0]
+        first = next(names)
+        return export.to_bag(records, first, names=itertools.chain([first], names))[0]
     for key in ('topics', 'types', 'counts', 'count', 'start', 'end', 'start_utc', 'end_utc', 'codec', 'layout',
                 'cc_log_version'):
         metadata.pop(key, None)
@@ -188,8 +188,8 @@ def _recover_partial(path, directory, base, extension, size, fmt, prefix):
         safe_files.fsync_directory(directory)
         return Outcome(path, PARTIAL, written, count, detail + '; every byte decoded: leftover removed')
     pid = os.path.basename(path).rpartition(log_format.TMP_MARK)[2]
-    kept = safe_files.publish(path, (os.path.join(directory, base + extension + KEPT_MARK + pid + (
-        '.%d' % number if number else '')) for number in itertools.count()))
+    kept = safe_files.publish(path, (safe_files.inside(directory, base + extension + KEPT_MARK + pid + (
+        '.%d' % number if number else ''), 'leftover') for number in itertools.count()))
     safe_files.fsync_directory(directory)
     return Outcome(path, PARTIAL, written, count, '%s; %d bytes could not be decoded%s: the leftover is kept as %s'
                    % (detail, lost, why, os.path.basename(kept)), lost, kept)
@@ -207,7 +207,7 @@ def recover(path, prefix=log_format.PREFIX):
     if info.st_size == 0:
         os.unlink(path)
         return Outcome(path, EMPTY, '', 0, 'empty (nothing had been written into it): removed')
-    final = os.path.join(directory, base + extension)
+    final = safe_files.inside(directory, base + extension, 'leftover')
     if os.path.isfile(final) and not os.path.islink(final) and (os.path.samefile(path, final)
                                                                 or _same_bytes(path, final)):
         os.unlink(path)

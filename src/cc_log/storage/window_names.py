@@ -42,6 +42,10 @@ _PIECE = (r'(?P<name>%s(?P<stamp>[0-9]{8}T[0-9]{6}\.[0-9]{3}Z)_(?P<reason>[A-Za-
           r'(?:\.(?P<number>[0-9]{3,}))?'
           r'(?P<recovered>_recovered(?:_[0-9]+)?)?')
 _PATTERNS = {}
+#: A context-track file's name (``context_track.file_name``, then ``final_names``' number, then recovery's mark).
+_CONTEXT = r'%scontext_[0-9]{8}T[0-9]{6}\.[0-9]{3}Z(?:_[0-9]+)?(?:_recovered(?:_[0-9]+)?)?'
+_CONTEXTS = {}
+_KEPT_PID = re.compile(r'[0-9]+(?:\.[0-9]+)?')  # after a kept leftover's KEPT_MARK: its pid, a number
 RESERVED_MARK = '.reserved'  # ``<name>.reserved``: a window's name taken while its pieces are written
 
 Piece = collections.namedtuple('Piece', 'name route number')
@@ -98,6 +102,19 @@ def parse_piece(name, prefix=PREFIX):
         return None
     number = match.group('number') or match.group('old_part') or match.group('old_route_part') or 0
     return Piece(match.group('name'), match.group('route'), int(number))
+
+
+def own_name(name, prefix=PREFIX):
+    """Whether ``name`` (a file name with its format's extension; ``<final name>.unrecovered-<pid>[.<n>]`` too, a
+    kept leftover) is one cc_log gives: a window's piece (``parse_piece``) or a context-track file
+    (``<prefix>context_<UTC>``, numbered or recovered) of ``prefix``. What a quota may count and delete."""
+    final, kept, pid = name.partition(KEPT_MARK)
+    if TMP_MARK in final or formats.by_extension(final) is None or (kept and not _KEPT_PID.fullmatch(pid)):
+        return False
+    pattern = _CONTEXTS.get(prefix)
+    if pattern is None:
+        pattern = _CONTEXTS[prefix] = re.compile(_CONTEXT % re.escape(prefix))
+    return parse_piece(final, prefix) is not None or pattern.fullmatch(_stem(final)) is not None
 
 
 def _stem(name):
@@ -219,8 +236,9 @@ class WindowName(object):
 
 
 def final_names(directory, base, extension):
-    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ..."""
+    """The names a window file may take, in order: ``base + extension``, then ``base_1``, ``base_2``, ... (each
+    inside ``directory``: ``safe_files.inside``, ValueError otherwise)."""
     counter = 0
     while True:
-        yield os.path.join(directory, base + ('_%d' % counter if counter else '') + extension)
+        yield safe_files.inside(directory, base + ('_%d' % counter if counter else '') + extension, 'window')
         counter += 1

@@ -22,8 +22,8 @@ writes them in order, on a background thread (``background=True``) or in the cal
 - every outcome is an event ``WriterEvent(kind, job, path, bytes, error, kept)``, its kind one of
   ``core.event_kinds``: WRITTEN, FAILED (``kept`` True: held and retried, said once per job; False: lost for
   good, always said), SPLIT (a file of a window finished at ``split_mb``: ``path``, ``bytes``; the job of the part
-  that began the next file) and DELETED (a window file deleted by the quota: ``path``, ``bytes``); and a counter
-  in ``stats()``.
+  that began the next file) and DELETED (a window file deleted by the quota: ``path``, ``bytes``; ``error`` says
+  why, and ``FOREIGN_NOTE`` for a file this writer did not write); and a counter in ``stats()``.
 
 Pure: no rospy.
 """
@@ -41,6 +41,7 @@ from cc_log.core.spans import megabytes, seconds
 __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
 
+FOREIGN_NOTE = ', a file this writer did not write'  # said of a file the quota deleted that another run left
 WINDOW = 'window'  # Job.what of a window file
 CONTEXT = 'context'  # Job.what of a closed context-track file (counted in the quota like a window)
 ROUTE = 'route'  # Job.what of a route's file of a window (core.routes): the window is counted once, by its own
@@ -474,8 +475,9 @@ class WindowWriter(object):
                 self._counts['windows_deleted'] += 1
                 self.last_deleted = path
             deleted.append(path)
-            self._emit(WriterEvent(DELETED, None, path, 0, 'deleted to stay within %s' % self.guard.quota_text(),
-                                   False))
+            foreign = FOREIGN_NOTE if path in self.guard.last_foreign else ''
+            self._emit(WriterEvent(DELETED, None, path, 0, 'deleted to stay within %s%s' % (
+                self.guard.quota_text(), foreign), False))
         return deleted
 
     def _lose(self, job, error):

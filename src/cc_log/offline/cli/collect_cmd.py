@@ -1,9 +1,9 @@
 """``cclog collect``: feature vectors of bags, as collect mode writes them."""
 import collections
 import contextlib
-import os
 import sys
 
+from cc_log.core import safe_files
 from cc_log.offline.progress import bar as _bar, call as _call
 from cc_log.offline.cli.common import (
     PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
@@ -141,7 +141,8 @@ def _drop_rule_flagged(bag, out, cfg, specs, label):
     for name, config, _ in specs:
         span = config.span
         window = span.seconds if span.is_duration else span.count / rate
-        removed[name] = collector.drop_flagged(os.path.join(out, name), label, spans, window)
+        folder = safe_files.inside(out, name, 'classifier', directory=True)
+        removed[name] = collector.drop_flagged(folder, label, spans, window)
     return collections.OrderedDict([('rules', [t.name for t in triggers]),
                                     ('spans', [[start, end, names] for start, end, names in spans]),
                                     ('removed', removed)])
@@ -159,7 +160,7 @@ def _flagged_text(flagged):
 def _collect_many(args, specs, label, stride):
     from cc_log.offline import fleet
     bags = fleet.expand_bags(args.bag)
-    with _leftovers_removed([os.path.join(args.out, name) for name in fleet.output_names(bags)]):
+    with _leftovers_removed(fleet.output_dirs(args.out, bags)):
         outcomes, summary = run_fleet(args, 'collect', lambda engine, progress: fleet.collect_many(
             engine, bags, args.out, specs, label, stride, single=not args.config, progress=progress))
     rows = fleet_rows(outcomes, ('vectors', 'messages'))
