@@ -107,7 +107,8 @@ class SmartNode(object):
         cfg = node_config(params, params.configuration('smart'), dict(
             (name, given(name)) for name in ('model', 'retrigger', 'classify_every', 'recent', 'learn_online')))
         if not cfg.triggers:
-            raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
+            raise ConfigError('~model: required (the envelope file of cclog learn-envelope, or the model file written '
+                              'by learn mode), or triggers in ~config')
         try:
             triggers = cfg.build_triggers(AnomalyModel.load, config.installed_class, rospy.resolve_name)
             options = cfg.logger_options(triggers, rospy.resolve_name)
