@@ -3,6 +3,7 @@ import re
 
 import numpy as np
 import pytest
+from conftest import approx_floats
 
 from cc_log.features.envelope import (
     ENVELOPE_COLUMNS, ENVELOPE_FLOORS, ENVELOPE_UNITS, HISTORY, envelope_rows, envelope_windows)
@@ -352,6 +353,189 @@ def test_envelope_files_are_read_with_bounds(tmp_path):
     from cc_log.triggers.envelope import EnvelopeTrigger
     with pytest.raises(ValueError, match='^envelope: factor: 0.5 must be a number from 1 up'):
         EnvelopeTrigger('envelope', env, ODOM, factor=0.5)
+
+
+# -- the joint check ----------------------------------------------------------------------------------------------
+
+def paired_windows(n=600, seed=0):
+    """Synthetic training windows (n, 19): every feature spreads on its own but for speed and yaw rate, which
+    always move together (yaw rate = speed / 2, give or take 0.01)."""
+    rng = np.random.default_rng(seed)
+    matrix = rng.uniform(0.5, 1.5, (n, len(ENVELOPE_COLUMNS))) * rng.uniform(0.1, 10.0, len(ENVELOPE_COLUMNS))
+    matrix[:, COL['max_speed']] = rng.uniform(0.2, 1.0, n)
+    matrix[:, COL['max_yaw_rate']] = 0.5 * matrix[:, COL['max_speed']] + rng.normal(0.0, 0.01, n)
+    return matrix
+
+
+def apart(matrix):
+    """A window of typical values whose speed is near the most seen while its yaw rate is near the least."""
+    row = np.median(matrix, axis=0)
+    row[COL['max_speed']], row[COL['max_yaw_rate']] = 0.95, 0.12
+    return row
+
+
+def test_the_joint_check_flags_a_combination_never_seen_although_each_feature_is_inside_its_limit():
+    from cc_log.core import envelope
+    matrix = paired_windows()
+    env = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0)
+    assert env.joint is not None and 0 < env.joint.typical < env.joint.farthest
+    row = apart(matrix)
+    assert np.all(row <= matrix.max(axis=0))                       # inside the training's own range, each
+    limits = env.limits()
+    assert envelope.scores(row[None], limits, None)[0] > 0         # per feature: nothing to flag
+    assert envelope.scores(row[None], limits, env.joint)[0] < 0    # jointly: flagged
+    assert env.joint.ratios(row[None])[0] > 1
+    assert np.all(envelope.scores(matrix, limits, env.joint) >= 0)  # no training window is
+    assert np.max(env.joint.ratios(matrix)) == approx_floats(1.0 / envelope.DEFAULT_JOINT_FACTOR)
+    assert envelope.scores(row[None], limits, env.joint, joint_factor=0)[0] > 0   # 0: off
+    assert envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0, joint=False).joint is None
+    few = envelope.learn([matrix[:49]], ODOM, 1.0, 0.25, 12.0)
+    assert few.joint is None and envelope.joint_shortfall(49) == '49 training windows, fewer than 50'
+    assert envelope.joint_shortfall(50) == ''
+
+
+def test_the_joint_ratio_is_the_detector_benchmarks_robust_mahalanobis_at_its_level():
+    """The bench's ``mahalanobis``: sklearn's StandardScaler, MinCovDet(random_state=0) on the scaled training
+    windows, its squared ``mahalanobis`` distance, the threshold ``zero - level x (zero - extreme)`` with zero /
+    extreme the median / lowest training score (-d2)."""
+    from sklearn.covariance import MinCovDet
+    from sklearn.preprocessing import StandardScaler
+    from cc_log.core import envelope
+    matrix = paired_windows(seed=1)
+    joint = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0).joint
+    scaler = StandardScaler().fit(matrix)
+    assert joint.mean == approx_floats(scaler.mean_) and joint.scale == approx_floats(scaler.scale_)
+    standardised = (matrix - joint.mean) / joint.scale
+    robust = MinCovDet(random_state=0).fit(standardised)
+    assert joint.location == approx_floats(robust.location_)
+    assert joint.precision.ravel() == approx_floats(robust.precision_.ravel())
+    train = -robust.mahalanobis(standardised)
+    assert joint.distances(matrix) == approx_floats(-train)
+    assert (joint.typical, joint.farthest) == approx_floats((-np.median(train), -train.min()))
+    rng = np.random.default_rng(2)   # typical windows pushed out along random directions, near and far
+    typical = np.median(matrix, axis=0)
+    rows = typical + np.outer(np.geomspace(0.01, 3.0, 60), np.ones(len(ENVELOPE_COLUMNS))) * \
+        rng.normal(0.0, 1.0, (60, len(ENVELOPE_COLUMNS))) * matrix.std(axis=0)
+    rows = np.vstack([rows, apart(matrix)])
+    scores = -robust.mahalanobis((rows - joint.mean) / joint.scale)
+    zero, extreme = np.median(train), train.min()
+    for level in (1.0, 2.0, 4.0):
+        flagged = scores < zero - level * (zero - extreme)
+        assert 0 < flagged.sum() < len(rows)
+        assert list(joint.ratios(rows, level) > 1) == list(flagged)
+    assert joint.ratios(rows) == approx_floats((-scores - joint.typical) / (4.0 * (joint.farthest - joint.typical)))
+
+
+def test_a_joint_fire_says_why_naming_the_three_features_that_stand_out_together():
+    from cc_log.core import envelope
+    matrix = paired_windows()
+    env = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0)
+    row = apart(matrix)
+    why, = envelope.explain(row, env)
+    d2 = float(env.joint.distances(row[None])[0])
+    assert (why['feature'], why['unit']) == ('joint', '1')
+    assert why['value'] == approx_floats(d2) and why['limit'] == env.joint.farthest
+    assert why['ratio'] == approx_floats((d2 - env.joint.typical) / (env.joint.farthest - env.joint.typical))
+    match = re.match(r'^(.+), (.+) and (.+) together (\d+\.\d)x farther from typical driving than any training '
+                     r'window$', why['text'])
+    assert match, why['text']
+    named = set(match.groups()[:3])
+    assert len(named) == 3 and {'speed', 'yaw rate'} <= named
+    assert float(match.group(4)) == pytest.approx(why['ratio'], abs=0.05)
+    assert envelope.explain(row, env, joint_factor=0) == ()              # off: nothing beyond
+    assert envelope.explain(np.median(matrix, axis=0), env) == ()        # typical: nothing
+    # beside a feature beyond its own limit: both said, the one further past its factor first
+    both = row.copy()
+    both[COL['max_jerk']] = 3.0 * env.trained()[COL['max_jerk']]
+    said = envelope.explain(both, env)
+    assert [entry['feature'] for entry in said] == ['joint', 'max_jerk'] or \
+        [entry['feature'] for entry in said] == ['max_jerk', 'joint']
+    past = [entry['ratio'] / (envelope.DEFAULT_JOINT_FACTOR if entry['feature'] == 'joint' else 2.0)
+            for entry in said]
+    assert past == sorted(past, reverse=True)
+
+
+def test_the_trigger_scores_with_the_joint_check_alike_whatever_the_batches():
+    from cc_log.core import envelope
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    env = learned(nominal_drive(seed=0))
+    assert env.joint is not None
+    samples = nominal_drive(seconds=40, seed=3)
+    v = samples[4].copy()
+    v[1000:1100] = 0.05      # crawling while turning as usual: each feature inside, together new
+    records = odom_records(drive(v, samples[5]))
+    runs = [fires_of(EnvelopeTrigger('envelope', env, ODOM), records, batch) for batch in (1, 64, 512)]
+    decisions = [[(stamp, tuple(entry['feature'] for entry in fire.why)) for stamp, fire in run] for run in runs]
+    assert decisions[0] == decisions[1] == decisions[2]
+    assert any('joint' in features for _, features in decisions[0]), decisions[0]
+    for run in runs[1:]:
+        assert [fire.score for _, fire in run] == pytest.approx([fire.score for _, fire in runs[0]], abs=1e-9)
+    off = fires_of(EnvelopeTrigger('envelope', env, ODOM, joint_factor=0), records)
+    assert all('joint' not in [entry['feature'] for entry in fire.why] for _, fire in off)
+    trigger = EnvelopeTrigger('envelope', env, ODOM, joint_factor=8)
+    assert trigger.describe()['joint_factor'] == 8.0
+    assert trigger.describe()['joint'] == {'typical': env.joint.typical, 'farthest': env.joint.farthest}
+    for bad in (0.5, -1, 'x', True, float('nan')):
+        with pytest.raises(ValueError, match='^envelope: joint_factor: .* must be 0 \\(off\\) or a number from 1 up'):
+            EnvelopeTrigger('envelope', env, ODOM, joint_factor=bad)
+    assert envelope.check_joint_factor(0) == 0.0
+
+
+def test_version_1_files_load_without_a_joint_check(tmp_path):
+    import json
+    from cc_log.core.envelope import Envelope
+    env = learned(nominal_drive(seconds=30))
+    document = env.to_dict()
+    assert document['version'] == 2 and set(document['joint']) == {
+        'mean', 'scale', 'location', 'precision', 'typical', 'farthest'}
+    old = {key: value for key, value in document.items() if key != 'joint'}
+    old['version'] = 1
+    path = tmp_path / 'v1.json'
+    path.write_text(json.dumps(old))
+    loaded = Envelope.load(str(path))
+    assert loaded.joint is None and loaded == env._replace(joint=None)
+    path.write_text(json.dumps(dict(old, joint=document['joint'])))
+    with pytest.raises(ValueError, match="v1.json: unknown key 'joint'$"):
+        Envelope.load(str(path))
+    path.write_text(json.dumps(dict(document, joint=None)))
+    assert Envelope.load(str(path)).joint is None
+
+
+def test_bad_joint_blocks_are_refused_in_one_line(tmp_path):
+    import json
+    from cc_log.core.envelope import Envelope
+    env = learned(nominal_drive(seconds=30))
+    document = env.to_dict()
+    joint = document['joint']
+    path = str(tmp_path / 'envelope.json')
+    env.save(path)
+    assert Envelope.load(path) == env
+    precision = [list(line) for line in joint['precision']]
+    precision[3][4] = 'x'
+    cases = [([1, 2], 'joint: must map mean, scale, location, precision, typical, farthest to numbers'),
+             ({k: v for k, v in joint.items() if k != 'typical'}, 'joint: must map mean,'),
+             (dict(joint, extra=1), "(unknown key 'extra')"),
+             (dict(joint, mean=joint['mean'][:18]), 'joint: mean: must be 19 numbers'),
+             (dict(joint, precision=[line[:18] for line in joint['precision']]),
+              'joint: precision: must be 19 x 19 numbers'),
+             (dict(joint, precision=joint['precision'][0]), 'joint: precision: must be 19 x 19 numbers'),
+             (dict(joint, precision=precision), "joint: precision: 'x' is not a finite number"),
+             (dict(joint, location=[True] * 19), 'joint: location: True is not a finite number'),
+             (dict(joint, scale=[0.0] * 19), 'joint: scale: every entry must be positive'),
+             (dict(joint, typical=-1.0), 'joint: typical: -1.0 must be a finite non-negative number'),
+             (dict(joint, typical=joint['farthest']), 'joint: typical %r must be below farthest' % joint['farthest']),
+             (dict(joint, farthest='far'), "joint: farthest: 'far' must be")]
+    for bad, said in cases:
+        with open(path, 'w') as stream:
+            json.dump(dict(document, joint=bad), stream)
+        with pytest.raises(ValueError) as error:
+            Envelope.load(path)
+        assert str(error.value).startswith(path + ': joint') and said in str(error.value) and \
+            '\n' not in str(error.value), str(error.value)
+    with open(path, 'w') as stream:
+        stream.write(json.dumps(document).replace(json.dumps(joint['farthest']), 'Infinity', 1))
+    with pytest.raises(ValueError, match='Infinity is not a number JSON allows'):
+        Envelope.load(path)
 
 
 # -- end to end: cclog learn-envelope, then cclog replay --config with a trigger of kind envelope ----------------
