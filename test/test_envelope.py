@@ -543,20 +543,19 @@ def test_bad_joint_blocks_are_refused_in_one_line(tmp_path):
 HUSKY_ODOM = '/husky_velocity_controller/odom'
 
 
-def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_real_driving(tmp_path):
-    """The Husky's real odometry: the envelope learned on its first half (cclog learn-envelope), a sudden
-    acceleration at the robot's own scale injected into the second half (sim.inject_anomalies), the second half
-    replayed with a configuration whose only trigger is of kind envelope: the surge is caught within 0.5 s and its
-    window's trigger says why."""
+@pytest.fixture(scope='module')
+def husky_surge(tmp_path_factory):
+    """The Husky's real odometry: the envelope learned on its first half (cclog learn-envelope, default: with the
+    joint check), a sudden acceleration at the robot's own scale injected into the second half
+    (sim.inject_anomalies) and written to a bag: ``{'train', 'injected'}`` bag paths, ``limits`` (the envelope
+    file), ``records`` (the injected records), ``event`` (its truth)."""
     import json
     import rosbag
     import rospy
     from conftest import cclog, real_data
     from cc_log import sim
     from cc_log.core.records import Record
-    from cc_log.storage import log_format
-    from cc_log.triggers.envelope import EnvelopeTrigger
-    from cc_log.core.envelope import Envelope
+    tmp_path = tmp_path_factory.mktemp('husky_surge')
     records = []
     with rosbag.Bag(real_data('husky_outdoor_2015.bag')) as bag:
         for topic, msg, t in bag.read_messages(topics=[HUSKY_ODOM]):
@@ -577,17 +576,30 @@ def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_rea
     learned = cclog('learn-envelope', paths['train'], '--topic', HUSKY_ODOM, '--out', limits, '--json')
     assert learned.returncode == 0, learned.stderr
     assert json.loads(learned.stdout)['windows'] > 300
+    return dict(paths, limits=limits, records=injected, event=truth[0])
+
+
+def windows_over(summary, event):
+    """The metadata of the windows of a ``cclog replay --json`` summary that overlap ``event``, in start order."""
+    from cc_log.storage import log_format
+    return [log_format.read_window(window['path'])[0] for window in summary['windows']
+            if window['start'] <= event['end'] and window['end'] >= event['start']]
+
+
+def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_real_driving(tmp_path, husky_surge):
+    """The injected half replayed with a configuration whose only trigger is of kind envelope: the surge is
+    caught within 0.5 s and its window's trigger says why."""
+    import json
+    from conftest import cclog
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    from cc_log.core.envelope import Envelope
+    limits, injected, event = husky_surge['limits'], husky_surge['records'], husky_surge['event']
     config = tmp_path / 'config.yaml'
     config.write_text('driving_topic: %s\nformat: json-xz\nwindows: {pre: 1s, post: 1s}\ntriggers:\n'
                       '  - {name: envelope, kind: envelope, limits: %s}\n' % (HUSKY_ODOM, limits))
-    result = cclog('replay', paths['injected'], '--config', config, '--out', tmp_path / 'logs', '--json')
+    result = cclog('replay', husky_surge['injected'], '--config', config, '--out', tmp_path / 'logs', '--json')
     assert result.returncode == 0, result.stderr
-    event = truth[0]
-    caught = []
-    for window in json.loads(result.stdout)['windows']:
-        metadata, _ = log_format.read_window(window['path'])
-        if window['start'] <= event['end'] and window['end'] >= event['start']:
-            caught.append(metadata)
+    caught = windows_over(json.loads(result.stdout), event)
     assert caught, 'the injected surge was not kept'
     metadata = caught[0]       # windows in start order: the first one opened at the onset
     assert metadata['names'] == ['envelope']
@@ -607,6 +619,32 @@ def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_rea
     assert fire.why[0]['feature'] in ('max_span_accel', 'max_accel', 'max_speedup') and fire.why[0]['ratio'] > 2
     assert re.match(r'^(acceleration|acceleration over 0\.2 s|speed-up) \d+\.\d+ m/s\^2, \d+\.\dx ',
                     fire.why[0]['text']), fire.why[0]['text']
+
+
+def test_cclog_replay_model_with_an_envelope_file_opens_the_envelopes_windows(tmp_path, husky_surge):
+    """``cclog replay --model envelope.json``, no --topic, no configuration: the file decides the trigger (the
+    envelope, on the odometry topic it was learned on, with its joint check); the surge opens a window and
+    little else does. A file that is neither an envelope nor a model: one line naming it."""
+    import json
+    from conftest import cclog
+    event = husky_surge['event']
+    result = cclog('replay', husky_surge['injected'], '--model', husky_surge['limits'], '--out', tmp_path / 'logs',
+                   '--json')
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    caught = windows_over(summary, event)
+    assert caught and caught[0]['names'] == ['envelope'], caught
+    fired = [t for t in caught[0]['triggers'] if t['name'] == 'envelope']
+    assert fired and event['start'] <= fired[0]['stamp'] <= event['start'] + 0.5 and fired[0]['score'] < 0
+    info = caught[0]['trigger_info']['envelope']
+    assert (info['kind'], info['factor'], info['joint_factor']) == ('envelope', 2.0, 4.0)
+    assert info['joint'] is not None and info['joint']['typical'] < info['joint']['farthest']
+    assert len(summary['windows']) <= 3, summary['windows']
+    other = tmp_path / 'notes.json'
+    other.write_text('{"kind": "something else"}')
+    result = cclog('replay', husky_surge['injected'], '--model', other, '--out', tmp_path / 'logs2')
+    assert result.returncode == 1 and result.stderr == 'cclog replay: error: %s: not a cc_log model nor an envelope ' \
+        'file (cclog learn or cclog learn-envelope writes one)\n' % other, result.stderr
 
 
 def test_cclog_learn_envelope_says_what_is_wrong_in_one_line(tmp_path):
