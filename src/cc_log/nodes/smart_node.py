@@ -3,7 +3,8 @@
 Node name: ``smart_logger``.
 
 Subscribed topics
-  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it); the topics of
+  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it; an envelope file
+  as ``~model`` watches the topic it was learned on, remapped the same way); the topics of
   the model's other inputs by their role names (``cmd_vel`` for a command model; ``imu`` is the driving
   topic of an imu model), or those of the configuration's triggers.
   every topic in ``~topics`` (any type): saved in the windows whose time span holds them; of a latched topic
