@@ -647,6 +647,29 @@ def test_cclog_replay_model_with_an_envelope_file_opens_the_envelopes_windows(tm
         'file (cclog learn or cclog learn-envelope writes one)\n' % other, result.stderr
 
 
+def test_cclog_learn_envelope_learns_the_joint_check_by_default_and_says_its_figures(tmp_path, husky_surge):
+    """Without --topic, the bag's only odometry topic; the joint check learned unless --no-joint, its figures
+    said on the last line."""
+    import json
+    from conftest import cclog
+    from cc_log.core.envelope import Envelope
+    out = tmp_path / 'envelope.json'
+    result = cclog('learn-envelope', husky_surge['train'], '--out', out)
+    assert result.returncode == 0, result.stderr
+    assert 'driving topic %s (the bag\'s only nav_msgs/Odometry topic' % HUSKY_ODOM in result.stderr
+    learned = Envelope.load(str(out))
+    assert learned.topic == HUSKY_ODOM and learned.joint is not None
+    last = result.stdout.strip().splitlines()[-1]
+    assert last == 'joint check over %d windows: squared distance from typical driving %.4g typical (median), ' \
+        '%.4g farthest; flagged beyond %.4g (joint_factor 4)' % (
+            learned.windows, learned.joint.typical, learned.joint.farthest,
+            learned.joint.typical + 4 * (learned.joint.farthest - learned.joint.typical)), last
+    result = cclog('learn-envelope', husky_surge['train'], '--topic', HUSKY_ODOM, '--out', out, '--no-joint', '--json')
+    assert result.returncode == 0, result.stderr
+    document = json.loads(result.stdout)
+    assert document['version'] == 2 and document['joint'] is None and Envelope.load(str(out)).joint is None
+
+
 def test_cclog_learn_envelope_says_what_is_wrong_in_one_line(tmp_path):
     from conftest import cclog, real_data
     bag = real_data('husky_outdoor_2015.bag')
