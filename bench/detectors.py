@@ -36,8 +36,8 @@ and its limit, ratio 1, so level 2 is "2x the limit": the issue's envelope at 2x
 threshold, LEVELS the recall-versus-false-windows curve. cc_log's defaults keep their own threshold.
 
 Measures: a flagged window's end is a fire; fires merge into episodes [fire - 2 s, fire + 2 s] as cc_log's windows
-do. An event is caught when a fire lies in [onset, end + the detector's window] (1 s; cclog: the envelope's 1 s,
-the classifier's 2 s), within 0.5 s when the first such fire is at most 0.5 s after onset; its span is kept when >= 95 % of [onset, end] lies in
+do. An event is caught when a fire lies in [onset, end + the detector's window] (1 s; cclog: its own), within
+0.5 s when the first such fire is at most 0.5 s after onset; its span is kept when >= 95 % of [onset, end] lies in
 episodes. False windows: the episodes of the held-out nominal driving, per hour, with the 95 % upper bound
 (Poisson: chi2.ppf(0.975, 2k + 2) / 2 / T, or 3 / T for k = 0). kept x ideal: odometry messages inside episodes of
 the injected replays / those within [onset - 2 s, end + 2 s] of an event. Per event its extreme: the largest
