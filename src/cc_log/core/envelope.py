@@ -16,8 +16,7 @@ driving never showed although each stays inside its own limit (two features that
 now). Learned on the training windows: each feature standardised by their mean and standard deviation (as
 scikit-learn's StandardScaler, the deviation floored at ``JOINT_RESOLUTION``: a feature that spreads less is
 float rounding, not driving, and a live window's rounding must not look new), the robust centre ``location`` and
-``precision`` of
-the standardised windows (scikit-learn's MinCovDet), and of their squared distances
+``precision`` of the standardised windows (scikit-learn's MinCovDet), and of their squared distances
 ``d2 = (z - location) @ precision @ (z - location)`` the median (``typical``) and the largest (``farthest``).
 A window's joint ratio is ``(d2 - typical) / (joint_factor x (farthest - typical))`` and the score takes the
 larger of it and the largest feature ratio: ``-ln(max(feature ratios, joint ratio))``. Scoring is numpy only
@@ -47,7 +46,8 @@ JOINT_RESOLUTION = 1e-6     # the smallest scale of a feature in the joint check
 MIN_RATIO = 1e-6            # a smaller max ratio scores as this one (score <= 13.8)
 MAX_FILE_BYTES = 1 << 20
 MAX_WHY = 3                 # features a Fire names at most
-_KEYS = ('kind', 'version', 'topic', 'window', 'stride', 'windows', 'seconds', 'maxima', 'joint')
+_KEYS = {1: ('kind', 'version', 'topic', 'window', 'stride', 'windows', 'seconds', 'maxima')}   # per version
+_KEYS[2] = _KEYS[1] + ('joint',)
 
 # How a feature is named in a window's "why"
 LABELS = {
@@ -134,7 +134,7 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         if isinstance(version, bool) or version not in VERSIONS:
             raise ValueError('%s: version %s, this cc_log reads %s' % (
                 source, brief(version), ' and '.join(str(v) for v in VERSIONS)))
-        unknown = sorted(set(document) - set(_KEYS if version >= 2 else _KEYS[:-1]), key=str)
+        unknown = sorted(set(document) - set(_KEYS[version]), key=str)
         if unknown:
             raise ValueError('%s: unknown key %s' % (source, brief(unknown[0])))
         maxima = document.get('maxima')
@@ -348,10 +348,10 @@ def joint_why(row, joint, joint_factor=DEFAULT_JOINT_FACTOR):
     if joint is None:
         return None
     row = np.asarray(row, dtype=float)
+    if not joint.ratios(row, joint_factor) > 1:   # the rule ``scores`` flags by
+        return None
     value = float(joint.distances(row))
     ratio = (value - joint.typical) / (joint.farthest - joint.typical)
-    if not ratio > joint_factor:
-        return None
     z = joint.deviations(row)
     parts = z * (joint.precision @ z)
     named = [LABELS[ENVELOPE_COLUMNS[i]] for i in np.argsort(-parts, kind='stable')[:MAX_WHY]]
