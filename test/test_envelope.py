@@ -428,6 +428,7 @@ def test_the_joint_ratio_is_the_detector_benchmarks_robust_mahalanobis_at_its_le
 
 def test_a_joint_fire_says_why_naming_the_three_features_that_stand_out_together():
     from cc_log.core import envelope
+    from cc_log.core.why import MAX_TEXT
     matrix = paired_windows()
     env = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0)
     row = apart(matrix)
@@ -453,6 +454,15 @@ def test_a_joint_fire_says_why_naming_the_three_features_that_stand_out_together
     past = [entry['ratio'] / (envelope.DEFAULT_JOINT_FACTOR if entry['feature'] == 'joint' else 2.0)
             for entry in said]
     assert past == sorted(past, reverse=True)
+    # the longest names and a large ratio: a shorter sentence, within a why's text length, the three still named
+    size = len(ENVELOPE_COLUMNS)
+    unit = envelope.Joint(np.zeros(size), np.ones(size), np.zeros(size), np.eye(size), 1.0, 2.0)
+    row = np.zeros(size)
+    row[[COL['yaw_rate_variation'], COL['max_span_accel'], COL['yaw_rate_flips']]] = [300.0, 200.0, 100.0]
+    said = envelope.joint_why(row, unit)
+    assert said['text'] == 'yaw rate variation, 0.2 s acceleration and yaw rate sign flips together 139999.0x past ' \
+        'any training window'
+    assert len(said['text']) <= MAX_TEXT and said['ratio'] == 139999.0
 
 
 def test_the_trigger_scores_with_the_joint_check_alike_whatever_the_batches():

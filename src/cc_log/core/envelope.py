@@ -34,6 +34,7 @@ import numpy as np
 
 from cc_log.core import safe_files, safe_input
 from cc_log.core.safe_input import brief
+from cc_log.core.why import MAX_TEXT
 from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS, ENVELOPE_UNITS
 
 KIND = 'cc_log envelope'
@@ -60,6 +61,12 @@ LABELS = {
     'max_span_accel': 'acceleration over 0.2 s', 'max_decel': 'deceleration', 'max_speedup': 'speed-up',
     'max_speed_drop': 'speed drop in 0.2 s', 'max_speed_rise': 'speed rise in 0.2 s',
 }
+# Shorter names where the joint check names three features in one line (a why's text is at most MAX_TEXT)
+JOINT_LABELS = dict(LABELS, **{
+    'speed_variation': 'speed variation', 'yaw_rate_variation': 'yaw rate variation', 'max_pose_gap': 'pose step gap',
+    'sum_pose_gap': 'pose gap', 'max_heading_gap': 'heading step gap', 'sum_heading_gap': 'heading gap',
+    'still_fraction': 'standing still', 'still_yaw_rate': 'yaw rate standing', 'max_span_accel': '0.2 s acceleration',
+    'max_speed_drop': 'speed drop', 'max_speed_rise': 'speed rise'})
 
 
 class Joint(collections.namedtuple('Joint', 'mean scale location precision typical farthest')):
@@ -344,7 +351,8 @@ def explain(row, envelope, factor=DEFAULT_FACTOR, details=None, joint_factor=DEF
 def joint_why(row, joint, joint_factor=DEFAULT_JOINT_FACTOR):
     """The why entry of a window beyond the joint check (None when it is not, or there is no ``joint``):
     ``{feature: 'joint', value: d2, limit: farthest, ratio, unit: '1', text}``, ``ratio`` = (d2 - typical) /
-    (farthest - typical), the text naming the MAX_WHY features that contribute most to d2 (``z_i (P z)_i``)."""
+    (farthest - typical), the text naming the MAX_WHY features that contribute most to d2 (``z_i (P z)_i``; a
+    shorter sentence where that one would pass MAX_TEXT characters)."""
     if joint is None:
         return None
     row = np.asarray(row, dtype=float)
@@ -354,10 +362,13 @@ def joint_why(row, joint, joint_factor=DEFAULT_JOINT_FACTOR):
     ratio = (value - joint.typical) / (joint.farthest - joint.typical)
     z = joint.deviations(row)
     parts = z * (joint.precision @ z)
-    named = [LABELS[ENVELOPE_COLUMNS[i]] for i in np.argsort(-parts, kind='stable')[:MAX_WHY]]
+    named = [JOINT_LABELS[ENVELOPE_COLUMNS[i]] for i in np.argsort(-parts, kind='stable')[:MAX_WHY]]
     said = ', '.join(named[:-1]) + ' and ' + named[-1] if len(named) > 1 else named[0]
+    text = '%s together %.1fx farther from typical driving than any training window' % (said, ratio)
+    if len(text) > MAX_TEXT:
+        text = '%s together %.1fx past any training window' % (said, ratio)
     return {'feature': 'joint', 'value': value, 'limit': float(joint.farthest), 'ratio': ratio, 'unit': '1',
-            'text': '%s together %.1fx farther from typical driving than any training window' % (said, ratio)}
+            'text': text}
 
 
 def _figure(value):
