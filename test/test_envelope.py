@@ -388,6 +388,8 @@ def test_the_joint_check_flags_a_combination_never_seen_although_each_feature_is
     assert np.all(envelope.scores(matrix, limits, env.joint) >= 0)  # no training window is
     assert np.max(env.joint.ratios(matrix)) == approx_floats(1.0 / envelope.DEFAULT_JOINT_FACTOR)
     assert envelope.scores(row[None], limits, env.joint, joint_factor=0)[0] > 0   # 0: off
+    rows = np.vstack([matrix, row, 3.0 * matrix[:50]])    # the OR: whatever the limits flag, it flags too
+    assert np.all(envelope.scores(rows, limits, env.joint) <= envelope.scores(rows, limits))
     assert envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0, joint=False).joint is None
     few = envelope.learn([matrix[:49]], ODOM, 1.0, 0.25, 12.0)
     assert few.joint is None and envelope.joint_shortfall(49) == '49 training windows, fewer than 50'
