@@ -25,8 +25,10 @@ Detectors, all on the same windows (1 s, every 0.25 s) of the same 19 envelope f
   ``ecod``, ``copod``: implemented here in numpy after their papers (Li et al. 2022, 2020, as PyOD computes them),
   tail probabilities of each feature from the training windows (the window itself counted), summed;
   all on features standardised by a scaler fitted on the training windows;
-- ``cclog``: cc_log's defaults as a user runs them: ``cclog collect`` / ``learn`` of the training bags and
-  ``cclog replay`` of every held-out bag (detection_heldout.py's ``defaults``): its windows, its triggers.
+- ``cclog``: cc_log's defaults as a user runs them: ``cclog learn-envelope`` of the training bags (the envelope
+  with its joint check) and ``cclog replay --model envelope.json`` of every held-out bag: its windows, its triggers
+  (``--cclog classifier``: the classifier's way instead, ``cclog collect`` / ``learn`` of the training bags and
+  ``cclog replay`` with the model, detection_heldout.py's ``defaults``).
 
 The threshold rule, the same for every window detector: ``zero - level x (zero - extreme)`` where ``extreme`` is
 the most anomalous training score and ``zero`` the median training score (the envelope: its physical zero, ratio 0,
@@ -34,7 +36,7 @@ and its limit, ratio 1, so level 2 is "2x the limit": the issue's envelope at 2x
 threshold, LEVELS the recall-versus-false-windows curve. cc_log's defaults keep their own threshold.
 
 Measures: a flagged window's end is a fire; fires merge into episodes [fire - 2 s, fire + 2 s] as cc_log's windows
-do. An event is caught when a fire lies in [onset, end + the detector's window] (1 s; cclog: its 2 s), within
+do. An event is caught when a fire lies in [onset, end + the detector's window] (1 s; cclog: its own), within
 0.5 s when the first such fire is at most 0.5 s after onset; its span is kept when >= 95 % of [onset, end] lies in
 episodes. False windows: the episodes of the held-out nominal driving, per hour, with the 95 % upper bound
 (Poisson: chi2.ppf(0.975, 2k + 2) / 2 / T, or 3 / T for k = 0). kept x ideal: odometry messages inside episodes of
@@ -96,7 +98,7 @@ class Envelope(Detector):
     it), so level 2 is the envelope trigger's default factor."""
 
     def fit(self, X):
-        self.limits = envelope.learn([X], TOPIC, WINDOW, STRIDE, len(X) * STRIDE).trained()
+        self.limits = envelope.learn([X], TOPIC, WINDOW, STRIDE, len(X) * STRIDE, joint=False).trained()
         self.zero, self.extreme = 0.0, -1.0
         return self
 
@@ -316,9 +318,23 @@ def extreme_of(envelope, ends, M, entry):
 
 # -- one robot -----------------------------------------------------------------------------------------------------
 
-def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True):
+def learn_envelope(train, tmp):
+    """``cclog learn-envelope`` of every training piece (each a bag); (envelope path, its first and last lines)."""
+    bags = []
+    for k, (_, records) in enumerate(train):
+        bags.append(os.path.join(tmp, 'train%d.bag' % k))
+        common.write_bag(bags[-1], records)
+    path = os.path.join(tmp, 'envelope.json')
+    lines = heldout.quiet_cli(['learn-envelope'] + bags + ['--topic', TOPIC, '--out', path]).strip().splitlines()
+    for bag in bags:
+        os.remove(bag)
+    return path, [lines[0], lines[-1]]
+
+
+def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, default='envelope'):
     """Every detector on one robot: {'robot', 'train_s', 'hours', 'rate', 'lines', 'events' [{type, extreme}],
-    'stats' {detector: {level: tally}}, 'seconds'}."""
+    'stats' {detector: {level: tally}}, 'seconds'}. ``default``: how cc_log's defaults run (``envelope``: cclog
+    learn-envelope, ``classifier``: cclog collect / learn)."""
     started = time.time()
     total = sum(duration(records) for _, records in runs)
     train, rest = heldout.split(runs, min(train_seconds, fraction * total))
@@ -334,10 +350,14 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True):
            'stats': {name: {level: tally() for level in LEVELS} for name in detectors}}
     setting = heldout.SETTINGS['defaults']
     if with_cclog:
-        model, lines = heldout.learn(train, setting, tmp)
+        if default == 'envelope':
+            model, lines = learn_envelope(train, tmp)
+            reach = WINDOW
+        else:
+            model, lines = heldout.learn(train, setting, tmp)
+            reach = heldout.reach_of(setting, out['rate'])
         out['lines'] = lines
         out['stats']['cclog'] = {None: tally()}
-        reach = heldout.reach_of(setting, out['rate'])
 
     def cclog(records, tag, truth=None):
         if not with_cclog:
@@ -551,6 +571,8 @@ def main(argv=None):
     parser.add_argument('--train-fraction', type=float, default=0.5, help='at most this share of a robot trains')
     parser.add_argument('--level', type=float, default=2.0, help='the threshold level of the tables (default 2)')
     parser.add_argument('--no-cclog', action='store_true', help="leave cc_log's defaults out (faster)")
+    parser.add_argument('--cclog', choices=('envelope', 'classifier'), default='envelope',
+                        help="cc_log's defaults: the envelope file (default) or the classifier's collect / learn")
     parser.add_argument('--out', default=os.path.join(tempfile.gettempdir(), 'cc_log_detectors'),
                         help='where the curve PNG goes')
     parser.add_argument('--events', action='store_true', help='one line per injected event: its extreme, who caught it')
@@ -578,7 +600,7 @@ def main(argv=None):
         tmp = tempfile.mkdtemp(prefix='cc_log_detectors_')
         try:
             results.append(evaluate(robot, load_robot(robot, args.data), seeds, args.train_minutes * 60.0,
-                                    args.train_fraction, tmp, not args.no_cclog))
+                                    args.train_fraction, tmp, not args.no_cclog, args.cclog))
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         report_robot(results[-1], args.level)

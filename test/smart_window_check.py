@@ -232,6 +232,51 @@ class SmartWindowTest(unittest.TestCase):
             fx.stop(node)
             publisher.unregister()
 
+    def test_0_an_envelope_file_as_model_watches_the_odometry_it_was_learned_on(self):
+        # the envelope of the first 40 s (with its joint check), learned on /envelope_odom; ~model:=envelope.json
+        # builds the envelope trigger on that topic (no classifier); the run's burst opens one window saying why
+        from cc_log.core import envelope
+        from cc_log.features.envelope import envelope_windows, odometry_samples
+        name, topic = 'smart_logger_envelope', '/envelope_odom'
+        out = os.path.join(self.tmp, 'envelope')
+        samples = odometry_samples(self.odom[fx.TRAIN])
+        learned = envelope.learn([envelope_windows(*samples)[1]], topic, 1.0, 0.25, samples[0][-1] - samples[0][0])
+        self.assertIsNotNone(learned.joint)
+        path = os.path.join(self.tmp, 'envelope.json')
+        learned.save(path)
+        run = self.stream[:RUN.stop - RUN.start]
+        burst = run[100].stamp
+        events = []
+        rospy.Subscriber('/%s/anomalies' % name, AnomalyEvent, events.append, queue_size=None)
+        publisher = rospy.Publisher(topic, Odometry, queue_size=10000)
+        node = fx.start('smart_logger.py', '__name:=' + name, '_model:=' + path, '_directory:=' + out,
+                        '_pre:=1s', '_post:=1s', '_diagnostic_period:=0.2')
+        try:
+            fx.wait_for(lambda: publisher.get_num_connections(), 20, name + ' to subscribe to ' + topic)
+            for record in run:
+                publisher.publish(record.msg)
+                time.sleep(1.0 / RATE)
+            fx.wait_for(lambda: [e for e in events if e.event == AnomalyEvent.WRITTEN], 20, 'the window written')
+            fx.wait_for(lambda: fx.settled(self.diagnostics, name, len(run)), 20, name + ' to settle')
+            files = log_format.window_files(out)
+            self.assertEqual(len(files), 1, files)
+            metadata, records = log_format.read_window(files[0])
+            self.assertEqual((metadata['reason'], metadata['names']), ('envelope', ['envelope']))
+            self.assertEqual({r.topic for r in records}, {topic})
+            self.assertLessEqual(records[0].stamp, burst)
+            fired = metadata['triggers'][0]
+            self.assertTrue(burst <= fired['stamp'] <= burst + 0.5 and fired['score'] < 0, fired)
+            info = metadata['trigger_info']['envelope']
+            self.assertEqual((info['kind'], info['factor'], info['joint_factor']), ('envelope', 2.0, 4.0))
+            self.assertEqual(info['joint'], {'typical': learned.joint.typical, 'farthest': learned.joint.farthest})
+            self.assertTrue(fired['why'] and fired['why'][0]['ratio'] > 2, fired)
+            opened = [e for e in events if e.event == AnomalyEvent.OPENED]
+            self.assertEqual(len(opened), 1)
+            self.assertAlmostEqual(opened[0].header.stamp.to_sec(), fired['stamp'], places=6)
+        finally:
+            fx.stop(node)
+            publisher.unregister()
+
     def test_0_unusable_directory_is_a_warning_naming_the_directory_in_use(self):
         blocker = os.path.join(self.tmp, 'a_file')
         with open(blocker, 'w') as stream:

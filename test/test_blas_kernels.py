@@ -17,6 +17,8 @@ BLAS_SENSITIVE = (
     'test/test_batch_replay.py::test_scoring_a_batch_gives_each_vectors_own_score_and_decision',
     'test/test_online_learning.py::test_a_refit_only_widens_what_the_original_finds_nominal',
     'test/test_model.py::test_save_load_round_trip',
+    'test/test_envelope.py::test_the_joint_ratio_is_the_detector_benchmarks_robust_mahalanobis_at_its_level',
+    'test/test_envelope.py::test_the_trigger_scores_with_the_joint_check_alike_whatever_the_batches',
 )
 ARCHITECTURE = ('import numpy, threadpoolctl; print(" ".join(str(i.get("architecture")) '
                 'for i in threadpoolctl.threadpool_info() if i["internal_api"] == "openblas"))')

@@ -1,6 +1,7 @@
 """One configuration (YAML) for smart and collect mode, live and offline; cclog replay/collect --config."""
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -155,6 +156,42 @@ def test_parameters_override_the_file_and_the_single_classifier_joins_it(tmp_pat
         [('0.1s', 'every', '0.3s')] * 2
     resolved = cfg.build_triggers(AnomalyModel.load, installed_class, resolve=lambda t: '/robot1/' + t.lstrip('/'))
     assert resolved[1].topic == '/robot1/husky_velocity_controller/odom'
+
+
+def test_the_model_file_decides_the_default_trigger_an_envelope_or_the_classifier(tmp_path, model_path):
+    """Where a model enters as the default trigger (``with_classifier``: ~model, cclog replay --model), an
+    envelope file builds the envelope trigger on its odometry topic, a model file the classifier; any other file
+    is one line naming it."""
+    import numpy as np
+    from cc_log.core import envelope
+    from cc_log.features.envelope import ENVELOPE_COLUMNS
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    rng = np.random.default_rng(0)
+    learned = envelope.learn([rng.uniform(0.1, 1.0, (200, len(ENVELOPE_COLUMNS)))], HUSKY_ODOM, 1.0, 0.25, 50.0)
+    limits = str(tmp_path / 'envelope.json')
+    learned.save(limits)
+    assert (config.model_kind(limits), config.model_kind(model_path)) == ('envelope', 'classifier')
+    for given, resolve, topic in (({}, config.global_name, HUSKY_ODOM),
+                                  ({'topics': ['odom']}, lambda t: '/robot1/' + t.lstrip('/'), '/robot1/odom')):
+        data = config.with_classifier({'triggers': [{'name': 'too_fast', 'kind': 'rule', 'topic': 'odom',
+                                                     'arrival': True}]},
+                                      model=limits, classify_every='100ms', retrigger='every', **given)
+        triggers = Config.from_dict(data).build_triggers(AnomalyModel.load, installed_class, resolve=resolve)
+        assert [(t.name, type(t)) for t in triggers] == [('envelope', EnvelopeTrigger), ('too_fast', RuleTrigger)]
+        assert triggers[0].topic == topic and triggers[0].envelope == learned and triggers[0].joint is not None
+    triggers = Config.from_dict(config.with_classifier({}, model=model_path)).build_triggers(
+        AnomalyModel.load, installed_class)
+    assert [(t.name, type(t)) for t in triggers] == [('classifier', ClassifierTrigger)]
+    for path in (write(tmp_path, '{"kind": "notes"}', 'notes.json'), write(tmp_path, 'not json', 'text.json')):
+        with pytest.raises(ValueError) as error:
+            config.with_classifier({}, model=path)
+        assert str(error.value) == '%s: not a cc_log model nor an envelope file (cclog learn or cclog ' \
+            'learn-envelope writes one)' % path
+    for extra, said in (({'window': '2s'}, 'window: %s is an envelope file (cclog learn-envelope): its' % limits),
+                        ({'topics': ['a', 'b']}, 'topics: the envelope of %s reads one odometry topic' % limits)):
+        with pytest.raises(ValueError, match='^' + re.escape(said)):
+            config.with_classifier({}, model=limits, **extra)
+    assert config.model_kind(str(tmp_path / 'missing.json')) == 'classifier'   # its reader says what is wrong
 
 
 def test_cclog_replay_with_a_configuration_runs_every_trigger_and_sets_retrigger_and_classify_every(

@@ -3,6 +3,7 @@ import re
 
 import numpy as np
 import pytest
+from conftest import approx_floats
 
 from cc_log.features.envelope import (
     ENVELOPE_COLUMNS, ENVELOPE_FLOORS, ENVELOPE_UNITS, HISTORY, envelope_rows, envelope_windows)
@@ -234,7 +235,7 @@ def test_a_surge_to_three_times_the_top_speed_fires_saying_why_and_nominal_drivi
     v[1000 + ramp:1000 + ramp + 100] = 3 * top
     v[1000 + ramp + 100:1000 + 2 * ramp + 100] = 3 * top - 0.3 * np.arange(ramp) / RATE
     samples = drive(v, np.zeros(n))
-    trigger = EnvelopeTrigger('envelope', env, ODOM)
+    trigger = EnvelopeTrigger('envelope', env, ODOM, joint_factor=0)   # per feature (a straight ramp is new too)
     fires = fires_of(trigger, odom_records(samples))
     assert fires, 'the surge was not flagged'
     t_over = samples[0][np.argmax(v > 2 * top)]      # the limit at factor 2
@@ -392,25 +393,219 @@ def test_envelope_files_are_read_with_bounds(tmp_path):
         EnvelopeTrigger('envelope', env, ODOM, factor=0.5)
 
 
+# -- the joint check ----------------------------------------------------------------------------------------------
+
+def paired_windows(n=600, seed=0):
+    """Synthetic training windows (n, 19): every feature spreads on its own but for speed and yaw rate, which
+    always move together (yaw rate = speed / 2, give or take 0.01)."""
+    rng = np.random.default_rng(seed)
+    matrix = rng.uniform(0.5, 1.5, (n, len(ENVELOPE_COLUMNS))) * rng.uniform(0.1, 10.0, len(ENVELOPE_COLUMNS))
+    matrix[:, COL['max_speed']] = rng.uniform(0.2, 1.0, n)
+    matrix[:, COL['max_yaw_rate']] = 0.5 * matrix[:, COL['max_speed']] + rng.normal(0.0, 0.01, n)
+    return matrix
+
+
+def apart(matrix):
+    """A window of typical values whose speed is near the most seen while its yaw rate is near the least."""
+    row = np.median(matrix, axis=0)
+    row[COL['max_speed']], row[COL['max_yaw_rate']] = 0.95, 0.12
+    return row
+
+
+def test_the_joint_check_flags_a_combination_never_seen_although_each_feature_is_inside_its_limit():
+    from cc_log.core import envelope
+    matrix = paired_windows()
+    env = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0)
+    assert env.joint is not None and 0 < env.joint.typical < env.joint.farthest
+    row = apart(matrix)
+    assert np.all(row <= matrix.max(axis=0))                       # inside the training's own range, each
+    limits = env.limits()
+    assert envelope.scores(row[None], limits, None)[0] > 0         # per feature: nothing to flag
+    assert envelope.scores(row[None], limits, env.joint)[0] < 0    # jointly: flagged
+    assert env.joint.ratios(row[None])[0] > 1
+    assert np.all(envelope.scores(matrix, limits, env.joint) >= 0)  # no training window is
+    assert np.max(env.joint.ratios(matrix)) == approx_floats(1.0 / envelope.DEFAULT_JOINT_FACTOR)
+    assert envelope.scores(row[None], limits, env.joint, joint_factor=0)[0] > 0   # 0: off
+    rows = np.vstack([matrix, row, 3.0 * matrix[:50]])    # the OR: whatever the limits flag, it flags too
+    assert np.all(envelope.scores(rows, limits, env.joint) <= envelope.scores(rows, limits))
+    assert envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0, joint=False).joint is None
+    few = envelope.learn([matrix[:49]], ODOM, 1.0, 0.25, 12.0)
+    assert few.joint is None and envelope.joint_shortfall(49) == '49 training windows, fewer than 50'
+    assert envelope.joint_shortfall(50) == ''
+
+
+def test_the_joint_ratio_is_the_detector_benchmarks_robust_mahalanobis_at_its_level():
+    """The bench's ``mahalanobis``: sklearn's StandardScaler, MinCovDet(random_state=0) on the scaled training
+    windows, its squared ``mahalanobis`` distance, the threshold ``zero - level x (zero - extreme)`` with zero /
+    extreme the median / lowest training score (-d2)."""
+    from sklearn.covariance import MinCovDet
+    from sklearn.preprocessing import StandardScaler
+    from cc_log.core import envelope
+    matrix = paired_windows(seed=1)
+    joint = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0).joint
+    scaler = StandardScaler().fit(matrix)
+    assert joint.mean == approx_floats(scaler.mean_) and joint.scale == approx_floats(scaler.scale_)
+    standardised = (matrix - joint.mean) / joint.scale
+    robust = MinCovDet(random_state=0).fit(standardised)
+    assert joint.location == approx_floats(robust.location_)
+    assert joint.precision.ravel() == approx_floats(robust.precision_.ravel())
+    train = -robust.mahalanobis(standardised)
+    assert joint.distances(matrix) == approx_floats(-train)
+    assert (joint.typical, joint.farthest) == approx_floats((-np.median(train), -train.min()))
+    rng = np.random.default_rng(2)   # typical windows pushed out along random directions, near and far
+    typical = np.median(matrix, axis=0)
+    rows = typical + np.outer(np.geomspace(0.01, 3.0, 60), np.ones(len(ENVELOPE_COLUMNS))) * \
+        rng.normal(0.0, 1.0, (60, len(ENVELOPE_COLUMNS))) * matrix.std(axis=0)
+    rows = np.vstack([rows, apart(matrix)])
+    scores = -robust.mahalanobis((rows - joint.mean) / joint.scale)
+    zero, extreme = np.median(train), train.min()
+    for level in (1.0, 2.0, 4.0):
+        flagged = scores < zero - level * (zero - extreme)
+        assert 0 < flagged.sum() < len(rows)
+        assert list(joint.ratios(rows, level) > 1) == list(flagged)
+    assert joint.ratios(rows) == approx_floats((-scores - joint.typical) / (4.0 * (joint.farthest - joint.typical)))
+
+
+def test_a_joint_fire_says_why_naming_the_three_features_that_stand_out_together():
+    from cc_log.core import envelope
+    from cc_log.core.why import MAX_TEXT
+    matrix = paired_windows()
+    env = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0)
+    row = apart(matrix)
+    why, = envelope.explain(row, env)
+    d2 = float(env.joint.distances(row[None])[0])
+    assert (why['feature'], why['unit']) == ('joint', '1')
+    assert why['value'] == approx_floats(d2) and why['limit'] == env.joint.farthest
+    assert why['ratio'] == approx_floats((d2 - env.joint.typical) / (env.joint.farthest - env.joint.typical))
+    match = re.match(r'^(.+), (.+) and (.+) together (\d+\.\d)x farther from typical driving than any training '
+                     r'window$', why['text'])
+    assert match, why['text']
+    named = set(match.groups()[:3])
+    assert len(named) == 3 and {'speed', 'yaw rate'} <= named
+    assert float(match.group(4)) == pytest.approx(why['ratio'], abs=0.05)
+    assert envelope.explain(row, env, joint_factor=0) == ()              # off: nothing beyond
+    assert envelope.explain(np.median(matrix, axis=0), env) == ()        # typical: nothing
+    # beside a feature beyond its own limit: both said, the one further past its factor first
+    both = row.copy()
+    both[COL['max_jerk']] = 3.0 * env.trained()[COL['max_jerk']]
+    said = envelope.explain(both, env)
+    assert [entry['feature'] for entry in said] == ['joint', 'max_jerk'] or \
+        [entry['feature'] for entry in said] == ['max_jerk', 'joint']
+    past = [entry['ratio'] / (envelope.DEFAULT_JOINT_FACTOR if entry['feature'] == 'joint' else 2.0)
+            for entry in said]
+    assert past == sorted(past, reverse=True)
+    # the longest names and a large ratio: a shorter sentence, within a why's text length, the three still named
+    size = len(ENVELOPE_COLUMNS)
+    unit = envelope.Joint(np.zeros(size), np.ones(size), np.zeros(size), np.eye(size), 1.0, 2.0)
+    row = np.zeros(size)
+    row[[COL['yaw_rate_variation'], COL['max_span_accel'], COL['yaw_rate_flips']]] = [300.0, 200.0, 100.0]
+    said = envelope.joint_why(row, unit)
+    assert said['text'] == 'yaw rate variation, 0.2 s acceleration and yaw rate sign flips together 139999.0x past ' \
+        'any training window'
+    assert len(said['text']) <= MAX_TEXT and said['ratio'] == 139999.0
+
+
+def test_the_trigger_scores_with_the_joint_check_alike_whatever_the_batches():
+    from cc_log.core import envelope
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    env = learned(nominal_drive(seed=0))
+    assert env.joint is not None
+    samples = nominal_drive(seconds=40, seed=3)
+    v = samples[4].copy()
+    v[1000:1100] = 0.05      # crawling while turning as usual: each feature inside, together new
+    records = odom_records(drive(v, samples[5]))
+    runs = [fires_of(EnvelopeTrigger('envelope', env, ODOM), records, batch) for batch in (1, 64, 512)]
+    decisions = [[(stamp, tuple(entry['feature'] for entry in fire.why)) for stamp, fire in run] for run in runs]
+    assert decisions[0] == decisions[1] == decisions[2]
+    assert any('joint' in features for _, features in decisions[0]), decisions[0]
+    for run in runs[1:]:
+        assert [fire.score for _, fire in run] == pytest.approx([fire.score for _, fire in runs[0]], abs=1e-9)
+    off = fires_of(EnvelopeTrigger('envelope', env, ODOM, joint_factor=0), records)
+    assert all('joint' not in [entry['feature'] for entry in fire.why] for _, fire in off)
+    trigger = EnvelopeTrigger('envelope', env, ODOM, joint_factor=8)
+    assert trigger.describe()['joint_factor'] == 8.0
+    assert trigger.describe()['joint'] == {'typical': env.joint.typical, 'farthest': env.joint.farthest}
+    for bad in (0.5, -1, 'x', True, float('nan')):
+        with pytest.raises(ValueError, match='^envelope: joint_factor: .* must be 0 \\(off\\) or a number from 1 up'):
+            EnvelopeTrigger('envelope', env, ODOM, joint_factor=bad)
+    assert envelope.check_joint_factor(0) == 0.0
+
+
+def test_version_1_files_load_without_a_joint_check(tmp_path):
+    import json
+    from cc_log.core.envelope import Envelope
+    env = learned(nominal_drive(seconds=30))
+    document = env.to_dict()
+    assert document['version'] == 2 and set(document['joint']) == {
+        'mean', 'scale', 'location', 'precision', 'typical', 'farthest'}
+    old = {key: value for key, value in document.items() if key != 'joint'}
+    old['version'] = 1
+    path = tmp_path / 'v1.json'
+    path.write_text(json.dumps(old))
+    loaded = Envelope.load(str(path))
+    assert loaded.joint is None and loaded == env._replace(joint=None)
+    path.write_text(json.dumps(dict(old, joint=document['joint'])))
+    with pytest.raises(ValueError, match="v1.json: unknown key 'joint'$"):
+        Envelope.load(str(path))
+    path.write_text(json.dumps(dict(document, joint=None)))
+    assert Envelope.load(str(path)).joint is None
+
+
+def test_bad_joint_blocks_are_refused_in_one_line(tmp_path):
+    import json
+    from cc_log.core.envelope import Envelope
+    env = learned(nominal_drive(seconds=30))
+    document = env.to_dict()
+    joint = document['joint']
+    path = str(tmp_path / 'envelope.json')
+    env.save(path)
+    assert Envelope.load(path) == env
+    precision = [list(line) for line in joint['precision']]
+    precision[3][4] = 'x'
+    cases = [([1, 2], 'joint: must map mean, scale, location, precision, typical, farthest to numbers'),
+             ({k: v for k, v in joint.items() if k != 'typical'}, 'joint: must map mean,'),
+             (dict(joint, extra=1), "(unknown key 'extra')"),
+             (dict(joint, mean=joint['mean'][:18]), 'joint: mean: must be 19 numbers'),
+             (dict(joint, precision=[line[:18] for line in joint['precision']]),
+              'joint: precision: must be 19 x 19 numbers'),
+             (dict(joint, precision=joint['precision'][0]), 'joint: precision: must be 19 x 19 numbers'),
+             (dict(joint, precision=precision), "joint: precision: 'x' is not a finite number"),
+             (dict(joint, location=[True] * 19), 'joint: location: True is not a finite number'),
+             (dict(joint, scale=[0.0] * 19), 'joint: scale: every entry must be positive'),
+             (dict(joint, typical=-1.0), 'joint: typical: -1.0 must be a finite non-negative number'),
+             (dict(joint, typical=joint['farthest']), 'joint: typical %r must be below farthest' % joint['farthest']),
+             (dict(joint, farthest='far'), "joint: farthest: 'far' must be")]
+    for bad, said in cases:
+        with open(path, 'w') as stream:
+            json.dump(dict(document, joint=bad), stream)
+        with pytest.raises(ValueError) as error:
+            Envelope.load(path)
+        assert str(error.value).startswith(path + ': joint') and said in str(error.value) and \
+            '\n' not in str(error.value), str(error.value)
+    with open(path, 'w') as stream:
+        stream.write(json.dumps(document).replace(json.dumps(joint['farthest']), 'Infinity', 1))
+    with pytest.raises(ValueError, match='Infinity is not a number JSON allows'):
+        Envelope.load(path)
+
+
 # -- end to end: cclog learn-envelope, then cclog replay --config with a trigger of kind envelope ----------------
 
 HUSKY_ODOM = '/husky_velocity_controller/odom'
 
 
-def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_real_driving(tmp_path):
-    """The Husky's real odometry: the envelope learned on its first half (cclog learn-envelope), a sudden
-    acceleration at the robot's own scale injected into the second half (sim.inject_anomalies), the second half
-    replayed with a configuration whose only trigger is of kind envelope: the surge is caught within 0.5 s and its
-    window's trigger says why."""
+@pytest.fixture(scope='module')
+def husky_surge(tmp_path_factory):
+    """The Husky's real odometry: the envelope learned on its first half (cclog learn-envelope, default: with the
+    joint check), a sudden acceleration at the robot's own scale injected into the second half
+    (sim.inject_anomalies) and written to a bag: ``{'train', 'injected'}`` bag paths, ``limits`` (the envelope
+    file), ``records`` (the injected records), ``event`` (its truth)."""
     import json
     import rosbag
     import rospy
     from conftest import cclog, real_data
     from cc_log import sim
     from cc_log.core.records import Record
-    from cc_log.storage import log_format
-    from cc_log.triggers.envelope import EnvelopeTrigger
-    from cc_log.core.envelope import Envelope
+    tmp_path = tmp_path_factory.mktemp('husky_surge')
     records = []
     with rosbag.Bag(real_data('husky_outdoor_2015.bag')) as bag:
         for topic, msg, t in bag.read_messages(topics=[HUSKY_ODOM]):
@@ -431,17 +626,30 @@ def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_rea
     learned = cclog('learn-envelope', paths['train'], '--topic', HUSKY_ODOM, '--out', limits, '--json')
     assert learned.returncode == 0, learned.stderr
     assert json.loads(learned.stdout)['windows'] > 300
+    return dict(paths, limits=limits, records=injected, event=truth[0])
+
+
+def windows_over(summary, event):
+    """The metadata of the windows of a ``cclog replay --json`` summary that overlap ``event``, in start order."""
+    from cc_log.storage import log_format
+    return [log_format.read_window(window['path'])[0] for window in summary['windows']
+            if window['start'] <= event['end'] and window['end'] >= event['start']]
+
+
+def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_real_driving(tmp_path, husky_surge):
+    """The injected half replayed with a configuration whose only trigger is of kind envelope: the surge is
+    caught within 0.5 s and its window's trigger says why."""
+    import json
+    from conftest import cclog
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    from cc_log.core.envelope import Envelope
+    limits, injected, event = husky_surge['limits'], husky_surge['records'], husky_surge['event']
     config = tmp_path / 'config.yaml'
     config.write_text('driving_topic: %s\nformat: json-xz\nwindows: {pre: 1s, post: 1s}\ntriggers:\n'
                       '  - {name: envelope, kind: envelope, limits: %s}\n' % (HUSKY_ODOM, limits))
-    result = cclog('replay', paths['injected'], '--config', config, '--out', tmp_path / 'logs', '--json')
+    result = cclog('replay', husky_surge['injected'], '--config', config, '--out', tmp_path / 'logs', '--json')
     assert result.returncode == 0, result.stderr
-    event = truth[0]
-    caught = []
-    for window in json.loads(result.stdout)['windows']:
-        metadata, _ = log_format.read_window(window['path'])
-        if window['start'] <= event['end'] and window['end'] >= event['start']:
-            caught.append(metadata)
+    caught = windows_over(json.loads(result.stdout), event)
     assert caught, 'the injected surge was not kept'
     metadata = caught[0]       # windows in start order: the first one opened at the onset
     assert metadata['names'] == ['envelope']
@@ -461,6 +669,55 @@ def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_rea
     assert fire.why[0]['feature'] in ('max_span_accel', 'max_accel', 'max_speedup') and fire.why[0]['ratio'] > 2
     assert re.match(r'^(acceleration|acceleration over 0\.2 s|speed-up) \d+\.\d+ m/s\^2, \d+\.\dx ',
                     fire.why[0]['text']), fire.why[0]['text']
+
+
+def test_cclog_replay_model_with_an_envelope_file_opens_the_envelopes_windows(tmp_path, husky_surge):
+    """``cclog replay --model envelope.json``, no --topic, no configuration: the file decides the trigger (the
+    envelope, on the odometry topic it was learned on, with its joint check); the surge opens a window and
+    little else does. A file that is neither an envelope nor a model: one line naming it."""
+    import json
+    from conftest import cclog
+    event = husky_surge['event']
+    result = cclog('replay', husky_surge['injected'], '--model', husky_surge['limits'], '--out', tmp_path / 'logs',
+                   '--json')
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    caught = windows_over(summary, event)
+    assert caught and caught[0]['names'] == ['envelope'], caught
+    fired = [t for t in caught[0]['triggers'] if t['name'] == 'envelope']
+    assert fired and event['start'] <= fired[0]['stamp'] <= event['start'] + 0.5 and fired[0]['score'] < 0
+    info = caught[0]['trigger_info']['envelope']
+    assert (info['kind'], info['factor'], info['joint_factor']) == ('envelope', 2.0, 4.0)
+    assert info['joint'] is not None and info['joint']['typical'] < info['joint']['farthest']
+    assert len(summary['windows']) <= 3, summary['windows']
+    other = tmp_path / 'notes.json'
+    other.write_text('{"kind": "something else"}')
+    result = cclog('replay', husky_surge['injected'], '--model', other, '--out', tmp_path / 'logs2')
+    assert result.returncode == 1 and result.stderr == 'cclog replay: error: %s: not a cc_log model nor an envelope ' \
+        'file (cclog learn or cclog learn-envelope writes one)\n' % other, result.stderr
+
+
+def test_cclog_learn_envelope_learns_the_joint_check_by_default_and_says_its_figures(tmp_path, husky_surge):
+    """Without --topic, the bag's only odometry topic; the joint check learned unless --no-joint, its figures
+    said on the last line."""
+    import json
+    from conftest import cclog
+    from cc_log.core.envelope import Envelope
+    out = tmp_path / 'envelope.json'
+    result = cclog('learn-envelope', husky_surge['train'], '--out', out)
+    assert result.returncode == 0, result.stderr
+    assert 'driving topic %s (the bag\'s only nav_msgs/Odometry topic' % HUSKY_ODOM in result.stderr
+    learned = Envelope.load(str(out))
+    assert learned.topic == HUSKY_ODOM and learned.joint is not None
+    last = result.stdout.strip().splitlines()[-1]
+    assert last == 'joint check over %d windows: squared distance from typical driving %.4g typical (median), ' \
+        '%.4g farthest; flagged beyond %.4g (joint_factor 4)' % (
+            learned.windows, learned.joint.typical, learned.joint.farthest,
+            learned.joint.typical + 4 * (learned.joint.farthest - learned.joint.typical)), last
+    result = cclog('learn-envelope', husky_surge['train'], '--topic', HUSKY_ODOM, '--out', out, '--no-joint', '--json')
+    assert result.returncode == 0, result.stderr
+    document = json.loads(result.stdout)
+    assert document['version'] == 2 and document['joint'] is None and Envelope.load(str(out)).joint is None
 
 
 def test_cclog_learn_envelope_says_what_is_wrong_in_one_line(tmp_path):

@@ -82,24 +82,50 @@ def with_flat(data, flat):
     return merge(data, options.with_values({}, flat))
 
 
+def model_kind(path):
+    """The default trigger the file ``path`` builds where a model is given (``~model``, ``cclog replay
+    --model``): ``'envelope'`` for an envelope file (its JSON ``kind`` is ``cc_log envelope``: ``cclog
+    learn-envelope``), ``'classifier'`` for a cc_log model (``cclog learn``), and for a file that cannot be read
+    or is too large for an envelope (the model's reader says what is wrong); ValueError('<path>: ...') for any
+    other file."""
+    from cc_log.core import envelope, model
+    try:
+        with safe_input.open_input(os.path.expanduser(path)) as stream:
+            text = stream.read(envelope.MAX_FILE_BYTES + 1)
+    except (OSError, ValueError):
+        return 'classifier'
+    if len(text) > envelope.MAX_FILE_BYTES:
+        return 'classifier'
+    try:
+        document = safe_input.json_loads(text, parse_int=safe_input.bounded_int)
+    except ValueError:
+        document = None
+    if isinstance(document, dict) and document.get('kind') == envelope.KIND:
+        return 'envelope'
+    if isinstance(document, dict) and document.get('format') == model.FORMAT:
+        return 'classifier'
+    raise ValueError('%s: not a cc_log model nor an envelope file (cclog learn or cclog learn-envelope writes '
+                     'one)' % path)
+
+
 def with_classifier(data, **values):
     """``data`` with the single-classifier parameters of the nodes and ``cclog`` (None: not given):
     ``model``, ``topics``, ``feature_set`` and ``window`` go to the trigger named ``classifier`` (added first
     when there is none; without ``topics``, on its feature set's default topics); ``classify_every``,
-    ``retrigger``, ``recent`` and ``learn_online`` to every classifier."""
+    ``retrigger``, ``recent`` and ``learn_online`` to every classifier. When ``model`` is an envelope file
+    (``model_kind``), it goes to the trigger named ``envelope`` instead (of kind envelope, added first when
+    there is none; ``topics``: its one odometry topic, default the file's). ValueError naming what is wrong."""
     data = copy.deepcopy(data)
     triggers = data.get('triggers', [])
     if not isinstance(triggers, list):
         return data  # from_dict says what is wrong
     own = dict((key, values[key]) for key in ('model', 'topics', 'feature_set', 'window')
                if values.get(key) is not None)
+    if 'model' in own and isinstance(own['model'], str) and model_kind(own['model']) == 'envelope':
+        _default_trigger(triggers, 'envelope', _envelope_entry(own))
+        own = {}
     if own:
-        named = [entry for entry in triggers if isinstance(entry, dict)
-                 and entry.get('kind') == 'classifier' and entry.get('name', 'classifier') == 'classifier']
-        if not named:
-            named = [{'name': 'classifier', 'kind': 'classifier'}]
-            triggers.insert(0, named[0])
-        named[0].update(own)
+        _default_trigger(triggers, 'classifier', own)
     for key in ('classify_every', 'retrigger', 'recent', 'learn_online'):
         if values.get(key) is not None:
             for entry in triggers:
@@ -108,6 +134,32 @@ def with_classifier(data, **values):
     if triggers:
         data['triggers'] = triggers
     return data
+
+
+def _envelope_entry(own):
+    """The options of the default envelope trigger from the single-classifier parameters ``own``."""
+    for key in ('feature_set', 'window'):
+        if key in own:
+            raise ValueError('%s: %s is an envelope file (cclog learn-envelope): its features and window are its '
+                             'own, not a classifier\'s' % (key, own['model']))
+    entry = {'limits': own['model']}
+    if 'topics' in own:
+        topics = topic_list(own['topics'], 'topics')
+        if len(topics) != 1:
+            raise ValueError('topics: the envelope of %s reads one odometry topic, not %d'
+                             % (own['model'], len(topics)))
+        entry['topic'] = topics[0]
+    return entry
+
+
+def _default_trigger(triggers, kind, options):
+    """Update the trigger named ``kind`` of that kind in ``triggers`` with ``options`` (added first when none)."""
+    named = [entry for entry in triggers if isinstance(entry, dict)
+             and entry.get('kind') == kind and entry.get('name', kind) == kind]
+    if not named:
+        named = [{'name': kind, 'kind': kind}]
+        triggers.insert(0, named[0])
+    named[0].update(options)
 
 
 def global_name(topic):

@@ -9,9 +9,22 @@ value / limit, and its score keeps cc_log's direction (lower is more anomalous; 
     score = -ln(max ratio)      0 at the limit, negative beyond it (flagged), positive inside
 
 (a max ratio below 1e-6 counts as 1e-6). ``explain`` names the features beyond their limit, most outstanding
-first, each against the most seen in training (floored). The file (``save``/``load``, JSON) is read with bounds:
-known keys only, every column's maximum a finite non-negative number, one-line ValueErrors naming the file.
-Pure: no rospy.
+first, each against the most seen in training (floored).
+
+The *joint check* (``Envelope.joint``, a ``Joint``; None: off) sees a combination of features that nominal
+driving never showed although each stays inside its own limit (two features that always moved together, apart
+now). Learned on the training windows: each feature standardised by their mean and standard deviation (as
+scikit-learn's StandardScaler, the deviation floored at ``JOINT_RESOLUTION``: a feature that spreads less is
+float rounding, not driving, and a live window's rounding must not look new), the robust centre ``location`` and
+``precision`` of the standardised windows (scikit-learn's MinCovDet), and of their squared distances
+``d2 = (z - location) @ precision @ (z - location)`` the median (``typical``) and the largest (``farthest``).
+A window's joint ratio is ``(d2 - typical) / (joint_factor x (farthest - typical))`` and the score takes the
+larger of it and the largest feature ratio: ``-ln(max(feature ratios, joint ratio))``. Scoring is numpy only
+(the live trigger); only ``learn`` uses scikit-learn.
+
+The file (``save``/``load``, JSON; version 2 with the ``joint`` block, version 1 files load without it) is
+read with bounds: known keys only, every column's maximum a finite non-negative number, the joint block's
+arrays of their shapes and finite, one-line ValueErrors naming the file. Pure: no rospy.
 """
 import collections
 import json
@@ -21,15 +34,21 @@ import numpy as np
 
 from cc_log.core import safe_files, safe_input
 from cc_log.core.safe_input import brief
+from cc_log.core.why import MAX_TEXT
 from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS, ENVELOPE_UNITS
 
 KIND = 'cc_log envelope'
-VERSION = 1
+VERSION = 2
+VERSIONS = (1, 2)           # the versions ``load`` reads (1: no joint block)
 DEFAULT_FACTOR = 2.0
+DEFAULT_JOINT_FACTOR = 4.0  # the joint check's factor (the detector benchmark's level 4); 0: off
+MIN_JOINT_WINDOWS = 50      # fewer training windows (or fewer than 2 per feature): no joint check
+JOINT_RESOLUTION = 1e-6     # the smallest scale of a feature in the joint check (its units: m, m/s, rad, ...)
 MIN_RATIO = 1e-6            # a smaller max ratio scores as this one (score <= 13.8)
 MAX_FILE_BYTES = 1 << 20
 MAX_WHY = 3                 # features a Fire names at most
-_KEYS = ('kind', 'version', 'topic', 'window', 'stride', 'windows', 'seconds', 'maxima')
+_KEYS = {1: ('kind', 'version', 'topic', 'window', 'stride', 'windows', 'seconds', 'maxima')}   # per version
+_KEYS[2] = _KEYS[1] + ('joint',)
 
 # How a feature is named in a window's "why"
 LABELS = {
@@ -42,12 +61,53 @@ LABELS = {
     'max_span_accel': 'acceleration over 0.2 s', 'max_decel': 'deceleration', 'max_speedup': 'speed-up',
     'max_speed_drop': 'speed drop in 0.2 s', 'max_speed_rise': 'speed rise in 0.2 s',
 }
+# Shorter names where the joint check names three features in one line (a why's text is at most MAX_TEXT)
+JOINT_LABELS = dict(LABELS, **{
+    'speed_variation': 'speed variation', 'yaw_rate_variation': 'yaw rate variation', 'max_pose_gap': 'pose step gap',
+    'sum_pose_gap': 'pose gap', 'max_heading_gap': 'heading step gap', 'sum_heading_gap': 'heading gap',
+    'still_fraction': 'standing still', 'still_yaw_rate': 'yaw rate standing', 'max_span_accel': '0.2 s acceleration',
+    'max_speed_drop': 'speed drop', 'max_speed_rise': 'speed rise'})
 
 
-class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride windows seconds')):
+class Joint(collections.namedtuple('Joint', 'mean scale location precision typical farthest')):
+    """The joint check of the training windows (see the module docstring): ``mean``, ``scale`` (per feature),
+    ``location`` (standardised), ``precision`` (19 x 19) arrays; ``typical``, ``farthest``: the median and the
+    largest squared distance of a training window."""
+
+    __slots__ = ()
+
+    def distances(self, matrix):
+        """The squared robust distance ``d2`` of each row of ``matrix`` (numpy only)."""
+        z = self.deviations(matrix)
+        return np.einsum('...i,ij,...j->...', z, self.precision, z)
+
+    def deviations(self, matrix):
+        """Each row standardised, minus the location."""
+        return (np.asarray(matrix, dtype=float) - self.mean) / self.scale - self.location
+
+    def ratios(self, matrix, factor=DEFAULT_JOINT_FACTOR):
+        """The joint ratio of each row: ``(d2 - typical) / (factor x (farthest - typical))`` (> 1: flagged)."""
+        return (self.distances(matrix) - self.typical) / (factor * (self.farthest - self.typical))
+
+    def to_dict(self):
+        return collections.OrderedDict([
+            ('mean', self.mean.tolist()), ('scale', self.scale.tolist()), ('location', self.location.tolist()),
+            ('precision', self.precision.tolist()), ('typical', float(self.typical)),
+            ('farthest', float(self.farthest))])
+
+    def __eq__(self, other):
+        return isinstance(other, Joint) and all(np.array_equal(a, b) for a, b in zip(self, other))
+
+    def __ne__(self, other):
+        return not self == other
+
+    __hash__ = None
+
+
+class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride windows seconds joint')):
     """The nominal driving's largest value per envelope feature (``maxima``: a dict over ``ENVELOPE_COLUMNS``),
     learned on ``topic`` over windows of ``window`` s every ``stride`` s (``windows`` of them, ``seconds`` of
-    driving)."""
+    driving); ``joint``: their joint check (a ``Joint``), or None."""
 
     __slots__ = ()
 
@@ -63,7 +123,8 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         return collections.OrderedDict([
             ('kind', KIND), ('version', VERSION), ('topic', self.topic), ('window', self.window),
             ('stride', self.stride), ('windows', self.windows), ('seconds', self.seconds),
-            ('maxima', collections.OrderedDict((name, float(self.maxima[name])) for name in ENVELOPE_COLUMNS))])
+            ('maxima', collections.OrderedDict((name, float(self.maxima[name])) for name in ENVELOPE_COLUMNS)),
+            ('joint', self.joint.to_dict() if self.joint is not None else None)])
 
     def save(self, path):
         """Write as JSON (atomically)."""
@@ -76,11 +137,13 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         """The envelope of a document ``to_dict`` wrote; ValueError('<source>: ...') otherwise."""
         if not isinstance(document, dict) or document.get('kind') != KIND:
             raise ValueError('%s: not an envelope file (no "kind": "%s")' % (source, KIND))
-        unknown = sorted(set(document) - set(_KEYS), key=str)
+        version = document.get('version')
+        if isinstance(version, bool) or version not in VERSIONS:
+            raise ValueError('%s: version %s, this cc_log reads %s' % (
+                source, brief(version), ' and '.join(str(v) for v in VERSIONS)))
+        unknown = sorted(set(document) - set(_KEYS[version]), key=str)
         if unknown:
             raise ValueError('%s: unknown key %s' % (source, brief(unknown[0])))
-        if document.get('version') != VERSION:
-            raise ValueError('%s: version %s, this cc_log reads %d' % (source, brief(document.get('version')), VERSION))
         maxima = document.get('maxima')
         if not isinstance(maxima, dict) or set(maxima) != set(ENVELOPE_COLUMNS):
             missing = sorted(set(ENVELOPE_COLUMNS) - set(maxima or ())) if isinstance(maxima, dict) else ()
@@ -95,8 +158,9 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         stride = _number(document.get('stride'), '%s: stride' % source, positive=True, most=600.0)
         windows = _number(document.get('windows'), '%s: windows' % source)
         seconds = _number(document.get('seconds'), '%s: seconds' % source)
+        joint = _read_joint(document.get('joint'), '%s: joint' % source)
         return cls({name: float(maxima[name]) for name in ENVELOPE_COLUMNS}, topic, window, stride, int(windows),
-                   seconds)
+                   seconds, joint)
 
     @classmethod
     def load(cls, path):
@@ -113,6 +177,43 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         except ValueError as error:
             raise ValueError('%s: not JSON (%s)' % (path, error))
         return cls.from_dict(document, path)
+
+
+def _read_joint(block, where):
+    """The ``Joint`` of a file's ``joint`` block (None: none); ValueError('<where>: ...') unless every array has
+    its shape and finite numbers (``scale`` positive) and ``typical`` < ``farthest``."""
+    if block is None:
+        return None
+    if not isinstance(block, dict) or set(block) != set(Joint._fields):
+        extra = sorted(set(block) - set(Joint._fields), key=str) if isinstance(block, dict) else ()
+        raise ValueError('%s: must map %s to numbers%s' % (
+            where, ', '.join(Joint._fields), ' (unknown key %s)' % brief(extra[0]) if extra else ''))
+    size = len(ENVELOPE_COLUMNS)
+    arrays = [_array(block[key], (size,) * (2 if key == 'precision' else 1), '%s: %s' % (where, key))
+              for key in Joint._fields[:4]]
+    if not np.all(arrays[1] > 0):
+        raise ValueError('%s: scale: every entry must be positive' % where)
+    typical = _number(block['typical'], '%s: typical' % where)
+    farthest = _number(block['farthest'], '%s: farthest' % where)
+    if not typical < farthest:
+        raise ValueError('%s: typical %r must be below farthest %r' % (where, typical, farthest))
+    return Joint(*(arrays + [typical, farthest]))
+
+
+def _array(value, shape, where):
+    """``value`` (nested lists) as a float array of ``shape``, every entry a finite number; ValueError naming
+    ``where`` otherwise (checked before any conversion, so a wrong document costs no more than its size)."""
+    def check(item, depth):
+        if depth == len(shape):
+            if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
+                raise ValueError('%s: %s is not a finite number' % (where, brief(item)))
+            return
+        if not isinstance(item, list) or len(item) != shape[depth]:
+            raise ValueError('%s: must be %s numbers' % (where, ' x '.join(str(n) for n in shape)))
+        for entry in item:
+            check(entry, depth + 1)
+    check(value, 0)
+    return np.array(value, dtype=float)
 
 
 def _refuse_constant(name):
@@ -141,16 +242,64 @@ def check_factor(factor, name='factor'):
     return value
 
 
-def learn(matrices, topic, window, stride, seconds):
+def check_joint_factor(factor, name='joint_factor'):
+    """The joint check's factor: 0 (off) or a finite number from 1 up (ValueError naming ``name``)."""
+    try:
+        value = float(factor)
+    except (TypeError, ValueError):
+        value = float('nan')
+    if isinstance(factor, bool) or not (value == 0.0 or 1.0 <= value < 1e6):
+        raise ValueError('%s: %s must be 0 (off) or a number from 1 up (%g flags a window %gx farther from typical '
+                         'driving than any training window)' % (name, brief(factor), DEFAULT_JOINT_FACTOR,
+                                                                DEFAULT_JOINT_FACTOR))
+    return value
+
+
+def learn(matrices, topic, window, stride, seconds, joint=True):
     """The envelope of nominal driving: ``matrices`` the ``envelope_windows`` matrices of its runs (each (n, 19));
+    with ``joint``, its joint check too (None when ``joint_shortfall`` says the windows cannot set one).
     ValueError when they hold no window."""
     matrices = [np.asarray(m, dtype=float).reshape(-1, len(ENVELOPE_COLUMNS)) for m in matrices]
     rows = sum(len(m) for m in matrices)
     if not rows:
         raise ValueError('%s: no whole window of %g s of odometry to learn from' % (topic, window))
-    maxima = np.max(np.concatenate(matrices), axis=0)
+    matrix = np.concatenate(matrices)
+    maxima = np.max(matrix, axis=0)
     return Envelope({name: float(value) for name, value in zip(ENVELOPE_COLUMNS, maxima)}, topic, float(window),
-                    float(stride), rows, float(seconds))
+                    float(stride), rows, float(seconds), learn_joint(matrix) if joint else None)
+
+
+def joint_shortfall(windows):
+    """Why ``windows`` training windows cannot set a joint check ('' when they are enough)."""
+    needed = max(MIN_JOINT_WINDOWS, 2 * len(ENVELOPE_COLUMNS))
+    return '' if windows >= needed else '%d training windows, fewer than %d' % (windows, needed)
+
+
+def learn_joint(matrix):
+    """The ``Joint`` of the training windows ``matrix`` (n, 19); None when there are too few
+    (``joint_shortfall``) or they do not spread (every window as far from the centre as the typical one)."""
+    import warnings
+    from sklearn.covariance import MinCovDet
+    matrix = np.asarray(matrix, dtype=float)
+    if joint_shortfall(len(matrix)) or not np.all(np.isfinite(matrix)):
+        return None
+    mean, scale = matrix.mean(axis=0), np.maximum(matrix.std(axis=0), JOINT_RESOLUTION)
+    standardised = (matrix - mean) / scale
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore')   # "not full rank": a feature constant in most windows
+            robust = MinCovDet(random_state=0).fit(standardised)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    joint = Joint(mean, scale, np.asarray(robust.location_, dtype=float), np.asarray(robust.precision_, dtype=float),
+                  0.0, 0.0)
+    if not (np.all(np.isfinite(joint.location)) and np.all(np.isfinite(joint.precision))):
+        return None
+    distances = joint.distances(matrix)
+    typical, farthest = float(np.median(distances)), float(np.max(distances))
+    if not (np.isfinite(farthest) and typical < farthest):
+        return None
+    return joint._replace(typical=max(typical, 0.0), farthest=farthest)
 
 
 def ratios(matrix, limits):
@@ -158,22 +307,27 @@ def ratios(matrix, limits):
     return np.asarray(matrix, dtype=float) / limits
 
 
-def scores(matrix, limits):
-    """The score of each row: ``-ln(max ratio)`` (lower is more anomalous; < 0 beyond the envelope)."""
+def scores(matrix, limits, joint=None, joint_factor=DEFAULT_JOINT_FACTOR):
+    """The score of each row: ``-ln(max(largest ratio, joint ratio))`` (lower is more anomalous; < 0 beyond the
+    envelope). ``joint``: the ``Joint`` (None or ``joint_factor`` 0: per feature only)."""
     worst = np.max(ratios(matrix, limits), axis=-1)
+    if joint is not None and joint_factor:
+        worst = np.maximum(worst, joint.ratios(matrix, joint_factor))
     return -np.log(np.maximum(worst, MIN_RATIO))
 
 
-def explain(row, envelope, factor=DEFAULT_FACTOR, details=None):
+def explain(row, envelope, factor=DEFAULT_FACTOR, details=None, joint_factor=DEFAULT_JOINT_FACTOR):
     """Why a window (``row``, one ``envelope_windows`` row) is beyond the envelope: a tuple of at most MAX_WHY
     dicts ``{feature, value, limit, ratio, unit, text}`` of the features beyond ``factor`` x their limit, most
     outstanding first. ``limit`` is what the value is measured against, the most seen in training (floored:
     ``Envelope.trained``), ``ratio`` value / limit (the window fired because it exceeds ``factor``); the text
     says how far past it. ``details``: ``{feature: text}`` said instead of the feature's plain value (e.g. the
-    pose step against the wheels' step)."""
+    pose step against the wheels' step). A window beyond the joint check (``joint_factor``; 0: off) adds the
+    entry of feature ``joint`` (``joint_why``); the entries are ordered by how far past their factor they are."""
     trained = envelope.trained()
     row = np.asarray(row, dtype=float)
-    beyond = np.flatnonzero(row > check_factor(factor) * trained)
+    factor = check_factor(factor)
+    beyond = np.flatnonzero(row > factor * trained)
     order = beyond[np.argsort(-(row[beyond] / trained[beyond]), kind='stable')][:MAX_WHY]
     why = []
     for index in order:
@@ -187,7 +341,34 @@ def explain(row, envelope, factor=DEFAULT_FACTOR, details=None):
             times = '%.1fx the floor %s%s (training never reached it)' % (value / limit, _figure(limit), shown)
         why.append({'feature': name, 'value': value, 'limit': limit, 'ratio': value / limit, 'unit': unit,
                     'text': '%s, %s' % (said, times)})
-    return tuple(why)
+    joint = joint_why(row, envelope.joint, check_joint_factor(joint_factor)) if joint_factor else None
+    if joint is not None:
+        past = [entry['ratio'] / factor for entry in why]
+        why.insert(int(np.searchsorted(-np.array(past), -joint['ratio'] / joint_factor, side='right')), joint)
+    return tuple(why[:MAX_WHY])
+
+
+def joint_why(row, joint, joint_factor=DEFAULT_JOINT_FACTOR):
+    """The why entry of a window beyond the joint check (None when it is not, or there is no ``joint``):
+    ``{feature: 'joint', value: d2, limit: farthest, ratio, unit: '1', text}``, ``ratio`` = (d2 - typical) /
+    (farthest - typical), the text naming the MAX_WHY features that contribute most to d2 (``z_i (P z)_i``; a
+    shorter sentence where that one would pass MAX_TEXT characters)."""
+    if joint is None:
+        return None
+    row = np.asarray(row, dtype=float)
+    if not joint.ratios(row, joint_factor) > 1:   # the rule ``scores`` flags by
+        return None
+    value = float(joint.distances(row))
+    ratio = (value - joint.typical) / (joint.farthest - joint.typical)
+    z = joint.deviations(row)
+    parts = z * (joint.precision @ z)
+    named = [JOINT_LABELS[ENVELOPE_COLUMNS[i]] for i in np.argsort(-parts, kind='stable')[:MAX_WHY]]
+    said = ', '.join(named[:-1]) + ' and ' + named[-1] if len(named) > 1 else named[0]
+    text = '%s together %.1fx farther from typical driving than any training window' % (said, ratio)
+    if len(text) > MAX_TEXT:
+        text = '%s together %.1fx past any training window' % (said, ratio)
+    return {'feature': 'joint', 'value': value, 'limit': float(joint.farthest), 'ratio': ratio, 'unit': '1',
+            'text': text}
 
 
 def _figure(value):

@@ -277,7 +277,8 @@ OPTIONS = (
     _option('name_prefix', '', NAME_PREFIX, 'cc_log', 'what file names begin with, before `_<UTC>_<reason>` '
             "(rosbag record's `-o PREFIX`); listing, recovery, the quota and uploads follow it: files named "
             'otherwise are left alone', BOTH),
-    _option('model', '', TEXT, '', 'model file (cclog learn) of the classifier named `classifier`', SMART),
+    _option('model', '', TEXT, '', 'the default trigger: an envelope file (cclog learn-envelope: the trigger named '
+            '`envelope`) or a model file (cclog learn: the classifier named `classifier`)', SMART),
     _option('window', '', SPAN, features.DEFAULT_WINDOW, "the feature window (smart mode: checked against the "
             "model's)", BOTH),
     _option('feature_set', '', FEATURE_SET, 'motion', 'the feature set collect mode computes', COLLECT),

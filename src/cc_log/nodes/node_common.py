@@ -232,7 +232,11 @@ def node_config(params, flat, classifier=None):
         except ValueError as error:
             raise ConfigError('~config: %s' % error)
     structured = dict((key, params.value(key, None)) for key in STRUCTURED if params.given(key))
-    data = config.with_classifier(config.with_flat(config.merge(data, structured), flat), **(classifier or {}))
+    data = config.with_flat(config.merge(data, structured), flat)
+    try:
+        data = config.with_classifier(data, **(classifier or {}))  # ~model: an envelope file or a model
+    except ValueError as error:
+        raise ConfigError('~model: %s' % error)
     try:
         return config.Config.from_dict(data, ('~config %s' % path) if path else 'parameters')
     except ValueError as error:

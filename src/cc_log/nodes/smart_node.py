@@ -3,7 +3,8 @@
 Node name: ``smart_logger``.
 
 Subscribed topics
-  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it); the topics of
+  ``odom`` (nav_msgs/Odometry): the driving topic the classifier watches (relative: remap it; an envelope file
+  as ``~model`` watches the topic it was learned on, remapped the same way); the topics of
   the model's other inputs by their role names (``cmd_vel`` for a command model; ``imu`` is the driving
   topic of an imu model), or those of the configuration's triggers.
   every topic in ``~topics`` (any type): saved in the windows whose time span holds them; of a latched topic
@@ -106,7 +107,8 @@ class SmartNode(object):
         cfg = node_config(params, params.configuration('smart'), dict(
             (name, given(name)) for name in ('model', 'retrigger', 'classify_every', 'recent', 'learn_online')))
         if not cfg.triggers:
-            raise ConfigError('~model: required (the model file written by learn mode), or triggers in ~config')
+            raise ConfigError('~model: required (the envelope file of cclog learn-envelope, or the model file written '
+                              'by learn mode), or triggers in ~config')
         try:
             triggers = cfg.build_triggers(AnomalyModel.load, raw_message.installed_class, rospy.resolve_name)
             options = cfg.logger_options(triggers, rospy.resolve_name)

@@ -3,19 +3,24 @@
 Configuration (``kind: envelope``)::
 
     triggers:
-      - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0}
+      - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0, joint_factor: 4.0}
 
 ``limits``: the file ``cclog learn-envelope`` wrote (``core.envelope.Envelope``: the largest value of each of
 the 19 ``features.envelope`` features over nominal windows); ``topic``: the nav_msgs/Odometry topic (default:
 the one it was learned on); ``factor`` (default 2.0): a window is flagged when a feature exceeds ``factor`` x
-its training maximum (floored by ``ENVELOPE_FLOORS``).
+its training maximum (floored by ``ENVELOPE_FLOORS``); ``joint_factor`` (default 4.0; 0: off), when the file
+has a joint check (``core.envelope.Joint``): a window is flagged too when its squared robust distance from
+typical driving goes ``joint_factor`` x farther past the typical one than any training window did. A model path
+given as the default trigger (``~model``, ``cclog replay --model``) builds this trigger when the file is an
+envelope (``core.config.with_classifier``).
 
 Every ``stride`` (0.25 s, the file's) of message time the trigger computes the row of the window of ``window``
 s (1 s, the file's) ending on that grid point, from a ring of the last ``window`` + ``HISTORY`` seconds of
-samples (``features.envelope.envelope_rows``: the very rows ``envelope_windows`` gives offline). A window beyond
-the envelope fires at the first message at or after its end, with score ``-ln(max value / limit)`` (< 0;
-lower is more anomalous) and ``why``: the features beyond their limit, most outstanding first, each against the
-most seen in training (``core.envelope.explain``). Each such
+samples (``features.envelope.envelope_rows``: the very rows ``envelope_windows`` gives offline), all of a
+batch's windows at once (the joint check: one 19 x 19 quadratic form per window). A window beyond
+the envelope fires at the first message at or after its end, with score ``-ln(max(value / limit, joint
+ratio))`` (< 0; lower is more anomalous) and ``why``: the features beyond their limit and the joint check, most
+outstanding first, each against the most seen in training (``core.envelope.explain``). Each such
 window fires (every 0.25 s while the motion stays beyond the envelope; the logger merges them). A window that
 holds a sample out of any physical range (``features.envelope.out_of_range_samples``: a speed, yaw rate or
 position that is inf, NaN or beyond +-1e6, which the rows leave out) fires too, with the score
@@ -26,7 +31,8 @@ import time
 
 import numpy as np
 
-from cc_log.core.envelope import DEFAULT_FACTOR, Envelope, check_factor, explain, scores
+from cc_log.core.envelope import (
+    DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, Envelope, check_factor, check_joint_factor, explain, scores)
 from cc_log.features.envelope import (
     ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, out_of_range_samples, step_details)
 from cc_log.features.base import CLIP
@@ -41,10 +47,11 @@ OUT_OF_RANGE_SCORE = -CLIP  # the score of a window holding a sample out of rang
 class EnvelopeTrigger(Trigger):
     """Fires on odometry windows beyond the learned envelope (see the module docstring).
 
-    envelope: a ``core.envelope.Envelope``; topic: its nav_msgs/Odometry topic; factor: the limit factor."""
+    envelope: a ``core.envelope.Envelope``; topic: its nav_msgs/Odometry topic; factor: the limit factor;
+    joint_factor: the joint check's (0: off; no effect when the envelope has no joint check)."""
 
     kind = 'envelope'
-    config_keys = ('limits', 'topic', 'factor')
+    config_keys = ('limits', 'topic', 'factor', 'joint_factor')
     batched = True
 
     @classmethod
@@ -60,13 +67,16 @@ class EnvelopeTrigger(Trigger):
             raise ValueError('%s: topic: %r is not a topic name' % (name, topic))
         return cls(name, envelope, context.resolve(topic or envelope.topic), **options)
 
-    def __init__(self, name, envelope, topic, factor=DEFAULT_FACTOR, pre=None, post=None):
+    def __init__(self, name, envelope, topic, factor=DEFAULT_FACTOR, joint_factor=DEFAULT_JOINT_FACTOR, pre=None,
+                 post=None):
         super(EnvelopeTrigger, self).__init__(name, pre, post)
         if not isinstance(envelope, Envelope):
             raise ValueError('%s: envelope: expected an Envelope, got %s' % (name, type(envelope).__name__))
         self.envelope = envelope
         self.factor = check_factor(factor, '%s: factor' % name)
         self.limits = envelope.limits(self.factor)
+        self.joint_factor = check_joint_factor(joint_factor, '%s: joint_factor' % name)
+        self.joint = envelope.joint if self.joint_factor else None   # None: per feature only
         self.topic = topic
         self.topics = frozenset([topic])
         self.window, self.stride = envelope.window, envelope.stride
@@ -135,7 +145,7 @@ class EnvelopeTrigger(Trigger):
         self._last_end = float(grid[-1])
         ends, rows = envelope_rows(*self._ring, ends=grid, window=self.window)
         self.evaluated += len(ends)
-        window_scores = scores(rows, self.limits)
+        window_scores = scores(rows, self.limits, self.joint, self.joint_factor)
         held = (np.searchsorted(self._beyond, grid, side='right') -
                 np.searchsorted(self._beyond, grid - self.window, side='right'))  # out-of-range samples per window
         measured = dict(zip(ends.tolist(), range(len(ends))))
@@ -151,7 +161,8 @@ class EnvelopeTrigger(Trigger):
                 best[at] = (end, score, k, count)
         for at, (end, score, k, count) in sorted(best.items()):
             why = () if k is None else explain(rows[k], self.envelope, self.factor,
-                                               step_details(*self._ring, end=end, window=self.window))
+                                               step_details(*self._ring, end=end, window=self.window),
+                                               self.joint_factor if self.joint else 0)
             if count:
                 why = (out_of_range_why(count),) + tuple(why)
             fires[offset + at].append(self.fire(REASON, score, why))
@@ -168,6 +179,9 @@ class EnvelopeTrigger(Trigger):
     def describe(self):
         result = super(EnvelopeTrigger, self).describe()
         result.update(factor=self.factor, window=self.window, stride=self.stride,
+                      joint_factor=self.joint_factor,
+                      joint=None if self.joint is None else {'typical': self.joint.typical,
+                                                             'farthest': self.joint.farthest},
                       learned={'topic': self.envelope.topic, 'windows': self.envelope.windows,
                                'seconds': self.envelope.seconds},
                       limits={name: float(limit) for name, limit in zip(ENVELOPE_COLUMNS, self.limits)})

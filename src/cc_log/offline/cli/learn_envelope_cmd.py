@@ -1,6 +1,9 @@
 """``cclog learn-envelope``: the physics envelope of nominal driving, for the ``envelope`` trigger."""
+import argparse
+
 from cc_log.offline.cli.common import (
-    EXIT_OK, CommandError, command_help, existing_file, output_flags, parent_exists, print_json, say, span)
+    EXIT_OK, CommandError, command_help, driving_topic, existing_file, output_flags, parent_exists, print_json, say,
+    span)
 
 
 def add_parser(subparsers):
@@ -13,19 +16,27 @@ def add_parser(subparsers):
         over windows of --window every --stride, and write the largest value of each to --out (JSON). A
         trigger of kind envelope in the configuration (limits: that file) then flags every window where a
         feature exceeds its factor (default 2) times that maximum, floored by a physical minimum per feature.
+        It learns the joint check too (unless --no-joint): how far from typical driving, all 19 features
+        together, the windows went (a robust Mahalanobis distance); a window 4 times farther than any of them
+        (the trigger's joint_factor) is flagged although each feature stays inside its limit. The file is the
+        default trigger where a model is given: smart_logger.py _model:=envelope.json, cclog replay --model.
         Only the bags set the envelope: give nominal driving only (docs/DETECTION.md, "The physics envelope").
         """,
         """
+          cclog learn-envelope nominal.bag --out envelope.json
           cclog learn-envelope nominal.bag --topic /husky_velocity_controller/odom --out envelope.json
           cclog learn-envelope day1.bag day2.bag --topic /odom --out envelope.json --json
         """))
     p.add_argument('bag', nargs='+', metavar='BAG', help='a bag of nominal driving (indexed, rosbag 2.0)')
-    p.add_argument('--topic', required=True, metavar='T', help='the odometry topic (nav_msgs/Odometry)')
+    p.add_argument('--topic', metavar='T', help="the odometry topic (nav_msgs/Odometry; default: the first bag's "
+                   'only one)')
     p.add_argument('--out', required=True, metavar='PATH', help='the envelope file to write (JSON)')
     p.add_argument('--window', type=span('window'), default='1s', metavar='Ns',
                    help='feature window, a duration (default: %(default)s)')
     p.add_argument('--stride', type=span('stride'), default='250ms', metavar='Ns',
                    help='a window every this much message time (default: %(default)s)')
+    p.add_argument('--joint', action=argparse.BooleanOptionalAction, default=True,
+                   help='learn the joint check too (default: yes; --no-joint: the per-feature limits only)')
     output_flags(p)
     return p
 
@@ -38,8 +49,9 @@ def _seconds(value, name):
     return parsed.seconds
 
 
-def learn_bags(paths, topic, window, stride):
-    """The ``Envelope`` of the odometry of ``topic`` in the bags ``paths`` (each bag's windows apart)."""
+def learn_bags(paths, topic, window, stride, joint=True):
+    """The ``Envelope`` of the odometry of ``topic`` in the bags ``paths`` (each bag's windows apart; with its
+    joint check when ``joint`` and the windows allow it)."""
     from cc_log.core import envelope
     from cc_log.features.envelope import envelope_windows, odometry_samples
     from cc_log.features.motion import ODOMETRY
@@ -52,17 +64,21 @@ def learn_bags(paths, topic, window, stride):
         matrices.append(envelope_windows(*samples, window=window, stride=stride)[1])
         if len(samples[0]) > 1:
             seconds += float(samples[0].max() - samples[0].min())
-    return envelope.learn(matrices, topic, window, stride, seconds)
+    return envelope.learn(matrices, topic, window, stride, seconds, joint)
 
 
 def run(args):
     """Learn the envelope of the bags and write it to --out."""
-    from cc_log.core.envelope import DEFAULT_FACTOR
+    from cc_log.core.envelope import DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, joint_shortfall
     from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_UNITS
+    from cc_log.features.motion import ODOMETRY
     paths = [existing_file(path, 'bag file') for path in args.bag]
     parent_exists(args.out, 'out')
     window, stride = _seconds(args.window, 'window'), _seconds(args.stride, 'stride')
-    learned = learn_bags(paths, args.topic, window, stride)
+    if args.topic is None:
+        args.bag = paths[0]
+        args.topic = driving_topic(args, ODOMETRY)
+    learned = learn_bags(paths, args.topic, window, stride, args.joint)
     learned.save(args.out)
     if args.json:
         document = learned.to_dict()
@@ -75,4 +91,12 @@ def run(args):
     print('%-20s %-8s %12s %12s %12s' % ('feature', 'unit', 'most seen', 'floored', 'limit at %gx' % DEFAULT_FACTOR))
     for name, floored, limit in zip(ENVELOPE_COLUMNS, trained, limits):
         print('%-20s %-8s %12.4g %12.4g %12.4g' % (name, ENVELOPE_UNITS[name], learned.maxima[name], floored, limit))
+    joint = learned.joint
+    if joint is not None:
+        print('joint check over %d windows: squared distance from typical driving %.4g typical (median), %.4g '
+              'farthest; flagged beyond %.4g (joint_factor %g)' % (
+                  learned.windows, joint.typical, joint.farthest,
+                  joint.typical + DEFAULT_JOINT_FACTOR * (joint.farthest - joint.typical), DEFAULT_JOINT_FACTOR))
+    elif args.joint:
+        print('no joint check: %s' % (joint_shortfall(learned.windows) or 'the training windows do not spread'))
     return EXIT_OK

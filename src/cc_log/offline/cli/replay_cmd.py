@@ -21,10 +21,12 @@ def add_parser(subparsers):
         """
         Smart mode offline: feed the bag, as fast as it can be read, to the same SmartLogger the live node
         runs, with the triggers of --config (the YAML file smart_logger.py reads: classifiers, rules) and/or
-        a classifier scoring --topic with --model. Every trigger saves --pre messages before and --post
-        after (counts or durations), with the --side-topic messages of that time span, as window files in
-        OUT; options given override the configuration. --json prints {input_messages, raw_json_bytes,
-        stored_bytes, windows: [{name, start, end, messages, files, path}]}, one entry per window whatever
+        the trigger of --model: an envelope file (cclog learn-envelope) watches the odometry of --topic
+        (default: the file's), a model (cclog learn) is a classifier scoring --topic. Every trigger saves
+        --pre messages before and --post after (counts or durations), with the --side-topic messages of
+        that time span, as window files in OUT; options given override the configuration. --json prints
+        {input_messages, raw_json_bytes, stored_bytes, windows: [{name, start, end, messages, files, path}]},
+        one entry per window whatever
         its files (routes, parts, splits: messages of them all; path: its first); start/end are the header
         stamps (float seconds) of the first and last message saved. A window that cannot be written (disk
         full) is retried for a few seconds; then replay stops and exits 1 with one line naming OUT and how
@@ -33,6 +35,7 @@ def add_parser(subparsers):
         keep_budget).
         """,
         """
+          cclog replay husky.bag --model envelope.json --out logs
           cclog replay husky.bag --topic /husky_velocity_controller/odom --model model.json --out logs
           cclog replay crash.bag --topic /odom --model model.json --out logs --pre 2s --post 2s --json
           cclog replay crash.bag --topic /odom --side-topic /scan --model m.json --out logs --format bag-lz4
@@ -44,9 +47,9 @@ def add_parser(subparsers):
     p.add_argument('--config', metavar='YAML', help='configuration (topics, triggers, windows, format, limits): '
                    'the file smart_logger.py reads; the options below override it')
     p.add_argument('--topic', metavar='T', help="driving topic (the model's message type; default: "
-                   "the bag's only topic of that type)")
-    p.add_argument('--model', metavar='PATH', help='model file (cclog learn) of a classifier on --topic; needed '
-                   'without --config')
+                   "the bag's only topic of that type; an envelope's: the one it was learned on)")
+    p.add_argument('--model', metavar='PATH', help='envelope file (cclog learn-envelope) or model file (cclog '
+                   'learn) of a classifier on --topic; needed without --config')
     p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
     options.add_flags(p, 'replay')  # --format, --precision, --pre, --post, --max-buffer-mb: core.options
     p.add_argument('--side-topic', action='append', default=[], metavar='T',
@@ -70,6 +73,7 @@ def run(args):
     """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read, with the
     triggers of ``--config`` and/or the classifier of ``--model`` on ``--topic``."""
     from cc_log.offline import replay
+    from cc_log.core.config import model_kind
     many = fleet_wanted(args, args.bag)
     if not many:
         args.bag = existing_file(args.bag[0], 'bag file')
@@ -77,14 +81,14 @@ def run(args):
         raise CommandError('replay: give --model (and --topic), or --config (a configuration with triggers)')
     if args.model is not None:
         existing_file(args.model, 'model file')
-    if args.model is not None and args.topic is None:
+    if args.model is not None and args.topic is None and model_kind(args.model) == 'classifier':
         if many:
             raise CommandError('replay: --model needs --topic (the topic the model reads)')
         from cc_log.core.model import AnomalyModel
         args.topic = driving_topic(args, AnomalyModel.load(args.model).config.topic_type)
     flat = dict((option.name, getattr(args, option.name)) for option in options.for_command('replay'))
     flat.update({'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
-                 'classifier': {'model': args.model, 'topics': [args.topic] if args.model else None,
+                 'classifier': {'model': args.model, 'topics': [args.topic] if args.model and args.topic else None,
                                 'classify_every': args.classify_every, 'retrigger': args.retrigger}})
     cfg = configuration(args, copy.deepcopy(flat))
     if args.sweep:
