@@ -8,8 +8,8 @@ value / limit, and its score keeps cc_log's direction (lower is more anomalous; 
 
     score = -ln(max ratio)      0 at the limit, negative beyond it (flagged), positive inside
 
-(a max ratio below 1e-6 counts as 1e-6). ``explain`` names the features beyond their limit, most outstanding
-first, each against the most seen in training (floored).
+(a max ratio below 1e-6 counts as 1e-6, one above 1e300 or too large to compute as 1e300). ``explain`` names the
+features beyond their limit, most outstanding first, each against the most seen in training (floored).
 
 The *joint check* (``Envelope.joint``, a ``Joint``; None: off) sees a combination of features that nominal
 driving never showed although each stays inside its own limit (two features that always moved together, apart
@@ -45,6 +45,7 @@ DEFAULT_JOINT_FACTOR = 4.0  # the joint check's factor (the detector benchmark's
 MIN_JOINT_WINDOWS = 50      # fewer training windows (or fewer than 2 per feature): no joint check
 JOINT_RESOLUTION = 1e-6     # the smallest scale of a feature in the joint check (its units: m, m/s, rad, ...)
 MIN_RATIO = 1e-6            # a smaller max ratio scores as this one (score <= 13.8)
+MAX_RATIO = 1e300           # a larger one (or one too large to compute) as this one (score >= -690.8)
 MAX_FILE_BYTES = 1 << 20
 MAX_WHY = 3                 # features a Fire names at most
 _KEYS = {1: ('kind', 'version', 'topic', 'window', 'stride', 'windows', 'seconds', 'maxima')}   # per version
@@ -313,7 +314,8 @@ def scores(matrix, limits, joint=None, joint_factor=DEFAULT_JOINT_FACTOR):
     worst = np.max(ratios(matrix, limits), axis=-1)
     if joint is not None and joint_factor:
         worst = np.maximum(worst, joint.ratios(matrix, joint_factor))
-    return -np.log(np.maximum(worst, MIN_RATIO))
+    worst = np.where(np.isnan(worst), np.inf, worst)   # a value too large to square: as far out as can be said
+    return -np.log(np.clip(worst, MIN_RATIO, MAX_RATIO))
 
 
 def explain(row, envelope, factor=DEFAULT_FACTOR, details=None, joint_factor=DEFAULT_JOINT_FACTOR):
