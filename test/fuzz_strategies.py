@@ -55,14 +55,14 @@ def _deep(depth):
 
 
 scalars = st.one_of(
-    st.none(), st.booleans(), st.sampled_from(_EDGE_INTS), st.integers(), st.floats(allow_nan=True, allow_infinity=True),
-    st.sampled_from(_EDGE_TEXTS), st.text(max_size=40))
+    st.none(), st.booleans(), st.sampled_from(_EDGE_INTS), st.integers(),
+    st.floats(allow_nan=True, allow_infinity=True), st.sampled_from(_EDGE_TEXTS), st.text(max_size=40))
 
 #: Any value of a YAML or JSON document: scalars, lists, mappings, deep nesting.
 values = st.one_of(
     scalars,
-    st.recursive(scalars, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=10), inner,
-                                                                                         max_size=4), max_leaves=12),
+    st.recursive(scalars, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(
+        st.text(max_size=10), inner, max_size=4), max_leaves=12),
     st.sampled_from([99, 101, 150]).map(_deep))
 
 
@@ -325,9 +325,8 @@ def diagnostics(draw):
             pairs = [KeyValue(draw(_KEYS), draw(_DIAGNOSTIC_TEXT)) for _ in range(draw(st.integers(0, 6)))]
             if draw(st.integers(0, 6)) == 0:
                 pairs = pairs * 200  # more values than MAX_VALUES
-            statuses.append(Status(draw(_NODE_NAMES), draw(st.one_of(st.integers(-300, 300), st.binary(max_size=2),
-                                                                       st.none())),
-                                   draw(_DIAGNOSTIC_TEXT), pairs))
+            level = draw(st.one_of(st.integers(-300, 300), st.binary(max_size=2), st.none()))
+            statuses.append(Status(draw(_NODE_NAMES), level, draw(_DIAGNOSTIC_TEXT), pairs))
         if draw(st.integers(0, 5)) == 0:
             statuses = statuses + [Status('cc_log: %d' % i, 0, '', []) for i in range(100)]  # more than MAX_NODES
         now = draw(st.one_of(st.just(now), st.floats(now - 100, now + 100), st.floats(allow_nan=True)))

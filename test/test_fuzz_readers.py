@@ -363,9 +363,32 @@ def test_a_damaged_index_after_a_good_one_is_a_value_error(compression, tmp_path
     """bag_reader read the index of the first chunk as views of the file's map; the second chunk's damaged
     index raised, and closing the map under those views turned the one-line ValueError into a BufferError
     traceback (``cannot close exported pointers exist``)."""
-    _, data = dict((name, (name, data)) for name, data in fs.valid_bags())['plain_%s.bag' % compression]
+    data = dict(fs.valid_bags())['plain_%s.bag' % compression]
     path = str(tmp_path / 'damaged.bag')
     with open(path, 'wb') as stream:
         stream.write(_with_index_version(data, 1, 2))
     with pytest.raises(ValueError, match='damaged.bag: bag is truncated or damaged \\(index of the chunk at byte'):
+        list(bag_reader.read_raw(path, BAG_TOPICS))
+
+
+def _with_chunk_bytes_flipped(data, compression):
+    """``data`` (a bag) with bytes 12 to 60 of its first chunk's data flipped (its header and sizes intact)."""
+    records = fs.parse_records(data, len(b'#ROSBAG V2.0\n'))
+    chunk = next(record for record in records if dict(record[0]).get(b'op') == b'\x05')
+    assert dict(chunk[0])[b'compression'] == compression.encode()
+    chunk[1] = chunk[1][:12] + bytes(b ^ 0xff for b in chunk[1][12:60]) + chunk[1][60:]
+    return b'#ROSBAG V2.0\n' + b''.join(fs.record_bytes(fields, body) for fields, body in records)
+
+
+@pytest.mark.parametrize('compression', ['bz2', 'lz4'])
+def test_a_chunk_that_does_not_decompress_is_a_value_error_through_rosbag(compression, tmp_path):
+    """Through rosbag (``bag_open.read_raw``: the reader of encrypted bags) a compressed chunk that does not
+    decompress raised roslz4's or bz2's OSError, a traceback where every other damage is one line."""
+    data = dict(fs.valid_bags())['plain_%s.bag' % compression]
+    path = str(tmp_path / 'damaged.bag')
+    with open(path, 'wb') as stream:
+        stream.write(_with_chunk_bytes_flipped(data, compression))
+    with pytest.raises(ValueError, match='damaged.bag: bag is truncated or damaged'):
+        list(bag_open.read_raw(path, BAG_TOPICS))
+    with pytest.raises(ValueError, match='damaged.bag: bag is truncated or damaged'):
         list(bag_reader.read_raw(path, BAG_TOPICS))
