@@ -12,9 +12,12 @@ Each call must (``bounded``):
   an empty directory inside it, and afterwards the root holds just what the example put there, plus, for
   ``recovery.recover`` only, files in the leftover's own directory).
 
-Settings: a fixed seed (``derandomize``), ``CC_LOG_FUZZ_EXAMPLES`` examples per test (default 20: the file
-runs in under a minute); the longer run of docs/RELIABILITY.md sets it higher.
+Settings: a fixed seed (``derandomize``), ``CC_LOG_FUZZ_EXAMPLES`` examples per test (default 15: the file
+runs in under a minute); the longer run of docs/RELIABILITY.md (``tools/fuzz_long.sh``) runs rounds of more
+examples, each round with its own ``CC_LOG_FUZZ_SEED``; ``CC_LOG_FUZZ_FINDINGS``: a directory where the input
+files of a call past a bound are copied.
 """
+import functools
 import os
 import shutil
 import tempfile
@@ -22,7 +25,7 @@ import time
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 import fuzz_strategies as fs
@@ -37,15 +40,22 @@ from cc_log.storage.bag import bag_open, bag_reader, bag_salvage, bagio
 
 pytest.importorskip('rosbag')
 
-EXAMPLES = int(os.environ.get('CC_LOG_FUZZ_EXAMPLES', '20'))
+EXAMPLES = int(os.environ.get('CC_LOG_FUZZ_EXAMPLES', '15'))
 MAX_SECONDS = 5.0
 MAX_GROWTH_MB = 450
 DEAD_PID = 4194000  # above the kernel's pid_max of 4194304 minus what runs here: no writer holds a leftover
 FINDINGS = os.environ.get('CC_LOG_FUZZ_FINDINGS')  # a directory: inputs past a bound are copied there
 WINDOW = 'cc_log_20150521T191138.027Z_classifier'
 
-FUZZ = settings(max_examples=EXAMPLES, derandomize=True, deadline=None, database=None,
+SEED = os.environ.get('CC_LOG_FUZZ_SEED')  # another seed: other examples (the longer run's rounds)
+FUZZ = settings(max_examples=EXAMPLES, derandomize=SEED is None, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much])
+
+
+def fuzz(test, examples=EXAMPLES):
+    """``test`` (a hypothesis test) with the fuzzing settings: ``examples``, the fixed seed (or SEED's)."""
+    test = settings(FUZZ, max_examples=examples)(test)
+    return seed(int(SEED))(test) if SEED is not None else test
 
 
 def _rss_kb(key):
@@ -141,7 +151,7 @@ class Root(object):
 BAG_TOPICS = ['/odom', '/imu']
 
 
-@FUZZ
+@fuzz
 @given(bag=fs.bags())
 def test_hostile_bags_in_every_bag_reader(bag):
     name, data = bag
@@ -153,7 +163,7 @@ def test_hostile_bags_in_every_bag_reader(bag):
         bounded(bag_salvage.salvage, path)
 
 
-@FUZZ
+@fuzz
 @given(bag=fs.bags())
 def test_hostile_bags_as_windows(bag):
     _, data = bag
@@ -166,7 +176,7 @@ def test_hostile_bags_as_windows(bag):
 
 # -- json-xz -----------------------------------------------------------------------------------------------
 
-@FUZZ
+@fuzz
 @given(data=fs.json_xz_documents())
 def test_hostile_json_xz_documents(data):
     with Root() as root:
@@ -176,7 +186,7 @@ def test_hostile_json_xz_documents(data):
         bounded(formats.get('json-xz').read, path)
 
 
-@FUZZ
+@fuzz
 @given(document=fs.json_xz_documents(), bag=fs.bags(), split=st.booleans())
 def test_hostile_window_sets(document, bag, split):
     with Root() as root:
@@ -206,7 +216,7 @@ def check_recover(root, path, data):
         assert len(records) == outcome.messages, outcome
 
 
-@FUZZ
+@fuzz
 @given(bag=fs.bags(), document=fs.json_xz_documents(), which=st.booleans())
 def test_hostile_leftovers_recovered_in_their_directory_losing_nothing(bag, document, which):
     with Root(allow_in=True) as root:
@@ -224,7 +234,7 @@ def _use_model(path):
     return model
 
 
-@FUZZ
+@fuzz
 @given(data=fs.model_documents())
 def test_hostile_model_files(data):
     with Root() as root:
@@ -237,14 +247,14 @@ def _use_envelope(path):
     return envelope
 
 
-@FUZZ
+@fuzz
 @given(data=fs.envelope_documents())
 def test_hostile_envelope_files(data):
     with Root() as root:
         bounded(_use_envelope, root.put('envelope.json', data))
 
 
-@FUZZ
+@fuzz
 @given(data=fs.vector_documents(), more=fs.vector_documents())
 def test_hostile_feature_vector_files(data, more):
     with Root() as root:
@@ -262,7 +272,7 @@ def _use_config(path):
     return checked
 
 
-@FUZZ
+@fuzz
 @given(data=fs.config_documents())
 def test_hostile_configuration_files(data):
     with Root() as root:
@@ -273,7 +283,7 @@ OPTIONS = list(options.OPTIONS) + list(options.TOPIC_OPTIONS)
 
 
 @pytest.mark.parametrize('option', OPTIONS, ids=[o.name for o in OPTIONS])
-@settings(FUZZ, max_examples=max(5, EXAMPLES // 4))
+@functools.partial(fuzz, examples=max(5, EXAMPLES // 4))
 @given(value=fs.option_values(), text=st.one_of(st.sampled_from(fs._EDGE_TEXTS), st.text(max_size=30)))
 def test_every_option_parser_takes_any_value(option, value, text):
     with Root():
@@ -285,7 +295,7 @@ PARSERS = [spans.Span.parse, spans.seconds, spans.megabytes, spans.Rotation.pars
 
 
 @pytest.mark.parametrize('parser', PARSERS, ids=[p.__qualname__ for p in PARSERS])
-@FUZZ
+@fuzz
 @given(value=fs.option_values())
 def test_every_grammar_parser_takes_any_value(parser, value):
     with Root():
@@ -308,7 +318,7 @@ def _listen(batches):
     return lines
 
 
-@FUZZ
+@fuzz
 @given(batches=fs.diagnostics())
 def test_hostile_diagnostics_in_cclog_top(batches):
     lines = bounded(_listen, batches)
@@ -326,7 +336,7 @@ def _names(name):
     return results
 
 
-@FUZZ
+@fuzz
 @given(names=st.lists(fs.names(), min_size=1, max_size=5))
 def test_hostile_file_names(names):
     with Root() as root:
