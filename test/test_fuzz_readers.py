@@ -34,7 +34,8 @@ from cc_log.core.envelope import Envelope
 from cc_log.core.learning import load_vectors
 from cc_log.core.model import AnomalyModel
 from cc_log.core.safe_input import printable
-from cc_log.offline import top
+from cc_log.nodes import record_main
+from cc_log.offline import stats, sweep, top
 from cc_log.storage import formats, log_format, recovery, window_names
 from cc_log.storage.bag import bag_open, bag_reader, bag_salvage, bagio
 
@@ -300,6 +301,28 @@ PARSERS = [spans.Span.parse, spans.seconds, spans.megabytes, spans.Rotation.pars
 def test_every_grammar_parser_takes_any_value(parser, value):
     with Root():
         bounded(parser, value)
+
+
+def _record_arguments(texts):
+    return record_main.parse([text for text in texts if not text.lstrip('-').startswith('h')])  # not --help
+
+
+TEXT_PARSERS = [record_main.parse_size, record_main.parse_split_size, record_main.parse_duration,
+                functools.partial(stats.parse_time, name='--start'), lambda text: sweep.parse_sweep([text]),
+                lambda text: _record_arguments(text.split())]
+TEXT_PARSER_NAMES = ['record.parse_size', 'record.parse_split_size', 'record.parse_duration', 'stats.parse_time',
+                     'sweep.parse_sweep', 'record.parse']
+
+
+@pytest.mark.parametrize('parser', TEXT_PARSERS, ids=TEXT_PARSER_NAMES)
+@fuzz
+@given(text=st.one_of(st.sampled_from(fs._EDGE_TEXTS), st.text(max_size=40),
+                      st.lists(st.sampled_from(fs._EDGE_TEXTS + ['-a', '-e', '-o', '--split', '--size', '-x', '--node',
+                                                                 '--duration', '1', '-j', '--lz4', '-b', '0']),
+                               max_size=6).map(' '.join)))
+def test_every_command_line_parser_takes_any_text(parser, text):
+    with Root():
+        bounded(parser, text)
 
 
 # -- /diagnostics ------------------------------------------------------------------------------------------
