@@ -4,7 +4,7 @@ against every entry point where outside data comes in.
 Each call must (``bounded``):
 - let nothing but ``ValueError`` escape (``cc_log.errors``' classes are ValueErrors);
 - finish within ``MAX_SECONDS`` of CPU time (the machine is shared: CPU time, not wall time, is what the
-  reader spends);
+  reader spends), and within ``MAX_WALL_SECONDS`` of wall time (a call that waits);
 - grow the resident set by at most ``MAX_GROWTH_MB`` at its peak (``VmHWM`` reset before each call: what the
   call touched, not what it reserved; a ``cclog`` process itself takes ~150 MB, so this keeps a command under
   the 600 MB of offline tools);
@@ -20,6 +20,7 @@ files of a call past a bound are copied.
 import functools
 import os
 import shutil
+import signal
 import tempfile
 import time
 
@@ -43,6 +44,7 @@ pytest.importorskip('rosbag')
 
 EXAMPLES = int(os.environ.get('CC_LOG_FUZZ_EXAMPLES', '15'))
 MAX_SECONDS = 5.0
+MAX_WALL_SECONDS = 60  # a call that waits (no CPU spent) fails too; generous: the machine may be shared
 MAX_GROWTH_MB = 450
 DEAD_PID = 4194000  # above the kernel's pid_max of 4194304 minus what runs here: no writer holds a leftover
 FINDINGS = os.environ.get('CC_LOG_FUZZ_FINDINGS')  # a directory: inputs past a bound are copied there
@@ -68,6 +70,15 @@ def _rss_kb(key):
     raise ValueError('/proc/self/status: no %s' % key)
 
 
+class _Hung(BaseException):
+    """Raised in a call still running after MAX_WALL_SECONDS (a BaseException: no reader's ``except Exception``
+    turns it into a ValueError)."""
+
+
+def _hung(signum, frame):
+    raise _Hung('still running after %d s of wall time (waiting on something?)' % MAX_WALL_SECONDS)
+
+
 def _reset_peak():
     """Make ``VmHWM`` start again from the resident set now (``clear_refs`` 5, Linux 4.0)."""
     with open('/proc/self/clear_refs', 'w') as stream:
@@ -80,12 +91,16 @@ def bounded(call, *args):
     _reset_peak()
     before = _rss_kb('VmRSS')
     started = time.process_time()
+    signal.signal(signal.SIGALRM, _hung)
+    signal.alarm(MAX_WALL_SECONDS)
     try:
         result = call(*args)
         if hasattr(result, '__next__'):
             result = list(result)
     except ValueError as error:
         result = error
+    finally:
+        signal.alarm(0)
     spent = time.process_time() - started
     grown = (_rss_kb('VmHWM') - before) / 1e3
     if (spent >= MAX_SECONDS or grown >= MAX_GROWTH_MB) and FINDINGS:
