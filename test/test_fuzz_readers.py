@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 import fuzz_strategies as fs
-from cc_log.core import config, options, spans
+from cc_log.core import config, options, safe_files, spans
 from cc_log.core.envelope import Envelope
 from cc_log.core.learning import load_vectors
 from cc_log.core.model import AnomalyModel
@@ -46,7 +46,7 @@ EXAMPLES = int(os.environ.get('CC_LOG_FUZZ_EXAMPLES', '15'))
 MAX_SECONDS = 5.0
 MAX_WALL_SECONDS = 60  # a call that waits (no CPU spent) fails too; generous: the machine may be shared
 MAX_GROWTH_MB = 450
-DEAD_PID = 4194000  # above the kernel's pid_max of 4194304 minus what runs here: no writer holds a leftover
+DEAD_PID = safe_files.PID_MAX + 1  # names no process (``safe_files.pid_of``): no writer holds the leftover
 FINDINGS = os.environ.get('CC_LOG_FUZZ_FINDINGS')  # a directory: inputs past a bound are copied there
 WINDOW = 'cc_log_20150521T191138.027Z_classifier'
 
