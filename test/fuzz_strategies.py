@@ -329,7 +329,8 @@ def diagnostics(draw):
             statuses.append(Status(draw(_NODE_NAMES), level, draw(_DIAGNOSTIC_TEXT), pairs))
         if draw(st.integers(0, 5)) == 0:
             statuses = statuses + [Status('cc_log: %d' % i, 0, '', []) for i in range(100)]  # more than MAX_NODES
-        now = draw(st.one_of(st.just(now), st.floats(now - 100, now + 100), st.floats(allow_nan=True)))
+        near = st.floats(now - 100, now + 100) if math.isfinite(now) else st.just(0.0)
+        now = draw(st.one_of(st.just(now), near, st.floats(allow_nan=True)))
         batches.append((statuses, now))
     return batches
 
