@@ -118,7 +118,7 @@ def read_raw(path, topics):
                 if known is None or known[0] is not header:
                     known = headers[id(header)] = (header, raw_message.text_header(header))
                 yield Record(t.to_sec(), topic, None, 0, msg[1], known[1])
-        except (rosbag.ROSBagException, struct.error, EOFError) as error:
+        except (rosbag.ROSBagException, struct.error, EOFError, OSError) as error:  # OSError: roslz4, bz2
             raise ValueError('%s: bag is truncated or damaged (%s)' % (path, _one_line(error)))
     finally:
         bag.close()

@@ -21,7 +21,7 @@ from cc_log.storage.bag import bag_open
 from cc_log.core import raw_message
 from cc_log.storage.bag.bag_format import OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA
 from cc_log.storage.bag.bag_salvage import (
-    MAX_CHUNK_BYTES, field_u32, lz4_decompress, map_file, read_record)
+    MAX_CHUNK_BYTES, close_map, field_u32, lz4_decompress, map_file, read_record)
 from cc_log.core.records import records_of
 
 __all__ = ['read_raw', 'read_runs', 'MAX_CHUNK_BYTES']
@@ -85,7 +85,7 @@ class _Reader(object):
 
     def records(self):
         """Yield lists of the records (see ``read_raw``), a run of one chunk's at a time."""
-        data, size = map_file(self.path)
+        data, _ = map_file(self.path)
         try:
             try:
                 index = self._index(data)
@@ -93,8 +93,7 @@ class _Reader(object):
                 raise self._damaged(error)
             yield from self._records(data, index)
         finally:
-            if size:
-                data.close()
+            close_map(data)
 
     def _index(self, data):
         """``(connection number, chunk number, bag time, offset)`` arrays of every message, in rosbag's order."""

@@ -34,8 +34,7 @@ def salvage(path):
     try:
         found = _Salvage(data).run()
     finally:
-        if size:
-            data.close()
+        close_map(data)
     metadata, records = _window_of(found)
     headers_only = not records and not found.undecoded and (
         found.decoded == size or found.header_end is None and size <= _BAG_HEADER_END)
@@ -43,7 +42,7 @@ def salvage(path):
 
 
 def map_file(path, follow=True):
-    """``(a read-only map of the file at path, its size)`` (``b''`` for an empty file; close the map when done);
+    """``(a read-only map of the file at path, its size)`` (``b''`` for an empty file; ``close_map`` it when done);
     ``follow``: through a symbolic link too."""
     fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC | (0 if follow else os.O_NOFOLLOW))
     try:
@@ -51,6 +50,17 @@ def map_file(path, follow=True):
         return (mmap.mmap(fd, size, access=mmap.ACCESS_READ) if size else b''), size
     finally:
         os.close(fd)
+
+
+def close_map(data):
+    """Close a map of ``map_file`` (``b''``: none). One that views still use (numpy arrays of it, held by the
+    traceback of an error raised while reading) is closed when the last of them goes: closing it now would
+    raise BufferError in place of that error."""
+    if isinstance(data, mmap.mmap):
+        try:
+            data.close()
+        except BufferError:
+            pass
 
 
 # -- reading a rosbag 2.0 file cut off mid-write ------------------------------------------------------------
