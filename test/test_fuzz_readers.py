@@ -30,7 +30,7 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 import fuzz_strategies as fs
-from cc_log.core import config, options, safe_files, spans
+from cc_log.core import config, options, raw_message, safe_files, spans
 from cc_log.core.envelope import Envelope
 from cc_log.core.learning import load_vectors
 from cc_log.core.model import AnomalyModel
@@ -284,7 +284,7 @@ def test_hostile_feature_vector_files(data, more):
 def _use_config(path):
     data = config.load_file(path)
     checked = config.Config.from_dict(data, path)
-    checked.build_triggers(AnomalyModel.load, config.installed_class)
+    checked.build_triggers(AnomalyModel.load, raw_message.installed_class)
     return checked
 
 
