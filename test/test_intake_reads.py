@@ -39,3 +39,42 @@ def test_set_receive_bytes_sizes_the_open_connections_and_those_to_come():
         subscriber.impl.connections.remove(connection)
     finally:
         subscriber.unregister()
+
+
+class Sink(object):
+    """Takes the intake's batches (as SmartLogger.on_records)."""
+
+    def __init__(self):
+        self.records = []
+
+    def on_records(self, records):
+        self.records.extend(records)
+
+
+def test_the_feeder_sizes_a_topics_reads_by_its_first_message_and_makes_them_large_at_a_heavy_one():
+    import threading
+    from cc_log.core.raw_message import class_header
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import Image
+    topics = {'/cc_log_test_odom': Odometry, '/cc_log_test_camera': Image, '/cc_log_test_grows': Odometry}
+    sink = Sink()
+    feeder = intake.Intake.__new__(intake.Intake)  # the feeder's part, with real subscribers, never connected
+    feeder.sink, feeder.decoder, feeder.dropped = sink, intake.MessageDecoder(), 0
+    feeder._typed, feeder._large_reads, feeder._lock = set(), set(), threading.Lock()
+    feeder.subscribers = {topic: rospy.Subscriber(topic, rospy.AnyMsg, lambda msg: None, queue_size=None,
+                                                  buff_size=intake.SMALL_RECEIVE_BYTES) for topic in topics}
+    batch = []
+    for topic, size in (('/cc_log_test_odom', 700), ('/cc_log_test_camera', 1000), ('/cc_log_test_grows', 700),
+                        ('/cc_log_test_odom', 700), ('/cc_log_test_grows', HEAVY_BYTES)):
+        msg = rospy.AnyMsg()
+        msg._buff, msg._connection_header = bytes(size), class_header(topic, topics[topic])
+        batch.append((topic, msg, rospy.Time(1, 0)))
+    try:
+        assert feeder._feed_records(batch) is True
+        reads = {topic: subscriber.impl.buff_size for topic, subscriber in feeder.subscribers.items()}
+    finally:
+        for subscriber in feeder.subscribers.values():
+            subscriber.unregister()
+    assert len(sink.records) == 5 and feeder.dropped == 0
+    assert reads == {'/cc_log_test_odom': intake.SMALL_RECEIVE_BYTES, '/cc_log_test_camera': intake.LARGE_RECEIVE_BYTES,
+                     '/cc_log_test_grows': intake.LARGE_RECEIVE_BYTES}

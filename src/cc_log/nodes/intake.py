@@ -8,7 +8,8 @@ takes batches (``SmartLogger``), else each to ``sink.on_raw(topic, bytes, connec
 serialized messages, else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
 message definition ``safe_input.check_definition`` refuses is never decoded (``MessageDecoder``).
 ``Intake.subscribe(topic)`` adds a topic at any time; ``Intake.sync()`` waits until what was received before
-the call has been handed to the sink (a manual trigger then sees it).
+the call has been handed to the sink (a manual trigger then sees it). rospy reads each topic's socket 64 kB at a
+time, 1 MB once the topic's messages prove heavy (``receive_bytes``; docs/COST.md).
 
 A batch is what arrived during ``batch_delay`` seconds (0.5) since its first message, or less when
 ``BATCH_MESSAGES`` messages or an eighth of the queue's byte bound came first: the sink's fixed cost per batch is
