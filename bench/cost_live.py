@@ -45,6 +45,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
+TARGET = 0.7  # node CPU / rosbag record CPU of the same light topics in the same run (issue 43)
 STAGES = ('classifier CPU s', 'feeder CPU s', 'writer CPU s')  # the node's thread CPU times on /diagnostics
 
 
@@ -337,8 +338,8 @@ def main(argv=None):
                  'Where the node\'s CPU goes (thread CPU times the node reports on /diagnostics at the end):')
     for r in results:
         ratio = r['node_cpu'] / r['record_cpu']
-        print('target node CPU <= rosbag record CPU at %d + %d Hz: %.2fx -> %s' % (
-            r['rate'], r['rate'], ratio, 'met' if ratio <= 1.0 else 'NOT met'))
+        print('target node CPU <= %.1fx rosbag record CPU at %d + %d Hz: %.2fx -> %s' % (
+            TARGET, r['rate'], r['rate'], ratio, 'met' if ratio <= TARGET else 'NOT met'))
     print('total %.1f s' % (time.time() - started))
     return 0
 

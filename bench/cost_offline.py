@@ -45,6 +45,8 @@ from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 from cc_log.offline.replay import replay  # noqa: E402
 
+TARGET = 0.9  # replay CPU / a plain deserializing read's CPU (issue 43)
+
 
 def plain_read(path, topics):
     n = 0
@@ -287,9 +289,9 @@ def main(argv=None):
                          '%.0f' % (r['replayed'] / r['replay_cpu']), '%.0f%%' % (100 * ratio_cpu),
                          '%.0f' % (r['messages'] / r['read_wall']), '%.0f' % (r['replayed'] / r['replay_wall']),
                          '%.0f%%' % (100 * ratio_wall), r['windows']])
-            print('target replay CPU <= read CPU (replay speed >= 100%% of read speed), %s: %.0f%% (CPU time), '
-                  '%.0f%% (wall) -> %s' % (name, 100 * ratio_cpu, 100 * ratio_wall,
-                                           'met' if ratio_cpu >= 1.0 else 'NOT met'))
+            print('target replay CPU <= %.1fx read CPU (replay speed >= %.0f%% of read speed), %s: %.0f%% (CPU time), '
+                  '%.0f%% (wall) -> %s' % (TARGET, 100 / TARGET, name, 100 * ratio_cpu, 100 * ratio_wall,
+                                           'met' if ratio_cpu >= 1 / TARGET else 'NOT met'))
         print()
         common.table(['bag', 'messages', 'read msg/CPU s', 'replay msg/CPU s', 'replay/read (CPU)',
                       'read msg/s wall', 'replay msg/s wall', 'replay/read (wall)', 'windows'], rows,

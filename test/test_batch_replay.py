@@ -219,6 +219,7 @@ def test_a_record_that_cannot_be_decoded_stops_a_batch_after_the_records_before_
 
 def test_the_intake_feeds_a_drained_batch_at_once_and_drops_only_a_message_that_cannot_be_decoded(sim_case,
                                                                                                   tmp_path):
+    import threading
     rospy = pytest.importorskip('rospy')
     from cc_log.nodes.intake import Intake, MessageDecoder
     bags, _ = sim_case
@@ -230,6 +231,7 @@ def test_the_intake_feeds_a_drained_batch_at_once_and_drops_only_a_message_that_
     logger.on_records = lambda batch: (calls.append(len(batch)), feed(batch))
     intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers, no thread
     intake.sink, intake.decoder, intake.dropped = logger, MessageDecoder(), 0
+    intake._typed, intake._large_reads, intake.subscribers, intake._lock = set(), set(), {}, threading.Lock()
     batch = []
     for k, record in enumerate(records):
         msg = rospy.AnyMsg()
@@ -293,6 +295,7 @@ def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, t
     intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers
     intake.sink, intake.decoder, intake.dropped, intake.cpu_seconds = logger, MessageDecoder(), 0, 0.0
     intake.queue, intake.batch_delay = IntakeQueue(1000, 10 ** 7), 3600.0
+    intake._typed, intake._large_reads, intake.subscribers, intake._lock = set(), set(), {}, threading.Lock()
     intake._thread = threading.Thread(target=intake._feed, daemon=True)
     intake._thread.start()
     for record in records:

@@ -8,7 +8,8 @@ takes batches (``SmartLogger``), else each to ``sink.on_raw(topic, bytes, connec
 serialized messages, else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
 message definition ``safe_input.check_definition`` refuses is never decoded (``MessageDecoder``).
 ``Intake.subscribe(topic)`` adds a topic at any time; ``Intake.sync()`` waits until what was received before
-the call has been handed to the sink (a manual trigger then sees it).
+the call has been handed to the sink (a manual trigger then sees it). rospy reads each topic's socket 64 kB at a
+time, 1 MB once the topic's messages prove heavy (``receive_bytes``; docs/COST.md).
 
 A batch is what arrived during ``batch_delay`` seconds (0.5) since its first message, or less when
 ``BATCH_MESSAGES`` messages or an eighth of the queue's byte bound came first: the sink's fixed cost per batch is
@@ -25,6 +26,7 @@ import rospy
 from cc_log import errors
 from cc_log.core import options
 from cc_log.core import raw_message
+from cc_log.core import window_prep
 from cc_log.core.records import Record
 
 DEFAULT_MAX_MESSAGES = options.get('intake_max_messages').default  # beyond, messages are dropped and counted
@@ -32,8 +34,37 @@ DEFAULT_MAX_MB = options.get('intake_max_mb').default              # MB of seria
 FEED_BATCH_DELAY = 0.5        # seconds at most the feeder lets messages gather before draining them in a batch
 BATCH_MESSAGES = 1024         # messages that make a batch before the delay is over
 BATCH_BYTES_SHARE = 8         # ... or this share of the queue's byte bound (an eighth)
-RECEIVE_BYTES = 1 << 20       # bytes rospy reads from a topic's socket at a time (its default, 64 kB, takes a
-#                               camera frame in 15 reads, each a pass of rospy's Python receive loop)
+SMALL_RECEIVE_BYTES = 1 << 16  # bytes rospy reads from a light topic's socket at a time (its default): a larger
+#                                read costs more than the message (recv(1 MB) of a 700-byte odometry: ~14 us of CPU,
+#                                recv(64 kB): ~1.3 us; Python allocates and shrinks the whole size each read)
+LARGE_RECEIVE_BYTES = 1 << 20  # ... of a heavy topic's (64 kB takes a camera frame in 15 reads, each a pass of
+#                                rospy's Python receive loop)
+HEAVY_TYPES = frozenset(['sensor_msgs/Image', 'sensor_msgs/CompressedImage', 'sensor_msgs/PointCloud2',
+                         'sensor_msgs/PointCloud', 'sensor_msgs/LaserScan', 'sensor_msgs/MultiEchoLaserScan',
+                         'nav_msgs/OccupancyGrid', 'theora_image_transport/Packet'])
+
+
+def receive_bytes(msg_type, size):
+    """The bytes rospy should read at a time from the socket of a topic of ``msg_type`` whose messages are
+    ``size`` serialized bytes: ``LARGE_RECEIVE_BYTES`` for the heavy types (``HEAVY_TYPES``) and messages of
+    ``window_prep.HEAVY_BYTES`` or more, else ``SMALL_RECEIVE_BYTES``."""
+    if msg_type in HEAVY_TYPES or size >= window_prep.HEAVY_BYTES:
+        return LARGE_RECEIVE_BYTES
+    return SMALL_RECEIVE_BYTES
+
+
+def set_receive_bytes(subscriber, buff_size):
+    """Make rospy read ``buff_size`` bytes at a time on every connection of ``subscriber``, those to come
+    (``impl.set_buff_size``) and those open (their protocol's ``buff_size``, read before each ``recv``: rospy's
+    internals, tcpros_base.TCPROSTransport.receive_once; a rospy without them keeps its reads as they are)."""
+    impl = getattr(subscriber, 'impl', None)
+    if impl is None or getattr(impl, 'buff_size', buff_size) == buff_size:
+        return
+    impl.set_buff_size(buff_size)
+    for connection in list(getattr(impl, 'connections', ())):
+        protocol = getattr(connection, 'protocol', None)
+        if protocol is not None and hasattr(protocol, 'buff_size'):
+            protocol.buff_size = buff_size
 
 
 class IntakeQueue(object):
@@ -190,6 +221,7 @@ class Intake(object):
         self.sink = sink
         self.on_new_topic = on_new_topic
         self._typed = set()               # topics whose first message was accepted
+        self._large_reads = set()         # topics read LARGE_RECEIVE_BYTES at a time
         self.tcp_nodelay = bool(tcp_nodelay)
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
@@ -224,7 +256,7 @@ class Intake(object):
     def _subscribe(self, resolved):
         self.queue.listen(resolved)  # its rate is 0 until its first message
         self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
-                                                      queue_size=None, buff_size=RECEIVE_BYTES,
+                                                      queue_size=None, buff_size=SMALL_RECEIVE_BYTES,
                                                       tcp_nodelay=self.tcp_nodelay)
         return resolved
 
@@ -321,13 +353,34 @@ class Intake(object):
         return True
 
     def _accepts(self, msg, topic):
-        """Whether the decoder accepts the serialized ``msg``; the first of each topic goes to ``on_new_topic``."""
+        """Whether the decoder accepts the serialized ``msg``; the first of each topic goes to ``on_new_topic``
+        (and each sizes the topic's reads: ``_size_reads``)."""
         if not self.decoder.accepts(msg._connection_header, topic):
             return False
-        if self.on_new_topic is not None and topic not in self._typed:
-            self._typed.add(topic)
+        first = self._size_reads(msg, topic)
+        if first and self.on_new_topic is not None:
             self.on_new_topic(topic, msg._connection_header.get('type', ''))
         return True
+
+    def _size_reads(self, msg, topic):
+        """Size the reads of ``topic``'s sockets by its first message (``receive_bytes`` of its type and size),
+        and make them large at a later message of ``window_prep.HEAVY_BYTES`` or more; True at the first."""
+        size = len(msg._buff)
+        first = topic not in self._typed
+        if first:
+            self._typed.add(topic)
+            buff_size = receive_bytes(msg._connection_header.get('type', ''), size)
+        elif size >= window_prep.HEAVY_BYTES and topic not in self._large_reads:
+            buff_size = LARGE_RECEIVE_BYTES
+        else:
+            return False
+        if buff_size == LARGE_RECEIVE_BYTES:
+            self._large_reads.add(topic)
+        with self._lock:
+            subscriber = self.subscribers.get(topic)
+        if subscriber is not None:
+            set_receive_bytes(subscriber, buff_size)
+        return first
 
     def _feed_batch(self, records):
         """``sink.on_records(records)``; a record that cannot be decoded is dropped (and counted), the rest fed."""
@@ -353,6 +406,8 @@ class Intake(object):
                     return
                 self.sink.on_raw(topic, msg._buff, msg._connection_header, self._receipt(receipt))
                 return
+            if isinstance(msg, rospy.AnyMsg):
+                self._size_reads(msg, topic)
             decoded = self.decoder.decode(msg, topic)
             if decoded is None:  # refused (warned once by the decoder)
                 self.dropped += 1
