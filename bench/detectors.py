@@ -28,7 +28,11 @@ Detectors, all on the same windows (1 s, every 0.25 s) of the same 19 envelope f
 - ``cclog``: cc_log's defaults as a user runs them: ``cclog learn-envelope`` of the training bags (the envelope
   with its joint check) and ``cclog replay --model envelope.json`` of every held-out bag: its windows, its triggers
   (``--cclog classifier``: the classifier's way instead, ``cclog collect`` / ``learn`` of the training bags and
-  ``cclog replay`` with the model, detection_heldout.py's ``defaults``).
+  ``cclog replay`` with the model, detection_heldout.py's ``defaults``);
+- with ``--candidates``, the combinations measured to choose that default (``Either``: ``a|b`` flags what either
+  part flags, each at its base level at level 2): ``env2|maha4`` (the default's rule on the bench's windows: the
+  envelope at 2x or the robust distance at level 4), ``env2|maha3``, ``env1.75|maha4``, ``env2|2nd1.5`` (or two
+  features beyond 1.5x at once), ``env2|maha4|knnmax3``, ``env2|maha4|lof3``.
 
 The threshold rule, the same for every window detector: ``zero - level x (zero - extreme)`` where ``extreme`` is
 the most anomalous training score and ``zero`` the median training score (the envelope: its physical zero, ratio 0,
@@ -107,6 +111,36 @@ class Envelope(Detector):
 
     def score(self, X):
         return -self.ratios(X).max(axis=1) if len(X) else np.zeros(0)
+
+
+class Either(Detector):
+    """Flags a window when any of its parts would at its own level: parts ``[(detector, base level)]``, each at
+    ``base x level / 2``, so level 2 is every part at its base level (the default's shape: the envelope at 2x or
+    the robust distance at level 4). A part reaches level ``(zero - score) / (zero - extreme)``; the score is
+    minus the largest of ``2 x that / base``."""
+
+    def __init__(self, parts):
+        self.parts = parts
+        self.zero, self.extreme = 0.0, -1.0
+
+    def fit(self, X):
+        for detector, _ in self.parts:
+            if not hasattr(detector, 'zero'):
+                detector.fit(X)
+        return self
+
+    def score(self, X):
+        if not len(X):
+            return np.zeros(0)
+        reached = [2.0 * (d.zero - d.score(X)) / (d.zero - d.extreme) / base for d, base in self.parts]
+        return -np.max(reached, axis=0)
+
+
+class SecondLargest(Envelope):
+    """The envelope's second largest ratio: two features beyond their limits at once."""
+
+    def score(self, X):
+        return -np.sort(self.ratios(X), axis=1)[:, -2] if len(X) else np.zeros(0)
 
 
 class Standardised(Detector):
@@ -207,12 +241,13 @@ class Tails(object):
         return -per.sum(axis=1)
 
 
-def make_detectors():
-    """The window detectors, by name, unfitted (cclog runs through the CLI)."""
+def make_detectors(candidates=False):
+    """The window detectors, by name, unfitted (cclog runs through the CLI); with ``candidates`` also the
+    combinations measured to choose cc_log's default (``Either``: ``a|b`` flags what either part flags)."""
     from sklearn.ensemble import IsolationForest
     from sklearn.neighbors import LocalOutlierFactor
     from sklearn.svm import OneClassSVM
-    return collections.OrderedDict([
+    detectors = collections.OrderedDict([
         ('envelope', Envelope()),
         ('knn-mean', Standardised(lambda: Knn('mean'))),
         ('knn-max', Standardised(lambda: Knn('max'))),
@@ -225,6 +260,16 @@ def make_detectors():
         ('ecod', Standardised(lambda: Tails(copod=False))),
         ('copod', Standardised(lambda: Tails(copod=True))),
     ])
+    if candidates:
+        out = detectors
+        env, maha, second = out['envelope'], out['mahalanobis'], SecondLargest()
+        out['env2|maha4'] = Either([(env, 2.0), (maha, 4.0)])       # the default (cclog learn-envelope)
+        out['env2|maha3'] = Either([(env, 2.0), (maha, 3.0)])
+        out['env1.75|maha4'] = Either([(env, 1.75), (maha, 4.0)])
+        out['env2|2nd1.5'] = Either([(env, 2.0), (second, 1.5)])
+        out['env2|maha4|knnmax3'] = Either([(env, 2.0), (maha, 4.0), (out['knn-max'], 3.0)])
+        out['env2|maha4|lof3'] = Either([(env, 2.0), (maha, 4.0), (out['lof'], 3.0)])
+    return detectors
 
 
 # -- data ----------------------------------------------------------------------------------------------------------
@@ -331,7 +376,8 @@ def learn_envelope(train, tmp):
     return path, [lines[0], lines[-1]]
 
 
-def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, default='envelope'):
+def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, default='envelope',
+             candidates=False):
     """Every detector on one robot: {'robot', 'train_s', 'hours', 'rate', 'lines', 'events' [{type, extreme}],
     'stats' {detector: {level: tally}}, 'seconds'}. ``default``: how cc_log's defaults run (``envelope``: cclog
     learn-envelope, ``classifier``: cclog collect / learn)."""
@@ -340,7 +386,7 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
     train, rest = heldout.split(runs, min(train_seconds, fraction * total))
     # each training run apart: runs of one robot may be stamped in any order
     envelope = sim.Limits(*np.max([sim.nominal_envelope(records, TOPIC) for _, records in train], axis=0))
-    detectors = make_detectors()
+    detectors = make_detectors(candidates)
     X = np.concatenate([windows(records)[1] for _, records in train])
     for detector in detectors.values():
         detector.fit(X)
@@ -573,6 +619,8 @@ def main(argv=None):
     parser.add_argument('--no-cclog', action='store_true', help="leave cc_log's defaults out (faster)")
     parser.add_argument('--cclog', choices=('envelope', 'classifier'), default='envelope',
                         help="cc_log's defaults: the envelope file (default) or the classifier's collect / learn")
+    parser.add_argument('--candidates', action='store_true',
+                        help="also the combinations measured to choose cc_log's default (env2|maha4 is it)")
     parser.add_argument('--out', default=os.path.join(tempfile.gettempdir(), 'cc_log_detectors'),
                         help='where the curve PNG goes')
     parser.add_argument('--events', action='store_true', help='one line per injected event: its extreme, who caught it')
@@ -600,7 +648,7 @@ def main(argv=None):
         tmp = tempfile.mkdtemp(prefix='cc_log_detectors_')
         try:
             results.append(evaluate(robot, load_robot(robot, args.data), seeds, args.train_minutes * 60.0,
-                                    args.train_fraction, tmp, not args.no_cclog, args.cclog))
+                                    args.train_fraction, tmp, not args.no_cclog, args.cclog, args.candidates))
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
         report_robot(results[-1], args.level)

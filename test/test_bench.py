@@ -252,6 +252,26 @@ def test_detectors_quick_prints_every_detector_and_the_curve(tmp_path):
     assert len(targets(out)) == 2
 
 
+def test_a_combination_flags_exactly_what_one_of_its_parts_flags_at_its_base_level():
+    """``Either`` (the candidates of cc_log's default): at level 2 a window is flagged when a part would be at its
+    own base level, at other levels each part's level scales with it."""
+    sys.path.insert(0, BENCH)
+    import detectors
+    from cc_log.features.envelope import ENVELOPE_COLUMNS
+    rng = np.random.RandomState(1)
+    train = np.abs(rng.normal(1.0, 0.3, size=(400, len(ENVELOPE_COLUMNS))))
+    windows = np.abs(rng.normal(1.0, 0.9, size=(3000, len(ENVELOPE_COLUMNS))))
+    found = detectors.make_detectors(candidates=True)
+    env, maha, either = found['envelope'], found['mahalanobis'], found['env2|maha4']
+    for detector in (env, maha, either):
+        detector.fit(train)
+    for level in (1.0, 2.0, 3.0):
+        parts = (env.score(windows) < env.threshold(level)) | (maha.score(windows) < maha.threshold(2 * level))
+        flagged = either.score(windows) < either.threshold(level)
+        assert flagged.any() and not flagged.all()
+        assert np.array_equal(flagged, parts), level
+
+
 def test_detectors_flag_what_lies_beyond_the_training_windows():
     """Every window detector, fitted on synthetic nominal windows, flags a window with every feature far beyond
     them at the table's level, and the typical window never; a window with one feature 5x its training maximum is
