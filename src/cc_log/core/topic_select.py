@@ -194,8 +194,8 @@ class TopicSelection(object):
         known = self._matched.get(topic)
         if known is not None:
             return known
-        if len(topic) > MAX_NAME_CHARS and any(match_work(p.parsed, len(topic)) > MAX_MATCH_WORK
-                                                for p in self.regex + self.exclude):
+        patterns = self.regex + self.exclude
+        if len(topic) > MAX_NAME_CHARS and any(match_work(p.parsed, len(topic)) > MAX_MATCH_WORK for p in patterns):
             self.too_long += 1
         if any(pattern.fullmatch(topic) for pattern in self.exclude):
             selected = False
