@@ -189,7 +189,8 @@ def _scalar(value, name):
 
 # The sane ranges (``spans.Range``) of the options' quantities: an accepted value is a sane one.
 DAY = 86400.0
-MIN_MB = 0.001            # a kB: the smallest byte size that means something (a sub-byte split meant "never")
+MIN_MB = 1e-6             # a byte: the smallest size on disk (a sub-byte split meant "never")
+MIN_MEMORY_MB = 0.001     # a kB: the smallest memory bound
 MAX_MEMORY_MB = 1e6       # a TB of memory
 MAX_DISK_MB = 1e9         # a PB of disk
 MAX_TOPICS = 10000        # topics named in one option
@@ -226,15 +227,15 @@ COMMAND = characters(Grammar(_text_or_list, 'COMMAND', 'an argument list or a st
 NAME_PREFIX = characters(Grammar(lambda value, name: log_format.file_prefix(value, name)[:-1], 'NAME',
                                  'a plain part of a file name (no `/`, no control character, not starting with `.`)'),
                          1, MAX_NAME_CHARS)
-COUNT = number(Range(1, 10 ** 7, 'files', off=0), 'N', 'a whole number')
-MEMORY = size(MIN_MB, MAX_MEMORY_MB)
+COUNT = number(Range(1, 10 ** 7, 'files', off=0), 'N', 'a whole number', True)
+MEMORY = size(MIN_MEMORY_MB, MAX_MEMORY_MB)
 WINDOW_LENGTH = span(*WINDOW_LENGTHS)
 FEATURE_WINDOW = span(*features.WINDOW_RANGES)
 CLASSIFY_SPAN = span(*CLASSIFY_EVERY)
 WINDOWS_PER_HOUR = number(Range(0.01, MAX_PER_HOUR, 'windows/h', off=0), 'N', 'a number of windows, e.g. 0.1 .. 60')
 DIAGNOSTIC_PERIOD = number(Range(0.01, MAX_DIAGNOSTIC_PERIOD, 's', off=0, form=repr), 'SECONDS', 'seconds')
 INTAKE_COUNT = number(Range(1, 10 ** 7, 'messages'), 'N', 'a whole number', True)
-INTAKE_SIZE = size(MIN_MB, MAX_MEMORY_MB, None)
+INTAKE_SIZE = size(MIN_MEMORY_MB, MAX_MEMORY_MB, None)
 CHUNK_KB = number(Range(1, 1 << 20, 'KB'), 'KB', 'a whole number of KB (1024 bytes)', True)
 #: The grammars of one of a few values: their values are their range.
 CHOICES = (BOOL, FORMAT, RETRIGGER, FEATURE_SET)
