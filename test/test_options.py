@@ -118,7 +118,8 @@ def test_every_option_has_a_sane_range_refused_just_outside_and_accepted_at_its_
             with pytest.raises(ValueError) as error:
                 option.parse(value)
             message = str(error.value)
-            assert message.startswith(name + ': ') and message.endswith(' is outside %s' % str(within)), (value, message)
+            assert message.startswith(name + ': '), (value, message)
+            assert message.endswith(' is outside %s' % str(within)), (value, message)
 
 
 @pytest.mark.parametrize('option, value', [

@@ -13,6 +13,8 @@ from cc_log import sim
 from cc_log.offline import tuning
 from cc_log.features import FeatureConfig, FeatureStream
 from cc_log.core.model import AnomalyModel
+from cc_log.core.records import LogWindow, Trigger
+from cc_log.storage import log_format
 
 from test_cli import fails, ok_json, run
 
@@ -139,8 +141,10 @@ def test_tune_and_plot_read_a_topic_of_two_types_as_the_type_they_need(simulated
     skipped = 'warning: %s: read as /odom nav_msgs/Odometry; skipped 40 std_msgs/String on /odom' % mixed
     assert skipped in result.stderr.splitlines()
     assert json.loads(result.stdout)['hours'] == pytest.approx((records[-1].stamp - records[0].stamp) / 3600.0)
-    empty = tmp_path / 'windows'
-    empty.mkdir()
-    result = run('plot', empty, '--bag', mixed, '--topic', sim.ODOM_TOPIC, '--out', tmp_path / 'plot.png')
+    windows = tmp_path / 'windows'
+    windows.mkdir()
+    log_format.write_window(LogWindow(records[100:140], [Trigger(records[120].stamp, 'test', None)]), str(windows),
+                            'json-xz', {'driving_topic': sim.ODOM_TOPIC})
+    result = run('plot', windows, '--bag', mixed, '--topic', sim.ODOM_TOPIC, '--out', tmp_path / 'plot.png')
     assert result.returncode == 0 and 'Traceback' not in result.stderr, result.stderr[-2000:]
     assert skipped in result.stderr.splitlines() and os.path.getsize(str(tmp_path / 'plot.png')) > 0

@@ -60,10 +60,10 @@ def text():
     lines += ['', '## Per topic (`topic_limits`)', '',
               'A mapping of topic names to these keys, e.g. `{camera/image_raw: {pre: 2s, max_mb: 64}, scan: '
               '{post: 1s}}`; in the configuration file, as the `~topic_limits` parameter or as the `topic_limits` '
-              'launch argument (its YAML text).', '', '| key | value | range | default | what |', '|---|---|---|---|---|']
-    lines += ['| `%s` | %s | %s | `%s` | %s |' % (o.key, o.grammar.text, ranges(o.grammar), options.shown(o.default),
-                                                o.doc)
-              for o in options.TOPIC_OPTIONS]
+              'launch argument (its YAML text).', '', '| key | value | range | default | what |',
+              '|---|---|---|---|---|']
+    lines += ['| `%s` | %s | %s | `%s` | %s |' % (
+        o.key, o.grammar.text, ranges(o.grammar), options.shown(o.default), o.doc) for o in options.TOPIC_OPTIONS]
     return '\n'.join(lines) + '\n'
 
 
