@@ -124,7 +124,7 @@ def test_every_option_has_a_sane_range_refused_just_outside_and_accepted_at_its_
 
 @pytest.mark.parametrize('option, value', [
     ('context_topics', 'odom:1e308'), ('context_rotate', '1e-300'), ('context_rotate', '1ms'), ('rotate', '1ms'),
-    ('window', '1e-300s'), ('split_mb', '0.0000001'), ('split_mb', '1B'), ('diagnostic_period', '1e-300'),
+    ('window', '1e-300s'), ('split_mb', '0.0000001'), ('split_mb', '0.5B'), ('diagnostic_period', '1e-300'),
     ('max_disk_mb', '1e-9'), ('classify_every', '1e-300s'), ('max_windows_per_hour', '1e-300'),
     ('intake_max_mb', '0'), ('max_window', '0')])
 def test_the_values_accepted_that_meant_nothing_or_far_too_much_are_refused(option, value):

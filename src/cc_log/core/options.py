@@ -200,7 +200,6 @@ MARGINS = (Range(0, 10 ** 7, 'messages'), Range(0, DAY, 's'))    # pre, post: up
 WINDOW_LENGTHS = (Range(1, 10 ** 8, 'messages'), Range(0.001, 7 * DAY, 's'))   # windows.max: a week
 STRIDES = Range(1, 10 ** 6, 'messages')
 CLASSIFY_EVERY = (STRIDES, Range(0.001, 3600.0, 's'))   # a classification per message or per ms, up to an hour
-CONTEXT_RATES = Range(0.001, 1000.0, 'Hz', form=lambda hz: '/odom:%r' % hz)   # a context topic's Hz
 
 SPAN = span(*MARGINS)
 DURATION = duration(0, DAY)
@@ -307,16 +306,13 @@ TOPIC_LIMITS = entries(Grammar(parse_topic_limits, 'YAML', 'per topic: {%s} (see
 
 def _context_topics(value, name):
     """The context track's topics (``topic_list``), each ``topic`` or ``topic:Hz`` with its rate within
-    CONTEXT_RATES (``context_track.parse_topics``)."""
-    topics = TOPICS.parse(value, name)
-    for topic, rate in context_track.parse_topics(value, name, context_track.BWI_ALIASES).items():
-        if rate is not None:
-            CONTEXT_RATES.check(rate, value, '%s: %s' % (name, topic))
-    return topics
+    ``context_track.RATES`` (``context_track.parse_topics``)."""
+    context_track.parse_topics(value, name, context_track.BWI_ALIASES)
+    return TOPICS.parse(value, name)
 
 
 CONTEXT_TOPICS = TOPICS._replace(parse=_context_topics, text='topic names, each `topic` or `topic:Hz`',
-                                 ranges=TOPICS.ranges + (CONTEXT_RATES,))
+                                 ranges=TOPICS.ranges + (context_track.RATES,))
 ROUTES = entries(Grammar(lambda value, name: parse_routes(value, formats.names(), name), 'YAML',
                          'a list of {%s}' % ', '.join(ROUTE_KEYS)),
                  100, lambda n: [{'name': 'r%d' % i, 'topics': ['/t%d' % i], 'format': formats.DEFAULT}
