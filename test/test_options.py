@@ -133,3 +133,14 @@ def test_the_values_accepted_that_meant_nothing_or_far_too_much_are_refused(opti
     with pytest.raises(ValueError) as error:
         options.get(option).parse(value)
     assert ' is outside ' in str(error.value) and '\n' not in str(error.value)
+
+
+def test_a_feature_window_has_one_range_wherever_it_is_read():
+    """The node's ~window, a classifier's window and a model file's config share features.WINDOW_RANGES."""
+    from cc_log.features import FeatureConfig, WINDOW_RANGES
+    assert options.get('window').grammar.ranges == WINDOW_RANGES
+    for window in ('1e-300s', '0', '100001', '3601s'):
+        with pytest.raises(ValueError) as error:
+            FeatureConfig('motion', window)
+        assert str(error.value).startswith("window: '%s' is outside " % window)
+    assert FeatureConfig('motion', '10ms').window == '0.01s' and FeatureConfig('motion', 100000).window == '100000'
