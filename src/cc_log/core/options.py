@@ -9,14 +9,16 @@ An ``Option`` may be
 
 and the configuration's checks, the nodes' parameters, the flags and docs/OPTIONS.md all come from here, with
 one grammar per kind of value (``spans``: ``1G`` and ``5m`` mean the same everywhere). A parameter or flag
-overrides the configuration's key.
+overrides the configuration's key. Every grammar states the sane range of what it reads (``Grammar.ranges``,
+``spans.Range``: minimum, maximum, unit, and the value that turns the option off), so an accepted value is a
+sane one; only the grammars of a few named values (``CHOICES``) have none.
 
 ``TOPIC_OPTIONS`` are per topic: the keys of ``topic_limits`` (``{camera/image_raw: {pre: 2s, max_mb: 64}}``),
 read into one ``TopicLimits`` per topic.
 
-To add an option: declare it here and use it where it acts (a per-topic one: a field of ``TopicLimits``,
-read by the window buffer); a launch file passes it as an ``<arg>`` if it should; ``tools/options_doc.py``
-rewrites docs/OPTIONS.md (a test checks that it is current).
+To add an option: declare it here (with a grammar that states its range) and use it where it acts (a per-topic
+one: a field of ``TopicLimits``, read by the window buffer); a launch file passes it as an ``<arg>`` if it
+should; ``tools/options_doc.py`` rewrites docs/OPTIONS.md (a test checks that it is current).
 """
 import argparse
 import collections
