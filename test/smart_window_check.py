@@ -123,7 +123,8 @@ class SmartWindowTest(unittest.TestCase):
                 (('_model:=[1]',), '~model: [1] is not a string'),
                 (('_model:=' + self.model_path, '_post:=99999999999999999999'), '~post: 99999999999999999999 is'),
                 (('_model:=' + self.model_path, '_directory:=[1,2]'), '~directory: [1, 2] is not a string'),
-                (('_model:=' + self.model_path, '_max_buffer_mb:=-5'), '~max_buffer_mb: -5 is not a size >= 0'),
+                (('_model:=' + self.model_path, '_max_buffer_mb:=-5'),
+                 '~max_buffer_mb: -5 is outside 0.001..1e+06 MB (or 0: off)'),
                 (('_model:=' + self.model_path, '_recent:=30'),
                  'triggers[0] (classifier): recent: 30 is longer than the feature window 20'))):
             code, out, err = fx.finish(fx.start('smart_logger.py', '__name:=smart_logger_bad_%d' % number, *args,

@@ -86,3 +86,61 @@ def test_launch_files_pass_only_declared_parameters():
             params = set(re.findall(r'<param\s+name="([a-z_]+)"', stream.read()))
         node = name.split('.')[0]
         assert params and params <= set(o.name for o in options.for_node(node)), (name, params)
+
+
+ALL_OPTIONS = options.OPTIONS + options.TOPIC_OPTIONS
+
+
+def _just_outside(within):
+    """Amounts just below and just above the Range ``within`` that can be written (no negative length)."""
+    if within.unit in spans.COUNTED:
+        below = [within.low - 1] if within.low > 0 or within.unit == 'messages' else []
+        below = [b - 1 if b == within.off else b for b in below]
+        return below + [within.high + 1]
+    step = lambda value: max(abs(value) * 1e-6, 1e-9)  # noqa: E731
+    return [within.low - step(within.low), within.high + step(within.high)]
+
+
+@pytest.mark.parametrize('option', ALL_OPTIONS, ids=lambda o: o.name)
+def test_every_option_has_a_sane_range_refused_just_outside_and_accepted_at_its_bounds(option):
+    """One range per option (``spans.Range``: minimum, maximum, unit; and the value that turns it off): the
+    bounds (and off) are accepted, a value just outside either is refused with '<key>: <value> is outside
+    <min>..<max> <unit>'. Only the grammars of a few named values (true/false, a format) have none."""
+    grammar = option.grammar
+    assert grammar.ranges or grammar in options.CHOICES, option.name
+    name = option.key or option.name
+    for within in grammar.ranges:
+        assert within.low <= within.high and within.unit, (option.name, within)
+        for amount in (within.low, within.high) + ((within.off,) if within.off is not None else ()):
+            option.parse(within.written(amount))
+        for amount in _just_outside(within):
+            value = within.written(amount)
+            with pytest.raises(ValueError) as error:
+                option.parse(value)
+            message = str(error.value)
+            assert message.startswith(name + ': '), (value, message)
+            assert message.endswith(' is outside %s' % str(within)), (value, message)
+
+
+@pytest.mark.parametrize('option, value', [
+    ('context_topics', 'odom:1e308'), ('context_rotate', '1e-300'), ('context_rotate', '1ms'), ('rotate', '1ms'),
+    ('window', '1e-300s'), ('split_mb', '0.0000001'), ('split_mb', '0.5B'), ('diagnostic_period', '1e-300'),
+    ('max_disk_mb', '1e-9'), ('classify_every', '1e-300s'), ('max_windows_per_hour', '1e-300'),
+    ('intake_max_mb', '0'), ('max_window', '0')])
+def test_the_values_accepted_that_meant_nothing_or_far_too_much_are_refused(option, value):
+    """Issue 42 item 9: a rate of 1e308 Hz, a rotation per message (1e-300 s, or 1ms for 1m), a feature
+    window of 1e-300 s, a sub-byte split: each refused in one line naming the option and its range."""
+    with pytest.raises(ValueError) as error:
+        options.get(option).parse(value)
+    assert ' is outside ' in str(error.value) and '\n' not in str(error.value)
+
+
+def test_a_feature_window_has_one_range_wherever_it_is_read():
+    """The node's ~window, a classifier's window and a model file's config share features.WINDOW_RANGES."""
+    from cc_log.features import FeatureConfig, WINDOW_RANGES
+    assert options.get('window').grammar.ranges == WINDOW_RANGES
+    for window in ('1e-300s', '0', '100001', '3601s'):
+        with pytest.raises(ValueError) as error:
+            FeatureConfig('motion', window)
+        assert str(error.value).startswith("window: '%s' is outside " % window)
+    assert FeatureConfig('motion', '10ms').window == '0.01s' and FeatureConfig('motion', 100000).window == '100000'

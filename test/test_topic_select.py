@@ -87,3 +87,23 @@ def test_cclog_replay_selects_the_bags_topics_with_patterns(tmp_path, real_bag):
     assert paths
     metadata, _ = log_format.read_window(paths[0])
     assert '/imu/data' not in metadata['topics'] and '/husky_velocity_controller/odom' in metadata['topics']
+
+
+def test_the_work_of_a_pattern_is_bounded_bounded_repeats_counted_too():
+    """Five ``.{0,9999}`` (which passed as bounded) are refused as ``.*.*.*.*x`` is; a pattern's work on a name
+    longer than the longest every pattern is tried on is counted before matching, and a name too long for it is
+    neither selected nor excluded by it (counted), so one 301-character or 10,000-character topic costs little."""
+    from cc_log.core import topic_select
+    for pattern in ('.{0,9999}' * 5 + 'x', '.{0,9999}' * 4, '[a-z]{0,40}' * 5, '(.{0,300}|.*)' * 4):
+        with pytest.raises(ValueError) as error:
+            TopicSelection.parse(['re:' + pattern])
+        assert str(error.value).startswith('topics: regular expression ') and 'ways to try' in str(error.value)
+    selection = TopicSelection.parse(['re:/cam.*.*.*x', 're:/ok/.*', '!re:.*/skip'])
+    assert topic_select.match_work(selection.regex[0].parsed, topic_select.MAX_NAME_CHARS) <= \
+        topic_select.MAX_MATCH_WORK
+    assert topic_select.match_work(selection.regex[0].parsed, 10000) > topic_select.MAX_MATCH_WORK
+    assert selection.regex[0].fullmatch('/cam' + 'a' * 10000) is None  # not tried: its work is beyond the bound
+    assert selection.select(['/cam' + 'a' * 251 + 'x', '/cam' + 'a' * 297 + 'x', '/ok/' + 'b' * 9996,
+                             '/ok/a/skip']) == ['/cam' + 'a' * 251 + 'x', '/ok/' + 'b' * 9996]
+    assert selection.too_long == 2
+    TopicSelection.parse(['re:.{0,3}/a{2,5}/[a-z]{0,40}', 're:.*/(camera|lidar)/.*'])  # ordinary ones pass

@@ -117,6 +117,7 @@ def test_conditions_that_are_not_field_op_value_are_refused_with_one_line(text):
     ('header.frame_id > 2', 'is a string'),
     ('twist.twist.linear.x == "fast"', 'is a number (float64), not a string'),
     ('twist.twist.linear.x.y > 1', 'is float64 and has no fields'),
+    ('pose.covariance[36] > 0', 'nav_msgs/Odometry.pose.covariance[36] is outside 0..35 elements (it has 36)'),
 ])
 def test_a_field_is_checked_against_the_message_type_at_start(text, message):
     rule = RuleTrigger('fast', ODOM, when=text, type='nav_msgs/Odometry')
@@ -516,3 +517,14 @@ def test_a_bad_period_is_one_line_naming_every(every, message):
     text = str(error.value)
     assert text.startswith('robot.yaml: triggers[0] (sample): every: ') and message in text
     assert '\n' not in text and len(text) < 160
+
+
+@pytest.mark.parametrize('text', ['pose.covariance[99999999] > 0', 'header.frame_id[1000001] == "a"'])
+def test_an_index_beyond_any_message_is_refused_at_configuration_time(text):
+    """Issue 42 item 9: a rule on pose.covariance[99999999] never fired; it is refused where it enters, before
+    any message type is known (a fixed-size array's own length is checked with the type)."""
+    with pytest.raises(ValueError) as error:
+        RuleTrigger('r', ODOM, when=text)
+    assert str(error.value).startswith("r: when: '") and str(error.value).endswith(
+        "]' is outside 0..1e+06 elements")
+    RuleTrigger('r', ODOM, when='pose.covariance[1000000] > 0')  # at the bound: the type decides

@@ -20,7 +20,9 @@ not edit by hand. A configuration key is set in the YAML file every mode reads (
 --config`, `cclog collect --config`); a node parameter (`_name:=value`, or `<param>` in a launch file)
 overrides it, and so does a `cclog` flag. Sizes, durations and message counts have one grammar everywhere
 (`cc_log.core.spans`): `64` is 64 MB where a size is meant, `1G` is 2^30 bytes and `1GB` 10^9, `5m` is five
-minutes where a duration is meant, `100` is 100 messages where a window size is.
+minutes where a duration is meant, `100` is 100 messages where a window size is. Each option states its sane
+range (`spans.Range`: minimum..maximum unit, and the value that turns it off where there is one); a value
+outside it is refused with `<key>: <value> is outside <min>..<max> <unit>`.
 """
 
 
@@ -36,15 +38,20 @@ def launch_params():
 
 def table(rows, launched):
     """Markdown rows of ``rows`` (Options)."""
-    lines = ['| option | configuration key | node parameter | launch files | `cclog` flag | value | default | what |',
-             '|---|---|---|---|---|---|---|---|']
+    lines = ['| option | configuration key | node parameter | launch files | `cclog` flag | value | range | default | '
+             'what |', '|---|---|---|---|---|---|---|---|---|']
     for o in rows:
-        lines.append('| `%s` | %s | %s | %s | %s | %s | `%s` | %s |' % (
+        lines.append('| `%s` | %s | %s | %s | %s | %s | %s | `%s` | %s |' % (
             o.name, '`%s`' % o.key if o.key else '', '`~%s` (%s)' % (o.name, ', '.join(o.nodes)) if o.nodes else '',
             ', '.join(sorted(set(launched.get(o.name, [])))) if o.nodes else '',
-            ', '.join('`%s` (%s)' % (o.flag, c) for c in o.commands), o.grammar.text, options.shown(o.default),
-            o.doc))
+            ', '.join('`%s` (%s)' % (o.flag, c) for c in o.commands), o.grammar.text, ranges(o.grammar),
+            options.shown(o.default), o.doc))
     return lines
+
+
+def ranges(grammar):
+    """The sane range(s) of a grammar's values (``spans.Range``), as the docs show them."""
+    return '; '.join(str(r) for r in grammar.ranges) or 'one of the values'
 
 
 def text():
@@ -53,9 +60,10 @@ def text():
     lines += ['', '## Per topic (`topic_limits`)', '',
               'A mapping of topic names to these keys, e.g. `{camera/image_raw: {pre: 2s, max_mb: 64}, scan: '
               '{post: 1s}}`; in the configuration file, as the `~topic_limits` parameter or as the `topic_limits` '
-              'launch argument (its YAML text).', '', '| key | value | default | what |', '|---|---|---|---|']
-    lines += ['| `%s` | %s | `%s` | %s |' % (o.key, o.grammar.text, options.shown(o.default), o.doc)
-              for o in options.TOPIC_OPTIONS]
+              'launch argument (its YAML text).', '', '| key | value | range | default | what |',
+              '|---|---|---|---|---|']
+    lines += ['| `%s` | %s | %s | `%s` | %s |' % (
+        o.key, o.grammar.text, ranges(o.grammar), options.shown(o.default), o.doc) for o in options.TOPIC_OPTIONS]
     return '\n'.join(lines) + '\n'
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from cc_log.core import safe_input
 from cc_log.core.safe_input import brief
-from cc_log.features import FeatureConfig, vector_length
+from cc_log.features import WINDOW_RANGES, FeatureConfig, vector_length
 from cc_log.errors import ModelError
 
 FORMAT = 'cc_log-model'
@@ -40,8 +40,8 @@ SCORE_BLOCK = 32  # vectors scored at a time by score_each (bounds its block of 
 FLOOR_FRACTION = 1e-3  # ocsvm: below this share of -intercept the kernel sum is continued by its log
 #: Plausible ranges of a model (anything outside is refused, naming the key): the feature window in
 #: messages (held as rows) or seconds, the RBF kernel's gamma (of standardised features: ~1e-3 to 10).
-MAX_WINDOW_COUNT = 100000
-MAX_WINDOW_SECONDS = 3600.0
+MAX_WINDOW_COUNT = WINDOW_RANGES[0].high
+MAX_WINDOW_SECONDS = WINDOW_RANGES[1].high
 MAX_GAMMA = 1e6
 
 

@@ -9,14 +9,16 @@ An ``Option`` may be
 
 and the configuration's checks, the nodes' parameters, the flags and docs/OPTIONS.md all come from here, with
 one grammar per kind of value (``spans``: ``1G`` and ``5m`` mean the same everywhere). A parameter or flag
-overrides the configuration's key.
+overrides the configuration's key. Every grammar states the sane range of what it reads (``Grammar.ranges``,
+``spans.Range``: minimum, maximum, unit, and the value that turns the option off), so an accepted value is a
+sane one; only the grammars of a few named values (``CHOICES``) have none.
 
 ``TOPIC_OPTIONS`` are per topic: the keys of ``topic_limits`` (``{camera/image_raw: {pre: 2s, max_mb: 64}}``),
 read into one ``TopicLimits`` per topic.
 
-To add an option: declare it here and use it where it acts (a per-topic one: a field of ``TopicLimits``,
-read by the window buffer); a launch file passes it as an ``<arg>`` if it should; ``tools/options_doc.py``
-rewrites docs/OPTIONS.md (a test checks that it is current).
+To add an option: declare it here (with a grammar that states its range) and use it where it acts (a per-topic
+one: a field of ``TopicLimits``, read by the window buffer); a launch file passes it as an ``<arg>`` if it
+should; ``tools/options_doc.py`` rewrites docs/OPTIONS.md (a test checks that it is current).
 """
 import argparse
 import collections
@@ -25,10 +27,10 @@ import re
 
 from cc_log import features
 from cc_log.core import safe_input
-from cc_log.core.keep_budget import MAX_PER_HOUR, check_rate
+from cc_log.core.keep_budget import MAX_PER_HOUR
 from cc_log.core.routes import ROUTE_KEYS, parse_routes
 from cc_log.core.safe_input import brief
-from cc_log.core.spans import Rotation, Span, megabytes, seconds
+from cc_log.core.spans import ROTATIONS, Range, Rotation, Span, megabytes, seconds
 from cc_log.core.topic_select import topic_list
 from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE
 from cc_log.storage import context_track, formats, log_format
@@ -40,9 +42,12 @@ MAX_TEXT = 1 << 20   # characters of a YAML value given as text (a launch argume
 MAX_DIAGNOSTIC_PERIOD = 3600.0  # longest ``~diagnostic_period`` (a longer wait overflows the thread's timer)
 
 
-class Grammar(collections.namedtuple('Grammar', 'parse metavar text')):
+class Grammar(collections.namedtuple('Grammar', 'parse metavar text ranges', defaults=((),))):
     """How a value is written: ``parse(value, name)`` returns it checked (ValueError('<name>: ...') naming the
-    option), ``metavar`` shows it on a command line, ``text`` in the docs."""
+    option), ``metavar`` shows it on a command line, ``text`` in the docs; ``ranges``: the ``spans.Range`` of
+    each quantity it reads (a duration, a count, a size, the length of a text, the entries of a list), outside
+    which ``parse`` refuses a value with ``<name>: <value> is outside <low>..<high> <unit>`` (none: one of a
+    few values, ``CHOICES``)."""
 
     __slots__ = ()
 
@@ -74,8 +79,8 @@ def _boolean(value, name):
     raise ValueError('%s: %s is not true or false' % (name, brief(value)))
 
 
-def number(minimum=0.0, maximum=math.inf, integer=False):
-    """A grammar of a finite number from ``minimum`` to ``maximum`` (a whole one when ``integer``)."""
+def number(within, metavar, text, integer=False):
+    """A grammar of a finite number within the Range ``within`` (a whole one when ``integer``)."""
     def parse(value, name):
         result = float('nan')
         if not isinstance(value, bool) and isinstance(value, (int, float, str)):
@@ -83,25 +88,70 @@ def number(minimum=0.0, maximum=math.inf, integer=False):
                 result = float(value)
             except (ValueError, OverflowError):
                 pass
-        if integer and math.isfinite(result) and result != int(result):
+        if not math.isfinite(result):
+            raise ValueError('%s: %s is not a number' % (name, brief(value)))
+        if integer and result != int(result):
             raise ValueError('%s: %s is not a whole number' % (name, brief(value)))
-        if not math.isfinite(result) or result < minimum:
-            raise ValueError('%s: %s must be a number >= %g' % (name, brief(value), minimum))
-        if result > maximum:
-            raise ValueError('%s: %s must be a number <= %g' % (name, brief(value), maximum))
+        within.check(result, value, name)
         return int(result) if integer else result
-    return parse
+    return Grammar(parse, metavar, text, (within,))
 
 
-def size(minimum=0.0):
-    """A grammar of a byte size in MB (``spans.megabytes``) of at least ``minimum`` MB."""
+def size(low, high, off=0.0):
+    """A grammar of a byte size in MB (``spans.megabytes``) from ``low`` to ``high`` MB, or ``off``."""
+    within = Range(low, high, 'MB', off)
+    return Grammar(lambda value, name: megabytes(value, name, within=within), 'SIZE',
+                   'a size: MB (`64`) or with a unit (`64MB`, `2GB`, `1G`, `1.5GiB`)', (within,))
+
+
+def duration(low, high, off=None):
+    """A grammar of a duration (``spans.seconds``) from ``low`` to ``high`` seconds, or ``off``."""
+    within = Range(low, high, 's', off)
+    return Grammar(lambda value, name: seconds(value, name, within=within), 'DURATION',
+                   'a duration (`2s`, `250ms`, `5m`, `2h`; a number is seconds)', (within,))
+
+
+def span(counts, durations):
+    """A grammar of a span (``spans.Span``): ``counts`` messages or ``durations`` seconds (two Ranges)."""
+    return Grammar(lambda value, name: Span.parse(value, name, counts, durations), 'N|DURATION',
+                   'messages (`100`) or a duration (`2s`, `250ms`, `5m`)', (counts, durations))
+
+
+def ranged(grammar, within, measure):
+    """``grammar`` whose values also have ``measure(value)`` (their length, their entries) within the Range
+    ``within``, checked first."""
     def parse(value, name):
-        result = megabytes(value, name)
-        if result < minimum:
-            raise ValueError('%s: %gMB is below the minimum of %gMB' % (name, result, minimum))
-        return result
-    return Grammar(parse, 'SIZE', 'a size: MB (`64`) or with a unit (`64MB`, `2GB`, `1G`, `1.5GiB`)%s' % (
-        ', at least %gMB' % minimum if minimum else ''))
+        amount = measure(value)
+        if amount is not None:
+            within.check(amount, value, name)
+        return grammar.parse(value, name)
+    return grammar._replace(parse=parse, ranges=grammar.ranges + (within,))
+
+
+def _characters(value):
+    """The length of a text (of an argument list: its words joined), None for anything else."""
+    if isinstance(value, str):
+        return len(value)
+    if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        return len(' '.join(value))
+    return None
+
+
+def _entries(value):
+    """How many entries a list, a mapping or a space/comma-separated text holds (None for anything else)."""
+    if isinstance(value, str):
+        return len(value.replace(',', ' ').split())
+    return len(value) if isinstance(value, (list, tuple, dict)) else None
+
+
+def characters(grammar, low, high):
+    """``grammar`` for texts of ``low`` to ``high`` characters."""
+    return ranged(grammar, Range(low, high, 'characters', form=lambda n: 'x' * int(n)), _characters)
+
+
+def entries(grammar, high, form):
+    """``grammar`` for lists (or mappings) of at most ``high`` entries; ``form(n)``: a value of ``n`` entries."""
+    return ranged(grammar, Range(0, high, 'entries', form=form), _entries)
 
 
 def _topic(value, name):
@@ -111,10 +161,10 @@ def _topic(value, name):
 
 
 def _stride(value, name):
-    span = Span.parse(value, name)
-    if span.is_duration or span.count < 1:
-        raise ValueError('%s: %s must be a whole number of messages, at least 1' % (name, brief(value)))
-    return span.count
+    stride = Span.parse(value, name, STRIDES)
+    if stride.is_duration:
+        raise ValueError('%s: %s must be a whole number of messages' % (name, brief(value)))
+    return stride.count
 
 
 _LABEL = re.compile(r'[A-Za-z0-9_.-]+')
@@ -139,30 +189,57 @@ def _scalar(value, name):
     return str(value)
 
 
-SPAN = Grammar(Span.parse, 'N|DURATION', 'messages (`100`) or a duration (`2s`, `250ms`, `5m`)')
-DURATION = Grammar(seconds, 'DURATION', 'a duration (`2s`, `250ms`, `5m`, `2h`; a number is seconds)')
-POSITIVE_DURATION = Grammar(lambda value, name: seconds(value, name, positive=True), 'DURATION',
-                            'a duration > 0 (`2s`, `10m`; a number is seconds)')
-SIZE = size()
+# The sane ranges (``spans.Range``) of the options' quantities: an accepted value is a sane one.
+DAY = 86400.0
+MIN_MB = 1e-6             # a byte: the smallest size on disk (a sub-byte split meant "never")
+MIN_MEMORY_MB = 0.001     # a kB: the smallest memory bound
+MAX_MEMORY_MB = 1e6       # a TB of memory
+MAX_DISK_MB = 1e9         # a PB of disk
+MAX_TOPICS = 10000        # topics named in one option
+MAX_PATH_CHARS = 4096     # a file name or a command
+MAX_NAME_CHARS = 100      # a name part or a label
+MARGINS = (Range(0, 10 ** 7, 'messages'), Range(0, DAY, 's'))    # pre, post: up to a day
+WINDOW_LENGTHS = (Range(1, 10 ** 8, 'messages'), Range(0.001, 7 * DAY, 's'))   # windows.max: a week
+STRIDES = Range(1, 10 ** 6, 'messages')
+CLASSIFY_EVERY = (STRIDES, Range(0.001, 3600.0, 's'))   # a classification per message or per ms, up to an hour
+
+SPAN = span(*MARGINS)
+DURATION = duration(0, DAY)
+SIZE = size(MIN_MB, MAX_DISK_MB)
 BOOL = Grammar(_boolean, 'BOOL', '`true` or `false`')
-TEXT = Grammar(_text, 'TEXT', 'a string')
-SCALAR = Grammar(_scalar, 'VALUE', 'a string or a number')
-TOPIC = Grammar(_topic, 'TOPIC', 'a topic name')
-TOPICS = Grammar(topic_list, 'TOPICS', 'topic names: a list or a space/comma-separated string')
-STRIDE = Grammar(_stride, 'N', 'a whole number of messages, at least 1')
-LABEL = Grammar(check_label, 'LABEL', 'letters, digits, `.`, `_`, `-`')
-ROTATION = Grammar(Rotation.parse, 'N|DURATION|SIZE', 'messages (`6000`), a duration (`60s`) or a size (`20MB`)')
+TEXT = characters(Grammar(_text, 'TEXT', 'a string'), 0, MAX_PATH_CHARS)
+SCALAR = characters(Grammar(_scalar, 'VALUE', 'a string or a number'), 0, 64)
+TOPIC = characters(Grammar(_topic, 'TOPIC', 'a topic name'), 1, MAX_PATH_CHARS)
+TOPICS = entries(Grammar(topic_list, 'TOPICS', 'topic names: a list or a space/comma-separated string'),
+                 MAX_TOPICS, lambda n: ['/t%d' % i for i in range(int(n))])
+STRIDE = Grammar(_stride, 'N', 'a whole number of messages', (STRIDES,))
+LABEL = characters(Grammar(check_label, 'LABEL', 'letters, digits, `.`, `_`, `-`'), 1, MAX_NAME_CHARS)
+ROTATION = Grammar(Rotation.parse, 'N|DURATION|SIZE', 'messages (`6000`), a duration (`60s`) or a size (`20MB`)',
+                   ROTATIONS)
 FORMAT = Grammar(_choice(formats.names), 'FORMAT', 'a window format: %s' % ', '.join(
     '`%s`' % name for name in formats.names()))
-PRECISION = Grammar(json_xz.check_precision, 'FIELD=STEP,...',
-                    "field patterns and steps: `{'pose.pose.position.*': 1e-4}` or `'twist.twist.*=1e-5, ...'`")
+PRECISION = entries(Grammar(json_xz.check_precision, 'FIELD=STEP,...', "field patterns and steps: "
+                            "`{'pose.pose.position.*': 1e-4}` or `'twist.twist.*=1e-5, ...'`"),
+                    1000, lambda n: dict(('f%d.*' % i, 1e-4) for i in range(int(n))))
 RETRIGGER = Grammar(_choice(lambda: RETRIGGER_MODES), 'MODE', ', '.join('`%s`' % m for m in RETRIGGER_MODES))
 FEATURE_SET = Grammar(_choice(features.names), 'SET', 'a feature set: %s' % ', '.join(
     '`%s`' % name for name in features.names()))
-COMMAND = Grammar(_text_or_list, 'COMMAND', 'an argument list or a string')
-NAME_PREFIX = Grammar(lambda value, name: log_format.file_prefix(value, name)[:-1], 'NAME',
-                      'a plain part of a file name (no `/`, no control character, not starting with `.`)')
-COUNT = Grammar(number(0, integer=True), 'N', 'a whole number >= 0')
+COMMAND = characters(Grammar(_text_or_list, 'COMMAND', 'an argument list or a string'), 0, MAX_PATH_CHARS)
+NAME_PREFIX = characters(Grammar(lambda value, name: log_format.file_prefix(value, name)[:-1], 'NAME',
+                                 'a plain part of a file name (no `/`, no control character, not starting with `.`)'),
+                         1, MAX_NAME_CHARS)
+COUNT = number(Range(1, 10 ** 7, 'files', off=0), 'N', 'a whole number', True)
+MEMORY = size(MIN_MEMORY_MB, MAX_MEMORY_MB)
+WINDOW_LENGTH = span(*WINDOW_LENGTHS)
+FEATURE_WINDOW = span(*features.WINDOW_RANGES)
+CLASSIFY_SPAN = span(*CLASSIFY_EVERY)
+WINDOWS_PER_HOUR = number(Range(0.01, MAX_PER_HOUR, 'windows/h', off=0), 'N', 'a number of windows, e.g. 0.1 .. 60')
+DIAGNOSTIC_PERIOD = number(Range(0.01, MAX_DIAGNOSTIC_PERIOD, 's', off=0, form=repr), 'SECONDS', 'seconds')
+INTAKE_COUNT = number(Range(1, 10 ** 7, 'messages'), 'N', 'a whole number', True)
+INTAKE_SIZE = size(MIN_MEMORY_MB, MAX_MEMORY_MB, None)
+CHUNK_KB = number(Range(1, 1 << 20, 'KB'), 'KB', 'a whole number of KB (1024 bytes)', True)
+#: The grammars of one of a few values: their values are their range.
+CHOICES = (BOOL, FORMAT, RETRIGGER, FEATURE_SET)
 
 
 class Option(collections.namedtuple('Option', 'name key grammar default doc nodes commands')):
@@ -190,7 +267,7 @@ TOPIC_OPTIONS = (
             "the window's)"),
     _option('post', 'post', DURATION, None, "the topic's own time kept after the window's last trigger (at most "
             "the window's)"),
-    _option('max_mb', 'max_mb', SIZE, 0.0, 'memory its messages may take outside every window (0: no cap of its '
+    _option('max_mb', 'max_mb', MEMORY, 0.0, 'memory its messages may take outside every window (0: no cap of its '
             'own)'),
 )
 
@@ -225,10 +302,23 @@ def parse_topic_limits(value, name='topic_limits'):
     return limits
 
 
-TOPIC_LIMITS = Grammar(parse_topic_limits, 'YAML', 'per topic: {%s} (see below)' % ', '.join(
-    o.key for o in TOPIC_OPTIONS))
-ROUTES = Grammar(lambda value, name: parse_routes(value, formats.names(), name), 'YAML',
-                 'a list of {%s}' % ', '.join(ROUTE_KEYS))
+TOPIC_LIMITS = entries(Grammar(parse_topic_limits, 'YAML', 'per topic: {%s} (see below)' % ', '.join(
+    o.key for o in TOPIC_OPTIONS)), MAX_TOPICS, lambda n: dict(('/t%d' % i, {}) for i in range(int(n))))
+
+
+def _context_topics(value, name):
+    """The context track's topics (``topic_list``), each ``topic`` or ``topic:Hz`` with its rate within
+    ``context_track.RATES`` (``context_track.parse_topics``)."""
+    context_track.parse_topics(value, name, context_track.BWI_ALIASES)
+    return TOPICS.parse(value, name)
+
+
+CONTEXT_TOPICS = TOPICS._replace(parse=_context_topics, text='topic names, each `topic` or `topic:Hz`',
+                                 ranges=TOPICS.ranges + (context_track.RATES,))
+ROUTES = entries(Grammar(lambda value, name: parse_routes(value, formats.names(), name), 'YAML',
+                         'a list of {%s}' % ', '.join(ROUTE_KEYS)),
+                 100, lambda n: [{'name': 'r%d' % i, 'topics': ['/t%d' % i], 'format': formats.DEFAULT}
+                                 for i in range(int(n))])
 
 OPTIONS = (
     # the configuration file's keys, in the order the file documents them
@@ -246,7 +336,8 @@ OPTIONS = (
     _option('pre', 'windows.pre', SPAN, str(DEFAULT_PRE), 'kept before an anomaly (not given: the default, or the '
             'longest `pre` of a trigger in the configuration)', SMART, ('replay',)),
     _option('post', 'windows.post', SPAN, str(DEFAULT_POST), 'kept after the last anomaly', SMART, ('replay',)),
-    _option('max_window', 'windows.max', SPAN, str(DEFAULT_MAX_WINDOW), 'longer windows are handed to the writer '
+    _option('max_window', 'windows.max', WINDOW_LENGTH, str(DEFAULT_MAX_WINDOW),
+            'longer windows are handed to the writer '
             'in parts (one file)', SMART),
     _option('max_disk_mb', 'limits.max_disk_mb', SIZE, 0.0, 'keep window files within this size by deleting the '
             'oldest (0: no quota)', BOTH),
@@ -254,10 +345,10 @@ OPTIONS = (
             "deleting the oldest, as `max_disk_mb` does (rosbag record's `--max-splits`; 0: no limit)", BOTH),
     _option('min_free_mb', 'limits.min_free_mb', SIZE, 0.0, 'below this much free disk, writing pauses and '
             'windows wait in memory (0: off)', BOTH),
-    _option('max_buffer_mb', 'limits.max_buffer_mb', SIZE, DEFAULT_MAX_BUFFER_MB, 'memory budget of every '
+    _option('max_buffer_mb', 'limits.max_buffer_mb', MEMORY, DEFAULT_MAX_BUFFER_MB, 'memory budget of every '
             'buffered message and the writer queue (0: none)', BOTH, ('replay',)),
-    _option('max_windows_per_hour', 'limits.max_windows_per_hour', Grammar(check_rate, 'N', 'a number of windows '
-            'from 0 (off) to %g, e.g. 0.1 .. 60' % MAX_PER_HOUR), 0.0, 'keep budget: once this many windows opened '
+    _option('max_windows_per_hour', 'limits.max_windows_per_hour', WINDOWS_PER_HOUR, 0.0,
+            'keep budget: once this many windows opened '
             'in the last hour, a Fire opens a window only if its score is more anomalous than the hour\'s N-th '
             'most anomalous window (a rising threshold; Fires without a score always open; skipped windows are '
             'counted); 0: no budget', SMART, ('replay',)),
@@ -279,33 +370,33 @@ OPTIONS = (
             'otherwise are left alone', BOTH),
     _option('model', '', TEXT, '', 'the default trigger: an envelope file (cclog learn-envelope: the trigger named '
             '`envelope`) or a model file (cclog learn: the classifier named `classifier`)', SMART),
-    _option('window', '', SPAN, features.DEFAULT_WINDOW, "the feature window (smart mode: checked against the "
+    _option('window', '', FEATURE_WINDOW, features.DEFAULT_WINDOW,
+            "the feature window (smart mode: checked against the "
             "model's)", BOTH),
     _option('feature_set', '', FEATURE_SET, 'motion', 'the feature set collect mode computes', COLLECT),
     _option('retrigger', '', RETRIGGER, DEFAULT_RETRIGGER, 'every classifier: `event` (the onset opens a window, '
             'extended while the newest rows are anomalous), `every` anomalous score, or the `onset` only', SMART),
-    _option('classify_every', '', SPAN, DEFAULT_CLASSIFY_EVERY, 'every classifier: score every N-th message or '
+    _option('classify_every', '', CLASSIFY_SPAN, DEFAULT_CLASSIFY_EVERY,
+            'every classifier: score every N-th message or '
             'at most once per duration', SMART),
     _option('recent', '', SCALAR, '', 'every classifier, `event` only: the newest rows that keep an anomaly open '
             '(default: a quarter of the feature window)', SMART),
     _option('learn_online', '', BOOL, False, 'every classifier learns nominal online and refits in the '
             'background (saved beside the model)', SMART),
     _option('enabled', '', BOOL, True, 'start logging, or start paused (`~enable` service)', SMART),
-    _option('diagnostic_period', '', Grammar(number(0.0, MAX_DIAGNOSTIC_PERIOD), 'SECONDS', 'seconds (0: off, at '
-                                             'most %g)' % MAX_DIAGNOSTIC_PERIOD),
-            1.0, 'seconds of wall time between /diagnostics; 0 turns them off', BOTH),
-    _option('intake_max_messages', '', Grammar(number(1, integer=True), 'N', 'a whole number >= 1'), 20000,
+    _option('diagnostic_period', '', DIAGNOSTIC_PERIOD, 1.0,
+            'seconds of wall time between /diagnostics; 0 turns them off', BOTH),
+    _option('intake_max_messages', '', INTAKE_COUNT, 20000,
             'bound of the subscriber queue in messages; beyond it messages are counted as lost', SMART),
-    _option('intake_max_mb', '', size(0.001), 64.0, 'bound of the subscriber queue in bytes', SMART),
-    _option('chunk_kb', '', Grammar(number(1, 1 << 20, integer=True), 'KB', 'a whole number of KB (1024 bytes) '
-                                    'from 1'), 768, "bag-lz4 windows and context bags: a chunk is closed once "
+    _option('intake_max_mb', '', INTAKE_SIZE, 64.0, 'bound of the subscriber queue in bytes', SMART),
+    _option('chunk_kb', '', CHUNK_KB, 768, "bag-lz4 windows and context bags: a chunk is closed once "
             "it holds this many KB uncompressed (rosbag record's `--chunksize`)", BOTH),
     _option('quiet', '', BOOL, False, "log warnings and errors only, no INFO lines (rosbag record's `-q`)", BOTH),
     _option('tcp_nodelay', '', BOOL, False, "subscribe with TCP_NODELAY (rosbag record's `--tcpnodelay`): lower "
             'latency for small messages, more packets', BOTH),
-    _option('context_topics', '', TOPICS, (), 'topics recorded always, each `topic` or `topic:Hz`, in rotated '
+    _option('context_topics', '', CONTEXT_TOPICS, (), 'topics recorded always, each `topic` or `topic:Hz`, in rotated '
             'LZ4 bags under `context/`', BOTH),
-    _option('context_rotate', '', POSITIVE_DURATION, context_track.DEFAULT_ROTATE, 'seconds of stamps per context '
+    _option('context_rotate', '', duration(1, DAY), context_track.DEFAULT_ROTATE, 'seconds of stamps per context '
             'file', BOTH),
     _option('upload_command', '', COMMAND, '', 'run with the path of each closed window or context file', BOTH),
 )

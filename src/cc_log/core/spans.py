@@ -19,6 +19,44 @@ MAX_SECONDS = 1e7
 MAX_MEGABYTES = 1e9
 
 
+class Range(collections.namedtuple('Range', 'low high unit off form')):
+    """The sane values of a quantity an option reads: ``low`` to ``high`` ``unit`` (``'s'``, ``'messages'``,
+    ``'MB'``, ...), or exactly ``off`` (a value that turns the option off, e.g. 0; None: none). ``form(amount)``
+    writes an amount as a value of the option (default: by the unit), for the docs' examples and the tests."""
+
+    __slots__ = ()
+
+    def __new__(cls, low, high, unit, off=None, form=None):
+        return super(Range, cls).__new__(cls, low, high, unit, off, form)
+
+    def check(self, amount, value, name):
+        """``amount`` (read from ``value``) when it is ``off`` or within the range; else
+        ValueError('<name>: <value> is outside <low>..<high> <unit>')."""
+        if (self.off is not None and amount == self.off) or self.low <= amount <= self.high:
+            return amount
+        raise ValueError('%s: %s is outside %s' % (name, brief(value), str(self)))
+
+    def written(self, amount):
+        """``amount`` as a value of the option (``form``, else by the unit: ``2.5s``, ``100``, ``64MB``)."""
+        if self.form is not None:
+            return self.form(amount)
+        if self.unit in COUNTED:
+            return str(int(amount))
+        return '%r%s' % (float(amount), self.unit if self.unit in ('s', 'MB') else '')
+
+    def __str__(self):
+        return '%g..%g %s%s' % (self.low, self.high, self.unit,
+                                ' (or %g: off)' % self.off if self.off is not None else '')
+
+
+#: Units of whole counts (``Range.written`` writes them as integers; one past a bound is one more).
+COUNTED = ('messages', 'files', 'KB', 'entries', 'characters')
+#: The ranges of a span, a duration and a size where an option states none of its own.
+COUNTS = Range(0, MAX_COUNT, 'messages')
+DURATIONS = Range(0, MAX_SECONDS, 's')
+SIZES = Range(0, MAX_MEGABYTES, 'MB')
+
+
 class Span(collections.namedtuple('Span', 'count seconds')):
     """A window size: exactly one of ``count`` (messages) and ``seconds`` is set."""
 
@@ -35,12 +73,12 @@ class Span(collections.namedtuple('Span', 'count seconds')):
         return cls(None, float(seconds))
 
     @classmethod
-    def parse(cls, value, name='size'):
+    def parse(cls, value, name='size', counts=COUNTS, durations=DURATIONS):
         """Parse ``500``, ``'500'``, ``'5s'``, ``'2.5s'``, ``'250ms'``, ``'5m'`` or ``'2h'``; a Span is returned
         as is.
 
-        Raises ValueError naming ``name`` when the value is not a count or duration from 0 to MAX_COUNT
-        messages or MAX_SECONDS seconds.
+        Raises ValueError naming ``name`` when the value is not a count within ``counts`` (a Range of
+        messages; default 0 to MAX_COUNT) or a duration within ``durations`` (default 0 to MAX_SECONDS).
         """
         if isinstance(value, cls):
             return value
@@ -56,12 +94,10 @@ class Span(collections.namedtuple('Span', 'count seconds')):
                 span = cls.messages(int(number))
         except (ValueError, OverflowError):
             raise ValueError('%s: %s is not a message count (500) or a duration (5s)' % (name, brief(value)))
-        amount = span.count if span.count is not None else span.seconds
-        if amount < 0 or not math.isfinite(amount):
-            raise ValueError('%s: %s must be zero or positive' % (name, brief(value)))
-        if amount > (MAX_COUNT if span.count is not None else MAX_SECONDS):
-            raise ValueError('%s: %s is more than %s' % (
-                name, brief(value), MAX_COUNT if span.count is not None else '%gs' % MAX_SECONDS))
+        if span.count is not None:
+            counts.check(span.count, value, name)
+        else:
+            durations.check(span.seconds, value, name)
         return span
 
     @property
@@ -86,10 +122,10 @@ def _duration(text):
     return None
 
 
-def seconds(value, name='duration', positive=False):
-    """Seconds (a float >= 0, > 0 when ``positive``, at most MAX_SECONDS) of a duration: a number of
-    seconds (``30``, ``'30'``) or one with a unit (``'30s'``, ``'250ms'``, ``'5m'``, ``'2h'``). ValueError
-    naming ``name`` otherwise."""
+def seconds(value, name='duration', positive=False, within=DURATIONS):
+    """Seconds (a float >= 0, > 0 when ``positive``, within the Range ``within``: default 0 to MAX_SECONDS)
+    of a duration: a number of seconds (``30``, ``'30'``) or one with a unit (``'30s'``, ``'250ms'``, ``'5m'``,
+    ``'2h'``). ValueError naming ``name`` otherwise."""
     number = float('nan')
     if not isinstance(value, bool) and isinstance(value, (int, float, str)):
         text = str(value).strip().lower()
@@ -98,12 +134,12 @@ def seconds(value, name='duration', positive=False):
             number = float(text) if number is None else number
         except (ValueError, OverflowError):
             number = float('nan')
-    if not (number > 0 if positive else number >= 0) or not math.isfinite(number):
-        raise ValueError('%s: %s is not a duration %s (30s, 250ms, 5m, 2h; a number is seconds)'
-                         % (name, brief(value), '> 0' if positive else '>= 0'))
-    if number > MAX_SECONDS:
-        raise ValueError('%s: %s is more than %gs' % (name, brief(value), MAX_SECONDS))
-    return number
+    if not math.isfinite(number):
+        raise ValueError('%s: %s is not a duration (30s, 250ms, 5m, 2h; a number is seconds)'
+                         % (name, brief(value)))
+    if positive and number == 0:
+        raise ValueError('%s: %s is not a duration > 0' % (name, brief(value)))
+    return within.check(number, value, name)
 
 
 # Byte sizes: a bare number is MB (10^6 bytes), as the ``*_mb`` parameters always took, unless the option
@@ -113,10 +149,10 @@ _BYTE_UNITS = {'b': 1e-6, 'kb': 1e-3, 'mb': 1.0, 'gb': 1e3, 'tb': 1e6,
                'k': 1024 / 1e6, 'm': 1024 ** 2 / 1e6, 'g': 1024 ** 3 / 1e6, 't': 1024 ** 4 / 1e6}
 
 
-def megabytes(value, name='size', bare='mb'):
+def megabytes(value, name='size', bare='mb', within=SIZES):
     """MB (10^6 bytes) of a number (of MB; of ``bare``, a unit of _BYTE_UNITS, when given) or a size with a
-    unit (``'64MB'``, ``'2GB'``, ``'500kB'``, ``'1.5GiB'``, ``'1G'``, ``'100B'``; units case-insensitive), at
-    most MAX_MEGABYTES. ValueError naming ``name`` otherwise."""
+    unit (``'64MB'``, ``'2GB'``, ``'500kB'``, ``'1.5GiB'``, ``'1G'``, ``'100B'``; units case-insensitive),
+    within the Range ``within`` (default 0 to MAX_MEGABYTES). ValueError naming ``name`` otherwise."""
     number = float('nan')
     if not isinstance(value, bool) and isinstance(value, (int, float, str)):
         text = str(value).strip().lower().replace(' ', '')
@@ -126,12 +162,10 @@ def megabytes(value, name='size', bare='mb'):
             number = float(digits) * factor if factor is not None else number
         except (ValueError, OverflowError):
             pass
-    if not number >= 0 or not math.isfinite(number):
-        raise ValueError('%s: %s is not a size >= 0 (%s as a number, or 64MB, 2GB, 500kB, 1.5GiB, 1G)'
+    if not math.isfinite(number):
+        raise ValueError('%s: %s is not a size (%s as a number, or 64MB, 2GB, 500kB, 1.5GiB, 1G)'
                          % (name, brief(value), (bare or 'mb').upper()))
-    if number > MAX_MEGABYTES:
-        raise ValueError('%s: %s is more than %gMB' % (name, brief(value), MAX_MEGABYTES))
-    return number
+    return within.check(number, value, name)
 
 
 class Rotation(collections.namedtuple('Rotation', 'span bytes')):
@@ -140,25 +174,28 @@ class Rotation(collections.namedtuple('Rotation', 'span bytes')):
     __slots__ = ()
 
     @classmethod
-    def parse(cls, value, name='rotate'):
+    def parse(cls, value, name='rotate', ranges=None):
         """``'6000'`` (messages), ``'60s'``/``'5m'`` (a duration) or a size with a unit (``'20MB'``, ``'1GiB'``);
-        a Rotation is returned as is."""
+        a Rotation is returned as is. ``ranges``: (messages, seconds, MB) Ranges (default ``ROTATIONS``)."""
         if isinstance(value, cls):
             return value
+        counts, durations, sizes = ranges or ROTATIONS
         try:
-            span = Span.parse(value, name)
-        except ValueError:
+            span = Span.parse(value, name, counts, durations)
+        except ValueError as error:
+            if ' is outside ' in str(error):
+                raise
             try:
-                size = megabytes(value, name, bare=None) * 1e6
+                size = megabytes(value, name, bare=None, within=SIZES)
             except ValueError:
                 raise ValueError('%s: %s is not a message count (6000), a duration (60s) or a size (20MB)'
                                  % (name, brief(value)))
-            if not size > 0:
-                raise ValueError('%s: %s must be positive' % (name, brief(value)))
-            return cls(None, int(size))
-        if span.count == 0 or span.seconds == 0:
-            raise ValueError('%s: %s must be positive' % (name, brief(value)))
+            return cls(None, int(round(sizes.check(size, value, name) * 1e6)))
         return cls(span, None)
 
     def __str__(self):
         return str(self.span) if self.span is not None else '%dB' % self.bytes
+
+
+#: A rotation's sane messages, seconds and MB: a file per message, per millisecond or per byte is none.
+ROTATIONS = (Range(1, MAX_COUNT, 'messages'), Range(1, 86400, 's'), Range(0.001, 1e6, 'MB'))

@@ -23,9 +23,16 @@ must be discovered (``-a`` or a regular expression: see ``topic_watch``). Pure; 
 Python's regular expressions backtrack, so a pattern could take exponential time on one topic name. A pattern
 is compiled once and refused when it is longer than MAX_PATTERN_CHARS or has a shape that backtracks badly: a
 repetition inside a repetition (``(a+)+``, ``(a*b?)*``), alternatives inside a repetition (``(a|a)*``), a
-back reference, or more than MAX_UNBOUNDED_REPEATS unbounded repetitions (``.*.*.*.*x``). ``matches`` keeps
-its answer per topic (at most CACHE_TOPICS topics), so the topic watcher's polls do not match again.
+back reference, or more work than MAX_MATCH_WORK on a name of MAX_NAME_CHARS characters. The work of a pattern
+on a name of n characters (``match_work``) bounds the ways it can try: the product, over its repetitions in
+sequence, of the counts each may take (``x{low,high}``: ``min(high, n) - low + 1``; a bounded ``.{0,9999}`` is
+as wide as ``.*`` on a short name), alternatives adding up; MAX_MATCH_WORK is the work of three ``.*`` on the
+longest name (``.*.*.*.*x`` and five ``.{0,9999}`` are refused). A name longer than MAX_NAME_CHARS is tried
+against a pattern only while the pattern's work on it stays within MAX_MATCH_WORK; otherwise the pattern
+neither selects nor excludes it, and ``too_long`` counts it. ``matches`` keeps its answer per topic (at most
+CACHE_TOPICS topics), so the topic watcher's polls do not match again.
 """
+import collections
 import re
 try:
     from re import _parser as _sre_parse  # Python >= 3.11
@@ -40,7 +47,8 @@ ALL = '*'
 REGEX = 're:'
 EXCLUDE = '!'
 MAX_PATTERN_CHARS = 256
-MAX_UNBOUNDED_REPEATS = 3
+MAX_NAME_CHARS = 256     # the longest topic name every accepted pattern is tried on
+MAX_MATCH_WORK = (MAX_NAME_CHARS + 1) ** 3   # the work of ``.*.*.*x`` on a name of MAX_NAME_CHARS characters
 CACHE_TOPICS = 10000
 _LEGAL_NAME = re.compile(r'[~/A-Za-z][A-Za-z0-9_/]*')  # rosgraph.names.is_legal_name, ASCII
 
@@ -55,29 +63,65 @@ def _compile(pattern, name):
                          % (name, brief(pattern), MAX_PATTERN_CHARS))
     try:
         compiled = re.compile(pattern)
-        problem = _backtracking_shape(_sre_parse.parse(pattern), False, [0])
+        parsed = _sre_parse.parse(pattern)
+        problem = _backtracking_shape(parsed, False)
     except re.error as error:
         raise ValueError('%s: %s is not a regular expression: %s' % (name, brief(pattern), error))
+    if not problem and match_work(parsed, MAX_NAME_CHARS) > MAX_MATCH_WORK:
+        problem = 'more than %d ways to try on a name of %d characters (at most three .* in a row)' % (
+            MAX_MATCH_WORK, MAX_NAME_CHARS)
     if problem:
         raise ValueError('%s: regular expression %s is refused: %s (matching could take very long)'
                          % (name, brief(pattern), problem))
-    return compiled
+    return _Pattern(compiled, parsed)
 
 
-def _backtracking_shape(items, in_repeat, unbounded):
-    """What makes the parsed pattern ``items`` backtrack badly, or '' (``unbounded``: [repeats seen])."""
+class _Pattern(collections.namedtuple('_Pattern', 'compiled parsed')):
+    """A compiled pattern and its parse (for ``match_work`` on a long name)."""
+
+    __slots__ = ()
+
+    @property
+    def pattern(self):
+        """The pattern's text."""
+        return self.compiled.pattern
+
+    def fullmatch(self, name):
+        """``re.fullmatch`` of the whole ``name``; None when the work on a name that long would exceed
+        MAX_MATCH_WORK (see the module docstring)."""
+        if len(name) > MAX_NAME_CHARS and match_work(self.parsed, len(name)) > MAX_MATCH_WORK:
+            return None
+        return self.compiled.fullmatch(name)
+
+
+def match_work(items, length):
+    """A bound on the ways the parsed pattern ``items`` can try on a name of ``length`` characters (see the
+    module docstring); patterns whose shape backtracks badly are refused before (``_backtracking_shape``)."""
+    work = 1
+    for op, value in items:
+        if op in _REPEATS:
+            low, high, body = value
+            work *= max(1, min(high, length) - low + 1) * match_work(body, length)
+        elif op == _sre_parse.BRANCH:
+            work *= sum(match_work(part, length) for part in value[1])
+        elif op == _sre_parse.SUBPATTERN:
+            work *= match_work(value[-1], length)
+        elif op in (_sre_parse.ASSERT, _sre_parse.ASSERT_NOT):
+            work *= match_work(value[1], length)
+        elif op == getattr(_sre_parse, 'ATOMIC_GROUP', None):
+            work *= match_work(value, length)
+    return work
+
+
+def _backtracking_shape(items, in_repeat):
+    """What makes the parsed pattern ``items`` backtrack badly, or ''."""
     for op, value in items:
         parts = []
         if op in _REPEATS:
             low, high, body = value
-            if high > 1:
-                if in_repeat:
-                    return 'a repetition inside a repetition'
-                if high == _sre_parse.MAXREPEAT:
-                    unbounded[0] += 1
-                    if unbounded[0] > MAX_UNBOUNDED_REPEATS:
-                        return 'more than %d unbounded repetitions' % MAX_UNBOUNDED_REPEATS
-            problem = _backtracking_shape(body, in_repeat or high > 1, unbounded)
+            if high > 1 and in_repeat:
+                return 'a repetition inside a repetition'
+            problem = _backtracking_shape(body, in_repeat or high > 1)
             if problem:
                 return problem
             continue
@@ -94,7 +138,7 @@ def _backtracking_shape(items, in_repeat, unbounded):
         elif op == getattr(_sre_parse, 'ATOMIC_GROUP', None):
             parts = [value]
         for part in parts:
-            problem = _backtracking_shape(part, in_repeat, unbounded)
+            problem = _backtracking_shape(part, in_repeat)
             if problem:
                 return problem
     return ''
@@ -108,6 +152,7 @@ class TopicSelection(object):
         self.all_topics = bool(all_topics)
         self.regex = [_compile(pattern, name) for pattern in regex]
         self.exclude = [_compile(pattern, name) for pattern in exclude]
+        self.too_long = 0   # names a pattern was not tried on (see the module docstring)
         self._matched = {}
 
     @classmethod
@@ -158,6 +203,9 @@ class TopicSelection(object):
         known = self._matched.get(topic)
         if known is not None:
             return known
+        patterns = self.regex + self.exclude
+        if len(topic) > MAX_NAME_CHARS and any(match_work(p.parsed, len(topic)) > MAX_MATCH_WORK for p in patterns):
+            self.too_long += 1
         if any(pattern.fullmatch(topic) for pattern in self.exclude):
             selected = False
         else:

@@ -27,8 +27,8 @@ from cc_log.features import command  # noqa: F401
 from cc_log.features import progress  # noqa: F401
 from cc_log.features import dynamics  # noqa: F401
 from cc_log.features.base import (
-    CLIP, DEFAULT_MAX_DT, DEFAULT_MIN_DT, DEFAULT_WINDOW, STATISTICS, FeatureConfig, FeatureSet, get, names, register,
-    stamp_of)
+    CLIP, DEFAULT_MAX_DT, DEFAULT_MIN_DT, DEFAULT_WINDOW, STATISTICS, WINDOW_RANGES, FeatureConfig, FeatureSet, get,
+    names, register, stamp_of)
 from cc_log.features.motion import MOTION_COLUMNS
 from cc_log.features.raw import RAW_COLUMNS
 from cc_log.features.window import (
@@ -46,5 +46,6 @@ def OdometryFeatures(config=None, **kwargs):
 
 
 __all__ = ['FEATURE_SETS', 'MOTION_COLUMNS', 'RAW_COLUMNS', 'STATISTICS', 'CLIP', 'DEFAULT_MAX_DT', 'DEFAULT_MIN_DT',
-           'DEFAULT_WINDOW', 'FeatureConfig', 'FeatureSet', 'FeatureStream', 'FeatureWindow', 'OdometryFeatures',
+           'DEFAULT_WINDOW', 'WINDOW_RANGES',
+           'FeatureConfig', 'FeatureSet', 'FeatureStream', 'FeatureWindow', 'OdometryFeatures',
            'columns', 'get', 'names', 'register', 'stamp_of', 'vector_length', 'vector_names', 'window_vector']

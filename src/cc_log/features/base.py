@@ -36,7 +36,7 @@ import struct
 import numpy as np
 
 from cc_log.core.registry import Registry
-from cc_log.core.spans import Span
+from cc_log.core.spans import Range, Span
 
 STATISTICS = ('mean', 'std', 'min', 'max')
 DEFAULT_MAX_DT = 1.0    # seconds: a longer gap between messages restarts the derivatives
@@ -58,11 +58,12 @@ def register(cls):
     return _REGISTRY.register(cls)
 
 
+#: A feature window's sane messages and seconds (a window of 1e-300 s holds no row: no vector, ever).
+WINDOW_RANGES = (Range(1, 100000, 'messages'), Range(0.01, 3600.0, 's'))
+
+
 def _parse_window(value):
-    span = Span.parse(value, 'window')
-    if span.count == 0 or span.seconds == 0:
-        raise ValueError('window: must hold at least one message')
-    return span
+    return Span.parse(value, 'window', *WINDOW_RANGES)
 
 
 DEFAULT_WINDOW = '2s'  # a duration: the same span of driving at any rate (500 messages: 5 s at 100 Hz, 100 s at 5 Hz)

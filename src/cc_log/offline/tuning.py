@@ -27,12 +27,13 @@ Pure: no rospy.
 """
 import collections
 import copy
+import math
 
 import numpy as np
 
 from cc_log.core import learning
 from cc_log import sim
-from cc_log.features import FeatureConfig, FeatureStream
+from cc_log.features import CLIP, FeatureConfig, FeatureStream
 from cc_log.core.spans import Span
 from cc_log.triggers import ClassifierTrigger
 
@@ -104,6 +105,61 @@ def injection_envelope(runs, topic, injection_scale=DEFAULT_INJECTION_SCALE):
         return None
 
 
+def _bad_field(msg, prefix=''):
+    """The path of the first float field of ``msg`` that is not finite or beyond +-CLIP, or ''."""
+    for name in getattr(msg, '__slots__', ()):
+        value = getattr(msg, name, None)
+        if isinstance(value, float):
+            if not (abs(value) <= CLIP):
+                return prefix + name
+        elif hasattr(value, '__slots__') and not isinstance(value, (str, bytes)):
+            found = _bad_field(value, prefix + name + '.')
+            if found:
+                return found
+    return ''
+
+
+def usable_runs(runs, topic, config, sources=None):
+    """``(runs, rejected)``: the records of ``topic`` of each run whose values for the feature set of ``config``
+    (its ``read``) are finite and within +-CLIP, as feature rows keep them (a NaN, inf or 1e308 twist is not
+    driving), and how many of each run were left out. ValueError('<bag>: ...', naming a field) when no run
+    keeps two records."""
+    reader = config.feature(config)
+    kept, rejected, example = [], [], ''
+    for run in runs:
+        good, bad = [], 0
+        for r in run:
+            if r.topic != topic:
+                continue
+            try:
+                values = reader.read(r.msg)
+                ok = all(abs(float(v)) <= CLIP for v in values) and math.isfinite(r.stamp)
+            except (AttributeError, TypeError, ValueError, OverflowError):
+                ok = False
+            if ok:
+                good.append(r)
+            else:
+                bad += 1
+                example = example or _bad_field(r.msg) or 'a field the %s set reads' % config.feature_set
+        kept.append(good)
+        rejected.append(bad)
+    if not any(len(run) > 1 for run in kept):
+        names = ', '.join(sources or []) or 'bag'
+        if any(rejected):
+            raise ValueError('%s: no usable %s messages to tune on: %d of them have a non-finite or huge value '
+                             '(beyond %g; e.g. %s)' % (names, topic, sum(rejected), CLIP, example))
+        raise ValueError('%s: no %s messages to tune on' % (names, topic))
+    return kept, rejected
+
+
+def rejected_lines(record):
+    """One line per tuning bag that had messages left out (``usable_runs``), for stderr."""
+    return ['warning: %s: %d %s message(s) left out of tuning: a non-finite or huge value (beyond %g)'
+            % (source, count, record['topic'], CLIP)
+            for source, count in zip(record['bags'] or ['bag'] * len(record['rejected']), record['rejected'])
+            if count]
+
+
 def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_POST,
          classify_every=DEFAULT_CLASSIFY_EVERY, retrigger=DEFAULT_RETRIGGER, sources=None, keep_recall=False,
          injection_scale=DEFAULT_INJECTION_SCALE):
@@ -113,10 +169,8 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
     docstring). ``injection_scale``: 'robot' or 'bwibot' (``INJECTION_SCALES``)."""
     if not (max_false_per_hour >= 0):
         raise ValueError('max_false_per_hour: %r must be zero or positive' % (max_false_per_hour,))
-    runs = [[r for r in run if r.topic == topic] for run in runs]
+    runs, rejected = usable_runs(runs, topic, model.config, sources)
     runs = [run for run in runs if len(run) > 1]
-    if not runs:
-        raise ValueError('bag: no %s messages to tune on' % topic)
     envelope = injection_envelope(runs, topic, injection_scale)
     hours = sum(run[-1].stamp - run[0].stamp for run in runs) / 3600.0
     rate = _rate(runs[0])
@@ -131,7 +185,7 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
     start = false_windows(before)
     threshold, count = before, start
     scores = np.concatenate([step_scores(model, run, topic, classify_every) for run in runs])
-    candidates = np.unique(scores[scores < before])  # ascending: each lowers the threshold below a score
+    candidates = np.unique(scores[np.isfinite(scores) & (scores < before)])  # ascending: each lowers the threshold
     if count > allowed:
         lo, hi = 0, len(candidates)   # threshold just below candidates[i]; i = 0: below every nominal score
         while lo < hi:
@@ -178,7 +232,8 @@ def tune(model, runs, topic, max_false_per_hour, pre=DEFAULT_PRE, post=DEFAULT_P
         ('lost', [kind for kind in reference if kind not in caught]), ('keep_recall', bool(keep_recall)),
         ('keep_recall_threshold', keep), ('keep_recall_false_windows', keep_count),
         ('keep_recall_false_per_hour', keep_count / hours if hours else 0.0),
-        ('budget_threshold', budget_threshold), ('budget_false_windows', budget_count), ('curve', curve)])
+        ('budget_threshold', budget_threshold), ('budget_false_windows', budget_count), ('curve', curve),
+        ('rejected', rejected)])
     model.info = dict(model.info, tuned=record)
     return record
 
@@ -301,6 +356,7 @@ def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_
     return ``(model, record)`` of the chosen setting (see the module docstring). ``record`` is ``tune``'s with
     ``window``, ``chosen_by`` and ``grid`` (a summary of every setting) added; it is the model's
     ``info['tuned']``. ``keep_recall``, ``injection_scale``: as ``tune``'s."""
+    runs, rejected = usable_runs(runs, topic, model.config, sources)
     windows = [model.config.window] if not windows else list(windows)
     configs = [FeatureConfig(model.config.feature_set, window, model.config.topic_type) for window in windows]
     train_runs = tune_runs = runs
@@ -326,7 +382,7 @@ def choose(model, runs, topic, max_false_per_hour, windows=None, rates=(DEFAULT_
             if best is None or key > best[0]:
                 best = (key, candidate, record)
     _, chosen, record = best
-    record = collections.OrderedDict(record, window=chosen.config.window, grid=grid,
+    record = collections.OrderedDict(record, window=chosen.config.window, grid=grid, rejected=rejected,
                                      chosen_by='meets the budget, most types caught, smallest mean latency',
                                      tuned_on='whole runs' if tune_runs is runs else
                                      'second halves (the first halves trained the other windows)')

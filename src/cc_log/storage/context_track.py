@@ -42,7 +42,7 @@ from cc_log.core import raw_message, safe_files
 from cc_log.storage.bag import bag_writer
 from cc_log.storage.formats import bag_lz4
 from cc_log.core.records import Record
-from cc_log.core.spans import seconds
+from cc_log.core.spans import Range, seconds
 from cc_log.core.topic_select import topic_list
 
 __all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PREFIX', 'DEFAULT_TOPICS',
@@ -57,6 +57,8 @@ JUMP_BACK = 1.0          # stamps going back more than this start a new file
 RETRY_PERIOD = 5.0       # seconds (monotonic clock) without a new file after a write failed: messages are lost
 # bwi_logging/record.launch names its odometry thinned to 1 Hz (topic_tools drop) odom_1hz; here it means the same.
 BWI_ALIASES = {'odom_1hz': ('odom', 1.0)}
+#: A context topic's sane rate (1e308 Hz kept every message, with an ERROR per message).
+RATES = Range(0.001, 1000.0, 'Hz', form=lambda hz: '/odom:%r' % hz)
 _SERIAL = itertools.count()  # the files this process opened: their temporary names never collide
 _ENTRY = re.compile(r'(?P<topic>[^\s:]+)(?::(?P<rate>[^\s:]+))?')
 
@@ -92,9 +94,9 @@ def _rate(value, name):
         rate = float(str(value).lower().replace('hz', ''))
     except ValueError:
         rate = float('nan')
-    if not rate > 0 or not math.isfinite(rate):
-        raise ValueError('%s: rate %r must be a positive number of Hz' % (name, value))
-    return rate
+    if not math.isfinite(rate):
+        raise ValueError('%s: rate %r is not a number of Hz' % (name, value))
+    return RATES.check(rate, value, name)
 
 
 def file_name(stamp, prefix=log_format.PREFIX):

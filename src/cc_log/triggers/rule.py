@@ -34,7 +34,7 @@ import re
 
 from cc_log.core import msg_codec, why
 from cc_log.core.safe_input import brief
-from cc_log.core.spans import seconds
+from cc_log.core.spans import Range, seconds
 from cc_log.triggers.base import Trigger, register
 
 DEFAULT_HOLD_OFF = '5s'
@@ -47,6 +47,8 @@ JUMP_BACK_TOLERANCE = 1.0
 STARTUP_GRACE = 5.0  # seconds a silence or rate rule waits, before the topic's first message, on top of its own
 
 MAX_CONDITION_CHARS = 1000
+#: An array index of a field path: no message holds a million elements of an array a rule compares.
+INDEXES = Range(0, 10 ** 6, 'elements')
 _FIELD_PATH = re.compile(r'[A-Za-z0-9_.\[\]]*')  # the characters a field path may hold (one pass, no backtracking)
 _PART = re.compile(r'([A-Za-z_][A-Za-z0-9_]*)(?:\[([0-9]{1,9})\])?\Z')
 _NUMBER = re.compile(r'[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?\Z')
@@ -66,6 +68,9 @@ class Condition(object):
                              % (name, brief(text), MAX_CONDITION_CHARS))
         self.text = ' '.join(text.split())
         self.absolute, field, self.path, self.op_text, raw = parsed
+        for part, index in self.path:
+            if index is not None:
+                INDEXES.check(index, '%s[%d]' % (part, index), name)
         self.field = field
         self.op = OPERATORS[self.op_text]
         string = _STRING.fullmatch(raw)
@@ -94,9 +99,12 @@ class Condition(object):
             slots = list(cls.__slots__)
             if field not in slots:
                 raise ValueError('%s: %s has no field %r (fields: %s)' % (name, where, field, ', '.join(slots)))
-            base, is_array, _ = msg_codec.split_type(cls._slot_types[slots.index(field)])
+            base, is_array, length = msg_codec.split_type(cls._slot_types[slots.index(field)])
             if index is not None and not is_array:
                 raise ValueError('%s: %s.%s is not an array' % (name, where, field))
+            if index is not None and length is not None and index >= length:
+                raise ValueError('%s: %s.%s[%d] is outside 0..%d elements (it has %d)'
+                                 % (name, where, field, index, length - 1, length))
             if is_array and index is None:
                 raise ValueError('%s: %s.%s is an array: give an index, %s[0]' % (name, where, field, field))
             base = msg_codec._resolve(base, cls._type)

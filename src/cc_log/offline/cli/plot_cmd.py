@@ -61,7 +61,7 @@ def run(args):
             bag.close()
         speed = []
         with _bar(args, 'read', total) as bar:
-            for record in bagio.read_messages(args.bag, [driving]):
+            for record in bagio.read_messages(args.bag, [driving], {driving: plot.ODOMETRY}):
                 speed.append((record.stamp,) + plot.motion_of(record.msg))
                 bar.update()
     else:

@@ -1,4 +1,6 @@
 """``cclog tune``: a model's threshold (and window, classify rate) for a false-window budget."""
+import sys
+
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
     EXIT_OK, CommandError, command_help, existing_file, output_flags, parent_exists, positive_float, print_json,
@@ -61,18 +63,21 @@ def run(args):
     from cc_log.offline import replay, tuning
     from cc_log.core.model import AnomalyModel
     model = AnomalyModel.load(existing_file(args.model, 'model file'))
+    types = {args.topic: model.config.feature.inputs[0][1]}
     for bag in args.bag:
         existing_file(bag, 'bag file')
-        replay.check_bag_topics(bag, [args.topic], {args.topic: model.config.feature.inputs[0][1]})
+        replay.check_bag_topics(bag, [args.topic], types)
     parent_exists(args.out, 'out')
     with _bar(args, 'tune').busy():
-        runs = [list(bagio.read_messages(bag, [args.topic])) for bag in args.bag]
+        runs = [list(bagio.read_messages(bag, [args.topic], types)) for bag in args.bag]
         try:
             model, record = tuning.choose(model, runs, args.topic, args.max_false_per_hour, args.windows,
                                           args.classify_every, args.pre, args.post, args.retrigger, sources=args.bag,
                                           keep_recall=args.keep_recall, injection_scale=args.injection_scale)
         except ValueError as error:
             raise CommandError(str(error))
+    for line in tuning.rejected_lines(record):
+        sys.stderr.write(line + '\n')
     try:
         model.save(args.out)
     except OSError as error:
