@@ -442,9 +442,7 @@ def test_a_chunk_that_does_not_decompress_is_a_value_error_through_rosbag(compre
         list(bag_reader.read_raw(path, BAG_TOPICS))
 
 
-@pytest.mark.xfail(strict=True, raises=OverflowError, reason='keep_budget.check_rate: float() of an integer beyond '
-                   'a float (YAML `max_windows_per_hour: 1e400` written as digits) raises OverflowError')
 @pytest.mark.parametrize('value', [10 ** 400, -10 ** 400])
 def test_max_windows_per_hour_of_an_integer_beyond_a_float_is_a_value_error(value):
-    with pytest.raises(ValueError, match='^max_windows_per_hour: '):
+    with pytest.raises(ValueError, match='max_windows_per_hour: .* is not a number'):
         options.get('max_windows_per_hour').parse(value)
