@@ -18,6 +18,7 @@ import numpy
 from cc_log.storage import log_format
 from cc_log.core import msg_codec, raw_message, safe_files
 from cc_log.storage.formats import bag_lz4
+from cc_log.storage.formats.bag_lz4 import to_bag  # noqa: F401  (export.to_bag: --to bag)
 from cc_log.storage.bag import bag_writer
 from cc_log.core.safe_files import AtomicFile
 from cc_log.core.safe_input import printable
@@ -54,27 +55,6 @@ def to_jsonl(records, out):
         for record in records:
             stream.write(json.dumps(plain(record_row(record)), allow_nan=False) + '\n')
     return [out]
-
-
-def to_bag(records, out, compression='lz4', progress=None, names=None):
-    """The records as one rosbag ``out`` (replaced), each at its stamp, as rosbag writes them
-    (``formats.bag_writer``; chunks lz4, bz2 or none): a record read with its serialized bytes and connection
-    header (from a bag-lz4 window) keeps them, the publisher's ``callerid`` and ``latching`` too, so ``rosbag
-    play`` latches what was latched. ``progress()`` after each record; ``[out]``. ValueError when a topic
-    holds messages of two types (a bag has one connection per topic). ``names``: the paths to try in order
-    instead of replacing ``out`` (the first free one is taken, nothing is overwritten)."""
-    headers = bag_lz4.connection_headers(records)
-
-    def messages():
-        for record in records:
-            yield bag_lz4.bag_message(record)
-            if progress:
-                progress()
-
-    target = AtomicFile(out, names=names, overwrite=names is None)
-    with target as stream:
-        bag_writer.write_bag(stream, messages(), headers, compression=compression)
-    return [target.path]
 
 
 MCAP_COMPRESSIONS = ('zstd', 'lz4', 'none')

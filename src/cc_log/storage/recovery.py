@@ -39,6 +39,7 @@ import stat
 import time
 
 from cc_log.storage import formats, log_format
+from cc_log.storage.formats import bag_lz4
 from cc_log.core import msg_codec, safe_files, why
 from cc_log.core.records import LogWindow, Trigger
 
@@ -144,10 +145,9 @@ def _write_recovered(path, directory, base, fmt, metadata, records, prefix):
     """Write ``records`` as ``<base>_recovered<extension>`` in format ``fmt`` with ``metadata`` (of the
     leftover), or as the plain rosbag it was for a context file; return its path."""
     if _is_context(path, prefix):
-        from cc_log.offline import export
         names = log_format.final_names(directory, base + RECOVERED_SUFFIX, fmt.EXTENSION)
         first = next(names)
-        return export.to_bag(records, first, names=itertools.chain([first], names))[0]
+        return bag_lz4.to_bag(records, first, names=itertools.chain([first], names))[0]
     for key in ('topics', 'types', 'counts', 'count', 'start', 'end', 'start_utc', 'end_utc', 'codec', 'layout',
                 'cc_log_version'):
         metadata.pop(key, None)

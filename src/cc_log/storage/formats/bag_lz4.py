@@ -464,3 +464,24 @@ def _restore(read_records, layout):
             raise ValueError('%d stamps for %d records' % (len(stamps), len(records)))
         records = [record._replace(stamp=msg_codec.decode_float(stamp)) for stamp, record in zip(stamps, records)]
     return records
+
+
+def to_bag(records, out, compression='lz4', progress=None, names=None):
+    """The records as one rosbag ``out`` (replaced), each at its stamp, as rosbag writes them
+    (``bag.bag_writer``; chunks lz4, bz2 or none): a record read with its serialized bytes and connection
+    header (from a bag-lz4 window) keeps them, the publisher's ``callerid`` and ``latching`` too, so ``rosbag
+    play`` latches what was latched. ``progress()`` after each record; ``[out]``. ValueError when a topic
+    holds messages of two types (a bag has one connection per topic). ``names``: the paths to try in order
+    instead of replacing ``out`` (the first free one is taken, nothing is overwritten)."""
+    headers = connection_headers(records)
+
+    def messages():
+        for record in records:
+            yield bag_message(record)
+            if progress:
+                progress()
+
+    target = safe_files.AtomicFile(out, names=names, overwrite=names is None)
+    with target as stream:
+        bag_writer.write_bag(stream, messages(), headers, compression=compression)
+    return [target.path]
