@@ -441,8 +441,7 @@ class SmartLogger(object):
         s = self._stats
         with s.lock:
             result = {
-                'enabled': self._enabled,
-                'messages_seen': s.messages_seen,
+                'enabled': self._enabled, 'messages_seen': s.messages_seen,
                 'messages_kept': written['messages_kept'],
                 'messages_queued': written['messages_queued'],
                 'messages_buffered': buffered,
