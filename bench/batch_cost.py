@@ -21,10 +21,11 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 from cc_log.storage.bag import bagio  # noqa: E402
-from cc_log.core import learning, raw_message  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
+from cc_log.base import raw_message  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
-from cc_log.core.smart import SmartLogger  # noqa: E402
+from cc_log.logger.smart import SmartLogger  # noqa: E402
 from cc_log.triggers.classifier import ClassifierTrigger  # noqa: E402
 
 

@@ -173,7 +173,7 @@ def write_bag(path, records, compression='none'):
 def sim_records(config):
     """(records, truth) of a whole simulated run: Record(stamp, topic, msg) in time order (header stamps)."""
     from cc_log import sim
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     simulator = sim.Simulator(config)
     records = [Record(stamp, topic, msg) for topic, stamp, msg in simulator.messages()]
     return records, simulator.truth
@@ -202,7 +202,7 @@ def smart_replay(model, records, driving_topic, directory, side_topics=(), fmt='
     replay of ``cclog replay``; return a dict: stats (SmartLogger.stats()), windows [{start, end, messages,
     path, bytes, triggers: [stamps]}]. ``triggers``: more triggers beside ``model``'s classifier."""
     from cc_log.storage import log_format
-    from cc_log.core.smart import SmartLogger
+    from cc_log.logger.smart import SmartLogger
     from cc_log.offline.replay import replay_records
     logger = SmartLogger(model, directory, fmt, pre, post, driving_topic=driving_topic,
                          side_topics=tuple(side_topics), retrigger=retrigger, triggers=triggers, wait_for_writer=True)

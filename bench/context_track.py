@@ -26,7 +26,7 @@ import common  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.offline import stats  # noqa: E402
 from cc_log.storage.context_track import ContextTrack  # noqa: E402
-from cc_log.core.records import Record  # noqa: E402
+from cc_log.base.records import Record  # noqa: E402
 
 
 def run(minutes, noise, directory):

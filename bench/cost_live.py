@@ -243,7 +243,7 @@ def roscore_session(prefix):
 def train_model(path, rate, minutes=5.0):
     """A motion model (500-message window) trained on a nominal simulated run (seed 2, ``minutes``) at ``rate``
     Hz, the rate the publisher streams: the nominal case at every rate (one vector per 0.1 s of data)."""
-    from cc_log.core import learning
+    from cc_log.learning import learning
     from cc_log import sim
     from cc_log.features import FeatureConfig
     records, _ = common.sim_records(sim.SimConfig(rate=rate, seed=2, minutes=minutes, anomalies=0, jitter=0.05 / rate))

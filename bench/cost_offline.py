@@ -40,7 +40,7 @@ import common  # noqa: E402
 import genpy  # noqa: E402
 import rosbag  # noqa: E402
 
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 from cc_log.offline.replay import replay  # noqa: E402
@@ -59,11 +59,11 @@ def plain_read(path, topics):
 STAGES = (  # (stage, substrings of the file names whose functions' own time counts for it), first match wins
     ('bag read', ('/cc_log/storage/bag/bag_reader.py', '/cc_log/storage/bag/bagio.py')),
     ('features', ('/cc_log/features/',)),
-    ('classifier', ('/cc_log/core/model.py', '/cc_log/triggers/classifier.py', '/sklearn/', '/numpy/', '/scipy/')),
-    ('window buffer, triggers', ('/cc_log/core/window_buffer.py', '/cc_log/core/smart.py', '/cc_log/triggers/',
-                                 '/cc_log/core/stamp_clock.py', '/cc_log/core/window_prep.py',
-                                 '/cc_log/core/trigger_topics.py', '/cc_log/core/smart_events.py',
-                                 '/cc_log/core/raw_json.py', '/cc_log/offline/replay.py')),
+    ('classifier', ('/cc_log/learning/model.py', '/cc_log/triggers/classifier.py', '/sklearn/', '/numpy/', '/scipy/')),
+    ('window buffer, triggers', ('/cc_log/buffer/window_buffer.py', '/cc_log/logger/smart.py', '/cc_log/triggers/',
+                                 '/cc_log/base/stamp_clock.py', '/cc_log/buffer/window_prep.py',
+                                 '/cc_log/logger/trigger_topics.py', '/cc_log/logger/smart_events.py',
+                                 '/cc_log/base/raw_json.py', '/cc_log/offline/replay.py')),
     ('writer (decode, json-xz, disk)', ('/cc_log/', 'lzma', 'json', '/genpy/', '_Odometry', '_Imu', 'dynamic')),
     ('bag read', ('/rosbag/', 'bz2', 'lz4', '/roslz4/')),
 )
@@ -81,8 +81,8 @@ def profile(path, topics, model_path, out, name, top, fmt='json-xz'):
     functions grouped by file) and the ``top`` functions by own time."""
     import cProfile
     import pstats
-    from cc_log.core.model import AnomalyModel
-    from cc_log.core.smart import SmartLogger
+    from cc_log.learning.model import AnomalyModel
+    from cc_log.logger.smart import SmartLogger
     from cc_log.offline.replay import replay_into
     logger = SmartLogger(AnomalyModel.load(model_path), out, fmt=fmt, driving_topic=topics[0],
                          side_topics=tuple(topics[1:]), background=False)
@@ -131,7 +131,7 @@ def writer_cost(windows, rounds):
     document + JSON) now (``json_xz.decoded_records``: fields read from the bytes) and earlier (every message
     decoded by genpy, ``raw_message.decoded_records``, then rows), and of LZMA on that text. Both texts must be
     the same."""
-    from cc_log.core import raw_message
+    from cc_log.base import raw_message
     from cc_log.storage.formats import json_xz
     times = {'now': [], 'earlier': [], 'lzma': []}
     texts = {}
@@ -174,7 +174,7 @@ class BagTime(genpy.Time):
 def rosbag_write(path, messages, headers):
     """``messages`` and ``headers`` (``bag_lz4.bag_messages``) written by rosbag, as bag-lz4 wrote them before
     ``formats.bag_writer`` (raw, with the connection headers, ``BagTime``)."""
-    from cc_log.core import raw_message
+    from cc_log.base import raw_message
     classes = dict((topic, raw_message.message_class(header)) for topic, header in headers.items())
     bag = rosbag.Bag(path, 'w', compression=rosbag.Compression.LZ4)
     for topic, secs, nsecs, data in messages:

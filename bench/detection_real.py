@@ -28,7 +28,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 from cc_log.storage.bag import bagio  # noqa: E402
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
 
 DATA = common.DATA

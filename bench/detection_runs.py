@@ -74,7 +74,7 @@ from common import count_of  # noqa: E402
 
 import retime  # noqa: E402
 from cc_log.storage.bag import bagio  # noqa: E402
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.offline import tuning  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream, vector_length  # noqa: E402

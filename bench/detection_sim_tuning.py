@@ -47,7 +47,9 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.core import config as configuration, learning, raw_message  # noqa: E402
+from cc_log.logger import config as configuration  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
+from cc_log.base import raw_message  # noqa: E402
 from cc_log.offline import demo  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402

@@ -17,7 +17,7 @@ EVENT_EVERY s of a long run (the types repeated), a short run split into fewer t
 Detectors, all on the same windows (1 s, every 0.25 s) of the same 19 envelope features
 (``cc_log.features.envelope``), fitted on the training windows, every score lower = more anomalous:
 
-- ``envelope``: the physics envelope (``core.envelope``, the ``envelope`` trigger's): the training maximum of each
+- ``envelope``: the physics envelope (``learning.envelope``, the ``envelope`` trigger's): the training maximum of each
   feature floored at ``ENVELOPE_FLOORS``, score = -(largest ratio of a feature to it);
 - ``knn-mean``, ``knn-max``: mean / largest distance to the 5 nearest training windows (training scores leave the
   window itself out); ``lof`` (sklearn, novelty=True, 20 neighbours); ``iforest`` (sklearn IsolationForest);
@@ -68,7 +68,7 @@ import detection_runs  # noqa: E402
 import heldout_data  # noqa: E402
 
 from cc_log import sim  # noqa: E402
-from cc_log.core import envelope  # noqa: E402
+from cc_log.learning import envelope  # noqa: E402
 from cc_log.features.envelope import ENVELOPE_COLUMNS, envelope_windows, odometry_samples  # noqa: E402
 from cc_log.offline.tuning import windows_of  # noqa: E402
 
@@ -98,7 +98,7 @@ class Detector(object):
 
 
 class Envelope(Detector):
-    """The physics envelope (``core.envelope``): per-feature training maximum floored; score = -(largest ratio to
+    """The physics envelope (``learning.envelope``): per-feature training maximum floored; score = -(largest ratio to
     it), so level 2 is the envelope trigger's default factor."""
 
     def fit(self, X):

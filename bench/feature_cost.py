@@ -28,9 +28,10 @@ sys.path.insert(0, os.path.join(ROOT, 'src'))
 
 import common  # noqa: E402
 from cc_log.storage.bag import bagio  # noqa: E402
-from cc_log.core import learning, raw_message  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
+from cc_log.base import raw_message  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureWindow, OdometryFeatures, window_vector  # noqa: E402
-from cc_log.core.model import AnomalyModel  # noqa: E402
+from cc_log.learning.model import AnomalyModel  # noqa: E402
 
 BAG = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real', 'husky_outdoor_2015.bag'))
 TOPIC = '/husky_velocity_controller/odom'

@@ -46,7 +46,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 from cc_log.offline import fleet, partition_learning  # noqa: E402
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 

@@ -40,9 +40,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 import cc_log  # noqa: E402
-from cc_log.core import msg_codec  # noqa: E402
+from cc_log.base import msg_codec  # noqa: E402
 from cc_log.storage.formats import json_rows, json_xz  # noqa: E402
-from cc_log.core.records import Record  # noqa: E402
+from cc_log.base.records import Record  # noqa: E402
 
 REAL = common.DATA
 

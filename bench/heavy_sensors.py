@@ -425,7 +425,7 @@ def parse(argv):
 
 def never_firing_model(path):
     """cost_live's motion model for 100 Hz odometry with a threshold no score goes below: it never fires."""
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     if not os.path.exists(path):
         train_model(path + '.trained', ODOM_RATE, minutes=1.0)
         model = AnomalyModel.load(path + '.trained')

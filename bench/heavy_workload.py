@@ -122,9 +122,9 @@ def compression_ratios(data):
 
 def build(workload, path):
     """Write the workload bag at ``path`` (uncompressed chunks); return its description (also in path.json)."""
-    from cc_log.core import raw_message
+    from cc_log.base import raw_message
     from cc_log.storage.bag import bag_writer
-    from cc_log.core.safe_files import AtomicFile
+    from cc_log.base.safe_files import AtomicFile
     stamps = {topic: [] for topic in workload.topics}
     sizes = dict.fromkeys(workload.topics, 0)
     headers, samples = {}, {}

@@ -44,7 +44,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 from cc_log import sim  # noqa: E402
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream  # noqa: E402
 from cc_log.triggers.classifier import ClassifierTrigger  # noqa: E402
 from cc_log.triggers.rule import RuleTrigger  # noqa: E402

@@ -25,8 +25,8 @@ import common  # noqa: F401  (puts src/ on sys.path)
 from common import Timer, header, table
 
 from cc_log import sim
-from cc_log.core.raw_message import class_header
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.raw_message import class_header
+from cc_log.base.records import LogWindow, Record, Trigger
 from cc_log.offline import cli
 from cc_log.storage import log_format
 

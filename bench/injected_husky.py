@@ -29,7 +29,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 
@@ -52,7 +52,7 @@ def main(argv=None):
 
 
 def _seconds(span, rate):
-    from cc_log.core.spans import Span
+    from cc_log.base.spans import Span
     span = Span.parse(span)
     return span.seconds if span.is_duration else span.count / rate
 

@@ -24,12 +24,12 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.core import drift, learning  # noqa: E402
+from cc_log.learning import drift, learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig, FeatureStream  # noqa: E402
-from cc_log.core.online_learning import OnlineLearner  # noqa: E402
+from cc_log.learning.online_learning import OnlineLearner  # noqa: E402
 from cc_log.triggers import ClassifierTrigger  # noqa: E402
-from cc_log.core.records import Record  # noqa: E402
+from cc_log.base.records import Record  # noqa: E402
 
 FEATURE = FeatureConfig('motion', '1s')
 SLOW = sim.Limits(max_speed=0.5, max_accel=0.8, max_decel=1.0, max_yaw_rate=0.5, max_yaw_accel=2.0)

@@ -23,7 +23,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.core import msg_codec  # noqa: E402
+from cc_log.base import msg_codec  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.storage.formats import json_xz  # noqa: E402
 

@@ -104,7 +104,7 @@ def publisher(args):
 def always_anomalous_model(path):
     """A model trained on random vectors with a threshold that calls every message anomalous."""
     import numpy as np
-    from cc_log.core import learning
+    from cc_log.learning import learning
     from cc_log.features import FeatureConfig, vector_length
     config = FeatureConfig('motion', '20')
     model, _ = learning.train(np.random.RandomState(0).normal(size=(60, vector_length(config))), None, config)

@@ -17,7 +17,7 @@ import random
 
 import numpy as np
 
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 STOP_SECONDS = (1.0, 8.0)     # how long a stop holds
 CRAWL_SECONDS = (3.0, 10.0)   # how long a slow stretch holds

@@ -35,10 +35,11 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
 from cc_log.storage import codecs, log_format  # noqa: E402
-from cc_log.core import learning, msg_codec  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
+from cc_log.base import msg_codec  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
-from cc_log.core.records import LogWindow  # noqa: E402
+from cc_log.base.records import LogWindow  # noqa: E402
 
 SIM_RUN_SEED = 1
 SIM_TRAIN_SEED = 2

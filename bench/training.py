@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
 
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log import sim  # noqa: E402
 from cc_log.features import FeatureConfig, OdometryFeatures, vector_length, window_vector  # noqa: E402
 

@@ -26,10 +26,11 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 
 from cc_log.storage.bag import bagio  # noqa: E402
-from cc_log.core import learning, msg_codec  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
+from cc_log.base import msg_codec  # noqa: E402
 from cc_log.storage import log_format  # noqa: E402
-from cc_log.core.collector import collect_bag  # noqa: E402
-from cc_log.core.model import AnomalyModel  # noqa: E402
+from cc_log.logger.collector import collect_bag  # noqa: E402
+from cc_log.learning.model import AnomalyModel  # noqa: E402
 from cc_log.msg import AnomalyEvent  # noqa: E402
 
 PKG = 'cc_log'

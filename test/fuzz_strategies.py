@@ -145,7 +145,7 @@ def json_texts(draw, document):
 def _odometry_records(n=30, start=1432235498.0):
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Imu
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     out = []
     for i in range(n):
         msg = Odometry() if i % 3 else Imu()
@@ -164,7 +164,7 @@ def _odometry_records(n=30, start=1432235498.0):
 @functools.lru_cache(maxsize=None)
 def valid_window(fmt, precision=False):
     """``(file name, bytes)`` of a valid window file of format ``fmt`` (json-xz: with or without a precision)."""
-    from cc_log.core.records import LogWindow, Trigger
+    from cc_log.base.records import LogWindow, Trigger
     from cc_log.storage.log_format import write_window
     records = _odometry_records()
     with tempfile.TemporaryDirectory() as directory:
@@ -208,7 +208,7 @@ def json_xz_documents(draw):
 def valid_model():
     """The document of a small valid model (``AnomalyModel.to_dict``)."""
     import numpy as np
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     from cc_log.features import FeatureConfig, vector_length, vector_names
     config = FeatureConfig('motion', '5s')
     d = vector_length(config)
@@ -223,7 +223,7 @@ def valid_model():
 def valid_envelope():
     """The document of a small valid envelope (``Envelope.to_dict``)."""
     import numpy as np
-    from cc_log.core.envelope import learn
+    from cc_log.learning.envelope import learn
     from cc_log.features.envelope import ENVELOPE_COLUMNS
     rng = np.random.default_rng(0)
     envelope = learn([rng.uniform(0.1, 1.0, size=(20, len(ENVELOPE_COLUMNS)))], '/odom', 10, 5, 60.0)
@@ -260,7 +260,7 @@ def vector_documents():
 def config_documents(draw):
     """Bytes of a configuration YAML file: sections and keys of the configuration (and others), hostile values,
     triggers of every kind; or YAML text with tags, anchors and aliases."""
-    from cc_log.core import options
+    from cc_log.logger import options
     from cc_log import triggers
     sections = options.sections()
     how = draw(st.integers(0, 5))

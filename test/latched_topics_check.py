@@ -28,7 +28,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 
 from cc_log.storage import log_format  # noqa: E402
-from cc_log.core import msg_codec  # noqa: E402
+from cc_log.base import msg_codec  # noqa: E402
 from cc_log.msg import AnomalyEvent  # noqa: E402
 
 PKG = 'cc_log'

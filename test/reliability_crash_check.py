@@ -34,7 +34,7 @@ from sensor_msgs.msg import Imu
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log.storage import log_format, recovery  # noqa: E402
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
 

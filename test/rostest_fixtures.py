@@ -10,10 +10,10 @@ import time
 import numpy as np
 
 from cc_log.storage.bag import bagio
-from cc_log.core import learning
-from cc_log.core.collector import VectorStream
+from cc_log.learning import learning
+from cc_log.logger.collector import VectorStream
 from cc_log.features import FeatureConfig
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 ROOT = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
 HUSKY = os.path.normpath(os.path.join(ROOT, '..', 'shared', 'data', 'real', 'husky_outdoor_2015.bag'))

@@ -24,7 +24,7 @@ from test_reliability import as_leftover  # noqa: E402
 from test_safe_decoding import crafted_class, crafted_window  # noqa: E402
 
 from cc_log.storage import log_format  # noqa: E402
-from cc_log.core import msg_codec  # noqa: E402
+from cc_log.base import msg_codec  # noqa: E402
 
 PKG = 'cc_log'
 NODE = 'smart_logger_safe'

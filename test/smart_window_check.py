@@ -32,7 +32,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 
 from cc_log.storage import log_format  # noqa: E402
-from cc_log.core import msg_codec  # noqa: E402
+from cc_log.base import msg_codec  # noqa: E402
 from cc_log.msg import AnomalyEvent  # noqa: E402
 
 PKG = 'cc_log'
@@ -236,7 +236,7 @@ class SmartWindowTest(unittest.TestCase):
     def test_0_an_envelope_file_as_model_watches_the_odometry_it_was_learned_on(self):
         # the envelope of the first 40 s (with its joint check), learned on /envelope_odom; ~model:=envelope.json
         # builds the envelope trigger on that topic (no classifier); the run's burst opens one window saying why
-        from cc_log.core import envelope
+        from cc_log.learning import envelope
         from cc_log.features.envelope import envelope_windows, odometry_samples
         name, topic = 'smart_logger_envelope', '/envelope_odom'
         out = os.path.join(self.tmp, 'envelope')

@@ -3,7 +3,7 @@ import pytest
 from conftest import real_data
 
 from cc_log.storage.bag import bag_reader
-from cc_log.core import raw_message
+from cc_log.base import raw_message
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.bag import bag_writer
 

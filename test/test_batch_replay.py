@@ -8,12 +8,12 @@ import struct
 import numpy as np
 import pytest
 
-from cc_log import errors
-from cc_log.core import learning, raw_message
+from cc_log.base import errors, raw_message
+from cc_log.learning import learning
 from cc_log.storage import log_format
 from cc_log import sim
 from cc_log.features import FeatureConfig
-from cc_log.core.smart import SmartLogger
+from cc_log.logger.smart import SmartLogger
 from cc_log.offline.replay import replay_into
 from cc_log.triggers.classifier import scores_of
 from cc_log.triggers.rule import RuleTrigger
@@ -148,7 +148,7 @@ def same_windows(batched, single):
 def replay_both(tmp_path, path, topic, side, model_path, fmt, rule=None, **options):
     """The windows of a batched replay (``replay_into``: chunk reader, ``on_records``) and of one fed record by
     record (``on_raw``) from rosbag's raw read."""
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     results = []
     for how in ('batched', 'one by one'):
         out = str(tmp_path / ('%s %s' % (fmt, how)))
@@ -193,7 +193,7 @@ def test_batched_replay_writes_the_same_windows_as_record_by_record_on_the_husky
 
 
 def test_scoring_a_batch_gives_each_vectors_own_score_and_decision(sim_case):
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     model = AnomalyModel.load(sim_case[1])
     rng = np.random.default_rng(5)
     vectors = [model.mean + model.scale * rng.normal(size=model.mean.shape) * spread

@@ -213,7 +213,7 @@ def test_learn_with_a_test_directory_reports_the_table(trained, real_bag, tmp_pa
 
 def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     from cc_log.storage import log_format
-    from cc_log.core import msg_codec
+    from cc_log.base import msg_codec
     summary, bag = replayed['summary'], replayed['bag']
     assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
                              'keep_budget']
@@ -332,7 +332,7 @@ TABLE_2 = ['none', 'LZ4', 'LZFSE', 'ZIP', 'gzip', 'bzip2', 'LZMA-6', 'zstd', 'cc
 
 
 def test_codecs_on_a_bag_topic(real_bag):
-    from cc_log.core import msg_codec
+    from cc_log.base import msg_codec
     bag = real_bag(HUSKY)
     table = ok_json('codecs', bag, '--topic', HUSKY_ODOM)
     raw = sum(msg_codec.row_json_bytes(msg) for _, _, msg in bag_messages(bag, [HUSKY_ODOM]))
@@ -577,7 +577,7 @@ def test_bad_window_files_and_option_values(replayed, trained, tmp_path):
 
 def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
     from cc_log.storage import log_format
-    from cc_log.core.records import LogWindow, Record, Trigger
+    from cc_log.base.records import LogWindow, Record, Trigger
     import rosbag
     with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
         records = [Record(m.header.stamp.to_sec(), topic, m) for topic, m, _ in
@@ -598,7 +598,7 @@ def test_recover_renames_a_complete_leftover_and_reports(tmp_path, real_bag):
 def _odom_window(real_bag, count=50):
     """A window of ``count`` odometry messages of a real bag, triggered at its first."""
     import rosbag
-    from cc_log.core.records import LogWindow, Record, Trigger
+    from cc_log.base.records import LogWindow, Record, Trigger
     with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
         records = [Record(m.header.stamp.to_sec(), topic, m) for topic, m, _ in
                    bag.read_messages(topics=['/husky_velocity_controller/odom'])][:count]
@@ -682,7 +682,7 @@ def test_trigger_without_a_master_is_one_line():
 
 
 def test_trigger_finds_the_one_smart_logger_or_says_what_runs():
-    from cc_log.errors import CommandError
+    from cc_log.base.errors import CommandError
     from cc_log.offline.cli.trigger_cmd import trigger_service
     services = ['/rosout/get_loggers', '/robot1/smart_logger/trigger', '/robot1/smart_logger/trigger_window']
     assert trigger_service(services, ['/rosout']) == '/robot1/smart_logger/trigger_window'

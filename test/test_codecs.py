@@ -4,7 +4,7 @@ import importlib
 import pytest
 
 from cc_log.storage import codecs
-from cc_log.core import msg_codec
+from cc_log.base import msg_codec
 
 rosbag = pytest.importorskip('rosbag')
 

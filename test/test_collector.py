@@ -4,10 +4,11 @@ import os
 import numpy as np
 import pytest
 
-from cc_log.core import learning, msg_codec
+from cc_log.learning import learning
+from cc_log.base import msg_codec
 from cc_log.offline import learn_main
 from cc_log.storage import log_format
-from cc_log.core.collector import Collector, Rotation, VectorStream, collect_bag
+from cc_log.logger.collector import Collector, Rotation, VectorStream, collect_bag
 from cc_log.features import FeatureConfig
 
 bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
@@ -158,7 +159,7 @@ def test_learn_trains_validates_and_saves(husky_path, tmp_path, capsys):
     out = capsys.readouterr().out
     assert status == 0 and os.path.exists(model_path)
     assert 'Precision' in out and 'Recall' in out and model_path in out
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     model = AnomalyModel.load(model_path)
     assert model.config == config and len(records) > 0
     tn = int(out.split('TN')[1].split()[0])

@@ -7,12 +7,13 @@ import sys
 
 import pytest
 
-from cc_log.core import config, learning
+from cc_log.logger import config
+from cc_log.learning import learning
 from cc_log.storage import log_format
-from cc_log.core.config import Config
-from cc_log.core.raw_message import installed_class
+from cc_log.logger.config import Config
+from cc_log.base.raw_message import installed_class
 from cc_log.features import FeatureConfig
-from cc_log.core.model import AnomalyModel
+from cc_log.learning.model import AnomalyModel
 from cc_log.triggers import ClassifierTrigger, RuleTrigger
 
 bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
@@ -163,7 +164,7 @@ def test_the_model_file_decides_the_default_trigger_an_envelope_or_the_classifie
     envelope file builds the envelope trigger on its odometry topic, a model file the classifier; any other file
     is one line naming it."""
     import numpy as np
-    from cc_log.core import envelope
+    from cc_log.learning import envelope
     from cc_log.features.envelope import ENVELOPE_COLUMNS
     from cc_log.triggers.envelope import EnvelopeTrigger
     rng = np.random.default_rng(0)
@@ -286,7 +287,7 @@ def test_the_example_configuration_is_valid(tmp_path):
 def test_collect_mode_live_writes_the_same_vectors_of_every_classifier_as_cclog_collect(tmp_path, real_bag_path):
     """Collector with a configuration's classifiers (the collect node's path) against collect_bag (cclog
     collect --config): the same vector files, in features/<name>/<label>/."""
-    from cc_log.core.collector import Collector, collect_bag
+    from cc_log.logger.collector import Collector, collect_bag
     cfg = Config.from_dict({'triggers': [
         {'name': 'motion', 'kind': 'classifier', 'feature_set': 'motion', 'window': '2s', 'topics': [HUSKY_ODOM]},
         {'name': 'shock', 'kind': 'classifier', 'feature_set': 'imu', 'window': '1s', 'topics': ['/imu/data']}]})

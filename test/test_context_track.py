@@ -7,11 +7,10 @@ from conftest import assert_rosbag_spans, fill_disk
 from nav_msgs.msg import Odometry
 from std_msgs.msg import String
 
-from cc_log.core import event_kinds
+from cc_log.base import event_kinds, safe_files
 from cc_log.storage import context_track, window_writer
-from cc_log.core import safe_files
 from cc_log.storage.context_track import ContextTrack, Tee, parse_topics
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 
 def odom(stamp):

@@ -97,7 +97,7 @@ def test_an_unusable_out_is_one_line(tmp_path):
 def test_the_summary_counts_the_frames_and_scans_kept_around_each_event_in_either_format(tmp_path):
     from cc_log.storage import log_format
     from cc_log import sim
-    from cc_log.core.records import LogWindow, Record
+    from cc_log.base.records import LogWindow, Record
     simulator = sim.Simulator(sim.SimConfig(minutes=4.0 / 60, anomalies=0, camera=True, scan=True))
     records = [Record(stamp, topic, msg) for topic, stamp, msg in simulator.messages()]
     first, second = records[:len(records) // 3], records[2 * len(records) // 3:]    # a gap between them
@@ -153,11 +153,13 @@ def test_the_demos_configuration_keeps_every_event_of_its_run_whole(tmp_path):
     run (the simulator as demo.launch runs it: seed 8, 2.5 min, 6 anomalies, gap 10 s) through SmartLogger;
     demo.score passes (with retrigger onset and 1 s + 1 s, the old demo, a collision kept about a third)."""
     import yaml
-    from cc_log.core import config, learning, raw_message
+    from cc_log.logger import config
+    from cc_log.learning import learning
+    from cc_log.base import raw_message
     from cc_log import sim
-    from cc_log.core.smart import SmartLogger
+    from cc_log.logger.smart import SmartLogger
     from cc_log.offline.replay import replay_records
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     demo.prepare_out(str(tmp_path))
     model_path = demo.train(str(tmp_path), demo.DEFAULT_TRAIN_MINUTES, demo.DEFAULT_SEED, demo.DEFAULT_WINDOW,
                             demo.DEFAULT_STRIDE)

@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from cc_log.core import drift, learning
+from cc_log.learning import drift, learning
 from cc_log import sim
-from cc_log.core.drift import OK, WARN, DriftMonitor
+from cc_log.learning.drift import OK, WARN, DriftMonitor
 from cc_log.features import FeatureConfig, FeatureStream
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -181,7 +181,7 @@ def nominal_drive(seconds=120.0, seed=0, rate=RATE):
 def odom_records(samples, topic=ODOM):
     """Records of decoded nav_msgs/Odometry-shaped messages (SimpleNamespace) of planar samples."""
     from types import SimpleNamespace as NS
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     records = []
     for t, x, y, yaw, v, w in zip(*samples):
         pose = NS(position=NS(x=x, y=y, z=0.0), orientation=NS(x=0.0, y=0.0, z=np.sin(yaw / 2), w=np.cos(yaw / 2)))
@@ -191,7 +191,7 @@ def odom_records(samples, topic=ODOM):
 
 
 def learned(samples):
-    from cc_log.core import envelope
+    from cc_log.learning import envelope
     return envelope.learn([envelope_windows(*samples)[1]], ODOM, 1.0, 0.25, samples[0][-1] - samples[0][0])
 
 
@@ -204,7 +204,7 @@ def fires_of(trigger, records, batch=64):
 
 
 def test_limits_are_the_training_maxima_floored_times_the_factor():
-    from cc_log.core.envelope import Envelope
+    from cc_log.learning.envelope import Envelope
     samples = nominal_drive()
     env = learned(samples)
     matrix = envelope_windows(*samples)[1]
@@ -281,7 +281,7 @@ def test_the_trigger_fires_alike_whatever_the_batches():
 def odometry_messages(samples, topic=ODOM):
     """Records of real nav_msgs/Odometry messages of planar samples (what a logger writes)."""
     from nav_msgs.msg import Odometry
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     records = []
     for t, x, y, yaw, v, w in zip(*samples):
         msg = Odometry()
@@ -295,7 +295,7 @@ def odometry_messages(samples, topic=ODOM):
 
 @pytest.mark.parametrize('value', [1e200, float('inf'), float('nan'), -1e7])
 def test_five_seconds_of_speed_out_of_any_physical_range_fire_and_the_logger_keeps_their_span(tmp_path, value):
-    from cc_log.core.smart import SmartLogger
+    from cc_log.logger.smart import SmartLogger
     from cc_log.storage import log_format
     from cc_log.triggers.envelope import OUT_OF_RANGE_SCORE, EnvelopeTrigger
     env = learned(nominal_drive(seed=0))
@@ -336,9 +336,9 @@ def test_a_stamp_repeated_for_ever_does_not_grow_the_ring():
 
 
 def test_a_configuration_entry_of_kind_envelope(tmp_path):
-    from cc_log.core.config import Config
-    from cc_log.core.raw_message import installed_class
-    from cc_log.core.model import AnomalyModel
+    from cc_log.logger.config import Config
+    from cc_log.base.raw_message import installed_class
+    from cc_log.learning.model import AnomalyModel
     env = learned(nominal_drive(seconds=30))
     path = str(tmp_path / 'envelope.json')
     env.save(path)
@@ -360,7 +360,7 @@ def test_a_configuration_entry_of_kind_envelope(tmp_path):
 
 def test_envelope_files_are_read_with_bounds(tmp_path):
     import json
-    from cc_log.core.envelope import Envelope
+    from cc_log.learning.envelope import Envelope
     env = learned(nominal_drive(seconds=30))
     path = str(tmp_path / 'envelope.json')
     env.save(path)
@@ -413,7 +413,7 @@ def apart(matrix):
 
 
 def test_the_joint_check_flags_a_combination_never_seen_although_each_feature_is_inside_its_limit():
-    from cc_log.core import envelope
+    from cc_log.learning import envelope
     matrix = paired_windows()
     env = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0)
     assert env.joint is not None and 0 < env.joint.typical < env.joint.farthest
@@ -440,7 +440,7 @@ def test_the_joint_ratio_is_the_detector_benchmarks_robust_mahalanobis_at_its_le
     extreme the median / lowest training score (-d2)."""
     from sklearn.covariance import MinCovDet
     from sklearn.preprocessing import StandardScaler
-    from cc_log.core import envelope
+    from cc_log.learning import envelope
     matrix = paired_windows(seed=1)
     joint = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0).joint
     scaler = StandardScaler().fit(matrix)
@@ -467,8 +467,8 @@ def test_the_joint_ratio_is_the_detector_benchmarks_robust_mahalanobis_at_its_le
 
 
 def test_a_joint_fire_says_why_naming_the_three_features_that_stand_out_together():
-    from cc_log.core import envelope
-    from cc_log.core.why import MAX_TEXT
+    from cc_log.learning import envelope
+    from cc_log.base.why import MAX_TEXT
     matrix = paired_windows()
     env = envelope.learn([matrix], ODOM, 1.0, 0.25, 150.0)
     row = apart(matrix)
@@ -506,7 +506,7 @@ def test_a_joint_fire_says_why_naming_the_three_features_that_stand_out_together
 
 
 def test_the_trigger_scores_with_the_joint_check_alike_whatever_the_batches():
-    from cc_log.core import envelope
+    from cc_log.learning import envelope
     from cc_log.triggers.envelope import EnvelopeTrigger
     env = learned(nominal_drive(seed=0))
     assert env.joint is not None
@@ -533,7 +533,7 @@ def test_the_trigger_scores_with_the_joint_check_alike_whatever_the_batches():
 
 def test_version_1_files_load_without_a_joint_check(tmp_path):
     import json
-    from cc_log.core.envelope import Envelope
+    from cc_log.learning.envelope import Envelope
     env = learned(nominal_drive(seconds=30))
     document = env.to_dict()
     assert document['version'] == 2 and set(document['joint']) == {
@@ -553,7 +553,7 @@ def test_version_1_files_load_without_a_joint_check(tmp_path):
 
 def test_bad_joint_blocks_are_refused_in_one_line(tmp_path):
     import json
-    from cc_log.core.envelope import Envelope
+    from cc_log.learning.envelope import Envelope
     env = learned(nominal_drive(seconds=30))
     document = env.to_dict()
     joint = document['joint']
@@ -604,7 +604,7 @@ def husky_surge(tmp_path_factory):
     import rospy
     from conftest import cclog, real_data
     from cc_log import sim
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     tmp_path = tmp_path_factory.mktemp('husky_surge')
     records = []
     with rosbag.Bag(real_data('husky_outdoor_2015.bag')) as bag:
@@ -642,7 +642,7 @@ def test_cclog_replay_with_an_envelope_trigger_catches_a_surge_injected_into_rea
     import json
     from conftest import cclog
     from cc_log.triggers.envelope import EnvelopeTrigger
-    from cc_log.core.envelope import Envelope
+    from cc_log.learning.envelope import Envelope
     limits, injected, event = husky_surge['limits'], husky_surge['records'], husky_surge['event']
     config = tmp_path / 'config.yaml'
     config.write_text('driving_topic: %s\nformat: json-xz\nwindows: {pre: 1s, post: 1s}\ntriggers:\n'
@@ -702,7 +702,7 @@ def test_cclog_learn_envelope_learns_the_joint_check_by_default_and_says_its_fig
     said on the last line."""
     import json
     from conftest import cclog
-    from cc_log.core.envelope import Envelope
+    from cc_log.learning.envelope import Envelope
     out = tmp_path / 'envelope.json'
     result = cclog('learn-envelope', husky_surge['train'], '--out', out)
     assert result.returncode == 0, result.stderr

@@ -1,12 +1,13 @@
 """One vocabulary of window events (issue 44): the writer, the smart logger and the node's ``~anomalies`` say a
-window's kind with ``core.event_kinds``, whose values are AnomalyEvent's constants on the wire, so nothing
+window's kind with ``base.event_kinds``, whose values are AnomalyEvent's constants on the wire, so nothing
 translates one into another."""
 import os
 import re
 
 import pytest
 
-from cc_log.core import event_kinds, smart, smart_events
+from cc_log.base import event_kinds
+from cc_log.logger import smart, smart_events
 from cc_log.storage import window_writer
 
 KINDS = ('OPENED', 'WRITTEN', 'FAILED', 'SPLIT', 'DELETED')
@@ -36,7 +37,7 @@ def test_the_kinds_are_distinct_and_defined_only_in_the_vocabulary():
 
 def test_the_logger_says_the_writer_kind_as_it_is_and_the_node_publishes_it_unchanged(tmp_path):
     pytest.importorskip('rosbag')
-    from cc_log.core.smart import SmartLogger
+    from cc_log.logger.smart import SmartLogger
     from test_heavy_windows import ODOM, feed, stream
     logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, background=False)
     heard, said = [], []

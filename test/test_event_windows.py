@@ -4,13 +4,13 @@ import random
 import numpy as np
 import pytest
 
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log.features import FeatureConfig, FeatureStream
 from cc_log.features.window import FeatureWindow
-from cc_log.core.spans import Span
+from cc_log.base.spans import Span
 from cc_log.triggers import ClassifierTrigger
 from cc_log.triggers.classifier import recent_span
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 from nav_msgs.msg import Odometry  # noqa: E402
 
@@ -97,8 +97,8 @@ def test_newest_rows_of_the_feature_window():
 
 
 def test_a_configuration_sets_event_and_recent_and_refuses_a_bad_recent(model, tmp_path):
-    from cc_log.core.config import Config
-    from cc_log.core.model import AnomalyModel
+    from cc_log.logger.config import Config
+    from cc_log.learning.model import AnomalyModel
     path = str(tmp_path / 'model.json')
     model.save(path)
     entry = {'name': 'motion', 'kind': 'classifier', 'model': path, 'topics': [ODOM], 'retrigger': 'event',

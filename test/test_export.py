@@ -9,9 +9,9 @@ from conftest import real_data
 from cc_log.storage.bag import bag_reader
 from cc_log.offline import export
 from cc_log.storage import log_format
-from cc_log.core import raw_message
+from cc_log.base import raw_message
 from cc_log.storage.formats import bag_lz4, json_xz
-from cc_log.core.records import LogWindow
+from cc_log.base.records import LogWindow
 
 rosbag = pytest.importorskip('rosbag')
 
@@ -113,7 +113,7 @@ def test_csv_names_are_unique_sanitized_and_never_overwrite(tmp_path):
     import os
     import re
     from std_msgs.msg import String
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     topics = ['/a/b', '/a_b', '/x/../../escape', '/\x1b[31mred\n', '/' + 'n' * 5000]
     records = [Record(float(number), topic, String(data='of %s' % number)) for number, topic in enumerate(topics)]
     theirs = tmp_path / 'a_b.csv'

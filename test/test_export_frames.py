@@ -13,7 +13,7 @@ from sensor_msgs.msg import CompressedImage, Image
 from cc_log.offline import export
 from cc_log.storage import log_format
 from cc_log import sim
-from cc_log.core.records import LogWindow, Record
+from cc_log.base.records import LogWindow, Record
 
 CAMERA = sim.CAMERA_TOPIC
 

@@ -13,7 +13,7 @@ from cc_log.offline import export
 from cc_log.storage import log_format
 from cc_log import sim
 from cc_log.storage.formats import bag_lz4
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.records import LogWindow, Record, Trigger
 
 HUSKY = 'husky_outdoor_2015.bag'
 ODOM, IMU = '/husky_velocity_controller/odom', '/imu/data'

@@ -10,13 +10,14 @@ import pytest
 
 from cc_log.storage.bag import bagio
 from cc_log import features
-from cc_log.core import learning, raw_message
+from cc_log.learning import learning
+from cc_log.base import raw_message
 from cc_log.features import FeatureConfig, FeatureStream, FeatureWindow, window_vector
 from cc_log.features.base import statistics, window_statistics
 from cc_log.features.window import EVERY_SLACK, JUMP_BACK_TOLERANCE
-from cc_log.core.spans import Span
+from cc_log.base.spans import Span
 from cc_log.triggers import ClassifierTrigger
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 from conftest import REAL_DATA, approx_floats
 

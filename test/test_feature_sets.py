@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cc_log import features, sim
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log.features import FEATURE_SETS, FeatureConfig, FeatureStream, vector_length, vector_names, window_vector
 
 

@@ -9,7 +9,7 @@ import pytest
 from cc_log.features import (
     FEATURE_SETS, MOTION_COLUMNS, RAW_COLUMNS, FeatureConfig, FeatureWindow, OdometryFeatures, get, stamp_of,
     vector_length, vector_names, window_vector)
-from cc_log.core.spans import Span
+from cc_log.base.spans import Span
 
 rosbag = pytest.importorskip('rosbag')
 

@@ -7,12 +7,12 @@ import sys
 
 import pytest
 
-from cc_log.core import options
+from cc_log.logger import options
 from cc_log.storage import context_track, disk_guard, log_format, recovery
 from cc_log.storage.disk_guard import DiskGuard
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.log_format import Format, file_prefix, write_window
-from cc_log.core.event_kinds import DELETED
+from cc_log.base.event_kinds import DELETED
 from cc_log.storage.window_writer import Job, WindowWriter
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -141,7 +141,7 @@ def test_cclog_reads_and_recovers_the_files_of_a_prefix(tmp_path):
 
 def test_the_context_track_names_its_files_with_the_prefix_and_takes_the_chunk_size(tmp_path):
     import rosbag
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     from test_reliability import odom
     written = []
     track = context_track.ContextTrack(str(tmp_path), {'/odom': None}, rotate=1000, prefix=RUN, chunk_bytes=4096,

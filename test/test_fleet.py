@@ -12,7 +12,7 @@ import time
 import pytest
 
 from cc_log.offline import fleet, partition_learning, sweep
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log.storage import log_format
 
 distributed = pytest.importorskip('distributed')

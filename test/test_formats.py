@@ -14,11 +14,11 @@ import sys
 import pytest
 
 from cc_log.storage import formats, log_format
-from cc_log.core.raw_message import serialized
-from cc_log.core import msg_codec
+from cc_log.base.raw_message import serialized
+from cc_log.base import msg_codec
 from cc_log.storage.formats import json_xz
 from cc_log.storage.log_format import Format, read_window, write_window
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.records import LogWindow, Record, Trigger
 
 rosbag = pytest.importorskip('rosbag')
 
@@ -563,7 +563,7 @@ def test_compact_definition_keeps_md5(real_bag):
     assert msg_codec.compact_definition('string S=a # b\nint32 X=1 # one\n') == 'string S=a # b\nint32 X=1\n'
 
 
-@pytest.mark.parametrize('module', ['cc_log.core.msg_codec', 'cc_log.storage.formats.json_xz',
+@pytest.mark.parametrize('module', ['cc_log.base.msg_codec', 'cc_log.storage.formats.json_xz',
                                     'cc_log.storage.log_format', 'cc_log.storage.formats.bag_lz4',
                                     'cc_log.storage.bag.bag_salvage', 'cc_log.storage.codecs',
                                     'cc_log.storage.directory', 'cc_log.offline.export'])
@@ -674,7 +674,7 @@ def test_bag_lz4_refuses_records_that_do_not_match_their_crc32(husky_window, tmp
 def test_a_json_xz_replay_that_left_messages_out_says_so_not_0_windows_not_written(tmp_path):
     """Issue 42 item 20: a json-xz replay whose windows were all written, some messages left out of them (bytes
     that cannot be decoded), said "0 window(s) (N messages) not written ... M window(s) written"."""
-    from cc_log.core.smart import SmartLogger
+    from cc_log.logger.smart import SmartLogger
     from cc_log.offline import replay
     from cc_log.storage.bag.bag_reader import read_raw
     from cc_log.triggers.periodic import PeriodicTrigger

@@ -2,7 +2,7 @@
 against every entry point where outside data comes in.
 
 Each call must (``bounded``):
-- let nothing but ``ValueError`` escape (``cc_log.errors``' classes are ValueErrors);
+- let nothing but ``ValueError`` escape (``cc_log.base.errors``' classes are ValueErrors);
 - finish within ``MAX_SECONDS`` of CPU time (the machine is shared: CPU time, not wall time, is what the
   reader spends), and within ``MAX_WALL_SECONDS`` of wall time (a call that waits);
 - grow the resident set by at most ``MAX_GROWTH_MB`` at its peak (``VmHWM`` reset before each call: what the
@@ -30,11 +30,12 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 import fuzz_strategies as fs
-from cc_log.core import config, options, raw_message, safe_files, spans
-from cc_log.core.envelope import Envelope
-from cc_log.core.learning import load_vectors
-from cc_log.core.model import AnomalyModel
-from cc_log.core.safe_input import printable
+from cc_log.logger import config, options
+from cc_log.base import raw_message, safe_files, spans
+from cc_log.learning.envelope import Envelope
+from cc_log.learning.learning import load_vectors
+from cc_log.learning.model import AnomalyModel
+from cc_log.base.safe_input import printable
 from cc_log.nodes import record_main
 from cc_log.offline import stats, sweep, top
 from cc_log.storage import formats, log_format, recovery, window_names

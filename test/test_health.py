@@ -1,7 +1,7 @@
-"""What the counters say on /diagnostics (core/health): WARN whenever a message that belonged in a window is
+"""What the counters say on /diagnostics (logger/health): WARN whenever a message that belonged in a window is
 not on disk and while the logger is paused; the driving topic's silence names where its type is published."""
-from cc_log.core import health
-from cc_log.core.health import OK, WARN
+from cc_log.logger import health
+from cc_log.logger.health import OK, WARN
 
 ODOMETRY = 'nav_msgs/Odometry'
 

@@ -13,12 +13,12 @@ from cc_log.offline import cli
 from cc_log.storage import log_format, recovery
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.bag import bag_writer
-from cc_log.core.raw_message import class_header, serialized
-from cc_log.core.smart import SmartLogger
-from cc_log.core.window_prep import HEAVY_BYTES
-from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.options import TopicLimits
-from cc_log.core.window_buffer import WindowBuffer
+from cc_log.base.raw_message import class_header, serialized
+from cc_log.logger.smart import SmartLogger
+from cc_log.buffer.window_prep import HEAVY_BYTES
+from cc_log.base.records import LogWindow, Record, Trigger
+from cc_log.logger.options import TopicLimits
+from cc_log.buffer.window_buffer import WindowBuffer
 
 rosbag = pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -312,7 +312,7 @@ def test_an_offline_replay_waits_for_the_writer_and_keeps_every_frame(tmp_path):
 # -- configuration -------------------------------------------------------------------------------------------
 
 def test_topic_limits_from_the_configuration_and_from_a_launch_argument():
-    from cc_log.core import config, options
+    from cc_log.logger import config, options
     text = '{camera/image_raw: {pre: 2s, post: 500ms, max_mb: 64}, /scan: {post: 1s}}'
     for value in (text, {'camera/image_raw': {'pre': '2s', 'post': '500ms', 'max_mb': 64}, '/scan': {'post': '1s'}}):
         limits = options.parse_topic_limits(value)
@@ -331,7 +331,7 @@ def test_topic_limits_from_the_configuration_and_from_a_launch_argument():
     ('{camera: {pre: [1', 'topic_limits: not YAML'),
 ])
 def test_bad_topic_limits_are_one_line_naming_the_key(value, error):
-    from cc_log.core import options
+    from cc_log.logger import options
     with pytest.raises(ValueError) as raised:
         options.parse_topic_limits(value)
     assert error in str(raised.value) and '\n' not in str(raised.value)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from cc_log import sim
-from cc_log.core import learning
-from cc_log.core.records import Record
+from cc_log.learning import learning
+from cc_log.base.records import Record
 from cc_log.features import FeatureConfig, FeatureStream
 from cc_log.triggers.classifier import ClassifierTrigger
 from cc_log.triggers.rule import RuleTrigger

@@ -9,9 +9,9 @@ import time
 
 import pytest
 
-from cc_log.core import msg_codec, raw_message
-from cc_log.core.raw_message import class_header, serialized
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base import msg_codec, raw_message
+from cc_log.base.raw_message import class_header, serialized
+from cc_log.base.records import LogWindow, Record, Trigger
 from cc_log.offline import cli, stats
 from cc_log.storage import log_format, window_info
 from cc_log.storage.formats import bag_lz4, json_xz

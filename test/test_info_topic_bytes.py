@@ -6,7 +6,7 @@ from conftest import cclog
 
 from cc_log.storage import log_format
 from cc_log import sim
-from cc_log.core.records import LogWindow, Record
+from cc_log.base.records import LogWindow, Record
 
 
 def ok(*args):

@@ -2,8 +2,9 @@
 input, in bounded time and memory, never a traceback."""
 import pytest
 
-from cc_log.core import config, safe_input
-from cc_log.core.config import Config
+from cc_log.logger import config
+from cc_log.base import safe_input
+from cc_log.logger.config import Config
 
 
 def one_line(error, limit=300):
@@ -131,7 +132,7 @@ def test_a_classifier_window_of_collect_mode_is_bounded():
 
 
 def test_spans_and_sizes_are_bounded():
-    from cc_log.core.spans import Span, megabytes, MAX_COUNT, MAX_SECONDS
+    from cc_log.base.spans import Span, megabytes, MAX_COUNT, MAX_SECONDS
     assert Span.parse(str(MAX_COUNT)).count == MAX_COUNT
     assert Span.parse('%gs' % MAX_SECONDS).seconds == MAX_SECONDS
     for value in ('1e303', 1e303, '1e300s', '1e300ms', 10 ** 400):
@@ -155,7 +156,7 @@ def small_model_document(window='5s'):
     """The document of a small valid ocsvm model of the motion features."""
     import numpy as np
     from cc_log.features import FeatureConfig, vector_length
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     config_ = FeatureConfig('motion', window)
     dimension = vector_length(config_)
     model = AnomalyModel(config_, np.zeros(dimension), np.ones(dimension), 'ocsvm',
@@ -174,7 +175,7 @@ def small_model_document(window='5s'):
 ])
 def test_implausible_models_are_refused_naming_the_key(tmp_path, change, expected):
     import json
-    from cc_log.core.model import AnomalyModel, ModelError
+    from cc_log.learning.model import AnomalyModel, ModelError
     document = small_model_document()
     change(document)
     path = tmp_path / 'model.json'
@@ -190,7 +191,7 @@ def test_a_model_number_of_401_digits_is_refused_with_one_line(tmp_path, key):
     """Issue 42 item 15: an integer no float holds (math and numpy raised OverflowError: a traceback in replay,
     learn and the node) is refused by the model's one reader of numbers, naming the file."""
     import json
-    from cc_log.core.model import AnomalyModel, ModelError
+    from cc_log.learning.model import AnomalyModel, ModelError
     document = small_model_document()
     huge = int('9' * 401)
     if key == 'threshold':
@@ -212,7 +213,7 @@ def test_a_model_number_of_401_digits_is_refused_with_one_line(tmp_path, key):
 def test_model_integers_a_float_holds_are_read(tmp_path):
     """The bound of item 15 keeps every integer a float holds (here the threshold, 309 digits)."""
     import json
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     document = small_model_document()
     document['threshold'] = int('1' + '0' * 308)
     path = tmp_path / 'model.json'
@@ -225,7 +226,7 @@ def test_model_integers_a_float_holds_are_read(tmp_path):
 @pytest.mark.parametrize('pattern', ['(a+)+', '(/a|/a)*', '(x*y?)*z', '(.*)*', '.*.*.*.*x', r'(/a)\1',
                                      '/' + 'a' * 300], ids=range(7))
 def test_patterns_that_backtrack_badly_are_refused_with_one_line(pattern):
-    from cc_log.core.topic_select import TopicSelection
+    from cc_log.base.topic_select import TopicSelection
     for entry in ('re:' + pattern, '!re:' + pattern):
         with pytest.raises(ValueError) as error:
             TopicSelection.parse([entry])
@@ -233,14 +234,14 @@ def test_patterns_that_backtrack_badly_are_refused_with_one_line(pattern):
 
 
 def test_ordinary_patterns_are_kept():
-    from cc_log.core.topic_select import TopicSelection
+    from cc_log.base.topic_select import TopicSelection
     selection = TopicSelection.parse(['re:/(camera|lidar)/.*', '!re:.*/compressed', 're:/a{2,5}/b', 're:(/ns)?/odom'])
     assert selection.select(['/camera/x', '/lidar/y', '/camera/x/compressed', '/aaa/b', '/odom', '/ns/odom',
                              '/imu']) == ['/camera/x', '/lidar/y', '/aaa/b', '/odom', '/ns/odom']
 
 
 def test_a_topic_is_matched_once():
-    from cc_log.core.topic_select import TopicSelection
+    from cc_log.base.topic_select import TopicSelection
     selection = TopicSelection(regex=['/camera/.*'], exclude=['.*/compressed'])
     calls = []
 
@@ -292,7 +293,7 @@ def test_long_or_malformed_conditions_are_refused_with_one_line(text):
 def test_an_all_nan_odometry_stream_fires_a_nan_rule():
     nav_msgs = pytest.importorskip('nav_msgs.msg')
     from cc_log.triggers import RuleTrigger
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     rule = RuleTrigger('odom_nan', '/odom', when='twist.twist.linear.x == nan', type='nav_msgs/Odometry')
     rule.check(nav_msgs.Odometry)
     fires = []
@@ -307,7 +308,7 @@ def test_an_all_nan_odometry_stream_fires_a_nan_rule():
 def test_a_silent_topic_rule_gives_a_topic_time_at_start_up():
     from cc_log.triggers import RuleTrigger
     from cc_log.triggers.rule import STARTUP_GRACE
-    from cc_log.core.records import Record
+    from cc_log.base.records import Record
     for rule in (RuleTrigger('dead', '/scan', silent='1s'), RuleTrigger('slow', '/scan', min_rate=5, over='1s')):
         fired = []
         for tick in range(0, int((STARTUP_GRACE - 1) * 10)):  # the topic's first message comes late
@@ -330,7 +331,7 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
     import sys
     rosbag = pytest.importorskip('rosbag')
     from cc_log.storage import log_format
-    from cc_log.core.records import LogWindow, Record, Trigger
+    from cc_log.base.records import LogWindow, Record, Trigger
     hostile = '/odom\x1b]0;owned\x07\x1b[2J\u202e'
     with rosbag.Bag(real_bag('husky_outdoor_2015.bag')) as bag:
         records = [Record(m.header.stamp.to_sec(), hostile, m) for topic, m, _ in
@@ -351,8 +352,9 @@ def test_info_and_stats_print_topic_names_without_terminal_escapes(tmp_path, rea
 def test_a_trigger_window_reason_is_logged_with_its_terminal_escapes_shown(tmp_path):
     """Issue 42 item 20: the reason of ~trigger_window (a service caller's text) reaches the node's log, its
     AnomalyEvent and /diagnostics through smart_events.reason_text, which shows its terminal escapes."""
-    from cc_log.core import event_kinds, smart_events
-    from cc_log.core.smart import SmartLogger
+    from cc_log.base import event_kinds
+    from cc_log.logger import smart_events
+    from cc_log.logger.smart import SmartLogger
     from test_heavy_windows import ODOM, feed, stream
     logger = SmartLogger(None, str(tmp_path), 'bag-lz4', '1s', '1s', driving_topic=ODOM, background=False)
     events = []
@@ -367,7 +369,7 @@ def test_a_trigger_window_reason_is_logged_with_its_terminal_escapes_shown(tmp_p
 
 @pytest.mark.parametrize('value', ['9' * 400 + 'GB', '9' * 5000 + 'x', 'r' * 10 ** 6], ids=['huge', 'digits', 'long'])
 def test_collect_rotation_sizes_are_bounded_one_line(value):
-    from cc_log.core.collector import Rotation
+    from cc_log.logger.collector import Rotation
     with pytest.raises(ValueError) as error:
         Rotation.parse(value, 'collect.rotate')
     assert one_line(error).startswith('collect.rotate: ')

@@ -7,7 +7,7 @@ rospy = pytest.importorskip('rospy')
 from rospy.impl.tcpros_base import TCPROSTransport  # noqa: E402
 from rospy.impl.tcpros_pubsub import TCPROSSub  # noqa: E402
 
-from cc_log.core.window_prep import HEAVY_BYTES  # noqa: E402
+from cc_log.buffer.window_prep import HEAVY_BYTES  # noqa: E402
 from cc_log.nodes import intake  # noqa: E402
 
 
@@ -53,7 +53,7 @@ class Sink(object):
 
 def test_the_feeder_sizes_a_topics_reads_by_its_first_message_and_makes_them_large_at_a_heavy_one():
     import threading
-    from cc_log.core.raw_message import class_header
+    from cc_log.base.raw_message import class_header
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Image
     topics = {'/cc_log_test_odom': Odometry, '/cc_log_test_camera': Image, '/cc_log_test_grows': Odometry}

@@ -14,11 +14,11 @@ import struct
 import pytest
 
 from cc_log.storage.bag import bag_reader
-from cc_log.core.raw_message import serialized
+from cc_log.base.raw_message import serialized
 from cc_log.storage import log_format
-from cc_log.core import msg_codec, raw_message
+from cc_log.base import msg_codec, raw_message
 from cc_log.storage.formats import json_deltas, json_xz
-from cc_log.core.records import LogWindow, Record
+from cc_log.base.records import LogWindow, Record
 
 REAL = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..', 'shared', 'data', 'real'))
 HUSKY = ('husky_outdoor_2015.bag', ('/husky_velocity_controller/odom', '/imu/data', '/fix'))

@@ -11,9 +11,9 @@ from geometry_msgs.msg import PoseArray, Pose
 from nav_msgs.msg import Odometry
 from std_msgs.msg import Empty, Float32MultiArray, Header
 
-from cc_log.core import msg_codec
+from cc_log.base import msg_codec
 from cc_log.storage.formats import json_rows, json_xz
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 BAGS = ('husky_outdoor_2015.bag', 'f1tenth_DS1.bag', 'icelab_normal_plan.bag', 'alfa_carbonZ_engine_failure.bag')
 PRECISION = {'pose.pose.position.*': 1e-4, 'twist.twist.*': 1e-4, '*orientation*': 1e-5, '*velocity*': 1e-5}

@@ -1,6 +1,6 @@
 """The keep budget (``max_windows_per_hour``): a rising threshold over a sliding hour of message time.
 
-Pure: the decisions of ``core.keep_budget.KeepBudget`` on Fires of known scores, the option and its checks, what
+Pure: the decisions of ``logger.keep_budget.KeepBudget`` on Fires of known scores, the option and its checks, what
 /diagnostics says. End to end: ``cclog replay`` of the real Husky bag with a model learnt on its first half, with
 and without a budget: the windows kept are the ones the rule keeps (by the scores in their metadata) and the
 summary counts and names the one it skipped.
@@ -12,8 +12,8 @@ import sys
 
 import pytest
 
-from cc_log.core import config, health, options
-from cc_log.core.keep_budget import DRIFT_HINT, KeepBudget
+from cc_log.logger import config, health, options
+from cc_log.logger.keep_budget import DRIFT_HINT, KeepBudget
 from cc_log.triggers.base import Fire, Trigger
 
 HUSKY = 'husky_outdoor_2015.bag'
@@ -179,8 +179,8 @@ def odom_msg(stamp):
 
 
 def test_the_smart_logger_opens_only_what_the_budget_admits_and_says_what_it_skipped(tmp_path):
-    from cc_log.core.event_kinds import OPENED
-    from cc_log.core.smart import SmartLogger
+    from cc_log.base.event_kinds import OPENED
+    from cc_log.logger.smart import SmartLogger
     from cc_log.storage import log_format
     # 10.5 extends the window of 10 (never refused, though +5 is far from anomalous)
     scores = {10.0: -1.0, 10.5: 5.0, 30.0: -0.5, 50.0: -2.0, 70.0: -1.5, 90.0: -3.0}
@@ -210,7 +210,7 @@ def test_the_smart_logger_opens_only_what_the_budget_admits_and_says_what_it_ski
 def husky_model(tmp_path_factory):
     """A model of the Husky's driving learnt on the first half of its bag."""
     from conftest import real_data
-    from cc_log.core import learning
+    from cc_log.learning import learning
     from cc_log.features import FeatureConfig
     from cc_log.storage.bag import bagio
     feature = FeatureConfig('motion', '2s')

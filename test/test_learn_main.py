@@ -2,9 +2,9 @@
 import numpy as np
 
 from cc_log.offline import learn_main
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log.features import FeatureConfig
-from cc_log.core.model import AnomalyModel
+from cc_log.learning.model import AnomalyModel
 
 
 def test_learn_without_validation_trains_and_saves(tmp_path, capsys):

@@ -5,10 +5,10 @@ import os
 import numpy as np
 import pytest
 
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log.features import FeatureConfig, vector_length, vector_names
-from cc_log.core.learning import Report, evaluate, format_report, load_vectors, split_blocks, train, write_vector
-from cc_log.core.model import AnomalyModel
+from cc_log.learning.learning import Report, evaluate, format_report, load_vectors, split_blocks, train, write_vector
+from cc_log.learning.model import AnomalyModel
 
 CONFIG = FeatureConfig('motion', '2s')
 D = vector_length(CONFIG)
@@ -134,7 +134,7 @@ TRAIN_17512 = """
 import json, sys, time
 sys.path.insert(0, %r)
 from test_learning import CONFIG, nominal_stream
-from cc_log.core.learning import train
+from cc_log.learning.learning import train
 X = nominal_stream(17512, seed=5)
 started = time.time()
 _, info = train(X, config=CONFIG)

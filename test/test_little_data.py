@@ -1,7 +1,8 @@
 """Learning from little data: 20 s of real nominal driving through ``cclog collect`` and ``cclog learn``."""
 import pytest
 
-from cc_log.core import collector, learning
+from cc_log.logger import collector
+from cc_log.learning import learning
 
 from test_cli import HUSKY, HUSKY_ODOM, fails, ok_json
 

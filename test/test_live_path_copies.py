@@ -6,9 +6,9 @@ by rosbag."""
 import pytest
 
 from cc_log import sim
-from cc_log.core import learning
-from cc_log.core.records import Record
-from cc_log.core.smart import SmartLogger
+from cc_log.learning import learning
+from cc_log.base.records import Record
+from cc_log.logger.smart import SmartLogger
 from cc_log.features import FeatureConfig
 from cc_log.storage import log_format, window_info
 from cc_log.storage.bag import bag_writer

@@ -6,7 +6,7 @@ import re
 
 import pytest
 
-from cc_log.core import msg_codec, raw_message
+from cc_log.base import msg_codec, raw_message
 
 SRC = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'src', 'cc_log')
 
@@ -25,9 +25,9 @@ def calls(pattern):
 
 
 def test_only_raw_message_asks_roslib_and_only_msg_codec_asks_genpy_for_a_class():
-    assert calls(r'get_message_class\(') == ['core/raw_message.py']
-    assert calls(r'generate_dynamic\(') == ['core/msg_codec.py']
-    assert calls(r'\bgenerated_class\(') == sorted(['core/msg_codec.py', 'core/raw_message.py',
+    assert calls(r'get_message_class\(') == ['base/raw_message.py']
+    assert calls(r'generate_dynamic\(') == ['base/msg_codec.py']
+    assert calls(r'\bgenerated_class\(') == sorted(['base/msg_codec.py', 'base/raw_message.py',
                                                     'storage/formats/json_xz.py'])
 
 

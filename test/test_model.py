@@ -11,7 +11,7 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.svm import OneClassSVM
 
 from cc_log.features import FeatureConfig, vector_length, vector_names
-from cc_log.core.model import FLOOR_FRACTION, AnomalyModel, ModelError
+from cc_log.learning.model import FLOOR_FRACTION, AnomalyModel, ModelError
 
 from conftest import approx_floats
 

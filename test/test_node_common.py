@@ -8,7 +8,7 @@ import pytest
 pytest.importorskip('rospy')
 from cc_log.nodes import node_common  # noqa: E402
 from cc_log.nodes.node_common import ConfigError, Params  # noqa: E402
-from cc_log.core.spans import Span  # noqa: E402
+from cc_log.base.spans import Span  # noqa: E402
 
 
 def params(**values):

@@ -6,13 +6,14 @@ import sys
 import numpy as np
 import pytest
 
-from cc_log.core import config, drift, learning, online_learning
+from cc_log.logger import config
+from cc_log.learning import drift, learning, online_learning
 from cc_log import sim
 from cc_log.features import FeatureConfig
-from cc_log.core.model import AnomalyModel
-from cc_log.core.online_learning import OnlineLearner
+from cc_log.learning.model import AnomalyModel
+from cc_log.learning.online_learning import OnlineLearner
 from cc_log.triggers import ClassifierTrigger
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 from conftest import approx_floats
 
@@ -80,7 +81,7 @@ def test_in_drift_the_classifiers_own_flags_are_learned_and_other_triggers_still
 
 def test_a_classifier_in_drift_offers_its_anomalous_vectors(tmp_path):
     """The trigger offers what it flags while its learner adapts (drift.monitor_classifiers wires the monitor)."""
-    from cc_log.core import drift
+    from cc_log.learning import drift
     model, _ = slow_model(20.0), None
     learner = OnlineLearner(model, every=10 ** 6, keep=5000, guard='1s', background=False)
     trigger = ClassifierTrigger('classifier', model, '/odom', classify_every='100ms', learner=learner)

@@ -1,5 +1,5 @@
-"""Options declared once (cc_log.core.options): the configuration, the nodes' parameters, cclog's flags and
-docs/OPTIONS.md all come from the declarations; one grammar for sizes and durations (cc_log.core.spans)."""
+"""Options declared once (cc_log.logger.options): the configuration, the nodes' parameters, cclog's flags and
+docs/OPTIONS.md all come from the declarations; one grammar for sizes and durations (cc_log.base.spans)."""
 import argparse
 import os
 import re
@@ -8,7 +8,8 @@ import sys
 
 import pytest
 
-from cc_log.core import config, options, spans
+from cc_log.logger import config, options
+from cc_log.base import spans
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

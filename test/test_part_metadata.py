@@ -6,9 +6,9 @@ import os
 
 import pytest
 
-from cc_log.core.raw_message import class_header
-from cc_log.core.records import Record
-from cc_log.core.window_buffer import WindowBuffer
+from cc_log.base.raw_message import class_header
+from cc_log.base.records import Record
+from cc_log.buffer.window_buffer import WindowBuffer
 from cc_log.storage import log_format
 from cc_log.storage.window_writer import Job, WindowWriter
 

@@ -10,7 +10,7 @@ import os
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from cc_log.core import safe_files
+from cc_log.base import safe_files
 from cc_log.offline import fleet
 from cc_log.storage import disk_guard
 from cc_log.storage.disk_guard import DiskGuard

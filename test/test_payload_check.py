@@ -5,8 +5,8 @@ messages are counted per topic in the window metadata's ``dropped`` (``cclog inf
 import pytest
 
 from conftest import cclog
-from cc_log.core.raw_message import class_header, serialized
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.raw_message import class_header, serialized
+from cc_log.base.records import LogWindow, Record, Trigger
 from cc_log.storage import log_format, payload_check
 
 rosbag = pytest.importorskip('rosbag')

@@ -7,13 +7,13 @@ import tracemalloc
 import pytest
 
 from cc_log import features
-from cc_log.core.raw_message import serialized
+from cc_log.base.raw_message import serialized
 from cc_log.storage import log_format
-from cc_log.core import msg_codec, raw_message
+from cc_log.base import msg_codec, raw_message
 from cc_log.features import FeatureConfig, FeatureStream
-from cc_log.core.smart import SmartLogger
-from cc_log.core.records import Record
-from cc_log.core.window_buffer import RAW_RECORD_OVERHEAD, MemoryCost
+from cc_log.logger.smart import SmartLogger
+from cc_log.base.records import Record
+from cc_log.buffer.window_buffer import RAW_RECORD_OVERHEAD, MemoryCost
 
 bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 from geometry_msgs.msg import Twist  # noqa: E402
@@ -236,7 +236,7 @@ def test_a_bag_lz4_window_keeps_the_connection_headers(husky_raw, tmp_path):
 
 
 def test_json_xz_leaves_out_a_kept_message_that_cannot_be_decoded_and_says_so(husky_raw, tmp_path):
-    from cc_log.core.records import LogWindow, Trigger
+    from cc_log.base.records import LogWindow, Trigger
     records = [r for r in husky_raw if r.topic == ODOM][:5]
     broken = records[2]._replace(raw=records[2].raw[:30])
     window = LogWindow(records[:2] + [broken] + records[3:], [Trigger(records[0].stamp, 'test', None)])
@@ -286,7 +286,7 @@ def test_stamps_of_a_batch_are_each_message_s_stamp_with_and_without_headers(hus
 
 
 def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_raw):
-    from cc_log.core.raw_json import RawJsonEstimate
+    from cc_log.base.raw_json import RawJsonEstimate
     one, batched = RawJsonEstimate(every=7, first=20), RawJsonEstimate(every=7, first=20)
     records = husky_raw[:400]
     for record in records:
@@ -300,7 +300,7 @@ def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_
 
 
 def test_the_row_json_estimate_decodes_its_samples_when_asked_not_when_noted(husky_raw):
-    from cc_log.core.raw_json import RawJsonEstimate
+    from cc_log.base.raw_json import RawJsonEstimate
     raws, connections = [r.raw for r in husky_raw[:300]], [r.connection for r in husky_raw[:300]]
     lazy, eager = RawJsonEstimate(), RawJsonEstimate(pending_bytes=0)  # eager: decoded as soon as noted
     lazy.count_all(raws, connections)

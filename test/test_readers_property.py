@@ -15,9 +15,9 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from cc_log.core import msg_codec
+from cc_log.base import msg_codec
 from cc_log.storage.log_format import Format, read_window, write_window
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.records import LogWindow, Record, Trigger
 
 pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402

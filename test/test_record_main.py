@@ -47,7 +47,7 @@ def test_split_size_is_rosbags_mb_and_splits_smart_windows(tmp_path):
     _, params, _, _, _, _ = parse(['/odom', '--split', '--size', '64', '--duration', '10m', '--context', 'odom:1',
                                    '--model', str(model)])
     assert params['split_mb'] == pytest.approx(64 * 2 ** 20 / 1e6) and params['context_rotate'] == 600.0
-    from cc_log.core import options  # the node reads it as its own option
+    from cc_log.logger import options  # the node reads it as its own option
     assert options.get('split_mb').parse(params['split_mb']) == pytest.approx(params['split_mb'])
     assert 'split_mb' in [option.name for option in options.for_node('smart')]
 
@@ -115,7 +115,7 @@ def test_limit_and_node_flags(tmp_path):
         parse(['--node', '/nobody'], {}.get)
     plan = parse(['-e', 'cam.*', '--node', '/move_base', '--model', str(tmp_path / 'none.json')],
                  {'/move_base': ['/odom', '/a.b']}.get)  # with -e, NODE's topics as patterns of their exact names
-    from cc_log.core.topic_select import TopicSelection
+    from cc_log.base.topic_select import TopicSelection
     selection = TopicSelection.parse(plan.params['topics'], 'topics')
     assert [selection.matches(topic) for topic in ('/odom', '/a.b', '/axb', '/odom\n', 'camera')] == [
         True, True, False, False, True]
@@ -174,7 +174,7 @@ def test_output_prefix_and_name_as_rosbag_record_names_its_bags(tmp_path, monkey
     assert plan.params['directory'] == '/data' and plan.params['name_prefix'] == 'run'
     assert plan.said == ((False, '-O /data/run.bag: cc_log writes one file per window: '
                                  '/data/run_<UTC>_<reason>.bag'),)
-    from cc_log.core import options  # the node reads it as its own option
+    from cc_log.logger import options  # the node reads it as its own option
     assert options.get('name_prefix').parse(plan.params['name_prefix']) == 'run'
 
 
@@ -190,7 +190,7 @@ def test_max_splits_size_chunksize_tcpnodelay_quiet_and_bz2(tmp_path):
     plan = parse(['/odom', '--size', '100'] + none)  # rosbag stops at SIZE; cc_log keeps within it
     assert plan.params['max_disk_mb'] == pytest.approx(100 * 2 ** 20 / 1e6) and 'split_mb' not in plan.params
     assert plan.stop == {}
-    from cc_log.core import options
+    from cc_log.logger import options
     for key in ('max_files', 'chunk_kb', 'tcp_nodelay', 'quiet', 'max_disk_mb'):
         assert key in [option.name for option in options.for_node('collect')]
         assert key in [option.name for option in options.for_node('smart')]

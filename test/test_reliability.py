@@ -14,11 +14,11 @@ import time
 
 import pytest
 
-from cc_log.core import safe_files
+from cc_log.base import safe_files
 from cc_log.storage import disk_guard, log_format, recovery
 from cc_log.storage.disk_guard import DiskGuard
 from cc_log.storage.log_format import Format, read_window, write_window
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.records import LogWindow, Record, Trigger
 
 rosbag = pytest.importorskip('rosbag')
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -45,7 +45,7 @@ def window(n=300, start=0, reason='classifier'):
 
 
 def same(records_a, records_b):
-    from cc_log.core import msg_codec
+    from cc_log.base import msg_codec
     return ([(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in records_a]
             == [(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in records_b])
 
@@ -113,7 +113,7 @@ def test_a_leftover_or_reservation_naming_no_process_is_recovered_at_once(pid, t
 
 def test_a_vector_leftover_naming_no_process_is_removed(tmp_path):
     """Issue 42 item 5 in collect mode: a vector leftover whose pid is out of range or 0 has no running writer."""
-    from cc_log.core import collector
+    from cc_log.logger import collector
     names = ['1.0.json' + log_format.TMP_MARK + pid for pid in ('99999999999999999999', '0')]
     for name in names:
         (tmp_path / name).write_text('{}')
@@ -365,7 +365,7 @@ def chunked_bag(tmp_path_factory):
 
 
 def test_bag_truncated_anywhere_keeps_every_complete_chunk_and_never_deletes_data(chunked_bag, tmp_path):
-    from cc_log.core import msg_codec
+    from cc_log.base import msg_codec
     data, chunks = chunked_bag
     full = [(r.stamp, r.topic, msg_codec.to_dict(r.msg)) for r in window(600).records]
     header_end = 4117
@@ -505,7 +505,7 @@ def test_window_files_and_directories_group_writable_never_world_writable_even_w
 
 
 def test_feature_vector_files_never_world_writable_even_with_umask_0(tmp_path):
-    from cc_log.core import learning
+    from cc_log.learning import learning
     from cc_log.features import FeatureConfig
     old = os.umask(0)
     try:
@@ -535,8 +535,8 @@ def test_no_shell_anywhere():
 # -- SmartLogger: write failures, disk limits, bad input -------------------------------------------------
 
 from cc_log.features import FeatureConfig, vector_length  # noqa: E402
-from cc_log.core.event_kinds import DELETED, FAILED, OPENED, WRITTEN  # noqa: E402
-from cc_log.core.smart import SmartLogger  # noqa: E402
+from cc_log.base.event_kinds import DELETED, FAILED, OPENED, WRITTEN  # noqa: E402
+from cc_log.logger.smart import SmartLogger  # noqa: E402
 
 CONFIG = FeatureConfig('motion', '20')
 

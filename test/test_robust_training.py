@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from cc_log import sim
-from cc_log.core import drift, learning
-from cc_log.core.model import AnomalyModel, ModelError
-from cc_log.core.records import Record
+from cc_log.learning import drift, learning
+from cc_log.learning.model import AnomalyModel, ModelError
+from cc_log.base.records import Record
 from cc_log.features import FeatureConfig, FeatureStream, vector_length
 from cc_log.offline import tuning
 from cc_log.offline.cli.tune_cmd import tune_lines

@@ -1,4 +1,4 @@
-"""Routes (cc_log.core.routes): a window cut once into one file per route, each route a topic set in its own
+"""Routes (cc_log.base.routes): a window cut once into one file per route, each route a topic set in its own
 format; the configuration declares them; bad routes are one line naming the entry."""
 import collections
 import contextlib
@@ -12,10 +12,10 @@ import yaml
 from conftest import ROOT
 
 from cc_log import sim
-from cc_log.core import config
-from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.routes import parse_routes, split
-from cc_log.core.topic_select import TopicSelection
+from cc_log.logger import config
+from cc_log.base.records import LogWindow, Record, Trigger
+from cc_log.base.routes import parse_routes, split
+from cc_log.base.topic_select import TopicSelection
 from cc_log.offline import cli
 from cc_log.storage import log_format
 from cc_log.storage.bag.bag_format import METADATA_TOPIC
@@ -86,7 +86,7 @@ def test_json_xz_precision_may_round_a_routed_topic_set():
 # -- end to end: cclog replay writes a window as one bag-lz4 file and one json-xz file per route ------------
 
 def test_a_window_only_triggers_with_keep_opened_holds_only_their_topics():
-    from cc_log.core import window_prep
+    from cc_log.buffer import window_prep
     records = [Record(100.0 + i, topic, None, 10) for i, topic in enumerate(['/odom', '/camera', '/scan', '/diag'])]
     bumper = LogWindow(list(records), [Trigger(101.0, 'pressed', None, 'bumper')])
     keep = {'bumper': TopicSelection(['/camera']), 'silent': TopicSelection(['/diag'])}
@@ -232,7 +232,7 @@ def test_the_readme_camera_configuration_writes_one_bag_per_window_that_replays_
 
 
 def test_a_heavy_topic_written_as_json_xz_is_advised_bag_lz4():
-    from cc_log.core.routes import format_of
+    from cc_log.base.routes import format_of
     from cc_log.storage.formats.json_xz import heavy_topic_advice
     routes = parse_routes([NUMERIC, {'name': 'cameras', 'topics': ['re:/camera/.*'], 'format': 'json-xz'}], FORMATS)
     assert [format_of(topic, routes, 'bag-lz4') for topic in ('/odom', '/camera/image_raw', '/scan')] == [

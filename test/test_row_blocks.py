@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from cc_log import features
-from cc_log.core.raw_message import serialized
-from cc_log.core import raw_message
+from cc_log.base.raw_message import serialized
+from cc_log.base import raw_message
 from cc_log.features import FeatureConfig
 
 bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)

@@ -23,10 +23,10 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from cc_log.storage import log_format, recovery
-from cc_log.core import msg_codec, safe_input
+from cc_log.base import msg_codec, safe_input
 from cc_log.storage.formats import json_xz
 from cc_log.storage.log_format import read_window, write_window
-from cc_log.core.records import LogWindow, Record
+from cc_log.base.records import LogWindow, Record
 
 rosbag = pytest.importorskip('rosbag')
 import genpy.dynamic  # noqa: E402
@@ -65,7 +65,7 @@ def crafted(records, marker):
 def quick_model(directory):
     """A model file for commands that need one (trained on random vectors in a fraction of a second)."""
     import numpy as np
-    from cc_log.core import learning
+    from cc_log.learning import learning
     from cc_log.features import FeatureConfig, vector_length
     config = FeatureConfig('motion', '20')
     model, _ = learning.train(np.random.RandomState(0).normal(size=(60, vector_length(config))), None, config)

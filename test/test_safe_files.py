@@ -14,7 +14,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from cc_log.core import learning, safe_files
+from cc_log.learning import learning
+from cc_log.base import safe_files
 from cc_log.storage import log_format, recovery
 from cc_log.features import FeatureConfig, vector_length
 from cc_log.storage.log_format import Format, read_window, write_window
@@ -121,7 +122,7 @@ def test_window_writer_never_follows_a_link_at_its_temporary_or_final_name(fmt, 
 
 
 def test_vector_and_model_writers_replace_a_link_never_write_through_it(tmp_path, victim):
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     vector = tmp_path / 'features' / 'nominal' / ('%.6f.json' % 12.5)
     vector.parent.mkdir(parents=True)
     plant(str(vector) + safe_files.TMP_MARK + str(os.getpid()), victim)

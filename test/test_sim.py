@@ -10,8 +10,8 @@ import time
 import pytest
 
 from cc_log import sim
-from cc_log.core.raw_message import serialized
-from cc_log.core.records import Record
+from cc_log.base.raw_message import serialized
+from cc_log.base.records import Record
 from cc_log.sim import kinematics, messages
 
 HUSKY_ODOM = '/husky_velocity_controller/odom'

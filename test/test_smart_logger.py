@@ -7,16 +7,18 @@ import time
 import numpy as np
 import pytest
 
-from cc_log.core import learning, msg_codec, smart
+from cc_log.learning import learning
+from cc_log.base import msg_codec
+from cc_log.logger import smart
 from cc_log.storage import log_format
-from cc_log.core.collector import VectorStream
+from cc_log.logger.collector import VectorStream
 from cc_log.features import FeatureConfig, vector_length
-from cc_log.core.event_kinds import FAILED, OPENED, WRITTEN
-from cc_log.core.smart import SmartLogger
+from cc_log.base.event_kinds import FAILED, OPENED, WRITTEN
+from cc_log.logger.smart import SmartLogger
 from cc_log.offline.replay import replay
 from cc_log.triggers import ClassifierTrigger
-from cc_log.core.records import Record
-from cc_log.core.window_buffer import WindowBuffer
+from cc_log.base.records import Record
+from cc_log.buffer.window_buffer import WindowBuffer
 
 bagio = pytest.importorskip('cc_log.storage.bag.bagio')  # needs rosbag (a sourced ROS environment)
 
@@ -402,7 +404,7 @@ def test_one_outlier_stamp_of_the_driving_topic_keeps_what_is_held_before_an_eve
 
 
 def test_a_jump_of_the_driving_clock_that_persists_is_followed(husky, tmp_path):
-    from cc_log.core.stamp_clock import FOLLOW_AFTER
+    from cc_log.base.stamp_clock import FOLLOW_AFTER
     odom = [r for r in husky if r.topic == ODOM][:400]
     jumped = odom[:200] + [stamped(r, r.stamp + 100.0) for r in odom[200:]]  # the clock set 100 s ahead at 200
     _, expected = manual_window(tmp_path / 'plain', odom)

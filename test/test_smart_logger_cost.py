@@ -6,7 +6,8 @@ import os
 import pytest
 
 from cc_log import features
-from cc_log.core import msg_codec, smart
+from cc_log.base import msg_codec
+from cc_log.logger import smart
 
 REAL = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), '..', 'shared', 'data', 'real')
 

@@ -13,12 +13,12 @@ import yaml
 from conftest import assert_rosbag_spans
 
 from cc_log import sim
-from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.raw_message import class_header, serialized
+from cc_log.base.records import LogWindow, Record, Trigger
+from cc_log.base.raw_message import class_header, serialized
 from cc_log.offline import cli
 from cc_log.offline.stats import run_stats
 from cc_log.storage import log_format, window_writer
-from cc_log.core.event_kinds import DELETED, SPLIT, WRITTEN
+from cc_log.base.event_kinds import DELETED, SPLIT, WRITTEN
 from cc_log.storage.window_writer import Job, WindowWriter
 
 rosbag = pytest.importorskip('rosbag')

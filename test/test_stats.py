@@ -7,7 +7,7 @@ from cc_log.offline import cli, stats
 from cc_log.storage import log_format
 from cc_log import sim
 from cc_log.storage.context_track import ContextTrack
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.records import LogWindow, Record, Trigger
 
 MINUTES = 4.0
 

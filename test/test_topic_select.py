@@ -1,8 +1,8 @@
 """Topic selection (rosbag record's -a, -e, -x), the configuration's topic patterns, and the topic watcher."""
 import pytest
 
-from cc_log.core import config
-from cc_log.core.topic_select import TopicSelection
+from cc_log.logger import config
+from cc_log.base.topic_select import TopicSelection
 from cc_log.nodes.topic_watch import TopicWatcher
 
 TOPICS = ['/odom', '/scan', '/camera/rgb/image_raw', '/camera/rgb/image_raw/compressed', '/tf', '/tf_static']
@@ -93,7 +93,7 @@ def test_the_work_of_a_pattern_is_bounded_bounded_repeats_counted_too():
     """Five ``.{0,9999}`` (which passed as bounded) are refused as ``.*.*.*.*x`` is; a pattern's work on a name
     longer than the longest every pattern is tried on is counted before matching, and a name too long for it is
     neither selected nor excluded by it (counted), so one 301-character or 10,000-character topic costs little."""
-    from cc_log.core import topic_select
+    from cc_log.base import topic_select
     for pattern in ('.{0,9999}' * 5 + 'x', '.{0,9999}' * 4, '[a-z]{0,40}' * 5, '(.{0,300}|.*)' * 4):
         with pytest.raises(ValueError) as error:
             TopicSelection.parse(['re:' + pattern])

@@ -6,11 +6,11 @@ import pytest
 
 from cc_log.storage import log_format
 from cc_log.features import FeatureConfig
-from cc_log.core.event_kinds import OPENED, WRITTEN
-from cc_log.core.smart import SmartLogger
+from cc_log.base.event_kinds import OPENED, WRITTEN
+from cc_log.logger.smart import SmartLogger
 from cc_log.triggers import ClassifierTrigger, ManualTrigger, RuleTrigger
 from cc_log.triggers.rule import Condition
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 
 diagnostic_msgs = pytest.importorskip('diagnostic_msgs.msg')
 from nav_msgs.msg import Odometry  # noqa: E402
@@ -381,7 +381,7 @@ def test_a_goal_status_rule_catches_every_simulated_planning_failure_once(tmp_pa
     simulator = sim.Simulator(run)
     rule = RuleTrigger('goal_aborted', sim.STATUS_TOPIC, type='actionlib_msgs/GoalStatusArray',
                        when='status_list[0].status == 4')
-    from cc_log.core.raw_message import installed_class
+    from cc_log.base.raw_message import installed_class
     rule.check(installed_class(rule.type))
     logger = SmartLogger(None, str(tmp_path), 'json-xz', '1s', '1s', driving_topic=sim.ODOM_TOPIC, triggers=[rule])
     feed(logger, [(topic, msg, stamp) for topic, stamp, msg in simulator.messages()])
@@ -402,9 +402,9 @@ HUSKY, HUSKY_ODOM = 'husky_outdoor_2015.bag', '/husky_velocity_controller/odom'
 def configured_logger(directory, text):
     """A SmartLogger as the node and ``cclog replay --config`` build it from a configuration's text."""
     import yaml
-    from cc_log.core.config import Config
-    from cc_log.core.raw_message import installed_class
-    from cc_log.core.model import AnomalyModel
+    from cc_log.logger.config import Config
+    from cc_log.base.raw_message import installed_class
+    from cc_log.learning.model import AnomalyModel
     cfg = Config.from_dict(yaml.safe_load(text), 'test.yaml')
     triggers = cfg.build_triggers(AnomalyModel.load, installed_class)
     return SmartLogger(None, str(directory), **cfg.logger_options(triggers))
@@ -454,7 +454,7 @@ triggers:
 
 
 def test_a_trigger_pre_longer_than_the_logger_holds_is_refused_with_one_line():
-    from cc_log.core.config import Config
+    from cc_log.logger.config import Config
     entry = {'name': 'goal_aborted', 'kind': 'rule', 'topic': 'bumper', 'arrival': True, 'pre': '10s'}
     with pytest.raises(ValueError) as error:
         Config.from_dict({'windows': {'pre': '2s'}, 'triggers': [entry]}, 'robot.yaml')
@@ -509,7 +509,7 @@ def test_a_periodic_trigger_keeps_its_grid_and_makes_one_window_after_a_gap():
     ('0s', "every: '0s' must be a positive duration"), ('x' * 500, 'is not a duration'),
     (12.5, 'is not a duration')])
 def test_a_bad_period_is_one_line_naming_every(every, message):
-    from cc_log.core.config import Config
+    from cc_log.logger.config import Config
     entry = {'name': 'sample', 'kind': 'periodic', 'every': every}
     with pytest.raises(ValueError) as error:
         Config.from_dict({'driving_topic': 'odom', 'triggers': [entry]}, 'robot.yaml').build_triggers(

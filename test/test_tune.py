@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from cc_log.storage.bag import bagio
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log import sim
 from cc_log.offline import tuning
 from cc_log.features import FeatureConfig, FeatureStream
-from cc_log.core.model import AnomalyModel
+from cc_log.learning.model import AnomalyModel
 
 from conftest import REAL_DATA
 from test_cli import HUSKY, HUSKY_ODOM, fails, ok_json, run

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from cc_log.storage.bag import bagio
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log import sim
 from cc_log.offline import tuning
 from cc_log.features import FeatureConfig, FeatureStream
-from cc_log.core.model import AnomalyModel
-from cc_log.core.records import LogWindow, Trigger
+from cc_log.learning.model import AnomalyModel
+from cc_log.base.records import LogWindow, Trigger
 from cc_log.storage import log_format
 
 from test_cli import fails, ok_json, run

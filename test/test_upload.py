@@ -6,7 +6,7 @@ import time
 import pytest
 
 from cc_log.nodes import launcher
-from cc_log.core import event_kinds
+from cc_log.base import event_kinds
 from cc_log.storage import window_writer
 from cc_log.storage.upload import UploadHook, parse_command
 

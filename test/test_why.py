@@ -8,11 +8,13 @@ import random
 import numpy as np
 import pytest
 
-from cc_log.core import learning, smart_events, why
-from cc_log.core.model import AnomalyModel
-from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.event_kinds import OPENED
-from cc_log.core.smart import SmartLogger
+from cc_log.learning import learning
+from cc_log.logger import smart_events
+from cc_log.base import why
+from cc_log.learning.model import AnomalyModel
+from cc_log.base.records import LogWindow, Record, Trigger
+from cc_log.base.event_kinds import OPENED
+from cc_log.logger.smart import SmartLogger
 from cc_log.features import FeatureConfig, FeatureStream
 from cc_log.offline import cli
 from cc_log.storage import log_format, window_info

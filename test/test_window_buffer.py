@@ -5,9 +5,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from cc_log.core.spans import Span
-from cc_log.core.records import LogWindow, Record
-from cc_log.core.window_buffer import MemoryCost, WindowBuffer, deep_size
+from cc_log.base.spans import Span
+from cc_log.base.records import LogWindow, Record
+from cc_log.buffer.window_buffer import MemoryCost, WindowBuffer, deep_size
 
 
 def run(buffer, stamps, anomalies, side=()):
@@ -268,7 +268,7 @@ def test_span_parse_rejects(text):
 
 def test_window_buffer_does_not_import_rospy():
     import subprocess
-    code = 'import sys, cc_log.core.window_buffer, cc_log.core.spans; sys.exit("rospy" in sys.modules)'
+    code = 'import sys, cc_log.buffer.window_buffer, cc_log.base.spans; sys.exit("rospy" in sys.modules)'
     assert subprocess.call([sys.executable, '-c', code], env=None) == 0
 
 

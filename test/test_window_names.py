@@ -11,10 +11,10 @@ import pytest
 import yaml
 
 from cc_log import sim
-from cc_log.core import options
-from cc_log.core.routes import parse_routes
+from cc_log.logger import options
+from cc_log.base.routes import parse_routes
 from cc_log.triggers import base as triggers_base
-from cc_log.core.records import LogWindow, Record, Trigger
+from cc_log.base.records import LogWindow, Record, Trigger
 from cc_log.offline import cli
 from cc_log.storage import log_format
 
@@ -172,7 +172,7 @@ def test_replay_counts_windows_not_files_with_routes_and_json_xz_parts(simulated
 
 
 def test_a_sweep_counts_windows_not_files_with_routes_and_json_xz_parts(simulated, tmp_path):
-    from cc_log.core import config
+    from cc_log.logger import config
     from cc_log.offline import sweep
     bag, make = simulated
     cfg = config.Config.from_dict(yaml.safe_load(open(make('json-xz', max=150)).read()))
@@ -189,7 +189,7 @@ def test_a_sweep_counts_windows_not_files_with_routes_and_json_xz_parts(simulate
 def _played_twice(bag, config_path, out, **extra):
     """Replay's summary of ``bag`` fed twice into one offline logger writing into ``out`` (``rosbag play -l``),
     with the configuration at ``config_path`` and ``extra`` logger options."""
-    from cc_log.core import config
+    from cc_log.logger import config
     from cc_log.offline import replay
     from cc_log.storage.bag import bagio
     cfg = config.Config.from_dict(yaml.safe_load(open(config_path).read()))

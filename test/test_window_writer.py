@@ -10,11 +10,11 @@ import pytest
 
 from conftest import fill_disk
 from cc_log.storage import log_format, window_writer
-from cc_log.core.collector import Collector
+from cc_log.logger.collector import Collector
 from cc_log.storage.disk_guard import DiskGuard, allocated_bytes
 from cc_log.storage.log_format import Format, read_window, write_window
-from cc_log.core.event_kinds import DELETED, FAILED, WRITTEN
-from cc_log.core.smart import SmartLogger
+from cc_log.base.event_kinds import DELETED, FAILED, WRITTEN
+from cc_log.logger.smart import SmartLogger
 from cc_log.storage.window_writer import Job, WindowWriter
 
 pytest.importorskip('rosbag')

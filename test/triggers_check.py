@@ -36,13 +36,13 @@ from sensor_msgs.msg import Imu
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 
-from cc_log.core import learning  # noqa: E402
+from cc_log.learning import learning  # noqa: E402
 from cc_log.storage import log_format  # noqa: E402
-from cc_log.core.collector import VectorStream  # noqa: E402
+from cc_log.logger.collector import VectorStream  # noqa: E402
 from cc_log.features import FeatureConfig  # noqa: E402
 from cc_log.msg import AnomalyEvent  # noqa: E402
 from cc_log.srv import TriggerWindow  # noqa: E402
-from cc_log.core.records import Record  # noqa: E402
+from cc_log.base.records import Record  # noqa: E402
 
 PKG = 'cc_log'
 NODE = 'smart_logger'

@@ -35,8 +35,8 @@ import struct
 
 import numpy as np
 
-from cc_log.core.registry import Registry
-from cc_log.core.spans import Range, Span
+from cc_log.base.registry import Registry
+from cc_log.base.spans import Range, Span
 
 STATISTICS = ('mean', 'std', 'min', 'max')
 DEFAULT_MAX_DT = 1.0    # seconds: a longer gap between messages restarts the derivatives

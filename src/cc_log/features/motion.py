@@ -13,7 +13,7 @@ import struct
 
 import numpy as np
 
-from cc_log.core.spans import Span
+from cc_log.base.spans import Span
 from cc_log.features.base import CLIP, REPEAT, RESTART, STEP, FeatureSet, after_header, after_string, register, xyz
 
 MOTION_COLUMNS = (

@@ -12,7 +12,7 @@ Pure: numpy only.
 """
 import numpy as np
 
-from cc_log.core.spans import Span
+from cc_log.base.spans import Span
 from cc_log.features.base import BlockCache, FeatureSet, get, window_statistics
 
 JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the stream starts over (as WindowBuffer)

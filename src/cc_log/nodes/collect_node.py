@@ -13,7 +13,7 @@ Published topics
   that carry its type.
 
 Parameters
-  every option with a ``collect`` node parameter in docs/OPTIONS.md (declared in ``cc_log.core.options``;
+  every option with a ``collect`` node parameter in docs/OPTIONS.md (declared in ``cc_log.logger.options``;
   ``--help`` lists them with their defaults): ``~config`` (with classifiers, the vectors of each go to
   ``<directory>/features/<name>/<label>/`` and ``~feature_set``/``~window`` are not used), ``~directory``
   (vectors into ``<directory>/features/<label>/``), ``~format``, ``~rotate``, ``~topics``, ``~label``,
@@ -34,10 +34,10 @@ import sys
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from cc_log.core import collector
+from cc_log.logger import collector
 from cc_log import features
 from cc_log.storage import log_format
-from cc_log.core.model import AnomalyModel
+from cc_log.learning.model import AnomalyModel
 from cc_log.nodes.node_common import (
     CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
     node_config, node_name, recover_leftovers, resolve_directory, writer_status)
@@ -51,7 +51,7 @@ DEFAULT_LABEL = collector.DEFAULT_LABEL
 DEFAULT_WINDOW = collector.DEFAULT_WINDOW
 DEFAULT_FEATURE_SET = collector.DEFAULT_FEATURE_SET
 DEFAULT_STRIDE = collector.DEFAULT_STRIDE
-OPTIONS_NODE = 'collect'  # its parameters in core.options
+OPTIONS_NODE = 'collect'  # its parameters in logger.options
 
 
 class CollectNode(object):

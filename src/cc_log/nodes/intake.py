@@ -23,11 +23,10 @@ import time
 
 import rospy
 
-from cc_log import errors
-from cc_log.core import options
-from cc_log.core import raw_message
-from cc_log.core import window_prep
-from cc_log.core.records import Record
+from cc_log.base import errors, raw_message
+from cc_log.logger import options
+from cc_log.buffer import window_prep
+from cc_log.base.records import Record
 
 DEFAULT_MAX_MESSAGES = options.get('intake_max_messages').default  # beyond, messages are dropped and counted
 DEFAULT_MAX_MB = options.get('intake_max_mb').default              # MB of serialized messages

@@ -11,7 +11,7 @@ import importlib
 import os
 import sys
 
-from cc_log.core import options
+from cc_log.logger import options
 
 __all__ = ['choose', 'main', 'run', 'script_main', 'plain']
 

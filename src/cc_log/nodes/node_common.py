@@ -25,12 +25,13 @@ import diagnostic_updater
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 
-from cc_log.core import config, health, options, safe_input
+from cc_log.logger import config, health, options
+from cc_log.base import safe_input
 from cc_log.storage import log_format
 from cc_log.storage import recovery
 from cc_log.storage.directory import LoggingDirectory
-from cc_log.core import window_buffer
-from cc_log.errors import ConfigError
+from cc_log.buffer import window_buffer
+from cc_log.base.errors import ConfigError
 
 EXIT_BAD_CONFIG = 1                # as cclog's bad input (2 is its command-line usage error)
 DISK_WARN_BYTES = 200 * 1000 ** 2  # diagnostics warn below this much free disk
@@ -91,7 +92,7 @@ class Params(object):
         self._names = names if names is not None else _ros_names
 
     def unknown(self):
-        """A warning for each private parameter that is neither an option (``core.options``) nor a key of the
+        """A warning for each private parameter that is neither an option (``logger.options``) nor a key of the
         configuration (``rosparam load`` of a file): ``unknown parameter ~formt (did you mean ~format?)``."""
         known = sorted(set(o.name for o in options.OPTIONS).union(options.sections(), STRUCTURED))
         warnings = []
@@ -125,7 +126,7 @@ class Params(object):
         return value
 
     def option(self, name):
-        """The parameter of the option ``name`` (``core.options``) checked by its grammar; its declared default
+        """The parameter of the option ``name`` (``logger.options``) checked by its grammar; its declared default
         when it is not set."""
         declared = options.get(name)
         value = self.value(name, declared.default)

@@ -19,7 +19,7 @@ import os
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 
-from cc_log.core import event_kinds, raw_message
+from cc_log.base import event_kinds, raw_message
 from cc_log.storage import context_track, disk_guard, upload, window_writer
 from cc_log.nodes.node_common import ConfigError
 from cc_log.nodes.topic_watch import TopicWatcher

@@ -55,8 +55,9 @@ import sys
 import threading
 import time
 
-from cc_log.core import options, safe_input
-from cc_log.core.spans import megabytes, seconds
+from cc_log.logger import options
+from cc_log.base import safe_input
+from cc_log.base.spans import megabytes, seconds
 from cc_log.nodes import launcher
 from cc_log.storage.directory import LoggingDirectory, cc_log_home
 

@@ -28,7 +28,7 @@ Services
   ``~enable`` (std_srvs/SetBool): resume (true) or pause (false) logging.
 
 Parameters
-  every option with a ``smart`` node parameter in docs/OPTIONS.md (declared in ``cc_log.core.options``; ``--help``
+  every option with a ``smart`` node parameter in docs/OPTIONS.md (declared in ``cc_log.logger.options``; ``--help``
   lists them with their defaults): ``~config`` (the configuration file: topics, triggers, windows, format,
   limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
   ``~recent``, ``~learn_online``, the windows' ``~pre``, ``~post``, ``~max_window``, ``~topic_limits``, the
@@ -62,13 +62,14 @@ import time
 import rospy
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
-from cc_log.core import drift, health, raw_message
+from cc_log.learning import drift
+from cc_log.logger import health,from cc_log.base import raw_message, routess
+from cc_log.base import raw_message, routes
 from cc_log.nodes import intake
 from cc_log.storage import window_info
-from cc_log.storage.formats import json_xz
-from cc_log.core import event_kinds, routes, smart, smart_events, trigger_topics
-from cc_log.core.model import AnomalyModel
-from cc_log.core.safe_input import printable
+from cc_log.storage.formats import json_xzkinds
+from cc_log.learning.model import AnomalyModel
+from cc_log.base.safe_input import printable
 from cc_log.nodes.node_common import (
     CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
     node_config, node_name, recover_leftovers, resolve_directory, writer_status)
@@ -77,7 +78,7 @@ from cc_log.storage.log_format import file_prefix
 from cc_log.triggers import ClassifierTrigger
 
 NODE_NAME = 'smart_logger'
-OPTIONS_NODE = 'smart'  # its parameters in core.options
+OPTIONS_NODE = 'smart'  # its parameters in logger.options
 TICK_PERIOD = 0.5                    # seconds (ROS time) between ticks for the triggers that watch for silence
 
 

@@ -25,11 +25,10 @@ import sys
 import threading
 import time
 
-from cc_log.core import collector
-from cc_log.core import learning
+from cc_log.logger import collector
+from cc_log.learning import learning
 from cc_log.storage import log_format
-from cc_log.core import msg_codec
-from cc_log.core import safe_files
+from cc_log.base import msg_codec, safe_files
 from cc_log.storage.directory import cc_log_home
 from cc_log import sim
 

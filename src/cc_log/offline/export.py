@@ -16,12 +16,12 @@ import re
 import numpy
 
 from cc_log.storage import log_format
-from cc_log.core import msg_codec, raw_message, safe_files
+from cc_log.base import msg_codec, raw_message, safe_files
 from cc_log.storage.formats import bag_lz4
 from cc_log.storage.formats.bag_lz4 import to_bag  # noqa: F401  (export.to_bag: --to bag)
 from cc_log.storage.bag import bag_writer
-from cc_log.core.safe_files import AtomicFile
-from cc_log.core.safe_input import printable
+from cc_log.base.safe_files import AtomicFile
+from cc_log.base.safe_input import printable
 
 BAG_COMPRESSIONS = bag_writer.COMPRESSIONS
 MAX_CSV_NAME = 100  # characters of a topic name kept in its CSV file's name

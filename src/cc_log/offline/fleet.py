@@ -15,7 +15,7 @@ import logging
 import os
 import time
 
-from cc_log.core import safe_files
+from cc_log.base import safe_files
 
 BAG_SUFFIX = '.bag'
 DASK_MISSING = ('Dask is not installed (the fleet commands run on it): apt-get install python3-dask '
@@ -137,7 +137,7 @@ def _guarded(function, item):
 
 def peak_rss_mb():
     """Peak resident memory of this process (MB): ``learning.peak_rss_mb``."""
-    from cc_log.core import learning
+    from cc_log.learning import learning
     return learning.peak_rss_mb()
 
 
@@ -266,7 +266,7 @@ def collect_one(bag_path, out_dir, specs, label, stride, single=True):
     """``collector.collect_bag`` of one bag into ``out_dir`` with ``specs`` (``[(name, FeatureConfig, topics)]``;
     ``single``: the one feature set of ``--topic``, written straight into ``out_dir/<label>``); its result
     plus ``messages`` (read from the bag)."""
-    from cc_log.core import collector
+    from cc_log.logger import collector
     if single:
         name, config, topics = specs[0]
         result = collector.collect_bag(bag_path, topics, out_dir, label=label, window=config.window, stride=stride,

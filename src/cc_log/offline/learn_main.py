@@ -17,7 +17,7 @@ import sys
 
 import numpy as np
 
-from cc_log.core import learning
+from cc_log.learning import learning
 
 NOMINAL = 'nominal'
 DEFAULT_METHOD = 'auto'
@@ -60,7 +60,7 @@ def learn(train_dir, validate_dir, model_path, nu=None, gamma=None, method=DEFAU
     """Train on ``train_dir`` and save to ``model_path``, validate on ``validate_dir``; either may be None
     (train only; or evaluate the model at ``model_path``). Returns ``(model, report or None, info)``; raises
     ValueError('<what>: ...')."""
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     if train_dir is None and validate_dir is None:
         raise ValueError('train: give a directory to train on, one to validate on, or both')
     if not model_path:

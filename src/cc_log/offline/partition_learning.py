@@ -21,7 +21,7 @@ HELD_PARTITIONS_FROM = 5   # from this many partitions on, whole partitions are 
 def load_partition(directory):
     """A vector directory as a partition: ``{'vectors': {label: 2-D array}, 'config': FeatureConfig,
     'messages': vectors, 'peak_rss_mb': of the process}``."""
-    from cc_log.core import learning
+    from cc_log.learning import learning
     vectors, config = learning.load_vectors(directory)
     return {'vectors': vectors, 'config': config, 'messages': sum(len(v) for v in vectors.values()),
             'peak_rss_mb': peak_rss_mb()}
@@ -75,7 +75,7 @@ def partition_roles(count, holdout):
 
 
 def _nominal_split(partition, holdout, blocks):
-    from cc_log.core import learning
+    from cc_log.learning import learning
     X = partition['vectors'].get('nominal')
     role = partition.get('role', 'split')
     if X is None or len(X) < 4:
@@ -128,9 +128,9 @@ def train_streamed(engine, load, items, nu=None, gamma=None, components=None, ep
     """
     from sklearn.kernel_approximation import Nystroem
     from sklearn.linear_model import SGDOneClassSVM
-    from cc_log.core import learning
+    from cc_log.learning import learning
     from cc_log.features import vector_names
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     started = time.time()
     holdout = learning.DEFAULT_HOLDOUT if holdout is None else holdout
     blocks = learning.DEFAULT_BLOCKS if blocks is None else blocks

@@ -175,7 +175,7 @@ def timeline(out, windows, speed, curve=(), threshold=None, truth=(), title=None
     threshold: the model's, else the windows'; truth: ``[{type, start, end}]``.
     """
     import matplotlib.pyplot as plt
-    from cc_log.core.safe_files import AtomicFile
+    from cc_log.base.safe_files import AtomicFile
     figure, summary = draw(windows, speed, curve, threshold, truth, title, width, speed_label)
     with AtomicFile(out, overwrite=True) as stream:
         figure.savefig(stream, dpi=dpi, format=os.path.splitext(out)[1][1:].lower() or None,

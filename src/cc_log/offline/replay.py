@@ -1,4 +1,4 @@
-"""Replay: one recorded bag through the smart logger (``core.smart.SmartLogger``) as fast as it can be read.
+"""Replay: one recorded bag through the smart logger (``logger.smart.SmartLogger``) as fast as it can be read.
 
 ``replay_one(bag, out, cfg)`` is ``cclog replay`` of one bag and the fleet's task per bag: the logger of a
 configuration (``replay_setup``: its triggers, options and the topics to read), the bag opened once to select,
@@ -12,8 +12,8 @@ Edge module: ``bagio``/``bag_reader`` (and so rosbag) are imported when a bag is
 import itertools
 import operator
 
-from cc_log import errors
-from cc_log.core import raw_message, smart, smart_events, trigger_topics
+from cc_log.base import errors, raw_message
+from cc_log.logger import smart, smart_events, trigger_topics
 from cc_log.storage import window_writer
 
 __all__ = ['replay_one', 'replay_setup', 'replay', 'replay_into', 'replay_records', 'check_bag_topics',
@@ -32,7 +32,7 @@ def _options(cfg, online_dir=None):
     """``(SmartLogger keyword arguments, {topic: type} the triggers read)`` of ``cfg``, its triggers built (model
     files loaded; refits of online learning in ``online_dir``, None: beside the models); ``side_topics`` is None
     while topic patterns wait for a bag's topics."""
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     triggers = cfg.build_triggers(AnomalyModel.load, raw_message.installed_class, online_dir=online_dir)
     return cfg.logger_options(triggers), trigger_topics.topic_types(triggers)
 
@@ -42,7 +42,7 @@ def _selected(cfg, options, types, bag):
     (an open bag; none without one), with the names the triggers ``keep`` (a bag must hold them, as the names of
     ``topics``), and the topics to read, driving first."""
     if options['side_topics'] is None:
-        from cc_log.core.config import global_name
+        from cc_log.logger.config import global_name
         from cc_log.storage.bag import bagio
         selected = cfg.selection.select(sorted(bagio.topics_of(bag))) if bag is not None else []
         options['side_topics'] = list(dict.fromkeys(selected + [global_name(name) for name in cfg.keep_names()]))
@@ -104,7 +104,8 @@ def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None, online_dir=
     ``progress(done, total)``; ``make_dir(path)`` creates ``out_dir`` once the bag is checked (default:
     ``safe_files.make_dirs``); ``online_dir``: where online learning saves its refits, resuming none (None:
     beside the model files, resuming the refit found there, as on a robot)."""
-    from cc_log.core import drift, safe_files
+    from cc_log.learning import drift
+    from cc_log.base import safe_files
     options, types = _options(cfg, online_dir)
     bag = open_bag(bag_path)
     try:
@@ -149,7 +150,7 @@ def replay(bag_path, topic, model_path, out_dir, pre=smart.DEFAULT_PRE, post=sma
     Raises ValueError for bad arguments, ModelError for a bad model, OSError when the bag cannot be read or a
     window cannot be written (naming ``out_dir`` and what was not written).
     """
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     model = AnomalyModel.load(model_path) if model_path else None
     retry_seconds = window_writer.OFFLINE_RETRY_SECONDS if retry_seconds is None else retry_seconds
     logger = smart.SmartLogger(model, out_dir, fmt, pre, post, driving_topic=topic, side_topics=tuple(side_topics),
@@ -238,5 +239,5 @@ def replay_records(logger, records, progress=None, source='the records'):
         'raw_json_bytes': stats['raw_json_bytes'],
         'stored_bytes': stats['stored_bytes'],
         'windows': tally.windows(),
-        'keep_budget': logger.budget.stats(),  # the windows it skipped (core.keep_budget)
+        'keep_budget': logger.budget.stats(),  # the windows it skipped (logger.keep_budget)
     }

@@ -8,7 +8,8 @@ the bag's truth file when it has one, ``sweep_many`` does it for every bag on a 
 import collections
 import os
 
-from cc_log.core import safe_files, smart_events
+from cc_log.base import safe_files
+from cc_log.logger import smart_events
 from cc_log.offline import fleet, replay
 
 SWEEP_KEYS = ('threshold', 'pre', 'post', 'classify_every', 'retrigger')

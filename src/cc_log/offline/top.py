@@ -14,7 +14,7 @@ import sys
 import threading
 import time
 
-from cc_log.core.safe_input import printable
+from cc_log.base.safe_input import printable
 
 PREFIX = 'cc_log: '   # the name of every cc_log node's DiagnosticStatus
 LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}

@@ -31,10 +31,10 @@ import math
 
 import numpy as np
 
-from cc_log.core import learning
+from cc_log.learning import learning
 from cc_log import sim
 from cc_log.features import CLIP, FeatureConfig, FeatureStream
-from cc_log.core.spans import Span
+from cc_log.base.spans import Span
 from cc_log.triggers import ClassifierTrigger
 
 DEFAULT_PRE = DEFAULT_POST = '2s'

@@ -8,8 +8,8 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu
 from std_msgs.msg import String
 
-from cc_log.core import raw_message
-from cc_log.core.safe_files import AtomicFile
+from cc_log.base import raw_message
+from cc_log.base.safe_files import AtomicFile
 from cc_log.sim.config import SimConfig
 from cc_log.sim.messages import CMD_TOPIC, IMU_TOPIC, ODOM_TOPIC, TRUTH_TOPIC, ros_time, serialized
 from cc_log.sim.truth import truth_path, write_truth

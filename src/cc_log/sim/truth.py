@@ -11,7 +11,7 @@ import json
 
 from std_msgs.msg import String
 
-from cc_log.core.safe_files import AtomicFile
+from cc_log.base.safe_files import AtomicFile
 from cc_log.sim.messages import ODOM_TOPIC
 
 TRUTH_FORMAT = 'cc_log.sim.truth/1'

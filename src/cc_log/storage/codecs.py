@@ -104,7 +104,7 @@ def window_format_rows(records, raw_bytes):
     """cc_log's own window formats on the same records, as ``codec_table`` rows (size, ratio in %
     of the raw JSON, MB/s of raw JSON through ``log_format.write_window``, file write and fsync included)."""
     from cc_log.storage import log_format
-    from cc_log.core.records import LogWindow, Trigger
+    from cc_log.base.records import LogWindow, Trigger
     rows = []
     window = LogWindow(records, [Trigger(records[0].stamp, 'codecs', None)])
     folder = tempfile.mkdtemp(prefix='cclog-codecs-')

@@ -38,12 +38,12 @@ import time
 
 from cc_log import features as features_mod
 from cc_log.storage import log_format, recovery, window_writer
-from cc_log.core import raw_message, safe_files
+from cc_log.base import raw_message, safe_files
 from cc_log.storage.bag import bag_writer
 from cc_log.storage.formats import bag_lz4
-from cc_log.core.records import Record
-from cc_log.core.spans import Range, seconds
-from cc_log.core.topic_select import topic_list
+from cc_log.base.records import Record
+from cc_log.base.spans import Range, seconds
+from cc_log.base.topic_select import topic_list
 
 __all__ = ['ContextTrack', 'Tee', 'parse_topics', 'recover', 'SUBDIRECTORY', 'PREFIX', 'DEFAULT_TOPICS',
            'DEFAULT_ROTATE', 'BWI_ALIASES']

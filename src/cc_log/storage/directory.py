@@ -7,7 +7,7 @@ first directory that can be created and written to wins. ``fallback`` tells the 
 import os
 import tempfile
 
-from cc_log.core import safe_files
+from cc_log.base import safe_files
 
 TMP_DIRECTORY = os.path.join(tempfile.gettempdir(), 'cc_log')
 DIR_MODE = safe_files.DIR_MODE  # group-writable, setgid, never world-writable (parents made too)

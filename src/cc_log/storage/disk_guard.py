@@ -33,7 +33,7 @@ import errno
 import os
 import stat
 
-from cc_log.core import safe_files
+from cc_log.base import safe_files
 from cc_log.storage import log_format, window_names
 
 __all__ = ['DiskGuard', 'MB', 'is_retryable', 'is_out_of_space', 'allocated_bytes', 'RETRYABLE_ERRNOS']

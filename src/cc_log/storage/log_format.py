@@ -21,8 +21,7 @@ import itertools
 import os
 
 from cc_log.storage import formats, payload_check
-from cc_log.core import raw_message
-from cc_log.core import safe_files, safe_input
+from cc_log.base import raw_message, safe_files, safe_input
 from cc_log.storage.window_info import (  # noqa: F401 (trigger_name: also read through this module)
     SUMMARY_KEYS, Contents, check_metadata, merged_summary, summary_of, trigger_name, utc_text, window_metadata)
 from cc_log.storage.window_names import (  # noqa: F401 (the names, read through this module too)
@@ -153,7 +152,7 @@ def merged_metadata(metadatas, paths):
 
 
 def _is_copy(metadata, paths):
-    """True for the metadata of a ``copy`` route's file (``core.routes``) of a window whose own file is among
+    """True for the metadata of a ``copy`` route's file (``base.routes``) of a window whose own file is among
     ``paths`` (as ``window_sets`` orders them): its messages are in the window's own file too."""
     return bool(metadata.get('copy')) and metadata.get('route') is not None and not file_order(paths[0])[0]
 
@@ -266,7 +265,7 @@ class WindowFile(object):
 
     def __init__(self, directory, fmt, route=None, name=None, split_bytes=0, prefix=PREFIX):
         self.directory = directory
-        self.route = route    # a route's file of the window (``core.routes``), None for its own
+        self.route = route    # a route's file of the window (``base.routes``), None for its own
         self.name = WindowName(name=name, prefix=prefix)  # the window's (None until its first part: reserved then)
         self.format = formats.check(fmt)
         self.split_bytes = int(split_bytes or 0)

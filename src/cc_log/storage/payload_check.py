@@ -13,7 +13,7 @@ messages are kept as they are (they are serialized from their class).
 import collections
 import struct
 
-from cc_log.core import msg_codec
+from cc_log.base import msg_codec
 
 __all__ = ['PayloadCheck', 'fits', 'with_dropped']
 

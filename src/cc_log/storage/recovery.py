@@ -40,8 +40,8 @@ import time
 
 from cc_log.storage import formats, log_format
 from cc_log.storage.formats import bag_lz4
-from cc_log.core import msg_codec, safe_files, why
-from cc_log.core.records import LogWindow, Trigger
+from cc_log.base import msg_codec, safe_files, why
+from cc_log.base.records import LogWindow, Trigger
 
 __all__ = ['Outcome', 'scan', 'recover', 'recover_directory', 'release_stale_names', 'incomplete', 'DUPLICATE',
            'COMPLETE', 'PARTIAL', 'EMPTY', 'UNRECOVERABLE', 'BUSY', 'RECOVERED_SUFFIX', 'KEPT_MARK']

@@ -23,9 +23,9 @@ import shlex
 import subprocess
 import threading
 
-from cc_log.core import event_kinds
+from cc_log.base import event_kinds
 from cc_log.storage import window_writer
-from cc_log.core.safe_input import brief
+from cc_log.base.safe_input import brief
 
 __all__ = ['UploadHook', 'parse_command']
 

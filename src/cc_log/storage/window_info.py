@@ -7,7 +7,7 @@ import io
 import math
 
 from cc_log import __version__
-from cc_log.core import msg_codec, raw_message, why as why_
+from cc_log.base import msg_codec, raw_message, why as why_
 
 
 def utc_text(stamp):
@@ -27,8 +27,8 @@ def window_metadata(window, codec, extra=None, triggers=None):
 
     topics, types ({topic: type}), counts ({topic: messages}), count, start/end (float seconds of the first/last
     record), start_utc/end_utc, triggers ([{stamp, reason, score, name, why}]; name only for triggers that have one,
-    why (``core.why.bounded``) only for those that say one, the first and the most anomalous of each trigger:
-    ``core.why.said``), reasons and names (distinct, in order: every trigger of
+    why (``base.why.bounded``) only for those that say one, the first and the most anomalous of each trigger:
+    ``base.why.said``), reasons and names (distinct, in order: every trigger of
     the window), part (0, or 1, 2, ... for a split window), codec, cc_log_version, and the summary ``cclog info``
     and ``stats`` read instead of the messages (``SUMMARY_KEYS``, see ``Contents``). ``triggers``: those to say
     (default: the window's).

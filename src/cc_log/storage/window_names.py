@@ -4,7 +4,7 @@ A window's *name* is ``PREFIX``, the UTC time of its first stamp and the name of
 (``base_name``), with ``_<N>`` added when that name is taken in its directory (``reserve_name``:
 ``<name>.reserved`` created with ``O_EXCL``, so two writers, even in two processes, never share a name; a
 ``WindowName`` holds it for all the jobs of one window). Every file of the window is that name, then its route
-(``+<route>``, ``core.routes``), then its number among that route's files (``.<NNN>``: a window split at
+(``+<route>``, ``base.routes``), then its number among that route's files (``.<NNN>``: a window split at
 ``split_mb`` or written a file per part), then its format's extension (``piece_name``); ``parse_piece``
 (``re.fullmatch``) reads it back, and every reader groups files by it (``window_key``), so names sort by time::
 
@@ -24,7 +24,7 @@ import datetime
 import os
 import re
 
-from cc_log.core import routes, safe_files, safe_input
+from cc_log.base import routes, safe_files, safe_input
 from cc_log.storage import formats
 from cc_log.storage.window_info import trigger_name
 

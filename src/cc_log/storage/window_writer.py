@@ -20,7 +20,7 @@ writes them in order, on a background thread (``background=True``) or in the cal
   --split --size`` does; each file finished so before the window's end is a SPLIT event and counts against the
   quota as a window file does. A window written at once (json-xz, a window never handed on in parts) is one file.
 - every outcome is an event ``WriterEvent(kind, job, path, bytes, error, kept)``, its kind one of
-  ``core.event_kinds``: WRITTEN, FAILED (``kept`` True: held and retried, said once per job; False: lost for
+  ``base.event_kinds``: WRITTEN, FAILED (``kept`` True: held and retried, said once per job; False: lost for
   good, always said), SPLIT (a file of a window finished at ``split_mb``: ``path``, ``bytes``; the job of the part
   that began the next file) and DELETED (a window file deleted by the quota: ``path``, ``bytes``; ``error`` says
   why, and ``FOREIGN_NOTE`` for a file this writer did not write); and a counter in ``stats()``.
@@ -34,9 +34,9 @@ import time
 
 from cc_log.storage import disk_guard
 from cc_log.storage import log_format
-from cc_log.core.event_kinds import DELETED, FAILED, SPLIT, WRITTEN
-from cc_log.core.records import LogWindow
-from cc_log.core.spans import megabytes, seconds
+from cc_log.base.event_kinds import DELETED, FAILED, SPLIT, WRITTEN
+from cc_log.base.records import LogWindow
+from cc_log.base.spans import megabytes, seconds
 
 __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
@@ -44,7 +44,7 @@ __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'DEFAULT_RETRY_PERIOD',
 FOREIGN_NOTE = ', a file this writer did not write'  # said of a file the quota deleted that another run left
 WINDOW = 'window'  # Job.what of a window file
 CONTEXT = 'context'  # Job.what of a closed context-track file (counted in the quota like a window)
-ROUTE = 'route'  # Job.what of a route's file of a window (core.routes): the window is counted once, by its own
+ROUTE = 'route'  # Job.what of a route's file of a window (base.routes): the window is counted once, by its own
 
 DEFAULT_RETRY_PERIOD = 2.0         # seconds between attempts to write held jobs
 DEFAULT_MAX_HELD_MESSAGES = 50000  # messages of unwritten windows kept in memory; beyond, the oldest go
@@ -63,7 +63,7 @@ class Job(object):
     """One file for the writer: ``window`` (a LogWindow) with ``metadata`` for ``log_format.write_window``, or
     ``write``, a function that writes another file and returns its path. ``what`` names the kind of file
     (``'window'`` for windows; e.g. ``'vector'``); ``tag``: anything the owner wants back in events. ``fmt`` and
-    ``route``: the window's file of a route (``core.routes``) in that format, named ``<name>+<route>``; ``name``:
+    ``route``: the window's file of a route (``base.routes``) in that format, named ``<name>+<route>``; ``name``:
     the window's ``log_format.WindowName``, shared by the jobs of all its files (its parts, its routes) and reserved
     at the first one's write (None: a name of its own, or for a part (``LogWindow.key``) its first part's);
     ``last``: the window's last job (its name's reservation is released once it is done). A copy route's file

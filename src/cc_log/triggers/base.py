@@ -14,9 +14,9 @@ itself from one (``from_config``; see ``config``). Pure: no rospy.
 import collections
 import re
 
-from cc_log.core.registry import Registry
-from cc_log.core.safe_input import brief
-from cc_log.core.spans import Span
+from cc_log.base.registry import Registry
+from cc_log.base.safe_input import brief
+from cc_log.base.spans import Span
 
 Context = collections.namedtuple('Context', 'load_model message_class resolve online_dir', defaults=(None,))
 Context.__doc__ = """What building a trigger from a configuration may need: ``load_model(path)`` (a model; ValueError
@@ -26,7 +26,7 @@ naming the file), ``message_class(type)`` (an installed class or None), ``resolv
 Fire = collections.namedtuple('Fire', 'name reason score pre post why', defaults=(None, None, ()))
 Fire.__doc__ = """A trigger's decision to keep a window: its name, a reason (text), a score (float; NaN when none),
 optional ``pre`` / ``post`` Spans for this window (None: the logger's) and ``why``: the features that stood out,
-most outstanding first (a tuple of at most 3 dicts, ``core.why``)."""
+most outstanding first (a tuple of at most 3 dicts, ``base.why``)."""
 
 NAN = float('nan')
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_-]{0,63}')
@@ -109,6 +109,6 @@ class Trigger(object):
         return {'kind': self.kind, 'name': self.name, 'topics': sorted(self.topics)}
 
     def fire(self, reason, score=NAN, why=()):
-        """A Fire of this trigger (counted); ``why``: the features that stood out (``core.why``)."""
+        """A Fire of this trigger (counted); ``why``: the features that stood out (``base.why``)."""
         self.fired += 1
         return Fire(self.name, reason, score, self.pre, self.post, tuple(why))

@@ -7,7 +7,7 @@ inputs, in its order (the first makes the rows). Its ``features.FeatureStream`` 
 (``'onset'``: the score must come back above the threshold before it fires again), or at the onset and then
 only while the newest rows are anomalous (``'event'``: the window ends at the anomaly's end plus post, not a
 whole feature window later). Several classifiers may run at once, each with its own model, topics,
-``classify_every`` and ``retrigger``. A Fire says why (``core.why.classifier_why``): the entries of the window
+``classify_every`` and ``retrigger``. A Fire says why (``base.why.classifier_why``): the entries of the window
 vector furthest outside what the model's training vectors covered. A window whose rows hold a value out of
 any physical range (``features.base.out_of_range``: clipped at +-CLIP) is anomalous whatever the model says,
 with the score OUT_OF_RANGE_SCORE: clipped, it would look like any far vector, which a threshold tuned low may
@@ -19,11 +19,12 @@ import time
 import numpy as np
 
 from cc_log import features
-from cc_log.core import online_learning, why
+from cc_log.learning import online_learning
+from cc_log.base import why
 from cc_log.features import FeatureStream
 from cc_log.features.base import CLIP, out_of_range
-from cc_log.core.spans import Span
-from cc_log.core.topic_select import topic_list
+from cc_log.base.spans import Span
+from cc_log.base.topic_select import topic_list
 from cc_log.triggers.base import Trigger, register
 
 # Which anomalous scores fire:
@@ -195,7 +196,7 @@ class ClassifierTrigger(Trigger):
 
     def explain(self, vector):
         """The features of a window ``vector`` that stood out against the model file's training data
-        (``core.why.classifier_why``; () for a model without a scaler)."""
+        (``base.why.classifier_why``; () for a model without a scaler)."""
         if getattr(self.original, 'scale', None) is None:
             return ()
         return why.classifier_why(self.original, vector)

@@ -5,14 +5,14 @@ Configuration (``kind: envelope``)::
     triggers:
       - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0, joint_factor: 4.0}
 
-``limits``: the file ``cclog learn-envelope`` wrote (``core.envelope.Envelope``: the largest value of each of
+``limits``: the file ``cclog learn-envelope`` wrote (``learning.envelope.Envelope``: the largest value of each of
 the 19 ``features.envelope`` features over nominal windows); ``topic``: the nav_msgs/Odometry topic (default:
 the one it was learned on); ``factor`` (default 2.0): a window is flagged when a feature exceeds ``factor`` x
 its training maximum (floored by ``ENVELOPE_FLOORS``); ``joint_factor`` (default 4.0; 0: off), when the file
-has a joint check (``core.envelope.Joint``): a window is flagged too when its squared robust distance from
+has a joint check (``learning.envelope.Joint``): a window is flagged too when its squared robust distance from
 typical driving goes ``joint_factor`` x farther past the typical one than any training window did. A model path
 given as the default trigger (``~model``, ``cclog replay --model``) builds this trigger when the file is an
-envelope (``core.config.with_classifier``).
+envelope (``logger.config.with_classifier``).
 
 Every ``stride`` (0.25 s, the file's) of message time the trigger computes the row of the window of ``window``
 s (1 s, the file's) ending on that grid point, from a ring of the last ``window`` + ``HISTORY`` seconds of
@@ -20,7 +20,7 @@ samples (``features.envelope.envelope_rows``: the very rows ``envelope_windows``
 batch's windows at once (the joint check: one 19 x 19 quadratic form per window). A window beyond
 the envelope fires at the first message at or after its end, with score ``-ln(max(value / limit, joint
 ratio))`` (< 0; lower is more anomalous) and ``why``: the features beyond their limit and the joint check, most
-outstanding first, each against the most seen in training (``core.envelope.explain``). Each such
+outstanding first, each against the most seen in training (``learning.envelope.explain``). Each such
 window fires (every 0.25 s while the motion stays beyond the envelope; the logger merges them). A window that
 holds a sample out of any physical range (``features.envelope.out_of_range_samples``: a speed, yaw rate or
 position that is inf, NaN or beyond +-1e6, which the rows leave out) fires too, with the score
@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from cc_log.core.envelope import (
+from cc_log.learning.envelope import (
     DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, Envelope, check_factor, check_joint_factor, explain, scores)
 from cc_log.features.envelope import (
     ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, out_of_range_samples, step_details)
@@ -47,7 +47,7 @@ OUT_OF_RANGE_SCORE = -CLIP  # the score of a window holding a sample out of rang
 class EnvelopeTrigger(Trigger):
     """Fires on odometry windows beyond the learned envelope (see the module docstring).
 
-    envelope: a ``core.envelope.Envelope``; topic: its nav_msgs/Odometry topic; factor: the limit factor;
+    envelope: a ``learning.envelope.Envelope``; topic: its nav_msgs/Odometry topic; factor: the limit factor;
     joint_factor: the joint check's (0: off; no effect when the envelope has no joint check)."""
 
     kind = 'envelope'

@@ -7,8 +7,8 @@ has start and stop times, with the after-part too. Pure: no rospy.
 """
 import math
 
-from cc_log.core.safe_input import brief
-from cc_log.core.spans import Span
+from cc_log.base.safe_input import brief
+from cc_log.base.spans import Span
 from cc_log.triggers.base import Fire, Trigger, register
 
 DEFAULT_REASON = 'manual'

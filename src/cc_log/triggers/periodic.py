@@ -13,7 +13,7 @@ count again). Pure: no rospy.
 import math
 import re
 
-from cc_log.core.spans import Span
+from cc_log.base.spans import Span
 from cc_log.triggers.base import Trigger, register
 
 REASON = 'periodic'

@@ -24,7 +24,7 @@ A rule fires at the onset of its condition: the first message on which it holds 
 not (or after more than ``hold_off`` without a message where it held: event topics such as a goal result), and
 for silence when the topic falls silent or slow. It does not fire again within ``hold_off`` (default 5 s of
 message time) of its last firing, so a flapping condition makes one window. A ``when`` rule comparing numbers says
-why (``core.why``): the field, its value and the level it crossed. Pure: no rospy.
+why (``base.why``): the field, its value and the level it crossed. Pure: no rospy.
 """
 import collections
 import fnmatch
@@ -32,9 +32,9 @@ import math
 import operator
 import re
 
-from cc_log.core import msg_codec, why
-from cc_log.core.safe_input import brief
-from cc_log.core.spans import Range, seconds
+from cc_log.base import msg_codec, why
+from cc_log.base.safe_input import brief
+from cc_log.base.spans import Range, seconds
 from cc_log.triggers.base import Trigger, register
 
 DEFAULT_HOLD_OFF = '5s'

@@ -51,7 +51,7 @@ def run(args):
 
 def _cc_log_json(path):
     """A cc_log JSON file (model, feature vector, simulator truth); CommandError when it is none of them."""
-    from cc_log.core import safe_input
+    from cc_log.base import safe_input
     with safe_input.open_input(path) as stream:
         data = stream.read()
     try:
@@ -69,6 +69,6 @@ def _cc_log_json(path):
 
 def _is_window_file(path):
     from cc_log.storage import formats
-    from cc_log.core import safe_input
+    from cc_log.base import safe_input
     with safe_input.open_input(path) as stream:
         return formats.by_magic(stream.read(16)) is not None

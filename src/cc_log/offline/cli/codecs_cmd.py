@@ -32,7 +32,7 @@ def add_parser(subparsers):
 def run(args):
     """The paper's Table 2 on the row-per-message JSON of a bag topic or of window files."""
     from cc_log.storage import codecs
-    from cc_log.core import msg_codec
+    from cc_log.base import msg_codec
     path = args.path
     if not os.path.exists(path):
         raise CommandError('%s: no such file or directory' % path)
@@ -79,7 +79,7 @@ def run(args):
 
 def _is_plain_bag(path):
     """True for a rosbag that is not a cc_log bag-lz4 window file (which ``codecs`` reads as a LOG)."""
-    from cc_log.core import safe_input
+    from cc_log.base import safe_input
     from cc_log.storage.formats import bag_lz4
     with safe_input.open_input(path) as stream:
         if not stream.read(16).startswith(bag_lz4.MAGIC):

@@ -3,7 +3,7 @@ import collections
 import contextlib
 import sys
 
-from cc_log.core import safe_files
+from cc_log.base import safe_files
 from cc_log.offline.progress import bar as _bar, call as _call
 from cc_log.offline.cli.common import (
     PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
@@ -56,9 +56,9 @@ def add_parser(subparsers):
 def run(args):
     """Feature vectors of a bag's driving topic into ``OUT/<label>/``, as collect mode writes them; with
     ``--config``, of every classifier's feature set into ``OUT/<name>/<label>/``."""
-    from cc_log.core import collector
+    from cc_log.logger import collector
     from cc_log.offline import fleet
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     many = fleet_wanted(args, args.bag)
     if not many:
         args.bag = existing_file(args.bag[0], 'bag file')
@@ -117,8 +117,9 @@ def _drop_rule_flagged(bag, out, cfg, specs, label):
     they fired on; ``{'rules': names, 'spans': [[start, end, names]], 'removed': {set: count}}``, or None when
     the configuration has no rule."""
     import copy
-    from cc_log.core import collector, raw_message
-    from cc_log.core.model import AnomalyModel
+    from cc_log.logger import collector
+    from cc_log.base import raw_message
+    from cc_log.learning.model import AnomalyModel
     from cc_log.storage.bag import bagio
     rules_only = copy.copy(cfg)
     rules_only.triggers = [entry for entry in cfg.triggers if entry['kind'] not in collector.RULE_EXCLUDED_KINDS]
@@ -173,7 +174,7 @@ def _collect_many(args, specs, label, stride):
 @contextlib.contextmanager
 def _leftovers_removed(directories):
     """On the way out (Ctrl-C, a worker lost), remove the half-written vector files of ended processes."""
-    from cc_log.core import collector
+    from cc_log.logger import collector
     try:
         yield
     finally:
@@ -183,7 +184,7 @@ def _leftovers_removed(directories):
 
 def _collect_stride():
     try:
-        from cc_log.core.collector import DEFAULT_STRIDE
+        from cc_log.logger.collector import DEFAULT_STRIDE
     except ImportError:
         return 25
     return DEFAULT_STRIDE

@@ -8,10 +8,10 @@ import os
 import sys
 import textwrap
 
-from cc_log.core.safe_input import printable
+from cc_log.base.safe_input import printable
 from cc_log.offline import export
 from cc_log.offline.progress import bar as _bar
-from cc_log.errors import CommandError
+from cc_log.base.errors import CommandError
 
 PROG = 'cclog'
 EXIT_OK = 0
@@ -66,7 +66,7 @@ def existing_file(path, what='file'):
 
 def writable_dir(path, name):
     """Create directory ``path`` if needed; CommandError('<name>: ...') when that is impossible."""
-    from cc_log.core import safe_files
+    from cc_log.base import safe_files
     if os.path.exists(path) and not os.path.isdir(path):
         raise CommandError('%s: %s exists and is not a directory' % (name, path))
     try:
@@ -87,7 +87,7 @@ def parent_exists(path, name):
 def span(name):
     """argparse type for a count (``500``) or a duration (``5s``) checked by Span.parse."""
     def parse(value):
-        from cc_log.core.spans import Span
+        from cc_log.base.spans import Span
         try:
             Span.parse(value, name)
         except ValueError as error:
@@ -281,7 +281,7 @@ def driving_topic(args, type_name):
 def configuration(args, flat):
     """The Config of ``--config`` (if given) with the options of ``flat`` (None: not given) and the single
     classifier of ``--model``/``--topic`` over it."""
-    from cc_log.core import config as config_mod
+    from cc_log.logger import config as config_mod
     data = config_mod.load_file(existing_file(args.config, 'configuration file')) if args.config else {}
     side = flat.pop('side_topics', None)
     classifier = flat.pop('classifier', {})

@@ -79,7 +79,7 @@ def run(args):
 
 def _export_frames(args, records):
     """``export --to png``: every camera frame as a PNG (or its own JPEG) file in the directory ``--out``."""
-    from cc_log.core import raw_message
+    from cc_log.base import raw_message
     frames = [record for record in records if raw_message.type_of(record) in export.IMAGE_TYPES]
     if not frames:
         raise CommandError('%s: no sensor_msgs/Image or CompressedImage messages' % ', '.join(args.paths)[:200])

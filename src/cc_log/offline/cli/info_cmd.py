@@ -2,7 +2,7 @@
 import collections
 import os
 
-from cc_log.core import why
+from cc_log.base import why
 from cc_log.offline import progress
 from cc_log.offline.cli.common import (
     EXIT_OK, command_help, human_bytes, output_flags, print_json, say, size_ratio, stamp_text, window_paths)
@@ -127,7 +127,7 @@ def _summaries(args):
 
 def _window_summary(path, metadata, records):
     """What ``info`` reports about one window file, counted from its records."""
-    from cc_log.core import msg_codec
+    from cc_log.base import msg_codec
     from cc_log.storage.formats import bag_lz4
     counts = collections.OrderedDict()
     types = collections.OrderedDict()

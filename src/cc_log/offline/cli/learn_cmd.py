@@ -42,12 +42,12 @@ def add_parser(subparsers):
 
 
 def _default_trim():
-    from cc_log.core.learning import DEFAULT_TRIM
+    from cc_log.learning.learning import DEFAULT_TRIM
     return DEFAULT_TRIM
 
 
 def _trim(text):
-    from cc_log.core.learning import MAX_TRIM
+    from cc_log.learning.learning import MAX_TRIM
     try:
         value = float(text)
     except ValueError:
@@ -61,7 +61,7 @@ def _trim(text):
 def run(args):
     """Train a model (``--train``), validate it (``--test``); or evaluate an existing one (``--test`` only)."""
     from cc_log.offline import learn_main
-    from cc_log.core import learning
+    from cc_log.learning import learning
     if args.train is None and args.test is None:
         raise CommandError('train: give --train DIR (train a model), --test DIR (evaluate --model), or both')
     many = args.train is not None and (args.method == 'stream' or fleet_wanted(args, args.train, _vector_dir))
@@ -104,7 +104,7 @@ def run(args):
 def _learn_many(args):
     """Train over every vector directory of --train (partitions) on the engine: ``(model, info)``."""
     from cc_log.offline import fleet, learn_main, partition_learning
-    from cc_log.core import learning
+    from cc_log.learning import learning
     directories = fleet.expand_vector_dirs(args.train)
     with fleet_engine(args) as engine:
         if args.method == partition_learning.STREAM_METHOD:
@@ -139,7 +139,7 @@ def _report_dict(report):
 def _training_text(info):
     """What training alone (no --test) can tell: the model, its threshold, the held-out nominal check, what was
     trimmed."""
-    from cc_log.core import learning
+    from cc_log.learning import learning
     lines = ['%-16s %s, nu=%g, gamma=%.4g, %s nominal vectors (%s held out), %s anomalous' % (
         'Model', info['method'], info['nu'], info['gamma'], info['vectors_nominal'], info['vectors_held_out'],
         info['vectors_anomalous']),

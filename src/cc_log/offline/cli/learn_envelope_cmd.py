@@ -42,7 +42,7 @@ def add_parser(subparsers):
 
 
 def _seconds(value, name):
-    from cc_log.core.spans import Span
+    from cc_log.base.spans import Span
     parsed = Span.parse(value, name)
     if not parsed.is_duration or not 0 < parsed.seconds <= 600:
         raise CommandError('%s: %s must be a duration up to 10 minutes, like 1s or 250ms' % (name, value))
@@ -52,7 +52,7 @@ def _seconds(value, name):
 def learn_bags(paths, topic, window, stride, joint=True):
     """The ``Envelope`` of the odometry of ``topic`` in the bags ``paths`` (each bag's windows apart; with its
     joint check when ``joint`` and the windows allow it)."""
-    from cc_log.core import envelope
+    from cc_log.learning import envelope
     from cc_log.features.envelope import envelope_windows, odometry_samples
     from cc_log.features.motion import ODOMETRY
     from cc_log.offline import replay
@@ -69,7 +69,7 @@ def learn_bags(paths, topic, window, stride, joint=True):
 
 def run(args):
     """Learn the envelope of the bags and write it to --out."""
-    from cc_log.core.envelope import DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, joint_shortfall
+    from cc_log.learning.envelope import DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, joint_shortfall
     from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_UNITS
     from cc_log.features.motion import ODOMETRY
     paths = [existing_file(path, 'bag file') for path in args.bag]

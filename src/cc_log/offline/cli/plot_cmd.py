@@ -70,7 +70,7 @@ def run(args):
             raise CommandError('topic: no nav_msgs/Odometry messages on %s in the windows' % driving)
     curve, threshold = [], None
     if args.model:
-        from cc_log.core.model import AnomalyModel
+        from cc_log.learning.model import AnomalyModel
         if not args.bag:
             raise CommandError('model: --model scores the whole run and needs --bag')
         model = AnomalyModel.load(args.model)

@@ -6,7 +6,7 @@ import math
 import os
 import sys
 
-from cc_log.core import options
+from cc_log.logger import options
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
     PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
@@ -51,7 +51,7 @@ def add_parser(subparsers):
     p.add_argument('--model', metavar='PATH', help='envelope file (cclog learn-envelope) or model file (cclog '
                    'learn) of a classifier on --topic; needed without --config')
     p.add_argument('--out', required=True, metavar='DIR', help='directory for the window files')
-    options.add_flags(p, 'replay')  # --format, --precision, --pre, --post, --max-buffer-mb: core.options
+    options.add_flags(p, 'replay')  # --format, --precision, --pre, --post, --max-buffer-mb: logger.options
     p.add_argument('--side-topic', action='append', default=[], metavar='T',
                    help='another topic to save inside the windows (repeatable)')
     p.add_argument('--classify-every', type=span('classify-every'), metavar='N|Ns',
@@ -73,7 +73,7 @@ def run(args):
     """The smart logger (the live node's SmartLogger) fed from a bag as fast as it can be read, with the
     triggers of ``--config`` and/or the classifier of ``--model`` on ``--topic``."""
     from cc_log.offline import replay
-    from cc_log.core.config import model_kind
+    from cc_log.logger.config import model_kind
     many = fleet_wanted(args, args.bag)
     if not many:
         args.bag = existing_file(args.bag[0], 'bag file')
@@ -84,7 +84,7 @@ def run(args):
     if args.model is not None and args.topic is None and model_kind(args.model) == 'classifier':
         if many:
             raise CommandError('replay: --model needs --topic (the topic the model reads)')
-        from cc_log.core.model import AnomalyModel
+        from cc_log.learning.model import AnomalyModel
         args.topic = driving_topic(args, AnomalyModel.load(args.model).config.topic_type)
     flat = dict((option.name, getattr(args, option.name)) for option in options.for_command('replay'))
     flat.update({'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
@@ -148,7 +148,7 @@ def _window_entry(window):
 def _skipped_lines(budget):
     """The lines saying what the keep budget skipped (``KeepBudget.stats()``; none when nothing): its report and
     the last skipped windows, each with its stamp, trigger and score."""
-    from cc_log.core import keep_budget
+    from cc_log.logger import keep_budget
     report = keep_budget.report(budget)
     if not report:
         return []
@@ -182,7 +182,7 @@ def _replay_many(args, cfg):
 def _sweep(args, flat, many):
     """``replay --sweep``: every combination of the --sweep values over one reading of each bag; a table."""
     from cc_log.offline import fleet, replay, sweep
-    from cc_log.core.spans import Span
+    from cc_log.base.spans import Span
     from cc_log.triggers import RETRIGGER_MODES
     sweeps = []
     for combination in sweep.parse_sweep(args.sweep):

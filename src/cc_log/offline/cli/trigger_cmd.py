@@ -1,7 +1,7 @@
 """``cclog trigger``: save a window now, through a running smart logger's ``~trigger_window`` (needs a roscore)."""
 import argparse
 
-from cc_log.core.safe_input import printable
+from cc_log.base.safe_input import printable
 from cc_log.offline.cli.common import EXIT_OK, CommandError, command_help, print_json
 
 SERVICE = 'trigger_window'  # the smart logger's private service (cc_log/TriggerWindow)
@@ -37,7 +37,7 @@ def add_parser(subparsers):
 def _duration(name):
     """argparse type for a duration (``spans.seconds``: ``10``, ``500ms``, ``2m``) as float seconds."""
     def parse(value):
-        from cc_log.core.spans import seconds
+        from cc_log.base.spans import seconds
         try:
             return seconds(value, name)
         except ValueError as error:

@@ -61,7 +61,7 @@ def run(args):
     rate, to a false-window budget on nominal bags (``tuning.choose``); write it to --out."""
     from cc_log.storage.bag import bagio
     from cc_log.offline import replay, tuning
-    from cc_log.core.model import AnomalyModel
+    from cc_log.learning.model import AnomalyModel
     model = AnomalyModel.load(existing_file(args.model, 'model file'))
     types = {args.topic: model.config.feature.inputs[0][1]}
     for bag in args.bag:

@@ -6,8 +6,8 @@ import struct
 
 import rosbag
 
-from cc_log.core import raw_message, safe_input
-from cc_log.core.records import Record
+from cc_log.base import raw_message, safe_input
+from cc_log.base.records import Record
 
 
 def open_bag(path, skip_index=False):

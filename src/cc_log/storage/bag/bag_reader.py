@@ -18,11 +18,11 @@ import itertools
 import numpy as np
 
 from cc_log.storage.bag import bag_open
-from cc_log.core import raw_message
+from cc_log.base import raw_message
 from cc_log.storage.bag.bag_format import OP_CONNECTION, OP_INDEX_DATA, OP_MSG_DATA
 from cc_log.storage.bag.bag_salvage import (
     MAX_CHUNK_BYTES, close_map, field_u32, lz4_decompress, map_file, read_record)
-from cc_log.core.records import records_of
+from cc_log.base.records import records_of
 
 __all__ = ['read_raw', 'read_runs', 'MAX_CHUNK_BYTES']
 

@@ -9,8 +9,8 @@ import mmap
 import os
 import struct
 
-from cc_log.core import msg_codec, raw_message, safe_input
-from cc_log.core.records import Record
+from cc_log.base import msg_codec, raw_message, safe_input
+from cc_log.base.records import Record
 from cc_log.storage.bag.bag_format import (
     MAGIC, METADATA_TOPIC, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION, OP_FILE_HEADER, OP_INDEX_DATA, OP_MSG_DATA,
     bag_stamp)

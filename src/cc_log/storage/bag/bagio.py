@@ -15,9 +15,9 @@ import sys
 
 import numpy as np
 
-from cc_log.core import raw_message
+from cc_log.base import raw_message
 from cc_log.features import FeatureStream, stamp_of
-from cc_log.core.records import Record
+from cc_log.base.records import Record
 from cc_log.storage.bag import bag_reader
 from cc_log.storage.bag.bag_open import (  # noqa: F401  (bagio.*)
     _one_line, check_topic, only_topic_of_type, open_bag, read_raw, topics_of)

@@ -35,8 +35,8 @@ import os
 import struct
 import zlib
 
-from cc_log.core import msg_codec, raw_message, safe_files, safe_input
-from cc_log.core.records import Record
+from cc_log.base import msg_codec, raw_message, safe_files, safe_input
+from cc_log.base.records import Record
 from cc_log.storage import payload_check
 from cc_log.storage.bag import bag_salvage, bag_writer
 from cc_log.storage.bag.bag_format import MAGIC, METADATA_TOPIC, bag_stamp  # noqa: F401  (bag_lz4.MAGIC, ...)

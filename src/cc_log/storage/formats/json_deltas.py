@@ -8,7 +8,7 @@ import math
 import operator
 import re
 
-from cc_log.core import msg_codec
+from cc_log.base import msg_codec
 from cc_log.storage.formats.json_rows import flatten
 
 #: A float column is delta-coded when its differences have at most this share of its values' significant

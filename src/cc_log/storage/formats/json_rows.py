@@ -10,7 +10,7 @@ import operator
 
 import numpy
 
-from cc_log.core import msg_codec, raw_message
+from cc_log.base import msg_codec, raw_message
 
 
 # -- columns --------------------------------------------------------------------------------------------

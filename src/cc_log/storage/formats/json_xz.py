@@ -58,8 +58,8 @@ import json
 import lzma
 import os
 
-from cc_log.core import msg_codec, raw_message, safe_input
-from cc_log.core.records import Record
+from cc_log.base import msg_codec, raw_message, safe_input
+from cc_log.base.records import Record
 from cc_log.storage.formats.json_deltas import (  # noqa: F401  (json_xz.check_precision, ...: the format's API)
     Deltas, check_precision, decimal_text, decimal_texts, differences, max_errors, rounder, sums)
 from cc_log.storage.formats.json_rows import (  # noqa: F401  (json_xz.flat_row, json_xz.decoded_records)

@@ -26,13 +26,13 @@ import math
 import re
 
 from cc_log import features
-from cc_log.core import safe_input
-from cc_log.core.keep_budget import MAX_PER_HOUR
-from cc_log.core.routes import ROUTE_KEYS, parse_routes
-from cc_log.core.safe_input import brief
-from cc_log.core.spans import ROTATIONS, Range, Rotation, Span, megabytes, seconds
-from cc_log.core.topic_select import topic_list
-from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE
+from cc_log.base import safe_input
+from cc_log.logger.keep_budget import MAX_PER_HOUR
+from cc_log.base.routes import ROUTE_KEYS, parse_routes
+from cc_log.base.safe_input import brief
+from cc_log.base.spans import ROTATIONS, Range, Rotation, Span, megabytes, seconds
+from cc_log.base.topic_select import topic_list
+from cc_log.buffer.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE
 from cc_log.storage import context_track, formats, log_format
 from cc_log.storage.formats import json_xz
 from cc_log.triggers.classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES
@@ -330,7 +330,7 @@ OPTIONS = (
             "(default: the first trigger's first topic)"),
     _option('format', 'format', FORMAT, formats.DEFAULT, 'window file format', BOTH, ('replay',)),
     _option('routes', 'routes', ROUTES, (), "topic sets written beside the window's file in a format of their own, "
-            "e.g. `[{name: numeric, topics: [odom, imu/data], format: json-xz}]` (`core.routes`)", SMART),
+            "e.g. `[{name: numeric, topics: [odom, imu/data], format: json-xz}]` (`base.routes`)", SMART),
     _option('precision', 'json_xz.precision', PRECISION, {}, 'json-xz only, opt-in lossy: round fields to a step',
             BOTH, ('replay',)),
     _option('pre', 'windows.pre', SPAN, str(DEFAULT_PRE), 'kept before an anomaly (not given: the default, or the '

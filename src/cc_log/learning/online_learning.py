@@ -33,8 +33,9 @@ import time
 
 import numpy as np
 
-from cc_log.core import learning, safe_files
-from cc_log.core.spans import Span
+from cc_log.learning import learning
+from cc_log.base import safe_files
+from cc_log.base.spans import Span
 
 DEFAULT_EVERY = 2000    # new nominal vectors between refits
 DEFAULT_KEEP = 5000     # vectors in the reservoir

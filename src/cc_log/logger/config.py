@@ -34,15 +34,15 @@ import os
 
 from cc_log import features
 from cc_log.storage import log_format
-from cc_log.core import safe_input
-from cc_log.core.safe_input import brief
-from cc_log.core.model import check_window
-from cc_log.core import options
-from cc_log.core.spans import Span
+from cc_log.base import safe_input
+from cc_log.base.safe_input import brief
+from cc_log.learning.model import check_window
+from cc_log.logger import options
+from cc_log.base.spans import Span
 from cc_log.triggers import get as trigger_kind
 from cc_log.triggers.base import Context, check_name
 from cc_log.triggers.classifier import default_topics
-from cc_log.core.topic_select import TopicSelection, topic_list
+from cc_log.base.topic_select import TopicSelection, topic_list
 
 KEYS = tuple(options.sections())
 COMMON_TRIGGER_KEYS = ('name', 'kind', 'pre', 'post', 'keep')
@@ -88,7 +88,7 @@ def model_kind(path):
     learn-envelope``), ``'classifier'`` for a cc_log model (``cclog learn``), and for a file that cannot be read
     or is too large for an envelope (the model's reader says what is wrong); ValueError('<path>: ...') for any
     other file."""
-    from cc_log.core import envelope, model
+    from cc_log.learning import envelope, model
     try:
         with safe_input.open_input(os.path.expanduser(path)) as stream:
             text = stream.read(envelope.MAX_FILE_BYTES + 1)

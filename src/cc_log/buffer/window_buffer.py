@@ -27,8 +27,8 @@ import itertools
 import math
 import sys
 
-from cc_log.core.records import LogWindow, Trigger
-from cc_log.core.spans import Span
+from cc_log.base.records import LogWindow, Trigger
+from cc_log.base.spans import Span
 
 DEFAULT_PRE = Span.parse('2s')   # durations: the same margin at any rate (100 messages: 1 s at 100 Hz, 20 s at 5 Hz)
 DEFAULT_POST = Span.parse('2s')

@@ -9,7 +9,7 @@
 import collections
 import math
 
-from cc_log.core.safe_input import brief
+from cc_log.base.safe_input import brief
 
 #: Largest message count of a span (a billion messages: days of a 1 kHz topic).
 MAX_COUNT = 10 ** 9

@@ -9,7 +9,7 @@ import itertools
 import operator
 import threading
 
-from cc_log.core import msg_codec, raw_message
+from cc_log.base import msg_codec, raw_message
 
 __all__ = ['RawJsonEstimate', 'JSON_SAMPLE_EVERY', 'JSON_SAMPLE_FIRST', 'PENDING_BYTES']
 

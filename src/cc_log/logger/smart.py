@@ -36,20 +36,21 @@ import operator
 import threading
 import time
 
-from cc_log import errors
+from cc_log.base import errors, msg_codec, raw_message, routes as routes_mod
 from cc_log import features as features_mod
 from cc_log.storage import log_format, window_writer
-from cc_log.core import keep_budget, msg_codec, raw_message, routes as routes_mod, smart_events, window_prep
-from cc_log.core.raw_json import RawJsonEstimate
-from cc_log.core.event_kinds import OPENED
-from cc_log.core.smart_events import Event
-from cc_log.core.stamp_clock import StampClock
-from cc_log.core.trigger_topics import TriggerViews, check_triggers, topic_types
-from cc_log.core.spans import Span
+from cc_log.logger import keep_budget, smart_events
+from cc_log.buffer import window_prep
+from cc_log.base.raw_json import RawJsonEstimate
+from cc_log.base.event_kinds import OPENED
+from cc_log.logger.smart_events import Event
+from cc_log.base.stamp_clock import StampClock
+from cc_log.logger.trigger_topics import TriggerViews, check_triggers, topic_types
+from cc_log.base.spans import Span
 from cc_log.triggers import (
     DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger, ManualTrigger)
-from cc_log.core.records import Record, records_of
-from cc_log.core.window_buffer import (
+from cc_log.base.records import Record, records_of
+from cc_log.buffer.window_buffer import (
     DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDOW, DEFAULT_POST, DEFAULT_PRE, RAW_RECORD_OVERHEAD, MemoryCost, WindowBuffer)
 
 __all__ = ['SmartLogger', 'Event', 'DEFAULT_FORMAT', 'DEFAULT_PRE',
@@ -99,7 +100,7 @@ class SmartLogger(object):
     memory budget of every buffered message together (MB; 0: none): an open window is written in parts at
     half of it, divided by the format's ``PART_FACTOR`` (what its writer and the process need per estimated
     byte of a part; see ``WindowBuffer``). format_options: keys added to every window's metadata that the format
-    reads (json-xz: ``precision``); routes: ``core.routes.Route``s: topic sets written beside the window's own file
+    reads (json-xz: ``precision``); routes: ``base.routes.Route``s: topic sets written beside the window's own file
     in a format of their own; keep: ``{trigger name: topics}`` (``window_prep.selections``): a window only such
     triggers opened keeps only those; split_mb: a window written in parts goes on in a new file once its file holds
     that many MB (0: never); max_files, prefix: the writer's (``window_writer.WindowWriter``). wait_for_writer
@@ -150,7 +151,7 @@ class SmartLogger(object):
         self.max_buffer_mb = max_buffer_mb
         self.budget = keep_budget.KeepBudget(max_windows_per_hour, self.pre.seconds, self.post.seconds)
         self.topic_limits = dict(topic_limits or {})  # topic -> options.TopicLimits
-        self.routes = list(routes)  # core.routes.Route: topic sets written in a format of their own, beside the window
+        self.routes = list(routes)  # base.routes.Route: topic sets written in a format of their own, beside the window
         self._names = {}  # window key -> the log_format.WindowName of its files, while it is handed on in parts
         self.keep = window_prep.selections(keep)  # trigger name -> what its windows keep (window_prep.restrict)
         self.stamp_tolerance = float(stamp_tolerance)
@@ -563,7 +564,7 @@ class SmartLogger(object):
             name = self._names.pop(window.key, None) or self.writer.window_name(window)
             if window.part and not window.final:
                 self._names[window.key] = name  # all its files, every part's, take one name
-            pieces = routes_mod.split(window, self.routes)  # one file per route (core.routes)
+            pieces = routes_mod.split(window, self.routes)  # one file per route (base.routes)
             for number, (route, piece) in enumerate(pieces, 1):
                 last = (window.final or not window.part) and number == len(pieces)
                 self.writer.submit(window_writer.Job(piece, metadata, name=name, last=last) if route is None else

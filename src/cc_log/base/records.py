@@ -19,7 +19,7 @@ def records_of(stamps, topics, msgs, costs, raws, connections):
 Trigger = collections.namedtuple('Trigger', 'stamp reason score name why', defaults=(None, ()))
 Trigger.__doc__ = """Why a window was opened or extended: stamp of the message, reason, score (a classifier's; None or
 NaN when none), the name of the trigger (None: the reason is the name, as in files written before names) and
-``why``: the features that stood out (the Fire's, ``core.why``; () when none)."""
+``why``: the features that stood out (the Fire's, ``base.why``; () when none)."""
 
 
 class LogWindow(object):

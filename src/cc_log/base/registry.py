@@ -1,7 +1,7 @@
 """A registry of named classes (feature sets, trigger kinds): where a newcomer adds one, and how it is found."""
 import collections
 
-from cc_log.core.safe_input import brief
+from cc_log.base.safe_input import brief
 
 
 class Registry(object):

@@ -31,7 +31,7 @@ import threading
 import genpy
 import genpy.dynamic
 
-from cc_log.core import safe_input
+from cc_log.base import safe_input
 
 __all__ = ['to_dict', 'from_dict', 'generated_class', 'message_classes', 'row_json', 'row_json_bytes',
            'field_types', 'encode_float', 'decode_float', 'compact_definition', 'to_float32', 'short_float32',

@@ -9,7 +9,7 @@ a WARN. ``skipped(stats)``: the windows the keep budget did not open (WARN: the 
 ``DrivingWatch`` says when the driving topic is silent and where its message type is published instead.
 ``worst(level, message, problems)`` adds problems to a status.
 """
-from cc_log.core import keep_budget
+from cc_log.logger import keep_budget
 
 OK, WARN, ERROR = 0, 1, 2  # diagnostic_msgs/DiagnosticStatus levels
 SILENCE = 5.0  # seconds without a driving message (after start or the last one) before the node warns

@@ -3,7 +3,7 @@ message type each topic must carry for them (``topic_types``), and the records a
 decoded where a trigger of the topic reads fields). Pure."""
 import collections
 
-from cc_log.core import raw_message
+from cc_log.base import raw_message
 
 __all__ = ['check_triggers', 'topic_types', 'TriggerViews']
 

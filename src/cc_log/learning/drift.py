@@ -45,8 +45,8 @@ import collections
 
 import numpy as np
 
-from cc_log.core import learning
-from cc_log.core.learning import DEFAULT_QUANTILE
+from cc_log.learning import learning
+from cc_log.learning.learning import DEFAULT_QUANTILE
 
 OK, WARN = 0, 1  # diagnostic_msgs/DiagnosticStatus levels
 DEFAULT_SPAN = 120.0      # seconds of message time the live share is computed over

@@ -1,12 +1,12 @@
 """What the smart logger says about its logging windows (``SmartLogger.on_event``): ``Event`` (its kinds:
-``core.event_kinds``, the writer's and the node's too), and the writer's events (``window_writer``) said as
+``base.event_kinds``, the writer's and the node's too), and the writer's events (``window_writer``) said as
 Events. Pure."""
 import collections
 import math
 import os
 
-from cc_log.core import safe_input, why
-from cc_log.core.event_kinds import DELETED, WRITTEN, SPLIT
+from cc_log.base import safe_input, why
+from cc_log.base.event_kinds import DELETED, WRITTEN, SPLIT
 from cc_log.storage import log_format
 
 __all__ = ['Event', 'from_writer', 'reason_text', 'WindowTally']
@@ -16,7 +16,7 @@ Event = collections.namedtuple(
     defaults=('', (), False))
 Event.__doc__ = """What happened to a logging window.
 
-kind (``core.event_kinds``): OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED
+kind (``base.event_kinds``): OPENED (a trigger opened a window), WRITTEN (the window file is on disk), FAILED
 (writing it failed; ``error`` says why: once when a disk problem first keeps the window in memory to be
 retried, and again if it is lost for good), SPLIT (``path``, a file of a window still being written, was
 finished at split_mb: the window goes on in the next; start, end, messages: of the part that began it) or
@@ -27,8 +27,8 @@ rule's condition, a manual request's text); score: the lowest classifier score o
 when none); threshold: of the classifier that fired (else of the first classifier; NaN without one). start, end:
 header stamps (float s) of the first and last message (end is None for OPENED). messages, path, bytes: the
 window's message count (all topics), file and size on disk (0, '' and 0 until WRITTEN). why: the features that
-stood out when that trigger fired (``core.why``; () when it says none). copy: the file is a ``copy`` route's
-(``core.routes``): its messages are in the window's own file too."""
+stood out when that trigger fired (``base.why``; () when it says none). copy: the file is a ``copy`` route's
+(``base.routes``): its messages are in the window's own file too."""
 
 
 def from_writer(event, threshold_of):

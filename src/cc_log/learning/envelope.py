@@ -32,9 +32,9 @@ import math
 
 import numpy as np
 
-from cc_log.core import safe_files, safe_input
-from cc_log.core.safe_input import brief
-from cc_log.core.why import MAX_TEXT
+from cc_log.base import safe_files, safe_input
+from cc_log.base.safe_input import brief
+from cc_log.base.why import MAX_TEXT
 from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS, ENVELOPE_UNITS
 
 KIND = 'cc_log envelope'

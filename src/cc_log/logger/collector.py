@@ -25,15 +25,14 @@ import threading
 import time
 
 from cc_log import features as features_mod
-from cc_log.core import event_kinds, learning
+from cc_log.base import event_kinds, msg_codec, safe_files
+from cc_log.learning import learning
 from cc_log.storage import log_format
-from cc_log.core import msg_codec
-from cc_log.core import safe_files
 from cc_log.storage import window_writer
-from cc_log.core.options import STRIDE, check_label, get as option
-from cc_log.core.spans import Rotation
-from cc_log.core.records import LogWindow, Record, Trigger
-from cc_log.core.window_buffer import DEFAULT_MAX_BUFFER_MB, MemoryCost, budget_bytes, part_bytes
+from cc_log.logger.options import STRIDE, check_label, get as option
+from cc_log.base.spans import Rotation
+from cc_log.base.records import LogWindow, Record, Trigger
+from cc_log.buffer.window_buffer import DEFAULT_MAX_BUFFER_MB, MemoryCost, budget_bytes, part_bytes
 
 __all__ = ['Collector', 'Rotation', 'collect_bag', 'DEFAULT_ROTATE', 'DEFAULT_STRIDE', 'DEFAULT_LABEL',
            'DEFAULT_WINDOW', 'DEFAULT_FEATURE_SET', 'FEATURES_SUBDIRECTORY']

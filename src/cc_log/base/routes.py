@@ -18,9 +18,9 @@ from the window's own file only. The files of one window share its name, reserve
 import collections
 import re
 
-from cc_log.core.records import LogWindow
-from cc_log.core.safe_input import brief, loads_yaml, unknown_key
-from cc_log.core.topic_select import TopicSelection
+from cc_log.base.records import LogWindow
+from cc_log.base.safe_input import brief, loads_yaml, unknown_key
+from cc_log.base.topic_select import TopicSelection
 
 SEPARATOR = '+'  # between a window's name and a route's name in the route's file name
 ROUTE_KEYS = ('name', 'topics', 'format', 'copy')

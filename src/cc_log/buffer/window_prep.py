@@ -4,8 +4,8 @@ fallen behind (``thin``), and the newest message of each latched topic at its st
 """
 import collections
 
-from cc_log.core import raw_message
-from cc_log.core.topic_select import TopicSelection
+from cc_log.base import raw_message
+from cc_log.base.topic_select import TopicSelection
 
 __all__ = ['thin', 'CarriedDrops', 'restrict', 'Latched', 'any_latched', 'HEAVY_BYTES', 'LATCHED_KEPT']
 

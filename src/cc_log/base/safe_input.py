@@ -39,7 +39,7 @@ import re
 import reprlib
 import stat
 import sys
-from cc_log.errors import UnsafeDefinition
+from cc_log.base.errors import UnsafeDefinition
 
 __all__ = ['UnsafeDefinition', 'check_definition', 'check_connection', 'check_bag', 'check_type_name',
            'check_json_depth', 'json_loads', 'bounded_int', 'open_input', 'check_regular', 'load_yaml', 'brief',

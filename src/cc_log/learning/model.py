@@ -19,17 +19,17 @@ executes code (no pickle, no joblib), and anything but a well-formed model raise
 ``ModelError('<path>: <what is wrong>')``. The optional ``"coverage"`` (``learning.coverage``: the range of
 speed, yaw rate and time stopped, or of every feature, its nominal training vectors cover) is absent from
 older files, as is the optional ``"ranges"`` (``{"min": [...], "max": [...]}``: each feature's smallest and largest
-value over the nominal training vectors, which ``core.why`` compares a window with).
+value over the nominal training vectors, which ``base.why`` compares a window with).
 """
 import json
 import math
 
 import numpy as np
 
-from cc_log.core import safe_input
-from cc_log.core.safe_input import brief
+from cc_log.base import safe_input
+from cc_log.base.safe_input import brief
 from cc_log.features import WINDOW_RANGES, FeatureConfig, vector_length
-from cc_log.errors import ModelError
+from cc_log.base.errors import ModelError
 
 FORMAT = 'cc_log-model'
 VERSION = 1
@@ -52,7 +52,7 @@ class AnomalyModel(object):
     ``intercept``, ``gamma``; for ``nystroem-sgd`` ``components`` (m, d), ``normalization`` (m, m),
     ``coef`` (m,), ``offset``, ``gamma``. ``info`` is a free dict of JSON values (training figures);
     ``coverage`` None or ``learning.coverage``'s dict; ``ranges`` None or ``{"min": array, "max": array}`` of the
-    training vectors (``core.why``).
+    training vectors (``base.why``).
     """
 
     def __init__(self, config, mean, scale, kind, kernel, threshold, names=None, info=None, source='<model>',
@@ -187,7 +187,7 @@ class AnomalyModel(object):
     def save(self, path):
         """Write the model atomically (``<path>.tmp-<pid>``, fsync, rename over ``path``: a link there is
         replaced, never written through; see ``safe_files``); return ``path``."""
-        from cc_log.core import safe_files
+        from cc_log.base import safe_files
         text = json.dumps(self.to_dict(), allow_nan=False, separators=(',', ':'), default=_plain)
         with safe_files.AtomicFile(path, overwrite=True, text=True) as stream:
             stream.write(text)

@@ -39,7 +39,7 @@ try:
 except ImportError:  # pragma: no cover
     import sre_parse as _sre_parse
 
-from cc_log.core.safe_input import brief
+from cc_log.base.safe_input import brief
 
 __all__ = ['TopicSelection', 'topic_list', 'is_legal_name', 'ALL', 'REGEX', 'EXCLUDE']
 

@@ -23,8 +23,7 @@ import struct
 import genpy
 import numpy
 
-from cc_log.core import msg_codec
-from cc_log.core import safe_input
+from cc_log.base import msg_codec, safe_input
 
 HEADER_TYPES = frozenset(['Header', 'std_msgs/Header', 'roslib/Header'])
 _STAMP = struct.Struct('<II')  # secs, nsecs after the header's seq

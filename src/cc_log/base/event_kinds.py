@@ -1,5 +1,5 @@
 """The one vocabulary of what happens to a logging window and its files: the kind of a writer's event
-(``storage.window_writer.WriterEvent``), of the smart logger's (``core.smart_events.Event``) and of the smart
+(``storage.window_writer.WriterEvent``), of the smart logger's (``logger.smart_events.Event``) and of the smart
 node's ``~anomalies`` (``cc_log/AnomalyEvent``: its constants OPENED, WRITTEN and FAILED have these values on the
 wire, so a kind is published as it is). Pure, imports nothing."""
 

@@ -30,9 +30,9 @@ import time
 
 import numpy as np
 
-from cc_log.core import safe_files, safe_input
+from cc_log.base import safe_files, safe_input
 from cc_log.features import FeatureConfig, vector_length, vector_names
-from cc_log.core.model import AnomalyModel
+from cc_log.learning.model import AnomalyModel
 
 DEFAULT_NU = 0.02
 DEFAULT_GAMMA_FACTOR = 0.5      # gamma = factor / n_features on standardised vectors
