@@ -47,16 +47,19 @@ def cc_log_modules():
 
 def imported_modules(path, modules):
     """The cc_log modules a module imports, anywhere in it (inside functions too): ``from a.b import c`` is the
-    module a.b.c when there is one, else a.b."""
+    module a.b.c when there is one, else a.b; a relative import is resolved from the module's package."""
     import ast
     with open(path) as source:
         tree = ast.parse(source.read(), path)
+    package = os.path.relpath(os.path.dirname(path), os.path.dirname(PACKAGE)).split(os.sep)
     found = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             names = [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names = [node.module + '.' + alias.name if node.module + '.' + alias.name in modules else node.module
+        elif isinstance(node, ast.ImportFrom):
+            start = '.'.join(package[:len(package) - node.level + 1] + [node.module or ''] if node.level else
+                             [node.module]).strip('.')
+            names = [start + '.' + alias.name if start + '.' + alias.name in modules else start
                      for alias in node.names]
         else:
             continue
