@@ -62,12 +62,12 @@ import time
 import rospy
 from std_srvs.srv import SetBool, SetBoolResponse, Trigger, TriggerResponse
 
+from cc_log.base import event_kinds, raw_message, routes
 from cc_log.learning import drift
-from cc_log.logger import health,from cc_log.base import raw_message, routess
-from cc_log.base import raw_message, routes
+from cc_log.logger import health, smart, smart_events, trigger_topics
 from cc_log.nodes import intake
 from cc_log.storage import window_info
-from cc_log.storage.formats import json_xzkinds
+from cc_log.storage.formats import json_xz
 from cc_log.learning.model import AnomalyModel
 from cc_log.base.safe_input import printable
 from cc_log.nodes.node_common import (
