@@ -180,15 +180,19 @@ def test_hostile_bags_in_every_bag_reader(bag):
         bounded(bag_salvage.salvage, path)
 
 
+def read_as_window(path, fmt):
+    """Every reader of one window file, each bounded."""
+    bounded(log_format.read_window, path)
+    bounded(log_format.read_metadata, path)
+    bounded(formats.get(fmt).read, path)
+
+
 @fuzz
 @given(bag=fs.bags())
 def test_hostile_bags_as_windows(bag):
     _, data = bag
     with Root() as root:
-        path = root.put(WINDOW + '.bag', data)
-        bounded(log_format.read_window, path)
-        bounded(log_format.read_metadata, path)
-        bounded(formats.get('bag-lz4').read, path)
+        read_as_window(root.put(WINDOW + '.bag', data), 'bag-lz4')
 
 
 # -- json-xz -----------------------------------------------------------------------------------------------
@@ -197,10 +201,7 @@ def test_hostile_bags_as_windows(bag):
 @given(data=fs.json_xz_documents())
 def test_hostile_json_xz_documents(data):
     with Root() as root:
-        path = root.put(WINDOW + '.json.xz', data)
-        bounded(log_format.read_window, path)
-        bounded(log_format.read_metadata, path)
-        bounded(formats.get('json-xz').read, path)
+        read_as_window(root.put(WINDOW + '.json.xz', data), 'json-xz')
 
 
 @fuzz
@@ -245,30 +246,27 @@ def test_hostile_leftovers_recovered_in_their_directory_losing_nothing(bag, docu
 
 # -- models, envelopes, feature vectors --------------------------------------------------------------------
 
+def _use_file(data, name, use):
+    """``use(path)`` of ``data`` written as ``name``, bounded."""
+    with Root() as root:
+        bounded(use, root.put(name, data))
+
+
 def _use_model(path):
     model = AnomalyModel.load(path)
-    model.score(np.zeros(model.dimension))
-    return model
+    return model.score(np.zeros(model.dimension))
 
 
 @fuzz
 @given(data=fs.model_documents())
 def test_hostile_model_files(data):
-    with Root() as root:
-        bounded(_use_model, root.put('model.json', data))
-
-
-def _use_envelope(path):
-    envelope = Envelope.load(path)
-    envelope.limits()
-    return envelope
+    _use_file(data, 'model.json', _use_model)
 
 
 @fuzz
 @given(data=fs.envelope_documents())
 def test_hostile_envelope_files(data):
-    with Root() as root:
-        bounded(_use_envelope, root.put('envelope.json', data))
+    _use_file(data, 'envelope.json', lambda path: Envelope.load(path).limits())
 
 
 @fuzz
