@@ -15,7 +15,8 @@ from cc_log.offline import fleet
 from cc_log.storage import disk_guard
 from cc_log.storage.disk_guard import DiskGuard
 from cc_log.storage.log_format import Format, write_window
-from cc_log.storage.window_writer import DELETED, FOREIGN_NOTE, Job, WindowWriter
+from cc_log.base.event_kinds import DELETED
+from cc_log.storage.window_writer import FOREIGN_NOTE, Job, WindowWriter
 
 pytest.importorskip('rosbag')
 from test_cli import run  # noqa: E402

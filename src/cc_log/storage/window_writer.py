@@ -41,7 +41,7 @@ from cc_log.base.spans import megabytes, seconds
 __all__ = ['WindowWriter', 'Job', 'WriterEvent', 'DEFAULT_RETRY_PERIOD',
            'DEFAULT_MAX_HELD_MESSAGES', 'OFFLINE_RETRY_SECONDS', 'OFFLINE_RETRY_PERIOD', 'WINDOW', 'CONTEXT']
 
-FOREIGN_NOTE = ', a file this writer did not write'  # said of a file the quota deleted that another run left
+FOREIGN_NOTE = ', a file not written by this run'  # said of a file the quota deleted that an earlier run left
 WINDOW = 'window'  # Job.what of a window file
 CONTEXT = 'context'  # Job.what of a closed context-track file (counted in the quota like a window)
 ROUTE = 'route'  # Job.what of a route's file of a window (base.routes): the window is counted once, by its own
