@@ -111,7 +111,7 @@ def test_collect_mode_on_a_full_disk_holds_everything_leaves_no_leftover_and_wri
     collector = Collector(directory, 'json-xz', '200', driving_topic='/odom', window='20', stride=10,
                           retry_period=0.05)
     failures = []
-    collector.on_event(lambda kind, detail: failures.append(detail) if kind == 'failed' else None)
+    collector.on_event(lambda kind, detail: failures.append(detail) if kind == FAILED else None)
     for i in range(1000):
         msg = odom(i)
         collector.on_message('/odom', msg, msg.header.stamp.to_sec())

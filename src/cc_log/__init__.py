@@ -1,12 +1,15 @@
 """cc_log: anomaly-triggered, compressed logging for ROS 1 robots.
 
-The library is a pure core (no rospy) with ROS at the edges:
+The library stands in floors, each package importing only from those below it (``test/test_floors.py``):
 
-- ``spans``, ``window_buffer``: window sizes and the buffer of messages around anomalies;
-- ``features``, ``model``, ``learning``: what the classifier sees, the model file, training;
-- ``msg_codec``, ``log_format``, ``formats`` (one module per format): the window files cc_log writes and reads;
-- ``smart_logger``: the smart logger shared by the live node and offline replay;
-- ``*_node`` modules and ``cli``: the ROS nodes and the ``cclog`` command.
+1. ``base``: records, the grammar of spans, codecs, safe input and files, event kinds, routes, topic selection;
+2. ``buffer`` (the window buffer) and ``features`` (what the detectors see);
+3. ``learning`` (the classifier's model, training, drift, the physics envelope) and ``storage`` (the window
+   formats, the writer, the quota, recovery);
+4. ``triggers`` (what opens a window) and ``sim`` (the simulated BWIBot);
+5. ``logger``: the smart logger and collect mode shared by the live nodes and offline replay, the options and
+   the configuration;
+6. ``nodes`` (the ROS edge: rospy only here) and ``offline`` (the ``cclog`` command).
 """
 
 __version__ = '0.1.0'

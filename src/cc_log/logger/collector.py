@@ -163,10 +163,11 @@ class Collector(object):
         self.writer.on_event(self._written)
 
     def on_event(self, callback):
-        """Call ``callback(kind, detail)`` after each write: kind 'file', 'vector', 'failed' or 'deleted';
-        detail is a dict (path, bytes, messages, start, end for files; path, stamp for vectors; what ('window'
-        or 'vector'), messages, error, kept for failures: kept True while the file is held in memory and
-        retried; path for a window file the quota deleted)."""
+        """Call ``callback(kind, detail)`` after each write, ``kind`` of ``base.event_kinds``: WRITTEN, FAILED or
+        DELETED; ``detail`` a dict with ``what`` (``window_writer.WINDOW`` or ``VECTOR``) and path, bytes,
+        messages, start, end for a window file; path, stamp for a vector; messages, error, kept for a failure
+        (kept True while the file is held in memory and retried); path, error for a window file the quota
+        deleted."""
         self._callbacks.append(callback)
 
     def on_message(self, topic, msg, stamp=None, size=None):
@@ -272,18 +273,17 @@ class Collector(object):
         """A WindowWriter event as this collector's ``(kind, detail)`` callback."""
         job = event.job
         if event.kind == event_kinds.DELETED:
-            kind, detail = 'deleted', {'path': event.path, 'error': event.error}
+            detail = {'what': window_writer.WINDOW, 'path': event.path, 'error': event.error}
         elif event.kind == event_kinds.FAILED:
-            kind, detail = 'failed', {'what': job.what, 'messages': job.messages, 'error': event.error,
-                                      'kept': event.kept}
+            detail = {'what': job.what, 'messages': job.messages, 'error': event.error, 'kept': event.kept}
         elif job.window is not None:
             window = job.window
-            kind, detail = 'file', {'path': event.path, 'bytes': event.bytes, 'messages': len(window),
-                                    'start': window.start, 'end': window.end}
+            detail = {'what': window_writer.WINDOW, 'path': event.path, 'bytes': event.bytes,
+                      'messages': len(window), 'start': window.start, 'end': window.end}
         else:
-            kind, detail = VECTOR, {'path': event.path, 'stamp': job.tag}
+            detail = {'what': VECTOR, 'path': event.path, 'stamp': job.tag}
         for callback in self._callbacks:
-            callback(kind, detail)
+            callback(event.kind, detail)
 
 
 VECTOR = 'vector'  # Job.what of a feature-vector file

@@ -36,7 +36,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from cc_log.logger import collector
 from cc_log import features
-from cc_log.storage import log_format
+from cc_log.base import event_kinds
+from cc_log.storage import log_format, window_writer
 from cc_log.learning.model import AnomalyModel
 from cc_log.nodes.node_common import (
     CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
@@ -114,11 +115,11 @@ class CollectNode(object):
                       self.collector.features_directory, label)
 
     def _on_event(self, kind, detail):
-        if kind == 'file':
+        if kind == event_kinds.WRITTEN and detail['what'] == window_writer.WINDOW:
             rospy.loginfo('wrote %s (%d messages, %d bytes)', detail['path'], detail['messages'], detail['bytes'])
-        elif kind == 'failed':
+        elif kind == event_kinds.FAILED:
             rospy.logerr('%s of %d messages not written: %s', detail['what'], detail['messages'], detail['error'])
-        elif kind == 'deleted':
+        elif kind == event_kinds.DELETED:
             rospy.logwarn('window file %s: %s', detail['error'], detail['path'])
 
     def _status(self):
