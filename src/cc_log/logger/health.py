@@ -147,7 +147,7 @@ class NamedWatch(object):
     while a name is silent, at most every ``silence`` seconds). Returns ``[(topic, text)]``, e.g. ``no message
     on /IMU/data for 5 s; published: /imu/data (sensor_msgs/Imu)``. A name once heard is never said again: a
     topic silent later is a silence rule's business (``triggers.rule``). ``state``: ``{topic: what is said of
-    it}`` of the silent names (it changes only when that changes: the node logs each change once);
+    it}`` of the silent names (the node logs a name once, when it first appears there);
     ``summary(now)``: the silent names in one line for /diagnostics ('' when none).
     """
 

@@ -408,9 +408,9 @@ class TopicSilenceWatch(object):
     topics the master lists with its type, and when a topic of ``named`` (the names the configuration lists,
     subscribed; ``types``: ``{topic: type}`` known) has had no message since start (``health.NamedWatch``),
     naming the published topics that look like it. Checked every ``period`` seconds of wall time on a daemon
-    thread; ``counts()`` returns the node's ``{topic: messages received so far}``. Each change is logged once
-    (WARN per silent topic; INFO when its messages come); ``status(level, message)`` adds the WARNs to the
-    node's /diagnostics status."""
+    thread; ``counts()`` returns the node's ``{topic: messages received so far}``. Logged once: the driving
+    topic's WARN per change, one WARN per silent name, INFO when their messages come; ``status(level,
+    message)`` adds the WARNs to the node's /diagnostics status."""
 
     def __init__(self, topic, msg_type, counts, named=(), types=None, period=1.0, silence=health.SILENCE,
                  published=None):
@@ -452,7 +452,7 @@ class TopicSilenceWatch(object):
             else:
                 rospy.loginfo('messages arrive on %s', self.watch.topic)
         for name, text in silent:
-            if self.named.state[name] != named_before.get(name):
+            if name not in named_before:  # once per name; /diagnostics follows what is published since
                 rospy.logwarn(text)
         for name in sorted(set(named_before) - set(self.named.state)):
             rospy.loginfo('messages arrive on %s', name)
