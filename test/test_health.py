@@ -1,5 +1,6 @@
 """What the counters say on /diagnostics (logger/health): WARN whenever a message that belonged in a window is
-not on disk and while the logger is paused; the driving topic's silence names where its type is published."""
+not on disk and while the logger is paused; the driving topic's silence names where its type is published; a
+named topic that never had a message names the published topics that look like it."""
 from cc_log.logger import health
 from cc_log.logger.health import OK, WARN
 

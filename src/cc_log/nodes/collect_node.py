@@ -10,7 +10,8 @@ Published topics
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
   bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
   ``~diagnostic_period`` seconds (wall time); WARN when the driving topic is silent for 5 s, naming the topics
-  that carry its type.
+  that carry its type, and when a topic of ``~topics`` has had no message 5 s after start, naming the published
+  topics that look like it.
 
 Parameters
   every option with a ``collect`` node parameter in docs/OPTIONS.md (declared in ``cc_log.logger.options``;

@@ -14,7 +14,9 @@ Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/not kept (outside every
   window), raw vs stored bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``);
-  WARN while paused, when the driving topic is silent for 5 s (naming the topics that carry its type) and when
+  WARN while paused, when the driving topic is silent for 5 s (naming the topics that carry its type), when a
+  topic named in ``~topics``, ``keep`` or routes has had no message 5 s after start (naming the published topics
+  that look like it: ``health.NamedWatch``) and when
   a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
   trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
   off the clock), each classifier's drift (WARN when it flags far more of the driving than of its training
