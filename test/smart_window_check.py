@@ -323,7 +323,7 @@ class SmartWindowTest(unittest.TestCase):
                 self.assertEqual(level, DiagnosticStatus.WARN, message)
                 self.assertIn('nav_msgs/Odometry is published on ', message)
                 self.assertIn('/husky_odom', message)
-                self.assertIn(' on /IMU/data (published: /imu/data (sensor_msgs/Imu))', message)
+                self.assertIn(' on /IMU/data (published: /imu/data (sensor_msgs/Imu)', message)
             publisher = rospy.Publisher('silent_odom', Odometry, queue_size=100)
             imu_named = rospy.Publisher('/IMU/data', Imu, queue_size=100)
             records = iter(self.odom * 10)
