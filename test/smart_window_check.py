@@ -15,6 +15,7 @@ topic remapped, then this node publishes the run message by message:
 """
 import copy
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -301,35 +302,48 @@ class SmartWindowTest(unittest.TestCase):
                 fx.stop(node)
 
     def test_0_a_silent_driving_topic_warns_naming_the_topics_of_its_type(self):
-        # odometry flows on /husky_odom (this node's publisher) while these nodes watch /silent_odom
+        # odometry flows on /husky_odom (this node's publisher) while these nodes watch /silent_odom; the IMU is
+        # published as /imu/data while they are told to keep /IMU/data (names are case-sensitive)
+        imu_data = rospy.Publisher('/imu/data', Imu, queue_size=100)
         scripts = (('smart_logger.py', 'smart_logger_silent', ('_model:=' + self.model_path,)),
                    ('collect_logger.py', 'collect_logger_silent', ()))
         nodes = [(name, fx.start(script, '__name:=' + name, 'odom:=silent_odom', '_diagnostic_period:=0.2',
-                                 '_directory:=' + os.path.join(self.tmp, name), '_formt:=json-xz', *extra))
+                                 '_directory:=' + os.path.join(self.tmp, name), '_formt:=json-xz',
+                                 '_topics:=/IMU/data', *extra))
                  for script, name, extra in scripts]
+        named_silence = re.compile(r'no message on /IMU/data for \d+ s; published: /imu/data \(sensor_msgs/Imu\)')
 
         def silence_said(name):
             status = fx.status_values(self.diagnostics, name)
-            return status if 'no nav_msgs/Odometry on /silent_odom' in status[1] else None
+            return status if 'no nav_msgs/Odometry on /silent_odom' in status[1] and '/IMU/data' in status[1] \
+                else None
         try:
             for name, _ in nodes:
-                level, message, _ = fx.wait_for(lambda: silence_said(name), 30, 'the silence said by ' + name)
+                level, message, _ = fx.wait_for(lambda: silence_said(name), 30, 'the silences said by ' + name)
                 self.assertEqual(level, DiagnosticStatus.WARN, message)
                 self.assertIn('nav_msgs/Odometry is published on ', message)
                 self.assertIn('/husky_odom', message)
+                self.assertIn(' on /IMU/data (published: /imu/data (sensor_msgs/Imu)', message)
             publisher = rospy.Publisher('silent_odom', Odometry, queue_size=100)
+            imu_named = rospy.Publisher('/IMU/data', Imu, queue_size=100)
             records = iter(self.odom * 10)
+            imu = iter(self.imu * 10)
 
             def settled_ok():
                 publisher.publish(next(records).msg)  # odometry now comes on the driving topic
+                imu_named.publish(next(imu).msg)  # and the IMU on the name the nodes keep
                 return all(fx.status_values(self.diagnostics, name)[:2] == (DiagnosticStatus.OK, expected)
                            for (name, _), expected in zip(nodes, ('logging', 'collecting')))
-            fx.wait_for(settled_ok, 30, 'both nodes back to OK once odometry arrives on /silent_odom')
+            fx.wait_for(settled_ok, 30, 'both nodes back to OK once odometry and /IMU/data arrive')
         finally:
             outputs = [fx.stop(node) for _, node in nodes]
+            imu_data.unregister()
         for code, out, err in outputs:
             self.assertEqual(code, 0, err[-2000:])
             self.assertEqual((out + err).count('no nav_msgs/Odometry on /silent_odom'), 1, out + err)  # once, no flood
+            self.assertEqual(len(named_silence.findall(out + err)), 1, out + err)  # the log: once, naming /imu/data
+            self.assertEqual((out + err).count('no message on /IMU/data'), 1, out + err)
+            self.assertIn('messages arrive on /IMU/data', out + err)
             self.assertIn('unknown parameter ~formt (did you mean ~format?)', out + err)
 
     def test_1_anomaly_writes_exactly_the_expected_window(self):

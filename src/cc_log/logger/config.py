@@ -298,6 +298,12 @@ class Config(object):
         like the names of ``topics`` (a window cannot keep a topic nobody listens to)."""
         return list(dict.fromkeys(name for entry in self.triggers if 'keep' in entry for name in entry['keep'].names))
 
+    def named_topics(self):
+        """The topic names (not patterns) of ``topics``, the triggers' ``keep`` lists and the routes, in that
+        order: the names a node warns of when nothing comes on them."""
+        return list(dict.fromkeys(self.topics + self.keep_names() + [
+            name for route in self.routes for name in route.selection.names]))
+
     def format_options(self):
         """What the window format is told in each window's metadata: ``{'precision': ...}`` when set."""
         return {'precision': self.precision} if self.precision else {}

@@ -10,7 +10,8 @@ Published topics
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): files and vectors written, messages, raw vs stored
   bytes, queues, free disk, write errors and held files, each topic's rate (``rate <topic> Hz``), every
   ``~diagnostic_period`` seconds (wall time); WARN when the driving topic is silent for 5 s, naming the topics
-  that carry its type.
+  that carry its type, and when a topic of ``~topics`` has had no message 5 s after start, naming the published
+  topics that look like it.
 
 Parameters
   every option with a ``collect`` node parameter in docs/OPTIONS.md (declared in ``cc_log.logger.options``;
@@ -40,8 +41,8 @@ from cc_log.base import event_kinds
 from cc_log.storage import log_format, window_writer
 from cc_log.learning.model import AnomalyModel
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
-    node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, Params, fail, format_options, init_node,
+    named_subscribed, node_config, node_name, recover_leftovers, resolve_directory, TopicSilenceWatch, writer_status)
 from cc_log.nodes.intake import Intake
 from cc_log.nodes.node_extras import NodeExtras
 
@@ -106,8 +107,8 @@ class CollectNode(object):
                              tcp_nodelay=params.option('tcp_nodelay'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         driving = self.intake.driving_topic
-        self.silence = DrivingTopicWatch(driving, types.get(self.collector.driving_topic),
-                                         lambda: self.intake.counts().get(driving, 0))
+        self.silence = TopicSilenceWatch(driving, types.get(self.collector.driving_topic), self.intake.counts,
+                                         named_subscribed(cfg, self.intake.side_topics), types)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
                                        self.intake.counts, self.intake.sizes)
         rospy.loginfo('collecting %s and %s; vectors into %s/%s', self.intake.driving_topic,

@@ -11,6 +11,8 @@ diagnostics and the writer's part of their status.
 - ``Diagnostics``: one DiagnosticStatus every period of wall time through diagnostic_updater, with each
   subscribed topic's message rate (``TopicRates``); ``writer_status``: the status of the
   window writer and the disk (write errors, held windows, paused writing, quota, leftovers, fallback).
+- ``TopicSilenceWatch``: WARN when the driving topic is silent or a topic the configuration names never had a
+  message, naming the published topics that look like it (``health``).
 
 ROS edge (rospy).
 """
@@ -394,20 +396,32 @@ class Diagnostics(object):
             self._thread.join()
 
 
-class DrivingTopicWatch(object):
+def named_subscribed(cfg, subscribed):
+    """The topic names ``cfg`` lists (``config.Config.named_topics``), resolved, that are among ``subscribed``."""
+    return [topic for topic in dict.fromkeys(rospy.resolve_name(name) for name in cfg.named_topics())
+            if topic in subscribed]
+
+
+class TopicSilenceWatch(object):
     """Warns when the node's driving topic ``topic`` (of type ``msg_type``) is silent or missing
     (``health.DrivingWatch``: no message for ``silence`` seconds after start or after the last one), naming the
-    topics the master lists with its type. Checked every ``period`` seconds of wall time on a daemon thread;
-    ``received()`` returns the driving messages received so far. Logged once per change (WARN; INFO when its
-    messages come); ``status(level, message)`` adds the WARN to the node's /diagnostics status."""
+    topics the master lists with its type, and when a topic of ``named`` (the names the configuration lists,
+    subscribed; ``types``: ``{topic: type}`` known) has had no message since start (``health.NamedWatch``),
+    naming the published topics that look like it. Checked every ``period`` seconds of wall time on a daemon
+    thread; ``counts()`` returns the node's ``{topic: messages received so far}``. Logged once: the driving
+    topic's WARN per change, one WARN per silent name, INFO when their messages come; ``status(level,
+    message)`` adds the WARNs to the node's /diagnostics status."""
 
-    def __init__(self, topic, msg_type, received, period=1.0, silence=health.SILENCE, published=None):
-        self.watch = health.DrivingWatch(topic, msg_type, time.monotonic(), silence)
-        self._received = received
+    def __init__(self, topic, msg_type, counts, named=(), types=None, period=1.0, silence=health.SILENCE,
+                 published=None):
+        now = time.monotonic()
+        self.watch = health.DrivingWatch(topic, msg_type, now, silence)
+        self.named = health.NamedWatch([name for name in named if name != topic], now, types, silence)
+        self._counts = counts
         self._published = published or rospy.get_published_topics
-        self.text = ''
+        self.text = self.named_text = ''
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, args=(period,), name='cc_log driving topic watch')
+        self._thread = threading.Thread(target=self._loop, args=(period,), name='cc_log topic silence watch')
         self._thread.daemon = True
         self._thread.start()
 
@@ -417,21 +431,35 @@ class DrivingTopicWatch(object):
 
     def poll(self):
         """Check once; log what changed."""
-        before = self.watch.state
+        before, named_before = self.watch.state, self.named.state
+        answers = []
+
+        def published():  # the master asked at most once per check
+            if not answers:
+                answers.append(self._published())
+            return answers[0]
+        now, counts = time.monotonic(), self._counts()
         try:
-            self.text = self.watch.check(time.monotonic(), self._received(), self._published)
+            self.text = self.watch.check(now, counts.get(self.watch.topic, 0), published)
+            silent = self.named.check(now, counts, published)
         except Exception as error:  # the master is unreachable: said next time
-            rospy.logwarn_throttle(60.0, 'driving topic watch: %s' % error)
+            rospy.logwarn_throttle(60.0, 'topic silence watch: %s' % error)
             return
+        self.named_text = self.named.summary(now)
         if self.watch.state != before:
             if self.text:
                 rospy.logwarn(self.text)
             else:
                 rospy.loginfo('messages arrive on %s', self.watch.topic)
+        for name, text in silent:
+            if name not in named_before:  # once per name; /diagnostics follows what is published since
+                rospy.logwarn(text)
+        for name in sorted(set(named_before) - set(self.named.state)):
+            rospy.loginfo('messages arrive on %s', name)
 
     def status(self, level, message):
-        """``(level, message)`` with the silence added (WARN; the message when the status was OK)."""
-        text = self.text
+        """``(level, message)`` with the silences added (WARN; the message when the status was OK)."""
+        text = '; '.join(part for part in (self.text, self.named_text) if part)
         if not text:
             return level, message
         if level < health.WARN:

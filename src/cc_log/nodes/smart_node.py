@@ -14,7 +14,9 @@ Published topics
   ``~anomalies`` (cc_log/AnomalyEvent): when a window opens, is written, or fails to be written.
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray): windows, messages seen/kept/not kept (outside every
   window), raw vs stored bytes, classifier latency, queues, free disk, each topic's rate (``rate <topic> Hz``);
-  WARN while paused, when the driving topic is silent for 5 s (naming the topics that carry its type) and when
+  WARN while paused, when the driving topic is silent for 5 s (naming the topics that carry its type), when a
+  topic named in ``~topics``, ``keep`` or routes has had no message 5 s after start (naming the published topics
+  that look like it: ``health.NamedWatch``) and when
   a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
   trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
   off the clock), each classifier's drift (WARN when it flags far more of the driving than of its training
@@ -71,8 +73,8 @@ from cc_log.storage.formats import json_xz
 from cc_log.learning.model import AnomalyModel
 from cc_log.base.safe_input import printable
 from cc_log.nodes.node_common import (
-    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, DrivingTopicWatch, Params, fail, format_options, init_node,
-    node_config, node_name, recover_leftovers, resolve_directory, writer_status)
+    CLOSE_RETRY, CLOSE_TIMEOUT, ConfigError, Diagnostics, Params, fail, format_options, init_node,
+    named_subscribed, node_config, node_name, recover_leftovers, resolve_directory, TopicSilenceWatch, writer_status)
 from cc_log.nodes.node_extras import NodeExtras, context_rates
 from cc_log.storage.log_format import file_prefix
 from cc_log.triggers import ClassifierTrigger
@@ -164,8 +166,8 @@ class SmartNode(object):
                          rospy.Service('~enable', SetBool, self._enable)]
         self._ticker = WallTicker(TICK_PERIOD, self._tick)
         driving = self.intake.driving_topic
-        self.silence = DrivingTopicWatch(driving, types.get(self.logger.driving_topic),
-                                         lambda: self.intake.counts().get(driving, 0))
+        self.silence = TopicSilenceWatch(driving, types.get(self.logger.driving_topic), self.intake.counts,
+                                         named_subscribed(cfg, self.intake.side_topics), types)
         self.diagnostics = Diagnostics('cc_log: %s' % rospy.get_name().lstrip('/'), period, self._status,
                                        self.intake.counts, self.intake.sizes)
         rospy.loginfo('watching %s; keeping %s; %s', self.intake.driving_topic,
