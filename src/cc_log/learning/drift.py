@@ -442,9 +442,9 @@ class EnvelopeCoverage(object):
 
     def text(self, beyond_share=None, stopped_share=None, of='decisions'):
         """One line on the features the run takes past their training maximum (the most often first, then the
-        farthest; at most SHOWN_FEATURES): ``training reaches <feature> <maximum>; this run exceeds it in <share> of windows (up to
-        <ratio>x)``; with ``beyond_share`` (of windows beyond any maximum, over ``of``) the ratios only and that
-        share; '' when none. ``stopped_share``: unused (``Coverage``'s interface)."""
+        farthest; at most SHOWN_FEATURES): ``training reaches <feature> <maximum>; this run exceeds it in <share>
+        of windows (up to <ratio>x)``; with ``beyond_share`` (of windows beyond any maximum, over ``of``) the
+        ratios only and that share; '' when none. ``stopped_share``: unused (``Coverage``'s interface)."""
         order = [i for i in np.lexsort((-self.peak, -self.beyond)) if self.beyond[i]][:SHOWN_FEATURES]
         if not order:
             return ''
