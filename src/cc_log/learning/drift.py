@@ -44,7 +44,8 @@ driving (``cclog learn``).
 The physics envelope (``learning.envelope``, the default detector) is watched the same way: ``monitor_envelopes``
 gives each trigger of kind envelope a monitor fed every window it evaluates (one every 0.25 s), at the trained rate
 TRAINED_RATE_FLOOR (the envelope flags no training window by construction), with ``EnvelopeCoverage``: per
-feature, the share of windows beyond the training maximum (ratio > 1, before the trigger's 2x), e.g.
+feature, the share of windows beyond the training maximum (ratio > 1 + COVERAGE_TOLERANCE, as a classifier's
+range: past it by that share of the trained spread from 0; before the trigger's 2x), e.g.
 ``coverage: training reaches jerk 29.6 m/s^3; this run exceeds it in 12% of windows (up to 3.1x)``; its remedies
 (ENVELOPE_REMEDIES) re-learn the envelope. Pure: no rospy.
 """
@@ -409,7 +410,8 @@ def monitor_classifiers(classifiers, **options):
 
 class EnvelopeCoverage(object):
     """An envelope's training maxima (``Envelope.trained()``: floored) against the windows of a run: per feature,
-    how many windows exceed it (ratio > 1; the trigger flags at its factor, 2x) and the largest ratio reached.
+    how many windows exceed it (ratio > 1 + COVERAGE_TOLERANCE: a window of the training itself, evaluated on the
+    live grid, may pass its maximum by a rounding; the trigger flags at its factor, 2x) and the largest ratio.
     The ``Coverage`` interface of a ``DriftMonitor``: ``observe(row)``, ``text``, ``report``, ``as_dict``."""
 
     stopped_share = None  # the envelope has no share of stopped windows to compare
@@ -426,7 +428,7 @@ class EnvelopeCoverage(object):
     def observe(self, row):
         """``(beyond a training maximum, False)`` of one window's row (``features.envelope`` columns)."""
         ratio = np.asarray(row, dtype=float) / self.maxima
-        over = ratio > 1.0
+        over = ratio > 1.0 + COVERAGE_TOLERANCE
         self.peak = np.fmax(self.peak, ratio)
         self.beyond += over
         self.decisions += 1
@@ -466,7 +468,8 @@ class EnvelopeCoverage(object):
         (or that no window was seen)."""
         if not self.decisions:
             return 'coverage: no window to compare with the training maxima'
-        return 'coverage: ' + (self.text() or 'within the training maxima (no window exceeded one)')
+        return 'coverage: ' + (self.text() or 'within the training maxima (no window %s past one)' % percent(
+            COVERAGE_TOLERANCE))
 
     def as_dict(self):
         """The run against the training maxima, as JSON values: per feature its maximum, the windows beyond it and
