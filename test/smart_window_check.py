@@ -275,6 +275,9 @@ class SmartWindowTest(unittest.TestCase):
             opened = [e for e in events if e.event == AnomalyEvent.OPENED]
             self.assertEqual(len(opened), 1)
             self.assertAlmostEqual(opened[0].header.stamp.to_sec(), fired['stamp'], places=6)
+            # the envelope's drift on /diagnostics: its windows of the 30 s run, judged only after a minute
+            said = self.status_of(name).get('drift envelope', '')
+            self.assertTrue(said.startswith('drift: not judged yet (2'), self.status_of(name))
         finally:
             fx.stop(node)
             publisher.unregister()

@@ -151,3 +151,162 @@ def test_replay_of_the_training_distribution_states_no_drift(tmp_path, sim_model
     assert result.returncode == 0, result.stderr
     [line] = [line for line in result.stdout.splitlines() if 'drift' in line]
     assert line.startswith('  drift: none: classifier flagged at most ') and '(trained: 0.2%)' in line
+
+
+# -- the physics envelope: its windows against its trained rate and its training maxima -----------------------
+
+JERK = 29.6  # m/s^3, the training maximum of the synthetic envelope below (its floor is 5)
+
+
+def synthetic_envelope():
+    """An envelope whose training reached JERK in jerk and every other feature's floor."""
+    from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS
+    from cc_log.learning.envelope import Envelope
+    maxima = dict((name, ENVELOPE_FLOORS[name]) for name in ENVELOPE_COLUMNS)
+    maxima['max_jerk'] = JERK
+    return Envelope(maxima, '/odom', 1.0, 0.25, 2000, 500.0, None)
+
+
+def envelope_windows(monitor, envelope, start, seconds, jerk_ratios):
+    """Feed ``seconds`` of envelope windows (one every 0.25 s, as the trigger) from ``start``: every feature at
+    half its training maximum but jerk, at ``jerk_ratios[i % len]`` x its maximum; each decided as the trigger
+    decides (``learning.envelope.scores`` < 0, the limits at 2x)."""
+    from cc_log.features.envelope import ENVELOPE_COLUMNS
+    from cc_log.learning.envelope import scores
+    jerk = ENVELOPE_COLUMNS.index('max_jerk')
+    for i in range(int(seconds * 4)):
+        row = 0.5 * envelope.trained()
+        row[jerk] = jerk_ratios[i % len(jerk_ratios)] * JERK
+        monitor.observe(start + 0.25 * i, bool(scores(row[None], envelope.limits())[0] < 0), row)
+
+
+def envelope_monitor(envelope):
+    class Trigger(object):   # what monitor_envelopes reads of a triggers.envelope.EnvelopeTrigger
+        kind, name, observers = 'envelope', 'envelope', []
+    trigger = Trigger()
+    trigger.envelope = envelope
+    [monitor] = drift.monitor_envelopes([trigger, DriftMonitor])   # the other object: not of kind envelope
+    assert trigger.observers == [monitor.observe]
+    return monitor
+
+
+def test_an_envelope_run_like_its_training_reports_no_drift_and_a_rougher_one_drift_naming_the_feature():
+    """The envelope flags no training window: its monitor takes the floor, 0.2 %, so 20 % of 2 min flagged is
+    drift. A run like training (up to its maxima): none, within the training maxima. A rougher run, jerk past the
+    training maximum in half of its windows and past 2x in a quarter: drift, its coverage naming jerk."""
+    envelope = synthetic_envelope()
+    like = envelope_monitor(envelope)
+    assert like.trained_rate == drift.TRAINED_RATE_FLOOR == 0.002 and like.limit == 0.2
+    envelope_windows(like, envelope, 1000.0, 240.0, [0.5, 0.9, 1.0, 1.1, 0.7])
+    assert like.status() == (OK, 'drift: none: envelope flagged 0.0% of the last 2 min (trained: 0.2%)')
+    assert like.report() == ('drift: none: envelope flagged at most 0.0% of any 2 min (trained: 0.2%); coverage: '
+                             'within the training maxima (no window 10% past one)')
+    rough = envelope_monitor(envelope)
+    envelope_windows(rough, envelope, 1000.0, 240.0, [3.1, 1.5, 0.8, 0.5])
+    level, message = rough.status()
+    assert level == WARN and message == (
+        'drift: envelope flagged 25% of the last 2 min (trained: 0.2%): this robot drives unlike its training data '
+        '(training reaches jerk 29.6 m/s^3; this run goes up to 3.1x (50% of the last 2 min beyond)); remedies: '
+        + drift.ENVELOPE_REMEDIES)
+    assert rough.first_drift == pytest.approx(1060.0, abs=0.3)   # judged from 60 s of windows
+    assert rough.report() == (
+        'drift: from 1 min into the run envelope flagged up to 25%% of 2 min (trained: 0.2%%): this robot drives '
+        'unlike its training data; remedies: %s; coverage: training reaches jerk 29.6 m/s^3; this run exceeds it in '
+        '50%% of windows (up to 3.1x)' % drift.ENVELOPE_REMEDIES)
+    state = rough.as_dict()
+    assert state['drift'] and state['name'] == 'envelope' and state['coverage']['decisions'] == 960
+    [jerk] = [feature for feature in state['coverage']['features'] if feature['beyond']]
+    assert (jerk['name'], jerk['unit'], jerk['max'], jerk['beyond']) == ('max_jerk', 'm/s^3', JERK, 480)
+    assert jerk['peak_ratio'] == pytest.approx(3.1, rel=1e-12)
+
+
+def test_an_envelope_run_past_its_training_maxima_but_not_yet_flagged_warns_on_its_coverage():
+    """Jerk at 1.5x its training maximum in half of the windows: the trigger flags none (its limit is 2x), the
+    monitor warns that the driving leaves the training data, and the run's report says by how much."""
+    envelope = synthetic_envelope()
+    monitor = envelope_monitor(envelope)
+    envelope_windows(monitor, envelope, 0.0, 180.0, [1.5, 0.6])
+    assert monitor.share == 0.0 and monitor.first_drift is None
+    assert monitor.status() == (WARN, (
+        'drift: envelope flagged 0.0% of the last 2 min (trained: 0.2%), but the driving leaves the training data: '
+        'training reaches jerk 29.6 m/s^3; this run goes up to 1.5x (50% of the last 2 min beyond); remedies: '
+        + drift.ENVELOPE_REMEDIES))
+    assert monitor.report() == ('drift: none: envelope flagged at most 0.0% of any 2 min (trained: 0.2%); '
+                                'coverage: training reaches jerk 29.6 m/s^3; this run exceeds it in 50% of windows '
+                                '(up to 1.5x)')
+
+
+def rough_drive(seconds, seed, rate=25.0):
+    """``test_envelope.nominal_drive`` with a 1.5 Hz shake of 0.1 m/s and 0.2 rad/s on top: jerk, acceleration and
+    the variation of speed and yaw rate in a window well beyond 2x the smooth driving's."""
+    from test_envelope import drive
+    rng = np.random.default_rng(seed)
+    phase = np.arange(int(seconds * rate)) / rate
+    shake = np.sin(2 * np.pi * 1.5 * phase)
+    v = 0.6 + 0.4 * np.sin(phase / 7.0 + seed) + 0.1 * shake + rng.normal(0, 0.005, len(phase))
+    w = 0.5 * np.sin(phase / 5.0 + 2 * seed) + 0.2 * shake + rng.normal(0, 0.005, len(phase))
+    return drive(v, w, rate=rate)
+
+
+def test_the_envelope_trigger_tells_its_monitor_every_window_it_evaluates():
+    """``monitor_envelopes`` on a real EnvelopeTrigger: each window evaluated (one every 0.25 s) is observed;
+    smooth driving like training is no drift, the shaken one is, from the first judged minute."""
+    from test_envelope import ODOM, fires_of, learned, nominal_drive, odom_records
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    envelope = learned(nominal_drive(seconds=240.0, seed=0, rate=25.0))
+    for samples, drifting in ((nominal_drive(seconds=180.0, seed=1, rate=25.0), False),
+                              (rough_drive(180.0, seed=2), True)):
+        trigger = EnvelopeTrigger('envelope', envelope, ODOM)
+        [monitor] = drift.monitor_envelopes([trigger])
+        fires_of(trigger, odom_records(samples))
+        assert monitor.coverage.decisions == trigger.evaluated > 600
+        assert (monitor.first_drift is not None) == drifting, monitor.report()
+        if drifting:
+            assert monitor.first_drift - samples[0][0] == pytest.approx(61.0, abs=0.5)   # 1 s window + 60 s settle
+            assert monitor.peak == 1.0 and 'coverage: training reaches ' in monitor.report()
+
+
+@pytest.fixture(scope='module')
+def envelope_bags(tmp_path_factory):
+    """Bags of real nav_msgs/Odometry written by rosbag: smooth driving (4 min) and the envelope cclog
+    learn-envelope learns from it, and the same robot shaken (3 min): ``{'train', 'rough', 'limits'}``."""
+    import rosbag
+    import rospy
+    from test_envelope import ODOM, nominal_drive, odometry_messages
+    from conftest import cclog as run
+    tmp = tmp_path_factory.mktemp('envelope_drift')
+    paths = {}
+    for name, samples in (('train', nominal_drive(seconds=240.0, seed=0, rate=25.0)),
+                          ('rough', rough_drive(180.0, seed=2))):
+        paths[name] = str(tmp / (name + '.bag'))
+        with rosbag.Bag(paths[name], 'w') as bag:
+            for record in odometry_messages(samples):
+                bag.write(ODOM, record.msg, rospy.Time.from_sec(record.stamp))
+    paths['limits'] = str(tmp / 'envelope.json')
+    learned = run('learn-envelope', paths['train'], '--out', paths['limits'])
+    assert learned.returncode == 0, learned.stderr
+    return paths
+
+
+def test_cclog_replay_model_envelope_of_rougher_driving_states_drift(tmp_path, envelope_bags):
+    """``cclog replay --model envelope.json`` of the shaken robot: the summary says the envelope's drift (from
+    about 1 min in, the re-learning remedy, the features past their training maxima); ``--json`` carries it. Of
+    the smooth driving it was learned on: none, within the training maxima."""
+    from conftest import cclog as run
+    result = run('replay', envelope_bags['train'], '--model', envelope_bags['limits'], '--out', tmp_path / 'train')
+    assert result.returncode == 0, result.stderr
+    assert [line for line in result.stdout.splitlines() if line.startswith('  drift')] == [
+        '  drift: none: envelope flagged at most 0.0% of any 2 min (trained: 0.2%); coverage: within the training '
+        'maxima (no window 10% past one)']
+    result = run('replay', envelope_bags['rough'], '--model', envelope_bags['limits'], '--out', tmp_path / 'text')
+    assert result.returncode == 0, result.stderr
+    [line] = [line for line in result.stdout.splitlines() if line.startswith('  drift')]
+    assert line.startswith('  drift: from 1 min into the run envelope flagged up to 100% of 2 min (trained: 0.2%): '
+                           'this robot drives unlike its training data; remedies: re-learn the envelope'), line
+    assert '; coverage: training reaches ' in line and 'this run exceeds them in 100%, 100%, 100% of windows' in line
+    result = run('replay', envelope_bags['rough'], '--model', envelope_bags['limits'], '--out', tmp_path / 'json',
+                 '--json')
+    assert result.returncode == 0, result.stderr
+    [state] = json.loads(result.stdout)['drift']
+    assert state['name'] == 'envelope' and state['drift'] and state['trained_rate'] == 0.002
+    assert state['peak'] == 1.0 and state['coverage']['beyond'] == state['coverage']['decisions'] > 600

@@ -39,13 +39,23 @@ reaches 1.30 m/s (35% of decisions beyond)``. A model without it (older files) i
 
 Remedies (``REMEDIES``): online adaptation (``learn_online: true``, opt-in: ``online_learning``), a periodic
 trigger collecting nominal samples to retrain from (``kind: periodic``), retraining on this robot's nominal
-driving (``cclog learn``). Pure: no rospy.
+driving (``cclog learn``).
+
+The physics envelope (``learning.envelope``, the default detector) is watched the same way: ``monitor_envelopes``
+gives each trigger of kind envelope a monitor fed every window it evaluates (one every 0.25 s), at the trained rate
+TRAINED_RATE_FLOOR (the envelope flags no training window by construction), with ``EnvelopeCoverage``: per
+feature, the share of windows beyond the training maximum (ratio > 1 + COVERAGE_TOLERANCE, as a classifier's
+range: past it by that share of the trained spread from 0; before the trigger's 2x), e.g.
+``coverage: training reaches jerk 29.6 m/s^3; this run exceeds it in 12% of windows (up to 3.1x)``; its remedies
+(ENVELOPE_REMEDIES) re-learn the envelope. Pure: no rospy.
 """
 import collections
 
 import numpy as np
 
+from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_UNITS
 from cc_log.learning import learning
+from cc_log.learning.envelope import LABELS
 from cc_log.learning.learning import DEFAULT_QUANTILE
 
 OK, WARN = 0, 1  # diagnostic_msgs/DiagnosticStatus levels
@@ -58,6 +68,10 @@ REMEDIES = ('learn_online: true on the classifier (online adaptation, opt-in; it
             'driving too: keep rules for collisions and aborts), a periodic trigger (kind: periodic, every: 10min) '
             'to collect nominal samples to retrain from, or retrain (cclog learn) on nominal driving of this robot '
             'and place')
+ENVELOPE_REMEDIES = ('re-learn the envelope (cclog learn-envelope) on nominal driving of this robot and place, '
+                     'a periodic trigger (kind: periodic, every: 10min) to collect that driving, or a larger factor '
+                     'on the envelope trigger while it drives this way')
+TRAINED_RATE_FLOOR = DEFAULT_QUANTILE  # the lowest trained rate a monitor takes (the calibration's target)
 COVERAGE_TOLERANCE = 0.1  # a value is beyond the training range when past it by this share of the trained spread
 SHOWN_FEATURES = 3        # features named in a coverage line (per-feature coverage)
 
@@ -69,7 +83,7 @@ def trained_rate(model):
     measured = 0.0
     if isinstance(flagged, (int, float)) and isinstance(held_out, (int, float)) and held_out > 0:
         measured = min(1.0, max(0.0, float(flagged) / float(held_out)))
-    return max(measured, DEFAULT_QUANTILE)  # the held-out quantile the threshold is set below
+    return max(measured, TRAINED_RATE_FLOOR)  # the held-out quantile the threshold is set below
 
 
 def judged_margin(model):
@@ -101,12 +115,13 @@ class DriftMonitor(object):
     trained_rate: the model's share of flagged nominal samples (``trained_rate(model)``); span, settle: seconds
     of message time; factor, min_rate: when the share is drift; name: the classifier's, in messages;
     margin: a decision observed with its margin (score minus the classifier's threshold) is flagged when the
-    margin is below this (``judged_margin``; 0: as the classifier decided). ValueError('<parameter>: ...') for a
-    bad parameter."""
+    margin is below this (``judged_margin``; 0: as the classifier decided); coverage: a model's coverage (with its
+    ``config``) or an ``EnvelopeCoverage``; remedies: what the messages advise in drift. ValueError('<parameter>:
+    ...') for a bad parameter."""
 
     def __init__(self, trained_rate, span=DEFAULT_SPAN, factor=DEFAULT_FACTOR, min_rate=DEFAULT_MIN_RATE,
                  settle=None, name='classifier', coverage=None, config=None, episodes=DEFAULT_EPISODES,
-                 margin=0.0):
+                 margin=0.0, remedies=REMEDIES):
         for key, value, low, high in (('trained_rate', trained_rate, 0.0, 1.0), ('span', span, 0.0, None),
                                       ('factor', factor, 0.0, None), ('min_rate', min_rate, 0.0, 1.0)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > low \
@@ -125,7 +140,11 @@ class DriftMonitor(object):
             raise ValueError('episodes: %s must be a whole number >= 2' % repr(episodes)[:40])
         self.episodes = episodes
         self.name = name
-        self.coverage = None if coverage is None or config is None else Coverage(coverage, config)
+        self.remedies = remedies
+        if isinstance(coverage, EnvelopeCoverage):
+            self.coverage = coverage
+        else:
+            self.coverage = None if coverage is None or config is None else Coverage(coverage, config)
         self.began = None        # message time of the first decision
         self.first_drift = None  # message time drift was first reported
         self.peak = None         # the highest share flagged over a judged span (None: never judged)
@@ -232,10 +251,10 @@ class DriftMonitor(object):
         outside = self.outside
         if self.drifting:
             return WARN, 'drift: %s: this robot drives unlike its training data%s; remedies: %s' % (
-                flagged, ' (%s)' % outside if outside else '', REMEDIES)
+                flagged, ' (%s)' % outside if outside else '', self.remedies)
         if outside:
             return WARN, 'drift: %s, but the driving leaves the training data: %s; remedies: %s' % (
-                flagged, outside, REMEDIES)
+                flagged, outside, self.remedies)
         return OK, 'drift: none: %s' % flagged
 
     def report(self):
@@ -253,7 +272,7 @@ class DriftMonitor(object):
             return ('drift: from %s into the run %s flagged up to %s of %s %s%s: this robot drives unlike its '
                     'training data; remedies: %s' % (duration_text(self.first_drift - self.began), self.name,
                                                      percent(self.peak), duration_text(self.span), trained, episodes,
-                                                     REMEDIES))
+                                                     self.remedies))
         if self.peak is None:
             return 'drift: not judged: %s of %s\'s decisions, %s needed%s' % (
                 duration_text(self.covered), self.name, duration_text(self.settle),
@@ -385,5 +404,94 @@ def monitor_classifiers(classifiers, **options):
         trigger.observers.append(monitor.observe)
         if getattr(trigger, 'learner', None) is not None:
             trigger.learner.drifting = (lambda m: lambda: m.drifting)(monitor)  # online learning adapts in drift
+        monitors.append(monitor)
+    return monitors
+
+
+class EnvelopeCoverage(object):
+    """An envelope's training maxima (``Envelope.trained()``: floored) against the windows of a run: per feature,
+    how many windows exceed it (ratio > 1 + COVERAGE_TOLERANCE: a window of the training itself, evaluated on the
+    live grid, may pass its maximum by a rounding; the trigger flags at its factor, 2x) and the largest ratio.
+    The ``Coverage`` interface of a ``DriftMonitor``: ``observe(row)``, ``text``, ``report``, ``as_dict``."""
+
+    stopped_share = None  # the envelope has no share of stopped windows to compare
+
+    def __init__(self, envelope):
+        self.maxima = envelope.trained()
+        self.floored = np.array([float(envelope.maxima[name]) < limit
+                                 for name, limit in zip(ENVELOPE_COLUMNS, self.maxima)])
+        self.decisions = 0
+        self.beyond = np.zeros(len(ENVELOPE_COLUMNS), dtype=int)
+        self.beyond_any = 0
+        self.peak = np.zeros(len(ENVELOPE_COLUMNS))  # the largest value / training maximum per feature
+
+    def observe(self, row):
+        """``(beyond a training maximum, False)`` of one window's row (``features.envelope`` columns)."""
+        ratio = np.asarray(row, dtype=float) / self.maxima
+        over = ratio > 1.0 + COVERAGE_TOLERANCE
+        self.peak = np.fmax(self.peak, ratio)
+        self.beyond += over
+        self.decisions += 1
+        beyond = bool(over.any())
+        self.beyond_any += beyond
+        return beyond, False
+
+    def _reached(self, index):
+        name = ENVELOPE_COLUMNS[index]
+        unit = ENVELOPE_UNITS[name]
+        return '%s %.3g%s%s' % (LABELS[name], self.maxima[index], '' if unit == '1' else ' ' + unit,
+                                ' (its floor)' if self.floored[index] else '')
+
+    def text(self, beyond_share=None, stopped_share=None, of='decisions'):
+        """One line on the features the run takes past their training maximum (the most often first, then the
+        farthest; at most SHOWN_FEATURES): ``training reaches <feature> <maximum>; this run exceeds it in <share>
+        of windows (up to <ratio>x)``; with ``beyond_share`` (of windows beyond any maximum, over ``of``) the
+        ratios only and that share; '' when none. ``stopped_share``: unused (``Coverage``'s interface)."""
+        order = [i for i in np.lexsort((-self.peak, -self.beyond)) if self.beyond[i]][:SHOWN_FEATURES]
+        if not order:
+            return ''
+        them = 'it' if len(order) == 1 else 'them'
+        peaks = ', '.join('%.1fx' % self.peak[i] for i in order)
+        line = 'training reaches %s; this run ' % ', '.join(self._reached(i) for i in order)
+        if beyond_share is None:
+            line += 'exceeds %s in %s of windows (up to %s)' % (
+                them, ', '.join(percent(self.beyond[i] / float(self.decisions)) for i in order), peaks)
+        else:
+            line += 'goes up to %s (%s of %s beyond)' % (peaks, percent(beyond_share), of)
+        beyond = int(np.count_nonzero(self.beyond))
+        if beyond > len(order):
+            line += ' (%d of %d features beyond)' % (beyond, len(ENVELOPE_COLUMNS))
+        return line
+
+    def report(self):
+        """``coverage: ...`` on the whole run: ``text``, or that every window stayed within the training maxima
+        (or that no window was seen)."""
+        if not self.decisions:
+            return 'coverage: no window to compare with the training maxima'
+        return 'coverage: ' + (self.text() or 'within the training maxima (no window %s past one)' % percent(
+            COVERAGE_TOLERANCE))
+
+    def as_dict(self):
+        """The run against the training maxima, as JSON values: per feature its maximum, the windows beyond it and
+        the largest ratio."""
+        return collections.OrderedDict([
+            ('decisions', self.decisions), ('beyond', self.beyond_any),
+            ('features', [collections.OrderedDict([
+                ('name', name), ('unit', ENVELOPE_UNITS[name]), ('max', float(self.maxima[i])),
+                ('beyond', int(self.beyond[i])), ('peak_ratio', float(self.peak[i]) if self.decisions else None)])
+                for i, name in enumerate(ENVELOPE_COLUMNS)])])
+
+
+def monitor_envelopes(triggers, **options):
+    """A DriftMonitor for each trigger of kind envelope among ``triggers`` (``triggers.envelope.EnvelopeTrigger``),
+    at TRAINED_RATE_FLOOR with its ``EnvelopeCoverage``, fed every window it evaluates (added to its
+    ``observers``); returns the monitors in order."""
+    monitors = []
+    for trigger in triggers:
+        if getattr(trigger, 'kind', None) != 'envelope':
+            continue
+        monitor = DriftMonitor(TRAINED_RATE_FLOOR, name=trigger.name, coverage=EnvelopeCoverage(trigger.envelope),
+                               remedies=ENVELOPE_REMEDIES, **options)
+        trigger.observers.append(monitor.observe)
         monitors.append(monitor)
     return monitors

@@ -19,9 +19,10 @@ Published topics
   that look like it: ``health.NamedWatch``) and when
   a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
   trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
-  off the clock), each classifier's drift (WARN when it flags far more of the driving than of its training
-  data, with the remedies: ``drift.DriftMonitor``), the windows the keep budget ``~max_windows_per_hour`` skipped
-  (WARN once it skips: the robot's normal may have drifted), every ``~diagnostic_period`` seconds (wall time).
+  off the clock), each classifier's and envelope trigger's drift (WARN when it flags far more of the driving
+  than of its training data, with the remedies: ``drift.DriftMonitor``), the windows the keep budget
+  ``~max_windows_per_hour`` skipped (WARN once it skips: the robot's normal may have drifted), every
+  ``~diagnostic_period`` seconds (wall time).
 
 Services
   ``~trigger`` (std_srvs/Trigger): save a window around the newest odometry message now.
@@ -149,7 +150,8 @@ class SmartNode(object):
         self._last_trigger = 'none'
         self.events = rospy.Publisher('~anomalies', AnomalyEvent, queue_size=100)
         self.logger.on_event(self._publish_event)
-        self.drift = drift.monitor_classifiers(classifiers)  # the live flag rate against the trained one
+        # the live flag rate against the trained one, of each classifier and envelope trigger
+        self.drift = drift.monitor_classifiers(classifiers) + drift.monitor_envelopes(triggers)
         self.learners = [(t.name, t.learner) for t in classifiers if t.learner is not None]
         if self.learners:
             self.logger.on_event(self._flag_learners)

@@ -4,8 +4,8 @@
 configuration (``replay_setup``: its triggers, options and the topics to read), the bag opened once to select,
 check and count those topics (``bagio.open_bag`` without its per-message index), then its records read by
 ``bag_reader`` and fed in batches (``replay_records``); the summary says what came in, what was kept and, per
-classifier, whether its flag rate drifted (``drift.DriftMonitor``). ``replay`` does the same from a model file
-and options, ``replay_into`` for a logger already built (benchmarks, tests).
+classifier and envelope trigger, whether its flag rate drifted (``drift.DriftMonitor``). ``replay`` does the same
+from a model file and options, ``replay_into`` for a logger already built (benchmarks, tests).
 
 Edge module: ``bagio``/``bag_reader`` (and so rosbag) are imported when a bag is read.
 """
@@ -100,7 +100,8 @@ def offline_logger(out_dir, options):
 
 def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None, online_dir=None):
     """The smart logger of configuration ``cfg`` over one bag into ``out_dir``: ``replay``'s summary plus
-    ``driving_topic``, ``format``, ``messages`` and ``drift`` (a ``drift.DriftMonitor`` of each classifier).
+    ``driving_topic``, ``format``, ``messages`` and ``drift`` (a ``drift.DriftMonitor`` of each classifier, then
+    of each envelope trigger).
     ``progress(done, total)``; ``make_dir(path)`` creates ``out_dir`` once the bag is checked (default:
     ``safe_files.make_dirs``); ``online_dir``: where online learning saves its refits, resuming none (None:
     beside the model files, resuming the refit found there, as on a robot)."""
@@ -115,7 +116,7 @@ def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None, online_dir=
         bag.close()
     (make_dir or safe_files.make_dirs)(out_dir)
     logger = offline_logger(out_dir, options)
-    monitors = drift.monitor_classifiers(logger.classifiers)
+    monitors = drift.monitor_classifiers(logger.classifiers) + drift.monitor_envelopes(logger.triggers)
     summary = replay_records(logger, _records(bag_path, topics),
                              None if progress is None else (lambda done: progress(done, total)), bag_path)
     summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total, drift=monitors,

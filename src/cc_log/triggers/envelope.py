@@ -80,6 +80,9 @@ class EnvelopeTrigger(Trigger):
         self.topic = topic
         self.topics = frozenset([topic])
         self.window, self.stride = envelope.window, envelope.stride
+        # callables (stamp, anomalous, row) told every window evaluated (its end, beyond the envelope or not, its
+        # features; None when it holds no measured sample), e.g. drift.DriftMonitor.observe (drift.monitor_envelopes)
+        self.observers = []
         self.evaluated = 0      # windows computed
         self.beyond = 0         # of them beyond the envelope
         self.seconds = 0.0
@@ -153,6 +156,9 @@ class EnvelopeTrigger(Trigger):
         for end, count in zip(grid.tolist(), held.tolist()):
             k = measured.get(end)
             score = OUT_OF_RANGE_SCORE if count else float(window_scores[k]) if k is not None else 0.0
+            if k is not None or count:
+                for observe in self.observers:
+                    observe(end, score < 0.0, None if k is None else rows[k])
             if score >= 0.0:
                 continue
             self.beyond += 1
