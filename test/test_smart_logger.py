@@ -414,6 +414,26 @@ def test_a_jump_of_the_driving_clock_that_persists_is_followed(husky, tmp_path):
     assert logger.stats()['restamped_by_topic'] == {ODOM: FOLLOW_AFTER - 1}  # placed at the clock until followed
 
 
+def test_the_triggers_see_a_jump_of_the_driving_clock_at_its_header_stamps_and_open_no_window(husky, tmp_path):
+    """A bag played again while its clock runs on (the same run, its header stamps 100 s later, the robot back at
+    its start): the clock places the first messages of the jump at their arrival until it follows, but the
+    envelope sees them at their own stamps, a gap, so the robot's return to its start is no pose jump."""
+    from cc_log.features.envelope import envelope_windows, odometry_samples
+    from cc_log.learning import envelope
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    odom = [r for r in husky if r.topic == ODOM][:400]
+    samples = odometry_samples(odom)
+    learned = envelope.learn([envelope_windows(*samples)[1]], ODOM, 1.0, 0.25, samples[0][-1] - samples[0][0])
+    step = odom[-1].stamp - odom[-2].stamp
+    again = [stamped(r, r.stamp + 100.0)._replace(stamp=odom[-1].stamp + step * (k + 1)) for k, r in enumerate(odom)]
+    logger = SmartLogger(None, str(tmp_path), 'json-xz', '2s', '1s', driving_topic=ODOM,
+                         triggers=[EnvelopeTrigger('envelope', learned, ODOM)])
+    feed(logger, odom + again)
+    assert logger.close(30)
+    stats = logger.stats()
+    assert stats['restamped_by_topic'] == {ODOM: 2} and stats['windows_saved'] == 0, stats
+
+
 def test_failed_writes_are_reported_not_raised(husky, tmp_path):
     blocker = tmp_path / 'not_a_directory'
     blocker.write_text('x')

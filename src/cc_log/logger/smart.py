@@ -227,11 +227,13 @@ class SmartLogger(object):
             if not self._enabled or not self._type_ok(topic, getattr(msg, '_type', type(msg).__name__)):
                 return
             if stamp is None:
-                stamp = features_mod.stamp_of(msg, time.time())
+                stamp = header = features_mod.stamp_of(msg, time.time())
             else:
                 arrival = stamp.to_sec() if hasattr(stamp, 'to_sec') else float(stamp)
-                stamp = self._on_clock([features_mod.stamp_of(msg, arrival)], [arrival], [topic])[0]
-            self._take(Record(stamp, topic, msg, self._cost(msg, size)))
+                header = features_mod.stamp_of(msg, arrival)
+                stamp = self._on_clock([header], [arrival], [topic])[0]
+            self._take_all([Record(stamp, topic, msg, self._cost(msg, size))], None, None,
+                           None if stamp == header else [header])
 
     def on_raw(self, topic, raw, connection, stamp=None):
         """Feed one message of ``topic`` as its serialized bytes ``raw`` with its ``connection`` header (a
@@ -286,11 +288,12 @@ class SmartLogger(object):
         their length; ``places``: where each is in the batch fed (said by an ``UndecodableRecord``)."""
         raws = list(map(_RAW, records))
         arrivals = list(map(_STAMP, records))
-        stamps = self._on_clock(raw_message.stamps(raws, connections, arrivals), arrivals, topics)
-        costs = list(map(RAW_RECORD_OVERHEAD.__add__, map(len, raws)))
-        taken = records_of(stamps, topics, itertools.repeat(None), costs, raws, connections)
-        try:
-            self._take_all(taken, topics, connections)
+        headers = raw_message.stamps(raws, connections, arrivals)
+        stamps = self._on_clock(headers, arrivals, topics)
+        taken = records_of(stamps, topics, itertools.repeat(None), map(RAW_RECORD_OVERHEAD.__add__, map(len, raws)),
+                           raws, connections)
+        try:  # the triggers see a message placed off its header stamp at that stamp (the buffer at its place)
+            self._take_all(taken, topics, connections, None if stamps is headers else headers)
         except errors.UndecodableRecord as error:
             raise errors.UndecodableRecord(places[error.index], error.topic, error.error)
 
@@ -308,20 +311,14 @@ class SmartLogger(object):
         if self._closed:
             raise ValueError('%s: the logger is closed' % name)
 
-    def _take(self, record):
-        """Buffer a record and run the triggers of its topic (those that read fields get it decoded)."""
-        if not record.cost:
-            record = record._replace(cost=self._cost.of(record))  # the buffer keeps this very record
-        self._take_all([record])
-
-    def _take_all(self, records, topics=None, connections=None):
+    def _take_all(self, records, topics=None, connections=None, stamps=None):
         """Buffer records (each with its cost) and run the triggers of their topics: first every trigger that
         reads a batch (``batched``) over its records of the batch, then, record by record, the buffer and the
         Fires of every trigger in order (those that read fields get the record decoded). ``topics``,
-        ``connections``: of the records, when known."""
+        ``connections``: of the records, when known; ``stamps``: the stamps the triggers see, when not theirs."""
         topics = list(map(_TOPIC, records)) if topics is None else topics
         connections = list(map(_CONNECTION, records)) if connections is None else connections
-        views, error = self._trigger_views.views(records, topics, connections)
+        views, error = self._trigger_views.views(records, topics, connections, stamps)
         if error is not None:
             error = errors.UndecodableRecord(len(views), records[len(views)].topic, error)
             records = records[:len(views)]

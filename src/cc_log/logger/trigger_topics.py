@@ -51,10 +51,13 @@ class TriggerViews(object):
             known = self._decode[key] = (record.connection, any(t.needs_message(record) for t in triggers))
         return known[1]
 
-    def views(self, records, topics, connections):
+    def views(self, records, topics, connections, stamps=None):
         """``(the records as the triggers see them: decoded where a trigger of the topic reads fields, the
-        error decoding one)``; the views stop before a record that cannot be decoded."""
+        error decoding one)``; the views stop before a record that cannot be decoded. ``stamps``: the stamps the
+        triggers see, when not the records' (a message the clock placed off its header stamp is seen at it)."""
         by_topic = self.by_topic
+        if stamps is not None:
+            records = [r if r.stamp == stamp else r._replace(stamp=stamp) for r, stamp in zip(records, stamps)]
         firsts = dict(zip(zip(map(id, connections), topics), records))  # one record of each connection and topic
         if not any(record.msg is None and topic in by_topic and self.needs_message(record, by_topic[topic])
                    for (_, topic), record in firsts.items()):
