@@ -100,7 +100,7 @@ LAUNCH_EXIT = 90.0  # seconds: a node that cannot start ends its launch within t
 @pytest.mark.parametrize('launch, args, error', [
     ('smart.launch', ['model:=/nonexistent/model.json'], '/nonexistent/model.json: cannot read'),
     ('record.launch', ['mode:=smart', 'model:=/nonexistent/model.json'], '/nonexistent/model.json: cannot read'),
-    ('collect.launch', ['stride:=0'], "~stride: '0' must be a whole number of messages"),
+    ('collect.launch', ['stride:=0'], "~stride: '0' is outside 1..1e+06 messages"),
 ])
 def test_a_logger_that_cannot_start_ends_the_launch_with_its_error_last(tmp_path, launch, args, error):
     """The logger is required: roslaunch (here with a master of its own) shuts down when it exits, and the
