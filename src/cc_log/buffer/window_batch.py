@@ -21,8 +21,8 @@ class BatchAdd(object):
     def add_batch(self, records, topics, driving):
         """Add ``records`` in order (``topics``: theirs; ``driving``: the driving topic); return the windows this
         completes, as ``add``/``add_side`` of each in turn would."""
-        if not records:
-            return []
+        if len(records) < 2:
+            return [] if not records else self.add(records[0]) if topics[0] == driving else self.add_side(records[0])
         mask = list(map(driving.__eq__, topics))
         drivings = list(itertools.compress(records, mask))
         costs = list(map(_COST, records))

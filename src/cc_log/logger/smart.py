@@ -326,27 +326,21 @@ class SmartLogger(object):
             error = errors.UndecodableRecord(len(views), records[len(views)].topic, error)
             records, topics, connections = records[:len(views)], topics[:len(views)], connections[:len(views)]
         ahead = self._trigger_views.ahead(self._batched, views, topics)  # trigger -> its Fires of each of its records
-        driving, by_topic, fire, timed = self.driving_topic, self._by_topic, self._fire, self._timed
+        by_topic, fire, timed = self._by_topic, self._fire, self._timed
         latched, waits = window_prep.any_latched(connections), self.wait_for_writer and self._buffer.max_buffer_bytes
-        plan = None if timed or latched or waits else self._trigger_views.plan(ahead, topics)
+        plan = None if timed or latched else self._trigger_views.plan(ahead, topics)
         if plan is not None:  # every Fire known ahead: the buffer takes the records between two by slices
             start = 0
             for index, fired in plan + [(len(records) - 1, ())]:
-                self._add_batch(records[start:index + 1], topics[start:index + 1])
+                self._add_batch(records[start:index + 1], topics[start:index + 1], waits)
                 for fires in fired:
                     fire(fires)
                 start = index + 1
             records = ()
         for record, view, topic in zip(records, views, topics):
-            if waits:  # the writer's queue leaves room for the record beside the buffer (or is empty)
-                self.writer.wait_for_room(waits - self._buffer.buffered_bytes - record.cost)
             if latched and raw_message.is_latched(record.connection):
                 self._latched.note(topic, record)
-            if topic == driving:
-                self._complete(self._buffer.add(record))
-                self._last_stamp = record.stamp
-            else:
-                self._complete(self._buffer.add_side(record))
+            self._add_batch([record], [topic], waits)
             for trigger in by_topic.get(topic, ()):
                 fires = ahead.get(trigger)
                 fires = fires.popleft() if fires is not None else trigger.on_record(view)
@@ -359,8 +353,11 @@ class SmartLogger(object):
         if error is not None:
             raise error
 
-    def _add_batch(self, records, topics):
-        """Buffer records in order (``WindowBuffer.add_batch``) and hand on the windows this completes."""
+    def _add_batch(self, records, topics, waits=0):
+        """Buffer records in order (``WindowBuffer.add_batch``) and hand on the windows this completes; ``waits``
+        (the buffer's budget): first the writer's queue leaves room for them beside the buffer (or is empty)."""
+        if waits:
+            self.writer.wait_for_room(waits - self._buffer.buffered_bytes - sum(record.cost for record in records))
         self._complete(self._buffer.add_batch(records, topics, self.driving_topic))
         driving = list(itertools.compress(records, map(self.driving_topic.__eq__, topics)))
         self._last_stamp = driving[-1].stamp if driving else self._last_stamp
