@@ -58,7 +58,8 @@ def feed(buffer, records, triggers, cuts, batch):
     return windows + buffer.flush(), seen
 
 
-CONFIGS = [dict(), dict(pre='5', post='4'), dict(pre='0.2s', post='0.1s', max_window='0.5s'),
+CONFIGS = [dict(), dict(pre='5', post='4'), dict(pre='2', post='1'), dict(pre='1', post='3', max_window='12'),
+           dict(pre='0.2s', post='0.1s', max_window='0.5s'),
            dict(pre='0.1s', post='0.1s', max_window='40'), dict(pre='0.3s', post='0.2s', max_buffer_mb=0.02),
            dict(pre='0.2s', post='0.1s', max_buffer_mb=0),
            dict(pre='0.2s', post='0.1s', topic_limits={'/scan': TopicLimits(pre=0.05, post=None, max_mb=0.001)})]
@@ -68,7 +69,7 @@ CONFIGS = [dict(), dict(pre='5', post='4'), dict(pre='0.2s', post='0.1s', max_wi
 @given(config=st.sampled_from(CONFIGS), data=st.data())
 def test_a_batch_leaves_what_its_records_one_by_one_leave(config, data):
     records, triggers = stream(data.draw)
-    cuts = data.draw(st.lists(st.integers(0, len(records) - 1), max_size=6))
+    cuts = data.draw(st.lists(st.integers(0, len(records) - 1), max_size=40))
     one_by_one = feed(WindowBuffer(**config), records, triggers, cuts, False)
     batched = feed(WindowBuffer(**config), records, triggers, cuts, True)
     assert shape(batched[0]) == shape(one_by_one[0])
