@@ -314,7 +314,8 @@ def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, t
 
 def test_a_batched_replay_buffers_its_records_by_slices_not_one_by_one(sim_case, tmp_path):
     """Between two records that fire, a batch goes into the window buffer at once (``add_batch``): the per-record
-    ``add``/``add_side`` serve only where a window is pending (counted, not timed)."""
+    ``add``/``add_side`` serve only for a slice of one record and the record that completes a pending window
+    (counted, not timed: 2% of the records here, all of them before)."""
     from cc_log.learning.model import AnomalyModel
     bags, model_path = sim_case
     logger = SmartLogger(AnomalyModel.load(model_path), str(tmp_path), 'bag-lz4', driving_topic=sim.ODOM_TOPIC,
@@ -327,4 +328,4 @@ def test_a_batched_replay_buffers_its_records_by_slices_not_one_by_one(sim_case,
         setattr(buffer, name, counted)
     summary = replay_into(logger, bags['anomalies'])
     assert summary['windows'], 'no window: the replay would not have opened, merged or closed one'
-    assert sum(calls.values()) < summary['input_messages'] / 10, calls
+    assert sum(calls.values()) < summary['input_messages'] / 20, calls

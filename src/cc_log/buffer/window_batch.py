@@ -1,10 +1,11 @@
 """A batch of records into the window buffer at once (``WindowBuffer.add_batch``).
 
 The same as ``add`` of each driving record and ``add_side`` of each other one in turn, without a call per record
-in the common case: no window pending, the open window (if any) taking every driving record of the batch and not
-reaching ``max_window``, the buffer staying within half its budget, no topic with limits of its own, and driving
-stamps that do not go backwards in the batch (then every threshold the per-record path trims and prunes by only
-rises, so trimming and pruning once, at the last driving record, leaves what trimming at each one leaves). Any
+in the common case: the open window (if any) taking every driving record of the batch and not reaching
+``max_window``, the buffer staying within half its budget, no topic with limits of its own, and driving stamps that
+do not go backwards in the batch (then every threshold the per-record path trims and prunes by only rises, so
+trimming and pruning once, at the last driving record, leaves what trimming at each one leaves). A pending window
+is completed by ``add`` of the record that completes it, the records before and after it going by slices. Any
 other batch goes record by record.
 """
 import bisect
