@@ -9,9 +9,10 @@ For each bag, in the same process and alternating (read, replay, read, replay, .
 machine load:
 - read: ``rosbag.Bag.read_messages`` of the topics, touching each message (the baseline: what any Python
   tool pays to get the messages);
-- replay: ``offline.replay.replay`` (what ``cclog replay`` runs: ``bag_reader`` + features + classifier in
-  batches + windows written as json-xz, or ``--format bag-lz4``, by the background writer, waiting for every
-  window to be written).
+- replay: ``offline.replay.replay`` (what ``cclog replay`` runs: ``bag_reader`` + the detector in batches, by
+  default the envelope (``cclog replay --model envelope.json``; ``--detector classifier``: a one-class SVM) +
+  windows written as json-xz, or ``--format bag-lz4``, by the background writer, waiting for every window to be
+  written).
 Throughput is messages / process CPU seconds (user + system, all threads) and messages / wall seconds;
 the best round of each is kept. The ratio read-time / replay-time is "smart logger speed as % of read
 speed" (target >= 100%: replay costs no more CPU than a plain deserializing read; replay reads the bag
@@ -23,9 +24,9 @@ and flattened into rows (the writer before), alternating in the same process, an
 bag-lz4 writer on the same windows with the bag written by rosbag (before) and by ``formats.bag_writer`` (now,
 without rosbag's Python per message; the bags must be the same byte for byte).
 
-Bags: ../shared/data/real/husky_outdoor_2015.bag (odometry driving + IMU side topic; model trained on the
-first half, motion 2 s window) and a 10-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz odometry +
-IMU, 6 anomalies; model trained on a nominal run, seed 2, motion 500-message window).
+Bags: ../shared/data/real/husky_outdoor_2015.bag (odometry driving + IMU side topic; envelope learned, or model
+trained, on the first half, motion 2 s window) and a 10-minute simulated BWIBot bag (cc_log.sim seed 1, 100 Hz
+odometry + IMU, 6 anomalies; envelope or model on a nominal run, seed 2, motion 500-message window).
 """
 import argparse
 import os
@@ -76,7 +77,25 @@ def stage_of(filename):
     return 'other (interpreter, I/O)'
 
 
-def profile(path, topics, model_path, out, name, top, fmt='json-xz'):
+def detector(kind, records, topic, config, tmp, name, stride=1):
+    """``make() -> (model path or None, triggers)`` of a replay with the ``kind`` of detector learned on ``records``:
+    ``'envelope'`` (the default of ``cclog replay --model``: ``cclog learn-envelope``'s 1 s windows every 250 ms) or
+    ``'classifier'`` (``config``'s one-class SVM, a vector every ``stride`` messages)."""
+    if kind == 'classifier':
+        _, X = common.window_vectors(records, topic, config, stride=stride)
+        model, _ = learning.train(X, config=config)
+        path = model.save(os.path.join(tmp, '%s.model.json' % name))
+        return lambda: (path, ())
+    from cc_log.features.envelope import envelope_windows, odometry_samples
+    from cc_log.learning import envelope
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    samples = odometry_samples([record for record in records if record.topic == topic])
+    learned = envelope.learn([envelope_windows(*samples, window=1.0, stride=0.25)[1]], topic, 1.0, 0.25,
+                             float(samples[0].max() - samples[0].min()))
+    return lambda: (None, [EnvelopeTrigger('envelope', learned, topic)])
+
+
+def profile(path, topics, make, out, name, top, fmt='json-xz'):
     """cProfile of one replay with the writer (``fmt``) in the same thread: the share of each stage (own time of
     functions grouped by file) and the ``top`` functions by own time."""
     import cProfile
@@ -84,8 +103,9 @@ def profile(path, topics, model_path, out, name, top, fmt='json-xz'):
     from cc_log.learning.model import AnomalyModel
     from cc_log.logger.smart import SmartLogger
     from cc_log.offline.replay import replay_into
-    logger = SmartLogger(AnomalyModel.load(model_path), out, fmt=fmt, driving_topic=topics[0],
-                         side_topics=tuple(topics[1:]), background=False)
+    model_path, triggers = make()
+    logger = SmartLogger(model_path and AnomalyModel.load(model_path), out, fmt=fmt, driving_topic=topics[0],
+                         side_topics=tuple(topics[1:]), background=False, triggers=triggers)
     profiler = cProfile.Profile()
     profiler.enable()
     replay_into(logger, path)
@@ -214,18 +234,19 @@ def bag_writer_cost(windows, rounds, tmp):
     return dict((name, min(values)) for name, values in times.items())
 
 
-def kept_windows(path, topics, model_path, tmp):
+def kept_windows(path, topics, make, tmp):
     """``[(metadata, records)]`` of the json-xz windows a replay of ``path`` writes, read back."""
     from cc_log.storage import log_format
     out = os.path.join(tmp, 'kept')
-    replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt='json-xz')
+    model_path, triggers = make()
+    replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt='json-xz', triggers=triggers)
     windows = [log_format.read_window(os.path.join(out, name)) for name in sorted(os.listdir(out))
                if name.endswith('.json.xz')]
     shutil.rmtree(out, ignore_errors=True)
     return windows
 
 
-def measure(path, topics, model_path, rounds, tmp, fmt='json-xz'):
+def measure(path, topics, make, rounds, tmp, fmt='json-xz'):
     reads, replays = [], []
     summary = None
     for k in range(rounds):
@@ -233,8 +254,9 @@ def measure(path, topics, model_path, rounds, tmp, fmt='json-xz'):
             n = plain_read(path, topics)
         reads.append((timer.cpu, timer.wall, n))
         out = os.path.join(tmp, 'replay_%d' % k)
+        model_path, triggers = make()
         with common.Timer() as timer:
-            summary = replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt=fmt)
+            summary = replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt=fmt, triggers=triggers)
         replays.append((timer.cpu, timer.wall, summary['input_messages']))
         shutil.rmtree(out, ignore_errors=True)
     read_cpu, read_wall = min(r[0] for r in reads), min(r[1] for r in reads)
@@ -248,6 +270,8 @@ def main(argv=None):
     parser.add_argument('--rounds', type=int, default=3)
     parser.add_argument('--quick', action='store_true')
     parser.add_argument('--format', default='json-xz', choices=('json-xz', 'bag-lz4'), help='of the replay\'s windows')
+    parser.add_argument('--detector', default='envelope', choices=('envelope', 'classifier'),
+                        help="of the replay: the envelope (cclog replay's default) or a one-class SVM")
     parser.add_argument('--profile', type=int, default=0, metavar='N',
                         help='then profile one replay of the last bag (cProfile) and print its N costliest functions')
     parser.add_argument('--writer', action='store_true',
@@ -260,29 +284,24 @@ def main(argv=None):
         # Husky: model on the first half of the odometry
         records = common.husky_records((common.HUSKY_ODOM,))
         first, _ = common.split_half(records, common.HUSKY_ODOM)
-        config = FeatureConfig('motion', '2s')
-        _, X = common.window_vectors(first, common.HUSKY_ODOM, config)
-        model, _ = learning.train(X, config=config)
-        husky_model = model.save(os.path.join(tmp, 'husky.model.json'))
-        cases.append(('husky_outdoor_2015', common.HUSKY_BAG, [common.HUSKY_ODOM, common.HUSKY_IMU], husky_model))
+        husky = detector(args.detector, first, common.HUSKY_ODOM, FeatureConfig('motion', '2s'), tmp, 'husky')
+        cases.append(('husky_outdoor_2015', common.HUSKY_BAG, [common.HUSKY_ODOM, common.HUSKY_IMU], husky))
         data = [common.describe_data(common.HUSKY_BAG)]
         if not args.quick:
             sim_bag = os.path.join(tmp, 'sim.bag')
             sim.simulate_to_bag(sim_bag, sim.SimConfig(seed=1, minutes=10, anomalies=6, imu=True))
             nominal, _ = common.sim_records(sim.SimConfig(seed=2, minutes=10, anomalies=0))
-            config = FeatureConfig('motion', '500')
-            _, X = common.window_vectors(nominal, sim.ODOM_TOPIC, config, stride=10)
-            model, _ = learning.train(X, config=config)
-            sim_model = model.save(os.path.join(tmp, 'sim.model.json'))
-            cases.append(('sim 10 min, 6 anomalies', sim_bag, [sim.ODOM_TOPIC, sim.IMU_TOPIC], sim_model))
+            simulated = detector(args.detector, nominal, sim.ODOM_TOPIC, FeatureConfig('motion', '500'), tmp, 'sim',
+                                 stride=10)
+            cases.append(('sim 10 min, 6 anomalies', sim_bag, [sim.ODOM_TOPIC, sim.IMU_TOPIC], simulated))
             data.append('data: cc_log.sim BWIBot 10 min, 100 Hz odometry + IMU, 6 anomalies, seed 1, '
                         'lz4 bag (%d bytes)' % os.path.getsize(sim_bag))
         rounds = 1 if args.quick else args.rounds
-        common.header('Offline replay cost', data + ['rounds: %d, alternating read / replay; best of each; windows: %s'
-                                                     % (rounds, args.format)])
+        common.header('Offline replay cost', data + ['rounds: %d, alternating read / replay; best of each; windows: '
+                                                     '%s; detector: %s' % (rounds, args.format, args.detector)])
         rows = []
-        for name, path, topics, model_path in cases:
-            r = measure(path, topics, model_path, rounds, tmp, args.format)
+        for name, path, topics, make in cases:
+            r = measure(path, topics, make, rounds, tmp, args.format)
             ratio_cpu = r['read_cpu'] / r['replay_cpu']
             ratio_wall = r['read_wall'] / r['replay_wall']
             rows.append([name, r['messages'], '%.0f' % (r['messages'] / r['read_cpu']),
@@ -295,11 +314,12 @@ def main(argv=None):
         print()
         common.table(['bag', 'messages', 'read msg/CPU s', 'replay msg/CPU s', 'replay/read (CPU)',
                       'read msg/s wall', 'replay msg/s wall', 'replay/read (wall)', 'windows'], rows,
-                     'Offline throughput (replay = bag read + features + classifier + %s windows):' % args.format)
+                     'Offline throughput (replay = bag read + features + %s + %s windows):'
+                     % (args.detector, args.format))
         if args.writer:
             rows = []
-            for name, path, topics, model_path in cases:
-                windows = as_bytes(kept_windows(path, topics, model_path, tmp))
+            for name, path, topics, make in cases:
+                windows = as_bytes(kept_windows(path, topics, make, tmp))
                 kept = sum(len(records) for _, records in windows)
                 cpu, size = writer_cost(windows, max(rounds, 3))
                 cpu.update(bag_writer_cost(windows, max(rounds, 3), tmp))
@@ -316,8 +336,8 @@ def main(argv=None):
                          'document + JSON; bag-lz4 written by rosbag and by formats.bag_writer; best of '
                          'alternating rounds; same text, same bags checked):')
         if args.profile:
-            name, path, topics, model_path = cases[-1]
-            profile(path, topics, model_path, os.path.join(tmp, 'profiled'), name, args.profile, args.format)
+            name, path, topics, make = cases[-1]
+            profile(path, topics, make, os.path.join(tmp, 'profiled'), name, args.profile, args.format)
     print('total %.1f s' % (time.time() - started))
     return 0
 

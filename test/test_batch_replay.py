@@ -2,6 +2,7 @@
 batches (``SmartLogger.on_records``, one scoring call per batch) writes the same windows as one fed record by
 record (``on_raw``) from rosbag's own raw read: real and simulated bags, json-xz and bag-lz4, with and without
 anomalies, with a rule trigger, and every retrigger rule."""
+import collections
 import os
 import struct
 
@@ -309,3 +310,22 @@ def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, t
     assert not intake._thread.is_alive()
     assert intake.sync(timeout=60.0) is False  # stopped: nothing to wait for
     logger.close()
+
+
+def test_a_batched_replay_buffers_its_records_by_slices_not_one_by_one(sim_case, tmp_path):
+    """Between two records that fire, a batch goes into the window buffer at once (``add_batch``): the per-record
+    ``add``/``add_side`` serve only for a slice of one record and the record that completes a pending window
+    (counted, not timed: 2% of the records here, all of them before)."""
+    from cc_log.learning.model import AnomalyModel
+    bags, model_path = sim_case
+    logger = SmartLogger(AnomalyModel.load(model_path), str(tmp_path), 'bag-lz4', driving_topic=sim.ODOM_TOPIC,
+                         side_topics=(sim.IMU_TOPIC,), wait_for_writer=True)
+    calls, buffer = collections.Counter(), logger._buffer
+    for name in ('add', 'add_side'):
+        def counted(record, name=name, method=getattr(buffer, name)):
+            calls[name] += 1
+            return method(record)
+        setattr(buffer, name, counted)
+    summary = replay_into(logger, bags['anomalies'])
+    assert summary['windows'], 'no window: the replay would not have opened, merged or closed one'
+    assert sum(calls.values()) < summary['input_messages'] / 20, calls

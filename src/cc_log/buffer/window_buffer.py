@@ -29,6 +29,7 @@ import sys
 
 from cc_log.base.records import LogWindow, Trigger
 from cc_log.base.spans import Span
+from cc_log.buffer.window_batch import BatchAdd
 
 DEFAULT_PRE = Span.parse('2s')   # durations: the same margin at any rate (100 messages: 1 s at 100 Hz, 20 s at 5 Hz)
 DEFAULT_POST = Span.parse('2s')
@@ -201,11 +202,11 @@ def _sum(pre, post):
     return pre
 
 
-class WindowBuffer(object):
+class WindowBuffer(BatchAdd):
     """Logging windows around triggers.
 
-    Call ``add`` for every driving message, ``add_side`` for messages of
-    other topics, ``trigger`` when the last driving message is anomalous, and ``flush`` at the end of the
+    Call ``add`` for every driving message, ``add_side`` for messages of other topics (``add_batch`` for several
+    of both), ``trigger`` when the last driving message is anomalous, and ``flush`` at the end of the
     stream. ``add``, ``add_side``, ``trigger`` and ``flush`` return the windows completed by that call (a
     list of LogWindow); a window is complete once ``pre + post`` further messages have shown that the next
     window does not come within ``post`` of it, or when it reaches ``max_window`` or the memory budget

@@ -313,46 +313,35 @@ class SmartLogger(object):
 
     def _take_all(self, records, topics=None, connections=None, stamps=None):
         """Buffer records (each with its cost) and run the triggers of their topics: first every trigger that
-        reads a batch (``batched``) over its records of the batch, then, record by record, the buffer and the
-        Fires of every trigger in order (those that read fields get the record decoded). ``topics``,
-        ``connections``: of the records, when known; ``stamps``: the stamps the triggers see, when not theirs."""
+        reads a batch (``batched``) over its records of the batch, then the buffer and the Fires of every trigger
+        in order (those that read fields get the record decoded): by slices between the records that fire when all
+        Fires are known ahead, else record by record. ``topics``, ``connections``: of the records, when known;
+        ``stamps``: the stamps the triggers see, when not theirs."""
         topics = list(map(_TOPIC, records)) if topics is None else topics
         connections = list(map(_CONNECTION, records)) if connections is None else connections
         views, error = self._trigger_views.views(records, topics, connections, stamps)
         if error is not None:
             error = errors.UndecodableRecord(len(views), records[len(views)].topic, error)
-            records = records[:len(views)]
-            topics, connections = topics[:len(views)], connections[:len(views)]
-        present = set(topics)
-        ahead = {}  # batched trigger -> its Fires of each of its records, in order
-        for trigger in self._batched:
-            if present <= trigger.topics:
-                mine = views
-            else:
-                mine = list(itertools.compress(views, map(trigger.topics.__contains__, topics)))
-            if mine:
-                ahead[trigger] = iter(trigger.on_records(mine))
-        driving = self.driving_topic
-        by_topic = self._by_topic
-        timed, latched, fire = self._timed, window_prep.any_latched(connections), self._fire
-        waits = self._buffer.max_buffer_bytes if self.wait_for_writer else 0
+            records, topics, connections = records[:len(views)], topics[:len(views)], connections[:len(views)]
+        ahead = self._trigger_views.ahead(self._batched, views, topics)  # trigger -> its Fires of each of its records
+        by_topic, fire, timed = self._by_topic, self._fire, self._timed
+        latched, waits = window_prep.any_latched(connections), self.wait_for_writer and self._buffer.max_buffer_bytes
+        plan = None if timed or latched else self._trigger_views.plan(ahead, topics)
+        if plan is not None:  # every Fire known ahead: the buffer takes the records between two by slices
+            start = 0
+            for index, fired in plan + [(len(records) - 1, ())]:
+                self._add_batch(records[start:index + 1], topics[start:index + 1], waits)
+                for fires in fired:
+                    fire(fires)
+                start = index + 1
+            records = ()
         for record, view, topic in zip(records, views, topics):
-            if waits:  # the writer's queue leaves room for the record beside the buffer (or is empty)
-                self.writer.wait_for_room(waits - self._buffer.buffered_bytes - record.cost)
             if latched and raw_message.is_latched(record.connection):
                 self._latched.note(topic, record)
-            if topic == driving:
-                done = self._buffer.add(record)
-                if done:
-                    self._complete(done)
-                self._last_stamp = record.stamp
-            else:
-                done = self._buffer.add_side(record)
-                if done:
-                    self._complete(done)
+            self._add_batch([record], [topic], waits)
             for trigger in by_topic.get(topic, ()):
                 fires = ahead.get(trigger)
-                fires = next(fires) if fires is not None else trigger.on_record(view)
+                fires = fires.popleft() if fires is not None else trigger.on_record(view)
                 if fires:
                     fire(fires)
             for trigger in timed:
@@ -361,6 +350,15 @@ class SmartLogger(object):
                     fire(fires)
         if error is not None:
             raise error
+
+    def _add_batch(self, records, topics, waits=0):
+        """Buffer records in order (``WindowBuffer.add_batch``) and hand on the windows this completes; ``waits``
+        (the buffer's budget): first the writer's queue leaves room for them beside the buffer (or is empty)."""
+        if waits:
+            self.writer.wait_for_room(waits - self._buffer.buffered_bytes - sum(record.cost for record in records))
+        self._complete(self._buffer.add_batch(records, topics, self.driving_topic))
+        driving = list(itertools.compress(records, map(self.driving_topic.__eq__, topics)))
+        self._last_stamp = driving[-1].stamp if driving else self._last_stamp
 
     def tick(self, stamp):
         """Message time has reached ``stamp`` (float s) although no message came: lets the triggers that watch

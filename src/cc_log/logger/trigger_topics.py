@@ -2,6 +2,7 @@
 message type each topic must carry for them (``topic_types``), and the records as they see them (``TriggerViews``:
 decoded where a trigger of the topic reads fields). Pure."""
 import collections
+import itertools
 
 from cc_log.base import raw_message
 
@@ -71,3 +72,29 @@ class TriggerViews(object):
                 except raw_message.DECODE_ERRORS as error:
                     return views[:k], error
         return views, None
+
+    @staticmethod
+    def ahead(batched, views, topics):
+        """``{trigger: a deque of its Fires of each of its records of the batch, in order}`` of the ``batched``
+        triggers (those that read a batch at once) with records in it (``views``, ``topics``: the batch's)."""
+        present, ahead = set(topics), {}
+        for trigger in batched:
+            mine = views if present <= trigger.topics else \
+                list(itertools.compress(views, map(trigger.topics.__contains__, topics)))
+            if mine:
+                ahead[trigger] = collections.deque(trigger.on_records(mine))
+        return ahead
+
+    def plan(self, ahead, topics):
+        """``[(index, [Fires of each trigger in order])]``: the records of the batch that fire, in order, when every
+        trigger of its topics read it ahead (``ahead``); else None (one reads record by record)."""
+        by_topic = self.by_topic
+        if any(trigger not in ahead for topic in set(topics) for trigger in by_topic.get(topic, ())):
+            return None
+        marks = collections.defaultdict(list)
+        for trigger, fires in ahead.items():  # in the order of the triggers, as by_topic lists them
+            places = range(len(topics)) if len(fires) == len(topics) else \
+                itertools.compress(range(len(topics)), map(trigger.topics.__contains__, topics))
+            for index, fired in itertools.compress(zip(places, fires), fires):
+                marks[index].append(fired)
+        return sorted(marks.items())

@@ -1,0 +1,119 @@
+"""A batch of records into the window buffer at once (``WindowBuffer.add_batch``).
+
+The same as ``add`` of each driving record and ``add_side`` of each other one in turn, without a call per record
+in the common case: the open window (if any) taking every driving record of the batch and not reaching
+``max_window``, the buffer staying within half its budget, no topic with limits of its own, and driving stamps that
+do not go backwards in the batch (then every threshold the per-record path trims and prunes by only rises, so
+trimming and pruning once, at the last driving record, leaves what trimming at each one leaves). A pending window
+is completed by ``add`` of the record that completes it, the records before and after it going by slices. Any
+other batch goes record by record.
+"""
+import bisect
+import collections
+import itertools
+import operator
+
+_STAMP = operator.attrgetter('stamp')
+_COST = operator.attrgetter('cost')
+
+
+class BatchAdd(object):
+    """``add_batch`` for WindowBuffer (which holds the state it reads and the per-record ``add``/``add_side``)."""
+
+    def add_batch(self, records, topics, driving):
+        """Add ``records`` in order (``topics``: theirs; ``driving``: the driving topic); return the windows this
+        completes, as ``add``/``add_side`` of each in turn would."""
+        if len(records) < 2:
+            return [] if not records else self.add(records[0]) if topics[0] == driving else self.add_side(records[0])
+        mask = list(map(driving.__eq__, topics))
+        drivings = list(itertools.compress(records, mask))
+        costs = list(map(_COST, records))
+        if not self._batchable(drivings, costs):
+            done = []
+            for record, is_driving in zip(records, mask):
+                done.extend(self.add(record) if is_driving else self.add_side(record))
+            return done
+        ends = self._pending_ends(drivings)
+        if ends is not None:  # the pending window completes at that driving record: the rest goes as a batch again
+            at = [index for index, is_driving in enumerate(mask) if is_driving][ends]
+            done = self.add_batch(records[:at], topics[:at], driving) + self.add(records[at])
+            return done + self.add_batch(records[at + 1:], topics[at + 1:], driving)
+        self._bytes += sum(costs)
+        if not drivings:
+            self._extend_side(records, mask)
+            return []
+        last = len(mask) - 1 - mask[::-1].index(True)
+        stamps = list(map(_STAMP, drivings))
+        if self._clock is None or stamps[-1] > self._clock:
+            self._clock = stamps[-1]
+        window = self._open
+        if window is not None:
+            window.records.extend(drivings)
+            window.remaining = max(0, window.remaining - len(drivings))
+            self._extend_side(records, mask)
+            return []
+        self._ring.extend(drivings)
+        self._trim_ring(self.pre if self._pending is None else self._bridge)  # (pending: nothing goes, see above)
+        self._extend_side(records[:last], mask[:last])
+        if self._side:
+            self._prune_side()
+        self._extend_side(records[last + 1:], mask[last + 1:])
+        return []
+
+    def _batchable(self, drivings, costs):
+        """Whether a batch (its driving records, the costs of all) can go by slices (see the module docstring)."""
+        if self.limits or not all(costs) or (self._pending is not None and not self._ring):
+            return False
+        if self.max_buffer_bytes and self._bytes + sum(costs) > self._part_bytes:
+            return False
+        if not drivings:
+            return True
+        stamps = list(map(_STAMP, drivings))
+        if not all(map(operator.le, stamps, stamps[1:])):
+            return False
+        clock = stamps[-1] if self._clock is None else max(self._clock, stamps[-1])
+        if self._clock is not None and stamps[0] < self._clock - self.jump_back_tolerance:
+            return False
+        window = self._open
+        if window is not None:
+            if not (window.remaining >= len(drivings) or (window.until is not None and clock <= window.until)):
+                return False
+            if self.max_window.is_duration:
+                first = window.records[0] if window.records else drivings[0]
+                return stamps[-1] - first.stamp < self.max_window.seconds
+            return len(window.records) + len(drivings) < self.max_window.count
+        if self._pending is not None:  # until it completes, the ring only grows and the side threshold stays
+            return True
+        if self.pre.is_duration:  # the newest record stays in the ring: thresholds rise with the clock
+            return self._clock is None or stamps[0] >= self._clock - self.pre.seconds
+        ring = list(self._ring) + drivings  # the first record held after each driving one: its stamp must rise
+        fronts = ring[max(0, len(self._ring) + 1 - (self.pre.count + 1)):max(0, len(ring) - self.pre.count)]
+        fronts = list(map(_STAMP, fronts))
+        return all(map(operator.le, fronts, fronts[1:]))
+
+    def _pending_ends(self, drivings):
+        """The index among ``drivings`` of the record after which the pending window completes (a record more than
+        ``pre + post`` after it), None when none does (or none is pending). While a window is pending the ring holds
+        every driving record after it and drops none, so its first record stays: the first driving record whose
+        clock lies more than ``pre + post`` after it ends the wait (counts: the one past ``pre + post`` records)."""
+        if self._pending is None or not drivings:
+            return None
+        bridge, ring = self._bridge, self._ring
+        if bridge.is_duration:
+            first, seconds, clock = ring[0].stamp, bridge.seconds, self._clock
+            ends = bisect.bisect_left(drivings, True, key=lambda record: first < max(clock, record.stamp) - seconds)
+        else:
+            ends = max(0, bridge.count + 1 - len(ring))
+        return ends if ends < len(drivings) else None
+
+    def _extend_side(self, records, mask):
+        """Append the records of other topics (``mask``: False for them) to their topics' deques, costs counted."""
+        side, side_bytes = self._side, self._side_bytes
+        for record in itertools.compress(records, map(operator.not_, mask)):
+            topic = record.topic
+            held = side.get(topic)
+            if held is None:
+                held = side[topic] = collections.deque()
+                side_bytes[topic] = 0
+            held.append(record)
+            side_bytes[topic] += record.cost
