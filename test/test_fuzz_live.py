@@ -1,0 +1,156 @@
+"""Property-based fuzzing of the live path (issue 42): hostile input (``fuzz_live_strategies``) fed to a
+``SmartLogger`` as the intake feeds it (``on_records`` batches, manual requests between them), with the default
+envelope trigger, a classifier and rules, writing bag-lz4 or json-xz with a small memory budget into an
+example's own directory.
+
+Each example must:
+- let no exception escape ``on_records``, ``trigger_now``, ``stats`` or ``close``; a record a trigger cannot
+  decode is ``errors.UndecodableRecord``, the drop the intake counts (``intake.Intake._feed_batch``: the batch
+  goes on after it), and nothing else;
+- keep each call within the bounds of ``test_fuzz_readers.bounded`` (5 s of CPU, 60 s of wall time) and the
+  resident set's peak within ``MAX_BUFFER_MB`` + 150 MB of what it was before the logger was made;
+- write nothing outside its directory, and there only window files that read back
+  (``log_format.read_window``), each record of which was fed (its topic and bytes: nothing corrupted).
+
+Settings as ``test_fuzz_readers``: a fixed seed, ``CC_LOG_FUZZ_EXAMPLES`` (default 15), ``CC_LOG_FUZZ_SEED``
+for the rounds of the longer run (``tools/fuzz_long.sh``).
+"""
+import functools
+import os
+import tempfile
+
+import pytest
+from hypothesis import Phase, given
+from hypothesis import strategies as st
+
+import fuzz_live_strategies as fl
+from test_fuzz_readers import Root, _rss_kb, bounded, fuzz
+
+pytest.importorskip('rosbag')
+
+from cc_log.base import errors  # noqa: E402
+from cc_log.base.event_kinds import FAILED  # noqa: E402
+from cc_log.base.raw_message import serialized  # noqa: E402
+from cc_log.base.records import Record  # noqa: E402
+from cc_log.logger.smart import SmartLogger  # noqa: E402
+from cc_log.storage import log_format  # noqa: E402
+
+MAX_BUFFER_MB = 8
+MAX_GROWTH_MB = MAX_BUFFER_MB + 150
+
+
+def feed(logger, records):
+    """``logger.on_records(records)`` as the intake feeds it: past a record that cannot be decoded (dropped,
+    counted) the rest of the batch goes on. The records taken."""
+    taken = []
+    while records:
+        try:
+            logger.on_records(records)
+            return taken + list(records)
+        except errors.UndecodableRecord as error:
+            assert error.index < len(records) and '\n' not in str(error)
+            taken += records[:error.index]
+            records = records[error.index + 1:]
+    return taken
+
+
+def held(record):
+    """The serialized bytes a window file holds of a record (bag-lz4: as written; json-xz: its message's)."""
+    return record.raw if record.raw is not None else serialized(record.msg)
+
+
+def check_windows(directory, fed):
+    """Every file in ``directory`` is a window file that reads back, every record of it one of ``fed``."""
+    paths = log_format.window_files(directory)
+    assert sorted(os.listdir(directory)) == sorted(os.path.basename(path) for path in paths)
+    for path in paths:
+        result = bounded(log_format.read_window, path)
+        assert not isinstance(result, ValueError), 'a window written does not read back: %s' % result
+        _, records = result
+        for record in records:
+            assert (record.topic, held(record)) in fed, 'not fed: %s %r' % (record.topic, held(record)[:80])
+
+
+def smart_logger(directory, fmt, triggers):
+    """The logger under test: ``MAX_BUFFER_MB``, pre and post 1 s, every topic kept."""
+    return SmartLogger(None, directory, fmt, '1s', '1s', driving_topic=fl.DRIVING, side_topics=None,
+                       max_buffer_mb=MAX_BUFFER_MB, triggers=triggers)
+
+
+@functools.lru_cache(maxsize=None)
+def warmed_up():
+    """Run a logger of every trigger once in each format (the modules, classes and buffers a first run makes are
+    not the growth of an example)."""
+    driving = fl.smooth_driving(200, 1432235498.0)
+    for fmt in ('bag-lz4', 'json-xz'):
+        with tempfile.TemporaryDirectory() as directory:
+            logger = smart_logger(directory, fmt, fl.make_triggers(['envelope', 'classifier', 'when']))
+            feed(logger, driving)
+            logger.trigger_now('warm up')
+            feed(logger, [record._replace(stamp=record.stamp + 4.0) for record in driving])
+            assert logger.close(60)
+    return True
+
+
+def records_of_headers(headers, count=20):
+    """``count`` serialized std_msgs/String records on /chatter for each connection header of ``headers``."""
+    from std_msgs.msg import String
+    return [Record(1432235499.1 + 0.04 * i, '/chatter', None, 0, serialized(String('m%d' % i)), header)
+            for header in headers for i in range(count)]
+
+
+def test_connection_headers_without_type_md5sum_or_definition_are_refused_and_counted(tmp_path):
+    from std_msgs.msg import String
+    good = {'type': String._type, 'md5sum': String._md5sum, 'message_definition': String._full_text,
+            'callerid': '/talker', 'latching': '0'}
+    bad = [{key: value for key, value in good.items() if key != missing}
+           for missing in ('type', 'md5sum', 'message_definition')] + [dict(good, md5sum=None), None]
+    for fmt in ('bag-lz4', 'json-xz'):
+        directory = tmp_path / fmt
+        directory.mkdir()
+        events = []
+        logger = smart_logger(str(directory), fmt, [])
+        logger.on_event(events.append)
+        driving = fl.smooth_driving(100, 1432235498.0)
+        logger.on_records(driving[:50])
+        logger.on_records(records_of_headers(bad) + records_of_headers([good]))
+        logger.on_records(driving[50:])
+        assert logger.trigger_now('test')[0]
+        assert logger.close(60)
+        stats = logger.stats()
+        assert stats['messages_refused'] == 5 * 20
+        assert stats['last_refused'] == '/chatter: message refused (no connection header)'
+        assert [event.kind for event in events if event.kind == FAILED] == []
+        (path,) = log_format.window_files(str(directory))
+        _, records = log_format.read_window(path)
+        assert sorted(held(record) for record in records if record.topic == '/chatter') == \
+            sorted(record.raw for record in records_of_headers([good]))
+
+
+@functools.partial(fuzz, phases=[Phase.generate])  # no shrinking: it takes minutes over streams of MBs
+@given(steps=fl.live_streams(), names=fl.trigger_sets(), fmt=st.sampled_from(['bag-lz4', 'json-xz']))
+def test_hostile_live_input_through_a_smart_logger(steps, names, fmt):
+    with Root(allow_in=True) as root:
+        out = os.path.join(root.input, 'out')
+        os.mkdir(out)
+        assert warmed_up()
+        triggers = fl.make_triggers(names)
+        before = _rss_kb('VmRSS')
+        limits = dict(max_growth_mb=MAX_GROWTH_MB, since_kb=before)
+        logger = smart_logger(out, fmt, triggers)
+        fed = set()
+        try:
+            for step in steps:
+                if step[0] == 'records':
+                    taken = bounded(feed, logger, step[1], **limits)
+                    assert not isinstance(taken, ValueError), 'on_records raised: %s' % taken
+                    fed.update((record.topic, record.raw) for record in taken)
+                else:
+                    answer = bounded(logger.trigger_now, 'fuzz', step[1], step[2], **limits)
+                    assert isinstance(answer, tuple) and '\n' not in answer[1], answer
+            assert not isinstance(bounded(logger.stats, **limits), ValueError)
+        finally:
+            closed = bounded(logger.close, 50, **limits)
+        assert closed is True
+        assert os.listdir(root.input) == ['out']
+        check_windows(out, fed)
