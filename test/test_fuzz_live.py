@@ -10,7 +10,8 @@ Each example must:
 - keep each call within the bounds of ``test_fuzz_readers.bounded`` (5 s of CPU, 60 s of wall time) and the
   resident set's peak within ``MAX_BUFFER_MB`` + 150 MB of what it was before the logger was made;
 - write nothing outside its directory, and there only window files that read back
-  (``log_format.read_window``), each record of which was fed (its topic and bytes: nothing corrupted).
+  (``log_format.read_window``), each record of which was fed (its topic and bytes: nothing corrupted; json-xz:
+  or its message's bytes once decoded, a string's invalid UTF-8 replaced: ``text_replaced``).
 
 Settings as ``test_fuzz_readers``: a fixed seed, ``CC_LOG_FUZZ_EXAMPLES`` (default 15), ``CC_LOG_FUZZ_SEED``
 for the rounds of the longer run (``tools/fuzz_long.sh``).
@@ -28,7 +29,7 @@ from test_fuzz_readers import Root, _rss_kb, bounded, fuzz
 
 pytest.importorskip('rosbag')
 
-from cc_log.base import errors  # noqa: E402
+from cc_log.base import errors, raw_message  # noqa: E402
 from cc_log.base.event_kinds import FAILED  # noqa: E402
 from cc_log.base.raw_message import serialized  # noqa: E402
 from cc_log.base.records import Record  # noqa: E402
@@ -57,6 +58,15 @@ def feed(logger, records):
 def held(record):
     """The serialized bytes a window file holds of a record (bag-lz4: as written; json-xz: its message's)."""
     return record.raw if record.raw is not None else serialized(record.msg)
+
+
+def text_replaced(record):
+    """The bytes of a record's message decoded and serialized again: a json-xz window holds a string field as
+    text, invalid UTF-8 replaced (genpy warns once); None when it does not decode."""
+    try:
+        return serialized(raw_message.decode(record.raw, record.connection))
+    except Exception:  # anything: an expectation of the test, not the code under test
+        return None
 
 
 def check_windows(directory, fed):
@@ -155,6 +165,8 @@ def test_hostile_live_input_through_a_smart_logger(steps, names, fmt):
                     taken = bounded(feed, logger, step[1], **limits)
                     assert not isinstance(taken, ValueError), 'on_records raised: %s' % taken
                     fed.update((record.topic, record.raw) for record in taken)
+                    if fmt == 'json-xz':
+                        fed.update((record.topic, text_replaced(record)) for record in taken)
                 else:
                     answer = bounded(logger.trigger_now, 'fuzz', step[1], step[2], **limits)
                     assert isinstance(answer, tuple) and '\n' not in answer[1], answer
@@ -164,3 +176,22 @@ def test_hostile_live_input_through_a_smart_logger(steps, names, fmt):
         assert closed is True
         assert os.listdir(root.input) == ['out']
         check_windows(out, fed)
+
+
+def test_a_window_in_parts_whose_every_record_is_refused_leaves_no_file(tmp_path):
+    """Every record refused by the bag-lz4 writer (bytes not of their connection's type): the window fails, and
+    the file begun for its parts is removed (it was left as ``.tmp-<pid>``, its descriptor open)."""
+    import random
+    events = []
+    logger = smart_logger(str(tmp_path), 'bag-lz4', [])
+    logger.on_event(events.append)
+    wrong = fl._real_connection('sensor_msgs/Image')  # odometry said to be images
+    driving = [record._replace(connection=wrong) for record in fl.smooth_driving(200, 1432235498.0)]
+    noise = random.Random(0).randbytes(1 << 20)
+    images = [Record(1432235498.5 + 0.1 * i, '/camera', None, 0, noise, wrong) for i in range(30)]
+    logger.on_records(driving[:20])
+    assert logger.trigger_now('test', 0.1, 10.0)[0]
+    logger.on_records(images + driving[20:])
+    assert logger.close(60)
+    assert os.listdir(str(tmp_path)) == []
+    assert FAILED in [event.kind for event in events]
