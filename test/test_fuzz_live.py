@@ -25,7 +25,7 @@ from hypothesis import Phase, given
 from hypothesis import strategies as st
 
 import fuzz_live_strategies as fl
-from test_fuzz_readers import Root, _rss_kb, bounded, fuzz
+from test_fuzz_readers import Root, _reset_peak, _rss_kb, bounded, fuzz
 
 pytest.importorskip('rosbag')
 
@@ -155,6 +155,7 @@ def test_hostile_live_input_through_a_smart_logger(steps, names, fmt):
         os.mkdir(out)
         assert warmed_up()
         triggers = fl.make_triggers(names)
+        _reset_peak()  # not the peak of making the example's data
         before = _rss_kb('VmRSS')
         limits = dict(max_growth_mb=MAX_GROWTH_MB, since_kb=before)
         logger = smart_logger(out, fmt, triggers)
@@ -195,3 +196,22 @@ def test_a_window_in_parts_whose_every_record_is_refused_leaves_no_file(tmp_path
     assert logger.close(60)
     assert os.listdir(str(tmp_path)) == []
     assert FAILED in [event.kind for event in events]
+
+
+@pytest.mark.parametrize('arrival', [float('nan'), float('inf'), -float('inf'), -1.0, 1e308, 1e18])
+def test_an_arrival_stamp_that_is_no_time_is_the_one_before_and_counted(tmp_path, arrival):
+    """A message without a header stamp arriving at NaN, an infinity, before 1970 or past any ROS time: placed
+    at the arrival before it, counted as restamped (a window starting at an infinity was an OverflowError out of
+    ``on_records`` naming its file)."""
+    logger = smart_logger(str(tmp_path), 'bag-lz4', [])
+    driving = fl.smooth_driving(100, 1432235498.0)
+    odd = records_of_headers([string_header()], 1)[0]._replace(stamp=arrival)
+    logger.on_records([odd] + driving[:50])
+    logger.on_records(driving[50:60] + [odd] + driving[60:])
+    assert logger.trigger_now('test', 3.0, 1.0)[0]
+    assert logger.close(60)
+    assert logger.stats()['restamped_by_topic'] == {'/chatter': 2}
+    (path,) = log_format.window_files(str(tmp_path))
+    metadata, records = log_format.read_window(path)
+    assert [(record.topic, record.stamp) for record in records if record.topic == '/chatter'] == \
+        [('/chatter', driving[59].stamp)]  # the first came before the clock started (arrival 0): not in the window
