@@ -200,17 +200,17 @@ def test_a_window_in_parts_whose_every_record_is_refused_leaves_no_file(tmp_path
 
 @pytest.mark.parametrize('arrival', [float('nan'), float('inf'), -float('inf'), -1.0, 1e308, 1e18])
 def test_an_arrival_stamp_that_is_no_time_is_the_one_before_and_counted(tmp_path, arrival):
-    """A message without a header stamp arriving at NaN, an infinity, before 1970 or past any ROS time: placed
-    at the arrival before it, counted as restamped (a window starting at an infinity was an OverflowError out of
-    ``on_records`` naming its file)."""
+    """A message arriving at NaN, an infinity, before 1970 or past any ROS time: placed at the arrival before it
+    (without a header stamp) or by its header stamp, counted as restamped (a driving message's set the clock:
+    windows at an infinity, an OverflowError out of ``on_records`` naming a file, or at no time)."""
     logger = smart_logger(str(tmp_path), 'bag-lz4', [])
     driving = fl.smooth_driving(100, 1432235498.0)
     odd = records_of_headers([string_header()], 1)[0]._replace(stamp=arrival)
-    logger.on_records([odd] + driving[:50])
+    logger.on_records([odd, driving[0]._replace(stamp=arrival)] + driving[1:50])
     logger.on_records(driving[50:60] + [odd] + driving[60:])
     assert logger.trigger_now('test', 3.0, 1.0)[0]
     assert logger.close(60)
-    assert logger.stats()['restamped_by_topic'] == {'/chatter': 2}
+    assert logger.stats()['restamped_by_topic'] == {'/chatter': 2, fl.DRIVING: 1}
     (path,) = log_format.window_files(str(tmp_path))
     metadata, records = log_format.read_window(path)
     assert [(record.topic, record.stamp) for record in records if record.topic == '/chatter'] == \
