@@ -215,3 +215,23 @@ def test_an_arrival_stamp_that_is_no_time_is_the_one_before_and_counted(tmp_path
     metadata, records = log_format.read_window(path)
     assert [(record.topic, record.stamp) for record in records if record.topic == '/chatter'] == \
         [('/chatter', driving[59].stamp)]  # the first came before the clock started (arrival 0): not in the window
+
+
+@pytest.mark.parametrize('ahead', [86400.0 * 365, 2.0 ** 32 - 1432235498.0, 1e6])
+def test_the_envelope_makes_no_grid_over_a_jump_of_the_stamps(ahead):
+    """Odometry stamps jumping a year, to 2106 or 11 days ahead: the envelope evaluates the windows around the
+    samples only (a grid over the gap of 2106 was 76 GiB: a MemoryError out of ``on_records``) and fires alike."""
+    import test_envelope as te
+    from cc_log.triggers.envelope import EnvelopeTrigger
+    samples = te.nominal_drive(seconds=20.0, seed=1)
+    later = (samples[0] + ahead,) + samples[1:]
+    records = te.odom_records(samples) + te.odom_records(later)
+    trigger = EnvelopeTrigger('envelope', fl._envelope(), fl.DRIVING)
+    fires = bounded(te.fires_of, trigger, records, 256, max_growth_mb=50)
+    assert not isinstance(fires, ValueError)
+    apart = EnvelopeTrigger('envelope', fl._envelope(), fl.DRIVING)
+    alone = te.fires_of(apart, te.odom_records(samples), 256)
+    apart.reset()
+    alone += te.fires_of(apart, te.odom_records(later), 256)
+    assert [stamp for stamp, _ in fires] == [stamp for stamp, _ in alone]
+    assert trigger.stats()['envelope_windows'] < 2 * len(te.envelope_windows(*samples)[0]) + 50  # not 4e6 ends
