@@ -56,9 +56,10 @@ FUZZ = settings(max_examples=EXAMPLES, derandomize=SEED is None, deadline=None, 
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much])
 
 
-def fuzz(test, examples=EXAMPLES):
-    """``test`` (a hypothesis test) with the fuzzing settings: ``examples``, the fixed seed (or SEED's)."""
-    test = settings(FUZZ, max_examples=examples)(test)
+def fuzz(test, examples=EXAMPLES, **options):
+    """``test`` (a hypothesis test) with the fuzzing settings: ``examples``, the fixed seed (or SEED's), and
+    ``options`` (other hypothesis settings)."""
+    test = settings(FUZZ, max_examples=examples, **options)(test)
     return seed(int(SEED))(test) if SEED is not None else test
 
 
@@ -86,11 +87,13 @@ def _reset_peak():
         stream.write('5')
 
 
-def bounded(call, *args):
+def bounded(call, *args, max_growth_mb=MAX_GROWTH_MB, since_kb=None):
     """``call(*args)`` (a generator is consumed into a list) within the bounds; its result, or the ValueError it
-    raised. Any other exception fails the test."""
-    _reset_peak()
-    before = _rss_kb('VmRSS')
+    raised. Any other exception fails the test. ``since_kb``: the resident set (kB) the growth is counted from,
+    the peak not reset (calls that share what they hold, such as a logger's); None: this call's own."""
+    if since_kb is None:
+        _reset_peak()
+    before = _rss_kb('VmRSS') if since_kb is None else since_kb
     started = time.process_time()
     signal.signal(signal.SIGALRM, _hung)
     signal.alarm(MAX_WALL_SECONDS)
@@ -104,11 +107,11 @@ def bounded(call, *args):
         signal.alarm(0)
     spent = time.process_time() - started
     grown = (_rss_kb('VmHWM') - before) / 1e3
-    if (spent >= MAX_SECONDS or grown >= MAX_GROWTH_MB) and FINDINGS:
+    if (spent >= MAX_SECONDS or grown >= max_growth_mb) and FINDINGS:
         _keep(args)
     name = getattr(call, '__qualname__', call)
     assert spent < MAX_SECONDS, '%s took %.1f s of CPU' % (name, spent)
-    assert grown < MAX_GROWTH_MB, '%s grew the resident set by %.0f MB' % (name, grown)
+    assert grown < max_growth_mb, '%s grew the resident set by %.0f MB' % (name, grown)
     if isinstance(result, ValueError):
         assert str(result) and '\n' not in str(result).strip(), 'not one line: %r' % str(result)[:300]
     return result

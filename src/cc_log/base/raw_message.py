@@ -153,6 +153,18 @@ def _seconds(stamp):
 PUBLISHER_KEYS = ('callerid', 'latching')  # what a connection header says of its publisher
 
 
+CONNECTION_KEYS = ('type', 'md5sum', 'message_definition')  # what a connection header says of the bytes
+
+
+def header_problem(connection):
+    """What is wrong with the connection header of serialized bytes, '' when nothing: a dict whose
+    ``CONNECTION_KEYS`` are all text (rospy passes on a publisher's header without checking them)."""
+    if not isinstance(connection, dict):
+        return 'no connection header'
+    missing = [key for key in CONNECTION_KEYS if not isinstance(connection.get(key), str)]
+    return 'its connection header has no %s' % ', '.join(missing) if missing else ''
+
+
 def class_header(topic, cls):
     """The connection header rosbag writes for messages of the genpy class ``cls`` on ``topic``."""
     return {'topic': topic, 'type': cls._type, 'md5sum': cls._md5sum, 'message_definition': cls._full_text}

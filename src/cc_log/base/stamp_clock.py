@@ -1,10 +1,12 @@
 """The one clock that places messages in windows: the driving topic's header stamps set it, and a message
 whose header stamp is off that clock is placed at its arrival instead. Pure: used by ``smart.SmartLogger``."""
+import math
 import operator
 
-__all__ = ['StampClock', 'FOLLOW_AFTER']
+__all__ = ['StampClock', 'FOLLOW_AFTER', 'MAX_STAMP']
 
 FOLLOW_AFTER = 3  # driving messages in a row, off the clock and agreeing with each other, that the clock follows
+MAX_STAMP = 2.0 ** 33  # seconds beyond any ROS time (uint32 seconds and nanoseconds): a stamp from no clock
 
 
 class StampClock(object):
@@ -17,19 +19,43 @@ class StampClock(object):
     A driving message off the clock in the same way (one stamp in 2106, in 1970, 100 s ahead) is placed at its
     arrival too and counted, so one bad stamp cannot flush the messages held before a trigger; FOLLOW_AFTER of
     them in a row whose offsets agree within ``tolerance`` are a real jump of the clock (a bag looped, a clock
-    set): the clock follows from the last of them on."""
+    set): the clock follows from the last of them on. An arrival that is no time (NaN, infinite, negative, past
+    ``MAX_STAMP``) is the previous arrival (0 before any: the clock has not started), and counted."""
 
     def __init__(self, driving_topic, tolerance):
         self.driving_topic = driving_topic
         self.tolerance = float(tolerance)
         self.offset = None  # the driving topic's header stamps minus their arrival (None: no driving stamp yet)
         self._jump = []  # the offsets of the driving messages in a row off the clock that agree with each other
+        self._arrival = 0.0  # the last arrival that is a time
 
     def place(self, stamps, arrivals, topics):
         """``(the stamps that place the messages in windows, the topics of those restamped or None)``."""
-        tolerance, driving = self.tolerance, self.driving_topic
         if not stamps:
             return stamps, None
+        odd = None
+        if not (all(map(math.isfinite, arrivals)) and 0 <= min(arrivals) and max(arrivals) < MAX_STAMP):
+            stamps, arrivals, odd = self._times(stamps, arrivals, topics)
+        self._arrival = arrivals[-1]
+        stamps, restamped = self._place(stamps, arrivals, topics)
+        return stamps, (restamped or []) + odd if odd else restamped
+
+    def _times(self, stamps, arrivals, topics):
+        """``(stamps, arrivals, topics of those replaced)``: each arrival that is no time replaced by the arrival
+        before it, and so is the stamp of such a message when it is no time either (it had no header stamp)."""
+        stamps, arrivals, odd, last = list(stamps), list(arrivals), [], self._arrival
+        for k, arrival in enumerate(arrivals):
+            if 0 <= arrival < MAX_STAMP:
+                last = arrival
+                continue
+            arrivals[k] = last
+            odd.append(topics[k])
+            if not 0 <= stamps[k] < MAX_STAMP:
+                stamps[k] = last
+        return stamps, arrivals, odd
+
+    def _place(self, stamps, arrivals, topics):
+        tolerance, driving = self.tolerance, self.driving_topic
         differences = list(map(operator.sub, stamps, arrivals))
         offset = 0.0 if self.offset is None else self.offset
         if all(arrivals) and max(differences) - min(differences) <= tolerance and self.offset is not None \

@@ -43,7 +43,7 @@ from cc_log.logger import keep_budget, smart_events
 from cc_log.buffer import window_prep
 from cc_log.base.raw_json import RawJsonEstimate
 from cc_log.base.event_kinds import OPENED
-from cc_log.logger.smart_events import Event
+from cc_log.logger.smart_events import Event, Stats
 from cc_log.base.stamp_clock import StampClock
 from cc_log.logger.trigger_topics import TriggerViews, check_triggers, topic_types
 from cc_log.base.spans import Span
@@ -64,19 +64,6 @@ _TOPIC, _RAW, _CONNECTION, _STAMP = map(operator.attrgetter, ('topic', 'raw', 'c
 DEFAULT_STAMP_TOLERANCE = 5.0  # seconds a header stamp may differ from the message's arrival (else: its arrival)
 DEFAULT_RETRY_PERIOD = window_writer.DEFAULT_RETRY_PERIOD        # seconds between attempts at held windows
 DEFAULT_MAX_HELD_MESSAGES = window_writer.DEFAULT_MAX_HELD_MESSAGES  # unwritten messages kept in memory
-
-
-class _Stats(object):
-    """Counters of the message path (guarded by one lock); the writer keeps its own."""
-
-    def __init__(self):
-        self.lock = threading.Lock()
-        self.messages_seen = 0
-        self.raw_json_bytes = 0      # row-JSON bytes of every message seen
-        self.windows_opened = 0
-        self.fires_dropped = 0       # Fires before any driving message (no window to keep yet)
-        self.messages_refused = 0    # a message type other than the topic's (first seen / the model's)
-        self.last_refused = ''
 
 
 class SmartLogger(object):
@@ -170,7 +157,7 @@ class SmartLogger(object):
         self._batched = [trigger for trigger in self.triggers if trigger.batched and not trigger.watches_time]
         self._accepted = {}  # (id(connection), topic) -> connection: its messages are wanted and of the topic's type
         self._lock = threading.RLock()
-        self._stats = _Stats()
+        self._stats = Stats()
         self._raw = msg_codec.RowJsonCounter()
         self._raw_estimate = RawJsonEstimate()  # decodes its samples when stats() asks, not on the message path
         self._latched, self._unsaid = window_prep.Latched(), window_prep.CarriedDrops()
@@ -267,7 +254,7 @@ class SmartLogger(object):
             count = self._raw_estimate.count
             wanted = []
             for index, record in enumerate(records):
-                if self.wants(record.topic):
+                if self.wants(record.topic) and self._header_ok(record):
                     count(record.raw, record.connection)
                     wanted.append(index)
             with self._stats.lock:
@@ -492,9 +479,18 @@ class SmartLogger(object):
             expected = self._types.setdefault(topic, msg_type)
         if msg_type == expected:
             return True
+        return self._refuse('%s: %s message refused (the topic carries %s)' % (topic, msg_type, expected))
+
+    def _header_ok(self, record):
+        """Whether a record's connection header says its type, md5sum and definition (else it is refused)."""
+        problem = raw_message.header_problem(record.connection)
+        return not problem or self._refuse('%s: message refused (%s)' % (record.topic, problem))
+
+    def _refuse(self, text):
+        """Count a message refused, ``text`` saying why; False."""
         with self._stats.lock:
             self._stats.messages_refused += 1
-            self._stats.last_refused = '%s: %s message refused (the topic carries %s)' % (topic, msg_type, expected)
+            self._stats.last_refused = text
         return False
 
     def _new_buffer(self):

@@ -4,12 +4,13 @@ Events. Pure."""
 import collections
 import math
 import os
+import threading
 
 from cc_log.base import safe_input, why
 from cc_log.base.event_kinds import DELETED, WRITTEN, SPLIT
 from cc_log.storage import log_format
 
-__all__ = ['Event', 'from_writer', 'reason_text', 'WindowTally']
+__all__ = ['Event', 'Stats', 'from_writer', 'reason_text', 'WindowTally']
 
 Event = collections.namedtuple(
     'Event', 'kind stamp reason score threshold start end messages path bytes error trigger why copy',
@@ -86,3 +87,16 @@ class WindowTally(object):
             files = sorted(window['files'], key=log_format.file_order)
             result.append(dict(window, files=files, path=files[0]))
         return sorted(result, key=lambda window: (window['start'] is None, window['start'] or 0.0))
+
+
+class Stats(object):
+    """Counters of the smart logger's message path (guarded by one lock); the writer keeps its own."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.messages_seen = 0
+        self.raw_json_bytes = 0      # row-JSON bytes of every message seen
+        self.windows_opened = 0
+        self.fires_dropped = 0       # Fires before any driving message (no window to keep yet)
+        self.messages_refused = 0    # a message type other than the topic's, or a connection header lacking a key
+        self.last_refused = ''

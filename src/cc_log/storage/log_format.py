@@ -336,7 +336,7 @@ class WindowFile(object):
     def finish(self, window, metadata=None):
         """Append the last part, write the metadata, close the file and give it its final name: (path, bytes)."""
         self.append(window, metadata)
-        if not self._in_file.count:
+        if not self._in_file.count or getattr(self._stream, 'count', None) == 0:  # bag-lz4: every record refused
             self.discard()
             raise ValueError('window: has no records')
         split = {}

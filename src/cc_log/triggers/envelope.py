@@ -142,9 +142,9 @@ class EnvelopeTrigger(Trigger):
         if self._last_end is not None:
             k0 = max(k0, np.round(self._last_end / self.stride) + 1)
         k1 = np.floor(newest[-1] / self.stride + 1e-9)
-        if k1 < k0:
+        grid = self._ends(k0, k1)
+        if not len(grid):
             return
-        grid = np.arange(k0, k1 + 1) * self.stride
         self._last_end = float(grid[-1])
         ends, rows = envelope_rows(*self._ring, ends=grid, window=self.window)
         self.evaluated += len(ends)
@@ -175,6 +175,18 @@ class EnvelopeTrigger(Trigger):
         keep = self._ring[0] > self._last_end - self.window - HISTORY
         self._ring = tuple(a[keep] for a in self._ring)
         self._beyond = self._beyond[self._beyond > self._last_end - self.window]
+
+    def _ends(self, k0, k1):
+        """The grid's window ends from ``k0`` to ``k1`` (in strides) whose windows hold a sample of the ring or an
+        out-of-range one: a jump of the stamps (a year ahead, to 2106) makes no grid over the time between."""
+        held = np.concatenate((self._ring[0], self._beyond))
+        held = held[(held >= (k0 - 1) * self.stride - self.window) & (held <= (k1 + 1) * self.stride)]
+        if not len(held):
+            return held
+        lo = np.ceil(held / self.stride - 1e-9)
+        ks = lo[:, None] + np.arange(int(self.window / self.stride) + 2)[None, :]
+        ks = np.unique(ks[ks * self.stride <= held[:, None] + self.window + 1e-9 * self.stride])
+        return ks[(ks >= k0) & (ks <= k1)] * self.stride
 
     def stats(self):
         result = super(EnvelopeTrigger, self).stats()
