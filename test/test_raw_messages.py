@@ -299,6 +299,24 @@ def test_the_row_json_estimate_of_a_batch_is_that_of_each_message_in_turn(husky_
     assert 0 < sampled[2] < sampled[1]  # sampled after the first 20, not every message
 
 
+def test_the_row_json_estimate_samples_the_first_messages_of_a_type_only_while_few_bytes_came():
+    """A type of large messages (a 200 kB string, as a hostile or binary image can be) decodes its first ones only
+    until first_bytes came, then one in every: a burst costs what a few decodes cost, one by one or batched."""
+    from std_msgs.msg import String
+    from cc_log.base.raw_json import RawJsonEstimate
+    connection = connection_of(String)
+    raws = [serialized(String(data='x' * 200000)) for _ in range(40)]
+    one, batched = RawJsonEstimate(every=16, first=256, first_bytes=1 << 20), RawJsonEstimate(
+        every=16, first=256, first_bytes=1 << 20)
+    for raw in raws:
+        one.count(raw, connection)
+    batched.count_all(raws[:5], [connection] * 5)
+    batched.count_all(raws[5:], [connection] * 35)
+    sampled = 6 + 2  # 6 before 1 MB came (0, 200 kB, ... 1,000,008 bytes), then messages 16 and 32
+    assert len(one._pending) == len(batched._pending) == sampled
+    assert one.total == batched.total == pytest.approx(40 * len(raws[0]), rel=0.01)
+
+
 def test_the_row_json_estimate_decodes_its_samples_when_asked_not_when_noted(husky_raw):
     from cc_log.base.raw_json import RawJsonEstimate
     raws, connections = [r.raw for r in husky_raw[:300]], [r.connection for r in husky_raw[:300]]

@@ -11,24 +11,29 @@ import threading
 
 from cc_log.base import msg_codec, raw_message
 
-__all__ = ['RawJsonEstimate', 'JSON_SAMPLE_EVERY', 'JSON_SAMPLE_FIRST', 'PENDING_BYTES']
+__all__ = ['RawJsonEstimate', 'JSON_SAMPLE_EVERY', 'JSON_SAMPLE_FIRST', 'JSON_SAMPLE_FIRST_BYTES', 'PENDING_BYTES']
 
 JSON_SAMPLE_EVERY = 64  # serialized messages: one in this many is decoded to measure its row-JSON bytes ...
-JSON_SAMPLE_FIRST = 256  # ... after the first this many of each type, which all are
+JSON_SAMPLE_FIRST = 256  # ... after the first this many of each type, which all are ...
+JSON_SAMPLE_FIRST_BYTES = 1 << 20  # ... while fewer serialized bytes of the type came (a 1 MB image: the first only)
 PENDING_BYTES = 4 << 20  # serialized bytes of samples held until asked (beyond: decoded when noted)
 _TYPE = operator.itemgetter('type')
 
 
 class RawJsonEstimate(object):
     """Row-JSON bytes of serialized messages without decoding them all: per message type, the row-JSON
-    bytes per serialized byte of the first ``first`` messages and of every ``every``-th one after them, times
-    the serialized bytes of them all (exact up to ``first`` messages of a type). ``count``/``count_all`` only
+    bytes per serialized byte of the first ``first`` messages (those that came while fewer than ``first_bytes``
+    of the type had) and of every ``every``-th one after them, times the serialized bytes of them all (exact up to
+    ``first`` messages of a type): decoding a few large messages (images, hostile strings that genpy decodes a byte
+    at a time) is bounded as decoding many small ones is. ``count``/``count_all`` only
     note (one thread at a time); the samples are decoded by ``total`` (any thread) or once more than
     ``pending_bytes`` wait."""
 
-    def __init__(self, every=JSON_SAMPLE_EVERY, first=JSON_SAMPLE_FIRST, pending_bytes=PENDING_BYTES):
+    def __init__(self, every=JSON_SAMPLE_EVERY, first=JSON_SAMPLE_FIRST, pending_bytes=PENDING_BYTES,
+                 first_bytes=JSON_SAMPLE_FIRST_BYTES):
         self.every = int(every)
         self.first = int(first)
+        self.first_bytes = int(first_bytes)
         self.pending_bytes = int(pending_bytes)
         self._counter = msg_codec.RowJsonCounter()
         self._types = {}  # type -> [messages, serialized bytes, sampled serialized bytes, sampled JSON bytes]
@@ -46,7 +51,7 @@ class RawJsonEstimate(object):
     def count(self, raw, connection):
         """Note one message (its bytes and connection header)."""
         entry = self._entry(connection['type'])
-        if entry[0] < self.first or entry[0] % self.every == 0:
+        if (entry[0] < self.first and entry[1] < self.first_bytes) or entry[0] % self.every == 0:
             self._keep([(entry, raw, connection)])
         entry[0] += 1
         entry[1] += len(raw)
@@ -66,12 +71,15 @@ class RawJsonEstimate(object):
                 places = list(itertools.compress(range(len(raws)), map(msg_type.__eq__, types)))
             entry = self._entry(msg_type)
             seen = entry[0]
-            first = range(min(max(self.first - seen, 0), len(places)))  # the first of the type: all sampled
-            start = max(seen, self.first)
-            every = range(start + (-start) % self.every - seen, len(places), self.every)  # then every every-th
-            sampled.extend((entry, raws[places[k]], connections[places[k]]) for k in itertools.chain(first, every))
+            sizes = list(map(len, map(raws.__getitem__, places)))
+            head = sizes[:max(self.first - seen, 0)]  # the first of the type, while fewer than first_bytes came
+            before = itertools.accumulate(head, initial=entry[1])  # the type's bytes before each of them
+            first = range(min(len(head), sum(1 for _ in itertools.takewhile(self.first_bytes.__gt__, before))))
+            every = range((-seen) % self.every, len(places), self.every)  # and every every-th
+            sampled.extend((entry, raws[places[k]], connections[places[k]])
+                           for k in sorted(set(itertools.chain(first, every))))
             entry[0] += len(places)
-            entry[1] += sum(map(len, map(raws.__getitem__, places)))
+            entry[1] += sum(sizes)
         if sampled:
             self._keep(sampled)
 
