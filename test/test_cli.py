@@ -216,7 +216,8 @@ def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     from cc_log.base import msg_codec
     summary, bag = replayed['summary'], replayed['bag']
     assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
-                             'keep_budget']
+                             'keep_budget', 'absent_route_topics']
+    assert summary['absent_route_topics'] == []  # no route
     assert summary['online'] == []  # no classifier learns online here
     assert summary['keep_budget']['windows_skipped'] == 0  # no keep budget: every window kept
     records = bag_messages(bag, ['/odom', '/scan'])

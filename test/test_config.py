@@ -420,6 +420,53 @@ def test_keep_names_are_subscribed_like_topics():
     assert options['keep']['bumper'].matches('/imu/data') and not options['keep']['bumper'].matches('/scan')
 
 
+def test_route_names_are_subscribed_like_topics():
+    # a route's topic is listened to even when ``topics`` does not name it: else its file stays empty, silently
+    cfg = Config.from_dict({'driving_topic': 'odom', 'topics': ['scan'], 'format': 'bag-lz4', 'routes': [
+        {'name': 'numeric', 'topics': ['imu/data', 're:/joint_.*'], 'format': 'json-xz'}]})
+    options = cfg.logger_options(cfg.build_triggers(None, lambda _: None))
+    assert options['side_topics'] == ['/scan', '/imu/data']
+
+
+def routed_topics(tmp_path, bag, route_topics, topics):
+    """``[(topics of the window's own file, topics of its route file)]`` of a replay of ``bag`` whose route
+    ``numeric`` takes ``route_topics`` (json-xz) while ``topics`` lists what else to keep."""
+    from cc_log import sim
+    from cc_log.offline import replay
+    cfg = Config.from_dict({'driving_topic': sim.ODOM_TOPIC, 'topics': list(topics), 'windows': {'pre': 2, 'post': 2},
+                            'format': 'bag-lz4', 'routes': [{'name': 'numeric', 'topics': route_topics,
+                                                             'format': 'json-xz'}],
+                            'triggers': [{'name': 'every10s', 'kind': 'periodic', 'every': '10s'}]})
+    out = str(tmp_path / 'out')
+    assert replay.replay_one(bag, out, cfg)['windows']
+    found = []
+    for files in log_format.window_sets(log_format.window_files(out)):
+        metadatas = [log_format.read_window(path)[0] for path in files]
+        by_route = dict((metadata.get('route'), set(metadata['topics'])) for metadata in metadatas)
+        found.append((by_route.get(None, set()), by_route.get('numeric', set())))
+    return found
+
+
+def test_a_topic_named_only_by_a_route_is_kept_in_the_route_file(tmp_path, imu_run):
+    found = routed_topics(tmp_path, imu_run[0], ['imu/data'], ['scan'])
+    assert found and all(own == {'/odom', '/scan'} and routed == {'/imu/data'} for own, routed in found), found
+
+
+def test_a_route_naming_a_topic_the_bag_lacks_routes_nothing_and_replay_says_so(tmp_path, imu_run, capsys):
+    # a route is where a topic goes when it comes (the README's routes /diagnostics), not a topic a window needs:
+    # the replay goes on, and its summary names what no message came on
+    from cc_log.offline import cli
+    found = routed_topics(tmp_path, imu_run[0], ['/IMU/data', 'imu/data'], ['scan'])
+    assert found and all(routed == {'/imu/data'} for _, routed in found), found
+    config = tmp_path / 'routes.yaml'
+    config.write_text("driving_topic: odom\ntopics: [scan]\nformat: bag-lz4\n"
+                      "routes: [{name: numeric, topics: [/IMU/data], format: json-xz}]\n"
+                      "triggers: [{name: every10s, kind: periodic, every: 10s}]\n")
+    capsys.readouterr()
+    assert cli.main(['replay', imu_run[0], '--config', str(config), '--out', str(tmp_path / 'cli')]) == 0
+    assert '  routes: /IMU/data is not in the bag; nothing was routed there' in capsys.readouterr().out.splitlines()
+
+
 @pytest.mark.parametrize('keep', [['/imu/*'], ['regex:/imu/.*'], 'imu/data /IMU?', [''], ['re:(']])
 def test_a_keep_entry_of_no_known_grammar_is_refused_in_one_line(keep):
     with pytest.raises(ValueError, match=r'^config: triggers\[0\] \(bumper\): keep: [^\n]+$'):

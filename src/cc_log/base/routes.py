@@ -11,9 +11,10 @@ write each window as ``cc_log_<UTC>_<reason>.bag`` (the cameras, the lidar) besi
 A topic goes to the first route whose ``topics`` match it (names, ``*``, ``re:``, ``!`` as the configuration's
 ``topics``), else to the window's own file. A route with ``copy: true`` takes a copy: its topics stay in the
 window's own file too (a bag that replays the whole moment alone), and readers of the window's files read them
-from the window's own file only. The files of one window share its name, reserved once
-(``storage.log_format``: ``<name>[+<route>][.<NNN>]<ext>``, ``SEPARATOR`` before the route): ``cclog info``,
-``cat``, ``export`` and ``stats`` show them as one window. Pure.
+from the window's own file only. A topic name a route lists is subscribed (read from a bag) like the names of
+``topics`` (``Config.named_topics``); one a bag lacks routes nothing, and ``cclog replay`` says so. The files
+of one window share its name, reserved once (``storage.log_format``: ``<name>[+<route>][.<NNN>]<ext>``,
+``SEPARATOR`` before the route): ``cclog info``, ``cat``, ``export`` and ``stats`` show them as one window. Pure.
 """
 import collections
 import re

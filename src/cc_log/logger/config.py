@@ -283,7 +283,7 @@ class Config(object):
         return {'fmt': self.format, 'pre': self.pre, 'post': self.post, 'max_window': self.max_window,
                 'driving_topic': resolve(driving),
                 'side_topics': None if self.selection.dynamic else
-                [resolve(t) for t in dict.fromkeys(self.topics + self.keep_names())],
+                [resolve(t) for t in self.named_topics()],
                 'max_disk_mb': self.max_disk_mb, 'min_free_mb': self.min_free_mb, 'max_files': self.max_files,
                 'max_buffer_mb': self.max_buffer_mb, 'split_mb': self.split_mb, 'triggers': triggers,
                 'max_windows_per_hour': self.max_windows_per_hour,
@@ -298,9 +298,17 @@ class Config(object):
         like the names of ``topics`` (a window cannot keep a topic nobody listens to)."""
         return list(dict.fromkeys(name for entry in self.triggers if 'keep' in entry for name in entry['keep'].names))
 
+    def route_names(self):
+        """The topic names (not patterns) only the routes name: a bag may lack them (a route is where a topic
+        goes when it comes, not a topic a window needs)."""
+        named = set(self.topics + self.keep_names())
+        return [name for name in dict.fromkeys(name for route in self.routes for name in route.selection.names)
+                if name not in named]
+
     def named_topics(self):
         """The topic names (not patterns) of ``topics``, the triggers' ``keep`` lists and the routes, in that
-        order: the names a node warns of when nothing comes on them."""
+        order: the names subscribed (or read from a bag: it must hold them) besides what patterns select, and
+        those a node warns of when nothing comes on them."""
         return list(dict.fromkeys(self.topics + self.keep_names() + [
             name for route in self.routes for name in route.selection.names]))
 

@@ -157,7 +157,7 @@ class SmartNode(object):
             self.logger.on_event(self._flag_learners)
         self.extras = NodeExtras(params, self.logger.writer, self.directory, self.logger.driving_topic, context)
         self.intake = intake.Intake(self.extras.sink(self.logger), self.logger.driving_topic,
-                                    sorted(set(self.logger.side_topics or cfg.topics + cfg.keep_names()).union(
+                                    sorted(set(self.logger.side_topics or cfg.named_topics()).union(
                                         types, self.extras.topics) - {self.logger.driving_topic}),
                                     max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2),
                                     on_new_topic=self._advise_format,

@@ -39,16 +39,29 @@ def _options(cfg, online_dir=None):
 
 def _selected(cfg, options, types, bag):
     """``(options, types, topics)``: the side topics the patterns of ``cfg`` select among the topics of ``bag``
-    (an open bag; none without one), with the names the triggers ``keep`` (a bag must hold them, as the names of
-    ``topics``), and the topics to read, driving first."""
+    (an open bag; none without one), with the names of ``topics``, of the triggers' ``keep`` and of the routes
+    (``Config.named_topics``: a bag must hold them, but for those only a route names: ``absent_route_topics``),
+    and the topics to read, driving first."""
+    from cc_log.logger.config import global_name
+    from cc_log.storage.bag import bagio
     if options['side_topics'] is None:
-        from cc_log.logger.config import global_name
-        from cc_log.storage.bag import bagio
         selected = cfg.selection.select(sorted(bagio.topics_of(bag))) if bag is not None else []
-        options['side_topics'] = list(dict.fromkeys(selected + [global_name(name) for name in cfg.keep_names()]))
+        options['side_topics'] = list(dict.fromkeys(selected + [global_name(name) for name in cfg.named_topics()]))
+    if bag is not None:
+        absent = set(absent_route_topics(cfg, bag))
+        options['side_topics'] = [topic for topic in options['side_topics'] if topic not in absent]
     driving = options['driving_topic']
     topics = [driving] + [t for t in sorted(set(options['side_topics']).union(types)) if t != driving]
     return options, types, topics
+
+
+def absent_route_topics(cfg, bag):
+    """The topic names only the routes of ``cfg`` name that the open ``bag`` lacks (global names, sorted): nothing
+    is routed there."""
+    from cc_log.logger.config import global_name
+    from cc_log.storage.bag import bagio
+    present = set(bagio.topics_of(bag))
+    return sorted(set(global_name(name) for name in cfg.route_names()) - present)
 
 
 def replay_setup(cfg, bag=None):
@@ -100,7 +113,8 @@ def offline_logger(out_dir, options):
 
 def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None, online_dir=None):
     """The smart logger of configuration ``cfg`` over one bag into ``out_dir``: ``replay``'s summary plus
-    ``driving_topic``, ``format``, ``messages`` and ``drift`` (a ``drift.DriftMonitor`` of each classifier, then
+    ``driving_topic``, ``format``, ``messages``, ``absent_route_topics`` (names only a route lists that the bag
+    lacks) and ``drift`` (a ``drift.DriftMonitor`` of each classifier, then
     of each envelope trigger).
     ``progress(done, total)``; ``make_dir(path)`` creates ``out_dir`` once the bag is checked (default:
     ``safe_files.make_dirs``); ``online_dir``: where online learning saves its refits, resuming none (None:
@@ -112,6 +126,7 @@ def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None, online_dir=
     try:
         options, types, topics = _selected(cfg, options, types, bag)
         total = checked_count(bag, topics, types)
+        absent = absent_route_topics(cfg, bag)
     finally:
         bag.close()
     (make_dir or safe_files.make_dirs)(out_dir)
@@ -120,6 +135,7 @@ def replay_one(bag_path, out_dir, cfg, progress=None, make_dir=None, online_dir=
     summary = replay_records(logger, _records(bag_path, topics),
                              None if progress is None else (lambda done: progress(done, total)), bag_path)
     summary.update(driving_topic=options['driving_topic'], format=cfg.format, messages=total, drift=monitors,
+                   absent_route_topics=absent,
                    online=[{'classifier': t.name, 'resumed': t.learner.resumed} for t in logger.classifiers
                            if getattr(t, 'learner', None) is not None])
     return summary

@@ -6,6 +6,7 @@ import math
 import os
 import sys
 
+from cc_log.base.safe_input import printable
 from cc_log.logger import options
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
@@ -107,6 +108,7 @@ def run(args):
         ('drift', [monitor.as_dict() for monitor in summary['drift']]),
         ('online', summary['online']),
         ('keep_budget', summary['keep_budget']),
+        ('absent_route_topics', summary['absent_route_topics']),
     ])
     if args.json:
         print_json(result)
@@ -124,6 +126,8 @@ def run(args):
             number, stamp_text(window['start']), stamp_text(window['end']), window['end'] - window['start'],
             window['messages'], os.path.join(args.out, window['name']),
             ' (%s)' % _files_text(window['files'])))
+    for topic in result['absent_route_topics']:
+        print('  routes: %s is not in the bag; nothing was routed there' % printable(topic))
     for monitor in summary['drift']:
         print('  %s' % monitor.report())
     for learner in summary['online']:
