@@ -221,10 +221,20 @@ def wait_subscribers(topic, count, seconds=30.0):
     raise RuntimeError('%s: fewer than %d subscribers after %g s' % (topic, count, seconds))
 
 
+def require_package():
+    """Exit with one line when ``rosrun cc_log`` cannot find the package (a shell without the catkin workspace)."""
+    found = subprocess.run(['rospack', 'find', 'cc_log'], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                           universal_newlines=True) if shutil.which('rospack') else None
+    if found is None or found.returncode:
+        sys.exit('bench: rosrun cannot find the cc_log package here: run `./dev.sh setup` once, then '
+                 '`source .catkin_ws/devel/setup.bash; export PATH=/usr/bin:$PATH`, and run the bench again')
+
+
 @contextlib.contextmanager
 def roscore_session(prefix):
     """``(Processes, temporary directory)`` with a roscore on a free port running; at the end every process is
-    stopped and the directory removed."""
+    stopped and the directory removed. Exits first when the package cannot be run (``require_package``)."""
+    require_package()
     tmp = tempfile.mkdtemp(prefix=prefix)
     port = free_port()
     env = dict(os.environ, ROS_MASTER_URI='http://127.0.0.1:%d' % port, ROS_HOME=os.path.join(tmp, 'ros_home'),
