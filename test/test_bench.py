@@ -298,3 +298,21 @@ def test_detectors_flag_what_lies_beyond_the_training_windows():
     assert detectors.upper95(4, 1.0) == pytest.approx(10.2416, abs=1e-3)  # chi2.ppf(0.975, 10) / 2: Garwood
     stamps = np.arange(0.0, 10.0, 0.5)
     assert detectors.count_inside(stamps, [(1.0, 2.0), (1.5, 3.0), (8.9, 9.1)]) == 6  # 1.0-3.0 once, and 9.0
+
+
+def test_a_difference_of_one_event_or_one_window_is_not_significant_and_a_large_one_is():
+    """bench/significance.py: McNemar's exact test on the discordant events, the conditional binomial test on two
+    false-window counts over the same hours; a detector dominates significantly only when its better side is."""
+    sys.path.insert(0, BENCH)
+    import significance
+    assert significance.catches_p([1] * 7 + [0] * 5, [0] * 12) == pytest.approx(2 * 0.5 ** 7)
+    assert significance.catches_p([1, 0, 1], [1, 0, 1]) == 1.0  # no event tells them apart
+    assert significance.catches_p([1] * 12 + [0] * 5, [0] * 12 + [1] * 5) == pytest.approx(0.1435, abs=1e-4)
+    assert significance.false_windows_p(0, 1) == 1.0 and significance.false_windows_p(0, 0) == 1.0
+    assert significance.false_windows_p(0, 6) == pytest.approx(2 * 0.5 ** 6)
+    reference = ([1] * 5 + [0] * 14, 1)  # 5 of 19 events caught, 1 false window
+    candidates = {'one more caught': ([1] * 6 + [0] * 13, 1), 'one fewer window': ([1] * 5 + [0] * 14, 0),
+                  'seven more caught': ([1] * 12 + [0] * 7, 1), 'fewer caught': ([1] * 4 + [0] * 15, 0)}
+    found = significance.significantly_dominating(candidates, reference)
+    assert [name for name, _, _ in found] == ['seven more caught']
+    assert found[0][1] == pytest.approx(2 * 0.5 ** 7) and found[0][2] == 1.0
