@@ -80,6 +80,15 @@ def add_candidates(found, lof):
         for level in (3.0, 4.0, 5.0):
             found['env2|maha4|lof%d:%g' % (k, level)] = Either([(env, 2.0), (maha, 4.0), (other, level)])
     found['env2|maha3.5|lof4'] = Either([(env, 2.0), (maha, 3.5), (found['lof'], 4.0)])
+    # what the events a standard detector catches and the default misses cost: a part at level 2
+    found['env2|maha2'] = Either([(env, 2.0), (maha, 2.0)])
+    found['env2|maha4|knnmax2'] = Either([(env, 2.0), (maha, 4.0), (found['knn-max'], 2.0)])
+    found['env2|maha4|lof2'] = Either([(env, 2.0), (maha, 4.0), (found['lof'], 2.0)])
+    # the envelope above the nominal windows it opens on the Husky (2.19x) and ICE-lab (2.56x)
+    for factor in (2.25, 2.6):
+        found['env%g|maha4|lof6' % factor] = Either([(env, factor), (maha, 4.0), (found['lof'], 6.0)])
+    found['env2|maha3.5|lof6|knnmax3'] = Either([(env, 2.0), (maha, 3.5), (found['lof'], 6.0),
+                                                 (found['knn-max'], 3.0)])
     return found
 
 
