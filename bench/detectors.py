@@ -29,10 +29,10 @@ Detectors, all on the same windows (1 s, every 0.25 s) of the same 19 envelope f
   with its joint check) and ``cclog replay --model envelope.json`` of every held-out bag: its windows, its triggers
   (``--cclog classifier``: the classifier's way instead, ``cclog collect`` / ``learn`` of the training bags and
   ``cclog replay`` with the model, detection_heldout.py's ``defaults``);
-- with ``--candidates``, the combinations measured to choose that default (``Either``: ``a|b`` flags what either
-  part flags, each at its base level at level 2): ``env2|maha4`` (the default's rule on the bench's windows: the
-  envelope at 2x or the robust distance at level 4), ``env2|maha3``, ``env1.75|maha4``, ``env2|2nd1.5`` (or two
-  features beyond 1.5x at once), ``env2|maha4|knnmax3``, ``env2|maha4|lof3``.
+- with ``--candidates``, the combinations measured to choose that default (bench/detector_candidates.py: ``a|b``
+  flags what either part flags, each at its base level at level 2; ``env2|maha4`` is the default's rule on the
+  bench's windows) and one table of them: pooled caught and false windows, the robots where a standard detector at
+  the table's level dominates each, and those where it falls short of the envelope at 2x.
 
 The threshold rule, the same for every window detector: ``zero - level x (zero - extreme)`` where ``extreme`` is
 the most anomalous training score and ``zero`` the median training score (the envelope: its physical zero, ratio 0,
@@ -46,7 +46,8 @@ episodes. False windows: the episodes of the held-out nominal driving, per hour,
 (Poisson: chi2.ppf(0.975, 2k + 2) / 2 / T, or 3 / T for k = 0). kept x ideal: odometry messages inside episodes of
 the injected replays / those within [onset - 2 s, end + 2 s] of an event. Per event its extreme: the largest
 envelope ratio (feature over the robot's own floored training maximum) of the windows ending in [onset, end + 1 s];
-"strong" events (extreme >= 1.5x) are the target's population; ``--events`` prints every event with its extreme.
+"strong" events (extreme >= 1.5x) are the target's population; ``--events`` prints every event with its extreme
+and the false windows of the envelope and cclog (when, and their most outstanding feature).
 
 Figures and what they say: docs/DETECTION.md, "Against the standard detectors".
 """
@@ -490,10 +491,13 @@ def main(argv=None):
     parser.add_argument('--cclog', choices=('envelope', 'classifier'), default='envelope',
                         help="cc_log's defaults: the envelope file (default) or the classifier's collect / learn")
     parser.add_argument('--candidates', action='store_true',
-                        help="also the combinations measured to choose cc_log's default (env2|maha4 is it)")
+                        help="also the combinations measured to choose cc_log's default (env2|maha4 is it) and "
+                             "where a standard detector dominates each")
     parser.add_argument('--out', default=os.path.join(tempfile.gettempdir(), 'cc_log_detectors'),
                         help='where the curve PNG goes')
-    parser.add_argument('--events', action='store_true', help='one line per injected event: its extreme, who caught it')
+    parser.add_argument('--events', action='store_true',
+                        help='one line per injected event (its extreme, who caught it) and per false window of the '
+                             'envelope and cclog')
     parser.add_argument('--quick', action='store_true', help='the Husky alone, seed 0')
     args = parser.parse_args(argv)
     robots = ['husky'] if args.quick else args.robots.split(',')
