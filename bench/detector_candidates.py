@@ -39,6 +39,17 @@ class Either(object):
         return -np.max(reached, axis=0)
 
 
+class Both(Either):
+    """Flags a window when every one of its parts would at its own level (``base x level / 2``, as ``Either``):
+    the score is minus the smallest level reached."""
+
+    def score(self, X):
+        if not len(X):
+            return np.zeros(0)
+        reached = [2.0 * (d.zero - part_score(d, X)) / (d.zero - d.extreme) / base for d, base in self.parts]
+        return -np.min(reached, axis=0)
+
+
 def part_score(detector, X):
     """``detector.score(X)``, remembered for the last ``X`` (the parts are shared by many candidates)."""
     memo = getattr(detector, '_memo', None)
@@ -87,6 +98,10 @@ def add_candidates(found, lof):
     # the envelope above the nominal windows it opens on the Husky (2.19x) and ICE-lab (2.56x)
     for factor in (2.25, 2.6):
         found['env%g|maha4|lof6' % factor] = Either([(env, factor), (maha, 4.0), (found['lof'], 6.0)])
+    # the envelope confirmed by a second opinion (the nominal windows it opens on tuc, the Husky and ICE-lab)
+    for name, other, base in (('maha1', maha, 1.0), ('maha1.5', maha, 1.5), ('knnmax1', found['knn-max'], 1.0)):
+        confirmed = Both([(env, 2.0), (other, base)])
+        found['env2&%s|maha4|lof6' % name] = Either([(confirmed, 2.0), (maha, 4.0), (found['lof'], 6.0)])
     found['env2|maha3.5|lof6|knnmax3'] = Either([(env, 2.0), (maha, 3.5), (found['lof'], 6.0),
                                                  (found['knn-max'], 3.0)])
     return found
