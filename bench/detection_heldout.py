@@ -157,6 +157,7 @@ def replay(records, model, setting, tmp, tag, config=None):
     for window in result['windows']:
         meta, _ = log_format.read_window(window['path'])
         window['triggers'] = [t['stamp'] for t in meta.get('triggers', [])]
+        window['why'] = [w.get('text', '') for w in (meta.get('triggers') or [{}])[0].get('why') or []]
     shutil.rmtree(out, ignore_errors=True)
     os.remove(bag)
     return result['windows'], result['drift']

@@ -29,10 +29,10 @@ Detectors, all on the same windows (1 s, every 0.25 s) of the same 19 envelope f
   with its joint check) and ``cclog replay --model envelope.json`` of every held-out bag: its windows, its triggers
   (``--cclog classifier``: the classifier's way instead, ``cclog collect`` / ``learn`` of the training bags and
   ``cclog replay`` with the model, detection_heldout.py's ``defaults``);
-- with ``--candidates``, the combinations measured to choose that default (``Either``: ``a|b`` flags what either
-  part flags, each at its base level at level 2): ``env2|maha4`` (the default's rule on the bench's windows: the
-  envelope at 2x or the robust distance at level 4), ``env2|maha3``, ``env1.75|maha4``, ``env2|2nd1.5`` (or two
-  features beyond 1.5x at once), ``env2|maha4|knnmax3``, ``env2|maha4|lof3``.
+- with ``--candidates``, the combinations measured to choose that default (bench/detector_candidates.py: ``a|b``
+  flags what either part flags, each at its base level at level 2; ``env2|maha4`` is the default's rule on the
+  bench's windows) and one table of them: pooled caught and false windows, the robots where a standard detector at
+  the table's level dominates each, and those where it falls short of the envelope at 2x.
 
 The threshold rule, the same for every window detector: ``zero - level x (zero - extreme)`` where ``extreme`` is
 the most anomalous training score and ``zero`` the median training score (the envelope: its physical zero, ratio 0,
@@ -46,7 +46,8 @@ episodes. False windows: the episodes of the held-out nominal driving, per hour,
 (Poisson: chi2.ppf(0.975, 2k + 2) / 2 / T, or 3 / T for k = 0). kept x ideal: odometry messages inside episodes of
 the injected replays / those within [onset - 2 s, end + 2 s] of an event. Per event its extreme: the largest
 envelope ratio (feature over the robot's own floored training maximum) of the windows ending in [onset, end + 1 s];
-"strong" events (extreme >= 1.5x) are the target's population; ``--events`` prints every event with its extreme.
+"strong" events (extreme >= 1.5x) are the target's population; ``--events`` prints every event with its extreme
+and the false windows of the envelope and cclog (when, and their most outstanding feature).
 
 Figures and what they say: docs/DETECTION.md, "Against the standard detectors".
 """
@@ -57,23 +58,22 @@ import shutil
 import sys
 import tempfile
 import time
-import warnings
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import common  # noqa: E402
+import detector_candidates  # noqa: E402
 import detection_heldout as heldout  # noqa: E402
 import detection_runs  # noqa: E402
 import heldout_data  # noqa: E402
+from standard_detectors import STRIDE, WINDOW, Envelope, Knn, Mahalanobis, Sklearn, Standardised, Tails  # noqa: E402
 
 from cc_log import sim  # noqa: E402
-from cc_log.learning import envelope  # noqa: E402
 from cc_log.features.envelope import ENVELOPE_COLUMNS, envelope_windows, odometry_samples  # noqa: E402
 from cc_log.offline.tuning import windows_of  # noqa: E402
 
 TOPIC = heldout.TOPIC
-WINDOW, STRIDE = 1.0, 0.25
 PRE = POST = heldout.MARGIN
 LATENCY = heldout.LATENCY
 MIN_SPAN_KEPT = heldout.MIN_SPAN_KEPT
@@ -83,176 +83,29 @@ EVENT_EVERY = 60.0      # s of held-out driving per injected event on a long run
 WARMUP = GAP = 5.0      # s: sim.inject_anomalies' warmup and gap
 REAL = ('husky', 'f1tenth', 'icelab', 'pioneer')
 ROBOTS = heldout_data.ORDER + REAL
+STANDARD = ('envelope', 'knn-mean', 'knn-max', 'lof', 'iforest', 'ocsvm', 'mahalanobis', 'ecod', 'copod')
 SHORT = {'planning_failure': 'plan', 'collision': 'coll', 'sudden_acceleration': 'accel',
          'excessive_twisting': 'twist', 'localization_jump': 'loc', 'wheels_slipping': 'slip'}
 
 
-# -- detectors: fit(X) on training windows, score(X) lower = more anomalous, a threshold per level -----------------
-
-class Detector(object):
-    """A window detector: ``fit(X)`` on training windows sets ``zero`` and ``extreme``; ``score(X)``."""
-
-    def threshold(self, level):
-        """Flag a window whose score is below this."""
-        return self.zero - level * (self.zero - self.extreme)
-
-
-class Envelope(Detector):
-    """The physics envelope (``learning.envelope``): per-feature training maximum floored; score = -(largest ratio to
-    it), so level 2 is the envelope trigger's default factor."""
-
-    def fit(self, X):
-        self.limits = envelope.learn([X], TOPIC, WINDOW, STRIDE, len(X) * STRIDE, joint=False).trained()
-        self.zero, self.extreme = 0.0, -1.0
-        return self
-
-    def ratios(self, X):
-        return envelope.ratios(X, self.limits)
-
-    def score(self, X):
-        return -self.ratios(X).max(axis=1) if len(X) else np.zeros(0)
-
-
-class Either(Detector):
-    """Flags a window when any of its parts would at its own level: parts ``[(detector, base level)]``, each at
-    ``base x level / 2``, so level 2 is every part at its base level (the default's shape: the envelope at 2x or
-    the robust distance at level 4). A part reaches level ``(zero - score) / (zero - extreme)``; the score is
-    minus the largest of ``2 x that / base``."""
-
-    def __init__(self, parts):
-        self.parts = parts
-        self.zero, self.extreme = 0.0, -1.0
-
-    def fit(self, X):
-        for detector, _ in self.parts:
-            if not hasattr(detector, 'zero'):
-                detector.fit(X)
-        return self
-
-    def score(self, X):
-        if not len(X):
-            return np.zeros(0)
-        reached = [2.0 * (d.zero - d.score(X)) / (d.zero - d.extreme) / base for d, base in self.parts]
-        return -np.max(reached, axis=0)
-
-
-class SecondLargest(Envelope):
-    """The envelope's second largest ratio: two features beyond their limits at once."""
-
-    def score(self, X):
-        return -np.sort(self.ratios(X), axis=1)[:, -2] if len(X) else np.zeros(0)
-
-
-class Standardised(Detector):
-    """A standard detector on standardised features; ``zero`` / ``extreme``: median / lowest training score."""
-
-    def __init__(self, make):
-        self.make = make
-
-    def fit(self, X):
-        from sklearn.preprocessing import StandardScaler
-        self.scaler = StandardScaler().fit(X)
-        self.model = self.make()
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore')
-            train = np.asarray(self.model.fit(self.scaler.transform(X)), dtype=float)
-        self.zero, self.extreme = float(np.median(train)), float(train.min())
-        return self
-
-    def score(self, X):
-        if not len(X):
-            return np.zeros(0)
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore')
-            return np.asarray(self.model.score(self.scaler.transform(X)), dtype=float)
-
-
-class Knn(object):
-    """Mean or largest distance to the k nearest training windows (training: the window itself left out)."""
-
-    def __init__(self, how, k=5):
-        self.how, self.k = how, k
-
-    def fit(self, X):
-        from sklearn.neighbors import NearestNeighbors
-        self.tree = NearestNeighbors(n_neighbors=self.k).fit(X)
-        return -self._agg(self.tree.kneighbors(X, self.k + 1)[0][:, 1:])
-
-    def score(self, X):
-        return -self._agg(self.tree.kneighbors(X, self.k)[0])
-
-    def _agg(self, distances):
-        return distances.mean(axis=1) if self.how == 'mean' else distances.max(axis=1)
-
-
-class Sklearn(object):
-    """An sklearn estimator: ``fit`` then its training scores by ``train`` and others by ``test`` (method names)."""
-
-    def __init__(self, estimator, train, test):
-        self.estimator, self.train, self.test = estimator, train, test
-
-    def fit(self, X):
-        self.estimator.fit(X)
-        found = getattr(self.estimator, self.train)
-        return found(X) if callable(found) else found
-
-    def score(self, X):
-        return getattr(self.estimator, self.test)(X)
-
-
-class Mahalanobis(object):
-    """Minus the squared Mahalanobis distance to the robust (minimum covariance determinant) centre."""
-
-    def fit(self, X):
-        from sklearn.covariance import MinCovDet
-        self.mcd = MinCovDet(random_state=0).fit(X)
-        return self.score(X)
-
-    def score(self, X):
-        return -self.mcd.mahalanobis(X)
-
-
-class Tails(object):
-    """ECOD (``copod=False``) or COPOD: per feature -log of its empirical left / right tail probability among the
-    training windows (the scored window counted once), the skewness-chosen tail; ECOD takes the largest of the
-    three per feature, COPOD the larger of the skew tail and the mean of both; summed over features, negated."""
-
-    def __init__(self, copod):
-        self.copod = copod
-
-    def fit(self, X):
-        from scipy.stats import skew
-        self.sorted = np.sort(X, axis=0)
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore')
-            self.sign = np.nan_to_num(np.sign(skew(X, axis=0)))
-        return self.score(X)
-
-    def score(self, X):
-        n = len(self.sorted)
-        below = np.stack([np.searchsorted(self.sorted[:, j], X[:, j], side='right') for j in range(X.shape[1])], 1)
-        above = n - np.stack([np.searchsorted(self.sorted[:, j], X[:, j], side='left') for j in range(X.shape[1])], 1)
-        left, right = -np.log((below + 1.0) / (n + 1.0)), -np.log((above + 1.0) / (n + 1.0))
-        skewed = np.where(self.sign < 0, left, np.where(self.sign > 0, right, left + right))
-        if self.copod:
-            per = np.maximum(skewed, 0.5 * (left + right))
-        else:
-            per = np.maximum(np.maximum(left, right), skewed)
-        return -per.sum(axis=1)
-
+# -- detectors ---------------------------------------------------------------------------------------------------
 
 def make_detectors(candidates=False):
     """The window detectors, by name, unfitted (cclog runs through the CLI); with ``candidates`` also the
-    combinations measured to choose cc_log's default (``Either``: ``a|b`` flags what either part flags)."""
+    combinations measured to choose cc_log's default (bench/detector_candidates.py)."""
     from sklearn.ensemble import IsolationForest
     from sklearn.neighbors import LocalOutlierFactor
     from sklearn.svm import OneClassSVM
+
+    def lof(k):
+        return Standardised(lambda: Sklearn(LocalOutlierFactor(n_neighbors=k, novelty=True),
+                                            'negative_outlier_factor_', 'score_samples'))
+
     detectors = collections.OrderedDict([
         ('envelope', Envelope()),
         ('knn-mean', Standardised(lambda: Knn('mean'))),
         ('knn-max', Standardised(lambda: Knn('max'))),
-        ('lof', Standardised(lambda: Sklearn(LocalOutlierFactor(n_neighbors=20, novelty=True),
-                                             'negative_outlier_factor_', 'score_samples'))),
+        ('lof', lof(20)),
         ('iforest', Standardised(lambda: Sklearn(IsolationForest(random_state=0), 'score_samples', 'score_samples'))),
         ('ocsvm', Standardised(lambda: Sklearn(OneClassSVM(nu=0.01, gamma='scale'), 'decision_function',
                                                'decision_function'))),
@@ -261,14 +114,7 @@ def make_detectors(candidates=False):
         ('copod', Standardised(lambda: Tails(copod=True))),
     ])
     if candidates:
-        out = detectors
-        env, maha, second = out['envelope'], out['mahalanobis'], SecondLargest()
-        out['env2|maha4'] = Either([(env, 2.0), (maha, 4.0)])       # the default (cclog learn-envelope)
-        out['env2|maha3'] = Either([(env, 2.0), (maha, 3.0)])
-        out['env1.75|maha4'] = Either([(env, 1.75), (maha, 4.0)])
-        out['env2|2nd1.5'] = Either([(env, 2.0), (second, 1.5)])
-        out['env2|maha4|knnmax3'] = Either([(env, 2.0), (maha, 4.0), (out['knn-max'], 3.0)])
-        out['env2|maha4|lof3'] = Either([(env, 2.0), (maha, 4.0), (out['lof'], 3.0)])
+        detector_candidates.add_candidates(detectors, lof)
     return detectors
 
 
@@ -361,6 +207,19 @@ def extreme_of(envelope, ends, M, entry):
     return float(ratios[row, column]), ENVELOPE_COLUMNS[column]
 
 
+def episodes_of(envelope, ends, M, run, t0):
+    """The envelope's (at 2x) episodes of a nominal run: [('envelope', run, start s, end s, its most outstanding
+    window's feature and ratio)], times into the run."""
+    ratios = envelope.ratios(M) if len(M) else np.zeros((0, len(ENVELOPE_COLUMNS)))
+    flagged = ratios.max(axis=1) > 2.0 if len(M) else np.zeros(0, dtype=bool)
+    out = []
+    for a, b in windows_of(ends[flagged], PRE, POST):
+        inside = (ends >= a) & (ends <= b) & flagged
+        row, column = np.unravel_index(int(np.argmax(np.where(inside[:, None], ratios, -1.0))), ratios.shape)
+        out.append(('envelope', run, a - t0, b - t0, '%s %.2fx' % (ENVELOPE_COLUMNS[column], ratios[row, column])))
+    return out
+
+
 # -- one robot -----------------------------------------------------------------------------------------------------
 
 def learn_envelope(train, tmp):
@@ -392,7 +251,7 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
         detector.fit(X)
     out = {'robot': robot, 'train_s': sum(duration(r) for _, r in train), 'rate': detection_runs.rate_of(train[0][1]),
            'hours': sum(duration(r) for _, r in rest) / 3600.0, 'runs': [name for name, _ in rest],
-           'train_windows': len(X), 'events': [], 'lines': [], 'no_room': 0,
+           'train_windows': len(X), 'events': [], 'lines': [], 'no_room': 0, 'false_episodes': [],
            'stats': {name: {level: tally() for level in LEVELS} for name in detectors}}
     setting = heldout.SETTINGS['defaults']
     if with_cclog:
@@ -414,16 +273,19 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
         stats = out['stats']['cclog'][None]
         if truth is None:
             stats['false'] += len(found)
+            out['false_episodes'] += [('cclog', tag[len('nominal-'):], w['start'] - records[0].stamp,
+                                       w['end'] - records[0].stamp, '; '.join(w['why'])) for w in found]
         else:
             add_events(stats, fires, episodes, truth, reach, np.array([r.stamp for r in records]))
 
     for name, records in rest:
         ends, M = windows(records)
         for label, detector in detectors.items():
-            scores = detector.score(M)
+            scores = detector_candidates.part_score(detector, M)
             for level in LEVELS:
                 out['stats'][label][level]['false'] += len(windows_of(ends[scores < detector.threshold(level)],
                                                                       PRE, POST))
+        out['false_episodes'] += episodes_of(detectors['envelope'], ends, M, name, records[0].stamp)
         cclog(records, 'nominal-' + name)
         for seed in seeds:
             replays = injections(records, seed, envelope)
@@ -436,7 +298,7 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
                     out['events'].append({'type': entry['type'], 'run': name, 'seed': seed, 'feature': feature,
                                           'at': entry['start'] - records[0].stamp, 'extreme': extreme})
                 for label, detector in detectors.items():
-                    scores = detector.score(M)
+                    scores = detector_candidates.part_score(detector, M)
                     for level in LEVELS:
                         fires = ends[scores < detector.threshold(level)]
                         add_events(out['stats'][label][level], fires, windows_of(fires, PRE, POST), truth, WINDOW,
@@ -494,16 +356,14 @@ def point(result, name, level):
 
 
 def dominating(result, level=None):
-    """Window detectors (at ``level``, or at any level of LEVELS) whose recall and false windows are both at
+    """The standard detectors (at ``level``, or at any level of LEVELS) whose recall and false windows are both at
     least as good as cclog's, one strictly better: [(name, level)]."""
     if 'cclog' not in result['stats']:
         return []
     recall, false = recall_false(result, 'cclog', None)
     out = []
-    for name in result['stats']:
+    for name in STANDARD:
         for lv in ([level] if level is not None else LEVELS):
-            if name == 'cclog':
-                continue
             r, f = recall_false(result, name, lv)
             if r >= recall and f <= false and (r > recall or f < false):
                 out.append((name, lv))
@@ -523,6 +383,9 @@ def report_events(r, level):
         caught = [name for name in r['stats'] if r['stats'][name][level if name != 'cclog' else None]['caught'][k]]
         print('  %s seed %d %7.1f s %-19s %6.2fx %-18s %s' % (
             e['run'], e['seed'], e['at'], e['type'], e['extreme'], e['feature'], ' '.join(caught) or 'none'))
+    print('false windows of the envelope (2x) and cclog in the held-out nominal driving (run, s into it, why):')
+    for name, run, start, end, why in r['false_episodes']:
+        print('  %-8s %s %7.1f-%7.1f s %s' % (name, run, start, end, why))
     print()
 
 
@@ -584,6 +447,14 @@ def report_pooled(p, results, level, out_dir):
         print('target no standard detector at level %g dominates cclog on any robot: %s' % (level, '; '.join(
             '%s: %s' % (r['robot'], ', '.join(n for n, _ in dominating(r, level))) for r in results
             if dominating(r, level)) or 'met'))
+    if any('|' in name for name in p['stats']):
+        detector_candidates.report(results, p, level, cell_of, STANDARD, common.table)
+
+
+def cell_of(result, name, level):
+    """(caught, false windows) of one detector at one level (cclog: its own threshold)."""
+    stats = result['stats'][name][level if name != 'cclog' else None]
+    return sum(stats['caught']), stats['false']
 
 
 def plot_curve(p, path):
@@ -620,10 +491,13 @@ def main(argv=None):
     parser.add_argument('--cclog', choices=('envelope', 'classifier'), default='envelope',
                         help="cc_log's defaults: the envelope file (default) or the classifier's collect / learn")
     parser.add_argument('--candidates', action='store_true',
-                        help="also the combinations measured to choose cc_log's default (env2|maha4 is it)")
+                        help="also the combinations measured to choose cc_log's default (env2|maha4 is it) and "
+                             "where a standard detector dominates each")
     parser.add_argument('--out', default=os.path.join(tempfile.gettempdir(), 'cc_log_detectors'),
                         help='where the curve PNG goes')
-    parser.add_argument('--events', action='store_true', help='one line per injected event: its extreme, who caught it')
+    parser.add_argument('--events', action='store_true',
+                        help='one line per injected event (its extreme, who caught it) and per false window of the '
+                             'envelope and cclog')
     parser.add_argument('--quick', action='store_true', help='the Husky alone, seed 0')
     args = parser.parse_args(argv)
     robots = ['husky'] if args.quick else args.robots.split(',')

@@ -272,6 +272,58 @@ def test_a_combination_flags_exactly_what_one_of_its_parts_flags_at_its_base_lev
         assert np.array_equal(flagged, parts), level
 
 
+def test_a_third_part_joins_the_combination_at_its_own_level():
+    """A candidate of three parts (``env2|maha4|lof6``) flags exactly what the envelope at 2x, the robust distance
+    at level 4 or LOF at level 6 flags."""
+    sys.path.insert(0, BENCH)
+    import detectors
+    from cc_log.features.envelope import ENVELOPE_COLUMNS
+    rng = np.random.RandomState(2)
+    train = np.abs(rng.normal(1.0, 0.3, size=(400, len(ENVELOPE_COLUMNS))))
+    windows = np.abs(rng.normal(1.0, 1.2, size=(2000, len(ENVELOPE_COLUMNS))))
+    found = detectors.make_detectors(candidates=True)
+    for name in ('envelope', 'mahalanobis', 'lof'):
+        found[name].fit(train)
+    either = found['env2|maha4|lof6'].fit(train)
+    parts = ((found['envelope'].score(windows) < found['envelope'].threshold(2.0)) |
+             (found['mahalanobis'].score(windows) < found['mahalanobis'].threshold(4.0)) |
+             (found['lof'].score(windows) < found['lof'].threshold(6.0)))
+    flagged = either.score(windows) < either.threshold(2.0)
+    assert flagged.any() and not flagged.all()
+    assert np.array_equal(flagged, parts)
+
+
+def test_the_candidates_table_names_where_a_standard_detector_dominates_each(capsys):
+    """Per candidate the robots where a standard detector at level 2 dominates it (as many caught with fewer false
+    windows, or more with as few) and where it falls short of the envelope at 2x; cclog's own "dominating" column
+    counts the standard detectors only, never a candidate."""
+    sys.path.insert(0, BENCH)
+    import detectors
+
+    def robot(name, cells):
+        stats = {}
+        for detector in detectors.STANDARD + ('env2|maha4|lof6', 'cclog'):
+            caught, false = cells.get(detector, (0, 0))
+            tally = detectors.tally()
+            tally.update(caught=[True] * caught + [False] * (10 - caught), false=false)
+            stats[detector] = {None if detector == 'cclog' else 2.0: tally}
+        return {'robot': name, 'hours': 0.5, 'events': [{'type': 'collision', 'extreme': 1.0}] * 10, 'stats': stats}
+
+    quiet = robot('quiet', {'envelope': (5, 1), 'lof': (7, 0), 'env2|maha4|lof6': (8, 1), 'cclog': (5, 1)})
+    busy = robot('busy', {'envelope': (6, 0), 'knn-max': (6, 0), 'env2|maha4|lof6': (6, 1), 'cclog': (6, 0)})
+    assert detectors.dominating(quiet, 2.0) == [('lof', 2.0)]   # not the candidate, which catches more
+    assert detectors.dominating(busy, 2.0) == []
+    results = [quiet, busy]
+    detectors.detector_candidates.report(results, detectors.pooled(results), 2.0, detectors.cell_of,
+                                         detectors.STANDARD, detectors.common.table)
+    out = capsys.readouterr().out
+    rows = {line.split(' | ')[0].strip('| '): [cell.strip(' |') for cell in line.split(' | ')[1:]]
+            for line in out.splitlines() if line.startswith('| ')}
+    assert rows['env2|maha4|lof6'] == ['14/20', '2', '2.00', 'busy (envelope, knn-max)', '-', 'busy']
+    assert rows['cclog'] == ['11/20', '1', '1.00', 'quiet (lof)', '-', '-']
+    assert 'meeting all three (dominated nowhere, >= envelope 2x on every robot, <= 5 false/h pooled): none' in out
+
+
 def test_detectors_flag_what_lies_beyond_the_training_windows():
     """Every window detector, fitted on synthetic nominal windows, flags a window with every feature far beyond
     them at the table's level, and the typical window never; a window with one feature 5x its training maximum is
