@@ -67,6 +67,7 @@ import detector_candidates  # noqa: E402
 import detection_heldout as heldout  # noqa: E402
 import detection_runs  # noqa: E402
 import heldout_data  # noqa: E402
+import significance  # noqa: E402
 from standard_detectors import STRIDE, WINDOW, Envelope, Knn, Mahalanobis, Sklearn, Standardised, Tails  # noqa: E402
 
 from cc_log import sim  # noqa: E402
@@ -370,6 +371,31 @@ def dominating(result, level=None):
     return out
 
 
+def significantly_dominating(result, level):
+    """The standard detectors at ``level`` that dominate cclog by more than chance (``significance``: McNemar's
+    exact test on the events, the conditional binomial test on the false windows, p < ALPHA on the better side):
+    [(name, catches p, false windows p)]."""
+    if 'cclog' not in result['stats']:
+        return []
+    stats = result['stats']
+    ours = stats['cclog'][None]
+    return significance.significantly_dominating(
+        dict((name, (stats[name][level]['caught'], stats[name][level]['false'])) for name in STANDARD if name in stats),
+        (ours['caught'], ours['false']))
+
+
+def p_values(result, level):
+    """'name (events p P, false windows p Q)' of each standard detector dominating cclog at ``level``."""
+    if 'cclog' not in result['stats']:
+        return ''
+    stats = result['stats']
+    ours = stats['cclog'][None]
+    return ', '.join('%s (events p %.2f, false windows p %.2f)' % (
+        name, significance.catches_p(stats[name][level]['caught'], ours['caught']),
+        significance.false_windows_p(stats[name][level]['false'], ours['false']))
+        for name, _ in dominating(result, level))
+
+
 HEADERS = ['detector', 'caught', 'within 0.5 s', 'strong (>= 1.5x) caught', 'false windows', 'false/h',
            'false/h 95% upper', 'kept x ideal', 'span >= 95% kept', 'caught per type (%s)' % ' '.join(
                SHORT[kind] for kind in sim.ANOMALY_TYPES)]
@@ -400,6 +426,10 @@ def report_robot(r, level):
     print('dominating cclog at level %g: %s; at some level of the curve: %s' % (
         level, ', '.join(name for name, _ in found) or 'none',
         ', '.join('%s (%g)' % item for item in dominating(r)) or 'none'))
+    if found:
+        print('  by more than chance (p < %g)? %s: %s' % (
+            significance.ALPHA, p_values(r, level),
+            ', '.join(name for name, _, _ in significantly_dominating(r, level)) or 'none'))
     if 'cclog' in r['stats']:
         env, ours = recall_false(r, 'envelope', 2.0), recall_false(r, 'cclog', None)
         print('cclog against the envelope at 2x: recall %.0f%% vs %.0f%%, false/h %.1f vs %.1f: at least as many '
@@ -447,6 +477,10 @@ def report_pooled(p, results, level, out_dir):
         print('target no standard detector at level %g dominates cclog on any robot: %s' % (level, '; '.join(
             '%s: %s' % (r['robot'], ', '.join(n for n, _ in dominating(r, level))) for r in results
             if dominating(r, level)) or 'met'))
+        print('target no standard detector at level %g dominates cclog on any robot by more than chance (p < %g): '
+              '%s' % (level, significance.ALPHA, '; '.join(
+                  '%s: %s' % (r['robot'], ', '.join(n for n, _, _ in significantly_dominating(r, level)))
+                  for r in results if significantly_dominating(r, level)) or 'met'))
     if any('|' in name for name in p['stats']):
         detector_candidates.report(results, p, level, cell_of, STANDARD, common.table)
 
