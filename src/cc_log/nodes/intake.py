@@ -125,7 +125,7 @@ def overflow_text(queue, topic, size):
 
 
 class MessageDecoder(object):
-    """Decodes what the intake receives as rospy.AnyMsg (``raw_message.message_class``: the installed class
+    """Decodes what the intake receives (``raw_message.message_class``: the installed class
     of the publisher's type, else one built from the publisher's message definition, which must pass
     ``safe_input.check_definition`` first: genpy runs the code it generates). A definition that does not is
     refused for good: the topic is warned about once, and its messages are counted in ``refused``."""

@@ -1,0 +1,156 @@
+"""cc_log's own TCPROS message reader (nodes/tcpros_receive) on real sockets (``socket.socketpair()``): the framing
+(a 4-byte little-endian length, then the message) read exactly, whatever the sends; the end of the stream and a
+length over the bound as rospy's receive loop expects them; and the hook on a rospy connection run by rospy's
+own ``receive_loop``. Pure: no roscore (a rospy Subscriber and a TCPROS connection object are made, never
+connected to a publisher)."""
+import socket
+import struct
+import threading
+
+import pytest
+
+rospy = pytest.importorskip('rospy')
+from rospy.exceptions import TransportException, TransportTerminated  # noqa: E402
+from rospy.impl.tcpros_base import TCPROSTransport  # noqa: E402
+from rospy.impl.tcpros_pubsub import TCPROSSub  # noqa: E402
+
+from cc_log.nodes import tcpros_receive  # noqa: E402
+from cc_log.nodes.tcpros_receive import FrameReader  # noqa: E402
+
+BOUND = 64 * 1000 ** 2  # the intake queue's default byte bound
+
+
+def frame(payload):
+    return struct.pack('<I', len(payload)) + payload
+
+
+def message(size, seed=0):
+    """``size`` bytes that differ from one message to the next."""
+    return bytes((seed + k * 7) % 251 for k in range(size)) if size < 1000 else \
+        (bytes(range(seed % 256, 256)) + bytes(range(256))) * (size // 512) + bytes(size % 512)
+
+
+@pytest.fixture
+def pair():
+    sender, receiver = socket.socketpair()
+    yield sender, receiver
+    sender.close()
+    receiver.close()
+
+
+def sent_in_thread(sock, parts, end=False):
+    """Send each of ``parts`` (one ``sendall`` each) on a thread, the reader reading meanwhile; ``end``: then
+    end the stream."""
+    def send():
+        for part in parts:
+            sock.sendall(part)
+        if end:
+            sock.shutdown(socket.SHUT_WR)
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    return thread
+
+
+def test_messages_of_0_1_and_5_mb_are_read_whole_and_equal_to_what_was_sent(pair):
+    sender, receiver = pair
+    payloads = [b'', b'x', message(5 * 1000 ** 2, 3), b'', message(700, 1)]
+    thread = sent_in_thread(sender, [frame(p) for p in payloads])
+    reader = FrameReader(receiver, BOUND)
+    read = [reader.read() for _ in payloads]
+    thread.join(60.0)
+    assert read == payloads
+    assert [type(p) for p in read] == [bytes, bytes, bytearray, bytes, bytes]  # a large one: no copy of it made
+
+
+def test_a_message_sent_a_byte_at_a_time_is_read_whole(pair):
+    sender, receiver = pair
+    payloads = [message(300, 5), message(70000, 9)]
+    data = b''.join(frame(p) for p in payloads)
+    thread = sent_in_thread(sender, [data[k:k + 1] for k in range(300 + 4)] + [data[304:]])
+    reader = FrameReader(receiver, BOUND)
+    assert [reader.read(), reader.read()] == payloads
+    thread.join(60.0)
+
+
+def test_many_messages_in_one_send_are_read_one_by_one_in_order(pair):
+    sender, receiver = pair
+    payloads = [message(n % 900, n) for n in range(500)]  # ~225 kB: more than the reader's buffer
+    thread = sent_in_thread(sender, [b''.join(frame(p) for p in payloads)])
+    reader = FrameReader(receiver, BOUND)
+    assert [reader.read() for _ in payloads] == payloads
+    thread.join(60.0)
+
+
+def test_bytes_read_before_the_reader_come_first(pair):
+    sender, receiver = pair
+    first, second = message(100, 1), message(200000, 2)
+    data = frame(first) + frame(second)
+    reader = FrameReader(receiver, BOUND, leftovers=data[:50])
+    reader.take(data[50:110])  # the rest of the first message and the start of the second
+    thread = sent_in_thread(sender, [data[110:]])
+    assert reader.read() == first and reader.read() == second
+    thread.join(60.0)
+
+
+@pytest.mark.parametrize('size, sent', [(10, 5), (200000, 100000), (4, 0)])
+def test_the_end_of_the_stream_mid_message_is_transport_terminated(pair, size, sent):
+    sender, receiver = pair
+    sender.sendall(frame(message(size))[:4 + sent] if sent else b'\x04\x00')
+    sender.shutdown(socket.SHUT_WR)
+    reader = FrameReader(receiver, BOUND)
+    with pytest.raises(TransportTerminated):
+        reader.read()
+
+
+def test_the_end_of_the_stream_between_messages_is_transport_terminated(pair):
+    sender, receiver = pair
+    sender.sendall(frame(b'last'))
+    sender.close()
+    reader = FrameReader(receiver, BOUND)
+    assert reader.read() == b'last'
+    with pytest.raises(TransportTerminated):
+        reader.read()
+
+
+def test_a_length_over_the_bound_is_a_transport_exception_naming_both_and_allocates_nothing(pair):
+    sender, receiver = pair
+    sender.sendall(struct.pack('<I', 0xFFFFFFF0) + b'rest')
+    reader = FrameReader(receiver, 1000)
+    with pytest.raises(TransportException) as raised:
+        reader.read()
+    assert not isinstance(raised.value, TransportTerminated)  # rospy reconnects, it does not give up
+    assert str(raised.value) == ('a message of 4294967280 bytes announced, more than the 1000 bytes the intake '
+                                 'holds (~intake_max_mb): connection dropped')
+    assert len(reader._buffer) == tcpros_receive.READ_BYTES
+
+
+def test_the_hooked_connection_hands_every_message_to_the_intake_under_rospys_receive_loop(pair):
+    """rospy's own receive_loop runs the hooked connection: the bytes the handshake read past its header first,
+    then each message, to ``deliver`` with the connection header; another subscriber of the topic in the process
+    gets each as an AnyMsg, the latch is kept; the end of the stream ends the loop as rospy's receive does."""
+    sender, receiver = pair
+    topic = '/cc_log_test_fast_receive'
+    delivered, others = [], []
+    subscriber = rospy.Subscriber(topic, rospy.AnyMsg, lambda msg: None, queue_size=None)
+    other = rospy.Subscriber(topic, rospy.AnyMsg, others.append, queue_size=None)  # same impl
+    try:
+        tcpros_receive.hook(subscriber, lambda payload, header: delivered.append((payload, header)), BOUND)
+        connection = TCPROSTransport(TCPROSSub(topic, rospy.AnyMsg), topic)
+        connection.set_endpoint_id('http://publisher:1/')
+        assert subscriber.impl.add_connection(connection)
+        payloads = [message(700, n) for n in range(50)] + [message(921600, 7), b'']
+        data = b''.join(frame(p) for p in payloads)
+        connection.socket, connection.header = receiver, {'type': '*', 'latching': '1', 'callerid': '/pub'}
+        connection.is_latched = True
+        connection.read_buff.write(data[:1000])  # as rosgraph's handshake leaves what it read past the header
+        thread = sent_in_thread(sender, [data[1000:]], end=True)
+        connection.receive_loop(subscriber.impl.receive_callback)  # returns at the end of the stream
+        thread.join(60.0)
+    finally:
+        other.unregister()
+        subscriber.unregister()
+    assert [payload for payload, _ in delivered] == payloads
+    assert all(header is connection.header for _, header in delivered)
+    assert [msg._buff for msg in others] == payloads and connection.latch._buff == b''
+    assert connection.stat_num_msg == len(payloads) and connection.stat_bytes == len(data)
+    assert connection.done and connection.read_buff is None  # closed by rospy's loop
