@@ -145,7 +145,12 @@ def read_messages(connection, impl, own, deliver, max_bytes):
             reader.take(pending.getvalue()[:pending.tell()])
             pending.seek(0)
             pending.truncate()
-        payload = reader.read()
+        try:
+            payload = reader.read()
+        except TransportException:
+            raise
+        except Exception as error:  # out of memory...: the stream's place is lost, rospy connects again
+            raise TransportException('receive_once[%s]: unexpected error %s' % (connection.name, error))
         connection.stat_bytes += len(payload) + 4
         connection.stat_num_msg += 1
         deliver(payload, connection.header)
