@@ -7,7 +7,9 @@ windows) then gets real Husky odometry, restamped to now, with a 640x480 rgb8 ca
 different content) after every tenth message, and ``/restarted`` (std_msgs/String) from a publisher process that
 is killed and started again (rospy's reconnection: the master's publisherUpdate, a new connection). After a
 manual ``~trigger`` the window must hold every message published, exactly once, in order and byte-identical to
-what was serialized: the odometry, the images, ``/note`` and both publishers' ``/restarted`` messages.
+what was serialized: the odometry, the images, ``/note`` and both publishers' ``/restarted`` messages. And an
+``Intake`` in this process hands its sink a large message as the ``bytearray`` the reader filled (rospy's receive,
+``fast_receive`` off, hands over ``bytes``), every message equal to what was published.
 
 ``fast_receive_check.py --publish TOPIC COUNT TAG`` is the ``/restarted`` publisher: it publishes ``TAG-0`` ..
 ``TAG-<COUNT-1>`` once a subscriber is connected, then waits to be killed.
@@ -35,6 +37,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import rostest_fixtures as fx  # noqa: E402
 
 from cc_log.msg import AnomalyEvent  # noqa: E402
+from cc_log.nodes import intake  # noqa: E402
 
 PKG = 'cc_log'
 NODE = 'fast_receive_node'
@@ -64,6 +67,16 @@ def publish_until_killed(topic, count, tag):
     for k in range(count):
         publisher.publish(String(data='%s-%d' % (tag, k)))
     rospy.spin()
+
+
+class Sink(object):
+    """Takes the intake's batches (as SmartLogger.on_records)."""
+
+    def __init__(self):
+        self.records = []
+
+    def on_records(self, records):
+        self.records.extend(records)
 
 
 class FastReceiveTest(unittest.TestCase):
@@ -157,6 +170,32 @@ class FastReceiveTest(unittest.TestCase):
         # first one, its post the next POST
         self.assertEqual(len(kept['/odom']), ODOMETRY + POST)
         self.assertTrue(kept['/odom'] == odometry[:ODOMETRY + POST], 'the odometry differs from that published')
+
+    def test_an_intake_hands_over_what_its_own_reader_read_and_what_rospy_read_when_asked(self):
+        for fast, prefix in ((True, '/fast'), (False, '/rospy')):
+            sink = Sink()
+            reader = intake.Intake(sink, prefix + '/odom', [prefix + '/image'], fast_receive=fast)
+            odom_pub = rospy.Publisher(prefix + '/odom', Odometry, queue_size=100)
+            image_pub = rospy.Publisher(prefix + '/image', Image, queue_size=100)
+            try:
+                fx.wait_for(lambda: odom_pub.get_num_connections() and image_pub.get_num_connections(), 20,
+                            'the intake to subscribe %s' % prefix)
+                images = [Image(height=480, width=640, encoding='rgb8', step=1920, data=bytes([k]) * 921600)
+                          for k in range(5)]
+                odometry = [record.msg for record in self.odom[:5]]
+                for image, odom in zip(images, odometry):
+                    image_pub.publish(image)
+                    odom_pub.publish(odom)
+                fx.wait_for(lambda: sum(reader.counts().values()) == 10, 20, 'the intake to receive %s' % prefix)
+                self.assertTrue(reader.sync(20.0))
+            finally:
+                reader.stop()
+            kept = {topic: [record.raw for record in sink.records if record.topic == topic]
+                    for topic in (prefix + '/odom', prefix + '/image')}
+            self.assertTrue(kept[prefix + '/image'] == [serialized(image) for image in images], prefix)
+            self.assertTrue(kept[prefix + '/odom'] == [serialized(odom) for odom in odometry], prefix)
+            self.assertEqual({type(data) for data in kept[prefix + '/image']}, {bytearray if fast else bytes})
+            self.assertEqual({type(data) for data in kept[prefix + '/odom']}, {bytes})
 
 
 if __name__ == '__main__':
