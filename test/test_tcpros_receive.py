@@ -1,7 +1,7 @@
 """cc_log's own TCPROS message reader (nodes/tcpros_receive) on real sockets (``socket.socketpair()``): the framing
-(a 4-byte little-endian length, then the message) read exactly, whatever the sends; the end of the stream and a
-length over the bound as rospy's receive loop expects them; and the hook on a rospy connection run by rospy's
-own ``receive_loop``. Pure: no roscore (a rospy Subscriber and a TCPROS connection object are made, never
+(a 4-byte little-endian length, then the message) read exactly, whatever the sends; the end of the stream as
+rospy's receive loop expects it, a message over the bound read past, not kept; and the hook on a rospy connection
+run by rospy's own ``receive_loop``. Pure: no roscore (a rospy Subscriber and a TCPROS connection object are made, never
 connected to a publisher)."""
 import socket
 import struct
@@ -10,7 +10,7 @@ import threading
 import pytest
 
 rospy = pytest.importorskip('rospy')
-from rospy.exceptions import TransportException, TransportTerminated  # noqa: E402
+from rospy.exceptions import TransportTerminated  # noqa: E402
 from rospy.impl.tcpros_base import TCPROSTransport  # noqa: E402
 from rospy.impl.tcpros_pubsub import TCPROSSub  # noqa: E402
 
@@ -27,7 +27,7 @@ def frame(payload):
 def message(size, seed=0):
     """``size`` bytes that differ from one message to the next."""
     return bytes((seed + k * 7) % 251 for k in range(size)) if size < 1000 else \
-        (bytes(range(seed % 256, 256)) + bytes(range(256))) * (size // 512) + bytes(size % 512)
+        (bytes(range(256)) * (size // 256 + 2))[seed % 256:seed % 256 + size]
 
 
 @pytest.fixture
@@ -112,15 +112,29 @@ def test_the_end_of_the_stream_between_messages_is_transport_terminated(pair):
         reader.read()
 
 
-def test_a_length_over_the_bound_is_a_transport_exception_naming_both_and_allocates_nothing(pair):
+@pytest.mark.parametrize('size', [2000, 200000])
+def test_a_message_over_the_bound_is_read_past_not_kept_and_the_next_one_read(pair, size):
+    sender, receiver = pair
+    thread = sent_in_thread(sender, [frame(message(size, 1)) + frame(b'next') + frame(message(size, 2))])
+    reader = FrameReader(receiver, 1000)
+    with pytest.raises(tcpros_receive.TooLarge) as raised:
+        reader.read()
+    assert (raised.value.size, raised.value.bound) == (size, 1000)
+    assert str(raised.value) == 'a message of %d bytes, more than the 1000 bytes the intake holds' % size
+    assert reader.read() == b'next'
+    with pytest.raises(tcpros_receive.TooLarge):
+        reader.read()
+    assert len(reader._buffer) == tcpros_receive.READ_BYTES  # nothing allocated for them
+    thread.join(60.0)
+
+
+def test_a_bogus_length_allocates_nothing_and_the_end_of_the_stream_ends_it(pair):
     sender, receiver = pair
     sender.sendall(struct.pack('<I', 0xFFFFFFF0) + b'rest')
-    reader = FrameReader(receiver, 1000)
-    with pytest.raises(TransportException) as raised:
+    sender.shutdown(socket.SHUT_WR)
+    reader = FrameReader(receiver, BOUND)
+    with pytest.raises(TransportTerminated):
         reader.read()
-    assert not isinstance(raised.value, TransportTerminated)  # rospy reconnects, it does not give up
-    assert str(raised.value) == ('a message of 4294967280 bytes announced, more than the 1000 bytes the intake '
-                                 'holds (~intake_max_mb): connection dropped')
     assert len(reader._buffer) == tcpros_receive.READ_BYTES
 
 
@@ -130,16 +144,18 @@ def test_the_hooked_connection_hands_every_message_to_the_intake_under_rospys_re
     gets each as an AnyMsg, the latch is kept; the end of the stream ends the loop as rospy's receive does."""
     sender, receiver = pair
     topic = '/cc_log_test_fast_receive'
-    delivered, others = [], []
+    delivered, others, refused = [], [], []
     subscriber = rospy.Subscriber(topic, rospy.AnyMsg, lambda msg: None, queue_size=None)
     other = rospy.Subscriber(topic, rospy.AnyMsg, others.append, queue_size=None)  # same impl
     try:
-        tcpros_receive.hook(subscriber, lambda payload, header: delivered.append((payload, header)), BOUND)
+        tcpros_receive.hook(subscriber, lambda payload, header: delivered.append((payload, header)),
+                            refused.append, 1 << 20)
         connection = TCPROSTransport(TCPROSSub(topic, rospy.AnyMsg), topic)
         connection.set_endpoint_id('http://publisher:1/')
         assert subscriber.impl.add_connection(connection)
         payloads = [message(700, n) for n in range(50)] + [message(921600, 7), b'']
-        data = b''.join(frame(p) for p in payloads)
+        data = b''.join(frame(p) for p in payloads[:20]) + frame(bytes(3 << 20)) + \
+            b''.join(frame(p) for p in payloads[20:])
         connection.socket, connection.header = receiver, {'type': '*', 'latching': '1', 'callerid': '/pub'}
         connection.is_latched = True
         connection.read_buff.write(data[:1000])  # as rosgraph's handshake leaves what it read past the header
@@ -149,8 +165,8 @@ def test_the_hooked_connection_hands_every_message_to_the_intake_under_rospys_re
     finally:
         other.unregister()
         subscriber.unregister()
-    assert [payload for payload, _ in delivered] == payloads
+    assert [payload for payload, _ in delivered] == payloads and refused == [3 << 20]  # the large one read past
     assert all(header is connection.header for _, header in delivered)
     assert [msg._buff for msg in others] == payloads and connection.latch._buff == b''
-    assert connection.stat_num_msg == len(payloads) and connection.stat_bytes == len(data)
+    assert connection.stat_num_msg == len(payloads) and connection.stat_bytes == len(data) - 4 - (3 << 20)
     assert connection.done and connection.read_buff is None  # closed by rospy's loop

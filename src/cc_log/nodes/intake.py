@@ -229,7 +229,7 @@ class Intake(object):
                                       tcp_nodelay=self.tcp_nodelay)
         if self.fast_receive:
             tcpros_receive.hook(subscriber, lambda data, header: self.put(resolved, data, header),
-                                self.queue.max_bytes)
+                                lambda size: self.refuse(resolved, size), self.queue.max_bytes)
         self.subscribers[resolved] = subscriber
         return resolved
 
@@ -257,6 +257,13 @@ class Intake(object):
         if not self.queue.put((topic, data, header, rospy.get_rostime()), size, topic=topic):
             self.dropped += 1
             rospy.logwarn_throttle(10.0, overflow_text(self.queue, topic, size))
+
+    def refuse(self, topic, size):
+        """A message of ``size`` bytes on ``topic``, larger than the whole queue, read past and not kept
+        (``tcpros_receive``): counted and warned as ``put`` counts one that does not fit."""
+        self.queue.put('too large', size, topic=topic)  # never fits: counted in overflowed and received
+        self.dropped += 1
+        rospy.logwarn_throttle(10.0, overflow_text(self.queue, topic, size))
 
     def sync(self, timeout=5.0):
         """Wait until every message received before the call has been handed to the sink; False when that

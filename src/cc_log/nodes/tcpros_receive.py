@@ -2,9 +2,10 @@
 
 rospy stays the node: it registers with the master, takes publisherUpdate, asks each publisher for the topic
 (requestTopic), connects and does the connection header handshake, reconnects and shuts down. Only the reading
-of messages off a connected socket is cc_log's: ``hook(subscriber, deliver, max_bytes)`` gives every connection
-of ``subscriber`` an instance-level ``receive_once`` that reads one message (``FrameReader``) and hands its
-serialized bytes straight to ``deliver(payload, connection_header)``, skipping rospy's receive (a BytesIO filled
+of messages off a connected socket is cc_log's: ``hook(subscriber, deliver, refuse, max_bytes)`` gives every
+connection of ``subscriber`` an instance-level ``receive_once`` that reads one message (``FrameReader``) and hands
+its serialized bytes straight to ``deliver(payload, connection_header)`` (one over ``max_bytes`` is read past, never
+held, and its size handed to ``refuse(size)``), skipping rospy's receive (a BytesIO filled
 a piece at a time, its message cut out, an ``AnyMsg``, the subscriber's callback machinery and its locks).
 
 It relies on these internals of rospy (Noetic, frozen), all read here and nowhere else:
@@ -34,6 +35,14 @@ LENGTH = struct.Struct('<I')  # the 4-byte little-endian length before each mess
 READ_BYTES = 1 << 16          # bytes asked of the socket at a time for messages smaller than that
 
 
+class TooLarge(Exception):
+    """A message of ``size`` bytes, more than the ``bound``: read past, not kept."""
+
+    def __init__(self, size, bound):
+        Exception.__init__(self, 'a message of %d bytes, more than the %d bytes the intake holds' % (size, bound))
+        self.size, self.bound = size, bound
+
+
 class FrameReader(object):
     """Reads TCPROS messages (a 4-byte little-endian length, then that many bytes) off a connected blocking
     socket, one per ``read()``.
@@ -41,8 +50,9 @@ class FrameReader(object):
     Small messages are read ``READ_BYTES`` at a time into one reused buffer (one ``recv_into`` for a message that
     came alone, one for many that came together) and returned as ``bytes``; a message larger than that buffer is
     returned as a ``bytearray`` of its size filled by ``recv_into`` (no other copy but the few bytes read with its
-    length). A length over ``max_bytes`` is a ``TransportException`` (the stream is not read further; nothing is
-    allocated); the end of the stream, or a socket error, a ``TransportTerminated``, as rospy's ``recv_buff``.
+    length). A message over ``max_bytes`` is read past through the reused buffer (nothing allocated, the stream kept)
+    and ``TooLarge`` raised; the end of the stream, or a socket error, is a ``TransportTerminated``, as rospy's
+    ``recv_buff``.
     ``leftovers``: bytes of the stream read before (past the handshake)."""
 
     def __init__(self, sock, max_bytes, leftovers=b''):
@@ -72,8 +82,8 @@ class FrameReader(object):
             if unread >= 4:
                 (length,) = LENGTH.unpack_from(self._buffer, self._start)
                 if length > self.max_bytes:
-                    raise TransportException('a message of %d bytes announced, more than the %d bytes the intake '
-                                             'holds (~intake_max_mb): connection dropped' % (length, self.max_bytes))
+                    self._skip(length)
+                    raise TooLarge(length, self.max_bytes)
                 begin = self._start + 4
                 if unread - 4 >= length:
                     self._start = begin + length
@@ -81,6 +91,16 @@ class FrameReader(object):
                 if 4 + length > len(self._buffer):
                     return self._read_large(length, begin)
             self._receive()
+
+    def _skip(self, length):
+        """Read past the unread bytes' first message (``length`` bytes after its length)."""
+        left = length - (self._end - self._start - 4)
+        if left <= 0:  # all read already: the next message starts right after it
+            self._start += 4 + length
+            return
+        self._start = self._end = 0
+        while left > 0:
+            left -= self._recv_into(self._view[:min(left, len(self._buffer))])
 
     def _read_large(self, length, begin):
         payload = bytearray(length)
@@ -110,23 +130,23 @@ class FrameReader(object):
         return count
 
 
-def hook(subscriber, deliver, max_bytes):
+def hook(subscriber, deliver, refuse, max_bytes):
     """Read the messages of every connection of ``subscriber`` (a rospy.Subscriber), those open and those to
-    come, with a ``FrameReader`` (messages over ``max_bytes`` refused), handing each to ``deliver(payload,
-    connection_header)`` on the connection's thread instead of to the subscriber's callback."""
+    come, with a ``FrameReader``, handing each to ``deliver(payload, connection_header)`` on the connection's
+    thread instead of to the subscriber's callback; the size of one over ``max_bytes`` to ``refuse(size)``."""
     impl = subscriber.impl
     add_connection = impl.add_connection
     own = (subscriber.callback, subscriber.callback_args)
 
     def add_reading_connection(connection):
-        read_messages(connection, impl, own, deliver, max_bytes)
+        read_messages(connection, impl, own, deliver, refuse, max_bytes)
         return add_connection(connection)
     impl.add_connection = add_reading_connection
     for connection in list(impl.connections):
-        read_messages(connection, impl, own, deliver, max_bytes)
+        read_messages(connection, impl, own, deliver, refuse, max_bytes)
 
 
-def read_messages(connection, impl, own, deliver, max_bytes):
+def read_messages(connection, impl, own, deliver, refuse, max_bytes):
     """Give ``connection`` (a rospy TCPROSTransport of ``impl``) a ``receive_once`` that reads one message with a
     ``FrameReader``, counts it in rospy's statistics, hands it to ``deliver`` and returns no message to rospy.
     Other subscribers of the topic in this process (callbacks of ``impl`` besides ``own``, the hooked
@@ -147,6 +167,9 @@ def read_messages(connection, impl, own, deliver, max_bytes):
             pending.truncate()
         try:
             payload = reader.read()
+        except TooLarge as error:
+            refuse(error.size)
+            return []
         except TransportException:
             raise
         except Exception as error:  # out of memory...: the stream's place is lost, rospy connects again
