@@ -170,3 +170,21 @@ def test_the_hooked_connection_hands_every_message_to_the_intake_under_rospys_re
     assert [msg._buff for msg in others] == payloads and connection.latch._buff == b''
     assert connection.stat_num_msg == len(payloads) and connection.stat_bytes == len(data) - 4 - (3 << 20)
     assert connection.done and connection.read_buff is None  # closed by rospy's loop
+
+
+def test_the_intake_counts_and_warns_a_message_read_past_as_one_its_queue_cannot_take(caplog):
+    from cc_log.nodes import intake
+    receiver = intake.Intake.__new__(intake.Intake)  # the queue's part only: no subscribers, no thread
+    receiver.queue, receiver.dropped = intake.IntakeQueue(100, 1000), 0
+    initialized = rospy.rostime.is_rostime_initialized()
+    rospy.rostime.set_rostime_initialized(True)  # wall-clock time for rospy's throttled warning, as a node has
+    try:
+        with caplog.at_level('WARNING', logger='rosout'):
+            receiver.refuse('/cloud', 3 << 20)
+    finally:
+        rospy.rostime.set_rostime_initialized(initialized)
+    assert (receiver.queue.overflowed, receiver.dropped, receiver.queue.qsize()) == (1, 1, 0)
+    assert receiver.counts() == {'/cloud': 1} and receiver.sizes() == {'/cloud': 3 << 20}
+    assert [r.getMessage() for r in caplog.records] == [
+        'a message of 3145728 bytes on /cloud is larger than the whole intake queue (~intake_max_mb 0.001): dropped; '
+        'raise ~intake_max_mb (1 dropped so far)']
