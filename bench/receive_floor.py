@@ -13,7 +13,9 @@ socketpair, one at a time (each once the reader has the one before, as a topic's
 - rospy: ``rospy.impl.tcpros_base.TCPROSTransport.receive_once`` on a ``TCPROSSub`` of ``rospy.AnyMsg``
   (rospy's code as a subscriber runs it: ``sock.recv(buff_size)`` into a BytesIO, then ``read_messages`` cuts
   each message out), with ``buff_size`` 64 kB and 1 MB; or
-- floor: ``recv_into`` the length, then ``recv_into`` a bytearray of that length (one copy, from the kernel).
+- floor: ``recv_into`` the length, then ``recv_into`` a bytearray of that length (one copy, from the kernel);
+- cc_log: ``nodes.tcpros_receive.FrameReader.read`` (what the intake runs with ``~fast_receive``: 64 kB
+  ``recv_into`` a reused buffer, a larger message ``recv_into`` a bytearray of its size).
 Figures: the reader's thread CPU time (``time.thread_time``) per message, and per MB; the sender's is apart.
 """
 import argparse
@@ -73,6 +75,16 @@ def floor_reader(sock):
     return read
 
 
+def cc_log_reader(sock):
+    from cc_log.nodes.tcpros_receive import FrameReader
+    reader = FrameReader(sock, 1 << 31)
+
+    def read():
+        reader.read()
+        return 1
+    return read
+
+
 def measure(size, reader_of, seconds, paced):
     """``(reader CPU seconds per message, messages)`` of ``seconds`` of reading messages of ``size`` bytes."""
     a, b = socket.socketpair()
@@ -106,7 +118,8 @@ def main(argv=None):
                                                         'one message at a time')])
     readers = (('rospy 64 kB reads', lambda sock: rospy_reader(sock, 1 << 16)),
                ('rospy 1 MB reads', lambda sock: rospy_reader(sock, 1 << 20)),
-               ('recv_into (floor)', floor_reader))
+               ('recv_into (floor)', floor_reader),
+               ('cc_log FrameReader', cc_log_reader))
     rows = []
     for name, size in SIZES:
         row = [name, size]

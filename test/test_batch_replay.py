@@ -232,13 +232,9 @@ def test_the_intake_feeds_a_drained_batch_at_once_and_drops_only_a_message_that_
     logger.on_records = lambda batch: (calls.append(len(batch)), feed(batch))
     intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers, no thread
     intake.sink, intake.decoder, intake.dropped = logger, MessageDecoder(), 0
-    intake._typed, intake._large_reads, intake.subscribers, intake._lock = set(), set(), {}, threading.Lock()
-    batch = []
-    for k, record in enumerate(records):
-        msg = rospy.AnyMsg()
-        msg._buff = record.raw[:30] if k == 10 else record.raw
-        msg._connection_header = record.connection
-        batch.append((record.topic, msg, rospy.Time.from_sec(record.stamp)))
+    intake._typed, intake.subscribers, intake._lock = set(), {}, threading.Lock()
+    batch = [(record.topic, record.raw[:30] if k == 10 else record.raw, record.connection,
+              rospy.Time.from_sec(record.stamp)) for k, record in enumerate(records)]
     initialized = rospy.rostime.is_rostime_initialized()
     rospy.rostime.set_rostime_initialized(True)  # wall-clock time for rospy's throttled warning, as a node has
     try:
@@ -296,13 +292,12 @@ def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, t
     intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers
     intake.sink, intake.decoder, intake.dropped, intake.cpu_seconds = logger, MessageDecoder(), 0, 0.0
     intake.queue, intake.batch_delay = IntakeQueue(1000, 10 ** 7), 3600.0
-    intake._typed, intake._large_reads, intake.subscribers, intake._lock = set(), set(), {}, threading.Lock()
+    intake._typed, intake.subscribers, intake._lock = set(), {}, threading.Lock()
     intake._thread = threading.Thread(target=intake._feed, daemon=True)
     intake._thread.start()
     for record in records:
-        msg = rospy.AnyMsg()
-        msg._buff, msg._connection_header = record.raw, record.connection
-        intake.queue.put((record.topic, msg, rospy.Time.from_sec(record.stamp)), len(record.raw))
+        intake.queue.put((record.topic, record.raw, record.connection, rospy.Time.from_sec(record.stamp)),
+                         len(record.raw))
     assert intake.sync(timeout=60.0)
     assert logger.stats()['messages_buffered'] == 25
     intake.queue.put(None, force=True)  # the end mark: fed at once too

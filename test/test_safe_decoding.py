@@ -362,30 +362,27 @@ def test_a_crafted_leftover_is_kept_unrecovered_and_never_runs(fmt, marker, tmp_
 
 
 def test_a_side_topic_publisher_with_a_crafted_definition_is_refused_counted_and_warned_once(marker, caplog):
-    import rospy
     from cc_log.nodes.intake import MessageDecoder
     from std_msgs.msg import String
 
     def any_msg(msg_type, definition, data):
-        msg = rospy.AnyMsg()
-        msg._connection_header = {'type': msg_type, 'message_definition': definition, 'md5sum': '*'}
-        msg._buff = data
-        return msg
+        """``(data, connection header)`` as the intake queues them."""
+        return data, {'type': msg_type, 'message_definition': definition, 'md5sum': '*'}
 
     decoder = MessageDecoder({Odometry._type: Odometry})
     evil = any_msg('cc_log_test/Evil', payload(marker) + '\nfloat64 x\n', struct.pack('<d', 1.5))
     with caplog.at_level('WARNING', logger='rosout'):
-        assert decoder.decode(evil, '/side') is None and decoder.decode(evil, '/side') is None
+        assert decoder.decode(*evil, '/side') is None and decoder.decode(*evil, '/side') is None
     assert decoder.refused == 2
     warned = [r.getMessage() for r in caplog.records if 'refused' in r.getMessage()]
     assert len(warned) == 1 and warned[0].startswith('topic /side: messages refused, never decoded: message '
                                                      'definition of cc_log_test/Evil: ')
-    assert decoder.decode(any_msg('__import__("os")/x', 'float64 x\n', b''), '/side') is None
-    good = decoder.decode(any_msg('cc_log_test/Good', 'float64 x\n', struct.pack('<d', 1.5)), '/side')
+    assert decoder.decode(*any_msg('__import__("os")/x', 'float64 x\n', b''), '/side') is None
+    good = decoder.decode(*any_msg('cc_log_test/Good', 'float64 x\n', struct.pack('<d', 1.5)), '/side')
     assert good.x == 1.5 and decoder.refused == 3
     buffer = io.BytesIO()
     String(data='installed').serialize(buffer)
-    assert decoder.decode(any_msg('std_msgs/String', '', buffer.getvalue()), '/s').data == 'installed'
+    assert decoder.decode(*any_msg('std_msgs/String', '', buffer.getvalue()), '/s').data == 'installed'
 
 
 # -- nesting, metadata types, xz bombs, FIFOs -----------------------------------------------------------------

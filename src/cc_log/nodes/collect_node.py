@@ -21,8 +21,8 @@ Parameters
   ``~window``, ``~feature_set`` (its first input is the driving topic, ``odom``; its other inputs are
   subscribed under their role names, e.g. ``cmd_vel``: remap them), ``~stride``, ``~max_buffer_mb`` (a new file
   starts when it is reached), ``~max_disk_mb``, ``~max_files``, ``~min_free_mb``, ``~name_prefix`` (files
-  ``<name_prefix>_<UTC>_<reason>``), ``~tcp_nodelay``, ``~chunk_kb``. Each resolved value is logged once
-  (``~quiet``: warnings and errors only).
+  ``<name_prefix>_<UTC>_<reason>``), ``~tcp_nodelay``, ``~fast_receive``, ``~chunk_kb``. Each resolved value is
+  logged once (``~quiet``: warnings and errors only).
 
 Every parameter is type-checked (one line ``/collect_logger: ~<name>: ...``, exit 1). On start, crash
 leftovers in ``~directory`` are recovered or reported and kept, as the smart node does. Files and vectors
@@ -104,7 +104,8 @@ class CollectNode(object):
         self.extras = NodeExtras(params, self.collector.writer, self.directory, self.collector.driving_topic)
         self.intake = Intake(self.extras.sink(self.collector), self.collector.driving_topic,
                              sorted(set(topics).union(types, self.extras.topics) - {self.collector.driving_topic}),
-                             tcp_nodelay=params.option('tcp_nodelay'))
+                             tcp_nodelay=params.option('tcp_nodelay'),
+                             fast_receive=params.option('fast_receive'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         driving = self.intake.driving_topic
         self.silence = TopicSilenceWatch(driving, types.get(self.collector.driving_topic), self.intake.counts,

@@ -1,15 +1,15 @@
 """The message intake of the nodes (smart_logger and collect_logger): subscribers that only enqueue.
 
-Every topic arrives as ``rospy.AnyMsg``: the serialized bytes and the publisher's connection header
-(type, md5sum, message_definition, callerid, latching). The subscriber callback only puts them on a bounded
-queue (``IntakeQueue``); one feeder thread hands them to the sink in arrival order, draining the queue in
-batches: the whole batch to ``sink.on_records`` as ``records.Record``s of serialized bytes when the sink
+Every topic arrives as serialized bytes with the publisher's connection header (type, md5sum,
+message_definition, callerid, latching): read off rospy's connections by cc_log itself (``tcpros_receive``,
+``fast_receive``, the default), else rospy's own receive hands them over as ``rospy.AnyMsg``. Either only puts
+them on a bounded queue (``IntakeQueue``); one feeder thread hands them to the sink in arrival order, draining the
+queue in batches: the whole batch to ``sink.on_records`` as ``records.Record``s of serialized bytes when the sink
 takes batches (``SmartLogger``), else each to ``sink.on_raw(topic, bytes, connection, receipt)`` when it takes
 serialized messages, else decoded to ``sink.on_message(topic, msg, receipt, size)``. A connection whose
 message definition ``safe_input.check_definition`` refuses is never decoded (``MessageDecoder``).
 ``Intake.subscribe(topic)`` adds a topic at any time; ``Intake.sync()`` waits until what was received before
-the call has been handed to the sink (a manual trigger then sees it). rospy reads each topic's socket 64 kB at a
-time, 1 MB once the topic's messages prove heavy (``receive_bytes``; docs/COST.md).
+the call has been handed to the sink (a manual trigger then sees it).
 
 A batch is what arrived during ``batch_delay`` seconds (0.5) since its first message, or less when
 ``BATCH_MESSAGES`` messages or an eighth of the queue's byte bound came first: the sink's fixed cost per batch is
@@ -25,45 +25,14 @@ import rospy
 
 from cc_log.base import errors, raw_message
 from cc_log.logger import options
-from cc_log.buffer import window_prep
 from cc_log.base.records import Record
+from cc_log.nodes import tcpros_receive
 
 DEFAULT_MAX_MESSAGES = options.get('intake_max_messages').default  # beyond, messages are dropped and counted
 DEFAULT_MAX_MB = options.get('intake_max_mb').default              # MB of serialized messages
 FEED_BATCH_DELAY = 0.5        # seconds at most the feeder lets messages gather before draining them in a batch
 BATCH_MESSAGES = 1024         # messages that make a batch before the delay is over
 BATCH_BYTES_SHARE = 8         # ... or this share of the queue's byte bound (an eighth)
-SMALL_RECEIVE_BYTES = 1 << 16  # bytes rospy reads from a light topic's socket at a time (its default): a larger
-#                                read costs more than the message (recv(1 MB) of a 700-byte odometry: ~14 us of CPU,
-#                                recv(64 kB): ~1.3 us; Python allocates and shrinks the whole size each read)
-LARGE_RECEIVE_BYTES = 1 << 20  # ... of a heavy topic's (64 kB takes a camera frame in 15 reads, each a pass of
-#                                rospy's Python receive loop)
-HEAVY_TYPES = frozenset(['sensor_msgs/Image', 'sensor_msgs/CompressedImage', 'sensor_msgs/PointCloud2',
-                         'sensor_msgs/PointCloud', 'sensor_msgs/LaserScan', 'sensor_msgs/MultiEchoLaserScan',
-                         'nav_msgs/OccupancyGrid', 'theora_image_transport/Packet'])
-
-
-def receive_bytes(msg_type, size):
-    """The bytes rospy should read at a time from the socket of a topic of ``msg_type`` whose messages are
-    ``size`` serialized bytes: ``LARGE_RECEIVE_BYTES`` for the heavy types (``HEAVY_TYPES``) and messages of
-    ``window_prep.HEAVY_BYTES`` or more, else ``SMALL_RECEIVE_BYTES``."""
-    if msg_type in HEAVY_TYPES or size >= window_prep.HEAVY_BYTES:
-        return LARGE_RECEIVE_BYTES
-    return SMALL_RECEIVE_BYTES
-
-
-def set_receive_bytes(subscriber, buff_size):
-    """Make rospy read ``buff_size`` bytes at a time on every connection of ``subscriber``, those to come
-    (``impl.set_buff_size``) and those open (their protocol's ``buff_size``, read before each ``recv``: rospy's
-    internals, tcpros_base.TCPROSTransport.receive_once; a rospy without them keeps its reads as they are)."""
-    impl = getattr(subscriber, 'impl', None)
-    if impl is None or getattr(impl, 'buff_size', buff_size) == buff_size:
-        return
-    impl.set_buff_size(buff_size)
-    for connection in list(getattr(impl, 'connections', ())):
-        protocol = getattr(connection, 'protocol', None)
-        if protocol is not None and hasattr(protocol, 'buff_size'):
-            protocol.buff_size = buff_size
 
 
 class IntakeQueue(object):
@@ -156,7 +125,7 @@ def overflow_text(queue, topic, size):
 
 
 class MessageDecoder(object):
-    """Decodes what the intake receives as rospy.AnyMsg (``raw_message.message_class``: the installed class
+    """Decodes what the intake receives (``raw_message.message_class``: the installed class
     of the publisher's type, else one built from the publisher's message definition, which must pass
     ``safe_input.check_definition`` first: genpy runs the code it generates). A definition that does not is
     refused for good: the topic is warned about once, and its messages are counted in ``refused``."""
@@ -188,16 +157,14 @@ class MessageDecoder(object):
             return False
         return True
 
-    def decode(self, msg, topic):
-        """The deserialized message, or None when its definition is refused."""
-        if not isinstance(msg, rospy.AnyMsg):
-            return msg
-        header = msg._connection_header
+    def decode(self, data, header, topic):
+        """The message of the serialized ``data`` of a connection ``header``, deserialized, or None when its
+        definition is refused."""
         if not self.accepts(header, topic):
             return None
         cls = self.classes.get(header.get('type', '')) or raw_message.message_class(header)
         decoded = cls()
-        decoded.deserialize(msg._buff)
+        decoded.deserialize(data)
         return decoded
 
 
@@ -210,18 +177,22 @@ class Intake(object):
     ``dropped``, which also counts messages that could not be decoded or handled, and those of a refused
     message definition: ``decoder.refused``). ``on_new_topic(topic, type name)`` (optional) is called at each
     topic's first accepted message, on the feeder thread. ``tcp_nodelay``: subscribe with TCP_NODELAY
-    (``~tcp_nodelay``)."""
+    (``~tcp_nodelay``); ``fast_receive``: read the messages off rospy's connections with ``tcpros_receive``
+    (``~fast_receive``), else let rospy read them.
+
+    Each queued item is ``(topic, data, header, receipt)``: ``data`` the serialized bytes and ``header`` the
+    publisher's connection header, or ``data`` a decoded message and ``header`` None (as a test may queue)."""
 
     on_new_topic = None
 
     def __init__(self, sink, driving_topic, side_topics=(), max_messages=DEFAULT_MAX_MESSAGES,
                  max_bytes=int(DEFAULT_MAX_MB * 1000 ** 2), batch_delay=FEED_BATCH_DELAY, on_new_topic=None,
-                 tcp_nodelay=False):
+                 tcp_nodelay=False, fast_receive=True):
         self.sink = sink
         self.on_new_topic = on_new_topic
         self._typed = set()               # topics whose first message was accepted
-        self._large_reads = set()         # topics read LARGE_RECEIVE_BYTES at a time
         self.tcp_nodelay = bool(tcp_nodelay)
+        self.fast_receive = bool(fast_receive)
         self.queue = IntakeQueue(max_messages, max_bytes)
         self.dropped = 0             # messages not handed to the sink: queue full, undecodable, not handled
         self.cpu_seconds = 0.0       # CPU time of the feeder thread handing messages to the sink
@@ -254,9 +225,12 @@ class Intake(object):
 
     def _subscribe(self, resolved):
         self.queue.listen(resolved)  # its rate is 0 until its first message
-        self.subscribers[resolved] = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved,
-                                                      queue_size=None, buff_size=SMALL_RECEIVE_BYTES,
-                                                      tcp_nodelay=self.tcp_nodelay)
+        subscriber = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved, queue_size=None,
+                                      tcp_nodelay=self.tcp_nodelay)
+        if self.fast_receive:
+            tcpros_receive.hook(subscriber, lambda data, header: self.put(resolved, data, header),
+                                lambda size: self.refuse(resolved, size), self.queue.max_bytes)
+        self.subscribers[resolved] = subscriber
         return resolved
 
     @property
@@ -273,11 +247,23 @@ class Intake(object):
         return self.queue.received_sizes()
 
     def _enqueue(self, msg, topic):
-        # Cheap: count, note the receipt time and queue the serialized message; the feeder thread does the rest.
-        size = len(getattr(msg, '_buff', b'') or b'')
-        if not self.queue.put((topic, msg, rospy.get_rostime()), size, topic=topic):
+        """rospy's callback (``fast_receive`` off): the serialized message queued (``put``)."""
+        self.put(topic, msg._buff, msg._connection_header)
+
+    def put(self, topic, data, header):
+        """Queue the serialized message ``data`` of ``topic`` (``header``: its connection header) with its receipt
+        time, counted; the feeder thread does the rest. Cheap: called on the thread that read it."""
+        size = len(data)
+        if not self.queue.put((topic, data, header, rospy.get_rostime()), size, topic=topic):
             self.dropped += 1
             rospy.logwarn_throttle(10.0, overflow_text(self.queue, topic, size))
+
+    def refuse(self, topic, size):
+        """A message of ``size`` bytes on ``topic``, larger than the whole queue, read past and not kept
+        (``tcpros_receive``): counted and warned as ``put`` counts one that does not fit."""
+        self.queue.put('too large', size, topic=topic)  # never fits: counted in overflowed and received
+        self.dropped += 1
+        rospy.logwarn_throttle(10.0, overflow_text(self.queue, topic, size))
 
     def sync(self, timeout=5.0):
         """Wait until every message received before the call has been handed to the sink; False when that
@@ -339,47 +325,28 @@ class Intake(object):
                 records = []
                 item.set()  # a sync mark: everything before it was fed
                 continue
-            topic, msg, receipt = item
-            if not isinstance(msg, rospy.AnyMsg):
+            topic, data, header, receipt = item
+            if header is None:
                 self._feed_batch(records)
                 records = []
-                self._feed_one(topic, msg, receipt)
-            elif not self._accepts(msg, topic):
+                self._feed_one(*item)
+            elif not self._accepts(header, topic):
                 self.dropped += 1  # refused (warned once by the decoder)
             else:
-                records.append(Record(self._receipt(receipt), topic, None, 0, msg._buff, msg._connection_header))
+                records.append(Record(self._receipt(receipt), topic, None, 0, data, header))
         self._feed_batch(records)
         return True
 
-    def _accepts(self, msg, topic):
-        """Whether the decoder accepts the serialized ``msg``; the first of each topic goes to ``on_new_topic``
-        (and each sizes the topic's reads: ``_size_reads``)."""
-        if not self.decoder.accepts(msg._connection_header, topic):
+    def _accepts(self, header, topic):
+        """Whether the decoder accepts messages of the connection ``header``; the first of each topic goes to
+        ``on_new_topic``."""
+        if not self.decoder.accepts(header, topic):
             return False
-        first = self._size_reads(msg, topic)
-        if first and self.on_new_topic is not None:
-            self.on_new_topic(topic, msg._connection_header.get('type', ''))
-        return True
-
-    def _size_reads(self, msg, topic):
-        """Size the reads of ``topic``'s sockets by its first message (``receive_bytes`` of its type and size),
-        and make them large at a later message of ``window_prep.HEAVY_BYTES`` or more; True at the first."""
-        size = len(msg._buff)
-        first = topic not in self._typed
-        if first:
+        if topic not in self._typed:
             self._typed.add(topic)
-            buff_size = receive_bytes(msg._connection_header.get('type', ''), size)
-        elif size >= window_prep.HEAVY_BYTES and topic not in self._large_reads:
-            buff_size = LARGE_RECEIVE_BYTES
-        else:
-            return False
-        if buff_size == LARGE_RECEIVE_BYTES:
-            self._large_reads.add(topic)
-        with self._lock:
-            subscriber = self.subscribers.get(topic)
-        if subscriber is not None:
-            set_receive_bytes(subscriber, buff_size)
-        return first
+            if self.on_new_topic is not None:
+                self.on_new_topic(topic, header.get('type', ''))
+        return True
 
     def _feed_batch(self, records):
         """``sink.on_records(records)``; a record that cannot be decoded is dropped (and counted), the rest fed."""
@@ -397,22 +364,17 @@ class Intake(object):
                                       % (len(records), type(error).__name__, error))
                 return
 
-    def _feed_one(self, topic, msg, receipt):
+    def _feed_one(self, topic, data, header, receipt):
+        """Hand one queued message to the sink (serialized to ``on_raw`` if it takes them, else decoded)."""
         try:
-            if self._raw and isinstance(msg, rospy.AnyMsg):
-                if not self._accepts(msg, topic):
-                    self.dropped += 1  # refused (warned once by the decoder)
-                    return
-                self.sink.on_raw(topic, msg._buff, msg._connection_header, self._receipt(receipt))
+            if header is not None and not self._accepts(header, topic):
+                self.dropped += 1  # refused (warned once by the decoder)
                 return
-            if isinstance(msg, rospy.AnyMsg):
-                self._size_reads(msg, topic)
-            decoded = self.decoder.decode(msg, topic)
-            if decoded is None:  # refused (warned once by the decoder)
-                self.dropped += 1
+            if self._raw and header is not None:
+                self.sink.on_raw(topic, data, header, self._receipt(receipt))
                 return
-            self.sink.on_message(topic, decoded, self._receipt(receipt),
-                                 len(getattr(msg, '_buff', b'') or b''))
+            decoded = data if header is None else self.decoder.decode(data, header, topic)
+            self.sink.on_message(topic, decoded, self._receipt(receipt), len(data) if header is not None else 0)
         except raw_message.DECODE_ERRORS as error:
             self.dropped += 1
             rospy.logwarn_throttle(10.0, 'cannot decode a message of %s: %s' % (topic, error))

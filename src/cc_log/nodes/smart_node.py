@@ -36,8 +36,9 @@ Parameters
   limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
   ``~recent``, ``~learn_online``, the windows' ``~pre``, ``~post``, ``~max_window``, ``~topic_limits``, the
   memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb``, ``~max_files`` and ``~min_free_mb``, ``~directory``
-  and ``~name_prefix`` (files ``<name_prefix>_<UTC>_<reason>``), the intake's bounds and ``~tcp_nodelay``, the
-  context track and the upload command. Each resolved value is logged once (``~quiet``: warnings and errors only).
+  and ``~name_prefix`` (files ``<name_prefix>_<UTC>_<reason>``), the intake's bounds, ``~tcp_nodelay`` and
+  ``~fast_receive``, the context track and the upload command. Each resolved value is logged once (``~quiet``:
+  warnings and errors only).
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
 the node exits 1. A ``~directory`` that cannot be used falls back (see above) with WARN on /diagnostics.
@@ -161,7 +162,8 @@ class SmartNode(object):
                                         types, self.extras.topics) - {self.logger.driving_topic}),
                                     max_messages=intake_max_messages, max_bytes=int(intake_max_mb * 1000 ** 2),
                                     on_new_topic=self._advise_format,
-                                    tcp_nodelay=params.option('tcp_nodelay'))
+                                    tcp_nodelay=params.option('tcp_nodelay'),
+                                    fast_receive=params.option('fast_receive'))
         self.extras.watch(cfg.selection, self.intake, self.intake.side_topics + [self.intake.driving_topic])
         self.services = [rospy.Service('~trigger', Trigger, self._trigger),
                          rospy.Service('~trigger_window', TriggerWindow, self._trigger_window),
