@@ -235,7 +235,7 @@ def test_a_surge_to_three_times_the_top_speed_fires_saying_why_and_nominal_drivi
     v[1000 + ramp:1000 + ramp + 100] = 3 * top
     v[1000 + ramp + 100:1000 + 2 * ramp + 100] = 3 * top - 0.3 * np.arange(ramp) / RATE
     samples = drive(v, np.zeros(n))
-    trigger = EnvelopeTrigger('envelope', env, ODOM, joint_factor=0)   # per feature (a straight ramp is new too)
+    trigger = EnvelopeTrigger('envelope', env, ODOM, joint_factor=0, local_factor=0)   # per feature (a ramp is new)
     fires = fires_of(trigger, odom_records(samples))
     assert fires, 'the surge was not flagged'
     t_over = samples[0][np.argmax(v > 2 * top)]      # the limit at factor 2
