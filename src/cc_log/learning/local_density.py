@@ -67,9 +67,12 @@ class LocalDensity(collections.namedtuple('LocalDensity', 'k mean scale training
         if matrix.ndim == 1:
             return self.scores(matrix[None])[0]
         distances, indices = self.neighbours(matrix)
-        density = _density(distances, self.distances[indices])
-        with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
-            return -np.mean(self.densities[indices] / density[:, None], axis=1)
+        return _outlier_scores(self.densities[indices], _density(distances, self.distances[indices]))
+
+    def training_scores(self):
+        """The score of each training window among the others (scikit-learn's ``negative_outlier_factor_``)."""
+        _, indices = _training_neighbours(self.training, self.k)
+        return _outlier_scores(self.densities[indices], self.densities)
 
     def ratios(self, matrix, factor):
         """The local ratio of each row: ``(typical - score) / (factor x (typical - extreme))`` (> 1: flagged)."""
@@ -121,19 +124,31 @@ def learn(matrix, k=K):
     constant = variance <= n * eps * variance + (n * mean * eps) ** 2   # as StandardScaler's _is_constant_feature
     scale = np.where(constant, 1.0, np.maximum(np.sqrt(variance), RESOLUTION))
     training = (matrix - mean) / scale
+    distances, indices = _training_neighbours(training, k)
+    k_distances = distances[:, -1]
+    densities = _density(distances, k_distances[indices])
+    train = _outlier_scores(densities[indices], densities)
+    typical, extreme = float(np.median(train)), float(np.min(train))
+    if not (np.all(np.isfinite(train)) and extreme < typical):
+        return None
+    return LocalDensity(k, mean, scale, training, k_distances, densities, typical, extreme)
+
+
+def _training_neighbours(training, k):
+    """(distances, indices) of the ``k`` nearest other training windows of each training window."""
+    n = len(training)
     distances = np.empty((n, k))
     indices = np.empty((n, k), dtype=int)
     for start, stop in _chunks(n, n, training.shape[1]):
         near, found = _nearest(training[start:stop], training, k, exclude=np.arange(start, stop))
         distances[start:stop], indices[start:stop] = near, found
-    k_distances = distances[:, -1]
-    densities = _density(distances, k_distances[indices])
+    return distances, indices
+
+
+def _outlier_scores(neighbour_densities, densities):
+    """Minus the local outlier factor: the mean of each window's neighbours' densities over its own."""
     with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
-        train = -np.mean(densities[indices] / densities[:, None], axis=1)
-    typical, extreme = float(np.median(train)), float(np.min(train))
-    if not (np.all(np.isfinite(train)) and extreme < typical):
-        return None
-    return LocalDensity(k, mean, scale, training, k_distances, densities, typical, extreme)
+        return -np.mean(neighbour_densities / densities[:, None], axis=1)
 
 
 def _density(distances, k_distances):
