@@ -34,6 +34,7 @@ CHUNK_BYTES = 50 << 20      # the largest temporary a batch of distances allocat
 DENSITY_EPSILON = 1e-10     # scikit-learn's: a density of duplicates stays finite
 MAX_NEIGHBOURS = 1000       # the largest K a file may say
 RESOLUTION = 1e-6           # the smallest scale of a feature (as the joint check's: below it is float rounding)
+REACH_RESOLUTION = 1e-6     # the smallest reach distance (standardised): below it windows are alike up to rounding
 _ARRAYS = ('mean', 'scale', 'training', 'distances', 'densities')
 
 
@@ -153,7 +154,8 @@ def _outlier_scores(neighbour_densities, densities):
 
 def _density(distances, k_distances):
     """The local reachability density of windows at ``distances`` from their neighbours of ``k_distances``."""
-    return 1.0 / (np.mean(np.maximum(distances, k_distances), axis=1) + DENSITY_EPSILON)
+    reach = np.maximum(np.maximum(distances, k_distances), REACH_RESOLUTION)
+    return 1.0 / (np.mean(reach, axis=1) + DENSITY_EPSILON)
 
 
 def _chunks(rows, training, features):
