@@ -113,10 +113,20 @@ def subsample(matrix, most=MAX_WINDOWS):
     return matrix[np.round(np.linspace(0, len(matrix) - 1, most)).astype(int)]
 
 
+def distinct(matrix):
+    """The distinct rows of ``matrix`` (in their first order): a robot standing still makes many identical windows,
+    and K copies of one window have an infinite density (scikit-learn's 1e10) that makes every window near them
+    look new."""
+    if not len(matrix) or not np.all(np.isfinite(matrix)):
+        return matrix
+    _, first = np.unique(matrix, axis=0, return_index=True)
+    return matrix[np.sort(first)]
+
+
 def learn(matrix, k=K):
     """The ``LocalDensity`` of the training windows ``matrix`` (n, features; ``subsample``d to MAX_WINDOWS), or
     None when ``shortfall`` says they are too few, a value is not finite, or every window scores alike."""
-    matrix = subsample(np.asarray(matrix, dtype=float))
+    matrix = subsample(distinct(np.asarray(matrix, dtype=float)))
     if shortfall(len(matrix), k) or not np.all(np.isfinite(matrix)):
         return None
     n = len(matrix)
