@@ -75,6 +75,21 @@ def test_too_few_windows_give_no_part_and_many_are_evenly_subsampled():
     assert np.diff(kept[:, 0]).min() >= 2 and np.diff(kept[:, 0]).max() <= 3
 
 
+def test_identical_standing_still_windows_count_once():
+    """A robot standing still makes many identical windows: learned on the distinct ones, a window next to them
+    (standing, turning a little) is as ordinary as they are (with the copies, their density would be
+    unbounded and its factor in the millions)."""
+    train = spread_windows(n=600)
+    still = np.zeros(SIZE)
+    still[COL['still_fraction']] = 1.0
+    local = local_density.learn(np.vstack([train, np.tile(still, (200, 1))]))
+    assert len(local.training) == 601 and local == local_density.learn(np.vstack([train, still]))
+    near = still.copy()
+    near[COL['still_yaw_rate']] = 0.05 * train[:, COL['still_yaw_rate']].std()
+    assert local.ratios(near[None], envelope.DEFAULT_LOCAL_FACTOR)[0] < 1
+    assert np.array_equal(local_density.distinct(np.array([[2.0], [1.0], [2.0]])), [[2.0], [1.0]])
+
+
 def two_kinds_of_driving(n=1000, seed=0):
     """Nominal windows of two kinds: slow (0.3 m/s) and fast (0.9 m/s), each tight, every other feature moving
     with one common driving parameter alike in both; and a window halfway between them (0.6 m/s), typical in

@@ -19,7 +19,7 @@ def add_parser(subparsers):
         It learns the joint check too (unless --no-joint): how far from typical driving, all 19 features
         together, the windows went (a robust Mahalanobis distance); a window 4 times farther than any of them
         (the trigger's joint_factor) is flagged although each feature stays inside its limit. And the local
-        part (unless --no-local): the training windows themselves (at most 10,000, evenly subsampled beyond),
+        part (unless --no-local): the distinct training windows (at most 10,000, evenly subsampled beyond),
         standardised, for their local outlier factor (20 neighbours); a window 6 times further past typical
         than any of them (local_factor) is flagged: a sparse gap between kinds of driving. The file is the
         default trigger where a model is given: smart_logger.py _model:=envelope.json, cclog replay --model.
@@ -110,7 +110,8 @@ def run(args):
         kept = len(local.training)
         print('local part over %d windows%s, %d neighbours: local outlier factor %.4g typical (median), %.4g the '
               'largest; flagged beyond %.4g (local_factor %g)' % (
-                  kept, ' (of %d, evenly subsampled)' % learned.windows if kept < learned.windows else '', local.k,
+                  kept, '' if kept == learned.windows else ' (the distinct ones%s)' % (
+                      ', evenly subsampled' if kept == MAX_WINDOWS else ''), local.k,
                   -local.typical, -local.extreme,
                   -local.typical + DEFAULT_LOCAL_FACTOR * (local.typical - local.extreme), DEFAULT_LOCAL_FACTOR))
     elif args.local:
