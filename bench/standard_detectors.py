@@ -29,7 +29,7 @@ class Envelope(Detector):
     it), so level 2 is the envelope trigger's default factor."""
 
     def fit(self, X):
-        self.limits = envelope.learn([X], TOPIC, WINDOW, STRIDE, len(X) * STRIDE, joint=False).trained()
+        self.limits = envelope.learn([X], TOPIC, WINDOW, STRIDE, len(X) * STRIDE, joint=False, local=False).trained()
         self.zero, self.extreme = 0.0, -1.0
         return self
 

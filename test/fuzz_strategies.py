@@ -221,12 +221,13 @@ def valid_model():
 
 @functools.lru_cache(maxsize=None)
 def valid_envelope():
-    """The document of a small valid envelope (``Envelope.to_dict``)."""
+    """The document of a small valid envelope (``Envelope.to_dict``) with its joint check and local part."""
     import numpy as np
     from cc_log.learning.envelope import learn
     from cc_log.features.envelope import ENVELOPE_COLUMNS
     rng = np.random.default_rng(0)
-    envelope = learn([rng.uniform(0.1, 1.0, size=(20, len(ENVELOPE_COLUMNS)))], '/odom', 10, 5, 60.0)
+    envelope = learn([rng.uniform(0.1, 1.0, size=(60, len(ENVELOPE_COLUMNS)))], '/odom', 10, 5, 60.0)
+    assert envelope.joint is not None and envelope.local is not None
     return json.loads(json.dumps(envelope.to_dict()))
 
 

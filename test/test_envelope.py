@@ -235,7 +235,7 @@ def test_a_surge_to_three_times_the_top_speed_fires_saying_why_and_nominal_drivi
     v[1000 + ramp:1000 + ramp + 100] = 3 * top
     v[1000 + ramp + 100:1000 + 2 * ramp + 100] = 3 * top - 0.3 * np.arange(ramp) / RATE
     samples = drive(v, np.zeros(n))
-    trigger = EnvelopeTrigger('envelope', env, ODOM, joint_factor=0)   # per feature (a straight ramp is new too)
+    trigger = EnvelopeTrigger('envelope', env, ODOM, joint_factor=0, local_factor=0)   # per feature (a ramp is new)
     fires = fires_of(trigger, odom_records(samples))
     assert fires, 'the surge was not flagged'
     t_over = samples[0][np.argmax(v > 2 * top)]      # the limit at factor 2
@@ -488,7 +488,7 @@ def test_a_joint_fire_says_why_naming_the_three_features_that_stand_out_together
     # beside a feature beyond its own limit: both said, the one further past its factor first
     both = row.copy()
     both[COL['max_jerk']] = 3.0 * env.trained()[COL['max_jerk']]
-    said = envelope.explain(both, env)
+    said = envelope.explain(both, env, local_factor=0)
     assert [entry['feature'] for entry in said] == ['joint', 'max_jerk'] or \
         [entry['feature'] for entry in said] == ['max_jerk', 'joint']
     past = [entry['ratio'] / (envelope.DEFAULT_JOINT_FACTOR if entry['feature'] == 'joint' else 2.0)
@@ -536,14 +536,14 @@ def test_version_1_files_load_without_a_joint_check(tmp_path):
     from cc_log.learning.envelope import Envelope
     env = learned(nominal_drive(seconds=30))
     document = env.to_dict()
-    assert document['version'] == 2 and set(document['joint']) == {
+    assert document['version'] == 3 and set(document['joint']) == {
         'mean', 'scale', 'location', 'precision', 'typical', 'farthest'}
-    old = {key: value for key, value in document.items() if key != 'joint'}
+    old = {key: value for key, value in document.items() if key not in ('joint', 'local')}
     old['version'] = 1
     path = tmp_path / 'v1.json'
     path.write_text(json.dumps(old))
     loaded = Envelope.load(str(path))
-    assert loaded.joint is None and loaded == env._replace(joint=None)
+    assert loaded.joint is None and loaded == env._replace(joint=None, local=None)
     path.write_text(json.dumps(dict(old, joint=document['joint'])))
     with pytest.raises(ValueError, match="v1.json: unknown key 'joint'$"):
         Envelope.load(str(path))
@@ -699,7 +699,7 @@ def test_cclog_replay_model_with_an_envelope_file_opens_the_envelopes_windows(tm
 
 def test_cclog_learn_envelope_learns_the_joint_check_by_default_and_says_its_figures(tmp_path, husky_surge):
     """Without --topic, the bag's only odometry topic; the joint check learned unless --no-joint, its figures
-    said on the last line."""
+    said on the line before the local part's."""
     import json
     from conftest import cclog
     from cc_log.learning.envelope import Envelope
@@ -709,7 +709,7 @@ def test_cclog_learn_envelope_learns_the_joint_check_by_default_and_says_its_fig
     assert 'driving topic %s (the bag\'s only nav_msgs/Odometry topic' % HUSKY_ODOM in result.stderr
     learned = Envelope.load(str(out))
     assert learned.topic == HUSKY_ODOM and learned.joint is not None
-    last = result.stdout.strip().splitlines()[-1]
+    last = result.stdout.strip().splitlines()[-2]
     assert last == 'joint check over %d windows: squared distance from typical driving %.4g typical (median), ' \
         '%.4g farthest; flagged beyond %.4g (joint_factor 4)' % (
             learned.windows, learned.joint.typical, learned.joint.farthest,
@@ -717,7 +717,7 @@ def test_cclog_learn_envelope_learns_the_joint_check_by_default_and_says_its_fig
     result = cclog('learn-envelope', husky_surge['train'], '--topic', HUSKY_ODOM, '--out', out, '--no-joint', '--json')
     assert result.returncode == 0, result.stderr
     document = json.loads(result.stdout)
-    assert document['version'] == 2 and document['joint'] is None and Envelope.load(str(out)).joint is None
+    assert document['version'] == 3 and document['joint'] is None and Envelope.load(str(out)).joint is None
 
 
 def test_cclog_learn_envelope_says_what_is_wrong_in_one_line(tmp_path):

@@ -22,9 +22,15 @@ A window's joint ratio is ``(d2 - typical) / (joint_factor x (farthest - typical
 larger of it and the largest feature ratio: ``-ln(max(feature ratios, joint ratio))``. Scoring is numpy only
 (the live trigger); only ``learn`` uses scikit-learn.
 
-The file (``save``/``load``, JSON; version 2 with the ``joint`` block, version 1 files load without it) is
-read with bounds: known keys only, every column's maximum a finite non-negative number, the joint block's
-arrays of their shapes and finite, one-line ValueErrors naming the file. Pure: no rospy.
+The *local part* (``Envelope.local``, a ``learning.local_density.LocalDensity``; None: off) sees a window in a
+sparse gap between kinds of nominal driving (inside every limit, near the robust centre): its local outlier
+factor among the training windows. Its ratio ``(typical - score) / (local_factor x (typical - extreme))`` joins
+the others: ``-ln(max(feature ratios, joint ratio, local ratio))``.
+
+The file (``save``/``load``, JSON; version 3 with the ``local`` block, version 2 with the ``joint`` block only,
+version 1 with neither: the parts a file lacks are off) is read with bounds: known keys only, every column's
+maximum a finite non-negative number, the joint and local blocks' arrays of their shapes and finite, one-line
+ValueErrors naming the file. Pure: no rospy.
 """
 import collections
 import json
@@ -36,20 +42,24 @@ from cc_log.base import safe_files, safe_input
 from cc_log.base.safe_input import brief
 from cc_log.base.why import MAX_TEXT
 from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_FLOORS, ENVELOPE_UNITS
+from cc_log.learning import local_density
+from cc_log.learning.local_density import finite_array
 
 KIND = 'cc_log envelope'
-VERSION = 2
-VERSIONS = (1, 2)           # the versions ``load`` reads (1: no joint block)
+VERSION = 3
+VERSIONS = (1, 2, 3)        # the versions ``load`` reads (1: no joint block, 2: no local block)
 DEFAULT_FACTOR = 2.0
 DEFAULT_JOINT_FACTOR = 4.0  # the joint check's factor (the detector benchmark's level 4); 0: off
+DEFAULT_LOCAL_FACTOR = 6.0  # the local part's factor (the detector benchmark's lof at level 6); 0: off
 MIN_JOINT_WINDOWS = 50      # fewer training windows (or fewer than 2 per feature): no joint check
 JOINT_RESOLUTION = 1e-6     # the smallest scale of a feature in the joint check (its units: m, m/s, rad, ...)
 MIN_RATIO = 1e-6            # a smaller max ratio scores as this one (score <= 13.8)
 MAX_RATIO = 1e300           # a larger one (or one too large to compute) as this one (score >= -690.8)
-MAX_FILE_BYTES = 1 << 20
+MAX_FILE_BYTES = 16 << 20  # the local part keeps up to 10,000 training windows
 MAX_WHY = 3                 # features a Fire names at most
 _KEYS = {1: ('kind', 'version', 'topic', 'window', 'stride', 'windows', 'seconds', 'maxima')}   # per version
 _KEYS[2] = _KEYS[1] + ('joint',)
+_KEYS[3] = _KEYS[2] + ('local',)
 
 # How a feature is named in a window's "why"
 LABELS = {
@@ -105,10 +115,12 @@ class Joint(collections.namedtuple('Joint', 'mean scale location precision typic
     __hash__ = None
 
 
-class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride windows seconds joint')):
+class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride windows seconds joint local',
+                                      defaults=(None,))):
     """The nominal driving's largest value per envelope feature (``maxima``: a dict over ``ENVELOPE_COLUMNS``),
     learned on ``topic`` over windows of ``window`` s every ``stride`` s (``windows`` of them, ``seconds`` of
-    driving); ``joint``: their joint check (a ``Joint``), or None."""
+    driving); ``joint``: their joint check (a ``Joint``), or None; ``local``: their local part (a
+    ``LocalDensity``), or None."""
 
     __slots__ = ()
 
@@ -125,7 +137,8 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
             ('kind', KIND), ('version', VERSION), ('topic', self.topic), ('window', self.window),
             ('stride', self.stride), ('windows', self.windows), ('seconds', self.seconds),
             ('maxima', collections.OrderedDict((name, float(self.maxima[name])) for name in ENVELOPE_COLUMNS)),
-            ('joint', self.joint.to_dict() if self.joint is not None else None)])
+            ('joint', self.joint.to_dict() if self.joint is not None else None),
+            ('local', self.local.to_dict() if self.local is not None else None)])
 
     def save(self, path):
         """Write as JSON (atomically)."""
@@ -160,8 +173,9 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         windows = _number(document.get('windows'), '%s: windows' % source)
         seconds = _number(document.get('seconds'), '%s: seconds' % source)
         joint = _read_joint(document.get('joint'), '%s: joint' % source)
+        local = local_density.from_dict(document.get('local'), '%s: local' % source, len(ENVELOPE_COLUMNS))
         return cls({name: float(maxima[name]) for name in ENVELOPE_COLUMNS}, topic, window, stride, int(windows),
-                   seconds, joint)
+                   seconds, joint, local)
 
     @classmethod
     def load(cls, path):
@@ -190,7 +204,7 @@ def _read_joint(block, where):
         raise ValueError('%s: must map %s to numbers%s' % (
             where, ', '.join(Joint._fields), ' (unknown key %s)' % brief(extra[0]) if extra else ''))
     size = len(ENVELOPE_COLUMNS)
-    arrays = [_array(block[key], (size,) * (2 if key == 'precision' else 1), '%s: %s' % (where, key))
+    arrays = [finite_array(block[key], (size,) * (2 if key == 'precision' else 1), '%s: %s' % (where, key))
               for key in Joint._fields[:4]]
     if not np.all(arrays[1] > 0):
         raise ValueError('%s: scale: every entry must be positive' % where)
@@ -199,22 +213,6 @@ def _read_joint(block, where):
     if not typical < farthest:
         raise ValueError('%s: typical %r must be below farthest %r' % (where, typical, farthest))
     return Joint(*(arrays + [typical, farthest]))
-
-
-def _array(value, shape, where):
-    """``value`` (nested lists) as a float array of ``shape``, every entry a finite number; ValueError naming
-    ``where`` otherwise (checked before any conversion, so a wrong document costs no more than its size)."""
-    def check(item, depth):
-        if depth == len(shape):
-            if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
-                raise ValueError('%s: %s is not a finite number' % (where, brief(item)))
-            return
-        if not isinstance(item, list) or len(item) != shape[depth]:
-            raise ValueError('%s: must be %s numbers' % (where, ' x '.join(str(n) for n in shape)))
-        for entry in item:
-            check(entry, depth + 1)
-    check(value, 0)
-    return np.array(value, dtype=float)
 
 
 def _refuse_constant(name):
@@ -245,21 +243,32 @@ def check_factor(factor, name='factor'):
 
 def check_joint_factor(factor, name='joint_factor'):
     """The joint check's factor: 0 (off) or a finite number from 1 up (ValueError naming ``name``)."""
+    return _part_factor(factor, name, '%g flags a window %gx farther from typical driving than any training '
+                        'window' % (DEFAULT_JOINT_FACTOR, DEFAULT_JOINT_FACTOR))
+
+
+def check_local_factor(factor, name='local_factor'):
+    """The local part's factor: 0 (off) or a finite number from 1 up (ValueError naming ``name``)."""
+    return _part_factor(factor, name, '%g flags a window whose local outlier factor goes %gx past typical beyond '
+                        'any training window' % (DEFAULT_LOCAL_FACTOR, DEFAULT_LOCAL_FACTOR))
+
+
+def _part_factor(factor, name, example):
+    """A part's factor: 0 (off) or a finite number from 1 up; ValueError naming ``name``, saying ``example``."""
     try:
         value = float(factor)
     except (TypeError, ValueError):
         value = float('nan')
     if isinstance(factor, bool) or not (value == 0.0 or 1.0 <= value < 1e6):
-        raise ValueError('%s: %s must be 0 (off) or a number from 1 up (%g flags a window %gx farther from typical '
-                         'driving than any training window)' % (name, brief(factor), DEFAULT_JOINT_FACTOR,
-                                                                DEFAULT_JOINT_FACTOR))
+        raise ValueError('%s: %s must be 0 (off) or a number from 1 up (%s)' % (name, brief(factor), example))
     return value
 
 
-def learn(matrices, topic, window, stride, seconds, joint=True):
+def learn(matrices, topic, window, stride, seconds, joint=True, local=True):
     """The envelope of nominal driving: ``matrices`` the ``envelope_windows`` matrices of its runs (each (n, 19));
-    with ``joint``, its joint check too (None when ``joint_shortfall`` says the windows cannot set one).
-    ValueError when they hold no window."""
+    with ``joint``, its joint check too (None when ``joint_shortfall`` says the windows cannot set one); with
+    ``local``, its local part (``local_density.learn``: None when the windows are too few). ValueError when they
+    hold no window."""
     matrices = [np.asarray(m, dtype=float).reshape(-1, len(ENVELOPE_COLUMNS)) for m in matrices]
     rows = sum(len(m) for m in matrices)
     if not rows:
@@ -267,7 +276,8 @@ def learn(matrices, topic, window, stride, seconds, joint=True):
     matrix = np.concatenate(matrices)
     maxima = np.max(matrix, axis=0)
     return Envelope({name: float(value) for name, value in zip(ENVELOPE_COLUMNS, maxima)}, topic, float(window),
-                    float(stride), rows, float(seconds), learn_joint(matrix) if joint else None)
+                    float(stride), rows, float(seconds), learn_joint(matrix) if joint else None,
+                    local_density.learn(matrix) if local else None)
 
 
 def joint_shortfall(windows):
@@ -308,24 +318,30 @@ def ratios(matrix, limits):
     return np.asarray(matrix, dtype=float) / limits
 
 
-def scores(matrix, limits, joint=None, joint_factor=DEFAULT_JOINT_FACTOR):
-    """The score of each row: ``-ln(max(largest ratio, joint ratio))`` (lower is more anomalous; < 0 beyond the
-    envelope). ``joint``: the ``Joint`` (None or ``joint_factor`` 0: per feature only)."""
+def scores(matrix, limits, joint=None, joint_factor=DEFAULT_JOINT_FACTOR, local=None,
+           local_factor=DEFAULT_LOCAL_FACTOR):
+    """The score of each row: ``-ln(max(largest ratio, joint ratio, local ratio))`` (lower is more anomalous; < 0
+    beyond the envelope). ``joint``: the ``Joint``, ``local``: the ``LocalDensity`` (None or factor 0: off)."""
     worst = np.max(ratios(matrix, limits), axis=-1)
     if joint is not None and joint_factor:
         worst = np.maximum(worst, joint.ratios(matrix, joint_factor))
+    if local is not None and local_factor and len(worst):
+        worst = np.maximum(worst, local.ratios(matrix, local_factor))
     worst = np.where(np.isnan(worst), np.inf, worst)   # a value too large to square: as far out as can be said
     return -np.log(np.clip(worst, MIN_RATIO, MAX_RATIO))
 
 
-def explain(row, envelope, factor=DEFAULT_FACTOR, details=None, joint_factor=DEFAULT_JOINT_FACTOR):
+def explain(row, envelope, factor=DEFAULT_FACTOR, details=None, joint_factor=DEFAULT_JOINT_FACTOR,
+            local_factor=DEFAULT_LOCAL_FACTOR):
     """Why a window (``row``, one ``envelope_windows`` row) is beyond the envelope: a tuple of at most MAX_WHY
     dicts ``{feature, value, limit, ratio, unit, text}`` of the features beyond ``factor`` x their limit, most
     outstanding first. ``limit`` is what the value is measured against, the most seen in training (floored:
     ``Envelope.trained``), ``ratio`` value / limit (the window fired because it exceeds ``factor``); the text
     says how far past it. ``details``: ``{feature: text}`` said instead of the feature's plain value (e.g. the
     pose step against the wheels' step). A window beyond the joint check (``joint_factor``; 0: off) adds the
-    entry of feature ``joint`` (``joint_why``); the entries are ordered by how far past their factor they are."""
+    entry of feature ``joint`` (``joint_why``); the entries are ordered by how far past their factor they are. A
+    window beyond the local part (``local_factor``; 0: off) adds the entry of feature ``local`` (``local_why``)
+    last: its ratio grows with any distance, the named features say more where there are some."""
     trained = envelope.trained()
     row = np.asarray(row, dtype=float)
     factor = check_factor(factor)
@@ -347,7 +363,8 @@ def explain(row, envelope, factor=DEFAULT_FACTOR, details=None, joint_factor=DEF
     if joint is not None:
         past = [entry['ratio'] / factor for entry in why]
         why.insert(int(np.searchsorted(-np.array(past), -joint['ratio'] / joint_factor, side='right')), joint)
-    return tuple(why[:MAX_WHY])
+    local = local_why(row, envelope.local, check_local_factor(local_factor)) if local_factor else None
+    return tuple((why + [local] if local is not None else why)[:MAX_WHY])
 
 
 def joint_why(row, joint, joint_factor=DEFAULT_JOINT_FACTOR):
@@ -374,4 +391,27 @@ def joint_why(row, joint, joint_factor=DEFAULT_JOINT_FACTOR):
 
 
 def _figure(value):
-    return '%.3g' % value if abs(value) < 10 else '%.1f' % value
+    return '%.3g' % value if abs(value) < 10 or abs(value) >= 1e6 else '%.1f' % value
+
+
+def local_why(row, local, local_factor=DEFAULT_LOCAL_FACTOR):
+    """The why entry of a window beyond the local part (None when it is not, or there is no ``local``):
+    ``{feature: 'local', value: its local outlier factor, limit: training's largest, ratio, unit: '1', text}``,
+    ``ratio`` = (typical - score) / (typical - extreme), the text naming the MAX_WHY features farthest from the
+    nearest training windows (``LocalDensity.deviations``)."""
+    if local is None:
+        return None
+    row = np.asarray(row, dtype=float)
+    score = float(local.scores(row[None])[0])
+    ratio = (local.typical - score) / (local.typical - local.extreme)
+    if not (local.typical - score) / (local_factor * (local.typical - local.extreme)) > 1:   # as ``scores``
+        return None
+    named = [JOINT_LABELS[ENVELOPE_COLUMNS[i]] for i in local.deviations(row, MAX_WHY)]
+    for count in range(len(named), -1, -1):   # as many of the features as the text's length allows
+        said = ', '.join(named[:count - 1]) + ' and ' + named[count - 1] if count > 1 else ''.join(named[:count])
+        text = 'unusual for its neighbourhood%s: local outlier factor %s, %sx beyond training\'s spread' % (
+            ' (%s)' % said if said else '', _figure(-score), _figure(ratio))
+        if len(text) <= MAX_TEXT:
+            break
+    return {'feature': 'local', 'value': -score, 'limit': -float(local.extreme), 'ratio': ratio, 'unit': '1',
+            'text': text}

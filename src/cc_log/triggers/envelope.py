@@ -3,21 +3,26 @@
 Configuration (``kind: envelope``)::
 
     triggers:
-      - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0, joint_factor: 4.0}
+      - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0, joint_factor: 4.0,
+         local_factor: 6.0}
 
 ``limits``: the file ``cclog learn-envelope`` wrote (``learning.envelope.Envelope``: the largest value of each of
 the 19 ``features.envelope`` features over nominal windows); ``topic``: the nav_msgs/Odometry topic (default:
 the one it was learned on); ``factor`` (default 2.0): a window is flagged when a feature exceeds ``factor`` x
 its training maximum (floored by ``ENVELOPE_FLOORS``); ``joint_factor`` (default 4.0; 0: off), when the file
 has a joint check (``learning.envelope.Joint``): a window is flagged too when its squared robust distance from
-typical driving goes ``joint_factor`` x farther past the typical one than any training window did. A model path
+typical driving goes ``joint_factor`` x farther past the typical one than any training window did;
+``local_factor`` (default 6.0; 0: off), when the file has a local part (``learning.local_density``): a window is
+flagged too when its local outlier factor among the training windows goes ``local_factor`` x farther past the
+typical one than any training window's (a window in a sparse gap between kinds of nominal driving). A model path
 given as the default trigger (``~model``, ``cclog replay --model``) builds this trigger when the file is an
 envelope (``logger.config.with_classifier``).
 
 Every ``stride`` (0.25 s, the file's) of message time the trigger computes the row of the window of ``window``
 s (1 s, the file's) ending on that grid point, from a ring of the last ``window`` + ``HISTORY`` seconds of
 samples (``features.envelope.envelope_rows``: the very rows ``envelope_windows`` gives offline), all of a
-batch's windows at once (the joint check: one 19 x 19 quadratic form per window). A window beyond
+batch's windows at once (the joint check: one 19 x 19 quadratic form per window; the local part: the distances
+to every stored training window, brute force). A window beyond
 the envelope fires at the first message at or after its end, with score ``-ln(max(value / limit, joint
 ratio))`` (< 0; lower is more anomalous) and ``why``: the features beyond their limit and the joint check, most
 outstanding first, each against the most seen in training (``learning.envelope.explain``). Each such
@@ -32,7 +37,8 @@ import time
 import numpy as np
 
 from cc_log.learning.envelope import (
-    DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, Envelope, check_factor, check_joint_factor, explain, scores)
+    DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, DEFAULT_LOCAL_FACTOR, Envelope, check_factor, check_joint_factor,
+    check_local_factor, explain, scores)
 from cc_log.features.envelope import (
     ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, out_of_range_samples, step_details)
 from cc_log.features.base import CLIP
@@ -48,10 +54,11 @@ class EnvelopeTrigger(Trigger):
     """Fires on odometry windows beyond the learned envelope (see the module docstring).
 
     envelope: a ``learning.envelope.Envelope``; topic: its nav_msgs/Odometry topic; factor: the limit factor;
-    joint_factor: the joint check's (0: off; no effect when the envelope has no joint check)."""
+    joint_factor: the joint check's (0: off; no effect when the envelope has no joint check); local_factor: the
+    local part's (likewise)."""
 
     kind = 'envelope'
-    config_keys = ('limits', 'topic', 'factor', 'joint_factor')
+    config_keys = ('limits', 'topic', 'factor', 'joint_factor', 'local_factor')
     batched = True
 
     @classmethod
@@ -67,8 +74,8 @@ class EnvelopeTrigger(Trigger):
             raise ValueError('%s: topic: %r is not a topic name' % (name, topic))
         return cls(name, envelope, context.resolve(topic or envelope.topic), **options)
 
-    def __init__(self, name, envelope, topic, factor=DEFAULT_FACTOR, joint_factor=DEFAULT_JOINT_FACTOR, pre=None,
-                 post=None):
+    def __init__(self, name, envelope, topic, factor=DEFAULT_FACTOR, joint_factor=DEFAULT_JOINT_FACTOR,
+                 local_factor=DEFAULT_LOCAL_FACTOR, pre=None, post=None):
         super(EnvelopeTrigger, self).__init__(name, pre, post)
         if not isinstance(envelope, Envelope):
             raise ValueError('%s: envelope: expected an Envelope, got %s' % (name, type(envelope).__name__))
@@ -77,6 +84,8 @@ class EnvelopeTrigger(Trigger):
         self.limits = envelope.limits(self.factor)
         self.joint_factor = check_joint_factor(joint_factor, '%s: joint_factor' % name)
         self.joint = envelope.joint if self.joint_factor else None   # None: per feature only
+        self.local_factor = check_local_factor(local_factor, '%s: local_factor' % name)
+        self.local = envelope.local if self.local_factor else None   # None: no local part
         self.topic = topic
         self.topics = frozenset([topic])
         self.window, self.stride = envelope.window, envelope.stride
@@ -148,7 +157,7 @@ class EnvelopeTrigger(Trigger):
         self._last_end = float(grid[-1])
         ends, rows = envelope_rows(*self._ring, ends=grid, window=self.window)
         self.evaluated += len(ends)
-        window_scores = scores(rows, self.limits, self.joint, self.joint_factor)
+        window_scores = scores(rows, self.limits, self.joint, self.joint_factor, self.local, self.local_factor)
         held = (np.searchsorted(self._beyond, grid, side='right') -
                 np.searchsorted(self._beyond, grid - self.window, side='right'))  # out-of-range samples per window
         measured = dict(zip(ends.tolist(), range(len(ends))))
@@ -168,7 +177,8 @@ class EnvelopeTrigger(Trigger):
         for at, (end, score, k, count) in sorted(best.items()):
             why = () if k is None else explain(rows[k], self.envelope, self.factor,
                                                step_details(*self._ring, end=end, window=self.window),
-                                               self.joint_factor if self.joint else 0)
+                                               self.joint_factor if self.joint else 0,
+                                               self.local_factor if self.local else 0)
             if count:
                 why = (out_of_range_why(count),) + tuple(why)
             fires[offset + at].append(self.fire(REASON, score, why))
@@ -200,6 +210,10 @@ class EnvelopeTrigger(Trigger):
                       joint_factor=self.joint_factor,
                       joint=None if self.joint is None else {'typical': self.joint.typical,
                                                              'farthest': self.joint.farthest},
+                      local_factor=self.local_factor,
+                      local=None if self.local is None else {'k': self.local.k, 'windows': len(self.local.training),
+                                                             'typical': self.local.typical,
+                                                             'extreme': self.local.extreme},
                       learned={'topic': self.envelope.topic, 'windows': self.envelope.windows,
                                'seconds': self.envelope.seconds},
                       limits={name: float(limit) for name, limit in zip(ENVELOPE_COLUMNS, self.limits)})

@@ -18,7 +18,10 @@ def add_parser(subparsers):
         feature exceeds its factor (default 2) times that maximum, floored by a physical minimum per feature.
         It learns the joint check too (unless --no-joint): how far from typical driving, all 19 features
         together, the windows went (a robust Mahalanobis distance); a window 4 times farther than any of them
-        (the trigger's joint_factor) is flagged although each feature stays inside its limit. The file is the
+        (the trigger's joint_factor) is flagged although each feature stays inside its limit. And the local
+        part (unless --no-local): the distinct training windows (at most 10,000, evenly subsampled beyond),
+        standardised, for their local outlier factor (20 neighbours); a window 6 times further past typical
+        than any of them (local_factor) is flagged: a sparse gap between kinds of driving. The file is the
         default trigger where a model is given: smart_logger.py _model:=envelope.json, cclog replay --model.
         Only the bags set the envelope: give nominal driving only (docs/DETECTION.md, "The physics envelope").
         """,
@@ -37,6 +40,8 @@ def add_parser(subparsers):
                    help='a window every this much message time (default: %(default)s)')
     p.add_argument('--joint', action=argparse.BooleanOptionalAction, default=True,
                    help='learn the joint check too (default: yes; --no-joint: the per-feature limits only)')
+    p.add_argument('--local', action=argparse.BooleanOptionalAction, default=True,
+                   help='learn the local part too (default: yes; --no-local: without it)')
     output_flags(p)
     return p
 
@@ -49,9 +54,9 @@ def _seconds(value, name):
     return parsed.seconds
 
 
-def learn_bags(paths, topic, window, stride, joint=True):
+def learn_bags(paths, topic, window, stride, joint=True, local=True):
     """The ``Envelope`` of the odometry of ``topic`` in the bags ``paths`` (each bag's windows apart; with its
-    joint check when ``joint`` and the windows allow it)."""
+    joint check when ``joint``, its local part when ``local``, and the windows allow it)."""
     from cc_log.learning import envelope
     from cc_log.features.envelope import envelope_windows, odometry_samples
     from cc_log.features.motion import ODOMETRY
@@ -64,12 +69,13 @@ def learn_bags(paths, topic, window, stride, joint=True):
         matrices.append(envelope_windows(*samples, window=window, stride=stride)[1])
         if len(samples[0]) > 1:
             seconds += float(samples[0].max() - samples[0].min())
-    return envelope.learn(matrices, topic, window, stride, seconds, joint)
+    return envelope.learn(matrices, topic, window, stride, seconds, joint, local)
 
 
 def run(args):
     """Learn the envelope of the bags and write it to --out."""
-    from cc_log.learning.envelope import DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, joint_shortfall
+    from cc_log.learning.envelope import DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, DEFAULT_LOCAL_FACTOR, joint_shortfall
+    from cc_log.learning.local_density import MAX_WINDOWS, shortfall
     from cc_log.features.envelope import ENVELOPE_COLUMNS, ENVELOPE_UNITS
     from cc_log.features.motion import ODOMETRY
     paths = [existing_file(path, 'bag file') for path in args.bag]
@@ -78,7 +84,7 @@ def run(args):
     if args.topic is None:
         args.bag = paths[0]
         args.topic = driving_topic(args, ODOMETRY)
-    learned = learn_bags(paths, args.topic, window, stride, args.joint)
+    learned = learn_bags(paths, args.topic, window, stride, args.joint, args.local)
     learned.save(args.out)
     if args.json:
         document = learned.to_dict()
@@ -99,4 +105,16 @@ def run(args):
                   joint.typical + DEFAULT_JOINT_FACTOR * (joint.farthest - joint.typical), DEFAULT_JOINT_FACTOR))
     elif args.joint:
         print('no joint check: %s' % (joint_shortfall(learned.windows) or 'the training windows do not spread'))
+    local = learned.local
+    if local is not None:
+        kept = len(local.training)
+        print('local part over %d windows%s, %d neighbours: local outlier factor %.4g typical (median), %.4g the '
+              'largest; flagged beyond %.4g (local_factor %g)' % (
+                  kept, '' if kept == learned.windows else ' (the distinct ones%s)' % (
+                      ', evenly subsampled' if kept == MAX_WINDOWS else ''), local.k,
+                  -local.typical, -local.extreme,
+                  -local.typical + DEFAULT_LOCAL_FACTOR * (local.typical - local.extreme), DEFAULT_LOCAL_FACTOR))
+    elif args.local:
+        print('no local part: %s' % (shortfall(min(learned.windows, MAX_WINDOWS)) or
+                                     'the training windows all score alike'))
     return EXIT_OK
