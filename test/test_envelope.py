@@ -625,7 +625,10 @@ def husky_surge(tmp_path_factory):
     limits = tmp_path / 'envelope.json'
     learned = cclog('learn-envelope', paths['train'], '--topic', HUSKY_ODOM, '--out', limits, '--json')
     assert learned.returncode == 0, learned.stderr
-    assert json.loads(learned.stdout)['windows'] > 300
+    printed = json.loads(learned.stdout)
+    assert printed['windows'] > 300
+    assert set(printed['local']) == {'k', 'windows', 'typical', 'extreme'}  # not its training windows
+    assert len(learned.stdout) < 20000
     return dict(paths, limits=limits, records=injected, event=truth[0])
 
 

@@ -377,10 +377,11 @@ def joint_why(row, joint, joint_factor=DEFAULT_JOINT_FACTOR):
     row = np.asarray(row, dtype=float)
     if not joint.ratios(row, joint_factor) > 1:   # the rule ``scores`` flags by
         return None
-    value = float(joint.distances(row))
-    ratio = (value - joint.typical) / (joint.farthest - joint.typical)
-    z = joint.deviations(row)
-    parts = z * (joint.precision @ z)
+    with np.errstate(over='ignore', invalid='ignore'):  # a value beyond any physical range: inf, said as such
+        value = float(joint.distances(row))
+        ratio = (value - joint.typical) / (joint.farthest - joint.typical)
+        z = joint.deviations(row)
+        parts = z * (joint.precision @ z)
     named = [JOINT_LABELS[ENVELOPE_COLUMNS[i]] for i in np.argsort(-parts, kind='stable')[:MAX_WHY]]
     said = ', '.join(named[:-1]) + ' and ' + named[-1] if len(named) > 1 else named[0]
     text = '%s together %.1fx farther from typical driving than any training window' % (said, ratio)

@@ -92,6 +92,12 @@ class LocalDensity(collections.namedtuple('LocalDensity', 'k mean scale training
             [('k', int(self.k))] + [(key, getattr(self, key).tolist()) for key in _ARRAYS] +
             [('typical', float(self.typical)), ('extreme', float(self.extreme))])
 
+    def summary(self):
+        """What ``cclog learn-envelope --json`` shows of the part: ``k``, ``windows`` (training windows kept),
+        ``typical``, ``extreme`` (its arrays stay in the file)."""
+        return collections.OrderedDict([('k', int(self.k)), ('windows', len(self.training)),
+                                        ('typical', float(self.typical)), ('extreme', float(self.extreme))])
+
     def __eq__(self, other):
         return isinstance(other, LocalDensity) and all(np.array_equal(a, b) for a, b in zip(self, other))
 

@@ -88,6 +88,8 @@ def run(args):
     learned.save(args.out)
     if args.json:
         document = learned.to_dict()
+        if learned.local is not None:  # its training windows stay in the file: a summary here
+            document['local'] = learned.local.summary()
         document['out'] = args.out
         print_json(document)
         return EXIT_OK
