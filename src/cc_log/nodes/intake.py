@@ -94,6 +94,14 @@ class IntakeQueue(object):
                 self._ready.notify()
             return True
 
+    def refuse(self, topic, size):
+        """Count a message of ``size`` bytes on ``topic`` that was not queued (in ``received`` and
+        ``overflowed``), as ``put`` counts one that does not fit."""
+        with self._ready:
+            self.received[topic] += 1
+            self.received_bytes[topic] += size
+            self.overflowed += 1
+
     def take_batch(self, delay):
         """Every queued item (oldest first) once the batch is due: wait for a first item, then until ``delay``
         seconds have passed, ``batch_messages`` items or ``batch_bytes`` bytes are queued, or an item was put with
@@ -261,7 +269,7 @@ class Intake(object):
     def refuse(self, topic, size):
         """A message of ``size`` bytes on ``topic``, larger than the whole queue, read past and not kept
         (``tcpros_receive``): counted and warned as ``put`` counts one that does not fit."""
-        self.queue.put('too large', size, topic=topic)  # never fits: counted in overflowed and received
+        self.queue.refuse(topic, size)
         self.dropped += 1
         rospy.logwarn_throttle(10.0, overflow_text(self.queue, topic, size))
 
