@@ -36,7 +36,7 @@ def test_detection_sim_quick():
     out = run('detection_sim.py', '--quick')
     assert 'Table 1' in out and '| TP ' in out and '| Precision ' in out
     assert 'paper features' in out and 'paper settings' in out and 'motion + progress' in out
-    assert len(targets(out)) == 3  # false windows, dominance, dominance by more than chance
+    assert len(targets(out)) == 2
 
 
 def test_learn_online_and_tune_choice_quick():
@@ -161,7 +161,7 @@ def test_cost_offline_quick():
 def test_training_quick():
     out = run('training.py', '--quick')
     assert 'exact OCSVM' in out and 'nystroem-sgd' in out and 'paper case' in out
-    assert len(targets(out)) == 3  # false windows, dominance, dominance by more than chance
+    assert len(targets(out)) == 2
 
 
 def test_cost_live_quick():
@@ -171,7 +171,7 @@ def test_cost_live_quick():
         pytest.skip('cc_log is not on ROS_PACKAGE_PATH: source .catkin_ws/devel/setup.bash first')
     out = run('cost_live.py', '--quick')
     assert 'rosbag record' in out and 'node / record' in out
-    assert len(targets(out)) == 3  # false windows, dominance, dominance by more than chance
+    assert len(targets(out)) == 2
 
 
 @pytest.mark.skipif(shutil.which('roscore') is None or shutil.which('rosrun') is None,
