@@ -256,6 +256,25 @@ def test_heavy_sensors_quick_on_wall_time_keeps_every_image_of_its_window(tmp_pa
     assert played == '180' and recorded.isdigit() and recorded_lz4.isdigit()
 
 
+def test_cost_passes_wall_clock_to_the_heavy_sensors_bench_and_names_its_rows(monkeypatch):
+    """``cost.py --wall-clock``: keepall runs ``heavy_sensors.py ... --wall-clock`` and its rows say so; without
+    it the bench runs as before (sim time), the rows named as before."""
+    sys.path.insert(0, BENCH)
+    import cost
+    calls = []
+    table = ('| scenario | format | node / record CPU | node / record --lz4 CPU | images kept / expected |\n'
+             '|---|---|---|---|---|\n| one | bag-lz4 | 0.91 | 0.70 | 120 / 120 |\n'
+             '| all | bag-lz4 | 1.40 | 1.20 | 900 / 900 |\n\ntotal 1 s\n')
+    monkeypatch.setattr(cost, 'bench', lambda script, *args: calls.append((script,) + args) or table)
+    assert cost.keepall(37, wall_clock=True) == {
+        ('one window ~37 MB/s on wall time: node / rosbag record', 0.8): 0.91,
+        ('keep-all ~37 MB/s on wall time: node / rosbag record --lz4', 1.1): 1.2}
+    assert calls[-1] == ('heavy_sensors.py', '--scenarios', 'one,all', '--format', 'bag-lz4', '--wall-clock')
+    assert sorted(cost.keepall(100)) == [('keep-all ~100 MB/s: node / rosbag record --lz4', 1.1),
+                                         ('one window ~100 MB/s: node / rosbag record', 0.8)]
+    assert calls[-1] == ('heavy_sensors.py', '--scenarios', 'one,all', '--format', 'bag-lz4', '--rate', '100')
+
+
 def test_detectors_quick_prints_every_detector_and_the_curve(tmp_path):
     out = run('detectors.py', '--quick', '--out', str(tmp_path))
     for name in ('envelope', 'knn-mean', 'knn-max', 'lof', 'iforest', 'ocsvm', 'mahalanobis', 'ecod', 'copod',
