@@ -5,6 +5,7 @@ sides alive in the same run, each run repeated, every run given.
     cd <tree> && source .catkin_ws/devel/setup.bash && export PATH=/usr/bin:$PATH
     python3 bench/cost.py                                # every part, 3 runs each (~40 min)
     python3 bench/cost.py --parts light,replay --runs 1  # some parts, once
+    python3 bench/cost.py --parts keepall --wall-clock   # keepall on wall time, as a robot runs (no /clock)
 
 Parts (each runs the bench that measures it, whose full output is printed first):
 - light: ``cost_live.py --seconds 30 --rates 100,1000``: node CPU / ``rosbag record`` CPU of the same odometry
@@ -12,6 +13,8 @@ Parts (each runs the bench that measures it, whose full output is printed first)
 - keepall: ``heavy_sensors.py --scenarios one,all --format bag-lz4`` at ~37 MB/s: a window open all the time,
   node / ``rosbag record --lz4`` (target <= 1.1); one 4 s window, node / ``rosbag record`` (target <= 0.8);
 - keepall100: the same at ~100 MB/s (``--rate 100``);
+  with --wall-clock both on wall time (``heavy_sensors.py --wall-clock``: no /clock, /use_sim_time false), the
+  rows named so; without it, as the figures in docs/COST.md were made (``rosbag play --clock``, sim time);
 - replay: ``cost_offline.py --rounds 3`` with bag-lz4 and json-xz windows: replay CPU / a plain deserializing
   rosbag read of the same topics, Husky and the 10-minute simulated bag (target <= 0.9; the best of 3
   alternating rounds of each).
@@ -80,13 +83,15 @@ class Lossy(float):
         return '%.2f (node kept %s images)' % (self, self.kept)
 
 
-def keepall(rate):
-    """{(workload, target): ratio} of a heavy_sensors run at ~``rate`` MB/s (one window, keep-all); a ratio of a
-    run that kept fewer images than expected is ``Lossy``."""
+def keepall(rate, wall_clock=False):
+    """{(workload, target): ratio} of a heavy_sensors run at ~``rate`` MB/s (one window, keep-all), on wall time
+    when ``wall_clock``; a ratio of a run that kept fewer images than expected is ``Lossy``."""
     found = {}
-    args = ['--scenarios', 'one,all', '--format', 'bag-lz4'] + (['--rate', '100'] if rate == 100 else [])
-    names = {'all': ('keep-all ~%d MB/s: node / rosbag record --lz4' % rate, 1.1, 'node / record --lz4 CPU'),
-             'one': ('one window ~%d MB/s: node / rosbag record' % rate, 0.8, 'node / record CPU')}
+    args = ['--scenarios', 'one,all', '--format', 'bag-lz4'] + (['--rate', '100'] if rate == 100 else []) \
+        + (['--wall-clock'] if wall_clock else [])
+    clock = ' on wall time' if wall_clock else ''
+    names = {'all': ('keep-all ~%d MB/s%s: node / rosbag record --lz4' % (rate, clock), 1.1, 'node / record --lz4 CPU'),
+             'one': ('one window ~%d MB/s%s: node / rosbag record' % (rate, clock), 0.8, 'node / record CPU')}
     for row in table_rows(bench('heavy_sensors.py', *args), 'scenario'):
         if row.get('scenario') not in names:
             continue
@@ -119,14 +124,18 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--parts', default=','.join(PARTS), help='comma-separated, of: %s' % ', '.join(PARTS))
     parser.add_argument('--runs', type=int, default=3, help='runs of each part (default 3)')
+    parser.add_argument('--wall-clock', action='store_true',
+                        help='keepall and keepall100 on wall time (heavy_sensors.py --wall-clock; default sim time)')
     args = parser.parse_args(argv)
     parts = [part.strip() for part in args.parts.split(',') if part.strip()]
     if not parts or any(part not in PARTS for part in parts) or args.runs < 1:
         parser.error('--parts: expected some of %s; --runs: at least 1' % ', '.join(PARTS))
     started = time.time()
     common.header('The cost table', ['parts: %s, %d run(s) each; every ratio from one run, both sides alive '
-                                     'in it' % (', '.join(parts), args.runs)])
-    measure = {'light': light, 'keepall': lambda: keepall(37), 'keepall100': lambda: keepall(100), 'replay': replay}
+                                     'in it%s' % (', '.join(parts), args.runs,
+                                                  '; keepall on wall time' if args.wall_clock else '')])
+    measure = {'light': light, 'keepall': lambda: keepall(37, args.wall_clock),
+               'keepall100': lambda: keepall(100, args.wall_clock), 'replay': replay}
     ratios = {}  # (workload, target) -> [ratio of each run]
     for part in parts:
         for run in range(args.runs):

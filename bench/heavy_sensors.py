@@ -7,19 +7,24 @@ denser lidar), with one window, windows ~10% of the time, or a window open all t
     python3 bench/heavy_sensors.py                          # ~37 MB/s, 30 s, every scenario and format
     python3 bench/heavy_sensors.py --rate 100 --scenarios one,all --format bag-lz4
     python3 bench/heavy_sensors.py --quick                  # 6 s, one window, bag-lz4 (tests)
+    python3 bench/heavy_sensors.py --scenarios one,all --format bag-lz4 --wall-clock   # on wall time, no /clock
 
 Workload: bench/heavy_workload.py (30 Hz 640x480 rgb8 images, a 10 Hz PointCloud2 of 28,800 points, 100 Hz
 odometry and IMU, ~37 MB/s; --rate 100: a second camera and 131,072 points, ~97 MB/s), built once into --out.
 
 Each run (one scenario, one format) starts, beside a roscore on a free port (cost_live.roscore_session, every
-process in its own session, stopped by its id) with /use_sim_time true:
+process in its own session, stopped by its id) with /use_sim_time true (--wall-clock: false, as a robot runs):
 - the smart node: ``rosrun cc_log smart_logger.py _model:=<model> odom:=/odom _topics:="imu/data
   camera/image_raw velodyne_points" _pre:=2s _post:=2s _format:=<format>``, every other parameter at its
   default. The model is cost_live.train_model's (motion 500, nominal simulated odometry at 100 Hz, 1 min) with
   its threshold lowered so that the classifier runs on the odometry as usual but never fires: the bench's
   triggers alone open windows;
 - ``rosbag record -O ...`` and ``rosbag record --lz4 -O ...`` of the same topics;
-- ``rosbag play --clock --wait-for-subscribers <workload bag>`` once all three subscribe to every topic.
+- ``rosbag play --clock --wait-for-subscribers <workload bag>`` once all three subscribe to every topic
+  (--wall-clock: without ``--clock``; nothing publishes /clock).
+The played clock, which the bench's plan follows (when it calls the trigger services, where a window starts and
+ends, the wall time the clock passed a window's end): /clock; with --wall-clock the header stamps of the played
+odometry, which the bench's own node subscribes to (the node places windows by header stamps either way).
 Scenarios (bag time from the bag's start):
 - one: ``~trigger`` halfway: one 4 s window (pre 2 s, post 2 s);
 - tenth: ``~trigger_window`` (before 1.5 s, after 1.5 s) at 15 s and every 30 s: windows open 10% of the time;
@@ -60,6 +65,7 @@ from cost_live import cpu_of, memory_mb, roscore_session, train_model, wait_subs
 
 PRE = POST = 2.0            # the node's _pre and _post, seconds
 NODE = '/smart_logger'
+ODOM = '/odom'              # the workload's odometry: the node's driving topic; with --wall-clock the played clock
 SCENARIOS = ('one', 'tenth', 'all')
 LOSS_WORDS = re.compile(r'lost|dropped|trimmed|unwritten|not written', re.I)
 STATE = ('windows opened', 'windows saved', 'messages kept', 'messages buffered', 'writer queue')  # printed
@@ -69,15 +75,19 @@ NOT_LOSSES = {'messages not kept (outside every window)'}  # /diagnostics: let g
 # -- the bench's own ROS node: clock, diagnostics, triggers -----------------------------------------------
 
 class Ros(object):
-    """The bench's rospy node: the played clock, the smart node's last diagnostics, its trigger services."""
+    """The bench's rospy node: the played clock, the smart node's last diagnostics, its trigger services. The
+    played clock is /clock, or with ``wall_clock`` the header stamp of the last odometry message played."""
 
-    def __init__(self):
+    def __init__(self, wall_clock=False):
         import rospy
         from diagnostic_msgs.msg import DiagnosticArray
-        from rosgraph_msgs.msg import Clock
         rospy.init_node('cc_log_bench_heavy', disable_signals=True)
         self.reset()
-        rospy.Subscriber('/clock', Clock, self._on_clock)
+        if wall_clock:
+            rospy.Subscriber(ODOM, rospy.AnyMsg, self._on_odometry)
+        else:
+            from rosgraph_msgs.msg import Clock
+            rospy.Subscriber('/clock', Clock, self._on_clock)
         rospy.Subscriber('/diagnostics', DiagnosticArray, self._on_diagnostics)
 
     def reset(self):
@@ -85,6 +95,10 @@ class Ros(object):
 
     def _on_clock(self, msg):
         self.clock = msg.clock.to_sec()
+
+    def _on_odometry(self, msg):
+        from cc_log.base import raw_message
+        self.clock = raw_message.stamp(msg._buff, msg._connection_header, self.clock or 0.0)
 
     def _on_diagnostics(self, array):
         for status in array.status:
@@ -212,22 +226,22 @@ def run(procs, tmp, ros, workload, bag, model, scenario, fmt, args):
     os.makedirs(windows)
     ros.reset()
     node = procs.start('node_%s_%s' % (scenario, fmt), [
-        'rosrun', 'cc_log', 'smart_logger.py', '_model:=' + model, 'odom:=/odom', '_directory:=' + windows,
+        'rosrun', 'cc_log', 'smart_logger.py', '_model:=' + model, 'odom:=' + ODOM, '_directory:=' + windows,
         '_topics:=' + workload.node_topics(), '_pre:=%gs' % PRE, '_post:=%gs' % POST, '_format:=' + fmt]
         + args.node_param)
     bags = {'record': os.path.join(work, 'record.bag'), 'record_lz4': os.path.join(work, 'record_lz4.bag')}
     record = procs.start('record_%s_%s' % (scenario, fmt), ['rosbag', 'record', '-O', bags['record']] + workload.topics)
     record_lz4 = procs.start('record_lz4_%s_%s' % (scenario, fmt),
                              ['rosbag', 'record', '--lz4', '-O', bags['record_lz4']] + workload.topics)
-    for topic in workload.topics:
-        wait_subscribers(topic, 3, 60.0)
+    for topic in workload.topics:  # the node and both recorders (and on wall time the bench's clock on ODOM)
+        wait_subscribers(topic, 4 if args.wall_clock and topic == ODOM else 3, 60.0)
     wait_service(NODE + '/trigger_window')
     watch = Watch({'node': node.pid, 'record': record.pid, 'record_lz4': record_lz4.pid}, windows)
     watch.sample()
     cpu0 = dict(watch.cpu)
     plans = trigger_plans(scenario, workload.seconds)
-    play = procs.start('play_%s_%s' % (scenario, fmt), ['rosbag', 'play', '--clock', '--wait-for-subscribers',
-                                                        '-q', bag])
+    play = procs.start('play_%s_%s' % (scenario, fmt), ['rosbag', 'play'] + ([] if args.wall_clock else ['--clock'])
+                       + ['--wait-for-subscribers', '-q', bag])
     started = time.time()
     while play.poll() is None and time.time() < started + 3 * workload.seconds + 60:
         watch.sample(ros.clock)
@@ -408,6 +422,10 @@ def parse(argv):
     parser.add_argument('--out', default='/tmp/cc_log_heavy', help='where the workload bag and model are cached')
     parser.add_argument('--node-param', action='append', default=[], metavar='_NAME:=VALUE',
                         help='another parameter of the node, e.g. _max_buffer_mb:=512 (repeatable)')
+    parser.add_argument('--wall-clock', action='store_true',
+                        help='run on wall time as a robot does: /use_sim_time false for every process, rosbag play '
+                        'without --clock, the bench\'s plan on the played odometry\'s header stamps (default: '
+                        '/use_sim_time true and rosbag play --clock)')
     parser.add_argument('--quick', dest='preset', action='store_const', const=QUICK, default={},
                         help='6 s, one window, bag-lz4')
     args = parser.parse_args(argv)
@@ -452,14 +470,16 @@ def main(argv=None):
         'date: %s; code: %s; node: rosrun cc_log smart_logger.py from %s' % (
             time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()), common.revision(), package.stdout.strip() or '?'),
         'runs: scenarios %s x formats %s; node _pre:=%gs _post:=%gs%s, motion model that never fires'
-        % (', '.join(args.scenarios), ', '.join(args.format), PRE, POST, ''.join(' ' + p for p in args.node_param))])
+        % (', '.join(args.scenarios), ', '.join(args.format), PRE, POST, ''.join(' ' + p for p in args.node_param)),
+        'clock: %s' % ('wall time (/use_sim_time false, rosbag play without --clock; the played clock: %s header '
+                       'stamps)' % ODOM if args.wall_clock else 'simulated (/use_sim_time true, rosbag play --clock)')])
     results = []
     with roscore_session('cc_log_bench_heavy_') as (procs, tmp):
         import rosgraph
-        rosgraph.Master('/cc_log_bench').setParam('/use_sim_time', True)
+        rosgraph.Master('/cc_log_bench').setParam('/use_sim_time', not args.wall_clock)
         os.environ.update({key: value for key, value in procs.env.items() if key.startswith('ROS_')})
         trigger_window_class()  # fails here, before any run, without a sourced workspace
-        ros = Ros()
+        ros = Ros(args.wall_clock)
         for scenario in args.scenarios:
             for fmt in args.format:
                 print('run: %s, %s ...' % (scenario, fmt))

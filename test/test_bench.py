@@ -241,6 +241,40 @@ def test_heavy_sensors_quick(tmp_path):
     assert played == '180' and recorded.isdigit() and recorded_lz4.isdigit()
 
 
+@pytest.mark.skipif(shutil.which('roscore') is None or shutil.which('rosrun') is None,
+                    reason='needs roscore and rosrun (a sourced ROS workspace)')
+def test_heavy_sensors_quick_on_wall_time_keeps_every_image_of_its_window(tmp_path):
+    """--wall-clock: no /clock, /use_sim_time false; the bench's plan follows the played odometry's header stamps
+    and the node's window lands where the bench expects it: every image of the 4 s window kept."""
+    out = run('heavy_sensors.py', '--quick', '--wall-clock', '--out', str(tmp_path))
+    assert '\nclock: wall time (/use_sim_time false, rosbag play without --clock' in out
+    row = next(line for line in out.splitlines() if line.startswith('| one ') and 'bag-lz4' in line)
+    cells = [cell.strip() for cell in row.split('|')[1:-1]]
+    assert cells[7] == '120 / 120' and cells[8] == '1 / 1'  # one file, every frame of the 4 s window
+    detail = next(line for line in out.splitlines() if line.startswith('| one ') and '/camera/image_raw' in line)
+    played, recorded, recorded_lz4 = (cell.strip() for cell in detail.split('|')[4:7])
+    assert played == '180' and recorded.isdigit() and recorded_lz4.isdigit()
+
+
+def test_cost_passes_wall_clock_to_the_heavy_sensors_bench_and_names_its_rows(monkeypatch):
+    """``cost.py --wall-clock``: keepall runs ``heavy_sensors.py ... --wall-clock`` and its rows say so; without
+    it the bench runs as before (sim time), the rows named as before."""
+    sys.path.insert(0, BENCH)
+    import cost
+    calls = []
+    table = ('| scenario | format | node / record CPU | node / record --lz4 CPU | images kept / expected |\n'
+             '|---|---|---|---|---|\n| one | bag-lz4 | 0.91 | 0.70 | 120 / 120 |\n'
+             '| all | bag-lz4 | 1.40 | 1.20 | 900 / 900 |\n\ntotal 1 s\n')
+    monkeypatch.setattr(cost, 'bench', lambda script, *args: calls.append((script,) + args) or table)
+    assert cost.keepall(37, wall_clock=True) == {
+        ('one window ~37 MB/s on wall time: node / rosbag record', 0.8): 0.91,
+        ('keep-all ~37 MB/s on wall time: node / rosbag record --lz4', 1.1): 1.2}
+    assert calls[-1] == ('heavy_sensors.py', '--scenarios', 'one,all', '--format', 'bag-lz4', '--wall-clock')
+    assert sorted(cost.keepall(100)) == [('keep-all ~100 MB/s: node / rosbag record --lz4', 1.1),
+                                         ('one window ~100 MB/s: node / rosbag record', 0.8)]
+    assert calls[-1] == ('heavy_sensors.py', '--scenarios', 'one,all', '--format', 'bag-lz4', '--rate', '100')
+
+
 def test_detectors_quick_prints_every_detector_and_the_curve(tmp_path):
     out = run('detectors.py', '--quick', '--out', str(tmp_path))
     for name in ('envelope', 'knn-mean', 'knn-max', 'lof', 'iforest', 'ocsvm', 'mahalanobis', 'ecod', 'copod',
