@@ -434,6 +434,39 @@ def test_the_triggers_see_a_jump_of_the_driving_clock_at_its_header_stamps_and_o
     assert stats['restamped_by_topic'] == {ODOM: 2} and stats['windows_saved'] == 0, stats
 
 
+def imu_window(tmp_path, records, at=200):
+    """The records of the one window of ``records`` (odometry and IMU) through a logger holding 2 s before and 1 s
+    after, a manual trigger at odometry message ``at``, and the logger's stats."""
+    logger = SmartLogger(ScriptedModel(), str(tmp_path), 'json-xz', '2s', '1s', driving_topic=ODOM, side_topics=[IMU])
+    index = -1
+    for record in records:
+        logger.on_message(record.topic, record.msg, record.stamp)
+        if record.topic == ODOM:
+            index += 1
+            if index == at:
+                assert logger.trigger_now()[0]
+    assert logger.close(30)
+    (_, _, kept), = read_all(str(tmp_path))
+    return kept, logger.stats()
+
+
+def test_a_side_topic_that_starts_before_the_driving_one_on_a_bag_played_without_its_clock_is_kept(husky, tmp_path):
+    """A bag played beside a node on wall time (no --clock): header stamps of the bag's day, arrivals of today. The
+    IMU's first 3 s come before the first odometry message, so before the clock knows the bag's offset: they are
+    placed at their own header stamps (no clock to judge them by, and not in the future of their arrival), not at
+    today's arrival, where one of them held every later IMU message of the topic back from every window."""
+    start = [r.stamp for r in husky if r.topic == ODOM][0]
+    records = [r for r in husky if r.topic == IMU or r.stamp >= start + 3.0]
+    assert records[0].topic == IMU
+    expected, _ = imu_window(tmp_path / 'bag_time', records)
+    today = 1.7e9 - start  # the arrivals a year of seconds later: wall time
+    kept, stats = imu_window(tmp_path / 'wall_time', [r._replace(stamp=r.stamp + today) for r in records])
+    imu = [r.stamp for r in kept if r.topic == IMU]
+    assert len(imu) > 50 and imu == [r.stamp for r in expected if r.topic == IMU]  # 3 s of it
+    assert [r.stamp for r in kept] == [r.stamp for r in expected]
+    assert stats['restamped_by_topic'] == {}
+
+
 def test_failed_writes_are_reported_not_raised(husky, tmp_path):
     blocker = tmp_path / 'not_a_directory'
     blocker.write_text('x')

@@ -11,10 +11,12 @@ MAX_STAMP = 2.0 ** 33  # seconds beyond any ROS time (uint32 seconds and nanosec
 
 class StampClock(object):
     """The driving topic's header stamps set the clock: its offset from the arrival (receipt or bag time) of
-    each of its messages (0 before the first; a bag played without its clock keeps its own stamps). Any other
-    message whose header stamp is more than ``tolerance`` seconds from its arrival on that clock is placed at
-    that arrival instead: a sensor stamping by another clock (wall time next to a bag's, a camera without time
-    sync, a stamp in the future) can neither stretch a window nor hold others back.
+    each of its messages (a bag played without its clock keeps its own stamps). Any other message whose header
+    stamp is more than ``tolerance`` seconds from its arrival on that clock is placed at that arrival instead
+    (before the first driving message, only one stamped after its own arrival: there is no clock yet, and a side
+    topic that starts first, a bag's day next to today's arrivals, keeps its stamps): a sensor stamping by another
+    clock (wall time next to a bag's, a camera without time sync, a stamp in the future) can neither stretch a
+    window nor hold others back.
 
     A driving message off the clock in the same way (one stamp in 2106, in 1970, 100 s ahead) is placed at its
     arrival too and counted, so one bad stamp cannot flush the messages held before a trigger; FOLLOW_AFTER of
@@ -72,7 +74,10 @@ class StampClock(object):
                 continue
             if topic == driving and (self.offset is None or self._follows(difference, offset)):
                 offset = self.offset = difference
-            elif not -tolerance <= difference - offset <= tolerance:
+            elif difference > offset + tolerance if self.offset is None else \
+                    not -tolerance <= difference - offset <= tolerance:
+                # before the first driving message there is no clock to judge by: a message keeps its own
+                # stamp (a bag played without its clock: the bag's day) unless that is after its arrival
                 if restamped is None:
                     stamps, restamped = list(stamps), []
                 stamps[k] = arrival + offset
