@@ -211,9 +211,7 @@ class EnvelopeTrigger(Trigger):
                       joint=None if self.joint is None else {'typical': self.joint.typical,
                                                              'farthest': self.joint.farthest},
                       local_factor=self.local_factor,
-                      local=None if self.local is None else {'k': self.local.k, 'windows': len(self.local.training),
-                                                             'typical': self.local.typical,
-                                                             'extreme': self.local.extreme},
+                      local=None if self.local is None else dict(self.local.summary()),
                       learned={'topic': self.envelope.topic, 'windows': self.envelope.windows,
                                'seconds': self.envelope.seconds},
                       limits={name: float(limit) for name, limit in zip(ENVELOPE_COLUMNS, self.limits)})
