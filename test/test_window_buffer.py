@@ -270,6 +270,23 @@ def test_a_side_record_placed_at_the_driving_clock_goes_into_the_window_at_that_
     assert (499, 49.9) in cam and len(cam) == 40 and buffer.restamped == {'/cam': 1}  # 48.05 .. 51.95
 
 
+def test_side_records_during_a_silence_of_the_driving_topic_keep_their_stamps():
+    """The clock judges a side record when it moves on, not when the record comes: a camera running on through 30 s
+    without odometry is not ahead of the clock that comes back, and a window just after keeps its own stamps."""
+    buffer, windows = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0), []
+    for i in range(600):
+        stamp = round(0.1 * i, 6)
+        windows += buffer.add_side(Record(stamp + 0.05, '/cam', i, 100))
+        if not 200 <= i < 500:  # no odometry from 20 s to 50 s
+            windows += buffer.add(Record(stamp, '/odom', i, 100))
+        if i == 510:
+            windows += buffer.trigger('test')
+    windows += buffer.flush()
+    assert [r.msg for r in windows[0].records if r.topic == '/cam'] == list(range(490, 530))  # 49.05 .. 52.95
+    assert all(r.stamp == round(0.1 * r.msg, 6) + 0.05 for r in windows[0].records if r.topic == '/cam')
+    assert buffer.restamped == {}
+
+
 def test_a_side_record_that_comes_after_a_later_stamped_one_is_kept_in_the_window_its_stamp_falls_in():
     """Side records out of stamp order (two publishers, a sensor's variable delay): a record stamped inside a window
     that came after one stamped beyond its end used to wait behind it and miss the window."""

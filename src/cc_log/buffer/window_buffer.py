@@ -329,20 +329,21 @@ class WindowBuffer(BatchAdd):
         if side is None:
             side = self._side[topic] = collections.deque()
             self._side_bytes[topic] = 0
+        newest = side[-1].stamp if side else record.stamp
         side_order.insert(side, record)
         self._side_bytes[topic] += record.cost
         self._bytes += record.cost
         limits = self.limits.get(topic)
-        if limits is not None and self._open is None and self._pending is None:
-            self._limit_topic(topic, side, limits, record.stamp)
+        if limits is not None and self._open is None and self._pending is None:  # by no stamp far ahead of the clock
+            clock = newest if self._clock is None else max(newest, self._clock)  # or of the topic's newest
+            self._limit_topic(topic, side, limits, min(record.stamp, clock + self.max_ahead))
         if self.max_buffer_bytes and self._bytes > self._part_bytes:
             return self._enforce_budget()
         return []
 
     def _limit_topic(self, topic, side, limits, clock):
         """Outside every window: a topic's records older than its own ``pre`` or beyond its own memory cap go
-        (counted in ``limited``), the oldest first; ``clock`` at most ``max_ahead`` after the driving clock."""
-        clock = clock if self._clock is None else min(clock, self._clock + self.max_ahead)
+        (counted in ``limited``), the oldest first."""
         while side and ((limits.pre is not None and side[0].stamp < clock - limits.pre)
                         or (limits.max_mb and self._side_bytes[topic] > limits.max_mb * MB and len(side) > 1)):
             self._drop_side(topic)
@@ -559,14 +560,14 @@ class WindowBuffer(BatchAdd):
     def _emit(self, window, records=None, everything=False, final=True):
         """Turn a window (or the given first records of it) into a LogWindow with the side records of its
         time span (``everything``: every side record held from its start on), in stamp order. A part after
-        the first takes the side records since the previous part (those of its time span and those between).
-        A topic with its own ``pre`` or ``post`` (``limits``) keeps only what lies within them of the window's
-        first and last trigger."""
+        the first takes the side records since the previous part (those of its time span and those between, none
+        before the window's start: a late record stamped there is let go). A topic with its own ``pre`` or
+        ``post`` (``limits``) keeps only what lies within them of the window's first and last trigger."""
         if window.before:  # a part goes out: no later trigger reaches back before it
             self._bytes -= sum(record.cost for record in window.before)
             window.before = []
         records = window.records if records is None else records
-        start = float('-inf') if window.continued else window.since
+        start = window.since
         end = records[-1].stamp if records else float('-inf')
         if window.until is not None and (final or everything):
             end = max(end, window.until)  # its span ends at the post of its last trigger, not at a driving record
@@ -576,8 +577,6 @@ class WindowBuffer(BatchAdd):
         side = []
         triggers = window.triggers
         for topic, held in self._side.items():
-            if end > self._clock + self.max_ahead:
-                self._place_ahead(topic, held)
             low, high = start, end
             limits = self.limits.get(topic)
             if limits is not None and triggers:
