@@ -40,8 +40,8 @@ def place_ahead(held, clock, max_ahead):
     return len(placed)
 
 
-def none_ahead(stamps, clock, held, max_ahead):
-    """Whether none of ``stamps`` (side records to come) nor any record ``held`` (the deques of each topic) lies
-    more than ``max_ahead`` seconds after ``clock``."""
+def none_ahead(newest, clock, held, max_ahead):
+    """Whether neither ``newest`` (the newest stamp of side records to come) nor any record ``held`` (the deques of
+    each topic, in stamp order) lies more than ``max_ahead`` seconds after ``clock``."""
     limit = clock + max_ahead
-    return all(not side or side[-1].stamp <= limit for side in held) and (not stamps or max(stamps) <= limit)
+    return newest <= limit and all(not side or side[-1].stamp <= limit for side in held)

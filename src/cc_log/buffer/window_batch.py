@@ -12,6 +12,7 @@ other batch goes record by record.
 import bisect
 import collections
 import itertools
+import math
 import operator
 
 from cc_log.buffer import side_order
@@ -87,9 +88,9 @@ class BatchAdd(object):
                 return stamps[-1] - first.stamp < self.max_window.seconds
             return len(window.records) + len(drivings) < self.max_window.count
         # one by one, a side record more than max_ahead after the clock of the driving record after it is placed there
-        sides = list(map(_STAMP, itertools.compress(records, map(operator.not_, mask))))
+        newest = max(map(_STAMP, itertools.compress(records, map(operator.not_, mask))), default=-math.inf)
         first = stamps[0] if self._clock is None else max(self._clock, stamps[0])
-        if not side_order.none_ahead(sides, first, self._side.values(), self.max_ahead):
+        if not side_order.none_ahead(newest, first, self._side.values(), self.max_ahead):
             return False
         if self._pending is not None:  # until it completes, the ring only grows and the side threshold stays
             return True
@@ -124,5 +125,8 @@ class BatchAdd(object):
             if held is None:
                 held = side[topic] = collections.deque()
                 side_bytes[topic] = 0
-            side_order.insert(held, record)
+            if held and record.stamp < held[-1].stamp:  # (side_order.insert; appended inline, the common case)
+                side_order.insert(held, record)
+            else:
+                held.append(record)
             side_bytes[topic] += record.cost

@@ -542,9 +542,10 @@ class WindowBuffer(BatchAdd):
                 oldest = min(oldest, self._clock - self.pre.seconds)
         else:
             return
-        free = self._open is None and self._pending is None
+        free, ahead = self._open is None and self._pending is None, self._clock + self.max_ahead
         for topic, side in self._side.items():
-            self._place_ahead(topic, side)
+            if side and side[-1].stamp > ahead:
+                self._place_ahead(topic, side)
             while side and side[0].stamp < oldest:
                 self._drop_side(topic)
             limits = self.limits.get(topic)
