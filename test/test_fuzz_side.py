@@ -2,7 +2,7 @@
 stamps (by the driving clock, jittered, out of order, some seconds to a million seconds ahead, in 2106, huge or
 infinite, far in the past; never NaN) beside a driving clock that walks (steps, gaps, standing still, jitter and
 jumps back), triggers at random, fed record by record or in batches (``add_batch``), with or without a memory
-budget. Each example must:
+budget or a topic's own limits. Each example must:
 
 - bound what the buffer holds of a side topic in time: after each driving record that finds no window open, every
   record it holds lies at most ``max_ahead`` after the driving clock (a record further ahead was placed at the clock
@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 
 from cc_log.base.records import Record
 from cc_log.buffer.window_buffer import WindowBuffer
+from cc_log.logger.options import TopicLimits
 from test_fuzz_readers import EXAMPLES, fuzz
 
 DRIVING = '/odom'
@@ -32,7 +33,8 @@ COST = 100
 FAR = (4294000000.0, 1e300, float('inf'), -1e300, float('-inf'), 0.0)  # 2106, huge, none, 1970
 CONFIGS = [dict(pre='2s', post='1s'), dict(pre='0.5s', post='0.3s', max_window='3s'),
            dict(pre='1s', post='1s', max_ahead=2.0), dict(pre='1s', post='0.5s', max_buffer_mb=0.005),
-           dict(pre='0.3s', post='2s', max_buffer_mb=0.02, max_ahead=0.5)]
+           dict(pre='0.3s', post='2s', max_buffer_mb=0.02, max_ahead=0.5),
+           dict(pre='1s', post='0.5s', topic_limits={'/scan': TopicLimits(pre=0.3, post=0.2, max_mb=0.001)})]
 FINAL_STEP = 1e8  # past every stamp the strategy gives but those of FAR
 
 

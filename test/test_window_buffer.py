@@ -263,11 +263,17 @@ def test_a_side_record_far_ahead_of_the_driving_clock_holds_no_later_record_of_i
     assert most <= 2 * 21 + 1  # the pre-buffer's 2 s of both topics (and the outlier) at most
 
 
-def test_a_side_record_placed_at_the_driving_clock_goes_into_the_window_at_that_clock():
-    buffer = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0)
+@pytest.mark.parametrize('limits', [None, {'/cam': TopicLimits(pre=0.5, post=None, max_mb=0)}], ids=['', 'limits'])
+def test_a_side_record_placed_at_the_driving_clock_goes_into_the_window_at_that_clock(limits):
+    """A camera message stamped in 2106 just before the trigger: placed at the driving record after it, it is in the
+    window at that stamp, and the camera's own ``pre`` keeps what it kept without it."""
+    expected, _ = side_stream(WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits=limits),
+                              camera(None, None))
+    buffer = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits=limits)
     windows, _ = side_stream(buffer, camera(499, 4294000000.0))
     cam = [(r.msg, r.stamp) for r in windows[0].records if r.topic == '/cam']
-    assert (499, 49.9) in cam and len(cam) == 40 and buffer.restamped == {'/cam': 1}  # 48.05 .. 51.95
+    assert cam == [(r.msg, 49.9 if r.msg == 499 else r.stamp) for r in expected[0].records if r.topic == '/cam']
+    assert len(cam) == (25 if limits else 40) and buffer.restamped == {'/cam': 1}  # from 49.55 or 48.05 to 51.95
 
 
 def test_side_records_during_a_silence_of_the_driving_topic_keep_their_stamps():
