@@ -334,9 +334,9 @@ class WindowBuffer(BatchAdd):
         self._side_bytes[topic] += record.cost
         self._bytes += record.cost
         limits = self.limits.get(topic)
-        if limits is not None and self._open is None and self._pending is None:  # a stamp far ahead trims nothing:
-            clock = newest if self._clock is None else max(newest, self._clock)  # by the clock or the topic's newest
-            self._limit_topic(topic, side, limits, min(record.stamp, clock))
+        if limits is not None and self._open is None and self._pending is None:  # a stamp far ahead trims nothing
+            clock = newest if self._clock is None else max(newest, self._clock)  # (of the clock or its topic's newest)
+            self._limit_topic(topic, side, limits, record.stamp if record.stamp <= clock + self.max_ahead else clock)
         if self.max_buffer_bytes and self._bytes > self._part_bytes:
             return self._enforce_budget()
         return []
