@@ -305,6 +305,18 @@ def test_a_side_record_that_comes_after_a_later_stamped_one_is_kept_in_the_windo
     assert buffer.restamped == {}
 
 
+@pytest.mark.parametrize('late', [1.0, 0.0, -1e300], ids=['46s-late', '1970', 'huge'])
+def test_a_window_written_in_parts_takes_no_late_side_record_stamped_before_its_start(late):
+    """A window from 48 s to 52 s in parts (max_window 3 s: the first ends at 51 s): a side record stamped before
+    its start that comes while its last part is collected is not the window's; it used to be written into that part
+    (a window file from 1970 to 52 s)."""
+    def side(i, stamp):
+        return [Record(late, '/cam', 'late', 100)] if i == 515 else [Record(stamp + 0.05, '/cam', i, 100)]
+    windows, _ = side_stream(WindowBuffer(pre='2s', post='2s', max_window='3s', max_buffer_mb=0), side)
+    cam = [r for w in windows for r in w.records if r.topic == '/cam']
+    assert [w.part for w in windows] == [1, 2] and [r.msg for r in cam] == [i for i in range(480, 520) if i != 515]
+
+
 def test_long_anomaly_is_split_at_max_window_without_loss():
     windows = run(WindowBuffer(pre=2, post=2, max_window=5), [float(i) for i in range(30)], set(range(5, 20)))
     assert [w.part for w in windows] == [1, 2, 3, 4]

@@ -217,7 +217,7 @@ class WindowBuffer(BatchAdd):
     ``max_buffer_mb`` (written in parts). ``cost``: the MemoryCost estimating records that carry no cost.
     ``part_factor``: the memory the writer needs for a part per byte of it (>= 1; a format that decodes serialized
     messages needs several times their size): parts are handed on at half the budget divided by it. ``max_ahead``:
-    seconds (> 0) a side record may lie after the driving clock when the clock moves on or a window takes it.
+    seconds (> 0) a side record may lie after the driving clock when the clock moves on (else it is placed at it).
     """
 
     def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
