@@ -216,8 +216,9 @@ def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     from cc_log.base import msg_codec
     summary, bag = replayed['summary'], replayed['bag']
     assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
-                             'keep_budget', 'absent_route_topics']
+                             'keep_budget', 'absent_route_topics', 'messages_restamped', 'restamped_by_topic']
     assert summary['absent_route_topics'] == []  # no route
+    assert summary['messages_restamped'] == 0 and summary['restamped_by_topic'] == {}  # every stamp on the clock
     assert summary['online'] == []  # no classifier learns online here
     assert summary['keep_budget']['windows_skipped'] == 0  # no keep budget: every window kept
     records = bag_messages(bag, ['/odom', '/scan'])
@@ -261,6 +262,28 @@ def test_replay_nominal_run_and_bag_lz4_format(trained, real_bag, tmp_path):
     assert len(lines) == summary['windows'][0]['messages'] and json.loads(lines[0])['topic'] == '/odom'
     text = ok('replay', bag, '--topic', '/odom', '--model', trained['model'], '--out', tmp_path / 'text')
     assert '271 messages in' in text and 'window(s)' in text
+
+
+def test_replay_says_how_many_messages_it_placed_at_the_clock(trained, real_bag, tmp_path):
+    """A laser scanner whose every 10th header stamp is 100 s ahead of the bag's clock: those scans are placed at
+    their arrival, and the summary says how many, per topic (they were counted only on the live node's
+    /diagnostics)."""
+    import rosbag
+    bag = str(tmp_path / 'ahead.bag')
+    scans = 0
+    with rosbag.Bag(real_bag(JERKY)) as source, rosbag.Bag(bag, 'w') as out:
+        for topic, msg, t in source.read_messages(topics=['/odom', '/scan']):
+            if topic == '/scan':
+                scans += 1
+                if scans % 10 == 0:
+                    msg.header.stamp.secs += 100
+            out.write(topic, msg, t)
+    args = ('replay', bag, '--topic', '/odom', '--side-topic', '/scan', '--model', trained['model'])
+    summary = ok_json(*args + ('--out', tmp_path / 'json'))
+    assert summary['restamped_by_topic'] == {'/scan': scans // 10} and summary['messages_restamped'] == scans // 10
+    text = ok(*args + ('--out', tmp_path / 'text'))
+    assert '  %d messages placed at the clock, their header stamps off it (/scan: %d)\n' % (scans // 10, scans // 10) \
+        in text
 
 
 # -- info, cat, export ----------------------------------------------------------------------------------------

@@ -467,6 +467,24 @@ def test_a_side_topic_that_starts_before_the_driving_one_on_a_bag_played_without
     assert stats['restamped_by_topic'] == {}
 
 
+def test_a_side_stamp_the_clock_cannot_judge_is_placed_by_the_buffer_and_counted_with_the_restamped(husky, tmp_path):
+    """An IMU message stamped in 2106 that comes with no arrival time (0: before the clock started) keeps its header
+    stamp past the stamp clock, and used to hold every later IMU message back from every window (the window at 20 s
+    had no IMU). The buffer places it at its driving clock; the count joins the clock's (``stats()``, on
+    /diagnostics, and the summary of ``cclog replay``)."""
+    from cc_log.offline.replay import replay_records
+    expected, _ = imu_window(tmp_path / 'plain', husky)
+    bad = [k for k, record in enumerate(husky) if record.topic == IMU][100]  # at about 3 s
+    records = husky[:bad] + [stamped(husky[bad], 4294000000.0)._replace(stamp=0.0)] + husky[bad + 1:]
+    kept, stats = imu_window(tmp_path / 'placed', records)
+    assert len([r for r in kept if r.topic == IMU]) == 90 and [r.stamp for r in kept] == [r.stamp for r in expected]
+    assert stats['restamped_by_topic'] == {IMU: 1} and stats['messages_restamped'] == 1
+    logger = SmartLogger(ScriptedModel(), str(tmp_path / 'replay'), 'json-xz', '2s', '1s', driving_topic=ODOM,
+                         side_topics=[IMU])
+    summary = replay_records(logger, records)
+    assert summary['restamped_by_topic'] == {IMU: 1} and summary['messages_restamped'] == 1
+
+
 def test_failed_writes_are_reported_not_raised(husky, tmp_path):
     blocker = tmp_path / 'not_a_directory'
     blocker.write_text('x')
@@ -533,7 +551,8 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
         for record in run:
             out.write(ODOM, record.msg, t=record.msg.header.stamp)
     summary = replay(bag, ODOM, path, str(tmp_path / 'out'), PRE, POST, 'json-xz')
-    assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'keep_budget'}
+    assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'keep_budget',
+                            'messages_restamped', 'restamped_by_topic'}
     assert summary['input_messages'] == len(run)
     # estimated from a sample of the messages (replay does not decode them all)
     assert summary['raw_json_bytes'] == pytest.approx(sum(msg_codec.row_json_bytes(r.msg) for r in run), rel=0.01)

@@ -18,7 +18,7 @@ def stream(draw):
         step = draw(st.sampled_from([0.01, 0.01, 0.02, 0.0, -0.005, 0.3, -3.0]))  # jitter, gaps, a jump back
         stamp += step
         topic = draw(st.sampled_from([DRIVING, DRIVING, '/imu', '/scan']))
-        offset = 0.0 if topic == DRIVING else draw(st.sampled_from([0.0, -0.004, -0.05, 0.003]))
+        offset = 0.0 if topic == DRIVING else draw(st.sampled_from([0.0, -0.004, -0.05, 0.003, 15.0]))  # 15: far ahead
         records.append(Record(stamp + offset, topic, index, draw(st.sampled_from([100, 150, 2000]))))
         if topic == DRIVING and draw(st.integers(0, 14)) == 0:
             triggers[len(records) - 1] = draw(st.sampled_from([(None, None), ('0.1s', '0.05s'), ('3', '2')]))

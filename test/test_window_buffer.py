@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from cc_log.base.spans import Span
 from cc_log.base.records import LogWindow, Record
 from cc_log.buffer.window_buffer import MemoryCost, WindowBuffer, deep_size
+from cc_log.logger.options import TopicLimits
 
 
 def run(buffer, stamps, anomalies, side=()):
@@ -218,6 +219,102 @@ def test_a_part_written_for_the_budget_takes_no_side_record_beyond_the_window():
     windows += buffer.flush()
     side = [r.msg for w in windows for r in w.records if r.topic == '/side']
     assert 'after' not in side and side[-1] == 1.4 and len(windows) > 2  # (the budget trimmed the pre-buffer)
+
+
+def side_stream(buffer, side, n=1000, trigger_at=500, step=0.1):
+    """Driving records 0..n-1 (``/odom``, every ``step`` s, cost 100), each after the side records ``side(i,
+    stamp)`` gives; a trigger after record ``trigger_at``. The windows after the flush, and the most records the
+    buffer held after a driving record before the trigger."""
+    windows, most = [], 0
+    for i in range(n):
+        stamp = round(step * i, 6)
+        for record in side(i, stamp):
+            windows += buffer.add_side(record)
+        windows += buffer.add(Record(stamp, '/odom', i, 100))
+        if i == trigger_at:
+            windows += buffer.trigger('test')
+        if i < trigger_at:
+            most = max(most, buffer.buffered_messages)
+    return windows + buffer.flush(), most
+
+
+def camera(outlier_at, outlier):
+    """A camera every 0.1 s beside the driving records, stamped as they are, but the one at ``outlier_at``."""
+    return lambda i, stamp: [Record(outlier if i == outlier_at else stamp + 0.05, '/cam', i, 100)]
+
+
+OUTLIERS = {'2106': 4294000000.0, 'huge': 1e300, 'inf': float('inf'), '11s-ahead': 10.0 + 11.0}
+
+
+@pytest.mark.parametrize('outlier', list(OUTLIERS.values()), ids=list(OUTLIERS))
+@pytest.mark.parametrize('limits', [None, {'/cam': TopicLimits(pre=0.5, post=None, max_mb=0)}], ids=['', 'limits'])
+def test_a_side_record_far_ahead_of_the_driving_clock_holds_no_later_record_of_its_topic_back(outlier, limits):
+    """One camera message stamped far in the future (its header wrong: 2106), at 10 s: it used to sit at the front of
+    its topic's records and hold every later one (neither written nor let go: the window at 50 s had no camera,
+    900 records stayed held) or, with the topic's own pre, make it drop what it held. Now it is placed at the
+    driving clock when the clock moves on, counted, and let go with the records of its time."""
+    reference = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits=limits)
+    expected, _ = side_stream(reference, camera(None, None))
+    buffer = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits=limits)
+    windows, most = side_stream(buffer, camera(100, outlier))
+    assert [[tuple(r) for r in w.records] for w in windows] == [[tuple(r) for r in w.records] for w in expected]
+    assert [r.msg for r in windows[0].records if r.topic == '/cam'][0] == (495 if limits else 480)
+    assert buffer.restamped == {'/cam': 1} and buffer.limited == reference.limited
+    assert most <= 2 * 21 + 1  # the pre-buffer's 2 s of both topics (and the outlier) at most
+
+
+@pytest.mark.parametrize('limits', [None, {'/cam': TopicLimits(pre=0.5, post=None, max_mb=0)}], ids=['', 'limits'])
+def test_a_side_record_placed_at_the_driving_clock_goes_into_the_window_at_that_clock(limits):
+    """A camera message stamped in 2106 just before the trigger: placed at the driving record after it, it is in the
+    window at that stamp, and the camera's own ``pre`` keeps what it kept without it."""
+    expected, _ = side_stream(WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits=limits),
+                              camera(None, None))
+    buffer = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0, topic_limits=limits)
+    windows, _ = side_stream(buffer, camera(499, 4294000000.0))
+    cam = [(r.msg, r.stamp) for r in windows[0].records if r.topic == '/cam']
+    assert cam == [(r.msg, 49.9 if r.msg == 499 else r.stamp) for r in expected[0].records if r.topic == '/cam']
+    assert len(cam) == (25 if limits else 40) and buffer.restamped == {'/cam': 1}  # from 49.55 or 48.05 to 51.95
+
+
+def test_side_records_during_a_silence_of_the_driving_topic_keep_their_stamps():
+    """The clock judges a side record when it moves on, not when the record comes: a camera running on through 30 s
+    without odometry is not ahead of the clock that comes back, and a window just after keeps its own stamps."""
+    buffer, windows = WindowBuffer(pre='2s', post='2s', max_buffer_mb=0), []
+    for i in range(600):
+        stamp = round(0.1 * i, 6)
+        windows += buffer.add_side(Record(stamp + 0.05, '/cam', i, 100))
+        if not 200 <= i < 500:  # no odometry from 20 s to 50 s
+            windows += buffer.add(Record(stamp, '/odom', i, 100))
+        if i == 510:
+            windows += buffer.trigger('test')
+    windows += buffer.flush()
+    assert [r.msg for r in windows[0].records if r.topic == '/cam'] == list(range(490, 530))  # 49.05 .. 52.95
+    assert all(r.stamp == round(0.1 * r.msg, 6) + 0.05 for r in windows[0].records if r.topic == '/cam')
+    assert buffer.restamped == {}
+
+
+def test_a_side_record_that_comes_after_a_later_stamped_one_is_kept_in_the_window_its_stamp_falls_in():
+    """Side records out of stamp order (two publishers, a sensor's variable delay): a record stamped inside a window
+    that came after one stamped beyond its end used to wait behind it and miss the window."""
+    def side(i, stamp):
+        return [Record(51.5, '/cam', 'beyond', 100), Record(50.9, '/cam', 'inside', 100)] if i == 51 else []
+    buffer = WindowBuffer(pre='1s', post='1s', max_buffer_mb=0)
+    windows, _ = side_stream(buffer, side, n=100, trigger_at=50, step=1.0)
+    assert [[r.msg for r in w.records if r.topic == '/cam'] for w in windows] == [['inside']]
+    assert [r.stamp for r in windows[0].records] == sorted(r.stamp for r in windows[0].records)
+    assert buffer.restamped == {}
+
+
+@pytest.mark.parametrize('late', [1.0, 0.0, -1e300], ids=['46s-late', '1970', 'huge'])
+def test_a_window_written_in_parts_takes_no_late_side_record_stamped_before_its_start(late):
+    """A window from 48 s to 52 s in parts (max_window 3 s: the first ends at 51 s): a side record stamped before
+    its start that comes while its last part is collected is not the window's; it used to be written into that part
+    (a window file from 1970 to 52 s)."""
+    def side(i, stamp):
+        return [Record(late, '/cam', 'late', 100)] if i == 515 else [Record(stamp + 0.05, '/cam', i, 100)]
+    windows, _ = side_stream(WindowBuffer(pre='2s', post='2s', max_window='3s', max_buffer_mb=0), side)
+    cam = [r for w in windows for r in w.records if r.topic == '/cam']
+    assert [w.part for w in windows] == [1, 2] and [r.msg for r in cam] == [i for i in range(480, 520) if i != 515]
 
 
 def test_long_anomaly_is_split_at_max_window_without_loss():

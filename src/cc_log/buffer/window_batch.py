@@ -4,14 +4,18 @@ The same as ``add`` of each driving record and ``add_side`` of each other one in
 in the common case: the open window (if any) taking every driving record of the batch and not reaching
 ``max_window``, the buffer staying within half its budget, no topic with limits of its own, and driving stamps that
 do not go backwards in the batch (then every threshold the per-record path trims and prunes by only rises, so
-trimming and pruning once, at the last driving record, leaves what trimming at each one leaves). A pending window
+trimming and pruning once, at the last driving record, leaves what trimming at each one leaves), and no side record
+more than ``max_ahead`` after the clock (which the per-record path places at the clock it meets). A pending window
 is completed by ``add`` of the record that completes it, the records before and after it going by slices. Any
 other batch goes record by record.
 """
 import bisect
 import collections
 import itertools
+import math
 import operator
+
+from cc_log.buffer import side_order
 
 _STAMP = operator.attrgetter('stamp')
 _COST = operator.attrgetter('cost')
@@ -28,7 +32,7 @@ class BatchAdd(object):
         mask = list(map(driving.__eq__, topics))
         drivings = list(itertools.compress(records, mask))
         costs = list(map(_COST, records))
-        if not self._batchable(drivings, costs):
+        if not self._batchable(drivings, costs, records, mask):
             done = []
             for record, is_driving in zip(records, mask):
                 done.extend(self.add(record) if is_driving else self.add_side(record))
@@ -60,8 +64,9 @@ class BatchAdd(object):
         self._extend_side(records[last + 1:], mask[last + 1:])
         return []
 
-    def _batchable(self, drivings, costs):
-        """Whether a batch (its driving records, the costs of all) can go by slices (see the module docstring)."""
+    def _batchable(self, drivings, costs, records, mask):
+        """Whether a batch (its driving records, the costs of all, its records and which are driving ones) can go by
+        slices (see the module docstring)."""
         if self.limits or not all(costs) or (self._pending is not None and not self._ring):
             return False
         if self.max_buffer_bytes and self._bytes + sum(costs) > self._part_bytes:
@@ -82,6 +87,11 @@ class BatchAdd(object):
                 first = window.records[0] if window.records else drivings[0]
                 return stamps[-1] - first.stamp < self.max_window.seconds
             return len(window.records) + len(drivings) < self.max_window.count
+        # one by one, a side record more than max_ahead after the clock of the driving record after it is placed there
+        newest = max(map(_STAMP, itertools.compress(records, map(operator.not_, mask))), default=-math.inf)
+        first = stamps[0] if self._clock is None else max(self._clock, stamps[0])
+        if not side_order.none_ahead(newest, first, self._side.values(), self.max_ahead):
+            return False
         if self._pending is not None:  # until it completes, the ring only grows and the side threshold stays
             return True
         if self.pre.is_duration:  # the newest record stays in the ring: thresholds rise with the clock
@@ -115,5 +125,8 @@ class BatchAdd(object):
             if held is None:
                 held = side[topic] = collections.deque()
                 side_bytes[topic] = 0
-            held.append(record)
+            if held and record.stamp < held[-1].stamp:  # (side_order.insert; appended inline, the common case)
+                side_order.insert(held, record)
+            else:
+                held.append(record)
             side_bytes[topic] += record.cost

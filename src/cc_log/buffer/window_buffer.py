@@ -8,8 +8,9 @@ written), and two windows that overlap, touch or lie closer than ``post`` (the g
 start of the next) become one, with the messages between, so no message is written twice, none inside a window
 is skipped and a window is not cut in two files by a short calm: a closed window waits ``pre + post`` more
 (counts with counts, durations with durations; else ``pre``) before it is handed on. Messages of other topics are
-buffered by time and saved in the windows whose time span holds them. (The feature window the classifiers score
-is ``features.FeatureWindow``.)
+buffered by time (``side_order``: in stamp order, one stamped more than ``max_ahead`` after the driving clock placed
+at it, counted in ``restamped``) and saved in the windows whose time span holds them. (The feature window the
+classifiers score is ``features.FeatureWindow``.)
 
 Memory is bounded by ``max_buffer_mb``: every message buffered (driving and other topics, in or outside a
 window) counts with its estimated memory cost (``Record.cost``, else ``MemoryCost``: a message held as its
@@ -28,7 +29,9 @@ import math
 import sys
 
 from cc_log.base.records import LogWindow, Trigger
+from cc_log.base import spans
 from cc_log.base.spans import Span
+from cc_log.buffer import side_order
 from cc_log.buffer.window_batch import BatchAdd
 
 DEFAULT_PRE = Span.parse('2s')   # durations: the same margin at any rate (100 messages: 1 s at 100 Hz, 20 s at 5 Hz)
@@ -36,6 +39,7 @@ DEFAULT_POST = Span.parse('2s')
 DEFAULT_MAX_WINDOW = Span.messages(100000)
 DEFAULT_JUMP_BACK_TOLERANCE = 1.0  # seconds a stamp may go backwards before the buffer resets
 DEFAULT_MAX_BUFFER_MB = 256.0      # memory budget of everything buffered (MB = 10^6 bytes); 0: none
+DEFAULT_MAX_AHEAD = 10.0           # seconds a side record may lie after the driving clock as it moves on (else: at it)
 MB = 1000 ** 2
 RECORD_OVERHEAD = 130              # bytes of a Record around its message: the tuple, stamp, cost, a deque slot
 ALLOCATOR_FACTOR = 1.15            # measured RSS per buffered nav_msgs/Odometry / its deep sys.getsizeof
@@ -212,12 +216,13 @@ class WindowBuffer(BatchAdd):
     window does not come within ``post`` of it, or when it reaches ``max_window`` or the memory budget
     ``max_buffer_mb`` (written in parts). ``cost``: the MemoryCost estimating records that carry no cost.
     ``part_factor``: the memory the writer needs for a part per byte of it (>= 1; a format that decodes serialized
-    messages needs several times their size): parts are handed on at half the budget divided by it.
+    messages needs several times their size): parts are handed on at half the budget divided by it. ``max_ahead``:
+    seconds (> 0) a side record may lie after the driving clock when the clock moves on (else it is placed at it).
     """
 
     def __init__(self, pre=DEFAULT_PRE, post=DEFAULT_POST, max_window=DEFAULT_MAX_WINDOW,
                  jump_back_tolerance=DEFAULT_JUMP_BACK_TOLERANCE, max_buffer_mb=DEFAULT_MAX_BUFFER_MB, cost=None,
-                 part_factor=1.0, topic_limits=None, held_elsewhere=None):
+                 part_factor=1.0, topic_limits=None, held_elsewhere=None, max_ahead=DEFAULT_MAX_AHEAD):
         self.pre = Span.parse(pre, 'pre')
         self.post = Span.parse(post, 'post')
         self.max_window = Span.parse(max_window, 'max_window')
@@ -227,6 +232,7 @@ class WindowBuffer(BatchAdd):
                 (self.pre.count or self.pre.seconds or 0) >= (self.max_window.count or self.max_window.seconds):
             raise ValueError('pre: %s is larger than the buffer can hold (max_window %s)' % (self.pre, self.max_window))
         self.jump_back_tolerance = jump_back_tolerance
+        self.max_ahead = spans.seconds(max_ahead, 'max_ahead', positive=True)
         self.max_buffer_bytes = budget_bytes(max_buffer_mb)
         self._part_bytes = int(part_bytes(self.max_buffer_bytes) / max(1.0, float(part_factor)))
         self._cost = cost if cost is not None else MemoryCost()
@@ -245,6 +251,7 @@ class WindowBuffer(BatchAdd):
         self._pending = None               # closed window that the next one may still join (within post)
         self._clock = None                 # newest stamp seen (stamps may jitter backwards a little)
         self.resets = 0                    # times time jumped backwards and the buffer started over
+        self.restamped = collections.Counter()  # topic -> side records placed at the driving clock (far after it)
 
     # -- logging windows ------------------------------------------------------------------------------
 
@@ -322,12 +329,14 @@ class WindowBuffer(BatchAdd):
         if side is None:
             side = self._side[topic] = collections.deque()
             self._side_bytes[topic] = 0
-        side.append(record)
+        newest = side[-1].stamp if side else record.stamp
+        side_order.insert(side, record)
         self._side_bytes[topic] += record.cost
         self._bytes += record.cost
         limits = self.limits.get(topic)
-        if limits is not None and self._open is None and self._pending is None:
-            self._limit_topic(topic, side, limits, record.stamp)
+        if limits is not None and self._open is None and self._pending is None:  # a stamp far ahead trims nothing
+            clock = newest if self._clock is None else max(newest, self._clock)  # (of the clock or its topic's newest)
+            self._limit_topic(topic, side, limits, record.stamp if record.stamp <= clock + self.max_ahead else clock)
         if self.max_buffer_bytes and self._bytes > self._part_bytes:
             return self._enforce_budget()
         return []
@@ -533,25 +542,33 @@ class WindowBuffer(BatchAdd):
                 oldest = min(oldest, self._clock - self.pre.seconds)
         else:
             return
-        free = self._open is None and self._pending is None
+        free, ahead = self._open is None and self._pending is None, self._clock + self.max_ahead
         for topic, side in self._side.items():
+            if side and side[-1].stamp > ahead:
+                self._place_ahead(topic, side)
             while side and side[0].stamp < oldest:
                 self._drop_side(topic)
             limits = self.limits.get(topic)
             if free and limits is not None and side:
                 self._limit_topic(topic, side, limits, self._clock)
 
+    def _place_ahead(self, topic, side):
+        """Place the records of a side topic stamped more than ``max_ahead`` after the driving clock at it."""
+        placed = side_order.place_ahead(side, self._clock, self.max_ahead)
+        if placed:
+            self.restamped[topic] += placed
+
     def _emit(self, window, records=None, everything=False, final=True):
         """Turn a window (or the given first records of it) into a LogWindow with the side records of its
         time span (``everything``: every side record held from its start on), in stamp order. A part after
-        the first takes the side records since the previous part (those of its time span and those between).
-        A topic with its own ``pre`` or ``post`` (``limits``) keeps only what lies within them of the window's
-        first and last trigger."""
+        the first takes the side records since the previous part (those of its time span and those between, none
+        before the window's start: a late record stamped there is let go). A topic with its own ``pre`` or
+        ``post`` (``limits``) keeps only what lies within them of the window's first and last trigger."""
         if window.before:  # a part goes out: no later trigger reaches back before it
             self._bytes -= sum(record.cost for record in window.before)
             window.before = []
         records = window.records if records is None else records
-        start = float('-inf') if window.continued else window.since
+        start = window.since
         end = records[-1].stamp if records else float('-inf')
         if window.until is not None and (final or everything):
             end = max(end, window.until)  # its span ends at the post of its last trigger, not at a driving record

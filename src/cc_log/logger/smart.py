@@ -46,7 +46,7 @@ from cc_log.base.event_kinds import OPENED
 from cc_log.logger.smart_events import Event, Stats
 from cc_log.base.stamp_clock import StampClock
 from cc_log.logger.trigger_topics import TriggerViews, check_triggers, topic_types
-from cc_log.base.spans import Span
+from cc_log.base.spans import MAX_SECONDS, Span
 from cc_log.triggers import (
     DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES, ClassifierTrigger, ManualTrigger)
 from cc_log.base.records import Record, records_of
@@ -416,6 +416,7 @@ class SmartLogger(object):
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
             limited = self._limited + self._buffer.limited
+            placed = self._placed + self._buffer.restamped
         raw_estimate = self._raw_estimate.total  # its samples decoded here, off the message path
         written = self.writer.stats()
         triggers = {trigger.name: trigger.stats() for trigger in self.triggers}
@@ -460,8 +461,8 @@ class SmartLogger(object):
                 'bytes_queued': written['bytes_queued'],
                 'messages_shed': sum(self._shed.values()),
                 'shed_by_topic': dict(self._shed),
-                'messages_restamped': sum(self._restamped.values()),
-                'restamped_by_topic': dict(self._restamped), **self.budget.stats(),  # windows_skipped, ...
+                'messages_restamped': sum((self._restamped + placed).values()),
+                'restamped_by_topic': dict(self._restamped + placed), **self.budget.stats(),  # windows_skipped, ...
             }
         # Not in any window (outside every anomaly, seen while paused, or trimmed from the pre buffer).
         result['messages_not_kept'] = result['messages_seen'] - sum(result[key] for key in (
@@ -494,16 +495,20 @@ class SmartLogger(object):
         return False
 
     def _new_buffer(self):
+        # the clock's stamps lie within 2 stamp_tolerance of each other: the buffer places what it could not judge
         buffer = WindowBuffer(pre=self.pre, post=self.post, max_window=self.max_window,
                               max_buffer_mb=self.max_buffer_mb, cost=self._cost,
                               part_factor=log_format.formats.get(self.format).PART_FACTOR,
-                              topic_limits=self.topic_limits, held_elsewhere=self._bytes_queued)
+                              topic_limits=self.topic_limits, held_elsewhere=self._bytes_queued,
+                              max_ahead=min(2 * self.stamp_tolerance, MAX_SECONDS))
         if getattr(self, '_buffer', None) is not None:
+            self._placed.update(self._buffer.restamped)
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed
             self._limited += self._buffer.limited
         else:
             self._resets = self._trimmed = self._limited = 0
+            self._placed = collections.Counter()  # side records the buffers placed at their driving clock
         self._buffer = buffer
         for trigger in self.triggers:
             trigger.reset()

@@ -8,6 +8,7 @@ import sys
 
 from cc_log.base.safe_input import printable
 from cc_log.logger import options
+from cc_log.logger.health import per_topic
 from cc_log.offline.progress import bar as _bar
 from cc_log.offline.cli.common import (
     PROG, EXIT_OK, CommandError, command_help, configuration, driving_topic, existing_file, fleet_end, fleet_flags,
@@ -26,7 +27,8 @@ def add_parser(subparsers):
         (default: the file's), a model (cclog learn) is a classifier scoring --topic. Every trigger saves
         --pre messages before and --post after (counts or durations), with the --side-topic messages of
         that time span, as window files in OUT; options given override the configuration. --json prints
-        {input_messages, raw_json_bytes, stored_bytes, windows: [{name, start, end, messages, files, path}]},
+        {input_messages, raw_json_bytes, stored_bytes, windows: [{name, start, end, messages, files, path}],
+        messages_restamped, restamped_by_topic (messages placed at the clock, their header stamps off it)},
         one entry per window whatever
         its files (routes, parts, splits: messages of them all; path: its first); start/end are the header
         stamps (float seconds) of the first and last message saved. A window that cannot be written (disk
@@ -109,6 +111,8 @@ def run(args):
         ('online', summary['online']),
         ('keep_budget', summary['keep_budget']),
         ('absent_route_topics', summary['absent_route_topics']),
+        ('messages_restamped', summary['messages_restamped']),
+        ('restamped_by_topic', summary['restamped_by_topic']),
     ])
     if args.json:
         print_json(result)
@@ -126,6 +130,9 @@ def run(args):
             number, stamp_text(window['start']), stamp_text(window['end']), window['end'] - window['start'],
             window['messages'], os.path.join(args.out, window['name']),
             ' (%s)' % _files_text(window['files'])))
+    if result['messages_restamped']:
+        print('  %d messages placed at the clock, their header stamps off it (%s)' % (
+            result['messages_restamped'], per_topic(result['restamped_by_topic'])))
     for topic in result['absent_route_topics']:
         print('  routes: %s is not in the bag; nothing was routed there' % printable(topic))
     for monitor in summary['drift']:
@@ -167,7 +174,7 @@ def _replay_many(args, cfg):
     outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
         engine, bags, args.out, cfg, progress=progress))
     rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
-                                 'keep_budget'))
+                                 'keep_budget', 'messages_restamped', 'restamped_by_topic'))
     reports = {}
     for row in rows:
         row['windows'] = [_window_entry(w) for w in row.get('windows', ())]
