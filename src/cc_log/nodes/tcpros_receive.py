@@ -44,6 +44,7 @@ import selectors
 import socket
 import struct
 import threading
+import time
 
 import rospy
 from rospy.exceptions import TransportException, TransportTerminated
@@ -52,6 +53,7 @@ from rospy.msg import AnyMsg
 LENGTH = struct.Struct('<I')  # the 4-byte little-endian length before each message
 READ_BYTES = 1 << 16          # bytes asked of the socket at a time for messages smaller than that
 CHECK_SECONDS = 1.0           # how often a waiting rospy thread looks whether its connection was closed unseen
+GATHER_SECONDS = 0.05         # after a pass that read less than READ_BYTES, the loop lets messages gather this long
 
 
 class TooLarge(Exception):
@@ -269,7 +271,7 @@ class Receiver(object):
 
     def _run(self):
         while True:
-            batch = []
+            batch, received = [], 0
             for key, _ in self._selector.select():
                 reading = key.data
                 if reading is None:  # woken by stop()
@@ -278,7 +280,7 @@ class Receiver(object):
                     continue
                 out = []
                 try:
-                    reading.reader.pull(out)
+                    received += reading.reader.pull(out)
                 except TransportTerminated as error:
                     self._end(reading, error)
                 except Exception as error:  # out of memory...: the stream's place is lost, rospy connects again
@@ -288,6 +290,8 @@ class Receiver(object):
                     self._take(reading, out, batch)
             if batch:
                 self._deliver(batch)
+            if received < READ_BYTES and not self._stopped:
+                time.sleep(GATHER_SECONDS)  # light traffic: the next pass reads what came meanwhile at once
 
     def _take(self, reading, out, batch):
         """The messages ``out`` of ``reading`` into ``batch``, counted in rospy's statistics; one read past to
