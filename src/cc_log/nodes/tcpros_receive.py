@@ -52,7 +52,7 @@ from rospy.msg import AnyMsg
 
 LENGTH = struct.Struct('<I')  # the 4-byte little-endian length before each message
 READ_BYTES = 1 << 16          # bytes asked of the socket at a time for messages smaller than that
-CHECK_SECONDS = 1.0           # how often a waiting rospy thread looks whether its connection was closed unseen
+CHECK_SECONDS = 1.0           # how often a waiting rospy thread looks whether its connection (or rospy) ended unseen
 GATHER_SECONDS = 0.05         # after a pass that read less than READ_BYTES, the loop lets messages gather this long
 
 
@@ -231,7 +231,7 @@ class Receiver(object):
                                             topic, impl, own)
             self._start(reading)
             while not reading.ended.wait(CHECK_SECONDS):
-                if connection.done or connection.socket is not sock:
+                if connection.done or connection.socket is not sock or rospy.is_shutdown():
                     self._end(reading, TransportTerminated('connection closed'))
             raise reading.error
 
