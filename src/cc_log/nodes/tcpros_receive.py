@@ -10,7 +10,10 @@ one ``selectors`` loop and rospy's thread waits, blocked on an event, until the 
 what each ready socket has (``FrameReader``: several light messages in one ``recv_into``, a large one into a
 ``bytearray`` of its size) and hands the messages of one pass over every ready socket to ``deliver(batch)`` in one
 call (``batch``: ``(topic, payload, connection_header)`` in order per connection); a message over ``max_bytes`` is
-read past, never held, and its size handed to ``refuse(topic, size)``. When the stream ends, or on a socket error,
+read past, never held, and its size handed to ``refuse(topic, size)``. After a pass that read less than
+``READ_BYTES`` (light topics only) the loop lets messages gather ``GATHER_SECONDS`` in the sockets before the next
+pass, so that one pass reads several (the feeder hands them on in batches of up to 0.5 s anyway); a heavier flow
+is read at once, pass after pass. When the stream ends, or on a socket error,
 the socket leaves the loop first, then rospy's thread raises what rospy's own ``receive_once`` raises there
 (``TransportTerminated``: its receive loop ends; ``TransportException`` on an unexpected error: rospy closes the
 socket and connects again), so connection, reconnection and shutdown stay rospy's, exactly as before. Skipped:
