@@ -344,6 +344,29 @@ def test_a_stopped_receiver_ends_the_connections_it_reads(pair):
     assert delivered.payloads(topic) == [b'one'] and not receiver._thread.is_alive()
 
 
+def test_flush_hands_over_at_once_what_came_while_the_loop_gathers(receiving, monkeypatch):
+    """After a light pass the loop lets messages gather (here 60 s); ``flush()`` (what ``Intake.sync`` calls before
+    a manual trigger) has what the socket holds read and handed over now, and gathering goes on after."""
+    monkeypatch.setattr(tcpros_receive, 'GATHER_SECONDS', 60.0)
+    receiver, delivered, subscribers = receiving
+    topic = '/cc_log_test_flush'
+    subscriber = rospy.Subscriber(topic, rospy.AnyMsg, lambda msg: None, queue_size=None)
+    subscribers.append(subscriber)
+    receiver.hook(subscriber, topic)
+    sender, sock = socket.socketpair()
+    try:
+        connection = connection_of(subscriber, topic, sock, 'http://pub:1/')
+        looping(connection, subscriber)
+        sender.sendall(frame(b'first'))
+        delivered.wait_for(lambda: delivered.messages)  # read at once: the loop then gathers for 60 s
+        sender.sendall(frame(b'second') + frame(b'third'))
+        assert receiver.flush(10.0)
+        assert delivered.payloads(topic) == [b'first', b'second', b'third']
+    finally:
+        sender.close()
+        sock.close()
+
+
 def test_a_batch_is_queued_under_one_lock_with_one_receipt_and_counted_as_put_counts():
     from cc_log.nodes import intake
     queue = intake.IntakeQueue(3, 1000)

@@ -310,9 +310,12 @@ class Intake(object):
         took longer than ``timeout`` seconds (the feeder is behind) or the intake is stopped."""
         if not self._thread.is_alive():
             return False
+        deadline = time.monotonic() + timeout
+        if self._receiver is not None and not self._receiver.flush(timeout):  # what the sockets hold, read now
+            return False
         done = threading.Event()
         self.queue.put(done, force=True)
-        return done.wait(timeout)
+        return done.wait(max(0.0, deadline - time.monotonic()))
 
     def _feed(self):
         batched = hasattr(self.sink, 'on_records')

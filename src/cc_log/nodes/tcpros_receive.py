@@ -13,7 +13,8 @@ call (``batch``: ``(topic, payload, connection_header)`` in order per connection
 read past, never held, and its size handed to ``refuse(topic, size)``. After a pass that read less than
 ``READ_BYTES`` (light topics only) the loop lets messages gather ``GATHER_SECONDS`` in the sockets before the next
 pass, so that one pass reads several (the feeder hands them on in batches of up to 0.5 s anyway); a heavier flow
-is read at once, pass after pass. When the stream ends, or on a socket error,
+is read at once, pass after pass; ``flush()`` (``Intake.sync``, before a manual trigger) has what the sockets hold
+read and handed over at once. When the stream ends, or on a socket error,
 the socket leaves the loop first, then rospy's thread raises what rospy's own ``receive_once`` raises there
 (``TransportTerminated``: its receive loop ends; ``TransportException`` on an unexpected error: rospy closes the
 socket and connects again), so connection, reconnection and shutdown stay rospy's, exactly as before. Skipped:
@@ -47,7 +48,6 @@ import selectors
 import socket
 import struct
 import threading
-import time
 
 import rospy
 from rospy.exceptions import TransportException, TransportTerminated
@@ -202,6 +202,9 @@ class Receiver(object):
         self._selector.register(self._wake, selectors.EVENT_READ, None)
         self._lock = threading.Lock()  # the selector's registrations, a reading's end
         self._stopped = False
+        self._passed = threading.Condition()  # the loop's passes counted; flush() waits for them
+        self._passes = self._wanted = 0        # passes done; passes a flush() waits for (no gathering before)
+        self._hurry = threading.Event()        # ends a gathering early (flush, stop)
         self._thread = threading.Thread(target=self._run, name='cc_log receive')
         self._thread.daemon = True
         self._thread.start()
@@ -273,13 +276,15 @@ class Receiver(object):
             reading.ended.set()
 
     def _run(self):
+        hurry = False
         while True:
             batch, received = [], 0
-            for key, _ in self._selector.select():
+            for key, _ in self._selector.select(0 if hurry else None):
                 reading = key.data
-                if reading is None:  # woken by stop()
+                if reading is None:  # woken by stop() or flush()
                     if self._stopped:
                         return
+                    _drain(self._wake)
                     continue
                 out = []
                 try:
@@ -293,8 +298,33 @@ class Receiver(object):
                     self._take(reading, out, batch)
             if batch:
                 self._deliver(batch)
-            if received < READ_BYTES and not self._stopped:
-                time.sleep(GATHER_SECONDS)  # light traffic: the next pass reads what came meanwhile at once
+            hurry = self._passed_once()
+            if not hurry and received < READ_BYTES and not self._stopped:
+                self._hurry.wait(GATHER_SECONDS)  # light traffic: the next pass reads what came meanwhile at once
+                self._hurry.clear()
+                with self._passed:
+                    hurry = self._passes < self._wanted
+
+    def _passed_once(self):
+        """Count a pass; whether a flush() still waits for more."""
+        with self._passed:
+            self._passes += 1
+            self._passed.notify_all()
+            return self._passes < self._wanted
+
+    def flush(self, timeout):
+        """Wait until the loop has read and handed over what the sockets held at the call (no gathering
+        meanwhile); False after ``timeout`` seconds or once stopped."""
+        with self._passed:
+            self._wanted = target = max(self._wanted, self._passes + 2)  # the pass under way may have begun before
+        self._hurry.set()
+        try:
+            self._waker.send(b'x')
+        except OSError:  # stopped and closed
+            return False
+        with self._passed:
+            return self._passed.wait_for(lambda: self._passes >= target or self._stopped, timeout) and \
+                not self._stopped
 
     def _take(self, reading, out, batch):
         """The messages ``out`` of ``reading`` into ``batch``, counted in rospy's statistics; one read past to
@@ -329,8 +359,11 @@ class Receiver(object):
             readings = [key.data for key in self._selector.get_map().values() if key.data is not None]
         for reading in readings:
             self._end(reading, TransportTerminated('the receiver is stopped'))
+        self._hurry.set()
         self._waker.send(b'x')
         self._thread.join()
+        with self._passed:
+            self._passed.notify_all()
         self._selector.close()
         self._wake.close()
         self._waker.close()
@@ -345,6 +378,15 @@ def _leftovers(connection):
     pending.seek(0)
     pending.truncate()
     return data
+
+
+def _drain(sock):
+    """Read what the non-blocking ``sock`` holds."""
+    try:
+        while sock.recv(4096):
+            pass
+    except BlockingIOError:
+        pass
 
 
 def _parsed(reader):
