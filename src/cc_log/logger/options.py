@@ -394,8 +394,9 @@ OPTIONS = (
     _option('quiet', '', BOOL, False, "log warnings and errors only, no INFO lines (rosbag record's `-q`)", BOTH),
     _option('tcp_nodelay', '', BOOL, False, "subscribe with TCP_NODELAY (rosbag record's `--tcpnodelay`): lower "
             'latency for small messages, more packets', BOTH),
-    _option('fast_receive', '', BOOL, True, "read each topic's messages off rospy's connections with cc_log's own "
-            "reader (one `recv_into` per message), not rospy's receive: docs/COST.md", BOTH),
+    _option('fast_receive', '', BOOL, True, "read every topic's messages off rospy's connections with cc_log's own "
+            "reader (one thread for every connection), not rospy's receive (a thread per connection): docs/COST.md",
+            BOTH),
     _option('context_topics', '', CONTEXT_TOPICS, (), 'topics recorded always, each `topic` or `topic:Hz`, in rotated '
             'LZ4 bags under `context/`', BOTH),
     _option('context_rotate', '', duration(1, DAY), context_track.DEFAULT_ROTATE, 'seconds of stamps per context '

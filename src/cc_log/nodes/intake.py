@@ -2,7 +2,8 @@
 
 Every topic arrives as serialized bytes with the publisher's connection header (type, md5sum,
 message_definition, callerid, latching): read off rospy's connections by cc_log itself (``tcpros_receive``,
-``fast_receive``, the default), else rospy's own receive hands them over as ``rospy.AnyMsg``. Either only puts
+``fast_receive``, the default: one thread reads every connection and queues what each pass read in one
+``put_batch``), else rospy's own receive hands them over as ``rospy.AnyMsg``. Either only puts
 them on a bounded queue (``IntakeQueue``); one feeder thread hands them to the sink in arrival order, draining the
 queue in batches: the whole batch to ``sink.on_records`` as ``records.Record``s of serialized bytes when the sink
 takes batches (``SmartLogger``), else each to ``sink.on_raw(topic, bytes, connection, receipt)`` when it takes
@@ -93,6 +94,28 @@ class IntakeQueue(object):
                     self.batch_bytes <= self.bytes < self.batch_bytes + size:
                 self._ready.notify()
             return True
+
+    def put_batch(self, items, receipt):
+        """Queue each ``(topic, data, header)`` of ``items`` (serialized messages, oldest first) as
+        ``(topic, data, header, receipt)``, counted as ``put`` counts them, under one lock; returns
+        ``(topic, size)`` of each that did not fit."""
+        refused = []
+        with self._ready:
+            count, size_before = len(self._items), self.bytes
+            for topic, data, header in items:
+                size = len(data)
+                self.received[topic] += 1
+                self.received_bytes[topic] += size
+                if len(self._items) >= self.max_messages or self.bytes + size > self.max_bytes:
+                    self.overflowed += 1
+                    refused.append((topic, size))
+                    continue
+                self._items.append(((topic, data, header, receipt), size))
+                self.bytes += size
+            if not count and self._items or count < self.batch_messages <= len(self._items) or \
+                    size_before < self.batch_bytes <= self.bytes:
+                self._ready.notify()
+        return refused
 
     def refuse(self, topic, size):
         """Count a message of ``size`` bytes on ``topic`` that was not queued (in ``received`` and
@@ -208,6 +231,8 @@ class Intake(object):
         self.decoder = MessageDecoder()
         self._raw = hasattr(sink, 'on_raw')
         self._lock = threading.Lock()
+        self._receiver = tcpros_receive.Receiver(self.put_batch, self.refuse, self.queue.max_bytes) \
+            if self.fast_receive else None
         self.driving_topic = rospy.resolve_name(driving_topic)
         self.subscribers = {}
         self.side_topics = []
@@ -235,9 +260,8 @@ class Intake(object):
         self.queue.listen(resolved)  # its rate is 0 until its first message
         subscriber = rospy.Subscriber(resolved, rospy.AnyMsg, self._enqueue, resolved, queue_size=None,
                                       tcp_nodelay=self.tcp_nodelay)
-        if self.fast_receive:
-            tcpros_receive.hook(subscriber, lambda data, header: self.put(resolved, data, header),
-                                lambda size: self.refuse(resolved, size), self.queue.max_bytes)
+        if self._receiver is not None:
+            self._receiver.hook(subscriber, resolved)
         self.subscribers[resolved] = subscriber
         return resolved
 
@@ -266,6 +290,14 @@ class Intake(object):
             self.dropped += 1
             rospy.logwarn_throttle(10.0, overflow_text(self.queue, topic, size))
 
+    def put_batch(self, batch):
+        """Queue the serialized messages ``(topic, data, header)`` of ``batch`` (``tcpros_receive``: what one pass
+        over the ready connections read) with one receipt time, each counted as ``put`` counts it."""
+        refused = self.queue.put_batch(batch, rospy.get_rostime())
+        if refused:
+            self.dropped += len(refused)
+            rospy.logwarn_throttle(10.0, overflow_text(self.queue, *refused[-1]))
+
     def refuse(self, topic, size):
         """A message of ``size`` bytes on ``topic``, larger than the whole queue, read past and not kept
         (``tcpros_receive``): counted and warned as ``put`` counts one that does not fit."""
@@ -278,9 +310,12 @@ class Intake(object):
         took longer than ``timeout`` seconds (the feeder is behind) or the intake is stopped."""
         if not self._thread.is_alive():
             return False
+        deadline = time.monotonic() + timeout
+        if self._receiver is not None and not self._receiver.flush(timeout):  # what the sockets hold, read now
+            return False
         done = threading.Event()
         self.queue.put(done, force=True)
-        return done.wait(timeout)
+        return done.wait(max(0.0, deadline - time.monotonic()))
 
     def _feed(self):
         batched = hasattr(self.sink, 'on_records')
@@ -397,5 +432,7 @@ class Intake(object):
             subscribers = list(self.subscribers.values())
         for subscriber in subscribers:
             subscriber.unregister()
+        if self._receiver is not None:
+            self._receiver.stop()
         self.queue.put(None, force=True)
         self._thread.join()
