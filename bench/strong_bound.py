@@ -51,6 +51,7 @@ import heldout_data  # noqa: E402
 from standard_detectors import WINDOW, Envelope  # noqa: E402
 
 from cc_log import sim  # noqa: E402
+from cc_log.features.envelope import ENVELOPE_COLUMNS  # noqa: E402
 from cc_log.offline.tuning import windows_of  # noqa: E402
 
 PRE, POST, LATENCY, STRONG = bench.PRE, bench.POST, bench.LATENCY, bench.STRONG
@@ -273,7 +274,7 @@ def evaluate(robot, runs, seeds, train_seconds, fraction):
     for (name, records), (ends, M) in zip(rest, held):
         for label, detector in detectors.items():
             out['nominal'][label].append((ends, levels_of(detector, detector_candidates.part_score(detector, M))))
-        out['exceed'] += bench.episodes_of(detectors['envelope'], ends, M, name, records[0].stamp, STRONG)
+        out['exceed'] += exceedances(detectors['envelope'], ends, M, name, records[0].stamp)
         for seed in seeds:
             for injected, truth in bench.injections(records, seed, scale):
                 ends, M = bench.windows(injected)
@@ -291,18 +292,33 @@ def evaluate(robot, runs, seeds, train_seconds, fraction):
     return out
 
 
+def exceedances(envelope, ends, M, run, t0):
+    """The envelope's episodes at STRONG x in a nominal run (detectors.episodes_of): {'run', 'start', 'end' (s into
+    the run), 'why' (the most outstanding feature), 'ratio' (its), 'beyond' (every feature beyond STRONG x in it),
+    'speed', 'yaw_rate' (the most in it: what the robot was doing)}."""
+    out = []
+    for _, _, start, end, why in bench.episodes_of(envelope, ends, M, run, t0, STRONG):
+        inside = (ends - t0 >= start) & (ends - t0 <= end)
+        most = envelope.ratios(M[inside]).max(axis=0)
+        out.append({'run': run, 'start': start, 'end': end, 'why': why, 'ratio': float(most.max()),
+                    'beyond': [c for c, ratio in zip(ENVELOPE_COLUMNS, most) if ratio > STRONG],
+                    'speed': float(M[inside, ENVELOPE_COLUMNS.index('max_speed')].max()),
+                    'yaw_rate': float(M[inside, ENVELOPE_COLUMNS.index('max_yaw_rate')].max())})
+    return out
+
+
 def report_robot(r):
     """Where the robot's held-out nominal driving exceeds 1.5x its training maximum."""
     episodes = r['exceed']
     print('## %s: trained on %.1f min, held out %.1f min of nominal driving, %d events injected (%.0f s)' % (
         r['robot'], r['train_minutes'], r['hours'] * 60.0, len(r['events']), r['seconds']))
-    features = collections.Counter(why.split()[0] for *_, why in episodes)
+    features = collections.Counter(e['why'].split()[0] for e in episodes)
     print('held-out nominal driving beyond %gx its training maximum: %d episodes (%.1f/h); by the most outstanding '
           'feature: %s' % (STRONG, len(episodes), len(episodes) / r['hours'] if r['hours'] else float('nan'),
                            ', '.join('%s %d' % item for item in features.most_common()) or '-'))
-    top = sorted(episodes, key=lambda e: -float(e[4].split()[1].rstrip('x')))[:TOP]
-    for _, run, start, end, why in top:
-        print('  %s %7.1f-%7.1f s into the run: %s' % (run, start, end, why))
+    for e in sorted(episodes, key=lambda e: -e['ratio'])[:TOP]:
+        print('  %s %7.1f-%7.1f s into its held-out part: %s; beyond %gx: %s; up to %.2f m/s, %.2f rad/s' % (
+            e['run'], e['start'], e['end'], e['why'], STRONG, ', '.join(e['beyond']), e['speed'], e['yaw_rate']))
     print()
     sys.stdout.flush()
 
