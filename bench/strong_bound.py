@@ -125,10 +125,10 @@ def kept_share(nominal, level):
     return inside / total if total else 0.0
 
 
-def false_steps(nominal, budget):
-    """The false windows of nominal runs [(ends, levels)] as the level falls, exactly: (levels, counts, complete),
-    levels descending, at a level L with levels[i + 1] <= L < levels[i] the windows above L open counts[i]
-    episodes. Stops after the first count above ``budget`` (then ``complete`` is False)."""
+def false_steps(nominal):
+    """The false windows of nominal runs [(ends, levels)] as the level falls, exactly: (levels, counts), levels
+    descending, at a level L with levels[i + 1] <= L < levels[i] the windows above L open counts[i] episodes
+    (windows_of's, run by run: one window added at a time, joining its neighbours' episodes or not)."""
     runs = np.concatenate([np.full(len(ends), k) for k, (ends, _) in enumerate(nominal)] + [np.zeros(0, int)])
     stamps = np.concatenate([ends for ends, _ in nominal] + [np.zeros(0)])
     lv = np.concatenate([values for _, values in nominal] + [np.zeros(0)])
@@ -152,21 +152,17 @@ def false_steps(nominal, budget):
             at += 1
         levels.append(value)
         counts.append(count)
-        if count > budget:
-            break
-    return np.array(levels, dtype=float), np.array(counts, dtype=float), at == len(order)
+    return np.array(levels, dtype=float), np.array(counts, dtype=float)
 
 
 def at_levels(steps, level):
-    """(false windows, the most false windows of any stricter level) at each of ``level`` (an array) from
-    ``false_steps``; inf where the steps stopped before it."""
-    levels, counts, complete = steps
+    """(false windows, the most false windows of it or any stricter level) at each of ``level`` (an array) from
+    ``false_steps``."""
+    levels, counts = steps
     level = np.atleast_1d(np.asarray(level, dtype=float))
     i = np.searchsorted(-levels, -level, 'left')    # how many step levels lie above each level
     most = np.maximum.accumulate(counts) if len(counts) else counts
-    padded, worst = np.concatenate([[0.0], counts]), np.concatenate([[0.0], most])
-    unknown = (i == len(levels)) & (not complete) & (level < (levels[-1] if len(levels) else np.inf))
-    return np.where(unknown, np.inf, padded[i]), np.where(unknown, np.inf, worst[i])
+    return np.concatenate([[0.0], counts])[i], np.concatenate([[0.0], most])[i]
 
 
 # -- the bound -----------------------------------------------------------------------------------------------------
@@ -210,7 +206,7 @@ def pooled_steps(steps):
     """``false_steps`` of several robots' nominal runs at one level for all: their sum, a step at each of theirs."""
     points = np.unique(np.concatenate([s[0] for s in steps] + [[np.inf]]))[::-1]
     false = sum(at_levels(s, below(points))[0] for s in steps)
-    return points, false, all(s[2] for s in steps)
+    return points, false
 
 
 def common_level(steps, needs, budget):
@@ -444,7 +440,7 @@ def main(argv=None):
                                 args.train_fraction))
         report_robot(results[-1])
     names = list(results[0]['nominal'])
-    steps = {r['robot']: {name: false_steps(r['nominal'][name], np.inf) for name in names} for r in results}
+    steps = {r['robot']: {name: false_steps(r['nominal'][name]) for name in names} for r in results}
     for group in sets:
         report_seed_set(results, names, steps, group)
     print('total %.0f s' % (time.time() - started))

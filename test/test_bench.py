@@ -435,7 +435,7 @@ def test_the_strong_bound_picks_the_strictest_level_that_catches_every_strong_ev
     assert sb.catch_all(nominal, [2.5, 1.6, 1.1])[1] == 2                 # the bump of 1.2 too
     assert sb.catch_all(nominal, []) == (np.inf, 0, 0.0)
     other = [bumpy_run({10.0: 3.0})]
-    steps = [sb.false_steps(n, np.inf) for n in (nominal, other)]
+    steps = [sb.false_steps(n) for n in (nominal, other)]
     hours = [100.0 / 3600.0] * 2
     found = sb.bound([nominal, other], hours, steps, [[1.3], [3.5]])
     assert found['false'] == 2                   # one level, just below 1.3, for both: the 3.0 bump opens one
@@ -451,7 +451,7 @@ def test_an_event_no_threshold_separates_from_nominal_costs_the_false_windows_of
     nominal = [bumpy_run({20.0: 1.8, 50.0: 1.2, 80.0: 0.9}), bumpy_run({30.0: 2.0})]
     level, false, kept = sb.catch_all(nominal, [3.0, 0.4])
     assert level < 0.4 and false == 2 and kept == pytest.approx(1.0)
-    steps = sb.false_steps(nominal, np.inf)
+    steps = sb.false_steps(nominal)
     assert sb.at_levels(steps, level)[1][0] == 4                           # 3 bumps + 1 before all merge
     assert sb.catch_all(nominal, [3.0, -np.inf])[1] is None
     ends = np.arange(0.0, 30.0, 0.25)
@@ -470,7 +470,7 @@ def test_the_strong_bound_counts_as_the_detectors_bench_does():
     from cc_log.offline.tuning import windows_of
     rng = np.random.RandomState(3)
     nominal = [(np.arange(0.0, length, 0.25), rng.gamma(1.0, 0.4, int(length / 0.25))) for length in (60.0, 90.0)]
-    steps = sb.false_steps(nominal, np.inf)
+    steps = sb.false_steps(nominal)
     grid = np.linspace(0.0, 3.0, 61)
     counts = [sb.false_windows(nominal, level) for level in grid]
     false, most = sb.at_levels(steps, grid)
@@ -496,7 +496,7 @@ def test_the_budget_goes_where_it_buys_the_most_events():
     assert sb.share_budget([[(0, 0, None), (1, 2, None), (3, 5, None)], [(0, 0, None), (2, 4, None)]], 3) == 6
     assert sb.share_budget([[(0, 0, None), (1, 2, None), (3, 5, None)], [(0, 0, None), (2, 4, None)]], 2) == 4
     nominal = [bumpy_run({20.0: 1.8, 50.0: 1.2, 80.0: 0.9})]
-    steps = [sb.false_steps(nominal, np.inf)]
+    steps = [sb.false_steps(nominal)]
     caught, level, false = sb.common_level(steps, [[2.5, 1.6, 1.3, 1.0]], 1)
     assert (caught, false) == (3, 1) and 1.2 < level < 1.3
 
