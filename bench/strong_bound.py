@@ -225,8 +225,9 @@ def common_level(steps, needs, budget):
 
 def bound(nominals, hours, steps, needs):
     """One detector's bound, per robot its nominal runs [(ends, levels)], hours of them, ``false_steps`` and the
-    population's levels (``needs``): {'population', 'level', 'false', 'kept', 'caught_at_rate', 'rate_level',
-    'robot_false', 'robot_kept', 'robot_caught_at_rate'} (``robot_``: a level per robot)."""
+    population's levels (``needs``): {'population', 'level', 'false', 'worst', 'kept', 'caught_at_rate',
+    'rate_level', 'robot_false', 'robot_worst', 'robot_kept', 'robot_caught_at_rate'} (``robot_``: a level per
+    robot; ``worst``: the most false windows of the level catching all or a stricter one)."""
     total = sum(hours)
     budget = int(math.floor(RATE * total + 1e-9))
     level, false, kept = catch_all([run for nominal in nominals for run in nominal],
