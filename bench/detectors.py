@@ -183,11 +183,16 @@ def add_events(stats, fires, episodes, truth, reach, stamps):
         near = fires[(fires >= entry['start']) & (fires <= entry['end'] + reach)]
         stats['caught'].append(bool(len(near)))
         stats['fast'].append(bool(len(near)) and near[0] - entry['start'] <= LATENCY)
-        length = entry['end'] - entry['start']
-        covered = sum(max(0.0, min(b, entry['end']) - max(a, entry['start'])) for a, b in merged(episodes))
-        stats['spans'].append(length <= 0 or covered / length >= MIN_SPAN_KEPT)
+        stats['spans'].append(span_kept(episodes, entry))
     stats['kept'] += count_inside(stamps, episodes)
     stats['need'] += count_inside(stamps, [(e['start'] - PRE, e['end'] + POST) for e in truth])
+
+
+def span_kept(episodes, entry):
+    """Whether at least MIN_SPAN_KEPT of an event's [onset, end] lies in ``episodes``."""
+    length = entry['end'] - entry['start']
+    covered = sum(max(0.0, min(b, entry['end']) - max(a, entry['start'])) for a, b in merged(episodes))
+    return length <= 0 or covered / length >= MIN_SPAN_KEPT
 
 
 def upper95(k, hours):
@@ -208,11 +213,11 @@ def extreme_of(envelope, ends, M, entry):
     return float(ratios[row, column]), ENVELOPE_COLUMNS[column]
 
 
-def episodes_of(envelope, ends, M, run, t0):
-    """The envelope's (at 2x) episodes of a nominal run: [('envelope', run, start s, end s, its most outstanding
-    window's feature and ratio)], times into the run."""
+def episodes_of(envelope, ends, M, run, t0, factor=2.0):
+    """The envelope's (at ``factor`` x) episodes of a nominal run: [('envelope', run, start s, end s, its most
+    outstanding window's feature and ratio)], times into the run."""
     ratios = envelope.ratios(M) if len(M) else np.zeros((0, len(ENVELOPE_COLUMNS)))
-    flagged = ratios.max(axis=1) > 2.0 if len(M) else np.zeros(0, dtype=bool)
+    flagged = ratios.max(axis=1) > factor if len(M) else np.zeros(0, dtype=bool)
     out = []
     for a, b in windows_of(ends[flagged], PRE, POST):
         inside = (ends >= a) & (ends <= b) & flagged
@@ -236,12 +241,9 @@ def learn_envelope(train, tmp):
     return path, [lines[0], lines[-1]]
 
 
-def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, default='envelope',
-             candidates=False):
-    """Every detector on one robot: {'robot', 'train_s', 'hours', 'rate', 'lines', 'events' [{type, extreme}],
-    'stats' {detector: {level: tally}}, 'seconds'}. ``default``: how cc_log's defaults run (``envelope``: cclog
-    learn-envelope, ``classifier``: cclog collect / learn)."""
-    started = time.time()
+def fitted(runs, train_seconds, fraction, candidates=False):
+    """A robot's runs split and its detectors fitted: (training pieces, held-out pieces, the injection scale
+    (``sim.Limits`` of the training driving), {name: detector fitted on the training windows}, those windows)."""
     total = sum(duration(records) for _, records in runs)
     train, rest = heldout.split(runs, min(train_seconds, fraction * total))
     # each training run apart: runs of one robot may be stamped in any order
@@ -250,6 +252,16 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
     X = np.concatenate([windows(records)[1] for _, records in train])
     for detector in detectors.values():
         detector.fit(X)
+    return train, rest, envelope, detectors, X
+
+
+def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, default='envelope',
+             candidates=False):
+    """Every detector on one robot: {'robot', 'train_s', 'hours', 'rate', 'lines', 'events' [{type, extreme}],
+    'stats' {detector: {level: tally}}, 'seconds'}. ``default``: how cc_log's defaults run (``envelope``: cclog
+    learn-envelope, ``classifier``: cclog collect / learn)."""
+    started = time.time()
+    train, rest, envelope, detectors, X = fitted(runs, train_seconds, fraction, candidates)
     out = {'robot': robot, 'train_s': sum(duration(r) for _, r in train), 'rate': detection_runs.rate_of(train[0][1]),
            'hours': sum(duration(r) for _, r in rest) / 3600.0, 'runs': [name for name, _ in rest],
            'train_windows': len(X), 'events': [], 'lines': [], 'no_room': 0, 'false_episodes': [],

@@ -402,3 +402,124 @@ def test_a_difference_of_one_event_or_one_window_is_not_significant_and_a_large_
     found = significance.significantly_dominating(candidates, reference)
     assert [name for name, _, _ in found] == ['seven more caught']
     assert found[0][1] == pytest.approx(2 * 0.5 ** 7) and found[0][2] == 1.0
+
+
+def strong_bound():
+    sys.path.insert(0, BENCH)
+    import strong_bound as module
+    return module
+
+
+def bumpy_run(bumps, base=0.5, length=100.0):
+    """A synthetic nominal run for bench/strong_bound.py: window ends every 0.25 s, each window at level ``base``
+    but at the times of ``bumps`` ({time: level})."""
+    ends = np.arange(0.0, length, 0.25)
+    levels = np.full(len(ends), base)
+    for at, level in bumps.items():
+        levels[np.argmin(np.abs(ends - at))] = level
+    return ends, levels
+
+
+def test_the_strong_bound_picks_the_strictest_level_that_catches_every_strong_event():
+    """Catching every strong event with the labels: the level just below the least of their levels, no stricter
+    (one event would be missed) and no looser (a nominal bump of 1.2 would open one more window); its false windows
+    are the episodes detectors.py counts there. One level for all robots against a level each: each robot's own
+    is as strict as its own events allow."""
+    sb = strong_bound()
+    from cc_log.offline.tuning import windows_of
+    nominal = [bumpy_run({20.0: 1.8, 50.0: 1.2, 80.0: 0.9})]
+    level, false, kept = sb.catch_all(nominal, [2.5, 1.6, 1.3])
+    assert 1.2 < level < 1.3 and np.nextafter(level, np.inf) == 1.3
+    assert false == 1 == len(windows_of(nominal[0][0][nominal[0][1] > level], 2.0, 2.0))
+    assert kept == pytest.approx(4.0 / 100.0, abs=0.01)                  # one window of [fire - 2 s, fire + 2 s]
+    assert sb.catch_all(nominal, [2.5, 1.6, 1.1])[1] == 2                 # the bump of 1.2 too
+    assert sb.catch_all(nominal, []) == (np.inf, 0, 0.0)
+    other = [bumpy_run({10.0: 3.0})]
+    steps = [sb.false_steps(n) for n in (nominal, other)]
+    hours = [100.0 / 3600.0] * 2
+    found = sb.bound([nominal, other], hours, steps, [[1.3], [3.5]])
+    assert found['false'] == 2                   # one level, just below 1.3, for both: the 3.0 bump opens one
+    assert found['robot_false'] == 1             # each its own: the other robot's level just below 3.5 opens none
+    assert found['population'] == 2
+
+
+def test_an_event_no_threshold_separates_from_nominal_costs_the_false_windows_of_catching_it():
+    """An event below every nominal window is caught only where every window is flagged: the false windows of that
+    level are counted (one long window per run, all of the driving kept) and beside them the most any stricter level
+    opens (the three bumps apart); an event no window reaches is caught at no level."""
+    sb = strong_bound()
+    nominal = [bumpy_run({20.0: 1.8, 50.0: 1.2, 80.0: 0.9}), bumpy_run({30.0: 2.0})]
+    level, false, kept = sb.catch_all(nominal, [3.0, 0.4])
+    assert level < 0.4 and false == 2 and kept == pytest.approx(1.0)
+    steps = sb.false_steps(nominal)
+    assert sb.at_levels(steps, level)[1][0] == 4                           # 3 bumps + 1 before all merge
+    assert sb.catch_all(nominal, [3.0, -np.inf])[1] is None
+    ends = np.arange(0.0, 30.0, 0.25)
+    lv = np.full(len(ends), 0.3)
+    lv[(ends >= 12.0) & (ends <= 13.0)] = 2.5
+    caught, fast, target = sb.event_levels(ends, lv, {'start': 12.0, 'end': 14.0})
+    assert caught == fast == 2.5 and target == 2.5                        # its windows keep all of its 2 s
+    assert sb.event_levels(ends, lv, {'start': 12.2, 'end': 20.0})[2] == pytest.approx(0.3)   # span: flag all
+
+
+def test_the_strong_bound_counts_as_the_detectors_bench_does():
+    """On random windows, at any level: the false-window steps give the episodes windows_of opens (and their running
+    most), an event's three levels give detectors.add_events' caught, within 0.5 s and span kept."""
+    sb = strong_bound()
+    import detectors
+    from cc_log.offline.tuning import windows_of
+    rng = np.random.RandomState(3)
+    nominal = [(np.arange(0.0, length, 0.25), rng.gamma(1.0, 0.4, int(length / 0.25))) for length in (60.0, 90.0)]
+    steps = sb.false_steps(nominal)
+    grid = np.linspace(0.0, 3.0, 61)
+    counts = [sb.false_windows(nominal, level) for level in grid]
+    false, most = sb.at_levels(steps, grid)
+    assert list(false) == counts and min(counts) < max(counts)
+    assert list(most) == [max(sb.false_windows(nominal, lv) for lv in [level] + list(steps[0][steps[0] > level]))
+                          for level in grid]
+    ends, lv = nominal[1]
+    truth = [{'start': at, 'end': at + span} for at, span in ((10.0, 3.0), (40.0, 0.5), (70.0, 8.0))]
+    need = [sb.event_levels(ends, lv, entry) for entry in truth]
+    for level in grid:
+        tally = detectors.tally()
+        fires = ends[lv > level]
+        detectors.add_events(tally, fires, windows_of(fires, 2.0, 2.0), truth, 1.0, ends)
+        assert tally['caught'] == [n[0] > level for n in need], level
+        assert tally['fast'] == [n[1] > level for n in need], level
+        assert [f and s for f, s in zip(tally['fast'], tally['spans'])] == [n[2] > level for n in need], level
+
+
+def test_the_budget_goes_where_it_buys_the_most_events():
+    """At <= 5/h a level per robot shares the pooled budget for the most events; one level for all stops where the
+    pooled false windows first exceed it."""
+    sb = strong_bound()
+    assert sb.share_budget([[(0, 0, None), (1, 2, None), (3, 5, None)], [(0, 0, None), (2, 4, None)]], 3) == 6
+    assert sb.share_budget([[(0, 0, None), (1, 2, None), (3, 5, None)], [(0, 0, None), (2, 4, None)]], 2) == 4
+    nominal = [bumpy_run({20.0: 1.8, 50.0: 1.2, 80.0: 0.9})]
+    steps = [sb.false_steps(nominal)]
+    caught, level, false = sb.common_level(steps, [[2.5, 1.6, 1.3, 1.0]], 1)
+    assert (caught, false) == (3, 1) and 1.2 < level < 1.3
+
+
+def test_the_verdict_says_met_only_when_a_detector_catches_every_strong_event_at_the_rate():
+    sb = strong_bound()
+
+    def bound(at_rate, worst):
+        return {'robot_caught_at_rate': at_rate, 'robot_worst': worst}
+
+    line = sb.met_line({'a': bound(10, 40), 'b': bound(12, 30), 'c': bound(3, None)}, 12, 4.0)
+    assert line == ('target strong events at <= 5/h: met by any detector (best: b, 12/12 at <= 5/h; all 12 cost '
+                    '7.5/h (b))')
+    line = sb.met_line({'a': bound(10, 40), 'b': bound(11, 30), 'c': bound(3, 20)}, 12, 4.0)
+    assert line == ('target strong events at <= 5/h: not met by any detector (best: b, 11/12 at <= 5/h; all 12 '
+                    'cost 5.0/h (c))')
+
+
+def test_strong_bound_quick():
+    out = run('strong_bound.py', '--quick')
+    assert re.search(r'\n## husky: trained on 3.3 min, held out 3.3 min of nominal driving, 6 events', out)
+    assert 'held-out nominal driving beyond 1.5x its training maximum: ' in out
+    for name in ('envelope', 'mahalanobis', 'env2|maha4|lof6'):
+        assert re.search(r'\n\| %s +\| [\d.e+-]+ +\| [\d.]+ \([\d.]+\) +\|' % re.escape(name), out), name
+    assert re.search(r'\ntarget strong events at <= 5/h: (met|not met) by any detector \(best: \S+, \d+/\d+ at <= '
+                     r'5/h; all \d+ cost ', out)
