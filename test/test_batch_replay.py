@@ -292,7 +292,7 @@ def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, t
     intake = Intake.__new__(Intake)  # the feeder's part only: no subscribers
     intake.sink, intake.decoder, intake.dropped, intake.cpu_seconds = logger, MessageDecoder(), 0, 0.0
     intake.queue, intake.batch_delay = IntakeQueue(1000, 10 ** 7), 3600.0
-    intake._typed, intake.subscribers, intake._lock = set(), {}, threading.Lock()
+    intake._typed, intake.subscribers, intake._lock, intake._receiver = set(), {}, threading.Lock(), None
     intake._thread = threading.Thread(target=intake._feed, daemon=True)
     intake._thread.start()
     for record in records:
