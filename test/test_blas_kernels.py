@@ -21,7 +21,6 @@ BLAS_SENSITIVE = (
     'test/test_envelope.py::test_the_trigger_scores_with_the_joint_check_alike_whatever_the_batches',
     'test/test_local_density.py::test_scores_are_scikit_learns_local_outlier_factor_and_decisions_match_at_every_level',
     'test/test_local_density.py::test_the_default_flags_exactly_what_the_benchmarks_env2_maha4_lof6_flags',
-    'test/test_local_density.py::test_the_neighbours_are_those_of_every_distance_bit_for_bit',
 )
 ARCHITECTURE = ('import numpy, threadpoolctl; print(" ".join(str(i.get("architecture")) '
                 'for i in threadpoolctl.threadpool_info() if i["internal_api"] == "openblas"))')

@@ -193,9 +193,10 @@ def _chunks(rows, training, features):
 def _nearest(rows, training, k, exclude=None):
     """(distances, indices) of the ``k`` nearest ``training`` windows of each of ``rows``, nearest first (ties:
     the lower index); ``exclude``: per row, a training index left out (the window itself). The candidates are
-    picked by a matrix product (|a|^2 + |b|^2 - 2 a.b, one BLAS call) with a margin wider than its rounding can
-    err, then the distances of the candidates computed from the differences as ``_nearest_brute`` does: the same
-    neighbours and distances, whatever the BLAS kernel, at a fraction of the memory traffic."""
+    picked by a matrix product (|a|^2 + |b|^2 - 2 a.b) with a margin wider than its rounding can err, then the
+    distances of the candidates computed from the differences as ``_nearest_brute`` does: the same neighbours and
+    distances at a fraction of the memory traffic. The product is numpy's einsum, not BLAS: OpenBLAS's threads
+    would spin on the other cores after each call, costing more CPU than the product."""
     k = min(k, training.shape[0] - (exclude is not None))
     if k >= training.shape[0] or not len(rows):
         return _nearest_brute(rows, training, k, exclude)
@@ -204,7 +205,8 @@ def _nearest(rows, training, k, exclude=None):
     # distances computed from the differences err by (f + 3) u relative, the bound's factor 8 times that
     rounding = (rows.shape[1] + 3) * np.finfo(float).eps
     with np.errstate(over='ignore', invalid='ignore'):
-        estimate = row_norms[:, None] + training_norms[None, :] - 2.0 * (rows @ training.T)
+        products = np.einsum('ik,kj->ij', rows, np.ascontiguousarray(training.T))
+        estimate = row_norms[:, None] + training_norms[None, :] - 2.0 * products
         if exclude is not None:
             estimate[np.arange(len(rows)), exclude] = np.inf
         error = 4 * rounding * (np.sqrt(row_norms) + np.sqrt(np.max(training_norms))) ** 2
