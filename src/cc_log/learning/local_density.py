@@ -62,9 +62,12 @@ class LocalDensity(collections.namedtuple('LocalDensity', 'k mean scale training
         return self._neighbours(np.atleast_2d(self.standardised(matrix)))
 
     def _neighbours(self, z):
+        chunks = _chunks(len(z), len(self.training), z.shape[1])
+        if len(chunks) == 1:
+            return _nearest(z, self.training, self.k)
         distances = np.empty((len(z), self.k))
         indices = np.empty((len(z), self.k), dtype=int)
-        for start, stop in _chunks(len(z), len(self.training), z.shape[1]):
+        for start, stop in chunks:
             near, found = _nearest(z[start:stop], self.training, self.k)
             distances[start:stop], indices[start:stop] = near, found
         return distances, indices
@@ -198,29 +201,51 @@ def _nearest(rows, training, k, exclude=None):
     distances at a fraction of the memory traffic. The product is numpy's einsum, not BLAS: OpenBLAS's threads
     would spin on the other cores after each call, costing more CPU than the product."""
     k = min(k, training.shape[0] - (exclude is not None))
-    if k >= training.shape[0] or not len(rows):
-        return _nearest_brute(rows, training, k, exclude)
-    row_norms, training_norms = np.einsum('ij,ij->i', rows, rows), np.einsum('ij,ij->i', training, training)
+    transposed, training_norms, farthest = _prepared(training)
+    row_norms = np.einsum('ij,ij->i', rows, rows)
+    if k >= training.shape[0] or not len(rows) or not (farthest < _LARGEST and np.max(row_norms) < _LARGEST):
+        return _nearest_brute(rows, training, k, exclude)   # values too large to square: every distance computed
+    estimate = np.einsum('ik,kj->ij', rows, transposed)
+    estimate *= -2.0
+    estimate += training_norms
+    estimate += row_norms[:, None]
+    if exclude is not None:
+        estimate[np.arange(len(rows)), exclude] = np.inf
     # |estimate - d^2| <= (f + 2) u (|a| + |b|)^2 (u = eps / 2, f features): ``error`` is 8 times that; the
     # distances computed from the differences err by (f + 3) u relative, the bound's factor 8 times that
-    rounding = (rows.shape[1] + 3) * np.finfo(float).eps
-    with np.errstate(over='ignore', invalid='ignore'):
-        products = np.einsum('ik,kj->ij', rows, np.ascontiguousarray(training.T))
-        estimate = row_norms[:, None] + training_norms[None, :] - 2.0 * products
-        if exclude is not None:
-            estimate[np.arange(len(rows)), exclude] = np.inf
-        error = 4 * rounding * (np.sqrt(row_norms) + np.sqrt(np.max(training_norms))) ** 2
-        bound = (np.partition(estimate, k - 1, axis=1)[:, k - 1] + error) * (1 + 4 * rounding) + error
-    if not (np.all(np.isfinite(bound)) and np.all(np.isfinite(training_norms))):
-        return _nearest_brute(rows, training, k, exclude)   # a value too large to square: every distance computed
+    rounding = (rows.shape[1] + 3) * _EPS
+    error = 4 * rounding * (np.sqrt(row_norms) + np.sqrt(farthest)) ** 2
+    bound = (np.partition(estimate, k - 1, axis=1)[:, k - 1] + error) * (1 + 4 * rounding) + error
     which, candidate = np.nonzero(estimate <= bound[:, None])
     difference = rows[which] - training[candidate]
     squared = np.einsum('ij,ij->i', difference, difference)
     order = np.lexsort((candidate, squared, which))    # by row, then distance, then index
     counts = np.bincount(which, minlength=len(rows))
-    first = (np.cumsum(counts) - counts)[:, None] + np.arange(k)[None, :]
-    chosen = order[first]
+    chosen = order[(np.cumsum(counts) - counts)[:, None] + np.arange(k)[None, :]]
     return np.sqrt(squared[chosen]), candidate[chosen]
+
+
+_EPS = float(np.finfo(float).eps)
+_LARGEST = 1e150        # a squared norm below it: no product or sum of ``_nearest`` overflows
+_PREPARED = collections.OrderedDict()   # id(training) -> (training, ``_prepared``'s), the last few searched
+_PREPARED_KEPT = 4
+
+
+def _prepared(training):
+    """What ``_nearest`` needs of the ``training`` windows each time: (their transpose, contiguous; each one's
+    squared norm; the largest), kept for the last ``_PREPARED_KEPT`` arrays searched (the trigger's, one batch
+    after another)."""
+    entry = _PREPARED.get(id(training))
+    if entry is None or entry[0] is not training:
+        norms = np.einsum('ij,ij->i', training, training)
+        entry = (training, np.ascontiguousarray(training.T), norms, float(np.max(norms)) if len(norms) else 0.0)
+        _PREPARED[id(training)] = entry
+        while len(_PREPARED) > _PREPARED_KEPT:
+            try:
+                _PREPARED.popitem(last=False)
+            except KeyError:    # emptied by another thread meanwhile
+                break
+    return entry[1:]
 
 
 def _nearest_brute(rows, training, k, exclude=None):
