@@ -9,8 +9,9 @@ For each bag, in the same process and alternating (read, replay, read, replay, .
 machine load:
 - read: ``rosbag.Bag.read_messages`` of the topics, touching each message (the baseline: what any Python
   tool pays to get the messages);
-- replay: ``offline.replay.replay`` (what ``cclog replay`` runs: ``bag_reader`` + the detector in batches, by
-  default the envelope (``cclog replay --model envelope.json``; ``--detector classifier``: a one-class SVM) +
+- replay: ``offline.replay.replay`` (what ``cclog replay`` runs: the detector's file loaded, ``bag_reader`` + the
+  detector in batches, by default the envelope (``cclog replay --model envelope.json``; ``--detector classifier``: a
+  one-class SVM) +
   windows written as json-xz, or ``--format bag-lz4``, by the background writer, waiting for every window to be
   written).
 Throughput is messages / process CPU seconds (user + system, all threads) and messages / wall seconds;
@@ -79,8 +80,9 @@ def stage_of(filename):
 
 def detector(kind, records, topic, config, tmp, name, stride=1):
     """``make() -> (model path or None, triggers)`` of a replay with the ``kind`` of detector learned on ``records``:
-    ``'envelope'`` (the default of ``cclog replay --model``: ``cclog learn-envelope``'s 1 s windows every 250 ms) or
-    ``'classifier'`` (``config``'s one-class SVM, a vector every ``stride`` messages)."""
+    ``'envelope'`` (the default of ``cclog replay --model``: ``cclog learn-envelope``'s 1 s windows every 250 ms,
+    saved to its file, which ``make`` loads as ``cclog replay --model`` does) or ``'classifier'`` (``config``'s
+    one-class SVM, a vector every ``stride`` messages; the replay loads its file)."""
     if kind == 'classifier':
         _, X = common.window_vectors(records, topic, config, stride=stride)
         model, _ = learning.train(X, config=config)
@@ -90,9 +92,10 @@ def detector(kind, records, topic, config, tmp, name, stride=1):
     from cc_log.learning import envelope
     from cc_log.triggers.envelope import EnvelopeTrigger
     samples = odometry_samples([record for record in records if record.topic == topic])
-    learned = envelope.learn([envelope_windows(*samples, window=1.0, stride=0.25)[1]], topic, 1.0, 0.25,
-                             float(samples[0].max() - samples[0].min()))
-    return lambda: (None, [EnvelopeTrigger('envelope', learned, topic)])
+    path = os.path.join(tmp, '%s.envelope.json' % name)
+    envelope.learn([envelope_windows(*samples, window=1.0, stride=0.25)[1]], topic, 1.0, 0.25,
+                   float(samples[0].max() - samples[0].min())).save(path)
+    return lambda: (None, [EnvelopeTrigger('envelope', envelope.Envelope.load(path), topic)])
 
 
 def profile(path, topics, make, out, name, top, fmt='json-xz'):
@@ -254,8 +257,8 @@ def measure(path, topics, make, rounds, tmp, fmt='json-xz'):
             n = plain_read(path, topics)
         reads.append((timer.cpu, timer.wall, n))
         out = os.path.join(tmp, 'replay_%d' % k)
-        model_path, triggers = make()
-        with common.Timer() as timer:
+        with common.Timer() as timer:   # the detector's file loaded, as cclog replay does
+            model_path, triggers = make()
             summary = replay(path, topics[0], model_path, out, side_topics=topics[1:], fmt=fmt, triggers=triggers)
         replays.append((timer.cpu, timer.wall, summary['input_messages']))
         shutil.rmtree(out, ignore_errors=True)

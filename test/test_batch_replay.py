@@ -324,3 +324,27 @@ def test_a_batched_replay_buffers_its_records_by_slices_not_one_by_one(sim_case,
     summary = replay_into(logger, bags['anomalies'])
     assert summary['windows'], 'no window: the replay would not have opened, merged or closed one'
     assert sum(calls.values()) < summary['input_messages'] / 20, calls
+
+
+def test_a_replay_hands_the_logger_batches_of_512_records_and_at_most_16_mb(tmp_path):
+    """Each batch costs the triggers a fixed part (an envelope trigger's rows and neighbour search): the Husky
+    bag's 15,817 messages go to the logger in 31 batches (62 of 256 before); big messages are cut at
+    REPLAY_BATCH_BYTES of serialized bytes (a record larger goes alone), decoded records kept apart."""
+    from conftest import REAL_DATA
+    from cc_log.base.records import Record
+    from cc_log.offline import replay
+    logger = SmartLogger(None, str(tmp_path), 'bag-lz4', driving_topic=HUSKY_ODOM, side_topics=(HUSKY_IMU,),
+                         wait_for_writer=True)
+    sizes, on_records = [], logger.on_records
+    logger.on_records = lambda records: sizes.append(len(records)) or on_records(records)
+    summary = replay_into(logger, os.path.join(REAL_DATA, HUSKY))
+    assert summary['input_messages'] == sum(sizes) == 15817 and sizes == [512] * 30 + [457]
+    image = b'\0' * (6 << 20)                   # one 6 MB payload, shared by the records
+    big = [Record(float(n), '/camera', None, 0, image if n != 3 else image * 3, {}) for n in range(8)]
+    small = [Record(8.0 + n, '/odom', None, 0, b'x', {}) for n in range(2)]
+    decoded = [Record(10.0, '/odom', 'a message')]
+    batches = list(replay._batches(big + small + decoded))
+    assert [[record.stamp for record in batch] for batch in batches] == \
+        [[0.0, 1.0], [2.0], [3.0], [4.0, 5.0], [6.0, 7.0, 8.0, 9.0], [10.0]]
+    assert all(sum(len(record.raw or b'') for record in batch) <= replay.REPLAY_BATCH_BYTES or len(batch) == 1
+               for batch in batches)

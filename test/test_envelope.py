@@ -536,7 +536,7 @@ def test_version_1_files_load_without_a_joint_check(tmp_path):
     from cc_log.learning.envelope import Envelope
     env = learned(nominal_drive(seconds=30))
     document = env.to_dict()
-    assert document['version'] == 3 and set(document['joint']) == {
+    assert document['version'] == 4 and set(document['joint']) == {
         'mean', 'scale', 'location', 'precision', 'typical', 'farthest'}
     old = {key: value for key, value in document.items() if key not in ('joint', 'local')}
     old['version'] = 1
@@ -720,7 +720,7 @@ def test_cclog_learn_envelope_learns_the_joint_check_by_default_and_says_its_fig
     result = cclog('learn-envelope', husky_surge['train'], '--topic', HUSKY_ODOM, '--out', out, '--no-joint', '--json')
     assert result.returncode == 0, result.stderr
     document = json.loads(result.stdout)
-    assert document['version'] == 3 and document['joint'] is None and Envelope.load(str(out)).joint is None
+    assert document['version'] == 4 and document['joint'] is None and Envelope.load(str(out)).joint is None
 
 
 def test_cclog_learn_envelope_says_what_is_wrong_in_one_line(tmp_path):

@@ -27,10 +27,11 @@ sparse gap between kinds of nominal driving (inside every limit, near the robust
 factor among the training windows. Its ratio ``(typical - score) / (local_factor x (typical - extreme))`` joins
 the others: ``-ln(max(feature ratios, joint ratio, local ratio))``.
 
-The file (``save``/``load``, JSON; version 3 with the ``local`` block, version 2 with the ``joint`` block only,
-version 1 with neither: the parts a file lacks are off) is read with bounds: known keys only, every column's
-maximum a finite non-negative number, the joint and local blocks' arrays of their shapes and finite, one-line
-ValueErrors naming the file. Pure: no rospy.
+The file (``save``/``load``, JSON; version 4 with the ``local`` block's arrays compact, float64 in base64
+(``local_density.ENCODING``: parsed in one call each), version 3 with them as lists of numbers, version 2 with the
+``joint`` block only, version 1 with neither: the parts a file lacks are off) is read with bounds: known keys only,
+every column's maximum a finite non-negative number, the joint and local blocks' arrays of their shapes and finite,
+one-line ValueErrors naming the file. Pure: no rospy.
 """
 import collections
 import json
@@ -46,8 +47,8 @@ from cc_log.learning import local_density
 from cc_log.learning.local_density import finite_array
 
 KIND = 'cc_log envelope'
-VERSION = 3
-VERSIONS = (1, 2, 3)        # the versions ``load`` reads (1: no joint block, 2: no local block)
+VERSION = 4
+VERSIONS = (1, 2, 3, 4)     # the versions ``load`` reads (1: no joint block, 2: no local block, 3: its arrays as lists)
 DEFAULT_FACTOR = 2.0
 DEFAULT_JOINT_FACTOR = 4.0  # the joint check's factor (the detector benchmark's level 4); 0: off
 DEFAULT_LOCAL_FACTOR = 6.0  # the local part's factor (the detector benchmark's lof at level 6); 0: off
@@ -60,6 +61,7 @@ MAX_WHY = 3                 # features a Fire names at most
 _KEYS = {1: ('kind', 'version', 'topic', 'window', 'stride', 'windows', 'seconds', 'maxima')}   # per version
 _KEYS[2] = _KEYS[1] + ('joint',)
 _KEYS[3] = _KEYS[2] + ('local',)
+_KEYS[4] = _KEYS[3]
 
 # How a feature is named in a window's "why"
 LABELS = {
@@ -173,7 +175,8 @@ class Envelope(collections.namedtuple('Envelope', 'maxima topic window stride wi
         windows = _number(document.get('windows'), '%s: windows' % source)
         seconds = _number(document.get('seconds'), '%s: seconds' % source)
         joint = _read_joint(document.get('joint'), '%s: joint' % source)
-        local = local_density.from_dict(document.get('local'), '%s: local' % source, len(ENVELOPE_COLUMNS))
+        local = local_density.from_dict(document.get('local'), '%s: local' % source, len(ENVELOPE_COLUMNS),
+                                        compact=version >= 4)
         return cls({name: float(maxima[name]) for name in ENVELOPE_COLUMNS}, topic, window, stride, int(windows),
                    seconds, joint, local)
 

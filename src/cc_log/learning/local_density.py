@@ -18,9 +18,14 @@ A window's score is minus its local outlier factor (the mean of its K neighbours
 more anomalous: 1 is typical, a training window's is its ``negative_outlier_factor_``), its *ratio*
 ``(typical - score) / (factor x (typical - extreme))`` (> 1: flagged), the envelope's direction everywhere
 (docs/DESIGN.md: the trigger turns the ratio into its score as it does the joint ratio). Brute-force distances in
-numpy (each batch chunked to at most ``CHUNK_BYTES``). Pure: numpy only (no scikit-learn, no pickle); the file
-block is read with bounds (``from_dict``: one-line ValueErrors).
+numpy (each batch chunked to at most ``CHUNK_BYTES``; the candidates picked by one matrix product, ``_nearest``).
+Pure: numpy only (no scikit-learn, no pickle); the file block is read with bounds (``from_dict``: one-line
+ValueErrors). In the file (``to_dict``) each array is ``ENCODING``: its float64 numbers, little-endian, in base64 (a
+string of plain data, parsed in one call and bit for bit the same numbers); ``windows`` says the training windows.
+The envelope file's version 3 held them as lists of numbers (``from_dict(..., compact=False)``).
 """
+import base64
+import binascii
 import collections
 import math
 
@@ -36,6 +41,8 @@ MAX_NEIGHBOURS = 1000       # the largest K a file may say
 RESOLUTION = 1e-6           # the smallest scale of a feature (as the joint check's: below it is float rounding)
 REACH_RESOLUTION = 1e-6     # the smallest reach distance (standardised): below it windows are alike up to rounding
 _ARRAYS = ('mean', 'scale', 'training', 'distances', 'densities')
+ENCODING = 'float64 little-endian, base64'   # the arrays of the file's block (``to_dict``)
+_COMPACT_KEYS = ('k', 'encoding', 'windows') + _ARRAYS + ('typical', 'extreme')
 
 
 class LocalDensity(collections.namedtuple('LocalDensity', 'k mean scale training distances densities typical '
@@ -55,9 +62,12 @@ class LocalDensity(collections.namedtuple('LocalDensity', 'k mean scale training
         return self._neighbours(np.atleast_2d(self.standardised(matrix)))
 
     def _neighbours(self, z):
+        chunks = _chunks(len(z), len(self.training), z.shape[1])
+        if len(chunks) == 1:
+            return _nearest(z, self.training, self.k)
         distances = np.empty((len(z), self.k))
         indices = np.empty((len(z), self.k), dtype=int)
-        for start, stop in _chunks(len(z), len(self.training), z.shape[1]):
+        for start, stop in chunks:
             near, found = _nearest(z[start:stop], self.training, self.k)
             distances[start:stop], indices[start:stop] = near, found
         return distances, indices
@@ -88,8 +98,11 @@ class LocalDensity(collections.namedtuple('LocalDensity', 'k mean scale training
         return [int(i) for i in np.argsort(-gap, kind='stable')[:count]]
 
     def to_dict(self):
+        """The file's block: ``k``, ``encoding``, ``windows``, each array a string (``ENCODING``), ``typical``,
+        ``extreme``."""
         return collections.OrderedDict(
-            [('k', int(self.k))] + [(key, getattr(self, key).tolist()) for key in _ARRAYS] +
+            [('k', int(self.k)), ('encoding', ENCODING), ('windows', len(self.training))] +
+            [(key, encode_array(getattr(self, key))) for key in _ARRAYS] +
             [('typical', float(self.typical)), ('extreme', float(self.extreme))])
 
     def summary(self):
@@ -182,42 +195,101 @@ def _chunks(rows, training, features):
 
 def _nearest(rows, training, k, exclude=None):
     """(distances, indices) of the ``k`` nearest ``training`` windows of each of ``rows``, nearest first (ties:
-    the lower index); ``exclude``: per row, a training index left out (the window itself)."""
+    the lower index); ``exclude``: per row, a training index left out (the window itself). The candidates are
+    picked by a matrix product (|a|^2 + |b|^2 - 2 a.b) with a margin wider than its rounding can err, then the
+    distances of the candidates computed from the differences as ``_nearest_brute`` does: the same neighbours and
+    distances at a fraction of the memory traffic. The product is numpy's einsum, not BLAS: OpenBLAS's threads
+    would spin on the other cores after each call, costing more CPU than the product."""
+    k = min(k, training.shape[0] - (exclude is not None))
+    transposed, training_norms, farthest = _prepared(training)
+    row_norms = np.einsum('ij,ij->i', rows, rows)
+    if k >= training.shape[0] or not len(rows) or not (farthest < _LARGEST and np.max(row_norms) < _LARGEST):
+        return _nearest_brute(rows, training, k, exclude)   # values too large to square: every distance computed
+    estimate = np.einsum('ik,kj->ij', rows, transposed)
+    estimate *= -2.0
+    estimate += training_norms
+    estimate += row_norms[:, None]
+    if exclude is not None:
+        estimate[np.arange(len(rows)), exclude] = np.inf
+    # |estimate - d^2| <= (f + 2) u (|a| + |b|)^2 (u = eps / 2, f features): ``error`` is 8 times that; the
+    # distances computed from the differences err by (f + 3) u relative, the bound's factor 8 times that
+    rounding = (rows.shape[1] + 3) * _EPS
+    error = 4 * rounding * (np.sqrt(row_norms) + np.sqrt(farthest)) ** 2
+    bound = (np.partition(estimate, k - 1, axis=1)[:, k - 1] + error) * (1 + 4 * rounding) + error
+    which, candidate = np.nonzero(estimate <= bound[:, None])
+    difference = rows[which] - training[candidate]
+    squared = np.einsum('ij,ij->i', difference, difference)
+    order = np.lexsort((candidate, squared, which))    # by row, then distance, then index
+    counts = np.bincount(which, minlength=len(rows))
+    chosen = order[(np.cumsum(counts) - counts)[:, None] + np.arange(k)[None, :]]
+    return np.sqrt(squared[chosen]), candidate[chosen]
+
+
+_EPS = float(np.finfo(float).eps)
+_LARGEST = 1e150        # a squared norm below it: no product or sum of ``_nearest`` overflows
+_PREPARED = collections.OrderedDict()   # id(training) -> (training, ``_prepared``'s), the last few searched
+_PREPARED_KEPT = 4
+
+
+def _prepared(training):
+    """What ``_nearest`` needs of the ``training`` windows each time: (their transpose, contiguous; each one's
+    squared norm; the largest), kept for the last ``_PREPARED_KEPT`` arrays searched (the trigger's, one batch
+    after another)."""
+    entry = _PREPARED.get(id(training))
+    if entry is None or entry[0] is not training:
+        norms = np.einsum('ij,ij->i', training, training)
+        entry = (training, np.ascontiguousarray(training.T), norms, float(np.max(norms)) if len(norms) else 0.0)
+        _PREPARED[id(training)] = entry
+        while len(_PREPARED) > _PREPARED_KEPT:
+            try:
+                _PREPARED.popitem(last=False)
+            except KeyError:    # emptied by another thread meanwhile
+                break
+    return entry[1:]
+
+
+def _nearest_brute(rows, training, k, exclude=None):
+    """``_nearest`` by every distance: the differences of each row with every training window, every distance
+    sorted (ties: the lower index)."""
     squared = np.einsum('ijk,ijk->ij', *(rows[:, None, :] - training[None, :, :],) * 2)
     if exclude is not None:
         squared[np.arange(len(rows)), exclude] = np.inf
     k = min(k, training.shape[0] - (exclude is not None))
-    part = np.argpartition(squared, k - 1, axis=1)[:, :k] if k < squared.shape[1] else \
-        np.tile(np.arange(squared.shape[1]), (len(rows), 1))
-    near = np.take_along_axis(squared, part, axis=1)
-    order = np.lexsort((part, near), axis=1)
-    found = np.take_along_axis(part, order, axis=1)
-    return np.sqrt(np.take_along_axis(near, order, axis=1)), found
+    found = np.argsort(squared, axis=1, kind='stable')[:, :k]
+    return np.sqrt(np.take_along_axis(squared, found, axis=1)), found
 
 
-def from_dict(block, where, features):
+def from_dict(block, where, features, compact=True):
     """The ``LocalDensity`` of a file's ``local`` block (None: none); ValueError('<where>: ...') unless ``k`` is a
     count from 1 below the windows (at most MAX_WINDOWS), every array has its shape (``features`` columns) and
     finite numbers (``scale`` and ``densities`` positive, ``distances`` non-negative) and ``extreme`` <
-    ``typical``."""
+    ``typical``. ``compact``: the arrays are ``ENCODING`` strings and ``windows`` says how many training windows
+    (``to_dict``); else lists of numbers (the envelope file's version 3)."""
     if block is None:
         return None
-    fields = LocalDensity._fields
-    if not isinstance(block, dict) or set(block) != set(fields):
-        extra = sorted(set(block) - set(fields), key=str) if isinstance(block, dict) else ()
-        raise ValueError('%s: must map %s to numbers%s' % (
-            where, ', '.join(fields), ' (unknown key %s)' % brief(extra[0]) if extra else ''))
+    keys = _COMPACT_KEYS if compact else LocalDensity._fields
+    if not isinstance(block, dict) or set(block) != set(keys):
+        extra = sorted(set(block) - set(keys), key=str) if isinstance(block, dict) else ()
+        raise ValueError('%s: must map %s%s%s' % (where, ', '.join(keys), '' if compact else ' to numbers',
+                                                  ' (unknown key %s)' % brief(extra[0]) if extra else ''))
     k = block['k']
     if isinstance(k, bool) or not isinstance(k, int) or not 1 <= k <= MAX_NEIGHBOURS:
         raise ValueError('%s: k: %s must be a count of neighbours from 1 to %d' % (where, brief(k), MAX_NEIGHBOURS))
-    training = block['training']
-    rows = len(training) if isinstance(training, list) else -1
+    if compact:
+        if block['encoding'] != ENCODING:
+            raise ValueError('%s: encoding: %s, this cc_log reads %r' % (where, brief(block['encoding']), ENCODING))
+        rows = block['windows']
+        rows = rows if isinstance(rows, int) and not isinstance(rows, bool) else -1
+        said = 'windows: must be a count'
+    else:
+        rows = len(block['training']) if isinstance(block['training'], list) else -1
+        said = 'training: must be a list'
     if not k < rows <= MAX_WINDOWS:
-        raise ValueError('%s: training: must be a list of more than k=%d and at most %d windows' % (
-            where, k, MAX_WINDOWS))
+        raise ValueError('%s: %s of more than k=%d and at most %d windows' % (where, said, k, MAX_WINDOWS))
     shapes = {'mean': (features,), 'scale': (features,), 'training': (rows, features), 'distances': (rows,),
               'densities': (rows,)}
-    arrays = {key: finite_array(block[key], shapes[key], '%s: %s' % (where, key)) for key in _ARRAYS}
+    read = decode_array if compact else finite_array
+    arrays = {key: read(block[key], shapes[key], '%s: %s' % (where, key)) for key in _ARRAYS}
     for key, test, said in (('scale', np.greater, 'positive'), ('densities', np.greater, 'positive'),
                             ('distances', np.greater_equal, 'non-negative')):
         if not np.all(test(arrays[key], 0)):
@@ -226,6 +298,31 @@ def from_dict(block, where, features):
     if not extreme < typical:
         raise ValueError('%s: extreme %r must be below typical %r' % (where, extreme, typical))
     return LocalDensity(k, *[arrays[key] for key in _ARRAYS], typical, extreme)
+
+
+def encode_array(array):
+    """``array``'s numbers as ``ENCODING``: float64, little-endian, in base64 (ASCII)."""
+    return base64.b64encode(np.ascontiguousarray(array, dtype='<f8').tobytes()).decode('ascii')
+
+
+def decode_array(text, shape, where):
+    """The float array of ``shape`` that ``encode_array`` wrote as ``text``, every entry a finite number;
+    ValueError naming ``where`` otherwise (the length checked before anything is decoded)."""
+    count = int(np.prod(shape))
+    size = 4 * -(-8 * count // 3)     # base64 of 8 x count bytes, padded
+    if not isinstance(text, str) or len(text) != size:
+        raise ValueError('%s: must be %s numbers, %s in %d characters' % (
+            where, ' x '.join(str(n) for n in shape), ENCODING, size))
+    try:
+        data = base64.b64decode(text.encode('ascii'), validate=True)
+    except (UnicodeEncodeError, binascii.Error, ValueError):
+        raise ValueError('%s: not %s' % (where, ENCODING))
+    if len(data) != 8 * count:
+        raise ValueError('%s: not %s' % (where, ENCODING))
+    array = np.frombuffer(data, dtype='<f8').astype(float).reshape(shape)
+    if not np.all(np.isfinite(array)):
+        raise ValueError('%s: entry %d is not a finite number' % (where, int(np.flatnonzero(~np.isfinite(array))[0])))
+    return array
 
 
 def finite_array(value, shape, where):
