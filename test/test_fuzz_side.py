@@ -14,7 +14,8 @@ budget or a topic's own limits. Each example must:
   or the driving clock it was placed at (more than ``max_ahead`` before its own);
 - hold nothing forever: once the clock has moved on past every stamp, the buffer holds one driving record and
   nothing of a side topic; and every record stamped beyond that clock was placed (counted) or trimmed by the
-  budget (counted: ``trimmed``, ``trimmed_silent``), when time never jumped back (a jump starts the buffer over, dropping what it held).
+  budget (counted: ``trimmed``, ``trimmed_silent``), when time never jumped back (a jump starts the buffer over,
+  dropping what it held).
 
 Settings as ``test_fuzz_readers``: a fixed seed, ``CC_LOG_FUZZ_EXAMPLES`` (here times 20: an example takes
 milliseconds), ``CC_LOG_FUZZ_SEED`` for the rounds of the longer run.
