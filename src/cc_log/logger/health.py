@@ -48,8 +48,8 @@ def not_kept(stats, overflowed=0):
         problems.append((WARN, '%d messages trimmed from the buffer to stay within ~max_buffer_mb (a window '
                                'then starts later than ~pre)' % stats['buffer_trimmed']))
     if stats['buffer_trimmed_silent']:
-        problems.append((WARN, '%d side messages after a window\'s end trimmed to stay within ~max_buffer_mb: the '
-                               'driving topic fell silent while the window was open' % stats['buffer_trimmed_silent']))
+        problems.append((WARN, '%d side messages after an open window\'s end trimmed to stay within ~max_buffer_mb: '
+                               'its end waits for the driving topic (silent?)' % stats['buffer_trimmed_silent']))
     if overflowed:
         problems.append((WARN, '%d messages dropped: intake queue full (the node falls behind)' % overflowed))
     return problems

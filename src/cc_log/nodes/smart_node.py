@@ -271,7 +271,7 @@ class SmartNode(object):
             ('max buffer bytes', self.logger.buffer_budget or 'no budget'),
             ('messages trimmed (buffer budget)', stats['buffer_trimmed']),
             ('messages trimmed (topic limits)', stats['topic_trimmed']),
-            ('messages trimmed (driving topic silent in a window)', stats['buffer_trimmed_silent']),
+            ("messages trimmed (after an open window's end)", stats['buffer_trimmed_silent']),
             ('messages lost', stats['messages_lost'] + self.intake.dropped),
             ('raw JSON bytes', raw),
             ('stored bytes', stored),
