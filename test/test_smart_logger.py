@@ -605,3 +605,14 @@ def test_a_window_whose_odometry_falls_silent_keeps_the_budget_and_its_imu_and_s
     imu_after = sum(1 for r in silent if r.topic == IMU and r.stamp > odom[195].stamp + 1.0)
     assert unbounded_stats['buffer_trimmed_silent'] == 0 and 0 < stats['buffer_trimmed_silent'] < imu_after
     assert stats['buffer_trimmed_silent'] > 0.9 * imu_after  # all but the last the budget holds (let go at the close)
+    from cc_log.offline.replay import replay_records  # the same in the summary of ``cclog replay``
+
+    class Counting(ScriptedModel):  # (fed in batches: the model counts the driving messages itself)
+        def is_anomalous(self, vector):
+            self.index = len(self.calls) + 19  # it scores every driving message from the 20th on
+            return ScriptedModel.is_anomalous(self, vector)
+    logger = SmartLogger(Counting({195}), str(tmp_path / 'replay'), 'json-xz', '1s', '1s', driving_topic=ODOM,
+                         side_topics=[IMU], max_buffer_mb=budget, wait_for_writer=True)
+    summary = replay_records(logger, silent)
+    assert len(summary['windows']) == 1 and summary['windows'][0]['messages'] == len(kept)
+    assert summary['messages_trimmed_silent'] > 0.9 * imu_after
