@@ -216,7 +216,8 @@ def test_replay_json_fields_match_the_bag_and_the_files(replayed):
     from cc_log.base import msg_codec
     summary, bag = replayed['summary'], replayed['bag']
     assert list(summary) == ['input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
-                             'keep_budget', 'absent_route_topics', 'messages_restamped', 'restamped_by_topic']
+                             'keep_budget', 'absent_route_topics', 'messages_restamped', 'restamped_by_topic',
+                             'messages_trimmed_silent']
     assert summary['absent_route_topics'] == []  # no route
     assert summary['messages_restamped'] == 0 and summary['restamped_by_topic'] == {}  # every stamp on the clock
     assert summary['online'] == []  # no classifier learns online here

@@ -1,17 +1,21 @@
 """Property-based fuzzing of the window buffer's side topics (no roscore): records of two side topics with any
 stamps (by the driving clock, jittered, out of order, some seconds to a million seconds ahead, in 2106, huge or
 infinite, far in the past; never NaN) beside a driving clock that walks (steps, gaps, standing still, jitter and
-jumps back), triggers at random, fed record by record or in batches (``add_batch``), with or without a memory
+jumps back) or falling silent while the side topics go on (a silence: up to 600 side records over up to 60 s, no
+driving record), triggers at random, fed record by record or in batches (``add_batch``), with or without a memory
 budget or a topic's own limits. Each example must:
 
 - bound what the buffer holds of a side topic in time: after each driving record that finds no window open, every
   record it holds lies at most ``max_ahead`` after the driving clock (a record further ahead was placed at the clock
   and counted in ``restamped``), so memory per side topic is bounded by the span of the buffer plus ``max_ahead``;
+- stay within the memory budget (when there is one) after every call, whatever the driving clock does (the newest
+  driving record excepted: a trigger needs it), a silence inside a window too (``budget_trim``);
 - write each side record at most once, into a window whose time span covers the stamp it was placed at: its own,
   or the driving clock it was placed at (more than ``max_ahead`` before its own);
 - hold nothing forever: once the clock has moved on past every stamp, the buffer holds one driving record and
   nothing of a side topic; and every record stamped beyond that clock was placed (counted) or trimmed by the
-  budget (counted), when time never jumped back (a jump starts the buffer over, dropping what it held).
+  budget (counted: ``trimmed``, ``trimmed_silent``), when time never jumped back (a jump starts the buffer over,
+  dropping what it held).
 
 Settings as ``test_fuzz_readers``: a fixed seed, ``CC_LOG_FUZZ_EXAMPLES`` (here times 20: an example takes
 milliseconds), ``CC_LOG_FUZZ_SEED`` for the rounds of the longer run.
@@ -40,13 +44,15 @@ FINAL_STEP = 1e8  # past every stamp the strategy gives but those of FAR
 
 @st.composite
 def streams(draw):
-    """``(start, events)``: the driving clock's start and a list of ('drive', step), ('side', topic, kind, value)
-    and ('trigger',) in the order they come."""
+    """``(start, events)``: the driving clock's start and a list of ('drive', step), ('side', topic, kind, value),
+    ('silence', records, step) and ('trigger',) in the order they come."""
     start = draw(st.sampled_from([0.0, 1000.0, 1.7e9]))
     events = []
     for _ in range(draw(st.integers(1, 250))):
-        what = draw(st.sampled_from(['drive', 'drive', 'side', 'side', 'side', 'trigger']))
-        if what == 'drive':
+        what = draw(st.sampled_from(['drive', 'drive', 'side', 'side', 'side', 'trigger', 'silence']))
+        if what == 'silence':
+            events.append(('silence', draw(st.integers(1, 600)), draw(st.sampled_from([0.01, 0.1]))))
+        elif what == 'drive':
             events.append(('drive', draw(st.sampled_from([0.01, 0.1, 0.1, 0.0, -0.005, 0.7, 4.0, 15.0, -3.0]))))
         elif what == 'side':
             kind = draw(st.sampled_from(['near', 'near', 'near', 'ahead', 'far']))
@@ -70,6 +76,10 @@ def records_of(start, events):
         elif event[0] == 'side':
             _, topic, kind, value = event
             records.append(Record(value if kind == 'far' else clock + value, topic, len(records), COST))
+        elif event[0] == 'silence':  # the side topics go on, ``step`` apart, the driving clock standing still
+            _, count, step = event
+            first = len(records)
+            records.extend([Record(clock + step * (k + 1), SIDE[k % 2], first + k, COST) for k in range(count)])
         elif records and records[-1].topic == DRIVING:
             triggers.add(len(records) - 1)
     last = max([record.stamp for record in records if record.topic == DRIVING] + [start])
@@ -93,6 +103,7 @@ def feed(buffer, records, triggers, cuts):
     for end in ends:
         part = records[start:end + 1]
         windows += buffer.add_batch(part, [record.topic for record in part], DRIVING)
+        assert not buffer.max_buffer_bytes or buffer.buffered_bytes <= buffer.max_buffer_bytes + COST, 'over budget'
         if part[-1].topic == DRIVING and not buffer.window_open:
             clock = buffer._clock
             assert all(record.stamp <= clock + buffer.max_ahead for record in held_side(buffer)), clock
@@ -136,4 +147,4 @@ def test_no_side_record_is_held_forever_and_each_is_written_at_most_once_where_i
     assert not buffer.window_open and not held_side(buffer) and buffer.buffered_messages == 1
     if not buffer.resets:
         beyond = sum(1 for record in fed.values() if record.stamp > records[-1].stamp + buffer.max_ahead)
-        assert beyond <= sum(buffer.restamped.values()) + buffer.trimmed
+        assert beyond <= sum(buffer.restamped.values()) + buffer.trimmed + buffer.trimmed_silent

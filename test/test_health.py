@@ -9,7 +9,7 @@ ODOMETRY = 'nav_msgs/Odometry'
 
 def stats(**values):
     base = dict(enabled=True, messages_refused=0, last_refused='', messages_shed=0, shed_by_topic={},
-                buffer_trimmed=0)
+                buffer_trimmed=0, buffer_trimmed_silent=0)
     base.update(values)
     return base
 
@@ -32,6 +32,7 @@ def test_a_paused_logger_warns():
 def test_every_message_of_a_window_not_on_disk_warns_with_its_count():
     for values, words in ((dict(messages_shed=3, shed_by_topic={'/camera': 3}), '3 messages of windows not written'),
                           (dict(buffer_trimmed=7), '7 messages trimmed from the buffer'),
+                          (dict(buffer_trimmed_silent=9), "9 side messages after an open window's end trimmed"),
                           (dict(overflowed=5), '5 messages dropped: intake queue full')):
         level, message = status(**values)
         assert level == WARN and message.startswith('logging; ') and words in message, (values, message)

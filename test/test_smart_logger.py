@@ -552,7 +552,7 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
             out.write(ODOM, record.msg, t=record.msg.header.stamp)
     summary = replay(bag, ODOM, path, str(tmp_path / 'out'), PRE, POST, 'json-xz')
     assert set(summary) == {'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'keep_budget',
-                            'messages_restamped', 'restamped_by_topic'}
+                            'messages_restamped', 'restamped_by_topic', 'messages_trimmed_silent'}
     assert summary['input_messages'] == len(run)
     # estimated from a sample of the messages (replay does not decode them all)
     assert summary['raw_json_bytes'] == pytest.approx(sum(msg_codec.row_json_bytes(r.msg) for r in run), rel=0.01)
@@ -572,3 +572,47 @@ def test_replay_finds_the_injected_anomaly(husky, trained, tmp_path):
     every = replay(bag, ODOM, path, str(tmp_path / 'every'), PRE, POST, 'json-xz', retrigger='every')['windows']
     assert [(w['start'], w['end']) for w in every] == [(run[lo].stamp, run[max(flagged) + POST].stamp)]
     assert smart.DEFAULT_FORMAT == 'bag-lz4'
+
+
+def test_a_window_whose_odometry_falls_silent_keeps_the_budget_and_its_imu_and_says_what_it_trimmed(husky, tmp_path):
+    """A window opens at odometry message 195 (pre and post 1 s) and the odometry stops at message 200 while the IMU
+    goes on for 40 s, far more than the budget: the IMU after the window's end used to pile up in memory without bound
+    (the window never ended). Now the buffer stays within the budget, the window holds the IMU a logger without a
+    budget writes, and the IMU let go after the window's end is counted (stats, the node's /diagnostics)."""
+    odom = [r for r in husky if r.topic == ODOM]
+    silent = [r for r in husky if r.topic != ODOM or r.stamp < odom[200].stamp]
+    budget = 0.2  # MB: about 90 IMU messages
+
+    def run(directory, max_buffer_mb, check=None):
+        model = ScriptedModel({195})
+        logger = SmartLogger(model, directory, 'json-xz', '1s', '1s', driving_topic=ODOM, side_topics=[IMU],
+                             background=False, max_buffer_mb=max_buffer_mb)
+        for record in silent:
+            if record.topic == ODOM:
+                model.index = odom.index(record)
+            logger.on_message(record.topic, record.msg, record.stamp)
+            if check is not None:
+                check(logger.stats())
+        logger.close()
+        return logger.stats(), read_all(directory)
+    peaks, unbounded_peaks = [], []
+    stats, parts = run(str(tmp_path / 'budget'), budget, lambda s: peaks.append(s['buffered_bytes']))
+    unbounded_stats, whole = run(str(tmp_path / 'whole'), 0, lambda s: unbounded_peaks.append(s['buffered_bytes']))
+    assert max(unbounded_peaks) > 10 * budget * 1e6  # what the buffer held before, and without a budget
+    assert max(peaks) <= budget * 1e6 and stats['messages_lost'] == 0 and stats['buffer_trimmed'] == 0
+    kept = sorted((r.stamp, r.topic) for _, _, records in parts for r in records)
+    assert len(whole) == 1 and kept == [(r.stamp, r.topic) for r in whole[0][2]]
+    imu_after = sum(1 for r in silent if r.topic == IMU and r.stamp > odom[195].stamp + 1.0)
+    assert unbounded_stats['buffer_trimmed_silent'] == 0 and 0 < stats['buffer_trimmed_silent'] < imu_after
+    assert stats['buffer_trimmed_silent'] > 0.9 * imu_after  # all but the last the budget holds (let go at the close)
+    from cc_log.offline.replay import replay_records  # the same in the summary of ``cclog replay``
+
+    class Counting(ScriptedModel):  # (fed in batches: the model counts the driving messages itself)
+        def is_anomalous(self, vector):
+            self.index = len(self.calls) + 19  # it scores every driving message from the 20th on
+            return ScriptedModel.is_anomalous(self, vector)
+    logger = SmartLogger(Counting({195}), str(tmp_path / 'replay'), 'json-xz', '1s', '1s', driving_topic=ODOM,
+                         side_topics=[IMU], max_buffer_mb=budget, wait_for_writer=True)
+    summary = replay_records(logger, silent)
+    assert len(summary['windows']) == 1 and summary['windows'][0]['messages'] == len(kept)
+    assert summary['messages_trimmed_silent'] > 0.9 * imu_after

@@ -520,3 +520,44 @@ def test_bad_budget_names_the_parameter(value):
     with pytest.raises(ValueError) as error:
         WindowBuffer(max_buffer_mb=value)
     assert str(error.value).startswith('max_buffer_mb:')
+
+
+# -- the driving topic falls silent while a window is open -------------------------------------------------
+
+def silent_stream(buffer, cost, seconds=40.0, back=None):
+    """Odometry every 0.1 s (cost 100) and a camera every 0.1 s (``cost``, stamped 0.05 s after), a trigger at 5 s;
+    the odometry silent from 5.5 s on (back at ``back`` s, if given). Checks the budget after every call; returns the
+    windows after the flush and the most bytes held."""
+    windows, most = [], 0
+    for i in range(int(seconds * 10)):
+        stamp = round(0.1 * i, 6)
+        windows += buffer.add_side(Record(round(stamp + 0.05, 6), '/cam', i, cost))
+        most = max(most, buffer.buffered_bytes)
+        if stamp <= 5.5 or (back is not None and stamp >= back):
+            windows += buffer.add(Record(stamp, '/odom', i, 100))
+            most = max(most, buffer.buffered_bytes)
+        if i == 50:
+            windows += buffer.trigger('test')
+    return windows + buffer.flush(), most
+
+
+@pytest.mark.parametrize('back, fed', [(None, 400), (39.0, 391)], ids=['never-back', 'back-at-39s'])
+def test_a_window_whose_driving_topic_falls_silent_stays_within_the_budget_and_keeps_its_side_records(back, fed):
+    """A window opens at 5 s (pre 2 s, post 2 s: it ends at 7 s) and the odometry dies at 5.5 s while the camera runs
+    on, 10 times the budget of it: the driving clock never reached the window's end, the budget did not trim while it
+    was open and its parts took side records up to its end only, so the camera after it piled up without bound (330 kB
+    held of a 40 kB budget). Now the parts hold what a buffer without a budget writes (the camera from 3.05 s to
+    6.95 s, each record once), and the camera after the window's end goes the oldest first at the budget, counted."""
+    budget = 40000  # 40 camera records of 1000 bytes; 400 are fed
+    buffer = WindowBuffer(pre='2s', post='2s', max_buffer_mb=budget / MB)
+    windows, most = silent_stream(buffer, 1000, back=back)
+    assert most <= budget
+    cam = [r.msg for w in windows for r in w.records if r.topic == '/cam']
+    unbounded, _ = silent_stream(WindowBuffer(pre='2s', post='2s', max_buffer_mb=0), 1000, back=back)
+    assert cam == [r.msg for r in unbounded[0].records if r.topic == '/cam'] == list(range(30, 70))
+    assert [r.msg for w in windows for r in w.records if r.topic == '/odom'] == list(range(30, 56))
+    assert len(set(w.key for w in windows)) == len(unbounded) == 1 and windows[-1].final
+    assert [w.part for w in windows] == list(range(1, len(windows) + 1)) and len(windows) >= 2
+    # fed while silent (before the odometry came back) = 30 before the window + 40 in it + the 40 the budget holds
+    # + those trimmed
+    assert buffer.trimmed_silent == fed - 30 - 40 - budget // 1000 and buffer.trimmed == 0

@@ -18,8 +18,8 @@ serialized bytes costs their length plus ``RAW_RECORD_OVERHEAD``). An open windo
 handed on in parts (as ``max_window`` splits it, with every message of other topics held) whenever the
 buffer reaches half the budget, so that the buffer and the part being compressed and written stay within
 the budget together. At the full budget a window waiting to be completed is completed, then messages
-outside every window (the ``pre`` buffer, oldest first) go, counted in ``trimmed``. No message inside a
-window is ever dropped.
+outside every window (the ``pre`` buffer, oldest first) go, counted in ``trimmed``, and while the driving topic is
+silent in an open window, side records after its end (``budget_trim``). No message inside a window is ever dropped.
 
 Everything is pure Python: records carry any message object, stamps are float seconds.
 """
@@ -32,6 +32,7 @@ from cc_log.base.records import LogWindow, Trigger
 from cc_log.base import spans
 from cc_log.base.spans import Span
 from cc_log.buffer import side_order
+from cc_log.buffer.budget_trim import BudgetTrim
 from cc_log.buffer.window_batch import BatchAdd
 
 DEFAULT_PRE = Span.parse('2s')   # durations: the same margin at any rate (100 messages: 1 s at 100 Hz, 20 s at 5 Hz)
@@ -206,7 +207,7 @@ def _sum(pre, post):
     return pre
 
 
-class WindowBuffer(BatchAdd):
+class WindowBuffer(BatchAdd, BudgetTrim):
     """Logging windows around triggers.
 
     Call ``add`` for every driving message, ``add_side`` for messages of other topics (``add_batch`` for several
@@ -241,6 +242,7 @@ class WindowBuffer(BatchAdd):
         self._max_count = None if self.max_window.is_duration else self.max_window.count
         self._bytes = 0                    # estimated memory of every record held
         self.trimmed = 0                   # records outside any window dropped early to stay within the budget
+        self.trimmed_silent = 0            # side records after the open window's end dropped so (budget_trim)
         self.limited = 0                   # records outside any window dropped by their topic's own pre or cap
         self._ring = collections.deque()   # driving records outside any window: the newest plus pre before it
         self._side = {}                    # topic -> its records (other topics than the driving one), by time
@@ -484,7 +486,8 @@ class WindowBuffer(BatchAdd):
         if not self.max_buffer_bytes or (self._bytes <= self._part_bytes and not self._over_budget()):
             return done
         window = self._open
-        if window is not None and self._bytes > self._part_bytes and (window.records or any(self._side.values())):
+        handed = window is not None and self._bytes > self._part_bytes and (window.records or any(self._side.values()))
+        if handed:
             # Written in parts, as max_window splits: what the window holds now, with every side record held,
             # in parts of at most part_limit (a pre-buffer larger than that, at a window's start, goes on as several
             # parts: the writer frees each one as it is written, so the next parts of the window fit the budget).
@@ -498,18 +501,7 @@ class WindowBuffer(BatchAdd):
         if self._over_budget() and self._pending is not None:
             done.extend(self._finish(self._pending))
             self._pending = None
-        while self._over_budget() and self._open is None:
-            # Outside every window: the oldest go first; the newest driving record stays (a trigger needs it).
-            # (With a window open, what the buffer holds is in it: the logger thins the parts it hands on.)
-            heads = [(side[0].stamp, topic) for topic, side in self._side.items() if side]
-            oldest = min(heads) if heads else None
-            if oldest is not None and (len(self._ring) <= 1 or oldest[0] <= self._ring[0].stamp):
-                self._drop_side(oldest[1])
-            elif len(self._ring) > 1:
-                self._bytes -= self._ring.popleft().cost
-            else:
-                break
-            self.trimmed += 1
+        self._trim_to_budget(bool(handed))  # outside every window, or after the open one's end (budget_trim)
         return done
 
     def _full(self, window):

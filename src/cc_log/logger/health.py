@@ -4,8 +4,9 @@ Levels are diagnostic_msgs' (``OK``, ``WARN``, ``ERROR``). ``smart_head(stats)``
 status before the writer's and the disk's part: WARN while it is paused (nothing is kept) or when messages of
 the wrong type were refused. ``not_kept(stats, overflowed)`` lists the messages that belonged in a window and
 are not on disk: thinned while the writer fell behind, trimmed from the buffer to stay within
-``max_buffer_mb`` (a window opened then starts later than ``pre``), or dropped by a full intake queue; each is
-a WARN. ``skipped(stats)``: the windows the keep budget did not open (WARN: the robot's normal may have drifted).
+``max_buffer_mb`` (a window opened then starts later than ``pre``; side messages after an open window's end while
+the driving topic is silent), or dropped by a full intake queue; each is a WARN. ``skipped(stats)``: the windows
+the keep budget did not open (WARN: the robot's normal may have drifted).
 ``DrivingWatch`` says when the driving topic is silent and where its message type is published instead;
 ``NamedWatch`` says which topics the configuration names have had no message since start, and which published
 topics look like each (``alike``: a name the same ignoring case, the same last component, the same type).
@@ -46,6 +47,9 @@ def not_kept(stats, overflowed=0):
     if stats['buffer_trimmed']:
         problems.append((WARN, '%d messages trimmed from the buffer to stay within ~max_buffer_mb (a window '
                                'then starts later than ~pre)' % stats['buffer_trimmed']))
+    if stats['buffer_trimmed_silent']:
+        problems.append((WARN, '%d side messages after an open window\'s end trimmed to stay within ~max_buffer_mb: '
+                               'its end waits for the driving topic (silent?)' % stats['buffer_trimmed_silent']))
     if overflowed:
         problems.append((WARN, '%d messages dropped: intake queue full (the node falls behind)' % overflowed))
     return problems

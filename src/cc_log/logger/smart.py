@@ -416,6 +416,7 @@ class SmartLogger(object):
             resets = self._resets + self._buffer.resets
             trimmed = self._trimmed + self._buffer.trimmed
             limited = self._limited + self._buffer.limited
+            silent = self._silent + self._buffer.trimmed_silent  # side records after a window, its driving topic silent
             placed = self._placed + self._buffer.restamped
         raw_estimate = self._raw_estimate.total  # its samples decoded here, off the message path
         written = self.writer.stats()
@@ -430,7 +431,7 @@ class SmartLogger(object):
                 'messages_queued': written['messages_queued'],
                 'messages_buffered': buffered,
                 'buffered_bytes': buffered_bytes,
-                'buffer_trimmed': trimmed, 'topic_trimmed': limited,
+                'buffer_trimmed': trimmed, 'topic_trimmed': limited, 'buffer_trimmed_silent': silent,
                 'messages_lost': written['messages_lost'],
                 'raw_json_bytes': s.raw_json_bytes + raw_estimate,
                 'stored_bytes': written['stored_bytes'],
@@ -506,8 +507,9 @@ class SmartLogger(object):
             self._resets += self._buffer.resets
             self._trimmed += self._buffer.trimmed
             self._limited += self._buffer.limited
+            self._silent += self._buffer.trimmed_silent
         else:
-            self._resets = self._trimmed = self._limited = 0
+            self._resets = self._trimmed = self._limited = self._silent = 0
             self._placed = collections.Counter()  # side records the buffers placed at their driving clock
         self._buffer = buffer
         for trigger in self.triggers:

@@ -18,7 +18,8 @@ Published topics
   topic named in ``~topics``, ``keep`` or routes has had no message 5 s after start (naming the published topics
   that look like it: ``health.NamedWatch``) and when
   a message that belonged in a window is not on disk (dropped because the writer fell behind, per topic;
-  trimmed to stay within ``~max_buffer_mb``; intake queue full: ``health``), messages restamped (header stamp
+  trimmed to stay within ``~max_buffer_mb``, side messages after an open window's end too while the driving topic
+  is silent; intake queue full: ``health``), messages restamped (header stamp
   off the clock), each classifier's and envelope trigger's drift (WARN when it flags far more of the driving
   than of its training data, with the remedies: ``drift.DriftMonitor``), the windows the keep budget
   ``~max_windows_per_hour`` skipped (WARN once it skips: the robot's normal may have drifted), every
@@ -270,6 +271,7 @@ class SmartNode(object):
             ('max buffer bytes', self.logger.buffer_budget or 'no budget'),
             ('messages trimmed (buffer budget)', stats['buffer_trimmed']),
             ('messages trimmed (topic limits)', stats['topic_trimmed']),
+            ("messages trimmed (after an open window's end)", stats['buffer_trimmed_silent']),
             ('messages lost', stats['messages_lost'] + self.intake.dropped),
             ('raw JSON bytes', raw),
             ('stored bytes', stored),

@@ -163,13 +163,14 @@ def replay(bag_path, topic, model_path, out_dir, pre=smart.DEFAULT_PRE, post=sma
     """Run the smart logger over a bag as fast as it can be read; return a summary dict:
 
     ``{'input_messages', 'raw_json_bytes', 'stored_bytes', 'windows': [{'name', 'start', 'end', 'messages',
-    'files', 'path'}], 'keep_budget', 'messages_restamped', 'restamped_by_topic'}`` with windows in start order,
-    one per window whatever its files
+    'files', 'path'}], 'keep_budget', 'messages_restamped', 'restamped_by_topic', 'messages_trimmed_silent'}``
+    with windows in start order, one per window whatever its files
     (``smart_events.WindowTally``: messages in all of them; start/end: header stamps, float s, of the first and last
     message saved; path: its first file); ``keep_budget``: ``KeepBudget.stats()``, the windows the keep budget
     skipped; ``messages_restamped``, ``restamped_by_topic``: the messages placed at the clock, their header stamps
-    off it (``SmartLogger.stats()``). ``model_path``: the model of the classifier on ``topic`` (None: only
-    ``triggers``); ``triggers``,
+    off it; ``messages_trimmed_silent``: side messages after a window's end let go to stay within the memory budget,
+    the driving topic silent while the window was open (``SmartLogger.stats()``). ``model_path``: the model of the
+    classifier on ``topic`` (None: only ``triggers``); ``triggers``,
     ``input_topics``: as SmartLogger's. ``progress``: optional ``callback(messages read)``, called every
     PROGRESS_EVERY messages and at the end. The reading waits for the writer (``SmartLogger``'s
     ``wait_for_writer``: nothing thinned because it is behind). A window that cannot be written (disk full...) is
@@ -284,4 +285,5 @@ def replay_records(logger, records, progress=None, source='the records'):
         'windows': tally.windows(),
         'keep_budget': logger.budget.stats(),  # the windows it skipped (logger.keep_budget)
         'messages_restamped': stats['messages_restamped'], 'restamped_by_topic': stats['restamped_by_topic'],
+        'messages_trimmed_silent': stats['buffer_trimmed_silent'],  # after a window, its driving topic silent
     }

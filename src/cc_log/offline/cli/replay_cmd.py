@@ -28,7 +28,9 @@ def add_parser(subparsers):
         --pre messages before and --post after (counts or durations), with the --side-topic messages of
         that time span, as window files in OUT; options given override the configuration. --json prints
         {input_messages, raw_json_bytes, stored_bytes, windows: [{name, start, end, messages, files, path}],
-        messages_restamped, restamped_by_topic (messages placed at the clock, their header stamps off it)},
+        messages_restamped, restamped_by_topic (messages placed at the clock, their header stamps off it),
+        messages_trimmed_silent (side messages after a window let go at the memory budget, the driving topic
+        silent while the window was open)},
         one entry per window whatever
         its files (routes, parts, splits: messages of them all; path: its first); start/end are the header
         stamps (float seconds) of the first and last message saved. A window that cannot be written (disk
@@ -113,6 +115,7 @@ def run(args):
         ('absent_route_topics', summary['absent_route_topics']),
         ('messages_restamped', summary['messages_restamped']),
         ('restamped_by_topic', summary['restamped_by_topic']),
+        ('messages_trimmed_silent', summary['messages_trimmed_silent']),
     ])
     if args.json:
         print_json(result)
@@ -133,6 +136,9 @@ def run(args):
     if result['messages_restamped']:
         print('  %d messages placed at the clock, their header stamps off it (%s)' % (
             result['messages_restamped'], per_topic(result['restamped_by_topic'])))
+    if result['messages_trimmed_silent']:
+        print('  %d side messages after a window trimmed to stay within the memory budget: the driving topic fell '
+              'silent while the window was open' % result['messages_trimmed_silent'])
     for topic in result['absent_route_topics']:
         print('  routes: %s is not in the bag; nothing was routed there' % printable(topic))
     for monitor in summary['drift']:
@@ -174,7 +180,8 @@ def _replay_many(args, cfg):
     outcomes, summary = run_fleet(args, 'replay', lambda engine, progress: fleet.replay_many(
         engine, bags, args.out, cfg, progress=progress))
     rows = fleet_rows(outcomes, ('input_messages', 'raw_json_bytes', 'stored_bytes', 'windows', 'drift', 'online',
-                                 'keep_budget', 'messages_restamped', 'restamped_by_topic'))
+                                 'keep_budget', 'messages_restamped', 'restamped_by_topic',
+                                 'messages_trimmed_silent'))
     reports = {}
     for row in rows:
         row['windows'] = [_window_entry(w) for w in row.get('windows', ())]
