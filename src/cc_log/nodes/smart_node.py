@@ -36,8 +36,9 @@ Parameters
   limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
   ``~recent``, ``~learn_online``, the envelope trigger's ``~on_drift``, the windows' ``~pre``, ``~post``,
   ``~max_window``, ``~topic_limits``, the memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb``,
-  ``~max_files`` and ``~min_free_mb``, ``~directory`` and ``~name_prefix`` (files ``<name_prefix>_<UTC>_<reason>``), the intake's bounds, ``~tcp_nodelay`` and
-  ``~fast_receive``, the context track and the upload command. Each resolved value is logged once (``~quiet``:
+  ``~max_files`` and ``~min_free_mb``, ``~directory`` and ``~name_prefix`` (files
+  ``<name_prefix>_<UTC>_<reason>``), the intake's bounds, ``~tcp_nodelay`` and ``~fast_receive``, the context
+  track and the upload command. Each resolved value is logged once (``~quiet``:
   warnings and errors only).
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
