@@ -7,6 +7,12 @@ one table: per candidate its pooled caught and false windows per hour, the robot
 table's level dominates it (catches as many with fewer false windows, or more with as few: the rule of the
 ``dominating cclog`` column), and the robots where it catches fewer than the envelope at 2x or opens more false
 windows than it.
+
+A drift-gated candidate ``env2|maha4|lof6/<when>:<rule>`` (``DriftGated``) is the default's rule until its drift
+monitor (``learning.drift.DriftMonitor``, fed the windows in order as the envelope trigger feeds it) states drift
+(``when``: ``drift``, as soon as it is stated; ``drifting``, by the flags alone; ``sustained``, stated for a whole
+span), ``<rule>`` after; ``--candidates`` prints per robot the share of windows under stated and sustained drift and
+each one's (caught; false windows). ``sustained:env2&maha1|maha2`` is the envelope trigger's ``on_drift: confirm``.
 """
 import os
 import sys
