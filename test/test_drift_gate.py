@@ -92,7 +92,8 @@ def test_a_true_event_far_outside_still_fires_under_drift_saying_it_was_confirme
     confirmed = fire.why[-1]
     assert confirmed['feature'] == 'drift_confirmed' and confirmed['ratio'] > 1.0 and len(fire.why) <= 3
     assert confirmed['limit'] == pytest.approx(envelope.joint.farthest)
-    assert confirmed['text'].startswith('under drift, confirmed: the features together ')
+    assert confirmed['text'] == ('under drift (on_drift: confirm): confirmed by the robust distance, %.1fx past '
+                                 'every training window' % confirmed['ratio'])
 
 
 def test_a_run_without_drift_decides_exactly_as_before():

@@ -68,5 +68,5 @@ def confirmation_why(row, joint):
     value = float(joint.distances(row))
     ratio = (value - joint.typical) / (joint.farthest - joint.typical)
     return {'feature': 'drift_confirmed', 'value': value, 'limit': float(joint.farthest), 'ratio': ratio,
-            'unit': '1', 'text': 'under drift, confirmed: the features together %.1fx farther from typical driving '
-                                 'than any training window' % ratio}
+            'unit': '1', 'text': 'under drift (on_drift: confirm): confirmed by the robust distance, %.1fx past '
+                                 'every training window' % ratio}
