@@ -4,7 +4,7 @@ Configuration (``kind: envelope``)::
 
     triggers:
       - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0, joint_factor: 4.0,
-         local_factor: 6.0}
+         local_factor: 6.0, on_drift: confirm}
 
 ``limits``: the file ``cclog learn-envelope`` wrote (``learning.envelope.Envelope``: the largest value of each of
 the 19 ``features.envelope`` features over nominal windows); ``topic``: the nav_msgs/Odometry topic (default:
@@ -14,7 +14,9 @@ has a joint check (``learning.envelope.Joint``): a window is flagged too when it
 typical driving goes ``joint_factor`` x farther past the typical one than any training window did;
 ``local_factor`` (default 6.0; 0: off), when the file has a local part (``learning.local_density``): a window is
 flagged too when its local outlier factor among the training windows goes ``local_factor`` x farther past the
-typical one than any training window's (a window in a sparse gap between kinds of nominal driving). A model path
+typical one than any training window's (a window in a sparse gap between kinds of nominal driving); ``on_drift``
+(default ``confirm``; ``none``): once the trigger's own drift monitor has stated drift for a whole span, a feature
+beyond its limit needs the robust distance's confirmation (``drift_gate``). A model path
 given as the default trigger (``~model``, ``cclog replay --model``) builds this trigger when the file is an
 envelope (``logger.config.with_classifier``).
 
