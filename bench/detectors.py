@@ -264,7 +264,7 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
     train, rest, envelope, detectors, X = fitted(runs, train_seconds, fraction, candidates)
     out = {'robot': robot, 'train_s': sum(duration(r) for _, r in train), 'rate': detection_runs.rate_of(train[0][1]),
            'hours': sum(duration(r) for _, r in rest) / 3600.0, 'runs': [name for name, _ in rest],
-           'train_windows': len(X), 'events': [], 'lines': [], 'no_room': 0, 'false_episodes': [],
+           'train_windows': len(X), 'events': [], 'lines': [], 'no_room': 0, 'false_episodes': [], 'scored': [],
            'stats': {name: {level: tally() for level in LEVELS} for name in detectors}}
     setting = heldout.SETTINGS['defaults']
     if with_cclog:
@@ -294,12 +294,13 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
     for name, records in rest:
         ends, M = windows(records)
         for label, detector in detectors.items():
-            scores = detector_candidates.part_score(detector, M)
+            scores = detector_candidates.part_score(detector, M, ends)
             for level in LEVELS:
                 out['stats'][label][level]['false'] += len(windows_of(ends[scores < detector.threshold(level)],
                                                                       PRE, POST))
         out['false_episodes'] += episodes_of(detectors['envelope'], ends, M, name, records[0].stamp)
         cclog(records, 'nominal-' + name)
+        out['scored'].append('nominal')
         for seed in seeds:
             replays = injections(records, seed, envelope)
             out['no_room'] += not replays
@@ -311,12 +312,14 @@ def evaluate(robot, runs, seeds, train_seconds, fraction, tmp, with_cclog=True, 
                     out['events'].append({'type': entry['type'], 'run': name, 'seed': seed, 'feature': feature,
                                           'at': entry['start'] - records[0].stamp, 'extreme': extreme})
                 for label, detector in detectors.items():
-                    scores = detector_candidates.part_score(detector, M)
+                    scores = detector_candidates.part_score(detector, M, ends)
                     for level in LEVELS:
                         fires = ends[scores < detector.threshold(level)]
                         add_events(out['stats'][label][level], fires, windows_of(fires, PRE, POST), truth, WINDOW,
                                    stamps)
                 cclog(injected, 'inj-%s-%d-%d' % (name, seed, k), truth)
+                out['scored'].append('injected')
+    out['drift'] = detector_candidates.drift_shares(detectors, out['scored'])
     out['seconds'] = time.time() - started
     return out
 

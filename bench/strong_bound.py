@@ -273,7 +273,8 @@ def evaluate(robot, runs, seeds, train_seconds, fraction):
     everything = Envelope().fit(np.concatenate([X] + [M for _, M in held if len(M)]))
     for (name, records), (ends, M) in zip(rest, held):
         for label, detector in detectors.items():
-            out['nominal'][label].append((ends, levels_of(detector, detector_candidates.part_score(detector, M))))
+            levels = levels_of(detector, detector_candidates.part_score(detector, M, ends))
+            out['nominal'][label].append((ends, levels))
         out['exceed'] += exceedances(detectors['envelope'], ends, M, name, records[0].stamp)
         for seed in seeds:
             for injected, truth in bench.injections(records, seed, scale):
@@ -284,7 +285,7 @@ def evaluate(robot, runs, seeds, train_seconds, fraction):
                     event['extreme'], event['feature'] = bench.extreme_of(detectors['envelope'], ends, M, entry)
                     event['extreme_all'], event['feature_all'] = bench.extreme_of(everything, ends, M, entry)
                 for label, detector in detectors.items():
-                    lv = levels_of(detector, detector_candidates.part_score(detector, M))
+                    lv = levels_of(detector, detector_candidates.part_score(detector, M, ends))
                     for event, entry in zip(events, truth):
                         event['need'][label] = event_levels(ends, lv, entry)
                 out['events'] += events

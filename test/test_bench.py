@@ -523,3 +523,44 @@ def test_strong_bound_quick():
         assert re.search(r'\n\| %s +\| [\d.e+-]+ +\| [\d.]+ \([\d.]+\) +\|' % re.escape(name), out), name
     assert re.search(r'\ntarget strong events at <= 5/h: (met|not met) by any detector \(best: \S+, \d+/\d+ at <= '
                      r'5/h; all \d+ cost ', out)
+
+
+def test_a_drift_gated_candidate_changes_its_rule_only_once_its_monitor_has_stated_drift_for_a_span():
+    """``DriftGated`` (the default's rule until drift has been stated for a whole span, then the envelope confirmed
+    by the robust distance at level 1 or the robust distance at level 2): on windows like training it flags exactly
+    what the default's rule flags; on a run whose every window passes a training maximum by 1.5x (coverage: drift
+    stated 1 min in), exactly that until drift has lasted 2 min (3 min in), then the drifted rule; a window's score
+    depends on it and the windows before only."""
+    sys.path.insert(0, BENCH)
+    import detectors
+    from cc_log.features.envelope import ENVELOPE_COLUMNS
+    rng = np.random.RandomState(3)
+    train = np.abs(rng.normal(1.0, 0.3, size=(800, len(ENVELOPE_COLUMNS))))
+    train[:4, 5:] *= 10.0   # a few odd training windows: the farthest robust distance is far (the real robots')
+    found = detectors.make_detectors(candidates=True)
+    for name in ('envelope', 'mahalanobis', 'lof'):
+        found[name].fit(train)
+    default = found['env2|maha4|lof6'].fit(train)
+    name = 'env2|maha4|lof6/sustained:env2&maha1|maha2'
+    gated = found[name].fit(train)
+    drifted = gated.drifted
+    ends = 1000.0 + 0.25 * np.arange(1, 1201)            # 5 min of windows
+    like = np.abs(rng.normal(1.0, 0.3, size=(len(ends), len(ENVELOPE_COLUMNS))))
+    like[:, 5:] = np.minimum(like[:, 5:], 1.0)
+    like[::97, 0] *= 3.0                                 # now and then a feature beyond 2x
+    assert np.array_equal(gated.score_at(like, ends), default.score(like))
+    assert (default.score(like) < default.threshold(2.0)).any() and gated.state.log[-1] == (len(ends), 0, 0)
+    rough = like.copy()
+    rough[:, 1] = 1.5 * train[:, 1].max()                # always past the training maximum, never 2x
+    rough[::37, 2] = 2.5 * train[:, 2].max()             # and beyond 2x now and then
+    sustained = ends >= ends[0] + 60.0 + 120.0           # settled after 1 min (from the first window), then 2 min
+    scores = gated.score_at(rough, ends)
+    assert np.array_equal(scores[~sustained], default.score(rough)[~sustained])
+    assert np.array_equal(scores[sustained], drifted.score(rough)[sustained])
+    threshold = gated.threshold(2.0)
+    unconfirmed = (default.score(rough) < threshold) & ~(scores < threshold)
+    assert unconfirmed[sustained].any() and not unconfirmed[~sustained].any()
+    half = len(ends) // 2
+    assert np.array_equal(gated.score_at(rough[:half], ends[:half]), scores[:half])   # causal
+    assert gated.state.log[-1] == (half, int((ends[:half] >= ends[0] + 60.0).sum()),
+                                   int(sustained[:half].sum()))

@@ -59,6 +59,31 @@ def test_drift_is_stated_once_the_span_is_judged_and_the_share_stays_far_above_t
     assert monitor.report().startswith('drift: from 1 min into the run motion flagged up to 50% of 2 min')
 
 
+def test_drift_is_sustained_once_stated_without_a_break_for_a_whole_span_and_the_action_said_then():
+    """``stated_for`` counts from the decision drift was first stated and starts again after a break;
+    ``sustained`` holds from a whole span on; the ``action`` (what the detector does then) ends ``status()`` only
+    while it holds and ``report()`` from the first time it held; ``as_dict()`` carries both times."""
+    monitor = DriftMonitor(0.002, name='envelope', action='the detector now does this')
+    decisions(monitor, 1000.0, 150.0, 0.5)       # stated from 1060 s (judged after 60 s)
+    assert monitor.first_stated == pytest.approx(1060.0, abs=0.1)
+    assert monitor.stated_for == pytest.approx(90.0, abs=0.1) and not monitor.sustained
+    assert not monitor.status()[1].endswith('the detector now does this')
+    assert 'the detector now does this' not in monitor.report()
+    decisions(monitor, 1150.0, 40.0, 0.5)
+    assert monitor.sustained and monitor.first_sustained == pytest.approx(1180.0, abs=0.1)
+    level, message = monitor.status()
+    assert level == WARN and message.endswith('; the detector now does this')
+    decisions(monitor, 1190.0, 200.0, 0.0)       # the share falls under 20 %: no longer stated, the count restarts
+    assert not monitor.stated and monitor.stated_for == 0.0 and not monitor.sustained
+    assert monitor.status()[0] == OK and 'the detector' not in monitor.status()[1]
+    assert monitor.report().endswith('; from 3 min into the run, the detector now does this')
+    state = monitor.as_dict()
+    assert state['first_sustained'] == monitor.first_sustained and state['action'] == 'the detector now does this'
+    plain = DriftMonitor(0.002)
+    decisions(plain, 1000.0, 300.0, 0.5)
+    assert plain.sustained and plain.as_dict()['action'] is None and 'into the run, ' not in plain.report()
+
+
 def test_a_few_true_anomalies_are_not_drift_and_time_going_back_starts_again():
     monitor = DriftMonitor(0.002)
     decisions(monitor, 0.0, 300.0, 0.0)

@@ -116,12 +116,13 @@ class DriftMonitor(object):
     of message time; factor, min_rate: when the share is drift; name: the classifier's, in messages;
     margin: a decision observed with its margin (score minus the classifier's threshold) is flagged when the
     margin is below this (``judged_margin``; 0: as the classifier decided); coverage: a model's coverage (with its
-    ``config``) or an ``EnvelopeCoverage``; remedies: what the messages advise in drift. ValueError('<parameter>:
-    ...') for a bad parameter."""
+    ``config``) or an ``EnvelopeCoverage``; remedies: what the messages advise in drift; action: what the
+    detector does while drift lasts (``sustained``), said after them (None: nothing changes).
+    ValueError('<parameter>: ...') for a bad parameter."""
 
     def __init__(self, trained_rate, span=DEFAULT_SPAN, factor=DEFAULT_FACTOR, min_rate=DEFAULT_MIN_RATE,
                  settle=None, name='classifier', coverage=None, config=None, episodes=DEFAULT_EPISODES,
-                 margin=0.0, remedies=REMEDIES):
+                 margin=0.0, remedies=REMEDIES, action=None):
         for key, value, low, high in (('trained_rate', trained_rate, 0.0, 1.0), ('span', span, 0.0, None),
                                       ('factor', factor, 0.0, None), ('min_rate', min_rate, 0.0, 1.0)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > low \
@@ -141,12 +142,15 @@ class DriftMonitor(object):
         self.episodes = episodes
         self.name = name
         self.remedies = remedies
+        self.action = action
         if isinstance(coverage, EnvelopeCoverage):
             self.coverage = coverage
         else:
             self.coverage = None if coverage is None or config is None else Coverage(coverage, config)
         self.began = None        # message time of the first decision
         self.first_drift = None  # message time drift was first reported
+        self.first_stated = None  # message time drift or the coverage warning was first stated (``stated``)
+        self.first_sustained = None  # message time it had first been stated for a whole span (``sustained``)
         self.peak = None         # the highest share flagged over a judged span (None: never judged)
         self.peak_episodes = 0   # the most episodes that began within a judged span
         self.reset()
@@ -160,6 +164,7 @@ class DriftMonitor(object):
         self._beyond = 0
         self._stopped = 0
         self._start = None  # stamp of the first decision since the reset
+        self._stated_since = None  # stamp from which drift has been stated without a break (None: not stated)
 
     def observe(self, stamp, anomalous, vector=None, margin=None):
         """One decision of the classifier at message time ``stamp`` (float s); ``anomalous``: bool; ``vector``: the
@@ -196,6 +201,12 @@ class DriftMonitor(object):
             self.peak_episodes = max(self.peak_episodes, self._onsets)
             if self.drifting and self.first_drift is None:
                 self.first_drift = stamp
+        stated = self.stated
+        if stated and self.first_stated is None:
+            self.first_stated = stamp
+        self._stated_since = (self._stated_since if self._stated_since is not None else stamp) if stated else None
+        if self.first_sustained is None and self.sustained:
+            self.first_sustained = stamp
 
     @property
     def covered(self):
@@ -215,16 +226,41 @@ class DriftMonitor(object):
         return self._flagged / float(len(self._decisions)) if self._decisions else 0.0
 
     @property
-    def outside(self):
-        """The coverage line when at least ``min_rate`` of the last span lies beyond the training range (or is
-        stopped that much more often than in training), else None."""
+    def leaving(self):
+        """Whether at least ``min_rate`` of the last span lies beyond the training range (or is stopped that much
+        more often than in training), once judged."""
         if self.coverage is None or not self.judged or not self._decisions:
+            return False
+        count = float(len(self._decisions))
+        trained_stopped = self.coverage.stopped_share
+        return self._beyond / count >= self.min_rate or (
+            trained_stopped is not None and self._stopped / count >= trained_stopped + self.min_rate)
+
+    @property
+    def stated(self):
+        """Whether ``status()`` warns now: drift, or the driving leaving the training data (``leaving``)."""
+        return self.drifting or self.leaving
+
+    @property
+    def stated_for(self):
+        """Seconds of message time drift has been stated (``stated``) without a break, up to the last decision."""
+        if self._stated_since is None or not self._decisions:
+            return 0.0
+        return self._decisions[-1][0] - self._stated_since
+
+    @property
+    def sustained(self):
+        """Whether drift has been stated without a break for a whole span: it lasts (a new place, not a stray
+        minute or a true anomaly's few seconds)."""
+        return self.stated and self.stated_for >= self.span
+
+    @property
+    def outside(self):
+        """The coverage line when the driving leaves the training range (``leaving``), else None."""
+        if not self.leaving:
             return None
         count = float(len(self._decisions))
         beyond, stopped = self._beyond / count, self._stopped / count
-        trained_stopped = self.coverage.stopped_share
-        if beyond < self.min_rate and (trained_stopped is None or stopped < trained_stopped + self.min_rate):
-            return None
         return self.coverage.text(beyond_share=beyond, stopped_share=stopped, of='the last %s' % duration_text(
             round(self.covered)))
 
@@ -249,12 +285,13 @@ class DriftMonitor(object):
         if self._onsets >= self.episodes:
             flagged += ' in %d separate episodes' % self._onsets
         outside = self.outside
+        action = '; %s' % self.action if self.action and self.sustained else ''
         if self.drifting:
-            return WARN, 'drift: %s: this robot drives unlike its training data%s; remedies: %s' % (
-                flagged, ' (%s)' % outside if outside else '', self.remedies)
+            return WARN, 'drift: %s: this robot drives unlike its training data%s; remedies: %s%s' % (
+                flagged, ' (%s)' % outside if outside else '', self.remedies, action)
         if outside:
-            return WARN, 'drift: %s, but the driving leaves the training data: %s; remedies: %s' % (
-                flagged, outside, self.remedies)
+            return WARN, 'drift: %s, but the driving leaves the training data: %s; remedies: %s%s' % (
+                flagged, outside, self.remedies, action)
         return OK, 'drift: none: %s' % flagged
 
     def report(self):
@@ -263,6 +300,9 @@ class DriftMonitor(object):
         line = self._rate_report()
         if self.coverage is not None:
             line += '; ' + self.coverage.report()
+        if self.action and self.first_sustained is not None:
+            lasting = duration_text(round(self.first_sustained - self.began))
+            line += '; from %s into the run, %s' % (lasting, self.action)
         return line
 
     def _rate_report(self):
@@ -287,6 +327,8 @@ class DriftMonitor(object):
             ('drift', self.first_drift is not None), ('first_drift', self.first_drift), ('peak', self.peak),
             ('peak_episodes', self.peak_episodes), ('episodes', self.episodes),
             ('share', self.share if self.judged else None),
+            ('first_stated', self.first_stated), ('first_sustained', self.first_sustained),
+            ('action', self.action if self.first_sustained is not None else None),
             ('coverage', None if self.coverage is None else self.coverage.as_dict())])
 
 
@@ -485,10 +527,14 @@ class EnvelopeCoverage(object):
 def monitor_envelopes(triggers, **options):
     """A DriftMonitor for each trigger of kind envelope among ``triggers`` (``triggers.envelope.EnvelopeTrigger``),
     at TRAINED_RATE_FLOOR with its ``EnvelopeCoverage``, fed every window it evaluates (added to its
-    ``observers``); returns the monitors in order."""
+    ``observers``); a trigger's own monitor (``drift``: the one its ``on_drift`` follows, ``triggers.drift_gate``)
+    where it has one, ``options`` unused then; returns the monitors in order."""
     monitors = []
     for trigger in triggers:
         if getattr(trigger, 'kind', None) != 'envelope':
+            continue
+        if getattr(trigger, 'drift', None) is not None:
+            monitors.append(trigger.drift)
             continue
         monitor = DriftMonitor(TRAINED_RATE_FLOOR, name=trigger.name, coverage=EnvelopeCoverage(trigger.envelope),
                                remedies=ENVELOPE_REMEDIES, **options)

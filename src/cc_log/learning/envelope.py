@@ -325,12 +325,26 @@ def scores(matrix, limits, joint=None, joint_factor=DEFAULT_JOINT_FACTOR, local=
            local_factor=DEFAULT_LOCAL_FACTOR):
     """The score of each row: ``-ln(max(largest ratio, joint ratio, local ratio))`` (lower is more anomalous; < 0
     beyond the envelope). ``joint``: the ``Joint``, ``local``: the ``LocalDensity`` (None or factor 0: off)."""
+    return score_of(np.maximum(*part_ratios(matrix, limits, joint, joint_factor, local, local_factor)))
+
+
+def part_ratios(matrix, limits, joint=None, joint_factor=DEFAULT_JOINT_FACTOR, local=None,
+                local_factor=DEFAULT_LOCAL_FACTOR):
+    """Of each row, ``(largest feature ratio, the larger of the joint and the local ratio)`` (the second 0 when
+    both are off): the parts ``scores`` takes the larger of."""
     worst = np.max(ratios(matrix, limits), axis=-1)
+    other = np.zeros(len(worst))
     if joint is not None and joint_factor:
-        worst = np.maximum(worst, joint.ratios(matrix, joint_factor))
+        other = np.maximum(other, joint.ratios(matrix, joint_factor))
     if local is not None and local_factor and len(worst):
-        worst = np.maximum(worst, local.ratios(matrix, local_factor))
-    worst = np.where(np.isnan(worst), np.inf, worst)   # a value too large to square: as far out as can be said
+        other = np.maximum(other, local.ratios(matrix, local_factor))
+    return worst, other
+
+
+def score_of(worst):
+    """The score of a largest ratio (``-ln``, clipped to [MIN_RATIO, MAX_RATIO]; NaN, a value too large to
+    square, as far out as can be said)."""
+    worst = np.where(np.isnan(worst), np.inf, worst)
     return -np.log(np.clip(worst, MIN_RATIO, MAX_RATIO))
 
 

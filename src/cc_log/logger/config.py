@@ -112,9 +112,10 @@ def with_classifier(data, **values):
     """``data`` with the single-classifier parameters of the nodes and ``cclog`` (None: not given):
     ``model``, ``topics``, ``feature_set`` and ``window`` go to the trigger named ``classifier`` (added first
     when there is none; without ``topics``, on its feature set's default topics); ``classify_every``,
-    ``retrigger``, ``recent`` and ``learn_online`` to every classifier. When ``model`` is an envelope file
-    (``model_kind``), it goes to the trigger named ``envelope`` instead (of kind envelope, added first when
-    there is none; ``topics``: its one odometry topic, default the file's). ValueError naming what is wrong."""
+    ``retrigger``, ``recent`` and ``learn_online`` to every classifier, ``on_drift`` to every envelope trigger.
+    When ``model`` is an envelope file (``model_kind``), it goes to the trigger named ``envelope`` instead (of
+    kind envelope, added first when there is none; ``topics``: its one odometry topic, default the file's).
+    ValueError naming what is wrong."""
     data = copy.deepcopy(data)
     triggers = data.get('triggers', [])
     if not isinstance(triggers, list):
@@ -126,10 +127,11 @@ def with_classifier(data, **values):
         own = {}
     if own:
         _default_trigger(triggers, 'classifier', own)
-    for key in ('classify_every', 'retrigger', 'recent', 'learn_online'):
+    for key, kind in (('classify_every', 'classifier'), ('retrigger', 'classifier'), ('recent', 'classifier'),
+                      ('learn_online', 'classifier'), ('on_drift', 'envelope')):
         if values.get(key) is not None:
             for entry in triggers:
-                if isinstance(entry, dict) and entry.get('kind') == 'classifier':
+                if isinstance(entry, dict) and entry.get('kind') == kind:
                     entry[key] = values[key]
     if triggers:
         data['triggers'] = triggers

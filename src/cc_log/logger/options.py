@@ -36,6 +36,7 @@ from cc_log.buffer.window_buffer import DEFAULT_MAX_BUFFER_MB, DEFAULT_MAX_WINDO
 from cc_log.storage import context_track, formats, log_format
 from cc_log.storage.formats import json_xz
 from cc_log.triggers.classifier import DEFAULT_CLASSIFY_EVERY, DEFAULT_RETRIGGER, RETRIGGER_MODES
+from cc_log.triggers.drift_gate import DEFAULT_ON_DRIFT, ON_DRIFT
 
 SMART, COLLECT, BOTH = ('smart',), ('collect',), ('smart', 'collect')
 MAX_TEXT = 1 << 20   # characters of a YAML value given as text (a launch argument)
@@ -222,6 +223,7 @@ PRECISION = entries(Grammar(json_xz.check_precision, 'FIELD=STEP,...', "field pa
                             "`{'pose.pose.position.*': 1e-4}` or `'twist.twist.*=1e-5, ...'`"),
                     1000, lambda n: dict(('f%d.*' % i, 1e-4) for i in range(int(n))))
 RETRIGGER = Grammar(_choice(lambda: RETRIGGER_MODES), 'MODE', ', '.join('`%s`' % m for m in RETRIGGER_MODES))
+ON_DRIFT_MODE = Grammar(_choice(lambda: ON_DRIFT), 'MODE', ', '.join('`%s`' % m for m in ON_DRIFT))
 FEATURE_SET = Grammar(_choice(features.names), 'SET', 'a feature set: %s' % ', '.join(
     '`%s`' % name for name in features.names()))
 COMMAND = characters(Grammar(_text_or_list, 'COMMAND', 'an argument list or a string'), 0, MAX_PATH_CHARS)
@@ -239,7 +241,7 @@ INTAKE_COUNT = number(Range(1, 10 ** 7, 'messages'), 'N', 'a whole number', True
 INTAKE_SIZE = size(MIN_MEMORY_MB, MAX_MEMORY_MB, None)
 CHUNK_KB = number(Range(1, 1 << 20, 'KB'), 'KB', 'a whole number of KB (1024 bytes)', True)
 #: The grammars of one of a few values: their values are their range.
-CHOICES = (BOOL, FORMAT, RETRIGGER, FEATURE_SET)
+CHOICES = (BOOL, FORMAT, RETRIGGER, ON_DRIFT_MODE, FEATURE_SET)
 
 
 class Option(collections.namedtuple('Option', 'name key grammar default doc nodes commands')):
@@ -381,6 +383,10 @@ OPTIONS = (
             'at most once per duration', SMART),
     _option('recent', '', SCALAR, '', 'every classifier, `event` only: the newest rows that keep an anomaly open '
             '(default: a quarter of the feature window)', SMART),
+    _option('on_drift', '', ON_DRIFT_MODE, DEFAULT_ON_DRIFT, 'every envelope trigger, once its drift monitor has '
+            'stated drift for 2 min without a break: `confirm` (a feature beyond its limit opens a window only where '
+            'the robust distance confirms it; the joint check flags at 2x) or `none` (no change); '
+            'triggers.drift_gate', SMART, ('replay',)),
     _option('learn_online', '', BOOL, False, 'every classifier learns nominal online and refits in the '
             'background (saved beside the model)', SMART),
     _option('enabled', '', BOOL, True, 'start logging, or start paused (`~enable` service)', SMART),

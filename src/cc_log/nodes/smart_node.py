@@ -35,10 +35,11 @@ Parameters
   every option with a ``smart`` node parameter in docs/OPTIONS.md (declared in ``cc_log.logger.options``; ``--help``
   lists them with their defaults): ``~config`` (the configuration file: topics, triggers, windows, format,
   limits; the parameters override its keys), ``~model`` and the classifier's ``~retrigger``, ``~classify_every``,
-  ``~recent``, ``~learn_online``, the windows' ``~pre``, ``~post``, ``~max_window``, ``~topic_limits``, the
-  memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb``, ``~max_files`` and ``~min_free_mb``, ``~directory``
-  and ``~name_prefix`` (files ``<name_prefix>_<UTC>_<reason>``), the intake's bounds, ``~tcp_nodelay`` and
-  ``~fast_receive``, the context track and the upload command. Each resolved value is logged once (``~quiet``:
+  ``~recent``, ``~learn_online``, the envelope trigger's ``~on_drift``, the windows' ``~pre``, ``~post``,
+  ``~max_window``, ``~topic_limits``, the memory budget ``~max_buffer_mb``, the disk's ``~max_disk_mb``,
+  ``~max_files`` and ``~min_free_mb``, ``~directory`` and ``~name_prefix`` (files
+  ``<name_prefix>_<UTC>_<reason>``), the intake's bounds, ``~tcp_nodelay`` and ``~fast_receive``, the context
+  track and the upload command. Each resolved value is logged once (``~quiet``:
   warnings and errors only).
 
 Every parameter is type-checked: a wrong type or value prints one line ``/smart_logger: ~<name>: ...`` and
@@ -111,7 +112,8 @@ class SmartNode(object):
             """The parameter ``name`` when it is set, else None (the configuration's value holds)."""
             return params.option(name) if params.given(name) else None
         cfg = node_config(params, params.configuration('smart'), dict(
-            (name, given(name)) for name in ('model', 'retrigger', 'classify_every', 'recent', 'learn_online')))
+            (name, given(name)) for name in ('model', 'retrigger', 'classify_every', 'recent', 'learn_online',
+                                             'on_drift')))
         if not cfg.triggers:
             raise ConfigError('~model: required (the envelope file of cclog learn-envelope, or the model file written '
                               'by learn mode), or triggers in ~config')

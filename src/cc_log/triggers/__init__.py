@@ -6,7 +6,8 @@
 - ``manual``: on request, with a reason and an optional span (``manual.ManualTrigger``);
 - ``periodic``: a window every ``every`` of message time, a nominal sample to retrain from
   (``periodic.PeriodicTrigger``);
-- ``envelope``: odometry beyond the learned physics envelope of nominal driving (``envelope.EnvelopeTrigger``).
+- ``envelope``: odometry beyond the learned physics envelope of nominal driving (``envelope.EnvelopeTrigger``;
+  under lasting drift ``drift_gate``).
 
 ``base.Trigger`` is what they share and ``base.Fire`` what they say; ``SmartLogger`` runs a list of them.
 How to add a trigger: docs/DESIGN.md.

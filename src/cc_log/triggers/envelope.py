@@ -4,7 +4,7 @@ Configuration (``kind: envelope``)::
 
     triggers:
       - {name: envelope, kind: envelope, limits: envelope.json, topic: /odom, factor: 2.0, joint_factor: 4.0,
-         local_factor: 6.0}
+         local_factor: 6.0, on_drift: confirm}
 
 ``limits``: the file ``cclog learn-envelope`` wrote (``learning.envelope.Envelope``: the largest value of each of
 the 19 ``features.envelope`` features over nominal windows); ``topic``: the nav_msgs/Odometry topic (default:
@@ -14,7 +14,9 @@ has a joint check (``learning.envelope.Joint``): a window is flagged too when it
 typical driving goes ``joint_factor`` x farther past the typical one than any training window did;
 ``local_factor`` (default 6.0; 0: off), when the file has a local part (``learning.local_density``): a window is
 flagged too when its local outlier factor among the training windows goes ``local_factor`` x farther past the
-typical one than any training window's (a window in a sparse gap between kinds of nominal driving). A model path
+typical one than any training window's (a window in a sparse gap between kinds of nominal driving); ``on_drift``
+(default ``confirm``; ``none``): once the trigger's own drift monitor has stated drift for a whole span, a feature
+beyond its limit needs the robust distance's confirmation (``drift_gate``). A model path
 given as the default trigger (``~model``, ``cclog replay --model``) builds this trigger when the file is an
 envelope (``logger.config.with_classifier``).
 
@@ -37,13 +39,14 @@ import time
 import numpy as np
 
 from cc_log.learning.envelope import (
-    DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, DEFAULT_LOCAL_FACTOR, Envelope, check_factor, check_joint_factor,
-    check_local_factor, explain, scores)
+    DEFAULT_FACTOR, DEFAULT_JOINT_FACTOR, DEFAULT_LOCAL_FACTOR, MAX_WHY, Envelope, check_factor, check_joint_factor,
+    check_local_factor, explain, part_ratios, score_of)
 from cc_log.features.envelope import (
     ENVELOPE_COLUMNS, HISTORY, clean_samples, envelope_rows, odometry_samples, out_of_range_samples, step_details)
 from cc_log.features.base import CLIP
 from cc_log.features.motion import ODOMETRY, OdometrySet
 from cc_log.triggers.base import Trigger, register
+from cc_log.triggers import drift_gate
 
 REASON = 'envelope'
 OUT_OF_RANGE_SCORE = -CLIP  # the score of a window holding a sample out of range: below any envelope score
@@ -55,10 +58,10 @@ class EnvelopeTrigger(Trigger):
 
     envelope: a ``learning.envelope.Envelope``; topic: its nav_msgs/Odometry topic; factor: the limit factor;
     joint_factor: the joint check's (0: off; no effect when the envelope has no joint check); local_factor: the
-    local part's (likewise)."""
+    local part's (likewise); on_drift: what changes once its drift monitor states drift (``drift_gate``)."""
 
     kind = 'envelope'
-    config_keys = ('limits', 'topic', 'factor', 'joint_factor', 'local_factor')
+    config_keys = ('limits', 'topic', 'factor', 'joint_factor', 'local_factor', 'on_drift')
     batched = True
 
     @classmethod
@@ -75,7 +78,7 @@ class EnvelopeTrigger(Trigger):
         return cls(name, envelope, context.resolve(topic or envelope.topic), **options)
 
     def __init__(self, name, envelope, topic, factor=DEFAULT_FACTOR, joint_factor=DEFAULT_JOINT_FACTOR,
-                 local_factor=DEFAULT_LOCAL_FACTOR, pre=None, post=None):
+                 local_factor=DEFAULT_LOCAL_FACTOR, on_drift=drift_gate.DEFAULT_ON_DRIFT, pre=None, post=None):
         super(EnvelopeTrigger, self).__init__(name, pre, post)
         if not isinstance(envelope, Envelope):
             raise ValueError('%s: envelope: expected an Envelope, got %s' % (name, type(envelope).__name__))
@@ -86,6 +89,10 @@ class EnvelopeTrigger(Trigger):
         self.joint = envelope.joint if self.joint_factor else None   # None: per feature only
         self.local_factor = check_local_factor(local_factor, '%s: local_factor' % name)
         self.local = envelope.local if self.local_factor else None   # None: no local part
+        self.on_drift = drift_gate.check_on_drift(on_drift, '%s: on_drift' % name)
+        # the drift monitor on_drift follows (drift.monitor_envelopes reports it); None: nothing to gate
+        self.drift = drift_gate.monitor_for(self) if on_drift == 'confirm' and self.joint is not None else None
+        self.unconfirmed = 0    # windows beyond a feature's limit left closed under drift (not confirmed)
         self.topic = topic
         self.topics = frozenset([topic])
         self.window, self.stride = envelope.window, envelope.stride
@@ -157,7 +164,11 @@ class EnvelopeTrigger(Trigger):
         self._last_end = float(grid[-1])
         ends, rows = envelope_rows(*self._ring, ends=grid, window=self.window)
         self.evaluated += len(ends)
-        window_scores = scores(rows, self.limits, self.joint, self.joint_factor, self.local, self.local_factor)
+        worst, other = part_ratios(rows, self.limits, self.joint, self.joint_factor, self.local, self.local_factor)
+        window_scores = score_of(np.maximum(worst, other))
+        if self.drift is not None:
+            drifted, confirming = drift_gate.drifted_ratios(rows, worst, other, self.joint, self.joint_factor)
+            drifted_scores = score_of(drifted)
         held = (np.searchsorted(self._beyond, grid, side='right') -
                 np.searchsorted(self._beyond, grid - self.window, side='right'))  # out-of-range samples per window
         measured = dict(zip(ends.tolist(), range(len(ends))))
@@ -165,20 +176,32 @@ class EnvelopeTrigger(Trigger):
         for end, count in zip(grid.tolist(), held.tolist()):
             k = measured.get(end)
             score = OUT_OF_RANGE_SCORE if count else float(window_scores[k]) if k is not None else 0.0
+            confirmed = False
             if k is not None or count:
+                row = None if k is None else rows[k]
+                if self.drift is not None:
+                    self.drift.observe(end, score < 0.0, row)
                 for observe in self.observers:
-                    observe(end, score < 0.0, None if k is None else rows[k])
+                    observe(end, score < 0.0, row)
+                if k is not None and not count and self.drift is not None and self.drift.sustained:
+                    self.unconfirmed += score < 0.0 <= drifted_scores[k]
+                    score = float(drifted_scores[k])
+                    confirmed = score < 0.0 and confirming[k] > 1.0
             if score >= 0.0:
                 continue
             self.beyond += 1
             at = min(int(np.searchsorted(newest, end, side='left')), len(newest) - 1)  # the first record at or after
             if at not in best or score < best[at][1]:   # the window's end: its most anomalous window
-                best[at] = (end, score, k, count)
-        for at, (end, score, k, count) in sorted(best.items()):
+                best[at] = (end, score, k, count, confirmed)
+        for at, (end, score, k, count, confirmed) in sorted(best.items()):
+            joint_factor = self.joint_factor if self.joint else 0
+            if confirmed:   # under drift the joint check's own factor is lower
+                joint_factor = min(joint_factor, drift_gate.DRIFT_JOINT_FACTOR)
             why = () if k is None else explain(rows[k], self.envelope, self.factor,
                                                step_details(*self._ring, end=end, window=self.window),
-                                               self.joint_factor if self.joint else 0,
-                                               self.local_factor if self.local else 0)
+                                               joint_factor, self.local_factor if self.local else 0)
+            if confirmed:
+                why = tuple(why)[:MAX_WHY - 1] + (drift_gate.confirmation_why(rows[k], self.joint),)
             if count:
                 why = (out_of_range_why(count),) + tuple(why)
             fires[offset + at].append(self.fire(REASON, score, why))
@@ -201,6 +224,7 @@ class EnvelopeTrigger(Trigger):
     def stats(self):
         result = super(EnvelopeTrigger, self).stats()
         result.update(envelope_windows=self.evaluated, envelope_beyond=self.beyond,
+                      envelope_unconfirmed=self.unconfirmed,
                       envelope_seconds=self.seconds, envelope_ring=len(self._ring[0]))
         return result
 
@@ -210,7 +234,7 @@ class EnvelopeTrigger(Trigger):
                       joint_factor=self.joint_factor,
                       joint=None if self.joint is None else {'typical': self.joint.typical,
                                                              'farthest': self.joint.farthest},
-                      local_factor=self.local_factor,
+                      local_factor=self.local_factor, on_drift=self.on_drift,
                       local=None if self.local is None else dict(self.local.summary()),
                       learned={'topic': self.envelope.topic, 'windows': self.envelope.windows,
                                'seconds': self.envelope.seconds},

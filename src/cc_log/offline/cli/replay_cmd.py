@@ -94,7 +94,8 @@ def run(args):
     flat = dict((option.name, getattr(args, option.name)) for option in options.for_command('replay'))
     flat.update({'driving_topic': args.topic, 'side_topics': [t for t in args.side_topic if t != args.topic],
                  'classifier': {'model': args.model, 'topics': [args.topic] if args.model and args.topic else None,
-                                'classify_every': args.classify_every, 'retrigger': args.retrigger}})
+                                'classify_every': args.classify_every, 'retrigger': args.retrigger,
+                                'on_drift': flat.pop('on_drift')}})
     cfg = configuration(args, copy.deepcopy(flat))
     if args.sweep:
         return _sweep(args, flat, many)
