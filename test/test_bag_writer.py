@@ -96,3 +96,54 @@ def test_bad_times_and_no_messages_are_refused(husky_messages):
         bag_writer.bag_bytes([(topic, 1, -1, data)], headers)
     with pytest.raises(ValueError, match='at least one message'):
         bag_writer.bag_bytes([], headers)
+
+
+@pytest.fixture
+def roslz4_calls(monkeypatch):
+    """The sizes of the chunks roslz4 compresses (its ``compress``, counted and then called)."""
+    import roslz4
+    calls, compress = [], roslz4.compress
+
+    def counted(data):
+        calls.append(len(data))
+        return compress(data)
+    monkeypatch.setattr(roslz4, 'compress', counted)
+    return calls
+
+
+def test_heavy_chunks_are_lz4_frames_as_roslz4_writes_them_without_roslz4(husky_messages, tmp_path, roslz4_calls):
+    # images and clouds: each ~0.9 MB message closes a chunk of its own; roslz4 compresses only the small last one
+    pytest.importorskip('lz4.frame')
+    import random
+    messages, headers = husky_messages
+    headers = dict(headers, **{'/camera': dict(headers[TOPICS[1]], topic='/camera')})
+    rng = random.Random(43)
+    sample = []
+    for index, (topic, secs, nsecs, data) in enumerate(messages[:600]):
+        sample.append((topic, secs, nsecs, data))
+        if index % 50 == 0:  # a noisy image (LZ4 keeps it as it is) or a flat one (LZ4 shrinks it)
+            image = rng.randbytes(921600) if index % 100 else bytes(921600)
+            sample.append(('/camera', secs, nsecs, bytearray(image) if index % 150 == 0 else image))
+    ours = bag_writer.bag_bytes(sample, headers)
+    heavy = sum(1 for message in sample if message[0] == '/camera')
+    assert len(roslz4_calls) == 1 and roslz4_calls[0] <= bag_writer.LZ4_FRAME_MIN  # the tail after the last image
+    as_bytes = [message[:3] + (bytes(message[3]),) for message in sample]  # rosbag takes no bytearray
+    assert ours == rosbag_bytes(tmp_path / 'rosbag.bag', as_bytes, headers)
+    with rosbag.Bag(str(tmp_path / 'rosbag.bag')) as bag:
+        assert len(bag._chunks) == heavy + 1
+        assert [raw[1] for _, raw, _ in bag.read_messages(topics=['/camera'], raw=True)] == \
+            [bytes(message[3]) for message in sample if message[0] == '/camera']
+
+
+@pytest.mark.parametrize('size', [1, 65536, bag_writer.LZ4_FRAME_MIN, bag_writer.LZ4_FRAME_MIN + 1, 768 * 1024,
+                                  1 << 20, (1 << 20) + 1, 3 * (1 << 20) + 7])
+def test_lz4_frame_is_roslz4s_frame_byte_for_byte(size, monkeypatch):
+    import os
+    import roslz4
+    for data in (os.urandom(size), bytes(size), b'cc_log' * (size // 6) + os.urandom(size % 6)):
+        frame = bag_writer.lz4_frame(data)
+        assert frame == roslz4.compress(data) and roslz4.decompress(frame) == data
+        assert bag_writer.lz4_frame(memoryview(data)) == frame
+        monkeypatch.setattr(bag_writer, '_lz4_frame', None)  # as without python3-lz4: roslz4
+        assert bag_writer.lz4_frame(data) == frame
+        monkeypatch.undo()
