@@ -147,3 +147,39 @@ def test_lz4_frame_is_roslz4s_frame_byte_for_byte(size, monkeypatch):
         monkeypatch.setattr(bag_writer, '_lz4_frame', None)  # as without python3-lz4: roslz4
         assert bag_writer.lz4_frame(data) == frame
         monkeypatch.undo()
+
+
+def test_a_window_part_reads_each_heavy_message_just_before_its_chunk(tmp_path, monkeypatch):
+    # the records' crc32 step of each message comes right before the chunk that holds it is compressed (the
+    # bytes read once from memory, then from the cache), not over the whole part first; the file reads back
+    import os
+    from std_msgs.msg import UInt8MultiArray
+    from cc_log.base.records import Record
+    import types
+    import zlib
+    events, chunk_record = [], bag_writer._Chunk.record
+
+    def crc32(data, value=0):
+        if len(data) > 100000:
+            events.append('crc')
+        return zlib.crc32(data, value)
+
+    def record(chunk, compression):
+        events.append('chunk')
+        return chunk_record(chunk, compression)
+    monkeypatch.setattr(bag_lz4, 'zlib', types.SimpleNamespace(crc32=crc32))
+    monkeypatch.setattr(bag_writer._Chunk, 'record', record)
+    connection = raw_message.class_header('/blob', UInt8MultiArray)
+    images = [raw_message.serialized(UInt8MultiArray(data=os.urandom(900000))) for _ in range(6)]
+    records = [Record(100.0 + index / 10.0, '/blob', None, 0, image, connection) for index, image in enumerate(images)]
+    path = tmp_path / 'window.bag'
+    with open(str(path), 'w+b') as stream:
+        window = bag_lz4.WindowStream(stream)
+        window.append(records[:3], {'codec': bag_lz4.CODEC})
+        window.append(records[3:], {'codec': bag_lz4.CODEC})
+        window.finish({'codec': bag_lz4.CODEC})
+    assert events.count('crc') == 6 and events.count('chunk') == 7  # one chunk per message, the final metadata's
+    assert all(events[at + 1] == 'chunk' for at, event in enumerate(events) if event == 'crc')
+    monkeypatch.undo()
+    _, back = bag_lz4.read(str(path))  # the crc32 of every record checked
+    assert [(record.stamp, bytes(record.raw)) for record in back] == [(record.stamp, record.raw) for record in records]

@@ -107,10 +107,11 @@ class _Layout(object):
         self.refused = collections.Counter()  # topic -> records refused (bytes not of their connection's type)
         self._check = payload_check.PayloadCheck()
 
-    def add(self, records):
+    def add(self, records, crc=True):
         """Take the next records of the window (checked: the reserved topic, bag times, one type per topic);
         return those to write: a record whose bytes are not a message of its connection's type is refused
-        (``payload_check``), counted by topic in ``refused`` (the metadata's ``dropped``)."""
+        (``payload_check``), counted by topic in ``refused`` (the metadata's ``dropped``). ``crc``: add them to
+        ``crc`` now (False: the caller does, ``crc_of`` in window order, as it writes them)."""
         records, refused = self._check.split(records)
         self.refused.update(refused)
         for record in records:
@@ -131,8 +132,13 @@ class _Layout(object):
                                         for ((secs, nsecs), _), record in zip(keys, records))
         self.keys.extend(keys)
         self.stamps.extend(record.stamp for record in records)
-        self.crc = _records_crc(self.crc, rank, ((record.topic, record.stamp, _data(record)) for record in records))
+        if crc:
+            self.crc = _records_crc(self.crc, rank, ((record.topic, record.stamp, _data(record)) for record in records))
         return records
+
+    def crc_of(self, crc, topic, stamp, data):
+        """``crc`` (of the records before) with one more record added (``records_crc``'s step)."""
+        return _record_crc(crc, self._rank[topic], stamp, data)
 
     def state(self):
         """What ``restore`` needs to forget the records added after this call."""
@@ -192,15 +198,18 @@ class WindowStream(object):
         bag.mark()
         saved = layout.state()
         try:
-            records = layout.add(records)
+            records = layout.add(records, crc=False)
             headers = layout.headers
             if self.count == 0 and records:
                 bag.chunk_threshold = chunk_bytes(metadata) or bag.chunk_threshold
                 bag.write(METADATA_TOPIC, *layout.first, layout.metadata_data(metadata, final=False),
                           headers[METADATA_TOPIC])
-            write = bag.write
-            for record in records:
-                write(record.topic, *bag_stamp(record.stamp), _data(record), headers[record.topic])
+            write, crc_of, crc = bag.write, layout.crc_of, layout.crc
+            for record in records:  # each message's CRC just before its chunk reads it: one read from memory
+                topic, data = record.topic, _data(record)
+                crc = crc_of(crc, topic, record.stamp, data)
+                write(topic, *bag_stamp(record.stamp), data, headers[topic])
+            layout.crc = crc
             bag.flush()
             bag.stream.flush()  # a full disk fails here, in the part that filled it
         except BaseException:
@@ -289,11 +298,14 @@ def _topics_crc(crc, topics, headers):
 
 
 def _records_crc(crc, rank, records):
-    pack = _RECORD_HEAD.pack
     for topic, stamp, data in records:
-        crc = zlib.crc32(pack(rank[topic], stamp, len(data)), crc)
-        crc = zlib.crc32(data, crc)
+        crc = _record_crc(crc, rank[topic], stamp, data)
     return crc
+
+
+def _record_crc(crc, number, stamp, data):
+    """``crc`` with one record added: its topic's ``number``, ``stamp`` and serialized bytes ``data``."""
+    return zlib.crc32(data, zlib.crc32(_RECORD_HEAD.pack(number, stamp, len(data)), crc))
 
 
 _RECORD_HEAD = struct.Struct('<IdI')  # topic number, stamp, length of the serialized bytes
