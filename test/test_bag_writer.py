@@ -149,37 +149,60 @@ def test_lz4_frame_is_roslz4s_frame_byte_for_byte(size, monkeypatch):
         monkeypatch.undo()
 
 
-def test_a_window_part_reads_each_heavy_message_just_before_its_chunk(tmp_path, monkeypatch):
-    # the records' crc32 step of each message comes right before the chunk that holds it is compressed (the
-    # bytes read once from memory, then from the cache), not over the whole part first; the file reads back
+def heavy_window(tmp_path, count=6):
+    """A bag-lz4 window of ``count`` 0.9 MB noisy blobs written a part at a time: (path, records)."""
     import os
     from std_msgs.msg import UInt8MultiArray
     from cc_log.base.records import Record
-    import types
-    import zlib
-    events, chunk_record = [], bag_writer._Chunk.record
-
-    def crc32(data, value=0):
-        if len(data) > 100000:
-            events.append('crc')
-        return zlib.crc32(data, value)
-
-    def record(chunk, compression):
-        events.append('chunk')
-        return chunk_record(chunk, compression)
-    monkeypatch.setattr(bag_lz4, 'zlib', types.SimpleNamespace(crc32=crc32))
-    monkeypatch.setattr(bag_writer._Chunk, 'record', record)
     connection = raw_message.class_header('/blob', UInt8MultiArray)
-    images = [raw_message.serialized(UInt8MultiArray(data=os.urandom(900000))) for _ in range(6)]
-    records = [Record(100.0 + index / 10.0, '/blob', None, 0, image, connection) for index, image in enumerate(images)]
+    blobs = [raw_message.serialized(UInt8MultiArray(data=os.urandom(900000))) for _ in range(count)]
+    records = [Record(100.0 + index / 10.0, '/blob', None, 0, blob, connection) for index, blob in enumerate(blobs)]
     path = tmp_path / 'window.bag'
     with open(str(path), 'w+b') as stream:
         window = bag_lz4.WindowStream(stream)
-        window.append(records[:3], {'codec': bag_lz4.CODEC})
-        window.append(records[3:], {'codec': bag_lz4.CODEC})
+        window.append(records[:count // 2], {'codec': bag_lz4.CODEC})
+        window.append(records[count // 2:], {'codec': bag_lz4.CODEC})
         window.finish({'codec': bag_lz4.CODEC})
-    assert events.count('crc') == 6 and events.count('chunk') == 7  # one chunk per message, the final metadata's
-    assert all(events[at + 1] == 'chunk' for at, event in enumerate(events) if event == 'crc')
+    return path, records
+
+
+def test_a_window_reads_each_payload_once_to_compress_it_not_again_for_its_crc(tmp_path, monkeypatch):
+    # the records' crc32 covers their topics, stamps and lengths; their bytes are covered by the LZ4 frame of
+    # their chunk (its XXH32 content checksum), which roslz4 checks as rosbag reads the chunk
+    import types
+    import zlib
+    payload_crcs = []
+
+    def crc32(data, value=0):
+        if len(data) > 100000:
+            payload_crcs.append(len(data))
+        return zlib.crc32(data, value)
+    monkeypatch.setattr(bag_lz4, 'zlib', types.SimpleNamespace(crc32=crc32))
+    path, records = heavy_window(tmp_path)
+    assert payload_crcs == []
     monkeypatch.undo()
-    _, back = bag_lz4.read(str(path))  # the crc32 of every record checked
+    metadata, back = bag_lz4.read(str(path))  # the crc32 of every record checked
+    assert metadata['layout'] == 4
     assert [(record.stamp, bytes(record.raw)) for record in back] == [(record.stamp, record.raw) for record in records]
+
+
+def test_a_flipped_bit_in_a_payload_on_disk_is_refused_by_its_chunks_lz4_checksum(tmp_path):
+    path, records = heavy_window(tmp_path)
+    data = bytearray(path.read_bytes())
+    at = data.find(records[4].raw[500000:500064])  # noise: LZ4 keeps it as literals
+    assert at > 0
+    data[at + 10] ^= 0x10
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match='corrupt or truncated bag') as error:
+        bag_lz4.read(str(path))
+    assert str(path) in str(error.value)
+
+
+def test_the_records_crc_of_layout_3_still_covers_the_payloads():
+    headers = {'/a': {'type': 't/T', 'md5sum': '0' * 32, 'message_definition': 'uint8[] data\n'}}
+    records = [('/a', 1.5, b'\x01\x00\x00\x00\x07')]
+    changed = [('/a', 1.5, b'\x01\x00\x00\x00\x08')]
+    assert bag_lz4.records_crc(['/a'], headers, records, 3) != bag_lz4.records_crc(['/a'], headers, changed, 3)
+    assert bag_lz4.records_crc(['/a'], headers, records, 4) == bag_lz4.records_crc(['/a'], headers, changed, 4)
+    moved = [('/a', 1.25, b'\x01\x00\x00\x00\x07')]
+    assert bag_lz4.records_crc(['/a'], headers, records, 4) != bag_lz4.records_crc(['/a'], headers, moved, 4)
