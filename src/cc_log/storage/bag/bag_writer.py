@@ -13,9 +13,10 @@ the bag, and writes a chunk's record in pieces (its compressed bytes are not cop
 An LZ4 chunk is one LZ4 frame as roslz4 (rosbag's LZ4) writes it: independent blocks of at most 1 MB, a content
 checksum (XXH32, checked by roslz4 when the chunk is read), no content size (``lz4_frame``). A chunk of more than
 ``LZ4_FRAME_MIN`` bytes (the heavy messages' chunks) is compressed by python3-lz4's ``lz4.frame`` when it is
-installed: the same liblz4 and the same frame, byte for byte, at a third of roslz4's CPU (roslz4's Python
-compressor streams through buffers it allocates per call) and without holding the GIL; a smaller one, or any
-without python3-lz4, by roslz4. Pure: both are imported only to compress LZ4 chunks.
+installed: the same liblz4 and the same frame, byte for byte, at a half to a third of roslz4's CPU (roslz4's
+Python compressor streams through buffers it allocates per call) and without holding the GIL; a smaller one, or
+any without python3-lz4, by roslz4. Pure: roslz4 is imported only to compress an LZ4 chunk, ``lz4.frame`` (when
+installed) with this module.
 """
 import bz2
 import io
