@@ -68,7 +68,8 @@ NODE = '/smart_logger'
 ODOM = '/odom'              # the workload's odometry: the node's driving topic; with --wall-clock the played clock
 SCENARIOS = ('one', 'tenth', 'all')
 LOSS_WORDS = re.compile(r'lost|dropped|trimmed|unwritten|not written', re.I)
-STATE = ('windows opened', 'windows saved', 'messages kept', 'messages buffered', 'writer queue')  # printed
+STATE = ('windows opened', 'windows saved', 'messages kept', 'messages buffered', 'writer queue', 'feeder CPU s',
+         'writer CPU s')  # printed
 NOT_LOSSES = {'messages not kept (outside every window)'}  # /diagnostics: let go as they should be
 
 

@@ -96,3 +96,113 @@ def test_bad_times_and_no_messages_are_refused(husky_messages):
         bag_writer.bag_bytes([(topic, 1, -1, data)], headers)
     with pytest.raises(ValueError, match='at least one message'):
         bag_writer.bag_bytes([], headers)
+
+
+@pytest.fixture
+def roslz4_calls(monkeypatch):
+    """The sizes of the chunks roslz4 compresses (its ``compress``, counted and then called)."""
+    import roslz4
+    calls, compress = [], roslz4.compress
+
+    def counted(data):
+        calls.append(len(data))
+        return compress(data)
+    monkeypatch.setattr(roslz4, 'compress', counted)
+    return calls
+
+
+def test_heavy_chunks_are_lz4_frames_as_roslz4_writes_them_without_roslz4(husky_messages, tmp_path, roslz4_calls):
+    # images and clouds: each ~0.9 MB message closes a chunk of its own; roslz4 compresses only the small last one
+    pytest.importorskip('lz4.frame')
+    import random
+    messages, headers = husky_messages
+    headers = dict(headers, **{'/camera': dict(headers[TOPICS[1]], topic='/camera')})
+    rng = random.Random(43)
+    sample = []
+    for index, (topic, secs, nsecs, data) in enumerate(messages[:600]):
+        sample.append((topic, secs, nsecs, data))
+        if index % 50 == 0:  # a noisy image (LZ4 keeps it as it is) or a flat one (LZ4 shrinks it)
+            image = rng.randbytes(921600) if index % 100 else bytes(921600)
+            sample.append(('/camera', secs, nsecs, bytearray(image) if index % 150 == 0 else image))
+    ours = bag_writer.bag_bytes(sample, headers)
+    heavy = sum(1 for message in sample if message[0] == '/camera')
+    assert len(roslz4_calls) == 1 and roslz4_calls[0] <= bag_writer.LZ4_FRAME_MIN  # the tail after the last image
+    as_bytes = [message[:3] + (bytes(message[3]),) for message in sample]  # rosbag takes no bytearray
+    assert ours == rosbag_bytes(tmp_path / 'rosbag.bag', as_bytes, headers)
+    with rosbag.Bag(str(tmp_path / 'rosbag.bag')) as bag:
+        assert len(bag._chunks) == heavy + 1
+        assert [raw[1] for _, raw, _ in bag.read_messages(topics=['/camera'], raw=True)] == \
+            [bytes(message[3]) for message in sample if message[0] == '/camera']
+
+
+@pytest.mark.parametrize('size', [1, 65536, bag_writer.LZ4_FRAME_MIN, bag_writer.LZ4_FRAME_MIN + 1, 768 * 1024,
+                                  1 << 20, (1 << 20) + 1, 3 * (1 << 20) + 7])
+def test_lz4_frame_is_roslz4s_frame_byte_for_byte(size, monkeypatch):
+    import os
+    import roslz4
+    for data in (os.urandom(size), bytes(size), b'cc_log' * (size // 6) + os.urandom(size % 6)):
+        frame = bag_writer.lz4_frame(data)
+        assert frame == roslz4.compress(data) and roslz4.decompress(frame) == data
+        assert bag_writer.lz4_frame(memoryview(data)) == frame
+        monkeypatch.setattr(bag_writer, '_lz4_frame', None)  # as without python3-lz4: roslz4
+        assert bag_writer.lz4_frame(data) == frame
+        monkeypatch.undo()
+
+
+def heavy_window(tmp_path, count=6):
+    """A bag-lz4 window of ``count`` 0.9 MB noisy blobs written a part at a time: (path, records)."""
+    import os
+    from std_msgs.msg import UInt8MultiArray
+    from cc_log.base.records import Record
+    connection = raw_message.class_header('/blob', UInt8MultiArray)
+    blobs = [raw_message.serialized(UInt8MultiArray(data=os.urandom(900000))) for _ in range(count)]
+    records = [Record(100.0 + index / 10.0, '/blob', None, 0, blob, connection) for index, blob in enumerate(blobs)]
+    path = tmp_path / 'window.bag'
+    with open(str(path), 'w+b') as stream:
+        window = bag_lz4.WindowStream(stream)
+        window.append(records[:count // 2], {'codec': bag_lz4.CODEC})
+        window.append(records[count // 2:], {'codec': bag_lz4.CODEC})
+        window.finish({'codec': bag_lz4.CODEC})
+    return path, records
+
+
+def test_a_window_reads_each_payload_once_to_compress_it_not_again_for_its_crc(tmp_path, monkeypatch):
+    # the records' crc32 covers their topics, stamps and lengths; their bytes are covered by the LZ4 frame of
+    # their chunk (its XXH32 content checksum), which roslz4 checks as rosbag reads the chunk
+    import types
+    import zlib
+    payload_crcs = []
+
+    def crc32(data, value=0):
+        if len(data) > 100000:
+            payload_crcs.append(len(data))
+        return zlib.crc32(data, value)
+    monkeypatch.setattr(bag_lz4, 'zlib', types.SimpleNamespace(crc32=crc32))
+    path, records = heavy_window(tmp_path)
+    assert payload_crcs == []
+    monkeypatch.undo()
+    metadata, back = bag_lz4.read(str(path))  # the crc32 of every record checked
+    assert metadata['layout'] == 4
+    assert [(record.stamp, bytes(record.raw)) for record in back] == [(record.stamp, record.raw) for record in records]
+
+
+def test_a_flipped_bit_in_a_payload_on_disk_is_refused_by_its_chunks_lz4_checksum(tmp_path):
+    path, records = heavy_window(tmp_path)
+    data = bytearray(path.read_bytes())
+    at = data.find(records[4].raw[500000:500064])  # noise: LZ4 keeps it as literals
+    assert at > 0
+    data[at + 10] ^= 0x10
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match='corrupt or truncated bag') as error:
+        bag_lz4.read(str(path))
+    assert str(path) in str(error.value)
+
+
+def test_the_records_crc_of_layout_3_still_covers_the_payloads():
+    headers = {'/a': {'type': 't/T', 'md5sum': '0' * 32, 'message_definition': 'uint8[] data\n'}}
+    records = [('/a', 1.5, b'\x01\x00\x00\x00\x07')]
+    changed = [('/a', 1.5, b'\x01\x00\x00\x00\x08')]
+    assert bag_lz4.records_crc(['/a'], headers, records, 3) != bag_lz4.records_crc(['/a'], headers, changed, 3)
+    assert bag_lz4.records_crc(['/a'], headers, records, 4) == bag_lz4.records_crc(['/a'], headers, changed, 4)
+    moved = [('/a', 1.25, b'\x01\x00\x00\x00\x07')]
+    assert bag_lz4.records_crc(['/a'], headers, records, 4) != bag_lz4.records_crc(['/a'], headers, moved, 4)

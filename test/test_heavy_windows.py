@@ -145,7 +145,7 @@ def test_a_part_that_fills_the_disk_is_rolled_back_and_written_again(tmp_path):
     metadata, records = bag_lz4.read(written(tmp_path, target.getvalue()))
     assert [r.stamp for r in records] == [r.stamp for r in part(0) + part(1)]  # each once, in order
     assert [r.raw for r in records] == [r.raw for r in part(0) + part(1)]
-    assert metadata['reason'] == 'x' and metadata['layout'] == 3
+    assert metadata['reason'] == 'x' and metadata['layout'] == 4
 
 
 def test_a_rolled_back_bag_stream_reads_as_if_nothing_had_failed(tmp_path):

@@ -62,6 +62,8 @@ CONFIGS = [dict(), dict(pre='5', post='4'), dict(pre='2', post='1'), dict(pre='1
            dict(pre='0.2s', post='0.1s', max_window='0.5s'),
            dict(pre='0.1s', post='0.1s', max_window='40'), dict(pre='0.3s', post='0.2s', max_buffer_mb=0.02),
            dict(pre='0.2s', post='0.1s', max_buffer_mb=0),
+           dict(pre='0.3s', post='0.2s', max_buffer_mb=0.05),
+           dict(pre='0.3s', post='0.2s', max_buffer_mb=0.08, part_factor=2.0, held_elsewhere=lambda: 15000),
            dict(pre='0.2s', post='0.1s', topic_limits={'/scan': TopicLimits(pre=0.05, post=None, max_mb=0.001)})]
 
 
@@ -117,3 +119,28 @@ def test_a_batch_outside_and_inside_a_window_makes_no_call_per_record():
     expected += single.flush()
     assert shape(windows) == shape(expected)
     assert len(windows) == 1 and len(windows[0].records) == 101 + 100 + 2 * 150  # 1 s of pre, the second batch
+
+
+def test_a_pre_buffer_of_cameras_over_half_the_budget_takes_batches_without_a_call_per_record():
+    # 2 s of a 0.9 MB camera at 30 Hz and 100 Hz odometry hold ~56 MB: more than the 32 MB part limit of the node's
+    # 256 MB budget (bag-lz4: part factor 4), within the budget; outside a window the batch goes by slices
+    config = dict(pre='2s', post='2s', max_buffer_mb=256, part_factor=4.0, held_elsewhere=lambda: 30 * 10 ** 6)
+    batched, single = WindowBuffer(**config), WindowBuffer(**config)
+    records = []
+    for i in range(500):  # 5 s
+        records.append(Record(i * 0.01, DRIVING, i, 900))
+        if i % 3 == 0:
+            records.append(Record(i * 0.01 - 0.004, '/camera', ('camera', i), 921600))
+    calls = counting(batched)
+    windows, expected = [], []
+    for start in range(0, len(records), 50):
+        batch = records[start:start + 50]
+        windows += batched.add_batch(batch, [record.topic for record in batch], DRIVING)
+        for record in batch:
+            expected += single.add(record) if record.topic == DRIVING else single.add_side(record)
+        assert counters(batched) == counters(single)
+    assert calls == {'add': 0, 'add_side': 0}
+    assert batched.buffered_bytes > batched.part_limit and windows == expected == []
+    windows += batched.trigger('test', -1.0) + batched.flush()
+    expected += single.trigger('test', -1.0) + single.flush()
+    assert shape(windows) == shape(expected) and len(windows[0].records) == 201 + 67

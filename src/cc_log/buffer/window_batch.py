@@ -2,7 +2,9 @@
 
 The same as ``add`` of each driving record and ``add_side`` of each other one in turn, without a call per record
 in the common case: the open window (if any) taking every driving record of the batch and not reaching
-``max_window``, the buffer staying within half its budget, no topic with limits of its own, and driving stamps that
+``max_window``, the buffer staying within half its budget (with no window open: within its whole budget, with the
+parts handed to the writer; a pre buffer of cameras and lidar holds more than half, and the per-record path then
+does nothing more), no topic with limits of its own, and driving stamps that
 do not go backwards in the batch (then every threshold the per-record path trims and prunes by only rises, so
 trimming and pruning once, at the last driving record, leaves what trimming at each one leaves), and no side record
 more than ``max_ahead`` after the clock (which the per-record path places at the clock it meets). A pending window
@@ -69,8 +71,9 @@ class BatchAdd(object):
         slices (see the module docstring)."""
         if self.limits or not all(costs) or (self._pending is not None and not self._ring):
             return False
-        if self.max_buffer_bytes and self._bytes + sum(costs) > self._part_bytes:
-            return False
+        if self.max_buffer_bytes and self._bytes + sum(costs) > self._part_bytes and (
+                self._open is not None or self._bytes + sum(costs) + self._held_elsewhere() > self.max_buffer_bytes):
+            return False  # (no window open and within the budget: the per-record path's _enforce_budget does nothing)
         if not drivings:
             return True
         stamps = list(map(_STAMP, drivings))

@@ -16,8 +16,10 @@ The JSON also holds a ``"bag"`` object that ``read`` uses and removes:
 - ``stamps``: only when some record stamp (float seconds) does not survive the trip through bag time
   (secs, nsecs): every record's stamp, in window order;
 - ``crc32`` (layout 2): the CRC-32 of the records as ``read`` returns them (``records_crc``: each topic's type,
-  md5sum and definition, each record's topic, stamp and serialized bytes, in window order). rosbag has no
-  checksum of its own: without it a flipped bit in a message reads back as a different value. ``read``
+  md5sum and definition, each record's topic, stamp and length, in window order; up to layout 3 its serialized
+  bytes too). rosbag's records have no checksum of their own; the bytes of each message are covered by the
+  LZ4 frame of the chunk holding them, whose content checksum (XXH32) roslz4 checks as it reads the chunk, so
+  since layout 4 the CRC leaves them out (the writer reads each payload once, to compress it). ``read``
   refuses a file whose records do not match it (layout 1 files, written before it, are read without it).
 
 A record held as bytes that are not exactly one message of its connection's type (a buggy publisher; two
@@ -48,7 +50,8 @@ EXTENSION = '.bag'
 #: but at 1 kHz the live node's RSS grew 1.7-2.4 KB per buffered message estimated at 0.7 KB (allocator
 #: fragmentation across the receiving threads; bench/memory_live.py --format bag-lz4).
 PART_FACTOR = 4.0
-LAYOUT_VERSION = 3  # 2: the layout holds the records' crc32; 3: computed records first (written a part at a time)
+LAYOUT_VERSION = 4  # 2: the layout holds the records' crc32; 3: computed records first (written a part at a time);
+#                      4: of the records' lengths, not their bytes (LZ4's checksum covers them)
 _STRING_DEFINITION = 'string data\n'
 
 
@@ -131,7 +134,8 @@ class _Layout(object):
                                         for ((secs, nsecs), _), record in zip(keys, records))
         self.keys.extend(keys)
         self.stamps.extend(record.stamp for record in records)
-        self.crc = _records_crc(self.crc, rank, ((record.topic, record.stamp, _data(record)) for record in records))
+        self.crc = _records_crc(self.crc, rank, ((record.topic, record.stamp, _data(record)) for record in records),
+                                payloads=False)
         return records
 
     def state(self):
@@ -272,10 +276,11 @@ def _data(record):
 def records_crc(topics, headers, records, layout=LAYOUT_VERSION):
     """CRC-32 of a window's records: ``topics`` in order with their connection ``headers`` (topic -> dict;
     type, md5sum and message_definition count, str or bytes) and ``records`` ((topic, stamp, serialized bytes)
-    in window order); layout 3 (a file written a part at a time) takes the records first, layout 2 the topics."""
+    in window order); layout 3 (a file written a part at a time) takes the records first, layout 2 the topics;
+    layout 4 the records' lengths, not their bytes (the chunks' LZ4 checksums cover them)."""
     rank = {topic: number for number, topic in enumerate(topics)}
     if layout >= 3:
-        return _topics_crc(_records_crc(0, rank, records), topics, headers)
+        return _topics_crc(_records_crc(0, rank, records, payloads=layout < 4), topics, headers)
     return _records_crc(_topics_crc(0, topics, headers), rank, records)
 
 
@@ -288,11 +293,13 @@ def _topics_crc(crc, topics, headers):
     return crc
 
 
-def _records_crc(crc, rank, records):
+def _records_crc(crc, rank, records, payloads=True):
+    """``crc`` with ``records`` added: each one's topic number, stamp, length and (``payloads``) serialized bytes."""
     pack = _RECORD_HEAD.pack
     for topic, stamp, data in records:
         crc = zlib.crc32(pack(rank[topic], stamp, len(data)), crc)
-        crc = zlib.crc32(data, crc)
+        if payloads:
+            crc = zlib.crc32(data, crc)
     return crc
 
 
