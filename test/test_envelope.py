@@ -551,6 +551,20 @@ def test_version_1_files_load_without_a_joint_check(tmp_path):
     assert Envelope.load(str(path)).joint is None
 
 
+def assert_blocks_refused(path, document, key, cases):
+    """Each ``(bad, said)`` of ``cases``: ``document`` with its ``key`` block replaced by ``bad``, written to
+    ``path``, is refused by ``Envelope.load`` in one line starting with the path and the block and saying ``said``."""
+    import json
+    from cc_log.learning.envelope import Envelope
+    for bad, said in cases:
+        with open(path, 'w') as stream:
+            json.dump(dict(document, **{key: bad}), stream)
+        with pytest.raises(ValueError) as error:
+            Envelope.load(path)
+        message = str(error.value)
+        assert message.startswith('%s: %s' % (path, key)) and said in message and '\n' not in message, message
+
+
 def test_bad_joint_blocks_are_refused_in_one_line(tmp_path):
     import json
     from cc_log.learning.envelope import Envelope
@@ -575,13 +589,7 @@ def test_bad_joint_blocks_are_refused_in_one_line(tmp_path):
              (dict(joint, typical=-1.0), 'joint: typical: -1.0 must be a finite non-negative number'),
              (dict(joint, typical=joint['farthest']), 'joint: typical %r must be below farthest' % joint['farthest']),
              (dict(joint, farthest='far'), "joint: farthest: 'far' must be")]
-    for bad, said in cases:
-        with open(path, 'w') as stream:
-            json.dump(dict(document, joint=bad), stream)
-        with pytest.raises(ValueError) as error:
-            Envelope.load(path)
-        assert str(error.value).startswith(path + ': joint') and said in str(error.value) and \
-            '\n' not in str(error.value), str(error.value)
+    assert_blocks_refused(path, document, 'joint', cases)
     with open(path, 'w') as stream:
         stream.write(json.dumps(document).replace(json.dumps(joint['farthest']), 'Infinity', 1))
     with pytest.raises(ValueError, match='Infinity is not a number JSON allows'):

@@ -258,21 +258,25 @@ def test_many_connections_are_read_by_one_thread_each_in_order(receiving):
     assert delivered.batches < len(delivered.messages)
 
 
+def hooked(receiver, subscribers, topic):
+    """A subscriber of ``topic`` hooked to ``receiver`` (kept in ``subscribers``) with one connection on a socket
+    pair, its rospy receive loop running: (connection, its thread, the sending end, the receiving end)."""
+    subscriber = rospy.Subscriber(topic, rospy.AnyMsg, lambda msg: None, queue_size=None)
+    subscribers.append(subscriber)
+    receiver.hook(subscriber, topic)
+    sender, sock = socket.socketpair()
+    connection = connection_of(subscriber, topic, sock, 'http://pub:1/')
+    return connection, looping(connection, subscriber), sender, sock
+
+
 def test_a_connection_closed_while_others_flow_ends_alone(receiving):
     """rospy closes one connection (as unregistering its topic does) while another sends: its rospy thread ends,
     the other connection's messages keep coming, every one once and in order."""
     receiver, delivered, subscribers = receiving
     topics = ['/cc_log_test_closed', '/cc_log_test_flowing']
-    connections, ends = [], []
-    for topic in topics:
-        subscriber = rospy.Subscriber(topic, rospy.AnyMsg, lambda msg: None, queue_size=None)
-        subscribers.append(subscriber)
-        receiver.hook(subscriber, topic)
-        sender, sock = socket.socketpair()
-        ends += [sender, sock]
-        connection = connection_of(subscriber, topic, sock, 'http://pub:1/')
-        connections.append((connection, looping(connection, subscriber), sender))
-    (closed, closed_thread, closed_sender), (_, flowing_thread, flowing_sender) = connections
+    connections = [hooked(receiver, subscribers, topic) for topic in topics]
+    ends = [end for connection in connections for end in connection[2:]]
+    (closed, closed_thread, closed_sender, _), (_, flowing_thread, flowing_sender, _) = connections
     try:
         first = [message(500, k) for k in range(100)]
         closed_sender.sendall(b''.join(frame(p) for p in first))
@@ -298,14 +302,9 @@ def test_a_message_over_the_bound_on_one_connection_does_not_disturb_another(rec
     sends: read past and refused, that connection kept (its next message read), the other's messages all read."""
     receiver, delivered, subscribers = receiving
     topics = ['/cc_log_test_oversize', '/cc_log_test_beside']
-    pairs, threads = [], []
-    for topic in topics:
-        subscriber = rospy.Subscriber(topic, rospy.AnyMsg, lambda msg: None, queue_size=None)
-        subscribers.append(subscriber)
-        receiver.hook(subscriber, topic)
-        sender, sock = socket.socketpair()
-        pairs += [sender, sock]
-        threads.append(looping(connection_of(subscriber, topic, sock, 'http://pub:1/'), subscriber))
+    connections = [hooked(receiver, subscribers, topic) for topic in topics]
+    pairs = [end for connection in connections for end in connection[2:]]
+    threads = [connection[1] for connection in connections]
     huge = frame(message(3 << 20, 5))
     before, after = message(600, 1), message(600000, 2)
     beside = [message(700, k) for k in range(300)]
