@@ -165,6 +165,7 @@ class DriftMonitor(object):
         self._stopped = 0
         self._start = None  # stamp of the first decision since the reset
         self._stated_since = None  # stamp from which drift has been stated without a break (None: not stated)
+        self._sustained = False  # ``sustained`` as of the last decision (it changes only with one)
 
     def observe(self, stamp, anomalous, vector=None, margin=None, covered=None):
         """One decision of the classifier at message time ``stamp`` (float s); ``anomalous``: bool; ``vector``: the
@@ -208,7 +209,8 @@ class DriftMonitor(object):
         if stated and self.first_stated is None:
             self.first_stated = stamp
         self._stated_since = (self._stated_since if self._stated_since is not None else stamp) if stated else None
-        if self.first_sustained is None and self.sustained:
+        self._sustained = stated and self.stated_for >= self.span
+        if self.first_sustained is None and self._sustained:
             self.first_sustained = stamp
 
     @property
@@ -255,7 +257,7 @@ class DriftMonitor(object):
     def sustained(self):
         """Whether drift has been stated without a break for a whole span: it lasts (a new place, not a stray
         minute or a true anomaly's few seconds)."""
-        return self.stated and self.stated_for >= self.span
+        return self._sustained
 
     @property
     def outside(self):
