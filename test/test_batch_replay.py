@@ -307,6 +307,18 @@ def test_intake_sync_returns_once_what_was_received_before_it_is_fed(sim_case, t
     logger.close()
 
 
+def per_record_calls(logger, bag_path):
+    """The replay summary of ``bag_path`` through ``logger`` and how many records went into its window buffer one
+    by one (``add``/``add_side``)."""
+    calls, buffer = collections.Counter(), logger._buffer
+    for name in ('add', 'add_side'):
+        def counted(record, name=name, method=getattr(buffer, name)):
+            calls[name] += 1
+            return method(record)
+        setattr(buffer, name, counted)
+    return replay_into(logger, bag_path), calls
+
+
 def test_a_batched_replay_buffers_its_records_by_slices_not_one_by_one(sim_case, tmp_path):
     """Between two records that fire, a batch goes into the window buffer at once (``add_batch``): the per-record
     ``add``/``add_side`` serve only for a slice of one record and the record that completes a pending window
@@ -315,15 +327,22 @@ def test_a_batched_replay_buffers_its_records_by_slices_not_one_by_one(sim_case,
     bags, model_path = sim_case
     logger = SmartLogger(AnomalyModel.load(model_path), str(tmp_path), 'bag-lz4', driving_topic=sim.ODOM_TOPIC,
                          side_topics=(sim.IMU_TOPIC,), wait_for_writer=True)
-    calls, buffer = collections.Counter(), logger._buffer
-    for name in ('add', 'add_side'):
-        def counted(record, name=name, method=getattr(buffer, name)):
-            calls[name] += 1
-            return method(record)
-        setattr(buffer, name, counted)
-    summary = replay_into(logger, bags['anomalies'])
+    summary, calls = per_record_calls(logger, bags['anomalies'])
     assert summary['windows'], 'no window: the replay would not have opened, merged or closed one'
     assert sum(calls.values()) < summary['input_messages'] / 20, calls
+
+
+def test_a_batch_longer_than_max_ahead_goes_by_slices_too(real_bag, husky_model, tmp_path):
+    """A batch of Husky's spans more than ``max_ahead`` (10 s): its last IMU records lie that far after its first
+    odometry record, not after the odometry record after each (which places one at its clock when it is): the
+    batches still go in by slices (counted: 85% of the records one by one before, 11% now, those of the batches
+    where a window ends; the windows are those of a replay record by record: the Husky test above)."""
+    from cc_log.learning.model import AnomalyModel
+    logger = SmartLogger(AnomalyModel.load(husky_model), str(tmp_path), 'bag-lz4', driving_topic=HUSKY_ODOM,
+                         side_topics=(HUSKY_IMU,), wait_for_writer=True)
+    summary, calls = per_record_calls(logger, real_bag(HUSKY))
+    assert summary['messages_restamped'] == 0  # none is ahead of the clock it meets
+    assert sum(calls.values()) < summary['input_messages'] / 5, calls
 
 
 def test_a_replay_hands_the_logger_batches_of_512_records_and_at_most_16_mb(tmp_path):

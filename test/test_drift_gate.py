@@ -124,6 +124,29 @@ def test_on_drift_is_checked_and_changes_nothing_without_a_joint_check():
 
 # -- cclog replay ------------------------------------------------------------------------------------------------
 
+def test_the_gated_monitors_coverage_sees_a_batchs_windows_at_once_and_counts_as_one_at_a_time(rough):
+    """The monitor the gate follows takes each batch's rows at once (``EnvelopeCoverage.observe_rows``: counted,
+    no call per window; before, ``observe`` of each window): the same windows beyond, per feature and in all, and
+    the same peaks as the monitor a trigger without the gate feeds one window at a time."""
+    envelope = gated_envelope(rough)
+    calls = {'observe': 0, 'observe_rows': 0}
+    trigger = EnvelopeTrigger('envelope', envelope, ODOM, on_drift='confirm')
+    coverage = trigger.drift.coverage
+    for name in calls:
+        def counted(*args, name=name, method=getattr(coverage, name)):
+            calls[name] += 1
+            return method(*args)
+        setattr(coverage, name, counted)
+    records = odom_records(rough)
+    fires_of(trigger, records, batch=256)
+    _, one_at_a_time, _ = run(envelope, rough, 'none')
+    single = one_at_a_time.coverage
+    assert calls['observe'] == 0 and 0 < calls['observe_rows'] <= -(-len(records) // 256), calls
+    assert coverage.decisions == single.decisions == trigger.evaluated > 1000
+    assert coverage.beyond.tolist() == single.beyond.tolist() and coverage.beyond_any == single.beyond_any > 0
+    assert coverage.peak == pytest.approx(single.peak, rel=1e-12)
+
+
 @pytest.fixture(scope='module')
 def rough_bag(tmp_path_factory, rough):
     """A bag of real nav_msgs/Odometry written by rosbag (the shaken run, 5 min) and the gated envelope's file."""

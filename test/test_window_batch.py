@@ -34,7 +34,7 @@ def shape(windows):
 
 def counters(buffer):
     return (buffer.buffered_bytes, buffer.buffered_messages, buffer.trimmed, buffer.limited, buffer.resets,
-            buffer.window_open, buffer.oldest())
+            buffer.window_open, buffer.oldest(), dict(buffer.restamped))
 
 
 def feed(buffer, records, triggers, cuts, batch):

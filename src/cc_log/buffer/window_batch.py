@@ -7,7 +7,8 @@ parts handed to the writer; a pre buffer of cameras and lidar holds more than ha
 does nothing more), no topic with limits of its own, and driving stamps that
 do not go backwards in the batch (then every threshold the per-record path trims and prunes by only rises, so
 trimming and pruning once, at the last driving record, leaves what trimming at each one leaves), and no side record
-more than ``max_ahead`` after the clock (which the per-record path places at the clock it meets). A pending window
+more than ``max_ahead`` after the clock of the driving record after it (which the per-record path places at that
+clock; the batch places it so when each side topic's stamps rise through the batch: ``_placed``). A pending window
 is completed by ``add`` of the record that completes it, the records before and after it going by slices. Any
 other batch goes record by record.
 """
@@ -21,6 +22,7 @@ from cc_log.buffer import side_order
 
 _STAMP = operator.attrgetter('stamp')
 _COST = operator.attrgetter('cost')
+_TOPIC = operator.attrgetter('topic')
 
 
 class BatchAdd(object):
@@ -50,6 +52,7 @@ class BatchAdd(object):
             return []
         last = len(mask) - 1 - mask[::-1].index(True)
         stamps = list(map(_STAMP, drivings))
+        clock = self._clock
         if self._clock is None or stamps[-1] > self._clock:
             self._clock = stamps[-1]
         window = self._open
@@ -60,7 +63,7 @@ class BatchAdd(object):
             return []
         self._ring.extend(drivings)
         self._trim_ring(self.pre if self._pending is None else self._bridge)  # (pending: nothing goes, see above)
-        self._extend_side(records[:last], mask[:last])
+        self._extend_side(self._placed(records[:last], mask[:last], stamps, clock), mask[:last])
         if self._side:
             self._prune_side()
         self._extend_side(records[last + 1:], mask[last + 1:])
@@ -91,9 +94,11 @@ class BatchAdd(object):
                 return stamps[-1] - first.stamp < self.max_window.seconds
             return len(window.records) + len(drivings) < self.max_window.count
         # one by one, a side record more than max_ahead after the clock of the driving record after it is placed there
-        newest = max(map(_STAMP, itertools.compress(records, map(operator.not_, mask))), default=-math.inf)
+        # (``_placed``: as it comes, when each side topic's stamps rise through the batch from what is held)
+        sides = list(itertools.compress(records, map(operator.not_, mask)))
+        newest = max(map(_STAMP, sides), default=-math.inf)
         first = stamps[0] if self._clock is None else max(self._clock, stamps[0])
-        if not side_order.none_ahead(newest, first, self._side.values(), self.max_ahead):
+        if not side_order.none_ahead(newest, first, self._side.values(), self.max_ahead) and not self._rising(sides):
             return False
         if self._pending is not None:  # until it completes, the ring only grows and the side threshold stays
             return True
@@ -103,6 +108,41 @@ class BatchAdd(object):
         fronts = ring[max(0, len(self._ring) + 1 - (self.pre.count + 1)):max(0, len(ring) - self.pre.count)]
         fronts = list(map(_STAMP, fronts))
         return all(map(operator.le, fronts, fronts[1:]))
+
+    def _rising(self, sides):
+        """Whether the stamps of each side topic's records ``sides`` (in arrival order) never go down, from the last
+        record held of the topic on."""
+        for topic in dict.fromkeys(map(_TOPIC, sides)):
+            held = self._side.get(topic)
+            stamps = [held[-1].stamp] if held else []
+            stamps.extend(record.stamp for record in sides if record.topic == topic)
+            if not all(map(operator.le, stamps, stamps[1:])):
+                return False
+        return True
+
+    def _placed(self, records, mask, stamps, clock):
+        """``records`` (those up to the batch's last driving record; ``mask``: True for driving ones, ``stamps``:
+        theirs; ``clock``: the buffer's before the batch) with each side record stamped more than ``max_ahead``
+        after the clock of the driving record after it placed at that clock (counted in ``restamped``), and the
+        held ones the first driving record places first, as ``add`` of each driving record places them
+        (``side_order.place_ahead``; ``_batchable``: each topic's stamps rise)."""
+        first = stamps[0] if clock is None else max(clock, stamps[0])
+        for topic, held in self._side.items():
+            if held and held[-1].stamp > first + self.max_ahead:
+                self.restamped[topic] += side_order.place_ahead(held, first, self.max_ahead)
+        ahead, sides = first + self.max_ahead, list(map(operator.not_, mask))
+        late = [index for index in itertools.compress(range(len(records)), sides) if records[index].stamp > ahead]
+        if not late:
+            return records
+        drivings = list(itertools.compress(range(len(records)), mask))
+        placed = list(records)
+        for index in late:  # (a batch spanning more than max_ahead: only its last side records are looked at)
+            at = stamps[bisect.bisect_right(drivings, index)]
+            next_clock = at if clock is None else max(clock, at)
+            if records[index].stamp > next_clock + self.max_ahead:
+                placed[index] = records[index]._replace(stamp=next_clock)
+                self.restamped[records[index].topic] += 1
+        return placed
 
     def _pending_ends(self, drivings):
         """The index among ``drivings`` of the record after which the pending window completes (a record more than

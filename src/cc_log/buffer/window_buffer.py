@@ -351,11 +351,14 @@ class WindowBuffer(BatchAdd, BudgetTrim):
             self._drop_side(topic)
             self.limited += 1
 
-    def _drop_side(self, topic):
-        record = self._side[topic].popleft()
-        self._side_bytes[topic] -= record.cost
-        self._bytes -= record.cost
-        return record
+    def _drop_side(self, topic, count=1):
+        """Let the ``count`` oldest records of ``topic`` go (their costs counted off); return the last of them."""
+        side = self._side[topic]
+        gone = [side.popleft() for _ in range(count)]
+        cost = sum(record.cost for record in gone)
+        self._side_bytes[topic] -= cost
+        self._bytes -= cost
+        return gone[-1]
 
     def trigger(self, reason, score=None, name=None, pre=None, post=None, why=()):
         """Mark the last driving record: open a window around it or extend the open one.
@@ -538,8 +541,9 @@ class WindowBuffer(BatchAdd, BudgetTrim):
         for topic, side in self._side.items():
             if side and side[-1].stamp > ahead:
                 self._place_ahead(topic, side)
-            while side and side[0].stamp < oldest:
-                self._drop_side(topic)
+            older = next((k for k, record in enumerate(side) if record.stamp >= oldest), len(side))
+            if older:
+                self._drop_side(topic, older)
             limits = self.limits.get(topic)
             if free and limits is not None and side:
                 self._limit_topic(topic, side, limits, self._clock)

@@ -165,11 +165,13 @@ class DriftMonitor(object):
         self._stopped = 0
         self._start = None  # stamp of the first decision since the reset
         self._stated_since = None  # stamp from which drift has been stated without a break (None: not stated)
+        self._sustained = False  # ``sustained`` as of the last decision (it changes only with one)
 
-    def observe(self, stamp, anomalous, vector=None, margin=None):
+    def observe(self, stamp, anomalous, vector=None, margin=None, covered=None):
         """One decision of the classifier at message time ``stamp`` (float s); ``anomalous``: bool; ``vector``: the
         feature vector decided on (for the coverage; None: not known); ``margin``: its score minus the classifier's
-        threshold (below the monitor's ``margin``: flagged; None: ``anomalous`` decides)."""
+        threshold (below the monitor's ``margin``: flagged; None: ``anomalous`` decides); ``covered``: what the
+        coverage's ``observe`` of ``vector`` said when it saw it already (``EnvelopeCoverage.observe_rows``)."""
         decisions = self._decisions
         if decisions and stamp < decisions[-1][0] - 1.0:
             self.reset()  # time went back (another run): start again
@@ -179,7 +181,9 @@ class DriftMonitor(object):
             self.began = stamp if self.began is None else self.began
         anomalous = bool(anomalous if margin is None else margin < self.margin)
         beyond = stopped = False
-        if self.coverage is not None and vector is not None:
+        if covered is not None:
+            beyond, stopped = covered
+        elif self.coverage is not None and vector is not None:
             beyond, stopped = self.coverage.observe(vector)
         onset = anomalous and (self._last_flag is None or stamp - self._last_flag > EPISODE_GAP)
         if anomalous:
@@ -205,7 +209,8 @@ class DriftMonitor(object):
         if stated and self.first_stated is None:
             self.first_stated = stamp
         self._stated_since = (self._stated_since if self._stated_since is not None else stamp) if stated else None
-        if self.first_sustained is None and self.sustained:
+        self._sustained = stated and self.stated_for >= self.span
+        if self.first_sustained is None and self._sustained:
             self.first_sustained = stamp
 
     @property
@@ -252,7 +257,7 @@ class DriftMonitor(object):
     def sustained(self):
         """Whether drift has been stated without a break for a whole span: it lasts (a new place, not a stray
         minute or a true anomaly's few seconds)."""
-        return self.stated and self.stated_for >= self.span
+        return self._sustained
 
     @property
     def outside(self):
@@ -469,14 +474,19 @@ class EnvelopeCoverage(object):
 
     def observe(self, row):
         """``(beyond a training maximum, False)`` of one window's row (``features.envelope`` columns)."""
-        ratio = np.asarray(row, dtype=float) / self.maxima
+        return bool(self.observe_rows(np.asarray(row, dtype=float)[None])[0]), False
+
+    def observe_rows(self, rows):
+        """``observe`` of each of ``rows`` (a 2-D array, one window a row) at once: whether each is beyond a
+        training maximum (a bool array)."""
+        ratio = np.asarray(rows, dtype=float) / self.maxima
         over = ratio > 1.0 + COVERAGE_TOLERANCE
-        self.peak = np.fmax(self.peak, ratio)
-        self.beyond += over
-        self.decisions += 1
-        beyond = bool(over.any())
-        self.beyond_any += beyond
-        return beyond, False
+        self.peak = np.fmax(self.peak, np.fmax.reduce(ratio, axis=0))
+        self.beyond += over.sum(axis=0)
+        self.decisions += len(ratio)
+        beyond = over.any(axis=1)
+        self.beyond_any += int(beyond.sum())
+        return beyond
 
     def _reached(self, index):
         name = ENVELOPE_COLUMNS[index]

@@ -172,6 +172,8 @@ class EnvelopeTrigger(Trigger):
         held = (np.searchsorted(self._beyond, grid, side='right') -
                 np.searchsorted(self._beyond, grid - self.window, side='right'))  # out-of-range samples per window
         measured = dict(zip(ends.tolist(), range(len(ends))))
+        if self.drift is not None:  # its coverage sees every row at once (each is observed below, in grid order)
+            covered = self.drift.coverage.observe_rows(rows).tolist() if len(rows) else []
         best = {}
         for end, count in zip(grid.tolist(), held.tolist()):
             k = measured.get(end)
@@ -180,7 +182,7 @@ class EnvelopeTrigger(Trigger):
             if k is not None or count:
                 row = None if k is None else rows[k]
                 if self.drift is not None:
-                    self.drift.observe(end, score < 0.0, row)
+                    self.drift.observe(end, score < 0.0, row, covered=None if k is None else (covered[k], False))
                 for observe in self.observers:
                     observe(end, score < 0.0, row)
                 if k is not None and not count and self.drift is not None and self.drift.sustained:
