@@ -337,3 +337,19 @@ def test_recover_removes_leftovers_that_hold_no_message(context_bag, tmp_path):
         path = leftover(directory, content)
         assert context_track.recover(directory) == ([], []), name
         assert not path.exists() and files(directory) == [], name
+
+
+def test_the_live_odom_1hz_takes_the_first_message_of_each_second_of_header_stamps_not_of_receipts():
+    """BWI's live ``odom_1hz`` (``node_extras.Thinned``) fed decoded messages: the first of each second of their
+    header stamps, whatever their receipt (one receipt per batch of 5, 90 ms late, as the reader hands them over)."""
+    rospy = pytest.importorskip('rospy')
+    from nav_msgs.msg import Odometry
+    from cc_log.nodes.node_extras import Thinned
+    thinned = Thinned('/odom', '/odom_1hz', 1.0)
+    published = []
+    thinned.publisher = type('Published', (), {'publish': lambda self, msg: published.append(msg)})()
+    for k in range(300):  # 3 s at 100 Hz
+        msg = Odometry()
+        msg.header.stamp = rospy.Time(100) + rospy.Duration.from_sec(k * 0.01)
+        thinned.on_message('/odom', msg, 100.0 + (k // 5 + 1) * 0.05 + 0.04)
+    assert [round(m.header.stamp.to_sec(), 6) for m in published] == [100.0, 101.0, 102.0]

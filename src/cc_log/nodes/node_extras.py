@@ -20,6 +20,7 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from cc_log.base import event_kinds, raw_message
+from cc_log.features.base import stamp_of
 from cc_log.storage import context_track, disk_guard, upload, window_writer
 from cc_log.nodes.node_common import ConfigError
 from cc_log.nodes.topic_watch import TopicWatcher
@@ -55,8 +56,8 @@ class Thinned(object):
                                                     lambda: raw_message.decode(raw, connection))
 
     def on_message(self, topic, msg, stamp=None, size=None):
-        """The same for a decoded message."""
-        return topic == self.source and self._offer(0.0 if stamp is None else stamp, lambda: msg)
+        """The same for a decoded message: its slot by its header stamp (``stamp``, the receipt, without one)."""
+        return topic == self.source and self._offer(stamp_of(msg, 0.0 if stamp is None else stamp), lambda: msg)
 
     def _offer(self, stamp, message):
         slot = math.floor(stamp * self.rate)
