@@ -53,6 +53,7 @@ NOMINAL = slice(700, 800)      # odometry the motion model calls nominal (smart_
 OVERLAP = slice(400, 600)      # the burst at local index 100, the IMU shock 0.5 s later
 ERROR_AT = 40                  # the first ERROR follows this odometry message of NOMINAL
 RULE_TOPIC = '/robot_diagnostics'  # the rule's DiagnosticArray topic
+LEAD = 10                      # odometry messages each side message is published ahead of its stamp's place
 
 
 def shock(records, first, count=3, amplitude=25.0):
@@ -129,6 +130,20 @@ class TriggersTest(unittest.TestCase):
             type(self).sent += 1
             time.sleep(pause)
 
+    def publish_ahead(self, items, pause=1.0 / RATE):
+        """Publish ``(stamp, publisher, msg)`` (in stamp order), each side message LEAD odometry messages ahead of
+        its stamp's place. Another connection may be read before or after the odometry's: a side message taken
+        before the odometry stamped before it waits for it (its Fire applies there, ``fire_order``), but one taken
+        after odometry stamped later fires late; published this far ahead, none is taken late under load."""
+        ahead, odom = {}, []
+        for stamp, publisher, msg in items:
+            if publisher is self.odom_pub:
+                odom.append((publisher, msg))
+            else:
+                ahead.setdefault(max(len(odom) - LEAD, 0), []).append((publisher, msg))
+        order = [item for k, item in enumerate(odom) for item in ahead.get(k, []) + [item]]
+        self.publish(order + ahead.get(len(odom), []), pause)
+
     def wait_received(self):
         """Until the node has received every message published so far (its /diagnostics)."""
         fx.wait_for(lambda: fx.received(self.diagnostics, NODE) >= self.sent, 10, 'the node to receive %d messages'
@@ -152,14 +167,14 @@ class TriggersTest(unittest.TestCase):
         self.assertFalse(fx.flagged(self.motion, odom))
         items = []
         for i, record in enumerate(odom):
-            items.append((self.odom_pub, record.msg))
+            items.append((record.stamp, self.odom_pub, record.msg))
             if i % 5 == 0 or ERROR_AT <= i <= ERROR_AT + 20:
                 # ERROR at message 40, flapping OK / ERROR for 2 s, OK after: one window (hold-off 5 s)
                 level = 2 if i == ERROR_AT or (ERROR_AT < i <= ERROR_AT + 20 and i % 3 == 0) else 0
-                items.append((self.diag_pub, diagnostics(record.stamp + 0.05, level)))
-        self.publish(items[:2])
-        self.wait_received()  # the node sees the first messages before the stream goes on
-        self.publish(items[2:])
+                items.append((record.stamp + 0.05, self.diag_pub, diagnostics(record.stamp + 0.05, level)))
+        self.publish([(self.odom_pub, odom[0].msg)])
+        self.wait_received()  # the node sees the first odometry before the stream goes on
+        self.publish_ahead(items[1:])
         [(path, metadata, records)] = self.new_windows(0, 1, 'the rule window')
         kept = [r for r in records if r.topic == '/husky_odom']
         self.assertEqual([r.stamp for r in kept], [r.stamp for r in odom[ERROR_AT - PRE:ERROR_AT + POST + 1]])
@@ -183,8 +198,8 @@ class TriggersTest(unittest.TestCase):
         self.assertTrue(imu_flags and min(imu_flags) >= at, imu_flags)
         merged = sorted([(r.stamp, 0, r.msg) for r in odom] + [(r.stamp, 1, r.msg) for r in imu], key=lambda x: x[:2])
         before = len(self.written())
-        self.publish([(self.odom_pub if kind == 0 else self.imu_pub, msg) for _, kind, msg in merged],
-                     pause=0.5 / RATE)
+        self.publish_ahead([(stamp, self.odom_pub if kind == 0 else self.imu_pub, msg) for stamp, kind, msg in merged],
+                           pause=0.5 / RATE)
         [(path, metadata, records)] = self.new_windows(before, 1, 'the merged window')
         self.assertEqual(metadata['trigger'], 'odom_motion')
         self.assertEqual(sorted(metadata['names']), ['imu_shock', 'odom_motion'])

@@ -8,7 +8,8 @@ installed class of the type when its md5sum matches, else one built from the con
 (``msg_codec.generated_class``), which must pass ``safe_input.check_definition`` first (genpy runs the code it
 generates); a refused definition is a ValueError naming the type; ``installed_class(type)`` is the installed
 class alone (a configuration's types); ``serialized(msg)`` is the other way, a message's bytes. ``stamp(raw, connection,
-fallback)`` reads the header stamp straight from the bytes of a type whose first field is a ``std_msgs/Header``.
+fallback)`` reads the header stamp straight from the bytes of a type whose first field is a ``std_msgs/Header``;
+``in_stamp_order(items)`` puts messages read at one time from several connections in the order of those stamps.
 
 ``layout(cls)`` and ``blocks(fields, raws)`` find where each field lies in the bytes of many messages at
 once (numpy views instead of a genpy decode per message: the json-xz writer).
@@ -17,6 +18,7 @@ Pure: roslib, genpy and numpy, no rospy.
 """
 import collections
 import functools
+import heapq
 import io
 import struct
 
@@ -143,6 +145,20 @@ def stamps(raws, connections, fallbacks):
     elif not any(headers):
         return list(map(_seconds, fallbacks))
     return list(map(stamp, raws, connections, fallbacks))
+
+
+def in_stamp_order(items):
+    """Serialized messages ``(topic, data, connection)`` read at one time from several connections (each topic's
+    in the order it was sent), merged in the order of their header stamps: the order they were published in, which
+    one read over several sockets loses. Each topic keeps its own order (a message without a header stamp follows
+    the one before it); the items themselves when they are of one topic."""
+    if len(items) < 2 or all(item[0] == items[0][0] for item in items):
+        return items
+    runs = collections.defaultdict(list)  # topic -> (stamp, place) of its items, in order
+    for place, (topic, data, connection) in enumerate(items):
+        run = runs[topic]
+        run.append((stamp(data, connection, run[-1][0] if run else 0.0), place))
+    return [items[place] for _, place in heapq.merge(*runs.values())]
 
 
 def _seconds(stamp):

@@ -28,7 +28,8 @@ in parts at half of it). ``stats()`` feeds the node's diagnostics; ``on_event`` 
 opens, is written or fails to be written, and when the quota deletes an old window file.
 
 Pure: no rospy. Its parts: ``stamp_clock`` (the one clock of the stamps), ``window_prep`` (windows thinned under
-overload, latched messages first), ``smart_events`` (Event), ``trigger_topics``, ``keep_budget``.
+overload, latched messages first), ``smart_events`` (Event), ``trigger_topics``, ``keep_budget``, ``fire_order`` (a
+side record's Fire waits for the driving clock to reach its stamp).
 """
 import collections
 import itertools
@@ -39,7 +40,7 @@ import time
 from cc_log.base import errors, msg_codec, raw_message, routes as routes_mod
 from cc_log import features as features_mod
 from cc_log.storage import log_format, window_writer
-from cc_log.logger import keep_budget, smart_events
+from cc_log.logger import fire_order, keep_budget, smart_events
 from cc_log.buffer import window_prep
 from cc_log.base.raw_json import RawJsonEstimate
 from cc_log.base.event_kinds import OPENED
@@ -64,6 +65,9 @@ _TOPIC, _RAW, _CONNECTION, _STAMP = map(operator.attrgetter, ('topic', 'raw', 'c
 DEFAULT_STAMP_TOLERANCE = 5.0  # seconds a header stamp may differ from the message's arrival (else: its arrival)
 DEFAULT_RETRY_PERIOD = window_writer.DEFAULT_RETRY_PERIOD        # seconds between attempts at held windows
 DEFAULT_MAX_HELD_MESSAGES = window_writer.DEFAULT_MAX_HELD_MESSAGES  # unwritten messages kept in memory
+WRITER_COUNTERS = ('messages_kept', 'messages_queued', 'messages_lost', 'stored_bytes', 'write_errors', 'last_error',
+                   'messages_held', 'write_retries', 'disk_paused', 'windows_deleted', 'bytes_deleted',
+                   'last_deleted', 'queue_depth', 'bytes_queued')  # the writer's counters in stats(), as it names them
 
 
 class SmartLogger(object):
@@ -319,7 +323,7 @@ class SmartLogger(object):
             for index, fired in plan + [(len(records) - 1, ())]:
                 self._add_batch(records[start:index + 1], topics[start:index + 1], waits)
                 for fires in fired:
-                    fire(fires)
+                    fire(fires, records[index].stamp)
                 start = index + 1
             records = ()
         for record, view, topic in zip(records, views, topics):
@@ -330,7 +334,7 @@ class SmartLogger(object):
                 fires = ahead.get(trigger)
                 fires = fires.popleft() if fires is not None else trigger.on_record(view)
                 if fires:
-                    fire(fires)
+                    fire(fires, record.stamp)
             for trigger in timed:
                 fires = trigger.on_time(record.stamp)
                 if fires:
@@ -340,7 +344,15 @@ class SmartLogger(object):
 
     def _add_batch(self, records, topics, waits=0):
         """Buffer records in order (``WindowBuffer.add_batch``) and hand on the windows this completes; ``waits``
-        (the buffer's budget): first the writer's queue leaves room for them beside the buffer (or is empty)."""
+        (the buffer's budget): first the writer's queue leaves room for them beside the buffer (or is empty). The
+        Fires held for the driving clock (``fire_order``) apply among them."""
+        if self._held:
+            self._held.add(records, topics, self._last_stamp, lambda part, kinds: self._add(part, kinds, waits),
+                           self._fire)
+        else:
+            self._add(records, topics, waits)
+
+    def _add(self, records, topics, waits):
         if waits:
             self.writer.wait_for_room(waits - self._buffer.buffered_bytes - sum(record.cost for record in records))
         self._complete(self._buffer.add_batch(records, topics, self.driving_topic))
@@ -387,14 +399,18 @@ class SmartLogger(object):
             if flag == self._enabled:
                 return
             if not flag:
-                self._complete(self._buffer.flush())
+                self._flush()
             self._new_buffer()
             self._enabled = flag
 
     def flush(self):
         """Complete every window now (the open one with what it holds), as at the end of a stream."""
         with self._lock:
-            self._complete(self._buffer.flush())
+            self._flush()
+
+    def _flush(self):
+        self._fire(self._held.release())  # at the clock: what comes after is not taken
+        self._complete(self._buffer.flush())
 
     def close(self, timeout=None):
         """Flush, then wait for the writer to write every queued window (see ``WindowWriter.close``).
@@ -402,7 +418,7 @@ class SmartLogger(object):
         """
         with self._lock:
             if not self._closed:
-                self._complete(self._buffer.flush())
+                self._flush()
                 self._new_buffer()  # what the buffer still held was outside every window: dropped
                 self._closed = True
         return self.writer.close(timeout)
@@ -427,41 +443,21 @@ class SmartLogger(object):
         with s.lock:
             result = {
                 'enabled': self._enabled, 'messages_seen': s.messages_seen,
-                'messages_kept': written['messages_kept'],
-                'messages_queued': written['messages_queued'],
-                'messages_buffered': buffered,
-                'buffered_bytes': buffered_bytes,
+                **{key: written[key] for key in WRITER_COUNTERS},
+                'messages_buffered': buffered, 'buffered_bytes': buffered_bytes,
                 'buffer_trimmed': trimmed, 'topic_trimmed': limited, 'buffer_trimmed_silent': silent,
-                'messages_lost': written['messages_lost'],
                 'raw_json_bytes': s.raw_json_bytes + raw_estimate,
-                'stored_bytes': written['stored_bytes'],
-                'windows_opened': s.windows_opened,
-                'windows_saved': written['windows_saved'],
-                'windows_queued': written['jobs_queued'],
-                'windows_lost': written['jobs_lost'],
-                'write_errors': written['write_errors'],
-                'last_error': written['last_error'],
+                'windows_opened': s.windows_opened, 'windows_saved': written['windows_saved'],
+                'windows_queued': written['jobs_queued'], 'windows_lost': written['jobs_lost'],
+                'windows_held': written['jobs_held'],
                 'classifier_calls': calls,
                 'classifier_mean_us': (sum(t['classifier_seconds'] for t in classified) / calls * 1e6
                                        if calls else 0.0),
                 'classifier_max_us': max([t['classifier_max_seconds'] for t in classified] or [0.0]) * 1e6,
                 'anomalous_messages': sum(t['anomalous_messages'] for t in classified),
-                'fires_dropped': s.fires_dropped,
-                'triggers': triggers,
-                'time_resets': resets,
-                'windows_held': written['jobs_held'],
-                'messages_held': written['messages_held'],
-                'write_retries': written['write_retries'],
-                'disk_paused': written['disk_paused'],
-                'windows_deleted': written['windows_deleted'],
-                'bytes_deleted': written['bytes_deleted'],
-                'last_deleted': written['last_deleted'],
-                'messages_refused': s.messages_refused,
-                'last_refused': s.last_refused,
-                'queue_depth': written['queue_depth'],
-                'bytes_queued': written['bytes_queued'],
-                'messages_shed': sum(self._shed.values()),
-                'shed_by_topic': dict(self._shed),
+                'fires_dropped': s.fires_dropped, 'triggers': triggers, 'time_resets': resets,
+                'messages_refused': s.messages_refused, 'last_refused': s.last_refused,
+                'messages_shed': sum(self._shed.values()), 'shed_by_topic': dict(self._shed),
                 'messages_restamped': sum((self._restamped + placed).values()),
                 'restamped_by_topic': dict(self._restamped + placed), **self.budget.stats(),  # windows_skipped, ...
             }
@@ -502,6 +498,7 @@ class SmartLogger(object):
                               part_factor=log_format.formats.get(self.format).PART_FACTOR,
                               topic_limits=self.topic_limits, held_elsewhere=self._bytes_queued,
                               max_ahead=min(2 * self.stamp_tolerance, MAX_SECONDS))
+        self._held = fire_order.HeldFires(self.driving_topic, buffer.max_ahead)
         if getattr(self, '_buffer', None) is not None:
             self._placed.update(self._buffer.restamped)
             self._resets += self._buffer.resets
@@ -516,8 +513,11 @@ class SmartLogger(object):
             trigger.reset()
         self._last_stamp = None
 
-    def _fire(self, fires):
-        """Open or extend windows for the Fires of a trigger."""
+    def _fire(self, fires, stamp=None):
+        """Open or extend windows for the Fires of a trigger (of a record stamped ``stamp``: held while that is
+        after the driving clock, ``fire_order``)."""
+        if stamp is not None and self._held.hold(stamp, fires, self._last_stamp):
+            return
         for fire in fires:
             if self._last_stamp is None:  # nothing to keep around yet
                 with self._stats.lock:

@@ -292,8 +292,9 @@ class Intake(object):
 
     def put_batch(self, batch):
         """Queue the serialized messages ``(topic, data, header)`` of ``batch`` (``tcpros_receive``: what one pass
-        over the ready connections read) with one receipt time, each counted as ``put`` counts it."""
-        refused = self.queue.put_batch(batch, rospy.get_rostime())
+        over the ready connections read, each connection's in order) in the order of their header stamps
+        (``raw_message.in_stamp_order``) with one receipt time, each counted as ``put`` counts it."""
+        refused = self.queue.put_batch(raw_message.in_stamp_order(batch), rospy.get_rostime())
         if refused:
             self.dropped += len(refused)
             rospy.logwarn_throttle(10.0, overflow_text(self.queue, *refused[-1]))
