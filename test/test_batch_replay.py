@@ -345,9 +345,9 @@ def test_a_batch_longer_than_max_ahead_goes_by_slices_too(real_bag, husky_model,
     assert sum(calls.values()) < summary['input_messages'] / 5, calls
 
 
-def test_a_replay_hands_the_logger_batches_of_512_records_and_at_most_16_mb(tmp_path):
+def test_a_replay_hands_the_logger_batches_of_2048_records_and_at_most_16_mb(tmp_path):
     """Each batch costs the triggers a fixed part (an envelope trigger's rows and neighbour search): the Husky
-    bag's 15,817 messages go to the logger in 31 batches (62 of 256 before); big messages are cut at
+    bag's 15,817 messages go to the logger in 8 batches (31 of 512, 62 of 256 before); big messages are cut at
     REPLAY_BATCH_BYTES of serialized bytes (a record larger goes alone), decoded records kept apart."""
     from conftest import REAL_DATA
     from cc_log.base.records import Record
@@ -357,7 +357,7 @@ def test_a_replay_hands_the_logger_batches_of_512_records_and_at_most_16_mb(tmp_
     sizes, on_records = [], logger.on_records
     logger.on_records = lambda records: sizes.append(len(records)) or on_records(records)
     summary = replay_into(logger, os.path.join(REAL_DATA, HUSKY))
-    assert summary['input_messages'] == sum(sizes) == 15817 and sizes == [512] * 30 + [457]
+    assert summary['input_messages'] == sum(sizes) == 15817 and sizes == [2048] * 7 + [1481]
     image = b'\0' * (6 << 20)                   # one 6 MB payload, shared by the records
     big = [Record(float(n), '/camera', None, 0, image if n != 3 else image * 3, {}) for n in range(8)]
     small = [Record(8.0 + n, '/odom', None, 0, b'x', {}) for n in range(2)]

@@ -35,6 +35,11 @@ class BatchAdd(object):
             return [] if not records else self.add(records[0]) if topics[0] == driving else self.add_side(records[0])
         mask = list(map(driving.__eq__, topics))
         drivings = list(itertools.compress(records, mask))
+        ends = self._open_ends(drivings)
+        if ends is not None:  # the open window stops at that driving record: the records before and after as batches
+            at = [index for index, is_driving in enumerate(mask) if is_driving][ends]
+            done = self.add_batch(records[:at], topics[:at], driving) + self.add(records[at])
+            return done + self.add_batch(records[at + 1:], topics[at + 1:], driving)
         costs = list(map(_COST, records))
         if not self._batchable(drivings, costs, records, mask):
             done = []
@@ -143,6 +148,22 @@ class BatchAdd(object):
                 placed[index] = records[index]._replace(stamp=next_clock)
                 self.restamped[records[index].topic] += 1
         return placed
+
+    def _open_ends(self, drivings):
+        """The index among ``drivings`` (their stamps rising) of the record the open window does not take, its
+        ``post`` over (``add`` makes it pending there), None when it takes them all (or none is open). ``add`` takes a
+        record while ``remaining`` counts are left or the clock is within ``until``: both hold for a first run."""
+        window = self._open
+        if window is None or window.remaining >= len(drivings):
+            return None
+        stamps = list(map(_STAMP, drivings))
+        if not all(map(operator.le, stamps, stamps[1:])):
+            return None  # (the batch goes record by record)
+        takes = window.remaining
+        if window.until is not None:
+            clock = -math.inf if self._clock is None else self._clock
+            takes = max(takes, bisect.bisect_right(stamps, window.until) if clock <= window.until else 0)
+        return takes if takes < len(drivings) else None
 
     def _pending_ends(self, drivings):
         """The index among ``drivings`` of the record after which the pending window completes (a record more than
