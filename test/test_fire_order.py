@@ -126,7 +126,16 @@ def test_held_fires_never_wait_past_max_ahead_a_jump_back_or_a_flush():
     assert run(held, [rec(50.0), rec(50.1)], 100.0) == [['jump'], [50.0, 50.1]]  # the clock jumped back
     assert held.hold(100.5, ['x'], 100.0) and held.hold(100.7, ['y'], 100.0)
     assert held.release() == ['x', 'y'] and not held and held.release() == []
-    assert not held.hold(100.5, ['none'], None)  # no driving record yet: not held (the logger counts it dropped)
+    assert not held.hold(math.nan, ['nan'], 100.0)
+    assert held.hold(100.5, ['first'], None)  # before any driving record: it waits for the first
+    assert run(held, [rec(100.2), rec(100.6)], None) == [[100.2], ['first'], [100.6]]
+
+
+def test_a_status_taken_before_the_first_odometry_applies_where_its_stamp_lies(tmp_path):
+    items = stamped_stream({20})
+    error = next(i for i, (topic, _, stamp) in enumerate(items) if topic == DIAG and stamp > 100.4)  # at 100.402
+    moved = [items[error]] + items[:error] + items[error + 1:]  # taken before any odometry
+    assert windows(moved, tmp_path / 'moved') == windows(items, tmp_path / 'in_order') != []
 
 
 def test_a_fire_held_at_close_is_kept_at_the_newest_odometry(tmp_path):

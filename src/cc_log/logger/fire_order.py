@@ -5,10 +5,11 @@ rule's topic) can be taken before driving records stamped before it: they came o
 (the live intake reads every socket in turn), or the driving topic's stamps lag. Its Fires then wait here
 (``HeldFires.hold``) and apply just before the first driving record stamped after the side record
 (``HeldFires.add``), so the window's span follows the stamps, not the order of arrival; replay and the live node
-keep the same window. A Fire waits only while what comes is stamped within ``max_ahead`` of it (past that, the
-driving topic is silent or its stamps lag: it applies at the clock, as it would have at once), and never across a
-jump back of the driving clock; the logger applies what waits before a flush, a pause or a close. A side record
-taken after driving records stamped later than it fires at once, at the newest (it arrived late). Pure.
+keep the same window; so does a side record taken before the first driving record. A Fire waits only while what
+comes is stamped within ``max_ahead`` of it (past that, the driving topic is silent or its stamps lag: it applies at
+the clock, as it would have at once), and never across a jump back of the driving clock; the logger applies what
+waits before a flush, a pause or a close. A side record taken after driving records stamped later than it fires at
+once, at the newest (it arrived late). Pure.
 """
 import bisect
 import math
@@ -29,8 +30,9 @@ class HeldFires(object):
 
     def hold(self, stamp, fires, clock):
         """Hold ``fires`` of a record stamped ``stamp`` when it lies after the driving ``clock`` (the newest driving
-        stamp; None before any), by ``max_ahead`` at most; return whether they were held."""
-        if clock is None or not clock < stamp <= clock + self.max_ahead:
+        stamp), by ``max_ahead`` at most, or comes before any driving record (``clock`` None: one stamped before the
+        first driving record applies before it, where nothing is held yet); return whether they were held."""
+        if not (stamp == stamp and (clock is None or clock < stamp <= clock + self.max_ahead)):  # (NaN: never)
             return False
         at = bisect.bisect_right(self._stamps, stamp)
         self._stamps.insert(at, stamp)
