@@ -199,21 +199,17 @@ class DriftMonitor(object):
             self._beyond -= old_beyond
             self._stopped -= old_stopped
             self._onsets -= old_onset
-        # ``judged``, ``drifting`` and ``stated`` of the decisions now, each worked out once
-        count = len(decisions)
-        judged = min(self.span, stamp - self._start) >= self.settle
-        drifting = judged and (self._flagged / count >= self.limit or self._onsets >= self.episodes)
-        if judged:
-            share = self._flagged / count
+        if self.judged:
+            share = self.share
             self.peak = share if self.peak is None else max(self.peak, share)
             self.peak_episodes = max(self.peak_episodes, self._onsets)
-            if drifting and self.first_drift is None:
+            if self.drifting and self.first_drift is None:
                 self.first_drift = stamp
-        stated = drifting or (judged and self._leaving(count))
+        stated = self.stated
         if stated and self.first_stated is None:
             self.first_stated = stamp
         self._stated_since = (self._stated_since if self._stated_since is not None else stamp) if stated else None
-        self._sustained = stated and stamp - self._stated_since >= self.span
+        self._sustained = stated and self.stated_for >= self.span
         if self.first_sustained is None and self._sustained:
             self.first_sustained = stamp
 
@@ -238,13 +234,9 @@ class DriftMonitor(object):
     def leaving(self):
         """Whether at least ``min_rate`` of the last span lies beyond the training range (or is stopped that much
         more often than in training), once judged."""
-        return self.judged and self._leaving(len(self._decisions))
-
-    def _leaving(self, count):
-        """``leaving`` of ``count`` (> 0) decisions held, judged."""
-        if self.coverage is None:
+        if self.coverage is None or not self.judged or not self._decisions:
             return False
-        count = float(count)
+        count = float(len(self._decisions))
         trained_stopped = self.coverage.stopped_share
         return self._beyond / count >= self.min_rate or (
             trained_stopped is not None and self._stopped / count >= trained_stopped + self.min_rate)
