@@ -158,3 +158,18 @@ def test_messages_read_at_one_time_from_several_connections_are_merged_by_stamp_
         (ODOM, 100.0), (DIAG, 100.05), (ODOM, 100.1), (ODOM, 100.2), (DIAG, 100.25), (DIAG, 100.2), (ODOM, 100.3),
         (ODOM, 100.4)]  # a topic's own order kept (100.25 before 100.2: the order it was sent)
     assert raw_message.in_stamp_order(odom) is odom
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from([ODOM, DIAG, '/raw']), st.binary(max_size=16)), max_size=30))
+def test_any_pass_of_any_bytes_is_merged_into_a_permutation_keeping_each_topics_order(messages):
+    """Hostile or short payloads (a stamp of any value, fewer bytes than a header) only reorder one pass."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import String
+    headers = {ODOM: header(), DIAG: raw_message.class_header(DIAG, DiagnosticArray),
+               '/raw': raw_message.class_header('/raw', String)}
+    items = [(topic, data, headers[topic]) for topic, data in messages]
+    merged = raw_message.in_stamp_order(items)
+    assert sorted(map(id, merged)) == sorted(map(id, items))
+    for topic in headers:
+        assert [item for item in merged if item[0] == topic] == [item for item in items if item[0] == topic]
